@@ -1,0 +1,23 @@
+#pragma once
+// Helpers shared by the vistream subcommands.
+
+#include <atomic>
+#include <string>
+
+#include <absl/status/statusor.h>
+
+#include "scenes/scene.h"
+
+namespace vistream::cli {
+
+// Set by SIGINT; long computations poll it through Progress.
+std::atomic<bool>& CancelFlag();
+void InstallCancelHandler();
+
+// A scene from a .glb/.gltf file, or from the catalog (name or .json path).
+absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
+
+// Prints `status` as "vistream: error: ..." and returns the process exit code for it.
+int Fail(const absl::Status& status);
+
+}  // namespace vistream::cli

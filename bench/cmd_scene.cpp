@@ -1,0 +1,140 @@
+// vistream scene generate | info
+#include <chrono>
+#include <cstdio>
+#include <map>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench/cli_common.h"
+#include "bench/commands.h"
+#include "scenes/catalog.h"
+#include "scenes/city_generator.h"
+#include "scenes/gltf_io.h"
+#include "scenes/progress.h"
+#include "visibility/kdtree.h"
+
+namespace vistream::cli {
+
+namespace {
+
+double Since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+struct GenerateArgs {
+  std::string name, output;
+  std::optional<uint64_t> seed;
+};
+
+int Generate(const GenerateArgs& a) {
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<scenes::Scene> scene;
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(a.name);
+  if (entry.ok()) {
+    if (a.seed) entry->source.seed = *a.seed;
+    if (entry->source.kind != scenes::SceneSource::Kind::kGenerator) {
+      return Fail(absl::InvalidArgumentError(
+          entry->file + ": this scene is loaded from a file, not generated; use 'vistream scene info'"));
+    }
+    scene = scenes::BuildScene(*entry, &CancelFlag());
+  } else if (entry.status().code() == absl::StatusCode::kNotFound) {
+    // Not in the catalog: a bare generator name.
+    scenes::GeneratorParams params;
+    params.seed = a.seed.value_or(1);
+    scene = scenes::GenerateNamed(a.name, params, &CancelFlag());
+    if (!scene.ok()) {
+      return Fail(absl::Status(scene.status().code(),
+                               std::string(scene.status().message()) + "; catalog: " +
+                                   std::string(entry.status().message())));
+    }
+  } else {
+    return Fail(entry.status());
+  }
+  if (!scene.ok()) return Fail(scene.status());
+  const double generate_s = Since(start);
+  const auto save_start = std::chrono::steady_clock::now();
+  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
+  std::printf("generated %s: %zu objects, %zu triangles, %zu occluders in %.2f s; saved %s in %.2f s\n",
+              scene->name.c_str(), scene->objects.size(), scene->TriangleCount(),
+              scene->occluders.size(), generate_s, a.output.c_str(), Since(save_start));
+  return 0;
+}
+
+struct InfoArgs {
+  std::string file;
+  bool json = false;
+  uint32_t leaf_size = 4;
+};
+
+int Info(const InfoArgs& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  double load_s = 0.0;
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file, &load_s);
+  if (!scene.ok()) return Fail(scene.status());
+  const auto kd_start = std::chrono::steady_clock::now();
+  const visibility::KdTree tree = visibility::KdTree::Build(*scene, {.leaf_size = a.leaf_size});
+  const double kd_ms = 1000.0 * Since(kd_start);
+
+  size_t tiered = 0;
+  std::map<scenes::ObjectId, int> per_object;
+  for (const auto& oc : scene->occluders) ++per_object[oc.object];
+  for (const auto& [id, n] : per_object) tiered += n > 1;
+  const auto& b = scene->bounds;
+  const double area_km2 = (b.max.x - b.min.x) * (b.max.y - b.min.y) / 1e6;
+  if (a.json) {
+    nlohmann::json j;
+    j["name"] = scene->name;
+    j["objects"] = scene->objects.size();
+    j["triangles"] = scene->TriangleCount();
+    j["vertices"] = scene->VertexCount();
+    j["occluders"] = scene->occluders.size();
+    j["objects_with_several_occluders"] = tiered;
+    j["bounds"] = {{"min", {b.min.x, b.min.y, b.min.z}}, {"max", {b.max.x, b.max.y, b.max.z}}};
+    j["origin"] = {scene->origin.x, scene->origin.y, scene->origin.z};
+    j["area_km2"] = area_km2;
+    j["load_s"] = load_s;
+    j["kd"] = {{"nodes", tree.nodes().size()}, {"leaves", tree.LeafCount()}, {"depth", tree.depth()},
+               {"leaf_size", a.leaf_size}, {"build_ms", kd_ms}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("scene       %s\n", scene->name.c_str());
+  std::printf("objects     %zu (%zu with several occluders: stacked or rows)\n", scene->objects.size(), tiered);
+  std::printf("triangles   %zu\n", scene->TriangleCount());
+  std::printf("vertices    %zu\n", scene->VertexCount());
+  std::printf("occluders   %zu\n", scene->occluders.size());
+  std::printf("bounds      min (%.2f, %.2f, %.2f)  max (%.2f, %.2f, %.2f)  [scene-local m]\n", b.min.x,
+              b.min.y, b.min.z, b.max.x, b.max.y, b.max.z);
+  std::printf("extent      %.0f x %.0f m, %.2f km², height %.1f m\n", b.max.x - b.min.x, b.max.y - b.min.y,
+              area_km2, b.max.z - b.min.z);
+  std::printf("origin      (%.3f, %.3f, %.3f)\n", scene->origin.x, scene->origin.y, scene->origin.z);
+  std::printf("loaded in   %.2f s\n", load_s);
+  std::printf("kd-tree     %zu nodes, %zu leaves (<= %u objects), depth %u, built in %.1f ms\n",
+              tree.nodes().size(), tree.LeafCount(), a.leaf_size, tree.depth(), kd_ms);
+  return 0;
+}
+
+}  // namespace
+
+void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
+  CLI::App* scene = app.add_subcommand("scene", "generate, load and inspect scenes");
+  scene->require_subcommand(1);
+
+  auto gen = std::make_shared<GenerateArgs>();
+  CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london)");
+  g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
+  g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)");
+  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required();
+  g->callback([gen, done] { done(Generate(*gen)); });
+
+  auto info = std::make_shared<InfoArgs>();
+  CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");
+  i->add_option("FILE", info->file, ".glb/.gltf file, catalog name or catalog .json")->required();
+  i->add_flag("--json", info->json, "print one JSON object");
+  i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(CLI::Range(1u, 1024u));
+  i->callback([info, done] { done(Info(*info)); });
+}
+
+}  // namespace vistream::cli

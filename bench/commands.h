@@ -1,0 +1,13 @@
+#pragma once
+// Subcommand registration for the vistream tool. Each Add* function adds its subcommands to
+// `app`; a subcommand's callback reports its exit code through `done`.
+
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+namespace vistream::cli {
+
+void AddSceneCommands(CLI::App& app, std::function<void(int)> done);
+
+}  // namespace vistream::cli

@@ -1,0 +1,655 @@
+#include "scenes/gltf_io.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <unordered_set>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_join.h>
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <tiny_gltf.h>
+
+namespace vistream::scenes {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// glTF y-up <-> vistream z-up. A rotation, so it maps normals the same way.
+glm::dvec3 ZupFromGltf(const glm::dvec3& p) { return {p.x, -p.z, p.y}; }
+glm::dvec3 GltfFromZup(const glm::dvec3& p) { return {p.x, p.z, -p.y}; }
+// The matrix of ZupFromGltf, and its inverse.
+const glm::dmat4 kZupFromGltf(1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1);
+const glm::dmat4 kGltfFromZup = glm::inverse(kZupFromGltf);
+
+constexpr int kMaxNodeDepth = 256;
+
+// Bad data found while walking the model; `what` names the element.
+struct LoadError {
+  std::string what;
+};
+
+glm::dmat4 LocalMatrix(const tinygltf::Node& node) {
+  if (node.matrix.size() == 16) return glm::make_mat4(node.matrix.data());
+  glm::dmat4 m(1.0);
+  if (node.translation.size() == 3) {
+    m = glm::translate(m, glm::dvec3(node.translation[0], node.translation[1], node.translation[2]));
+  }
+  if (node.rotation.size() == 4) {
+    // glTF stores x, y, z, w; glm's constructor takes w first.
+    const glm::dquat q(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]);
+    m = m * glm::mat4_cast(glm::normalize(q));
+  }
+  if (node.scale.size() == 3) {
+    m = glm::scale(m, glm::dvec3(node.scale[0], node.scale[1], node.scale[2]));
+  }
+  return m;
+}
+
+// Typed, bounds-checked reading of accessor elements.
+class AccessorReader {
+ public:
+  AccessorReader(const tinygltf::Model& model, int index, std::string what) : what_(std::move(what)) {
+    if (index < 0 || index >= static_cast<int>(model.accessors.size())) {
+      throw LoadError{absl::StrCat(what_, ": accessor ", index, " does not exist")};
+    }
+    acc_ = &model.accessors[index];
+    if (acc_->sparse.isSparse) throw LoadError{absl::StrCat(what_, ": sparse accessors are not supported")};
+    if (acc_->bufferView < 0 || acc_->bufferView >= static_cast<int>(model.bufferViews.size())) {
+      throw LoadError{absl::StrCat(what_, ": accessor ", index, " has no valid bufferView")};
+    }
+    const tinygltf::BufferView& view = model.bufferViews[acc_->bufferView];
+    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
+      throw LoadError{absl::StrCat(what_, ": bufferView ", acc_->bufferView, " has no valid buffer")};
+    }
+    const auto& data = model.buffers[view.buffer].data;
+    components_ = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc_->type));
+    component_size_ = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(acc_->componentType));
+    if (components_ <= 0 || component_size_ <= 0) {
+      throw LoadError{absl::StrCat(what_, ": accessor ", index, " has an invalid type")};
+    }
+    const int stride = acc_->ByteStride(view);
+    if (stride <= 0) throw LoadError{absl::StrCat(what_, ": accessor ", index, " has an invalid stride")};
+    stride_ = static_cast<size_t>(stride);
+    const size_t element = static_cast<size_t>(components_) * static_cast<size_t>(component_size_);
+    const size_t start = view.byteOffset + acc_->byteOffset;
+    // The last element must end inside the view, and the view inside the buffer.
+    const size_t need = acc_->count == 0 ? 0 : (acc_->count - 1) * stride_ + element;
+    if (view.byteOffset > data.size() || view.byteLength > data.size() - view.byteOffset ||
+        acc_->byteOffset > view.byteLength || need > view.byteLength - acc_->byteOffset) {
+      throw LoadError{absl::StrCat(what_, ": accessor ", index, " reads past the end of its buffer")};
+    }
+    base_ = data.data() + start;
+  }
+  size_t count() const { return acc_->count; }
+  int components() const { return components_; }
+  int type() const { return acc_->type; }
+  int component_type() const { return acc_->componentType; }
+
+  // Component c of element i, as double (normalized integers scaled as glTF says).
+  double Get(size_t i, int c) const {
+    const unsigned char* p = base_ + i * stride_ + static_cast<size_t>(c) * component_size_;
+    switch (acc_->componentType) {
+      case TINYGLTF_COMPONENT_TYPE_FLOAT: return Load<float>(p);
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return Load<uint32_t>(p);
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        const double v = Load<uint16_t>(p);
+        return acc_->normalized ? v / 65535.0 : v;
+      }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+        const double v = Load<uint8_t>(p);
+        return acc_->normalized ? v / 255.0 : v;
+      }
+      case TINYGLTF_COMPONENT_TYPE_SHORT: {
+        const double v = Load<int16_t>(p);
+        return acc_->normalized ? std::max(v / 32767.0, -1.0) : v;
+      }
+      case TINYGLTF_COMPONENT_TYPE_BYTE: {
+        const double v = Load<int8_t>(p);
+        return acc_->normalized ? std::max(v / 127.0, -1.0) : v;
+      }
+      default: return NAN;
+    }
+  }
+  glm::dvec3 Vec3(size_t i) const { return {Get(i, 0), Get(i, 1), Get(i, 2)}; }
+
+ private:
+  template <typename T>
+  static T Load(const unsigned char* p) {
+    T v;
+    std::memcpy(&v, p, sizeof(T));
+    return v;
+  }
+  std::string what_;
+  const tinygltf::Accessor* acc_ = nullptr;
+  const unsigned char* base_ = nullptr;
+  size_t stride_ = 0;
+  int components_ = 0;
+  int component_size_ = 0;
+};
+
+struct PendingObject {
+  std::string name;
+  std::vector<glm::dvec3> positions;  // world, z-up
+  std::vector<glm::dvec3> normals;    // world, z-up, unit
+  std::vector<uint32_t> indices;
+  std::vector<Occluder25D> occluders;  // world footprints, z-up
+};
+
+class GltfImporter {
+ public:
+  GltfImporter(const tinygltf::Model& model, std::string file, std::vector<std::string>* warnings)
+      : model_(model), file_(std::move(file)), warnings_(warnings) {}
+
+  Scene Import() {
+    std::vector<int> roots;
+    if (!model_.scenes.empty()) {
+      int s = model_.defaultScene;
+      if (s < 0 || s >= static_cast<int>(model_.scenes.size())) s = 0;
+      roots = model_.scenes[s].nodes;
+    } else {
+      // No scene: every node that is nobody's child is a root.
+      std::vector<bool> child(model_.nodes.size(), false);
+      for (const auto& n : model_.nodes) {
+        for (int c : n.children) {
+          if (c >= 0 && c < static_cast<int>(child.size())) child[c] = true;
+        }
+      }
+      for (size_t i = 0; i < child.size(); ++i) {
+        if (!child[i]) roots.push_back(static_cast<int>(i));
+      }
+    }
+    for (int r : roots) Visit(r, glm::dmat4(1.0), 0);
+    return Finish();
+  }
+
+ private:
+  void Warn(std::string w) {
+    if (warnings_ != nullptr) warnings_->push_back(absl::StrCat(file_, ": ", w));
+  }
+  std::string NodeName(int index) const {
+    const auto& n = model_.nodes[index];
+    return n.name.empty() ? absl::StrCat("node ", index) : absl::StrCat("node ", index, " ('", n.name, "')");
+  }
+
+  void Visit(int index, const glm::dmat4& parent, int depth) {
+    if (index < 0 || index >= static_cast<int>(model_.nodes.size())) {
+      throw LoadError{absl::StrCat("node ", index, " does not exist")};
+    }
+    if (depth > kMaxNodeDepth || !on_path_.insert(index).second) {
+      throw LoadError{absl::StrCat(NodeName(index), ": the node hierarchy has a cycle or is deeper than ",
+                                   kMaxNodeDepth)};
+    }
+    const tinygltf::Node& node = model_.nodes[index];
+    const glm::dmat4 local = LocalMatrix(node);
+    const glm::dmat4 world = parent * local;  // glTF frame
+    if (depth == 0 && IsOriginNode(node)) {
+      if (origin_node_ >= 0) Warn("more than one vistream origin node; the first is used");
+      else {
+        origin_node_ = index;
+        origin_ = ZupFromGltf(glm::dvec3(local[3]));
+      }
+    }
+    if (node.mesh >= 0) ImportMesh(index, world);
+    else if (Occluders(node).IsArray()) Warn(absl::StrCat(NodeName(index), ": occluders on a node without a mesh ignored"));
+    for (int c : node.children) Visit(c, world, depth + 1);
+    on_path_.erase(index);
+  }
+
+  static bool IsOriginNode(const tinygltf::Node& node) {
+    if (!node.extras.IsObject() || !node.extras.Has("vistream")) return false;
+    const auto& v = node.extras.Get("vistream");
+    return v.IsObject() && v.Has("origin") && v.Get("origin").IsBool() && v.Get("origin").Get<bool>();
+  }
+  static const tinygltf::Value& Occluders(const tinygltf::Node& node) {
+    static const tinygltf::Value kNone;
+    if (!node.extras.IsObject() || !node.extras.Has("vistream")) return kNone;
+    const auto& v = node.extras.Get("vistream");
+    if (!v.IsObject() || !v.Has("occluders")) return kNone;
+    return v.Get("occluders");
+  }
+
+  void ImportMesh(int node_index, const glm::dmat4& gltf_world) {
+    const tinygltf::Node& node = model_.nodes[node_index];
+    const std::string what = NodeName(node_index);
+    if (node.mesh >= static_cast<int>(model_.meshes.size())) {
+      throw LoadError{absl::StrCat(what, ": mesh ", node.mesh, " does not exist")};
+    }
+    const glm::dmat4 world = kZupFromGltf * gltf_world;                 // glTF local -> z-up world
+    const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
+    const bool mirrored = glm::determinant(glm::dmat3(world)) < 0.0;
+    PendingObject obj;
+    obj.name = node.name.empty() ? model_.meshes[node.mesh].name : node.name;
+    if (obj.name.empty()) obj.name = absl::StrCat("object", pending_.size());
+    const tinygltf::Mesh& mesh = model_.meshes[node.mesh];
+    for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
+      const tinygltf::Primitive& prim = mesh.primitives[pi];
+      const std::string pwhat = absl::StrCat(what, ", mesh ", node.mesh, ", primitive ", pi);
+      if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+          prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        Warn(absl::StrCat(pwhat, ": mode ", prim.mode, " is not triangles; skipped"));
+        continue;
+      }
+      const auto pos_it = prim.attributes.find("POSITION");
+      if (pos_it == prim.attributes.end()) {
+        Warn(absl::StrCat(pwhat, ": no POSITION attribute; skipped"));
+        continue;
+      }
+      AccessorReader pos(model_, pos_it->second, pwhat);
+      if (pos.type() != TINYGLTF_TYPE_VEC3) throw LoadError{absl::StrCat(pwhat, ": POSITION is not VEC3")};
+      std::vector<uint32_t> corners;  // triangle list in this primitive's vertex numbering
+      std::vector<uint32_t> seq;
+      if (prim.indices >= 0) {
+        AccessorReader idx(model_, prim.indices, pwhat);
+        const int ct = idx.component_type();
+        if (idx.type() != TINYGLTF_TYPE_SCALAR ||
+            (ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT && ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+             ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE)) {
+          throw LoadError{absl::StrCat(pwhat, ": indices must be unsigned integer scalars")};
+        }
+        seq.resize(idx.count());
+        for (size_t i = 0; i < idx.count(); ++i) {
+          const double v = idx.Get(i, 0);
+          if (!(v < static_cast<double>(pos.count()))) {
+            throw LoadError{absl::StrCat(pwhat, ": index ", i, " = ", v, " is out of range (",
+                                         pos.count(), " vertices)")};
+          }
+          seq[i] = static_cast<uint32_t>(v);
+        }
+      } else {
+        seq.resize(pos.count());
+        for (size_t i = 0; i < seq.size(); ++i) seq[i] = static_cast<uint32_t>(i);
+      }
+      if (prim.mode == TINYGLTF_MODE_TRIANGLES) {
+        if (seq.size() % 3 != 0) Warn(absl::StrCat(pwhat, ": index count not a multiple of 3; tail dropped"));
+        corners.assign(seq.begin(), seq.begin() + static_cast<long>(seq.size() / 3 * 3));
+      } else {
+        for (size_t i = 2; i < seq.size(); ++i) {
+          if (prim.mode == TINYGLTF_MODE_TRIANGLE_FAN) corners.insert(corners.end(), {seq[0], seq[i - 1], seq[i]});
+          else if (i % 2 == 0) corners.insert(corners.end(), {seq[i - 2], seq[i - 1], seq[i]});
+          else corners.insert(corners.end(), {seq[i - 1], seq[i - 2], seq[i]});
+        }
+      }
+      if (mirrored) {
+        for (size_t t = 0; t + 2 < corners.size(); t += 3) std::swap(corners[t + 1], corners[t + 2]);
+      }
+      // Read only the vertices this primitive uses: objects may share one large vertex
+      // accessor (vistream's own files do) and each reads its range through its indices.
+      std::vector<uint32_t> used(corners.begin(), corners.end());
+      std::sort(used.begin(), used.end());
+      used.erase(std::unique(used.begin(), used.end()), used.end());
+      auto local = [&used](uint32_t v) {
+        return static_cast<uint32_t>(std::lower_bound(used.begin(), used.end(), v) - used.begin());
+      };
+      std::vector<glm::dvec3> world_pos(used.size());
+      for (size_t k = 0; k < used.size(); ++k) {
+        world_pos[k] = glm::dvec3(world * glm::dvec4(pos.Vec3(used[k]), 1.0));
+      }
+      for (uint32_t& c : corners) c = local(c);
+
+      const auto nrm_it = prim.attributes.find("NORMAL");
+      const auto base = static_cast<uint32_t>(obj.positions.size());
+      if (nrm_it != prim.attributes.end()) {
+        AccessorReader nrm(model_, nrm_it->second, pwhat);
+        if (nrm.type() != TINYGLTF_TYPE_VEC3 || nrm.count() != pos.count()) {
+          throw LoadError{absl::StrCat(pwhat, ": NORMAL must be VEC3 with one per position")};
+        }
+        for (size_t k = 0; k < used.size(); ++k) {
+          obj.positions.push_back(world_pos[k]);
+          glm::dvec3 n = normal_matrix * nrm.Vec3(used[k]);
+          const double len = glm::length(n);
+          obj.normals.push_back(len > 0.0 ? n / len : glm::dvec3(0, 0, 1));
+        }
+        for (uint32_t c : corners) obj.indices.push_back(base + c);
+      } else {
+        // Flat normals: every triangle gets its own three vertices.
+        for (size_t t = 0; t + 2 < corners.size(); t += 3) {
+          const glm::dvec3 &a = world_pos[corners[t]], &b = world_pos[corners[t + 1]], &c = world_pos[corners[t + 2]];
+          glm::dvec3 n = glm::cross(b - a, c - a);
+          const double len = glm::length(n);
+          n = len > 0.0 ? n / len : glm::dvec3(0, 0, 1);
+          for (const glm::dvec3* p : {&a, &b, &c}) {
+            obj.indices.push_back(static_cast<uint32_t>(obj.positions.size()));
+            obj.positions.push_back(*p);
+            obj.normals.push_back(n);
+          }
+        }
+      }
+    }
+    ImportOccluders(node, world, what, &obj);
+    if (obj.indices.empty()) {
+      Warn(absl::StrCat(what, ": no triangles; skipped"));
+      return;
+    }
+    pending_.push_back(std::move(obj));
+  }
+
+  void ImportOccluders(const tinygltf::Node& node, const glm::dmat4& world, const std::string& what,
+                       PendingObject* obj) {
+    const tinygltf::Value& list = Occluders(node);
+    if (list.Type() == tinygltf::NULL_TYPE) return;
+    const std::string where = absl::StrCat(what, ": extras.vistream.occluders");
+    if (!list.IsArray()) throw LoadError{absl::StrCat(where, ": expected an array")};
+    // The node's transform (z-up in, z-up out) must keep prisms vertical and on the ground.
+    const glm::dmat4 m = world * kGltfFromZup;
+    const double tol = 1e-9 * (1.0 + std::abs(m[2][2]));
+    const bool vertical = std::abs(m[0][2]) <= tol && std::abs(m[1][2]) <= tol &&
+                          std::abs(m[2][0]) <= tol && std::abs(m[2][1]) <= tol && m[2][2] > 0.0;
+    for (size_t k = 0; k < list.ArrayLen(); ++k) {
+      const std::string ow = absl::StrCat(where, "[", k, "]");
+      const tinygltf::Value& oc = list.Get(static_cast<int>(k));
+      if (!oc.IsObject() || !oc.Has("footprint") || !oc.Has("height")) {
+        throw LoadError{absl::StrCat(ow, ": expected an object with 'footprint' and 'height'")};
+      }
+      const tinygltf::Value& fp = oc.Get("footprint");
+      const tinygltf::Value& h = oc.Get("height");
+      if (!fp.IsArray() || fp.ArrayLen() < 6 || fp.ArrayLen() % 2 != 0) {
+        throw LoadError{absl::StrCat(ow, ".footprint: expected an array of 2n >= 6 numbers (x, y pairs)")};
+      }
+      if (!h.IsNumber() || !std::isfinite(h.GetNumberAsDouble()) || h.GetNumberAsDouble() < 0.0) {
+        throw LoadError{absl::StrCat(ow, ".height: expected a finite non-negative number")};
+      }
+      if (!vertical) {
+        Warn(absl::StrCat(ow, ": the node transform tilts the prism; occluder dropped"));
+        continue;
+      }
+      Occluder25D out;
+      for (size_t i = 0; i < fp.ArrayLen(); i += 2) {
+        const tinygltf::Value &x = fp.Get(static_cast<int>(i)), &y = fp.Get(static_cast<int>(i + 1));
+        if (!x.IsNumber() || !y.IsNumber()) throw LoadError{absl::StrCat(ow, ".footprint[", i, "]: not a number")};
+        const glm::dvec3 p = glm::dvec3(m * glm::dvec4(x.GetNumberAsDouble(), y.GetNumberAsDouble(), 0.0, 1.0));
+        out.footprint.emplace_back(p.x, p.y);
+      }
+      // Where the prism's foot lands, relative to the scene origin (visited before objects).
+      const double base = m[3][2] - origin_.z;
+      const double top = base + m[2][2] * h.GetNumberAsDouble();
+      if (base > 1e-6 * (1.0 + std::abs(top))) {
+        Warn(absl::StrCat(ow, ": the prism does not stand on the ground (z = ", base, "); occluder dropped"));
+        continue;
+      }
+      out.height = std::max(0.0, top);
+      obj->occluders.push_back(std::move(out));
+    }
+  }
+
+  Scene Finish() {
+    Scene scene;
+    if (pending_.empty()) throw LoadError{"no triangle meshes in the file"};
+    if (origin_node_ < 0) {
+      // A foreign file: centre the local frame on the footprint, rounded to whole metres so
+      // that translating the file by whole metres translates nothing else.
+      Aabb box;
+      for (const auto& o : pending_) {
+        for (const auto& p : o.positions) box.Extend(p);
+      }
+      origin_ = glm::dvec3(std::round(box.Centre().x), std::round(box.Centre().y), 0.0);
+    }
+    scene.origin = origin_;
+    for (auto& o : pending_) {
+      Mesh mesh;
+      mesh.positions.reserve(o.positions.size());
+      for (const auto& p : o.positions) mesh.positions.emplace_back(glm::vec3(p - origin_));
+      mesh.normals.reserve(o.normals.size());
+      for (const auto& n : o.normals) mesh.normals.emplace_back(glm::vec3(n));
+      mesh.indices = std::move(o.indices);
+      const ObjectId id = scene.AddObject(std::move(o.name), std::move(mesh));
+      for (auto& oc : o.occluders) {
+        for (auto& p : oc.footprint) p -= glm::dvec2(origin_);
+        oc.object = id;
+        scene.occluders.push_back(std::move(oc));
+      }
+    }
+    NormalizeOccluders(&scene);
+    return scene;
+  }
+
+  const tinygltf::Model& model_;
+  std::string file_;
+  std::vector<std::string>* warnings_;
+  std::unordered_set<int> on_path_;
+  std::vector<PendingObject> pending_;
+  int origin_node_ = -1;
+  glm::dvec3 origin_{0.0};
+};
+
+bool SkipImages(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*,
+                int, void*) {
+  return true;  // vistream draws flat-shaded geometry; images are never decoded
+}
+
+absl::StatusOr<Scene> Convert(bool ok, const std::string& err, const std::string& warn,
+                              const tinygltf::Model& model, const std::string& name,
+                              std::vector<std::string>* warnings) {
+  if (!ok) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": not a valid glTF file: ", err.empty() ? "unknown error" : err));
+  }
+  if (warnings != nullptr && !warn.empty()) warnings->push_back(absl::StrCat(name, ": ", warn));
+  try {
+    GltfImporter importer(model, name, warnings);
+    Scene scene = importer.Import();
+    if (absl::Status s = ValidateScene(scene, name); !s.ok()) return s;
+    return scene;
+  } catch (const LoadError& e) {
+    return absl::InvalidArgumentError(absl::StrCat(name, ": ", e.what));
+  }
+}
+
+bool EndsWith(std::string_view s, std::string_view suffix) {
+  return s.size() >= suffix.size() && s.substr(s.size() - suffix.size()) == suffix;
+}
+
+}  // namespace
+
+absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, const std::string& name,
+                                         const std::string& base_dir,
+                                         std::vector<std::string>* warnings) {
+  tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(&SkipImages, nullptr);
+  tinygltf::Model model;
+  std::string err, warn;
+  bool ok = false;
+  try {
+    if (binary) {
+      ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
+                                       reinterpret_cast<const unsigned char*>(bytes.data()),
+                                       static_cast<unsigned int>(bytes.size()), base_dir);
+    } else {
+      ok = loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(),
+                                      static_cast<unsigned int>(bytes.size()), base_dir);
+    }
+  } catch (const std::exception& e) {  // nlohmann::json may throw on hostile input
+    ok = false;
+    err = e.what();
+  }
+  return Convert(ok, err, warn, model, name, warnings);
+}
+
+absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open file"));
+  in.seekg(0, std::ios::end);
+  const auto size = static_cast<size_t>(in.tellg());
+  in.seekg(0, std::ios::beg);
+  std::string bytes(size, '\0');
+  if (size > 0 && !in.read(bytes.data(), static_cast<std::streamsize>(size))) {
+    return absl::DataLossError(absl::StrCat(path, ": read failed"));
+  }
+  if (bytes.size() > std::numeric_limits<unsigned int>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": file larger than 4 GiB"));
+  }
+  // A .glb starts with the magic "glTF", whatever its extension.
+  const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  if (!binary && EndsWith(path, ".glb")) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": not a valid .glb file (bad magic)"));
+  }
+  std::string base = fs::path(path).parent_path().string();
+  return LoadGltfFromMemory(bytes, binary, path, base, warnings);
+}
+
+namespace {
+
+// Appends raw bytes of `values` to `buffer`, 4-byte aligned; returns the byte offset.
+template <typename T>
+size_t AppendBytes(const std::vector<T>& values, std::vector<unsigned char>* buffer) {
+  while (buffer->size() % 4 != 0) buffer->push_back(0);
+  const size_t offset = buffer->size();
+  buffer->resize(offset + values.size() * sizeof(T));
+  if (!values.empty()) std::memcpy(buffer->data() + offset, values.data(), values.size() * sizeof(T));
+  return offset;
+}
+
+// The shortest decimal that reads back as the same float: min/max stay exact for float
+// readers and the JSON stays short (3017.408, not 3017.407958984375).
+double ShortFloat(double value) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), static_cast<float>(value));
+  return std::strtod(std::string(buf, r.ptr).c_str(), nullptr);
+}
+
+}  // namespace
+
+absl::Status SaveGltf(const Scene& scene, const std::string& path) {
+  if (absl::Status s = ValidateScene(scene, path); !s.ok()) return s;
+  const bool binary = EndsWith(path, ".glb");
+  tinygltf::Model model;
+  model.asset.version = "2.0";
+  model.asset.generator = "vistream";
+  model.buffers.resize(1);
+  tinygltf::Buffer& buffer = model.buffers[0];
+
+  // Three interleaving-free streams, each one bufferView; objects are ranges of them.
+  std::vector<glm::vec3> positions, normals;
+  std::vector<uint32_t> indices;
+  positions.reserve(scene.VertexCount());
+  normals.reserve(scene.VertexCount());
+  indices.reserve(scene.TriangleCount() * 3);
+  if (scene.VertexCount() > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": more than 2^32 vertices"));
+  }
+  uint32_t vertex_base = 0;
+  for (const Object& o : scene.objects) {
+    for (const glm::vec3& p : o.mesh.positions) positions.emplace_back(GltfFromZup(glm::dvec3(p)));
+    for (const glm::vec3& n : o.mesh.normals) normals.emplace_back(GltfFromZup(glm::dvec3(n)));
+    for (uint32_t i : o.mesh.indices) indices.push_back(vertex_base + i);
+    vertex_base += static_cast<uint32_t>(o.mesh.positions.size());
+  }
+  const size_t pos_off = AppendBytes(positions, &buffer.data);
+  const size_t nrm_off = AppendBytes(normals, &buffer.data);
+  const size_t idx_off = AppendBytes(indices, &buffer.data);
+  auto add_view = [&](size_t offset, size_t length, int target) {
+    tinygltf::BufferView v;
+    v.buffer = 0;
+    v.byteOffset = offset;
+    v.byteLength = length;
+    v.target = target;
+    model.bufferViews.push_back(v);
+  };
+  add_view(pos_off, positions.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
+  add_view(nrm_off, normals.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
+  add_view(idx_off, indices.size() * sizeof(uint32_t), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+
+  // The origin node: its translation is the scene origin; objects are its children.
+  tinygltf::Node root;
+  root.name = scene.name.empty() ? "vistream" : scene.name;
+  const glm::dvec3 origin = GltfFromZup(scene.origin);
+  root.translation = {origin.x, origin.y, origin.z};
+  root.extras = tinygltf::Value(tinygltf::Value::Object{
+      {"vistream", tinygltf::Value(tinygltf::Value::Object{{"origin", tinygltf::Value(true)}})}});
+  model.nodes.push_back(root);
+
+  std::vector<std::vector<const Occluder25D*>> occluders(scene.objects.size());
+  for (const Occluder25D& oc : scene.occluders) occluders[oc.object].push_back(&oc);
+
+  auto add_accessor = [&](int view, size_t offset, size_t count, int ctype, int type) {
+    tinygltf::Accessor a;
+    a.bufferView = view;
+    a.byteOffset = offset;
+    a.count = count;
+    a.componentType = ctype;
+    a.type = type;
+    model.accessors.push_back(a);
+    return static_cast<int>(model.accessors.size() - 1);
+  };
+  // One POSITION and one NORMAL accessor for the whole scene; each object is a primitive
+  // whose indices pick its vertices. Far fewer accessors keeps the JSON, and loading, small.
+  const int pa = add_accessor(0, 0, positions.size(), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
+  glm::dvec3 lo(INFINITY), hi(-INFINITY);  // POSITION needs min and max (glTF 2.0, 3.6.2.4)
+  for (const glm::vec3& p : positions) {
+    lo = glm::min(lo, glm::dvec3(p));
+    hi = glm::max(hi, glm::dvec3(p));
+  }
+  model.accessors[pa].minValues = {ShortFloat(lo.x), ShortFloat(lo.y), ShortFloat(lo.z)};
+  model.accessors[pa].maxValues = {ShortFloat(hi.x), ShortFloat(hi.y), ShortFloat(hi.z)};
+  const int na = add_accessor(1, 0, normals.size(), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
+
+  size_t index_base = 0;
+  for (const Object& o : scene.objects) {
+    const size_t ni = o.mesh.indices.size();
+    const int ia = add_accessor(2, index_base * sizeof(uint32_t), ni, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                                TINYGLTF_TYPE_SCALAR);
+    index_base += ni;
+
+    tinygltf::Primitive prim;
+    prim.attributes["POSITION"] = pa;
+    prim.attributes["NORMAL"] = na;
+    prim.indices = ia;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    tinygltf::Mesh mesh;
+    mesh.primitives.push_back(prim);
+    model.meshes.push_back(std::move(mesh));
+
+    tinygltf::Node node;
+    node.name = o.name;
+    node.mesh = static_cast<int>(model.meshes.size() - 1);
+    if (!occluders[o.id].empty()) {
+      tinygltf::Value::Array list;
+      for (const Occluder25D* oc : occluders[o.id]) {
+        tinygltf::Value::Array fp;
+        for (const glm::dvec2& p : oc->footprint) {
+          fp.emplace_back(p.x);
+          fp.emplace_back(p.y);
+        }
+        list.emplace_back(tinygltf::Value::Object{{"footprint", tinygltf::Value(std::move(fp))},
+                                                  {"height", tinygltf::Value(oc->height)}});
+      }
+      node.extras = tinygltf::Value(tinygltf::Value::Object{
+          {"vistream", tinygltf::Value(tinygltf::Value::Object{{"occluders", tinygltf::Value(std::move(list))}})}});
+    }
+    model.nodes.push_back(std::move(node));
+    model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));
+  }
+  tinygltf::Scene s;
+  s.name = scene.name;
+  s.nodes = {0};
+  model.scenes.push_back(s);
+  model.defaultScene = 0;
+
+  if (!binary) buffer.uri = fs::path(path).stem().string() + ".bin";
+  const std::string tmp = path + ".tmp";
+  tinygltf::TinyGLTF writer;
+  bool ok = false;
+  try {
+    ok = writer.WriteGltfSceneToFile(&model, binary ? tmp : path, /*embedImages=*/true,
+                                     /*embedBuffers=*/binary, /*prettyPrint=*/false, binary);
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat(path, ": writing failed: ", e.what()));
+  }
+  if (!ok) return absl::UnavailableError(absl::StrCat(path, ": cannot write file"));
+  if (binary) {
+    // Written beside and renamed, so a reader never sees half a file.
+    std::error_code ec;
+    fs::rename(tmp, path, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename from ", tmp, ": ", ec.message()));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace vistream::scenes

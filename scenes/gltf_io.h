@@ -1,0 +1,37 @@
+#pragma once
+// glTF 2.0 (.gltf and .glb) load and save with tinygltf. glTF is y-up; vistream is z-up:
+// the conversion happens here and nowhere else ((x, y, z) z-up = (x, -z, y) glTF).
+//
+// vistream files keep the scene origin as the translation of one root node whose extras hold
+// {"vistream": {"origin": true}}, objects as its child nodes (one mesh each) and occluders in
+// each object node's extras: {"vistream": {"occluders": [{"footprint": [x0, y0, x1, y1, ...],
+// "height": h}]}} in the node's frame, z-up metres, standing on the ground.
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+#include "scenes/scene.h"
+
+namespace vistream::scenes {
+
+// Loads any valid glTF 2.0 file with triangle meshes: node transforms applied in double,
+// one object per mesh node (its triangle primitives merged), strips and fans converted,
+// points and lines skipped with a warning, flat normals made where a mesh has none.
+// Without a vistream origin node the origin is the rounded centre of the ground footprint.
+// Warnings are appended to `warnings` when given. Errors name the file and the element.
+absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings = nullptr);
+
+// The same, from bytes in memory (.glb when `binary`). External URIs resolve against
+// `base_dir`. Safe on untrusted input.
+absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary,
+                                         const std::string& name, const std::string& base_dir = "",
+                                         std::vector<std::string>* warnings = nullptr);
+
+// Saves a validated scene; binary when `path` ends in .glb, otherwise .gltf with the buffer
+// beside it as PATH_STEM.bin.
+absl::Status SaveGltf(const Scene& scene, const std::string& path);
+
+}  // namespace vistream::scenes

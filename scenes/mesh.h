@@ -1,0 +1,39 @@
+#pragma once
+// Triangle meshes and the prism builder shared by the city generator and importers.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "scenes/aabb.h"
+
+namespace vistream::scenes {
+
+// Positions and normals in scene-local metres (z up), single precision: a city of 20 km keeps
+// millimetre resolution, and this is what the client uploads. Geometric decisions use the
+// double-precision occluders and boxes, never these floats.
+struct Mesh {
+  std::vector<glm::vec3> positions;
+  std::vector<glm::vec3> normals;  // one per position, unit length
+  std::vector<uint32_t> indices;   // three per triangle, counter-clockwise seen from outside
+
+  size_t TriangleCount() const { return indices.size() / 3; }
+  Aabb Bounds() const;
+  // Appends `other`, offsetting its indices.
+  void Append(const Mesh& other);
+};
+
+// Appends a closed, flat-shaded prism: the convex footprint (counter-clockwise, xy metres,
+// at least 3 vertices) extruded from z0 to z1 > z0. Walls, roof and floor; 4n - 4 triangles.
+void AppendConvexPrism(std::span<const glm::dvec2> footprint, double z0, double z1, Mesh* mesh);
+
+// Signed area of a polygon in the xy plane: positive for counter-clockwise.
+double SignedArea(std::span<const glm::dvec2> polygon);
+
+// True when the polygon is convex (collinear vertices allowed) and counter-clockwise.
+bool IsConvexCcw(std::span<const glm::dvec2> polygon);
+
+}  // namespace vistream::scenes

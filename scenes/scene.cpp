@@ -1,0 +1,122 @@
+#include "scenes/scene.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+
+namespace vistream::scenes {
+
+size_t Scene::TriangleCount() const {
+  size_t n = 0;
+  for (const Object& o : objects) n += o.mesh.TriangleCount();
+  return n;
+}
+
+size_t Scene::VertexCount() const {
+  size_t n = 0;
+  for (const Object& o : objects) n += o.mesh.positions.size();
+  return n;
+}
+
+void Scene::RecomputeBounds() {
+  bounds = Aabb();
+  for (Object& o : objects) {
+    o.bounds = o.mesh.Bounds();
+    bounds.Extend(o.bounds);
+  }
+}
+
+ObjectId Scene::AddObject(std::string object_name, Mesh mesh) {
+  Object o;
+  o.id = static_cast<ObjectId>(objects.size());
+  o.name = std::move(object_name);
+  o.mesh = std::move(mesh);
+  o.bounds = o.mesh.Bounds();
+  bounds.Extend(o.bounds);
+  objects.push_back(std::move(o));
+  return objects.back().id;
+}
+
+namespace {
+
+bool Finite(const glm::vec3& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
+
+}  // namespace
+
+absl::Status ValidateScene(const Scene& scene, const std::string& where) {
+  if (scene.objects.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": scene has no objects"));
+  }
+  if (!std::isfinite(scene.origin.x) || !std::isfinite(scene.origin.y) ||
+      !std::isfinite(scene.origin.z)) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": scene origin is not finite"));
+  }
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    const Object& o = scene.objects[i];
+    const std::string what = absl::StrCat(where, ": object ", i, " ('", o.name, "')");
+    if (o.id != i) return absl::InternalError(absl::StrCat(what, ": id ", o.id, " is not dense"));
+    const Mesh& m = o.mesh;
+    if (m.indices.size() % 3 != 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": index count ", m.indices.size(), " is not a multiple of 3"));
+    }
+    if (m.normals.size() != m.positions.size()) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": ", m.normals.size(),
+                                                     " normals for ", m.positions.size(),
+                                                     " positions"));
+    }
+    for (size_t v = 0; v < m.positions.size(); ++v) {
+      if (!Finite(m.positions[v])) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(what, ": vertex ", v, " has a non-finite (NaN or infinite) coordinate"));
+      }
+      if (!Finite(m.normals[v])) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(what, ": normal ", v, " has a non-finite coordinate"));
+      }
+    }
+    for (size_t k = 0; k < m.indices.size(); ++k) {
+      if (m.indices[k] >= m.positions.size()) {
+        return absl::InvalidArgumentError(absl::StrCat(what, ": index ", k, " = ", m.indices[k],
+                                                       " is out of range (", m.positions.size(),
+                                                       " vertices)"));
+      }
+    }
+  }
+  for (size_t i = 0; i < scene.occluders.size(); ++i) {
+    const Occluder25D& oc = scene.occluders[i];
+    const std::string what = absl::StrCat(where, ": occluder ", i);
+    if (oc.object >= scene.objects.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": refers to object ", oc.object, ", which does not exist"));
+    }
+    if (oc.footprint.size() < 3) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": footprint has ", oc.footprint.size(), " vertices, needs 3"));
+    }
+    if (!std::isfinite(oc.height) || oc.height < 0.0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": height ", oc.height, " is not a finite non-negative number"));
+    }
+    for (const glm::dvec2& p : oc.footprint) {
+      if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(what, ": footprint has a non-finite coordinate"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+void NormalizeOccluders(Scene* scene) {
+  for (Occluder25D& oc : scene->occluders) {
+    auto& fp = oc.footprint;
+    while (fp.size() > 3 && fp.front() == fp.back()) fp.pop_back();
+    if (SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
+  }
+}
+
+}  // namespace vistream::scenes

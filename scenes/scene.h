@@ -1,0 +1,62 @@
+#pragma once
+// The scene model: objects with triangle meshes, 2.5D occluders, bounds and a
+// double-precision origin. Everything is in scene-local metres, z up, ground at z = 0;
+// world position = origin + local position.
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <absl/status/status.h>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "scenes/aabb.h"
+#include "scenes/mesh.h"
+
+namespace vistream::scenes {
+
+using ObjectId = uint32_t;
+
+struct Object {
+  ObjectId id = 0;  // dense: objects[i].id == i
+  std::string name;
+  Mesh mesh;
+  Aabb bounds;  // of mesh.positions, in double
+};
+
+// A vertical prism standing on the ground: a simple polygon footprint (counter-clockwise in
+// xy) extruded from z = 0 to z = height. It lies inside the solid of object `object`, so
+// occlusion computed from occluders is conservative for the real geometry.
+struct Occluder25D {
+  std::vector<glm::dvec2> footprint;
+  double height = 0.0;
+  ObjectId object = 0;
+};
+
+struct Scene {
+  std::string name;
+  glm::dvec3 origin{0.0};  // world coordinates of local (0, 0, 0), e.g. UTM metres
+  std::vector<Object> objects;
+  std::vector<Occluder25D> occluders;
+  Aabb bounds;  // union of object bounds
+
+  size_t TriangleCount() const;
+  size_t VertexCount() const;
+  // Recomputes every object's bounds and the scene bounds from the meshes.
+  void RecomputeBounds();
+  // Adds an object with the next dense id and returns that id. Bounds are computed here.
+  ObjectId AddObject(std::string name, Mesh mesh);
+};
+
+// Checks the invariants every consumer relies on: at least one object, dense ids, finite
+// coordinates, indices in range, normals per position, finite occluders referencing existing
+// objects. `where` names the source (a file path) in the message.
+absl::Status ValidateScene(const Scene& scene, const std::string& where);
+
+// Makes every occluder footprint counter-clockwise and drops repeated closing vertices.
+// Degenerate footprints (zero area, repeated vertices) are kept: visibility must cope.
+void NormalizeOccluders(Scene* scene);
+
+}  // namespace vistream::scenes

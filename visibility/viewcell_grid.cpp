@@ -1,0 +1,75 @@
+#include "visibility/viewcell_grid.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+
+namespace vistream::visibility {
+
+absl::StatusOr<ViewcellGrid> ViewcellGrid::Create(const scenes::Aabb& bounds, double cell_size,
+                                                  double base_z, double height) {
+  if (!(std::isfinite(cell_size) && cell_size > 0.0)) {
+    return absl::InvalidArgumentError(absl::StrCat("viewcell size must be positive, got ", cell_size));
+  }
+  if (!(std::isfinite(height) && height > 0.0) || !std::isfinite(base_z)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("viewcell height must be positive and its base finite, got ", height, " at ", base_z));
+  }
+  if (bounds.Empty()) return absl::InvalidArgumentError("viewcell grid over an empty scene");
+  ViewcellGrid g;
+  g.size_ = cell_size;
+  g.base_z_ = base_z;
+  g.height_ = height;
+  const double i0 = std::floor(bounds.min.x / cell_size), j0 = std::floor(bounds.min.y / cell_size);
+  const double i1 = std::floor(bounds.max.x / cell_size), j1 = std::floor(bounds.max.y / cell_size);
+  const double nx = i1 - i0 + 1, ny = j1 - j0 + 1;
+  if (!(nx * ny <= 2147483648.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("viewcell grid of ", nx, " x ", ny, " cells is too large; use larger cells"));
+  }
+  g.x0_ = i0 * cell_size;
+  g.y0_ = j0 * cell_size;
+  g.nx_ = static_cast<int>(nx);
+  g.ny_ = static_cast<int>(ny);
+  return g;
+}
+
+scenes::Aabb ViewcellGrid::CellBox(CellCoord c) const {
+  const glm::dvec3 lo(x0_ + c.i * size_, y0_ + c.j * size_, base_z_);
+  return scenes::Aabb{lo, lo + glm::dvec3(size_, size_, height_)};
+}
+
+std::optional<CellId> ViewcellGrid::CellAt(const glm::dvec2& p) const {
+  if (!std::isfinite(p.x) || !std::isfinite(p.y)) return std::nullopt;
+  const double fi = std::floor((p.x - x0_) / size_), fj = std::floor((p.y - y0_) / size_);
+  if (fi < 0 || fj < 0 || fi >= nx_ || fj >= ny_) return std::nullopt;
+  return Id({static_cast<int>(fi), static_cast<int>(fj)});
+}
+
+std::vector<CellId> ViewcellGrid::Neighbours(CellId id) const {
+  const CellCoord c = Coord(id);
+  std::vector<CellId> out;
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const CellCoord n{c.i + di, c.j + dj};
+      if ((di != 0 || dj != 0) && Valid(n)) out.push_back(Id(n));
+    }
+  }
+  return out;
+}
+
+std::vector<CellId> ViewcellGrid::NewlyAdjacent(CellId from, CellId to) const {
+  const CellCoord a = Coord(from), b = Coord(to);
+  if (from == to || std::abs(a.i - b.i) > 1 || std::abs(a.j - b.j) > 1) return {};
+  std::vector<CellId> out;
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const CellCoord n{b.i + di, b.j + dj};
+      if (Valid(n) && (std::abs(n.i - a.i) > 1 || std::abs(n.j - a.j) > 1)) out.push_back(Id(n));
+    }
+  }
+  return out;
+}
+
+}  // namespace vistream::visibility

@@ -1,0 +1,62 @@
+#pragma once
+// The viewcell grid: square cells of `size` metres over the scene's ground footprint, each an
+// eye-level box from base_z to base_z + height. Cell (i, j) covers
+// x in [x0 + i size, x0 + (i+1) size], y likewise, where x0, y0 are multiples of the size, so
+// the grid depends only on scene-local coordinates.
+
+#include <cstdint>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include <absl/status/statusor.h>
+#include <glm/vec2.hpp>
+
+#include "scenes/aabb.h"
+
+namespace vistream::visibility {
+
+using CellId = uint32_t;
+
+struct CellCoord {
+  int i = 0, j = 0;
+  friend bool operator==(const CellCoord&, const CellCoord&) = default;
+};
+
+class ViewcellGrid {
+ public:
+  // Covers the xy extent of `bounds`. Errors: non-positive or non-finite sizes, an empty box,
+  // or a grid of more than 2^31 cells.
+  static absl::StatusOr<ViewcellGrid> Create(const scenes::Aabb& bounds, double cell_size,
+                                             double base_z, double height);
+
+  int nx() const { return nx_; }
+  int ny() const { return ny_; }
+  size_t CellCount() const { return static_cast<size_t>(nx_) * static_cast<size_t>(ny_); }
+  double cell_size() const { return size_; }
+
+  bool Valid(CellCoord c) const { return c.i >= 0 && c.j >= 0 && c.i < nx_ && c.j < ny_; }
+  // Preconditions: Valid(c), id < CellCount().
+  CellId Id(CellCoord c) const { return static_cast<CellId>(c.j) * static_cast<CellId>(nx_) + c.i; }
+  CellCoord Coord(CellId id) const { return {static_cast<int>(id % nx_), static_cast<int>(id / nx_)}; }
+  scenes::Aabb CellBox(CellCoord c) const;
+  scenes::Aabb CellBox(CellId id) const { return CellBox(Coord(id)); }
+
+  // The cell whose ground square contains p (scene-local metres); none outside the grid.
+  // Points on a shared edge belong to the cell above and to the right.
+  std::optional<CellId> CellAt(const glm::dvec2& p) const;
+
+  // The up to eight cells around `id`, in row-major order.
+  std::vector<CellId> Neighbours(CellId id) const;
+  // The cells a client needs anew after moving from `from` to an adjacent `to`: `to`'s
+  // neighbourhood (itself and its neighbours) less `from`'s. Three for an edge crossing,
+  // five for a corner crossing; empty when `to` is not adjacent to `from`.
+  std::vector<CellId> NewlyAdjacent(CellId from, CellId to) const;
+
+ private:
+  double size_ = 1.0, base_z_ = 0.0, height_ = 1.0;
+  double x0_ = 0.0, y0_ = 0.0;
+  int nx_ = 0, ny_ = 0;
+};
+
+}  // namespace vistream::visibility
