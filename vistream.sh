@@ -12,7 +12,7 @@ PACKAGES=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
   libosmesa6-dev libglfw3-dev libglm-dev libembree-dev libtbb-dev libtinygltf-dev
   nlohmann-json3-dev libcli11-dev libpng-dev zlib1g-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   libcgal-dev libgmp-dev libmpfr-dev libmeshoptimizer-dev libosmium2-dev
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}

@@ -6,9 +6,11 @@ namespace vistream::scenes {
 
 namespace {
 
-// Generated coordinates are snapped to whole millimetres: files stay short (3017.408, not
-// 3017.4076950459207) and touching walls stay exactly touching, since equal inputs snap alike.
-double Snap(double x) { return std::round(x * 1000.0) / 1000.0; }
+// Generated coordinates are snapped to 1/256 m (4 mm). Such values below 65,536 m are exact
+// in single precision, so the float mesh and the double occluder describe the very same solid
+// (an occluder never pokes out of its building by a rounding error); touching walls stay
+// exactly touching, since equal inputs snap alike; and files stay short.
+double Snap(double x) { return std::round(x * 256.0) / 256.0; }
 
 }  // namespace
 

@@ -20,7 +20,7 @@ struct Prism {
 };
 
 // Adds one object made of `prisms` (closed, flat-shaded boxes) and one occluder per prism,
-// from the ground to the prism's top, all coordinates snapped to millimetres. Returns the id.
+// from the ground to the prism's top, all coordinates snapped to 1/256 m so that they are exact in float. Returns the id.
 ObjectId AddBuilding(Scene* scene, std::string name, const std::vector<Prism>& prisms);
 
 // The four corners, counter-clockwise, of the rectangle [u0,u1] x [v0,v1] in the frame with

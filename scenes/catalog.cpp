@@ -32,8 +32,9 @@ class Reader {
   }
 
   void Allow(std::initializer_list<const char*> keys) const {
-    for (const auto& [k, v] : j_.items()) {
-      if (std::none_of(keys.begin(), keys.end(), [&](const char* a) { return k == a; })) {
+    for (const auto& item : j_.items()) {
+      const std::string& k = item.key();
+      if (std::none_of(keys.begin(), keys.end(), [&k](const char* a) { return k == a; })) {
         Fail(Key(k), absl::StrCat("unknown key (allowed: ", absl::StrJoin(keys, ", "), ")"));
       }
     }

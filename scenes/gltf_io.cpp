@@ -195,6 +195,7 @@ class GltfImporter {
       else {
         origin_node_ = index;
         origin_ = ZupFromGltf(glm::dvec3(local[3]));
+        name_ = node.name;
       }
     }
     if (node.mesh >= 0) ImportMesh(index, world);
@@ -392,6 +393,7 @@ class GltfImporter {
       origin_ = glm::dvec3(std::round(box.Centre().x), std::round(box.Centre().y), 0.0);
     }
     scene.origin = origin_;
+    scene.name = name_.empty() ? fs::path(file_).stem().string() : name_;
     for (auto& o : pending_) {
       Mesh mesh;
       mesh.positions.reserve(o.positions.size());
@@ -417,6 +419,7 @@ class GltfImporter {
   std::vector<PendingObject> pending_;
   int origin_node_ = -1;
   glm::dvec3 origin_{0.0};
+  std::string name_;
 };
 
 bool SkipImages(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*,

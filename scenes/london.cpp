@@ -69,24 +69,29 @@ class CityPlan {
         districts_.push_back(d);
       }
     }
+    // Open features scale with the area: the defaults are tuned for 162.5 km².
+    const double area_ratio = o.width_m * o.depth_m / 162.5e6;
+    const double span = std::max(o.width_m, o.depth_m);
     // Long straight avenues (Oxford Street, Euston Road...).
-    const int avenues = 16;
+    const int avenues = std::max(2, static_cast<int>(std::lround(16.0 * std::sqrt(area_ratio))));
     for (int k = 0; k < avenues; ++k) {
       Avenue av;
       const glm::dvec2 mid(rng.Uniform(-0.8, 0.8) * half_.x, rng.Uniform(-0.8, 0.8) * half_.y);
       const double theta = rng.Uniform(0.0, kPi);
       av.dir = glm::dvec2(std::cos(theta), std::sin(theta));
-      av.length = rng.Uniform(3000.0, 11000.0);
+      av.length = rng.Uniform(0.25, 0.85) * span;
       av.a = mid - av.dir * (0.5 * av.length);
       av.half_width = 0.5 * rng.Uniform(22.0, 40.0);
       avenues_.push_back(av);
     }
     // Parks (few, large) and squares (many, small).
-    for (int k = 0; k < 9; ++k) {
+    const int parks = static_cast<int>(14.0 * area_ratio + rng.Uniform());
+    for (int k = 0; k < parks; ++k) {
       parks_.push_back({glm::dvec2(rng.Uniform(-0.9, 0.9) * half_.x, rng.Uniform(-0.9, 0.9) * half_.y),
                         rng.Uniform(250.0, 750.0)});
     }
-    for (int k = 0; k < 320; ++k) {
+    const int squares = static_cast<int>(320.0 * area_ratio + rng.Uniform());
+    for (int k = 0; k < squares; ++k) {
       squares_.push_back({glm::dvec2(rng.Uniform(-1.0, 1.0) * half_.x, rng.Uniform(-1.0, 1.0) * half_.y),
                           rng.Uniform(30.0, 85.0)});
     }

@@ -1,0 +1,146 @@
+#include "scenes/catalog.h"
+
+#include <filesystem>
+
+#include <gtest/gtest.h>
+
+#include "tests/test_util.h"
+
+namespace vistream::scenes {
+namespace {
+
+const char* kMinimal = R"({
+  "name": "t",
+  "source": {"generator": "city1"},
+  "viewcell": {"size_m": 50, "height_m": 2}
+})";
+
+absl::Status ParseError(const std::string& text) {
+  return ParseCatalogEntry(text, "scenes/t.json", "/base").status();
+}
+
+void ExpectErrorMentions(const std::string& text, std::initializer_list<const char*> parts) {
+  const absl::Status s = ParseError(text);
+  ASSERT_FALSE(s.ok()) << "accepted: " << text;
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("scenes/t.json"), std::string::npos) << s;
+  for (const char* p : parts) EXPECT_NE(s.message().find(p), std::string::npos) << "missing '" << p << "' in " << s;
+}
+
+TEST(Catalog, MinimalEntryGetsDefaults) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(kMinimal, "t.json", "/base");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->source.kind, SceneSource::Kind::kGenerator);
+  EXPECT_EQ(e->source.generator, "city1");
+  EXPECT_EQ(e->source.seed, 1u);
+  EXPECT_EQ(e->viewcell.size_m, 50.0);
+  EXPECT_EQ(e->viewcell.base_m, 0.5);
+  EXPECT_TRUE(e->walks.empty());
+  EXPECT_FALSE(e->simulation.link.has_value());
+  EXPECT_FALSE(e->simulation.client.has_value());
+}
+
+TEST(Catalog, OnlyDeclaredSimulationEffectsArePresent) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(R"({
+    "name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 50, "height_m": 2},
+    "simulation": {"link": {"latency_ms": 30}}})", "t.json", "/base");
+  ASSERT_TRUE(e.ok()) << e.status();
+  ASSERT_TRUE(e->simulation.link.has_value());
+  EXPECT_EQ(e->simulation.link->latency_ms, 30.0);
+  EXPECT_FALSE(e->simulation.link->bandwidth_mbps.has_value());
+  EXPECT_FALSE(e->simulation.link->loss_pct.has_value());
+  EXPECT_FALSE(e->simulation.client.has_value());
+}
+
+TEST(Catalog, GltfSourceResolvesAgainstTheCatalogFolder) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
+      R"({"name": "t", "source": {"gltf": "../data/x.glb"}, "viewcell": {"size_m": 50, "height_m": 2}})",
+      "t.json", "/base/scenes");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->source.path, "/base/data/x.glb");
+  absl::StatusOr<Scene> scene = BuildScene(*e);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("/base/data/x.glb"), std::string::npos) << scene.status();
+}
+
+TEST(Catalog, MalformedJsonGivesLineAndColumn) {
+  const absl::Status s = ParseError("{\n  \"name\": \"t\",\n  \"source\": {,}\n}");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("scenes/t.json:3:"), std::string::npos) << s;
+  EXPECT_NE(s.message().find("malformed JSON"), std::string::npos) << s;
+  ExpectErrorMentions("", {"malformed JSON"});
+  ExpectErrorMentions(R"({"name": "t", "viewcell": {"size_m": NaN}})", {"malformed JSON"});
+}
+
+TEST(Catalog, UnknownKeysAreNamedWithTheirPath) {
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"sise_m": 5, "height_m": 2}})",
+                      {"viewcell.sise_m", "unknown key"});
+  ExpectErrorMentions(R"({"name": "t", "colour": 1, "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"'colour'", "unknown key"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1", "width_m": 300},
+                          "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"source.width_m", "unknown key"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "simulation": {"link": {"latency": 3}}})",
+                      {"simulation.link.latency"});
+}
+
+TEST(Catalog, WrongTypesMissingKeysAndBadRangesAreErrors) {
+  ExpectErrorMentions(R"({"source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2}})", {"'name'", "missing"});
+  ExpectErrorMentions(R"({"name": 3, "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"'name'", "expected a string"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": -5, "height_m": 2}})",
+                      {"viewcell.size_m", "-5"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": "big", "height_m": 2}})",
+                      {"viewcell.size_m", "expected a number"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1", "seed": -1}, "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"source.seed", "non-negative integer"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "tokyo"}, "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"source.generator", "tokyo"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1", "gltf": "x.glb"}, "viewcell": {"size_m": 5, "height_m": 2}})",
+                      {"'source'", "exactly one"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "walks": [{"name": "w", "waypoints": [[0, 0]]}]})",
+                      {"walks[0].waypoints", "at least 2"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "walks": [{"name": "w", "waypoints": [[0, 0], [1, "x"]]}]})",
+                      {"walks[0].waypoints[1]"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "walks": [{"name": "w", "speed_mps": 0, "waypoints": [[0, 0], [1, 1]]}]})",
+                      {"walks[0].speed_mps"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "simulation": {"link": {"loss_pct": 150}}})",
+                      {"simulation.link.loss_pct"});
+  ExpectErrorMentions(R"([1, 2])", {"expected an object"});
+}
+
+TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
+  const std::vector<std::string> names = CatalogNames();
+  for (const char* required : {"default", "city1", "city2", "london"}) {
+    EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
+  }
+  for (const std::string& name : names) {
+    absl::StatusOr<CatalogEntry> e = FindCatalogEntry(name);
+    ASSERT_TRUE(e.ok()) << e.status();
+    EXPECT_EQ(e->name, name);
+    EXPECT_FALSE(e->walks.empty()) << name << " has no walk path";
+    absl::StatusOr<Scene> scene = BuildScene(*e);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    for (const WalkPath& w : e->walks) {
+      for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
+        EXPECT_TRUE(testing::SegmentClearOfOccluders(*scene, w.waypoints[k], w.waypoints[k + 1], 1.0))
+            << name << ": walk '" << w.name << "' leg " << k << " runs into a building";
+      }
+    }
+  }
+}
+
+TEST(Catalog, UnknownNameListsTheKnownOnes) {
+  absl::StatusOr<CatalogEntry> e = FindCatalogEntry("atlantis");
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(e.status().message().find("london"), std::string::npos) << e.status();
+}
+
+}  // namespace
+}  // namespace vistream::scenes

@@ -1,0 +1,91 @@
+// End-to-end tests of the vistream tool: run the real binary, read its output.
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+namespace {
+
+struct RunResult {
+  int exit_code;
+  std::string out;  // stdout and stderr
+};
+
+RunResult Vistream(const std::string& args) {
+  const std::string cmd = std::string(VISTREAM_BIN) + " " + args + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  EXPECT_NE(pipe, nullptr);
+  std::string out;
+  std::array<char, 4096> buf;
+  while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
+  const int status = pclose(pipe);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+std::string Tmp(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("vistream-cli-" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  return (dir / name).string();
+}
+
+TEST(Cli, GeneratedCity1Reports2128Objects) {
+  const std::string glb = Tmp("city1.glb");
+  const RunResult gen = Vistream("scene generate city1 -o " + glb);
+  ASSERT_EQ(gen.exit_code, 0) << gen.out;
+  const RunResult info = Vistream("scene info " + glb + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.out;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j.at("objects"), 2128);
+  EXPECT_EQ(j.at("triangles"), 12 * (1596 + 3 * 532));
+  EXPECT_EQ(j.at("occluders"), 1596 + 3 * 532);
+  const auto& min = j.at("bounds").at("min");
+  const auto& max = j.at("bounds").at("max");
+  ASSERT_EQ(min.size(), 3u);
+  EXPECT_LT(min[0].get<double>(), max[0].get<double>());
+  EXPECT_EQ(min[2].get<double>(), 0.0);
+  EXPECT_GT(j.at("kd").at("nodes").get<int>(), 1000);
+}
+
+TEST(Cli, SeedChangesTheCity) {
+  const RunResult a = Vistream("scene generate city2 --seed 4 -o " + Tmp("a.glb"));
+  const RunResult b = Vistream("scene generate city2 --seed 5 -o " + Tmp("b.glb"));
+  ASSERT_EQ(a.exit_code, 0) << a.out;
+  ASSERT_EQ(b.exit_code, 0) << b.out;
+  const auto read = [](const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  EXPECT_NE(read(Tmp("a.glb")), read(Tmp("b.glb")));
+}
+
+TEST(Cli, CatalogNamesWorkWithoutAFile) {
+  const RunResult info = Vistream("scene info default --json");
+  ASSERT_EQ(info.exit_code, 0) << info.out;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j.at("name"), "default");
+  EXPECT_GT(j.at("objects").get<int>(), 1000);
+}
+
+TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
+  const RunResult missing = Vistream("scene info " + Tmp("nope.glb"));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.out.find("nope.glb"), std::string::npos) << missing.out;
+  const std::string bad = Tmp("bad.json");
+  std::ofstream(bad) << R"({"name": "bad", "source": {"generator": "city1"}, "viewcell": {"size_m": 0, "height_m": 2}})";
+  const RunResult catalog = Vistream("scene info " + bad);
+  EXPECT_EQ(catalog.exit_code, 1);
+  EXPECT_NE(catalog.out.find("viewcell.size_m"), std::string::npos) << catalog.out;
+  const RunResult unknown = Vistream("scene generate atlantis -o " + Tmp("x.glb"));
+  EXPECT_EQ(unknown.exit_code, 1);
+  EXPECT_NE(unknown.out.find("atlantis"), std::string::npos) << unknown.out;
+  EXPECT_NE(Vistream("scene generate city1").exit_code, 0);  // -o is required
+  EXPECT_NE(Vistream("frobnicate").exit_code, 0);
+}
+
+}  // namespace

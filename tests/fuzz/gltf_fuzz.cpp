@@ -1,0 +1,14 @@
+// libFuzzer target: the glTF loader on untrusted bytes, as .glb and as .gltf.
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+
+#include "scenes/gltf_io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  const std::string_view bytes(reinterpret_cast<const char*>(data), size);
+  // Never resolve external URIs against a real folder: base_dir is a path that does not exist.
+  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/true, "fuzz.glb", "/nonexistent");
+  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/false, "fuzz.gltf", "/nonexistent");
+  return 0;
+}

@@ -1,0 +1,89 @@
+#include "tests/test_util.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+
+#include <glm/geometric.hpp>
+
+namespace vistream::testing {
+
+std::string TempDir() {
+  static const std::string dir = [] {
+    const auto path = std::filesystem::temp_directory_path() /
+                      ("vistream-test-" + std::to_string(getpid()));
+    std::filesystem::remove_all(path);
+    std::filesystem::create_directories(path);
+    return path.string();
+  }();
+  return dir;
+}
+
+namespace {
+
+double SegmentDistance(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
+  const glm::dvec2 d = b - a;
+  const double len2 = glm::dot(d, d);
+  const double t = len2 > 0.0 ? std::clamp(glm::dot(p - a, d) / len2, 0.0, 1.0) : 0.0;
+  return glm::length(p - (a + d * t));
+}
+
+bool SegmentsCross(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c, const glm::dvec2& d) {
+  auto orient = [](const glm::dvec2& p, const glm::dvec2& q, const glm::dvec2& r) {
+    return (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
+  };
+  const double o1 = orient(a, b, c), o2 = orient(a, b, d), o3 = orient(c, d, a), o4 = orient(c, d, b);
+  return ((o1 > 0) != (o2 > 0)) && ((o3 > 0) != (o4 > 0));
+}
+
+bool Inside(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
+  bool in = false;
+  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    const glm::dvec2 &u = poly[i], &v = poly[j];
+    if ((u.y > p.y) != (v.y > p.y) && p.x < (v.x - u.x) * (p.y - u.y) / (v.y - u.y) + u.x) in = !in;
+  }
+  return in;
+}
+
+}  // namespace
+
+bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, const glm::dvec2& b,
+                             double clearance) {
+  for (const scenes::Occluder25D& oc : scene.occluders) {
+    const auto& fp = oc.footprint;
+    if (Inside(fp, a) || Inside(fp, b)) return false;
+    for (size_t i = 0; i < fp.size(); ++i) {
+      const glm::dvec2 &u = fp[i], &v = fp[(i + 1) % fp.size()];
+      if (SegmentsCross(a, b, u, v)) return false;
+      if (SegmentDistance(u, a, b) < clearance || SegmentDistance(a, u, v) < clearance ||
+          SegmentDistance(b, u, v) < clearance) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+uint64_t SceneHash(const scenes::Scene& scene) {
+  uint64_t h = 1469598103934665603ULL;
+  auto mix = [&h](const void* data, size_t n) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ULL;
+  };
+  for (const auto& o : scene.objects) {
+    mix(o.mesh.positions.data(), o.mesh.positions.size() * sizeof(glm::vec3));
+    mix(o.mesh.normals.data(), o.mesh.normals.size() * sizeof(glm::vec3));
+    mix(o.mesh.indices.data(), o.mesh.indices.size() * sizeof(uint32_t));
+  }
+  for (const auto& oc : scene.occluders) {
+    mix(oc.footprint.data(), oc.footprint.size() * sizeof(glm::dvec2));
+    mix(&oc.height, sizeof(double));
+    mix(&oc.object, sizeof(oc.object));
+  }
+  mix(&scene.origin, sizeof(scene.origin));
+  return h;
+}
+
+}  // namespace vistream::testing

@@ -1,0 +1,21 @@
+#pragma once
+// Helpers shared by the test suites.
+
+#include <string>
+
+#include "scenes/scene.h"
+
+namespace vistream::testing {
+
+// A fresh empty directory under the system temp dir, unique to this test process.
+std::string TempDir();
+
+// True when the polygon footprints of the scene's occluders keep at least `clearance` metres
+// from the segment a-b (scene-local xy).
+bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, const glm::dvec2& b,
+                             double clearance);
+
+// A hash of every position, normal, index and occluder: equal scenes hash equal.
+uint64_t SceneHash(const scenes::Scene& scene);
+
+}  // namespace vistream::testing
