@@ -1,5 +1,8 @@
 // vistream scene generate | info
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <map>
 
@@ -9,6 +12,7 @@
 
 #include "bench/cli_common.h"
 #include "bench/commands.h"
+#include "bench/top_view_map.h"
 #include "scenes/catalog.h"
 #include "scenes/city_generator.h"
 #include "scenes/gltf_io.h"
@@ -116,6 +120,40 @@ int Info(const InfoArgs& a) {
   return 0;
 }
 
+struct MapArgs {
+  std::string file, output;
+  int size = 2048;
+};
+
+// Footprints coloured by height (tallest drawn last), the catalog's walk paths in red.
+int Map(const MapArgs& a) {
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file);
+  if (!scene.ok()) return Fail(scene.status());
+  std::vector<scenes::WalkPath> walks;
+  const std::string ext = std::filesystem::path(a.file).extension().string();
+  if (ext != ".glb" && ext != ".gltf") {
+    if (auto entry = scenes::FindCatalogEntry(a.file); entry.ok()) walks = entry->walks;
+  }
+  TopViewMap map(scene->bounds, a.size, Rgb{245, 243, 238});
+  std::vector<const scenes::Occluder25D*> order;
+  for (const auto& oc : scene->occluders) order.push_back(&oc);
+  std::sort(order.begin(), order.end(), [](auto* x, auto* y) { return x->height < y->height; });
+  const double top = std::max(1.0, scene->bounds.max.z);
+  for (const scenes::Occluder25D* oc : order) {
+    // Log scale: two-storey houses and 300 m towers both stay distinguishable.
+    map.FillPolygon(oc->footprint, Ramp(std::log1p(oc->height) / std::log1p(top)));
+  }
+  for (const scenes::WalkPath& w : walks) {
+    for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
+      map.Line(w.waypoints[k], w.waypoints[k + 1], Rgb{220, 30, 30}, 3);
+    }
+  }
+  if (absl::Status s = map.WritePng(a.output); !s.ok()) return Fail(s);
+  std::printf("wrote %s: %d x %d pixels, %.2f m per pixel, %zu footprints, %zu walks\n", a.output.c_str(),
+              map.width(), map.height(), map.metres_per_pixel(), order.size(), walks.size());
+  return 0;
+}
+
 }  // namespace
 
 void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
@@ -135,6 +173,13 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   i->add_flag("--json", info->json, "print one JSON object");
   i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(CLI::Range(1u, 1024u));
   i->callback([info, done] { done(Info(*info)); });
+
+  auto map = std::make_shared<MapArgs>();
+  CLI::App* m = scene->add_subcommand("map", "write a top-view PNG: footprints by height, walk paths in red");
+  m->add_option("FILE", map->file, ".glb/.gltf file, catalog name or catalog .json")->required();
+  m->add_option("-o,--output", map->output, "output .png")->required();
+  m->add_option("--size", map->size, "pixels on the longer side")->check(CLI::Range(16, 16384));
+  m->callback([map, done] { done(Map(*map)); });
 }
 
 }  // namespace vistream::cli

@@ -85,10 +85,16 @@ class CityPlan {
       avenues_.push_back(av);
     }
     // Parks (few, large) and squares (many, small).
+    // A park is a cluster of overlapping discs: an irregular blob, not a circle.
     const int parks = static_cast<int>(14.0 * area_ratio + rng.Uniform());
     for (int k = 0; k < parks; ++k) {
-      parks_.push_back({glm::dvec2(rng.Uniform(-0.9, 0.9) * half_.x, rng.Uniform(-0.9, 0.9) * half_.y),
-                        rng.Uniform(250.0, 750.0)});
+      const glm::dvec2 centre(rng.Uniform(-0.9, 0.9) * half_.x, rng.Uniform(-0.9, 0.9) * half_.y);
+      const double size = rng.Uniform(250.0, 700.0);
+      const int lobes = 2 + static_cast<int>(rng.Below(3));
+      for (int l = 0; l < lobes; ++l) {
+        const double a = rng.Uniform(0.0, 2 * kPi), d = rng.Uniform(0.2, 0.9) * size;
+        parks_.push_back({centre + d * glm::dvec2(std::cos(a), std::sin(a)), size * rng.Uniform(0.45, 0.8)});
+      }
     }
     const int squares = static_cast<int>(320.0 * area_ratio + rng.Uniform());
     for (int k = 0; k < squares; ++k) {
