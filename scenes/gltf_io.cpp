@@ -3,6 +3,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <unordered_set>
@@ -422,6 +423,53 @@ class GltfImporter {
   std::string name_;
 };
 
+// External buffers and images may only come from the glTF file's own folder (or below);
+// with no folder, from nowhere. A hostile file cannot make the loader read /etc/passwd.
+struct FileAccess {
+  fs::path root;  // empty: no file access
+};
+
+bool Allowed(const FileAccess& access, const std::string& path) {
+  if (access.root.empty()) return false;
+  const fs::path p = fs::weakly_canonical(fs::path(path));
+  const auto [root_end, p_it] = std::mismatch(access.root.begin(), access.root.end(), p.begin(), p.end());
+  return root_end == access.root.end();
+}
+
+// Existence is answered truthfully (without a folder, without looking) so that the read
+// below, not a misleading "file not found", reports why a file is refused.
+bool ConfinedFileExists(const std::string& path, void* user) {
+  if (static_cast<FileAccess*>(user)->root.empty()) return true;
+  std::error_code ec;
+  return fs::is_regular_file(path, ec);
+}
+
+std::string NoExpansion(const std::string& path, void*) { return path; }
+
+bool ConfinedReadWholeFile(std::vector<unsigned char>* out, std::string* err, const std::string& path,
+                           void* user) {
+  const FileAccess& access = *static_cast<FileAccess*>(user);
+  if (!Allowed(access, path)) {
+    if (err != nullptr) {
+      *err += access.root.empty() ? "external file '" + path + "' refused: in-memory input has no folder\n"
+                                  : "external file '" + path + "' is outside the glTF file's folder\n";
+    }
+    return false;
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    if (err != nullptr) *err += "cannot open external file '" + path + "'\n";
+    return false;
+  }
+  out->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  return true;
+}
+
+bool RefuseWrite(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err != nullptr) *err += "the loader writes no files\n";
+  return false;
+}
+
 bool SkipImages(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*,
                 int, void*) {
   return true;  // vistream draws flat-shaded geometry; images are never decoded
@@ -456,6 +504,10 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, co
                                          std::vector<std::string>* warnings) {
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&SkipImages, nullptr);
+  FileAccess access;
+  if (!base_dir.empty()) access.root = fs::weakly_canonical(fs::absolute(base_dir));
+  loader.SetFsCallbacks(tinygltf::FsCallbacks{&ConfinedFileExists, &NoExpansion, &ConfinedReadWholeFile,
+                                              &RefuseWrite, &access});
   tinygltf::Model model;
   std::string err, warn;
   bool ok = false;
@@ -494,6 +546,7 @@ absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>
     return absl::InvalidArgumentError(absl::StrCat(path, ": not a valid .glb file (bad magic)"));
   }
   std::string base = fs::path(path).parent_path().string();
+  if (base.empty()) base = ".";
   return LoadGltfFromMemory(bytes, binary, path, base, warnings);
 }
 

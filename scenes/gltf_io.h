@@ -25,7 +25,8 @@ namespace vistream::scenes {
 absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings = nullptr);
 
 // The same, from bytes in memory (.glb when `binary`). External URIs resolve against
-// `base_dir`. Safe on untrusted input.
+// `base_dir` and may not leave it; with an empty `base_dir` no file is read at all. Safe on
+// untrusted input.
 absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary,
                                          const std::string& name, const std::string& base_dir = "",
                                          std::vector<std::string>* warnings = nullptr);

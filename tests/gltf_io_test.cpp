@@ -404,6 +404,34 @@ TEST(GltfIo, MissingFileAndGarbageAreErrors) {
   EXPECT_FALSE(LoadGltf(not_json).ok());
 }
 
+TEST(GltfIo, ExternalBuffersMayNotLeaveTheFilesFolder) {
+  // A valid .gltf + .bin pair, then the same JSON pointing at ../ and at an absolute path.
+  const std::string dir = TempDir() + "/confined";
+  std::filesystem::create_directories(dir);
+  ASSERT_TRUE(SaveGltf(SmallScene(), dir + "/ok.gltf").ok());
+  ASSERT_TRUE(LoadGltf(dir + "/ok.gltf").ok());
+  std::filesystem::copy_file(dir + "/ok.bin", TempDir() + "/secret.bin",
+                             std::filesystem::copy_options::overwrite_existing);
+  const std::string json = ReadFile(dir + "/ok.gltf");
+  const size_t at = json.find("\"ok.bin\"");
+  ASSERT_NE(at, std::string::npos);
+  for (const std::string& uri : {std::string("../secret.bin"), TempDir() + "/secret.bin"}) {
+    std::string hostile = json;
+    hostile.replace(at, 8, "\"" + uri + "\"");
+    WriteFile(dir + "/hostile.gltf", hostile);
+    absl::StatusOr<Scene> scene = LoadGltf(dir + "/hostile.gltf");
+    ASSERT_FALSE(scene.ok()) << "read " << uri;
+    // A relative escape is refused by name; tinygltf joins even an absolute URI below the
+    // folder, where it is not found.
+    const bool relative = uri.front() != '/';
+    EXPECT_NE(scene.status().message().find(relative ? "outside" : "not found"), std::string::npos)
+        << scene.status();
+  }
+  // From memory without a folder, not even the neighbouring file may be read.
+  EXPECT_FALSE(LoadGltfFromMemory(json, false, "mem.gltf").ok());
+  EXPECT_TRUE(LoadGltfFromMemory(json, false, "mem.gltf", dir).ok());
+}
+
 TEST(GltfIo, SaveRejectsAnInvalidScene) {
   Scene empty;
   const absl::Status s = SaveGltf(empty, TempDir() + "/empty-out.glb");

@@ -7,8 +7,8 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
-  // Never resolve external URIs against a real folder: base_dir is a path that does not exist.
-  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/true, "fuzz.glb", "/nonexistent");
-  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/false, "fuzz.gltf", "/nonexistent");
+  // No base folder: external URIs are refused, the fuzzer never reads the file system.
+  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/true, "fuzz.glb");
+  (void)vistream::scenes::LoadGltfFromMemory(bytes, /*binary=*/false, "fuzz.gltf");
   return 0;
 }
