@@ -188,6 +188,8 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
     const size_t nl = json_text.rfind('\n', at == 0 ? 0 : at - 1);
     const size_t col = nl == std::string_view::npos ? at + 1 : at - nl;
     return absl::InvalidArgumentError(absl::StrCat(file, ":", static_cast<int64_t>(line), ":", col, ": malformed JSON: ", e.what()));
+  } catch (const Json::exception& e) {  // e.g. out_of_range for a number like 1e999
+    return absl::InvalidArgumentError(absl::StrCat(file, ": malformed JSON: ", e.what()));
   }
   try {
     const Reader r(j, "", file);
