@@ -1,0 +1,288 @@
+#include "visibility/dual_ray_space.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/common.hpp>
+
+namespace vistream::visibility {
+
+namespace {
+
+struct Line {
+  double slope = 0, intercept = 0;
+  double At(double p) const { return intercept + slope * p; }
+};
+
+// The upper common tangent of two horizontal edges, [a0, a1] at height ha and [b0, b1] at hb,
+// with a1 < b0: the line through the upper hull of their end points. Both edges lie on or
+// below it.
+Line UpperBridge(double a0, double a1, double ha, double b0, double b1, double hb) {
+  Line l;
+  if (hb > ha) {
+    l.slope = (hb - ha) / (b0 - a0);
+    l.intercept = ha - l.slope * a0;
+  } else if (hb < ha) {
+    l.slope = (hb - ha) / (b1 - a1);
+    l.intercept = ha - l.slope * a1;
+  } else {
+    l.intercept = ha;
+  }
+  return l;
+}
+
+// Clips a convex polygon (or a segment, two points) to lo <= p <= hi.
+void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vector<glm::dvec2>* out) {
+  out->clear();
+  if (in.size() == 2) {
+    glm::dvec2 a = in[0], b = in[1];
+    if (a.x > b.x) std::swap(a, b);
+    if (b.x < lo || a.x > hi) return;
+    auto at = [&](double p) {
+      if (b.x == a.x) return a;
+      const double t = (p - a.x) / (b.x - a.x);
+      return glm::dvec2(p, a.y + t * (b.y - a.y));
+    };
+    out->push_back(a.x < lo ? at(lo) : a);
+    out->push_back(b.x > hi ? at(hi) : b);
+    return;
+  }
+  std::vector<glm::dvec2> tmp;
+  auto clip = [](const std::vector<glm::dvec2>& poly, double bound, bool keep_below, std::vector<glm::dvec2>* res) {
+    res->clear();
+    const size_t n = poly.size();
+    for (size_t i = 0; i < n; ++i) {
+      const glm::dvec2 &a = poly[i], &b = poly[(i + 1) % n];
+      const bool ina = keep_below ? a.x <= bound : a.x >= bound;
+      const bool inb = keep_below ? b.x <= bound : b.x >= bound;
+      if (ina) res->push_back(a);
+      if (ina != inb) {
+        const double t = (bound - a.x) / (b.x - a.x);
+        res->push_back(glm::dvec2(bound, a.y + t * (b.y - a.y)));
+      }
+    }
+  };
+  clip(in, lo, /*keep_below=*/false, &tmp);
+  if (tmp.empty()) return;
+  clip(tmp, hi, /*keep_below=*/true, out);
+}
+
+}  // namespace
+
+bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, double sign, PlanarProblem* out) {
+  const int other = 1 - axis;
+  PlanarProblem& pr = *out;
+  pr.axis = axis;
+  pr.sign = sign;
+  pr.origin = glm::dvec2(a.min.x, a.min.y);
+  const double o = pr.origin[axis], oq = pr.origin[other];
+  // A and B along p, in the query frame.
+  double pa0, pa1, pb0, pb1;
+  if (sign > 0) {
+    pa0 = a.min[axis] - o, pa1 = a.max[axis] - o, pb0 = b.min[axis] - o, pb1 = b.max[axis] - o;
+  } else {
+    pa0 = -(a.max[axis] - o), pa1 = -(a.min[axis] - o), pb0 = -(b.max[axis] - o), pb1 = -(b.min[axis] - o);
+  }
+  // Separated with room between: boxes that touch leave no slab for an occluder.
+  if (!(pa1 < pb0)) return false;
+  pr.x1 = pa1;
+  pr.x2 = pb0;
+  const double aq0 = a.min[other] - oq, aq1 = a.max[other] - oq;
+  const double bq0 = b.min[other] - oq, bq1 = b.max[other] - oq;
+  const Line upper = UpperBridge(pa0, pa1, aq1, pb0, pb1, bq1);
+  const Line lower = UpperBridge(pa0, pa1, -aq0, pb0, pb1, -bq0);  // mirrored: the lower tangent
+  pr.l1 = upper.At(pr.x1);
+  pr.l2 = upper.At(pr.x2);
+  pr.r1 = -lower.At(pr.x1);
+  pr.r2 = -lower.At(pr.x2);
+  const Line ceiling = UpperBridge(pa0, pa1, a.max.z, pb0, pb1, b.max.z);
+  pr.alpha = ceiling.intercept;
+  pr.beta = ceiling.slope;
+  return true;
+}
+
+void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
+  const auto& pieces = occluders_.pieces();
+  if (local_.size() != pieces.size()) local_.assign(pieces.size(), -1);
+  gathered_.clear();
+  // The shaft between the faces, back in scene coordinates, gathers the candidate pieces.
+  auto scene_from = [&](double p, double q) {
+    glm::dvec2 w;
+    w[pr.axis] = pr.origin[pr.axis] + pr.sign * p;
+    w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
+    return w;
+  };
+  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pr.x2, pr.r2), scene_from(pr.x2, pr.l2),
+                              scene_from(pr.x1, pr.l1)};
+  const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
+  occluders_.Gather(hull, t_min, &gathered_);
+
+  // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
+  std::vector<glm::dvec2> planar, clipped;
+  std::vector<std::vector<glm::dvec2>> kept_points;
+  std::vector<uint32_t> kept;
+  lo_.clear();
+  hi_.clear();
+  for (uint32_t id : gathered_) {
+    const OccluderPiece& piece = pieces[id];
+    double lo = pr.x1, hi = pr.x2;
+    if (pr.beta > 0) hi = std::min(hi, (piece.height - pr.alpha) / pr.beta);
+    else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
+    else if (piece.height < pr.alpha) continue;
+    if (!(lo <= hi)) continue;
+    planar.clear();
+    for (const glm::dvec2& w : piece.points) planar.push_back(pr.PlanarFromScene(w));
+    ClipStrip(planar, lo, hi, &clipped);
+    if (clipped.empty()) continue;
+    // Entirely beside the shaft: blocks no ray of RS.
+    bool above = true, below = true;
+    for (const glm::dvec2& p : clipped) {
+      const double t = (p.x - pr.x1) / (pr.x2 - pr.x1);
+      const double l = pr.l1 + t * (pr.l2 - pr.l1), r = pr.r1 + t * (pr.r2 - pr.r1);
+      above &= p.y > l;
+      below &= p.y < r;
+    }
+    if (above || below) continue;
+    local_[id] = static_cast<int32_t>(kept.size());
+    kept.push_back(id);
+    kept_points.push_back(clipped);
+    lo_.push_back(lo);
+    hi_.push_back(hi);
+  }
+
+  // Fuse: kept pieces whose contact survives both clips are one connected blocker.
+  parent_.resize(kept.size());
+  for (uint32_t i = 0; i < kept.size(); ++i) parent_[i] = i;
+  auto find = [&](uint32_t x) {
+    while (parent_[x] != x) x = parent_[x] = parent_[parent_[x]];
+    return x;
+  };
+  for (uint32_t i = 0; i < kept.size(); ++i) {
+    for (uint32_t k : occluders_.ContactsOf(kept[i])) {
+      const PieceContact& c = occluders_.contacts()[k];
+      const uint32_t other = c.a == kept[i] ? c.b : c.a;
+      const int32_t j = local_[other];
+      if (j < 0 || static_cast<uint32_t>(j) < i) continue;
+      const double w0 = pr.PlanarFromScene(c.w0).x, w1 = pr.PlanarFromScene(c.w1).x;
+      const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
+      const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
+      if (lo <= hi) parent_[find(i)] = find(static_cast<uint32_t>(j));
+    }
+  }
+  for (uint32_t id : kept) local_[id] = -1;
+
+  // Group the points of each blocker and turn them into g coefficients.
+  std::vector<uint32_t> order(kept.size());
+  for (uint32_t i = 0; i < kept.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return find(x) < find(y); });
+  coeffs_.clear();
+  group_start_.clear();
+  const double w = pr.x2 - pr.x1;
+  for (size_t n = 0; n < order.size(); ++n) {
+    if (n == 0 || find(order[n]) != find(order[n - 1])) group_start_.push_back(static_cast<uint32_t>(coeffs_.size()));
+    for (const glm::dvec2& p : kept_points[order[n]]) {
+      const double t = (p.x - pr.x1) / w;
+      coeffs_.push_back({(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)});
+    }
+  }
+  group_start_.push_back(static_cast<uint32_t>(coeffs_.size()));
+  eps_ = 1e-9 * (1.0 + w + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+}
+
+bool DualRaySpace::FreeRay(double u, double v) const {
+  for (size_t g = 0; g + 1 < group_start_.size(); ++g) {
+    double mn = INFINITY, mx = -INFINITY;
+    for (uint32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
+      const Coeff& c = coeffs_[k];
+      const double val = c.a + c.b * u + c.c * v;
+      mn = std::min(mn, val);
+      mx = std::max(mx, val);
+    }
+    if (mn <= 0.0 && mx >= 0.0) return false;
+  }
+  return true;
+}
+
+bool DualRaySpace::RasterFull(uint32_t res) {
+  const uint32_t words = (res + 63) / 64;
+  bits_.assign(static_cast<size_t>(words), 0);
+  const double n = res;
+  for (uint32_t j = 0; j < res; ++j) {
+    std::fill(bits_.begin(), bits_.end(), 0);
+    const double v0 = j / n, v1 = (j + 1) / n;
+    for (size_t g = 0; g + 1 < group_start_.size(); ++g) {
+      // Pixel (i, j) is wholly blocked iff min_k g_k(u1, v1) <= 0 and max_k g_k(u0, v0) >= 0
+      // (each g_k rises with u and v); with a margin eps_ against rounding.
+      double ua = -INFINITY, ub = INFINITY;
+      for (uint32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
+        const Coeff& c = coeffs_[k];
+        const double ra = -eps_ - c.a - c.c * v1;  // need b u1 <= ra
+        const double rb = eps_ - c.a - c.c * v0;   // need b u0 >= rb
+        if (c.b > 0) {
+          ua = std::max(ua, ra / c.b);
+          ub = std::min(ub, rb / c.b);
+        } else {
+          if (ra >= 0) ua = INFINITY;
+          if (rb <= 0) ub = -INFINITY;
+        }
+      }
+      const double first = std::max(0.0, std::ceil(ub * n));
+      const double last = std::min(n - 1, std::floor(ua * n) - 1);
+      if (!(first <= last)) continue;
+      const auto i0 = static_cast<uint32_t>(first), i1 = static_cast<uint32_t>(last);
+      for (uint32_t wi = i0 / 64; wi <= i1 / 64; ++wi) {
+        const uint32_t s = wi == i0 / 64 ? i0 % 64 : 0, e = wi == i1 / 64 ? i1 % 64 : 63;
+        const uint64_t mask = (e == 63 ? ~0ULL : ((1ULL << (e + 1)) - 1)) & ~((1ULL << s) - 1);
+        bits_[wi] |= mask;
+      }
+    }
+    // This row decides: a gap means the bitmap is not full at this resolution.
+    for (uint32_t i = 0; i < res; ++i) {
+      if ((bits_[i / 64] >> (i % 64) & 1) == 0) {
+        last_gap_u_ = (i + 0.5) / n;
+        last_gap_v_ = (j + 0.5) / n;
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
+  BuildBlockers(pr);
+  if (stats != nullptr) {
+    ++stats->planar_tests;
+    stats->pieces += group_start_.empty() ? 0 : coeffs_.size();
+  }
+  if (group_start_.size() < 2) return false;
+  for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
+    if (stats != nullptr) ++stats->rasters;
+    if (RasterFull(res)) return true;
+    if (options.free_ray_test && FreeRay(last_gap_u_, last_gap_v_)) {
+      if (stats != nullptr) ++stats->free_rays;
+      return false;
+    }
+  }
+  return false;
+}
+
+bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
+                           CellQueryStats* stats) {
+  if (stats != nullptr) ++stats->queries;
+  bool separable = false;
+  PlanarProblem pr;
+  for (int axis = 0; axis < 2; ++axis) {
+    for (double sign : {1.0, -1.0}) {
+      if (!MakePlanarProblem(a, b, axis, sign, &pr)) continue;
+      separable = true;
+      if (PlanarOccluded(pr, options, stats)) {
+        if (stats != nullptr) ++stats->occluded;
+        return false;
+      }
+    }
+  }
+  if (!separable && stats != nullptr) ++stats->non_separable;
+  return true;
+}
+
+}  // namespace vistream::visibility

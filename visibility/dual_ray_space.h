@@ -1,0 +1,89 @@
+#pragma once
+// Cell-to-cell visibility among 2.5D occluders in the dual ray space (Koltun, Chrysanthou,
+// Cohen-Or 2001). For boxes A and B separated by a vertical plane, the question reduces to a
+// planar one on the shaft's ceiling T: can the segment s1 (on A's face) see s2 (on B's face)
+// among the occluder parts that rise above T? A ray from s1(u) to s2(v) is a point (u, v) of
+// the unit square RS. A connected blocker with points p_k blocks exactly the rays with
+// min_k g_k(u, v) <= 0 <= max_k g_k(u, v), g_k affine and increasing in u and v, so a pixel
+// of RS is wholly blocked iff min_k g_k at its upper corner <= 0 <= max_k g_k at its lower.
+// Touching occluders fuse into one connected blocker through their contacts.
+
+#include <cstdint>
+#include <vector>
+
+#include "scenes/aabb.h"
+#include "visibility/occluder_set.h"
+
+namespace vistream::visibility {
+
+struct CellQueryOptions {
+  uint32_t min_res = 16;   // first raster resolution
+  uint32_t max_res = 128;  // refined by doubling up to this; a power of two, at most 256
+  bool free_ray_test = true;  // test uncovered pixel centres exactly: a free ray ends the query
+};
+
+struct CellQueryStats {
+  uint64_t queries = 0;        // Visible() calls
+  uint64_t non_separable = 0;  // answered visible without a planar test
+  uint64_t planar_tests = 0;   // planar problems set up
+  uint64_t pieces = 0;         // occluder pieces gathered, summed over planar tests
+  uint64_t rasters = 0;        // bitmaps drawn, summed over resolutions
+  uint64_t free_rays = 0;      // planar tests ended by a free ray
+  uint64_t occluded = 0;       // Visible() answers false
+};
+
+// The planar problem of one separating direction, in a query-relative frame (p along the
+// separating axis from A towards B, q across it; origin at A's lower corner).
+struct PlanarProblem {
+  int axis = 0;      // 0: x separates, 1: y
+  double sign = 1;   // +1: B on the positive side of A
+  glm::dvec2 origin{0.0};
+  double x1 = 0, x2 = 0;          // slab between A's face (p = x1) and B's face (p = x2)
+  double r1 = 0, l1 = 0;          // s1 = [r1, l1] in q at p = x1 (the shaft's cross-section)
+  double r2 = 0, l2 = 0;          // s2 at p = x2
+  double alpha = 0, beta = 0;     // the ceiling T: z = alpha + beta p
+
+  glm::dvec2 PlanarFromScene(const glm::dvec2& w) const {
+    return {sign * (w[axis] - origin[axis]), w[1 - axis] - origin[1 - axis]};
+  }
+};
+
+// Sets up the planar problem for A and B separated along `axis` with B on side `sign`;
+// false when that plane does not separate them.
+bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, double sign, PlanarProblem* out);
+
+// One query engine per thread: it keeps scratch buffers between queries.
+class DualRaySpace {
+ public:
+  explicit DualRaySpace(const OccluderSet& occluders) : occluders_(occluders) {}
+
+  // Conservative: false only when every segment from A to B meets an occluder (decided on the
+  // shaft's ceiling with a conservative raster). Boxes in scene-local metres.
+  bool Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
+               CellQueryStats* stats = nullptr);
+
+  // The planar test of one separating direction: true when the raster proves every ray of RS
+  // blocked.
+  bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats);
+
+ private:
+  struct Coeff {
+    double a, b, c;  // g(u, v) = a + b u + c v
+  };
+  void BuildBlockers(const PlanarProblem& problem);
+  bool RasterFull(uint32_t res);
+  bool FreeRay(double u, double v) const;
+
+  const OccluderSet& occluders_;
+  std::vector<uint32_t> gathered_;
+  std::vector<double> lo_, hi_;           // blocking strip of each gathered piece
+  std::vector<uint32_t> parent_;          // union-find over gathered pieces
+  std::vector<int32_t> local_;            // piece id -> index in gathered_, or -1
+  std::vector<Coeff> coeffs_;             // blockers' points, grouped
+  std::vector<uint32_t> group_start_;     // blocker g spans coeffs_[group_start_[g], group_start_[g+1])
+  std::vector<uint64_t> bits_;            // the raster row being drawn
+  double eps_ = 0.0;
+  double last_gap_u_ = 0.5, last_gap_v_ = 0.5;  // centre of the first uncovered pixel found
+};
+
+}  // namespace vistream::visibility

@@ -1,0 +1,301 @@
+#include "visibility/occluder_set.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include "scenes/mesh.h"
+
+namespace vistream::visibility {
+
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+
+// Exact sign of the turn a -> b -> c: +1 left, -1 right, 0 collinear.
+int Orient(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c) {
+  const auto o = CGAL::orientation(Kernel::Point_2(a.x, a.y), Kernel::Point_2(b.x, b.y), Kernel::Point_2(c.x, c.y));
+  return o == CGAL::LEFT_TURN ? 1 : (o == CGAL::RIGHT_TURN ? -1 : 0);
+}
+
+// p on the closed segment [a, b], exactly.
+bool OnSegment(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
+  return Orient(a, b, p) == 0 && std::min(a.x, b.x) <= p.x && p.x <= std::max(a.x, b.x) &&
+         std::min(a.y, b.y) <= p.y && p.y <= std::max(a.y, b.y);
+}
+
+std::vector<glm::dvec2> Distinct(const std::vector<glm::dvec2>& fp) {
+  std::vector<glm::dvec2> out;
+  for (const glm::dvec2& p : fp) {
+    if (out.empty() || p != out.back()) out.push_back(p);
+  }
+  while (out.size() > 1 && out.front() == out.back()) out.pop_back();
+  return out;
+}
+
+bool IsEar(const std::vector<glm::dvec2>& poly, const std::vector<int>& idx, size_t i) {
+  const size_t n = idx.size();
+  const glm::dvec2 &a = poly[idx[(i + n - 1) % n]], &b = poly[idx[i]], &c = poly[idx[(i + 1) % n]];
+  if (Orient(a, b, c) <= 0) return false;
+  for (size_t k = 0; k < n; ++k) {
+    if (k == i || k == (i + n - 1) % n || k == (i + 1) % n) continue;
+    const glm::dvec2& p = poly[idx[k]];
+    if (Orient(a, b, p) >= 0 && Orient(b, c, p) >= 0 && Orient(c, a, p) >= 0) return false;
+  }
+  return true;
+}
+
+// Ear clipping of a simple counter-clockwise polygon; empty when the polygon is not simple.
+std::vector<std::array<int, 3>> Triangulate(const std::vector<glm::dvec2>& poly) {
+  std::vector<int> idx(poly.size());
+  std::iota(idx.begin(), idx.end(), 0);
+  std::vector<std::array<int, 3>> tris;
+  while (idx.size() > 3) {
+    bool clipped = false;
+    for (size_t i = 0; i < idx.size(); ++i) {
+      if (!IsEar(poly, idx, i)) continue;
+      const size_t n = idx.size();
+      tris.push_back({idx[(i + n - 1) % n], idx[i], idx[(i + 1) % n]});
+      idx.erase(idx.begin() + static_cast<long>(i));
+      clipped = true;
+      break;
+    }
+    if (!clipped) return {};
+  }
+  tris.push_back({idx[0], idx[1], idx[2]});
+  return tris;
+}
+
+void Boxes(OccluderPiece* p) {
+  p->box_min = glm::dvec2(INFINITY);
+  p->box_max = glm::dvec2(-INFINITY);
+  for (const glm::dvec2& q : p->points) {
+    p->box_min = glm::min(p->box_min, q);
+    p->box_max = glm::max(p->box_max, q);
+  }
+}
+
+// The edges of a piece: one for a segment, n for a polygon.
+template <typename F>
+void ForEdges(const OccluderPiece& p, F&& f) {
+  const size_t n = p.points.size();
+  if (n == 2) {
+    f(p.points[0], p.points[1]);
+    return;
+  }
+  for (size_t i = 0; i < n; ++i) f(p.points[i], p.points[(i + 1) % n]);
+}
+
+bool StrictlyInside(const OccluderPiece& piece, const glm::dvec2& q) {
+  if (piece.points.size() < 3) return false;
+  bool inside = true;
+  ForEdges(piece, [&](const glm::dvec2& a, const glm::dvec2& b) { inside &= Orient(a, b, q) > 0; });
+  return inside;
+}
+
+// Every way two pieces touch, as witnesses lying in both: collinear overlaps of edges,
+// crossings and touchings of edges, and containment.
+void FindContacts(uint32_t ia, uint32_t ib, const OccluderPiece& a, const OccluderPiece& b,
+                  std::vector<PieceContact>* out) {
+  const size_t before = out->size();
+  ForEdges(a, [&](const glm::dvec2& p0, const glm::dvec2& p1) {
+    ForEdges(b, [&](const glm::dvec2& q0, const glm::dvec2& q1) {
+      const int o0 = Orient(p0, p1, q0), o1 = Orient(p0, p1, q1);
+      const int o2 = Orient(q0, q1, p0), o3 = Orient(q0, q1, p1);
+      if (o0 == 0 && o1 == 0 && p0 != p1) {
+        // Collinear: the overlap of the two segments along the line, between original vertices.
+        const glm::dvec2 d = p1 - p0;
+        auto t = [&](const glm::dvec2& x) { return glm::dot(x - p0, d); };
+        struct At {
+          double t;
+          glm::dvec2 p;
+        };
+        auto less = [](const At& x, const At& y) { return x.t < y.t; };
+        const At e[4] = {{t(p0), p0}, {t(p1), p1}, {t(q0), q0}, {t(q1), q1}};
+        const At lo = std::max(std::min(e[0], e[1], less), std::min(e[2], e[3], less), less);
+        const At hi = std::min(std::max(e[0], e[1], less), std::max(e[2], e[3], less), less);
+        if (lo.t <= hi.t) out->push_back({ia, ib, lo.p, hi.p});
+        return;
+      }
+      if (o0 * o1 < 0 && o2 * o3 < 0) {
+        // A proper crossing: the computed point is within rounding of both boundaries.
+        const glm::dvec2 r = p1 - p0, s = q1 - q0;
+        const double den = r.x * s.y - r.y * s.x;
+        const double u = ((q0.x - p0.x) * s.y - (q0.y - p0.y) * s.x) / den;
+        const glm::dvec2 x = p0 + r * u;
+        out->push_back({ia, ib, x, x});
+        return;
+      }
+      for (const glm::dvec2* v : {&q0, &q1}) {
+        if (OnSegment(*v, p0, p1)) out->push_back({ia, ib, *v, *v});
+      }
+      for (const glm::dvec2* v : {&p0, &p1}) {
+        if (OnSegment(*v, q0, q1)) out->push_back({ia, ib, *v, *v});
+      }
+    });
+  });
+  if (out->size() != before) return;
+  if (StrictlyInside(a, b.points[0])) out->push_back({ia, ib, b.points[0], b.points[0]});
+  else if (StrictlyInside(b, a.points[0])) out->push_back({ia, ib, a.points[0], a.points[0]});
+}
+
+}  // namespace
+
+OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
+  OccluderSet set;
+  std::vector<uint32_t> owner;  // occluder index of each piece
+  for (size_t oi = 0; oi < scene.occluders.size(); ++oi) {
+    const scenes::Occluder25D& oc = scene.occluders[oi];
+    if (!(oc.height > 0.0)) continue;
+    std::vector<glm::dvec2> fp = Distinct(oc.footprint);
+    if (fp.empty()) continue;
+    const auto first = static_cast<uint32_t>(set.pieces_.size());
+    auto add = [&](std::vector<glm::dvec2> pts) {
+      OccluderPiece p;
+      p.points = std::move(pts);
+      p.height = oc.height;
+      p.object = oc.object;
+      Boxes(&p);
+      set.pieces_.push_back(std::move(p));
+      owner.push_back(static_cast<uint32_t>(oi));
+    };
+    if (scenes::SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
+    const bool degenerate = fp.size() < 3 || scenes::SignedArea(fp) == 0.0;
+    std::vector<std::array<int, 3>> tris;
+    if (!degenerate && !scenes::IsConvexCcw(fp)) tris = Triangulate(fp);
+    if (!degenerate && scenes::IsConvexCcw(fp)) {
+      add(fp);
+    } else if (!tris.empty()) {
+      // Triangles of a non-convex footprint, fused along their shared diagonals below.
+      for (const auto& t : tris) add({fp[t[0]], fp[t[1]], fp[t[2]]});
+    } else {
+      // Zero area or not simple: the boundary as segments, joined at their shared vertices.
+      // (A point is a segment of length zero.)
+      if (fp.size() == 1) fp.push_back(fp[0]);
+      for (size_t i = 0; i < fp.size(); ++i) {
+        if (fp.size() == 2 && i == 1) break;
+        add({fp[i], fp[(i + 1) % fp.size()]});
+      }
+    }
+    (void)first;
+  }
+
+  // The grid over all pieces.
+  const size_t n = set.pieces_.size();
+  glm::dvec2 lo(INFINITY), hi(-INFINITY);
+  for (const OccluderPiece& p : set.pieces_) {
+    lo = glm::min(lo, p.box_min);
+    hi = glm::max(hi, p.box_max);
+  }
+  if (n == 0) lo = hi = glm::dvec2(0.0);
+  set.cell_ = grid_cell_m;
+  set.grid_min_ = lo;
+  set.nx_ = std::max(1, static_cast<int>(std::ceil((hi.x - lo.x) / set.cell_ + 1e-9)));
+  set.ny_ = std::max(1, static_cast<int>(std::ceil((hi.y - lo.y) / set.cell_ + 1e-9)));
+  auto cell_range = [&](const OccluderPiece& p, int* i0, int* i1, int* j0, int* j1) {
+    *i0 = std::clamp(static_cast<int>(std::floor((p.box_min.x - lo.x) / set.cell_)), 0, set.nx_ - 1);
+    *i1 = std::clamp(static_cast<int>(std::floor((p.box_max.x - lo.x) / set.cell_)), 0, set.nx_ - 1);
+    *j0 = std::clamp(static_cast<int>(std::floor((p.box_min.y - lo.y) / set.cell_)), 0, set.ny_ - 1);
+    *j1 = std::clamp(static_cast<int>(std::floor((p.box_max.y - lo.y) / set.cell_)), 0, set.ny_ - 1);
+  };
+  std::vector<uint32_t> count(static_cast<size_t>(set.nx_) * set.ny_ + 1, 0);
+  for (const OccluderPiece& p : set.pieces_) {
+    int i0, i1, j0, j1;
+    cell_range(p, &i0, &i1, &j0, &j1);
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) ++count[static_cast<size_t>(j) * set.nx_ + i + 1];
+    }
+  }
+  std::partial_sum(count.begin(), count.end(), count.begin());
+  set.cell_start_ = count;
+  set.cell_items_.resize(count.back());
+  std::vector<uint32_t> fill(count.begin(), count.end() - 1);
+  for (uint32_t id = 0; id < n; ++id) {
+    int i0, i1, j0, j1;
+    cell_range(set.pieces_[id], &i0, &i1, &j0, &j1);
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) set.cell_items_[fill[static_cast<size_t>(j) * set.nx_ + i]++] = id;
+    }
+  }
+  set.stamp_.assign(n, 0);
+
+  // Contacts between pieces whose boxes touch (closed boxes: shared walls count).
+  for (size_t c = 0; c + 1 < set.cell_start_.size(); ++c) {
+    for (uint32_t x = set.cell_start_[c]; x < set.cell_start_[c + 1]; ++x) {
+      for (uint32_t y = x + 1; y < set.cell_start_[c + 1]; ++y) {
+        uint32_t a = set.cell_items_[x], b = set.cell_items_[y];
+        if (a > b) std::swap(a, b);
+        const OccluderPiece &pa = set.pieces_[a], &pb = set.pieces_[b];
+        if (pa.box_min.x > pb.box_max.x || pb.box_min.x > pa.box_max.x || pa.box_min.y > pb.box_max.y ||
+            pb.box_min.y > pa.box_max.y) {
+          continue;
+        }
+        // A pair sharing several cells is handled in the first cell of their overlap only.
+        const glm::dvec2 m = glm::max(pa.box_min, pb.box_min);
+        const int ci = std::clamp(static_cast<int>(std::floor((m.x - lo.x) / set.cell_)), 0, set.nx_ - 1);
+        const int cj = std::clamp(static_cast<int>(std::floor((m.y - lo.y) / set.cell_)), 0, set.ny_ - 1);
+        if (static_cast<size_t>(cj) * set.nx_ + ci != c) continue;
+        FindContacts(a, b, pa, pb, &set.contacts_);
+      }
+    }
+  }
+  std::vector<uint32_t> per(n + 1, 0);
+  for (const PieceContact& k : set.contacts_) ++per[k.a + 1], ++per[k.b + 1];
+  std::partial_sum(per.begin(), per.end(), per.begin());
+  set.contact_start_ = per;
+  set.contact_index_.resize(per.back());
+  std::vector<uint32_t> at(per.begin(), per.end() - 1);
+  for (uint32_t k = 0; k < set.contacts_.size(); ++k) {
+    set.contact_index_[at[set.contacts_[k].a]++] = k;
+    set.contact_index_[at[set.contacts_[k].b]++] = k;
+  }
+  return set;
+}
+
+void OccluderSet::Gather(std::span<const glm::dvec2> hull, double min_height, std::vector<uint32_t>* out) const {
+  if (pieces_.empty() || hull.empty()) return;
+  if (++stamp_value_ == 0) {
+    std::fill(stamp_.begin(), stamp_.end(), 0);
+    stamp_value_ = 1;
+  }
+  glm::dvec2 lo(INFINITY), hi(-INFINITY);
+  for (const glm::dvec2& p : hull) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const int j0 = std::clamp(static_cast<int>(std::floor((lo.y - grid_min_.y) / cell_)), 0, ny_ - 1);
+  const int j1 = std::clamp(static_cast<int>(std::floor((hi.y - grid_min_.y) / cell_)), 0, ny_ - 1);
+  for (int j = j0; j <= j1; ++j) {
+    // The hull's x-extent within this row of cells.
+    const double y0 = grid_min_.y + j * cell_, y1 = y0 + cell_;
+    double xl = INFINITY, xr = -INFINITY;
+    for (size_t k = 0; k < hull.size(); ++k) {
+      const glm::dvec2 &a = hull[k], &b = hull[(k + 1) % hull.size()];
+      if (a.y >= y0 && a.y <= y1) xl = std::min(xl, a.x), xr = std::max(xr, a.x);
+      for (double y : {y0, y1}) {
+        if ((a.y < y) != (b.y < y)) {
+          const double x = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
+          xl = std::min(xl, x), xr = std::max(xr, x);
+        }
+      }
+    }
+    if (xl > xr) continue;
+    const int i0 = std::clamp(static_cast<int>(std::floor((xl - grid_min_.x) / cell_)), 0, nx_ - 1);
+    const int i1 = std::clamp(static_cast<int>(std::floor((xr - grid_min_.x) / cell_)), 0, nx_ - 1);
+    for (int i = i0; i <= i1; ++i) {
+      const size_t c = static_cast<size_t>(j) * nx_ + i;
+      for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
+        const uint32_t id = cell_items_[k];
+        if (stamp_[id] == stamp_value_) continue;
+        stamp_[id] = stamp_value_;
+        if (pieces_[id].height > min_height) out->push_back(id);
+      }
+    }
+  }
+}
+
+}  // namespace vistream::visibility
