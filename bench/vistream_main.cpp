@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   auto done = [&exit_code](int code) { exit_code = code; };
   vistream::cli::AddSceneCommands(app, done);
+  vistream::cli::AddPvsCommand(app, done);
   vistream::cli::InstallCancelHandler();
   try {
     app.parse(argc, argv);

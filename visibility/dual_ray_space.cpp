@@ -32,7 +32,8 @@ Line UpperBridge(double a0, double a1, double ha, double b0, double b1, double h
 }
 
 // Clips a convex polygon (or a segment, two points) to lo <= p <= hi.
-void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vector<glm::dvec2>* out) {
+void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vector<glm::dvec2>* out,
+               std::vector<glm::dvec2>* scratch) {
   out->clear();
   if (in.size() == 2) {
     glm::dvec2 a = in[0], b = in[1];
@@ -47,7 +48,7 @@ void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vec
     out->push_back(b.x > hi ? at(hi) : b);
     return;
   }
-  std::vector<glm::dvec2> tmp;
+  std::vector<glm::dvec2>& tmp = *scratch;
   auto clip = [](const std::vector<glm::dvec2>& poly, double bound, bool keep_below, std::vector<glm::dvec2>* res) {
     res->clear();
     const size_t n = poly.size();
@@ -65,6 +66,29 @@ void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vec
   clip(in, lo, /*keep_below=*/false, &tmp);
   if (tmp.empty()) return;
   clip(tmp, hi, /*keep_below=*/true, out);
+}
+
+// Replaces `points` by the vertices of their convex hull (Andrew's monotone chain). A vertex
+// lost to rounding only shrinks the blocked region: the answer stays conservative.
+void ConvexHull(std::vector<glm::dvec2>* points) {
+  auto& p = *points;
+  if (p.size() <= 2) return;
+  std::sort(p.begin(), p.end(), [](const glm::dvec2& a, const glm::dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
+  auto cross = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
+    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+  };
+  std::vector<glm::dvec2> hull(2 * p.size());
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross(hull[k - 2], hull[k - 1], p[i]) <= 0) --k;
+    hull[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, t = k + 1; i > 0; --i) {
+    while (k >= t && cross(hull[k - 2], hull[k - 1], p[i - 1]) <= 0) --k;
+    hull[k++] = p[i - 1];
+  }
+  hull.resize(k > 1 ? k - 1 : k);
+  p.swap(hull);
 }
 
 }  // namespace
@@ -118,9 +142,12 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   occluders_.Gather(hull, t_min, &gathered_);
 
   // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
-  std::vector<glm::dvec2> planar, clipped;
-  std::vector<std::vector<glm::dvec2>> kept_points;
-  std::vector<uint32_t> kept;
+  std::vector<glm::dvec2>& planar = planar_;
+  std::vector<glm::dvec2>& clipped = clipped_;
+  auto& kept_points = kept_points_;
+  auto& kept = kept_;
+  kept.clear();
+  size_t kept_count = 0;
   lo_.clear();
   hi_.clear();
   for (uint32_t id : gathered_) {
@@ -132,7 +159,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     if (!(lo <= hi)) continue;
     planar.clear();
     for (const glm::dvec2& w : piece.points) planar.push_back(pr.PlanarFromScene(w));
-    ClipStrip(planar, lo, hi, &clipped);
+    ClipStrip(planar, lo, hi, &clipped, &clip_tmp_);
     if (clipped.empty()) continue;
     // Entirely beside the shaft: blocks no ray of RS.
     bool above = true, below = true;
@@ -145,7 +172,8 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     if (above || below) continue;
     local_[id] = static_cast<int32_t>(kept.size());
     kept.push_back(id);
-    kept_points.push_back(clipped);
+    if (kept_points.size() <= kept_count) kept_points.emplace_back();
+    kept_points[kept_count++].assign(clipped.begin(), clipped.end());
     lo_.push_back(lo);
     hi_.push_back(hi);
   }
@@ -171,28 +199,49 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   }
   for (uint32_t id : kept) local_[id] = -1;
 
-  // Group the points of each blocker and turn them into g coefficients.
+  // Each blocker blocks exactly the rays that separate its points, so only the convex hull of
+  // its points matters: g is affine in the point. Turn the hull vertices into coefficients.
   std::vector<uint32_t> order(kept.size());
   for (uint32_t i = 0; i < kept.size(); ++i) order[i] = i;
   std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return find(x) < find(y); });
   coeffs_.clear();
-  group_start_.clear();
+  groups_.clear();
   const double w = pr.x2 - pr.x1;
-  for (size_t n = 0; n < order.size(); ++n) {
-    if (n == 0 || find(order[n]) != find(order[n - 1])) group_start_.push_back(static_cast<uint32_t>(coeffs_.size()));
-    for (const glm::dvec2& p : kept_points[order[n]]) {
-      const double t = (p.x - pr.x1) / w;
-      coeffs_.push_back({(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)});
+  for (size_t n = 0; n < order.size();) {
+    size_t end = n;
+    group_points_.clear();
+    while (end < order.size() && find(order[end]) == find(order[n])) {
+      const auto& pts = kept_points[order[end]];
+      group_points_.insert(group_points_.end(), pts.begin(), pts.end());
+      ++end;
     }
+    ConvexHull(&group_points_);
+    Group g;
+    g.begin = static_cast<uint32_t>(coeffs_.size());
+    // How much of RS this blocker covers, roughly: its blocked width along u on the middle row.
+    double mn = INFINITY, mx = -INFINITY;
+    for (const glm::dvec2& p : group_points_) {
+      const double t = (p.x - pr.x1) / w;
+      const Coeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
+      coeffs_.push_back(c);
+      const double root = c.b > 0 ? -(c.a + 0.5 * c.c) / c.b : (c.a + 0.5 * c.c <= 0 ? INFINITY : -INFINITY);
+      mn = std::min(mn, root);
+      mx = std::max(mx, root);
+    }
+    g.end = static_cast<uint32_t>(coeffs_.size());
+    g.width = std::min(mx, 1.0) - std::max(mn, 0.0);
+    groups_.push_back(g);
+    n = end;
   }
-  group_start_.push_back(static_cast<uint32_t>(coeffs_.size()));
+  // Widest first: a row usually fills after a few blockers, and the rest are skipped.
+  std::sort(groups_.begin(), groups_.end(), [](const Group& x, const Group& y) { return x.width > y.width; });
   eps_ = 1e-9 * (1.0 + w + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
 }
 
 bool DualRaySpace::FreeRay(double u, double v) const {
-  for (size_t g = 0; g + 1 < group_start_.size(); ++g) {
+  for (const Group& g : groups_) {
     double mn = INFINITY, mx = -INFINITY;
-    for (uint32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
+    for (uint32_t k = g.begin; k < g.end; ++k) {
       const Coeff& c = coeffs_[k];
       const double val = c.a + c.b * u + c.c * v;
       mn = std::min(mn, val);
@@ -210,11 +259,12 @@ bool DualRaySpace::RasterFull(uint32_t res) {
   for (uint32_t j = 0; j < res; ++j) {
     std::fill(bits_.begin(), bits_.end(), 0);
     const double v0 = j / n, v1 = (j + 1) / n;
-    for (size_t g = 0; g + 1 < group_start_.size(); ++g) {
+    bool full = false;
+    for (const Group& g : groups_) {
       // Pixel (i, j) is wholly blocked iff min_k g_k(u1, v1) <= 0 and max_k g_k(u0, v0) >= 0
       // (each g_k rises with u and v); with a margin eps_ against rounding.
       double ua = -INFINITY, ub = INFINITY;
-      for (uint32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
+      for (uint32_t k = g.begin; k < g.end; ++k) {
         const Coeff& c = coeffs_[k];
         const double ra = -eps_ - c.a - c.c * v1;  // need b u1 <= ra
         const double rb = eps_ - c.a - c.c * v0;   // need b u0 >= rb
@@ -235,7 +285,12 @@ bool DualRaySpace::RasterFull(uint32_t res) {
         const uint64_t mask = (e == 63 ? ~0ULL : ((1ULL << (e + 1)) - 1)) & ~((1ULL << s) - 1);
         bits_[wi] |= mask;
       }
+      if (RowFull(res)) {
+        full = true;
+        break;
+      }
     }
+    if (full) continue;
     // This row decides: a gap means the bitmap is not full at this resolution.
     for (uint32_t i = 0; i < res; ++i) {
       if ((bits_[i / 64] >> (i % 64) & 1) == 0) {
@@ -248,13 +303,32 @@ bool DualRaySpace::RasterFull(uint32_t res) {
   return true;
 }
 
+bool DualRaySpace::RowFull(uint32_t res) const {
+  const uint32_t whole = res / 64;
+  for (uint32_t w = 0; w < whole; ++w) {
+    if (bits_[w] != ~0ULL) return false;
+  }
+  const uint32_t rest = res % 64;
+  return rest == 0 || bits_[whole] == (1ULL << rest) - 1;
+}
+
 bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
   BuildBlockers(pr);
   if (stats != nullptr) {
     ++stats->planar_tests;
-    stats->pieces += group_start_.empty() ? 0 : coeffs_.size();
+    stats->pieces += coeffs_.size();
   }
-  if (group_start_.size() < 2) return false;
+  if (groups_.empty()) return false;
+  // A free ray among a few before any raster proves the answer already.
+  if (options.free_ray_test) {
+    for (const auto& [u, v] : {std::pair{0.5, 0.5}, std::pair{0.0, 0.0}, std::pair{1.0, 1.0}, std::pair{0.0, 1.0},
+                               std::pair{1.0, 0.0}}) {
+      if (FreeRay(u, v)) {
+        if (stats != nullptr) ++stats->free_rays;
+        return false;
+      }
+    }
+  }
   for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
     if (stats != nullptr) ++stats->rasters;
     if (RasterFull(res)) return true;

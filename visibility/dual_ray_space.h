@@ -79,9 +79,18 @@ class DualRaySpace {
   std::vector<double> lo_, hi_;           // blocking strip of each gathered piece
   std::vector<uint32_t> parent_;          // union-find over gathered pieces
   std::vector<int32_t> local_;            // piece id -> index in gathered_, or -1
-  std::vector<Coeff> coeffs_;             // blockers' points, grouped
-  std::vector<uint32_t> group_start_;     // blocker g spans coeffs_[group_start_[g], group_start_[g+1])
+  struct Group {
+    uint32_t begin = 0, end = 0;  // the blocker's hull vertices: coeffs_[begin, end)
+    double width = 0.0;           // its blocked width along u on the middle row, for ordering
+  };
+  bool RowFull(uint32_t res) const;
+  std::vector<Coeff> coeffs_;             // blockers' hull vertices
+  std::vector<Group> groups_;             // blockers, widest first
   std::vector<uint64_t> bits_;            // the raster row being drawn
+  // Scratch, kept between queries to spare allocations.
+  std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
+  std::vector<std::vector<glm::dvec2>> kept_points_;
+  std::vector<uint32_t> kept_;
   double eps_ = 0.0;
   double last_gap_u_ = 0.5, last_gap_v_ = 0.5;  // centre of the first uncovered pixel found
 };

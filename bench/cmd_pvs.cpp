@@ -1,0 +1,145 @@
+// vistream pvs: the potentially visible set of one viewcell.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "bench/cli_common.h"
+#include "bench/commands.h"
+#include "bench/top_view_map.h"
+#include "scenes/catalog.h"
+#include "scenes/progress.h"
+#include "visibility/pvs.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::cli {
+
+namespace {
+
+struct PvsArgs {
+  std::string scene, cell, backend = "cpu", map;
+  double cell_size = 0.0;
+  uint32_t res = 128;
+  bool json = false;
+};
+
+double Since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+int Pvs(const PvsArgs& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.backend != "cpu") {
+    return Fail(absl::UnimplementedError("--backend " + a.backend +
+                                         ": only the cpu backend is in this build (gl and exact are in progress)"));
+  }
+  int ci = 0, cj = 0;
+  char tail = 0;
+  if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
+    return Fail(absl::InvalidArgumentError("--cell '" + a.cell + "': expected I,J (two integers)"));
+  }
+  // Viewcell size and band: the option, else the catalog entry's, else 100 m at eye level.
+  scenes::ViewcellSpec spec;
+  const std::string ext = std::filesystem::path(a.scene).extension().string();
+  if (ext != ".glb" && ext != ".gltf") {
+    if (auto entry = scenes::FindCatalogEntry(a.scene); entry.ok()) spec = entry->viewcell;
+  }
+  if (a.cell_size > 0.0) spec.size_m = a.cell_size;
+
+  double load_s = 0.0;
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
+  if (!scene.ok()) return Fail(scene.status());
+  absl::StatusOr<visibility::ViewcellGrid> grid =
+      visibility::ViewcellGrid::Create(scene->bounds, spec.size_m, spec.base_m, spec.height_m);
+  if (!grid.ok()) return Fail(grid.status());
+  const visibility::CellCoord coord{ci, cj};
+  if (!grid->Valid(coord)) {
+    return Fail(absl::OutOfRangeError("--cell " + a.cell + " is outside the grid of " + std::to_string(grid->nx()) +
+                                      " x " + std::to_string(grid->ny()) + " cells"));
+  }
+  const scenes::Aabb cell = grid->CellBox(coord);
+
+  auto t0 = std::chrono::steady_clock::now();
+  const visibility::KdTree tree = visibility::KdTree::Build(*scene);
+  const double kd_ms = Since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const visibility::PvsComputer computer(*scene, tree);
+  const double occluders_ms = Since(t0);
+  visibility::CellQueryOptions options;
+  options.max_res = a.res;
+  options.min_res = std::min<uint32_t>(16, a.res);
+  const visibility::PvsResult pvs = computer.Compute(cell, options);
+
+  if (!a.map.empty()) {
+    TopViewMap map(scene->bounds, 2048, Rgb{250, 250, 250});
+    std::vector<bool> visible(scene->objects.size(), false);
+    for (scenes::ObjectId id : pvs.objects) visible[id] = true;
+    for (const auto& oc : scene->occluders) {
+      map.FillPolygon(oc.footprint, visible[oc.object] ? Rgb{40, 90, 220} : Rgb{215, 50, 40});
+    }
+    if (map.metres_per_pixel() < 1.5) {
+      for (const auto& oc : scene->occluders) map.StrokePolygon(oc.footprint, Rgb{60, 60, 60});
+    }
+    const glm::dvec2 c0(cell.min), c1(cell.max);
+    const std::vector<glm::dvec2> square = {c0, {c1.x, c0.y}, c1, {c0.x, c1.y}};
+    map.FillPolygon(square, Rgb{30, 200, 60});
+    map.StrokePolygon(square, Rgb{0, 120, 30});
+    if (absl::Status s = map.WritePng(a.map); !s.ok()) return Fail(s);
+  }
+
+  if (a.json) {
+    nlohmann::json j;
+    j["scene"] = scene->name;
+    j["cell"] = {ci, cj};
+    j["cell_box"] = {{"min", {cell.min.x, cell.min.y, cell.min.z}}, {"max", {cell.max.x, cell.max.y, cell.max.z}}};
+    j["backend"] = a.backend;
+    j["res"] = a.res;
+    j["pvs_objects"] = pvs.objects.size();
+    j["pvs_triangles"] = pvs.triangles;
+    j["total_objects"] = scene->objects.size();
+    j["total_triangles"] = scene->TriangleCount();
+    j["ms"] = pvs.ms;
+    j["queries"] = pvs.stats.queries;
+    j["occluded_queries"] = pvs.stats.occluded;
+    j["planar_tests"] = pvs.stats.planar_tests;
+    j["free_rays"] = pvs.stats.free_rays;
+    j["rasters"] = pvs.stats.rasters;
+    j["setup_ms"] = {{"kd_tree", kd_ms}, {"occluders", occluders_ms}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("cell (%d, %d): [%.1f, %.1f] - [%.1f, %.1f], z %.1f - %.1f\n", ci, cj, cell.min.x, cell.min.y,
+              cell.max.x, cell.max.y, cell.min.z, cell.max.z);
+  std::printf("pvs: %zu of %zu objects, %llu of %zu triangles (%.2f%%)\n", pvs.objects.size(), scene->objects.size(),
+              static_cast<unsigned long long>(pvs.triangles), scene->TriangleCount(),
+              100.0 * static_cast<double>(pvs.triangles) / static_cast<double>(scene->TriangleCount()));
+  std::printf("time: %.1f ms, %llu node queries (%llu occluded), %llu planar tests, %llu ended by a free ray\n",
+              pvs.ms, static_cast<unsigned long long>(pvs.stats.queries),
+              static_cast<unsigned long long>(pvs.stats.occluded),
+              static_cast<unsigned long long>(pvs.stats.planar_tests),
+              static_cast<unsigned long long>(pvs.stats.free_rays));
+  std::printf("set-up: kd-tree %.1f ms, occluder pieces and contacts %.1f ms (once per scene)\n", kd_ms, occluders_ms);
+  if (!a.map.empty()) std::printf("map: %s\n", a.map.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
+  auto args = std::make_shared<PvsArgs>();
+  CLI::App* c = app.add_subcommand("pvs", "potentially visible set of one viewcell (dual ray space)");
+  c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->required();
+  c->add_option("--cell", args->cell, "viewcell grid coordinates I,J")->required();
+  c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two)")
+      ->check(CLI::IsMember({16u, 32u, 64u, 128u, 256u}));
+  c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
+  c->add_flag("--json", args->json, "print one JSON object");
+  c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");
+  c->callback([args, done] { done(Pvs(*args)); });
+}
+
+}  // namespace vistream::cli

@@ -1,0 +1,57 @@
+#include "visibility/pvs.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+namespace vistream::visibility {
+
+PvsComputer::PvsComputer(const scenes::Scene& scene, const KdTree& tree)
+    : scene_(scene), tree_(tree), occluders_(OccluderSet::Build(scene)) {}
+
+PvsResult PvsComputer::Compute(const scenes::Aabb& cell, const CellQueryOptions& options) const {
+  DualRaySpace drs(occluders_);
+  return Compute(cell, options, &drs);
+}
+
+PvsResult PvsComputer::Compute(const scenes::Aabb& cell, const CellQueryOptions& options, DualRaySpace* drs) const {
+  const auto start = std::chrono::steady_clock::now();
+  PvsResult result;
+  if (tree_.empty()) return result;
+  const auto& nodes = tree_.nodes();
+  std::vector<int32_t> stack = {0};
+  while (!stack.empty()) {
+    const KdNode& node = nodes[stack.back()];
+    stack.pop_back();
+    if (!drs->Visible(cell, node.bounds, options, &result.stats)) continue;
+    if (node.IsLeaf()) {
+      for (ObjectId id : tree_.LeafObjects(node)) result.objects.push_back(id);
+    } else {
+      stack.push_back(node.right);
+      stack.push_back(node.left);
+    }
+  }
+  std::sort(result.objects.begin(), result.objects.end());
+  for (ObjectId id : result.objects) result.triangles += scene_.objects[id].mesh.TriangleCount();
+  result.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+std::vector<PvsResult> PvsComputer::ComputeBatch(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
+                                                 unsigned threads) const {
+  std::vector<PvsResult> results(cells.size());
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = std::min<unsigned>(threads, static_cast<unsigned>(cells.size()));
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    DualRaySpace drs(occluders_);
+    for (size_t i = next++; i < cells.size(); i = next++) results[i] = Compute(cells[i], options, &drs);
+  };
+  std::vector<std::jthread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  return results;
+}
+
+}  // namespace vistream::visibility
