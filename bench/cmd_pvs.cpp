@@ -104,6 +104,8 @@ int Pvs(const PvsArgs& a) {
     j["queries"] = pvs.stats.queries;
     j["occluded_queries"] = pvs.stats.occluded;
     j["planar_tests"] = pvs.stats.planar_tests;
+    j["gathered_pieces"] = pvs.stats.gathered;
+    j["blocker_vertices"] = pvs.stats.pieces;
     j["free_rays"] = pvs.stats.free_rays;
     j["rasters"] = pvs.stats.rasters;
     j["setup_ms"] = {{"kd_tree", kd_ms}, {"occluders", occluders_ms}};

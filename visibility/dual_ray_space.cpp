@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <glm/common.hpp>
+#include <glm/geometric.hpp>
 
 namespace vistream::visibility {
 
@@ -125,19 +126,22 @@ bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, d
   return true;
 }
 
-void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
+void DualRaySpace::BuildBlockers(const PlanarProblem& pr, double p_limit) {
   const auto& pieces = occluders_.pieces();
   if (local_.size() != pieces.size()) local_.assign(pieces.size(), -1);
   gathered_.clear();
   // The shaft between the faces, back in scene coordinates, gathers the candidate pieces.
   auto scene_from = [&](double p, double q) {
-    glm::dvec2 w;
+    glm::dvec2 w(0.0);
     w[pr.axis] = pr.origin[pr.axis] + pr.sign * p;
     w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
     return w;
   };
-  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pr.x2, pr.r2), scene_from(pr.x2, pr.l2),
-                              scene_from(pr.x1, pr.l1)};
+  // Up to p_limit only, when asked: any subset of the blockers that covers RS proves occlusion.
+  const double pe = std::min(p_limit, pr.x2);
+  const double te = (pe - pr.x1) / (pr.x2 - pr.x1);
+  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pe, pr.r1 + te * (pr.r2 - pr.r1)),
+                              scene_from(pe, pr.l1 + te * (pr.l2 - pr.l1)), scene_from(pr.x1, pr.l1)};
   const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
   occluders_.Gather(hull, t_min, &gathered_);
 
@@ -157,6 +161,17 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
     else if (piece.height < pr.alpha) continue;
     if (!(lo <= hi)) continue;
+    // Reject from the box first: the frame is axis-aligned, so the box maps to a box.
+    {
+      const glm::dvec2 c0 = pr.PlanarFromScene(piece.box_min), c1 = pr.PlanarFromScene(piece.box_max);
+      const double p0 = std::max(std::min(c0.x, c1.x), lo), p1 = std::min(std::max(c0.x, c1.x), hi);
+      if (p0 > p1) continue;
+      const double q0 = std::min(c0.y, c1.y), q1 = std::max(c0.y, c1.y);
+      const double t0 = (p0 - pr.x1) / (pr.x2 - pr.x1), t1 = (p1 - pr.x1) / (pr.x2 - pr.x1);
+      const double l_max = std::max(pr.l1 + t0 * (pr.l2 - pr.l1), pr.l1 + t1 * (pr.l2 - pr.l1));
+      const double r_min = std::min(pr.r1 + t0 * (pr.r2 - pr.r1), pr.r1 + t1 * (pr.r2 - pr.r1));
+      if (q0 > l_max || q1 < r_min) continue;
+    }
     planar.clear();
     for (const glm::dvec2& w : piece.points) planar.push_back(pr.PlanarFromScene(w));
     ClipStrip(planar, lo, hi, &clipped, &clip_tmp_);
@@ -206,7 +221,6 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return find(x) < find(y); });
   coeffs_.clear();
   groups_.clear();
-  const double w = pr.x2 - pr.x1;
   for (size_t n = 0; n < order.size();) {
     size_t end = n;
     group_points_.clear();
@@ -216,26 +230,31 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       ++end;
     }
     ConvexHull(&group_points_);
-    Group g;
-    g.begin = static_cast<uint32_t>(coeffs_.size());
-    // How much of RS this blocker covers, roughly: its blocked width along u on the middle row.
-    double mn = INFINITY, mx = -INFINITY;
-    for (const glm::dvec2& p : group_points_) {
-      const double t = (p.x - pr.x1) / w;
-      const Coeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
-      coeffs_.push_back(c);
-      const double root = c.b > 0 ? -(c.a + 0.5 * c.c) / c.b : (c.a + 0.5 * c.c <= 0 ? INFINITY : -INFINITY);
-      mn = std::min(mn, root);
-      mx = std::max(mx, root);
-    }
-    g.end = static_cast<uint32_t>(coeffs_.size());
-    g.width = std::min(mx, 1.0) - std::max(mn, 0.0);
-    groups_.push_back(g);
+    AddGroup(pr);
     n = end;
   }
   // Widest first: a row usually fills after a few blockers, and the rest are skipped.
   std::sort(groups_.begin(), groups_.end(), [](const Group& x, const Group& y) { return x.width > y.width; });
-  eps_ = 1e-9 * (1.0 + w + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+  eps_ = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+}
+
+void DualRaySpace::AddGroup(const PlanarProblem& pr) {
+  const double w = pr.x2 - pr.x1;
+  Group g;
+  g.begin = static_cast<uint32_t>(coeffs_.size());
+  // How much of RS this blocker covers, roughly: its blocked width along u on the middle row.
+  double mn = INFINITY, mx = -INFINITY;
+  for (const glm::dvec2& p : group_points_) {
+    const double t = (p.x - pr.x1) / w;
+    const Coeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
+    coeffs_.push_back(c);
+    const double root = c.b > 0 ? -(c.a + 0.5 * c.c) / c.b : (c.a + 0.5 * c.c <= 0 ? INFINITY : -INFINITY);
+    mn = std::min(mn, root);
+    mx = std::max(mx, root);
+  }
+  g.end = static_cast<uint32_t>(coeffs_.size());
+  g.width = std::min(mx, 1.0) - std::max(mn, 0.0);
+  groups_.push_back(g);
 }
 
 bool DualRaySpace::FreeRay(double u, double v) const {
@@ -303,6 +322,81 @@ bool DualRaySpace::RasterFull(uint32_t res) {
   return true;
 }
 
+namespace {
+
+// Does the segment a-b (planar frame) meet the piece's points (a convex polygon of either
+// orientation, a segment, or a point), boundary included?
+bool SegmentMeetsPiece(const glm::dvec2& a, const glm::dvec2& b, const std::vector<glm::dvec2>& poly) {
+  auto cross = [](const glm::dvec2& o, const glm::dvec2& p, const glm::dvec2& q) {
+    return (p.x - o.x) * (q.y - o.y) - (p.y - o.y) * (q.x - o.x);
+  };
+  // The segment's line separates the piece?
+  bool pos = false, neg = false;
+  for (const glm::dvec2& v : poly) {
+    const double c = cross(a, b, v);
+    pos |= c >= 0;
+    neg |= c <= 0;
+  }
+  if (!pos || !neg) return false;
+  // The segment's extent along its own direction separates it?
+  const glm::dvec2 d = b - a;
+  double lo = INFINITY, hi = -INFINITY;
+  for (const glm::dvec2& v : poly) {
+    const double t = glm::dot(v - a, d);
+    lo = std::min(lo, t);
+    hi = std::max(hi, t);
+  }
+  if (hi < 0 || lo > glm::dot(d, d)) return false;
+  // An edge of the piece separates it? (The piece's own side is where its other points are.)
+  const size_t n = poly.size();
+  if (n < 3) {
+    // A segment piece: the segment's line already split it; test the piece's line too.
+    const glm::dvec2& p = poly[0];
+    const glm::dvec2& q = poly[n - 1];
+    const double ca = cross(p, q, a), cb = cross(p, q, b);
+    return !((ca > 0 && cb > 0) || (ca < 0 && cb < 0));
+  }
+  double area = 0;
+  for (size_t k = 0; k < n; ++k) area += poly[k].x * poly[(k + 1) % n].y - poly[(k + 1) % n].x * poly[k].y;
+  const double s = area >= 0 ? 1.0 : -1.0;
+  for (size_t k = 0; k < n; ++k) {
+    const glm::dvec2 &p = poly[k], &q = poly[(k + 1) % n];
+    if (p == q) continue;
+    if (s * cross(p, q, a) < 0 && s * cross(p, q, b) < 0) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
+  const double q1 = pr.r1 + u * (pr.l1 - pr.r1), q2 = pr.r2 + v * (pr.l2 - pr.r2);
+  auto scene_from = [&](double p, double q) {
+    glm::dvec2 w(0.0);
+    w[pr.axis] = pr.origin[pr.axis] + pr.sign * p;
+    w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
+    return w;
+  };
+  const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
+  const auto& pieces = occluders_.pieces();
+  const bool blocked = occluders_.Trace(scene_from(pr.x1, q1), scene_from(pr.x2, q2), [&](uint32_t id) {
+    const OccluderPiece& piece = pieces[id];
+    if (piece.height <= t_min) return false;
+    double lo = pr.x1, hi = pr.x2;
+    if (pr.beta > 0) hi = std::min(hi, (piece.height - pr.alpha) / pr.beta);
+    else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
+    else if (piece.height < pr.alpha) return false;
+    if (!(lo <= hi)) return false;
+    // The ray's part where the piece rises above T.
+    const double k = (q2 - q1) / (pr.x2 - pr.x1);
+    const glm::dvec2 a(lo, q1 + k * (lo - pr.x1)), b(hi, q1 + k * (hi - pr.x1));
+    planar_.clear();
+    for (const glm::dvec2& w : piece.points) planar_.push_back(pr.PlanarFromScene(w));
+    return SegmentMeetsPiece(a, b, planar_);
+  });
+  return !blocked;
+}
+
 bool DualRaySpace::RowFull(uint32_t res) const {
   const uint32_t whole = res / 64;
   for (uint32_t w = 0; w < whole; ++w) {
@@ -313,9 +407,33 @@ bool DualRaySpace::RowFull(uint32_t res) const {
 }
 
 bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
-  BuildBlockers(pr);
+  // Most B turn out visible: one traced ray often proves it before any blocker is built.
+  if (options.free_ray_test && FreeRayTraced(pr, 0.5, 0.5)) {
+    if (stats != nullptr) {
+      ++stats->planar_tests;
+      ++stats->free_rays;
+    }
+    return false;
+  }
+  // Near A first: the buildings around the viewcell usually hide a far B on their own.
+  constexpr double kNear = 150.0;
+  if (pr.x2 - pr.x1 > 2 * kNear) {
+    BuildBlockers(pr, pr.x1 + kNear);
+    if (stats != nullptr) stats->gathered += gathered_.size();
+    if (!groups_.empty()) {
+      for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
+        if (stats != nullptr) ++stats->rasters;
+        if (RasterFull(res)) {
+          if (stats != nullptr) ++stats->planar_tests;
+          return true;
+        }
+      }
+    }
+  }
+  BuildBlockers(pr, INFINITY);
   if (stats != nullptr) {
     ++stats->planar_tests;
+    stats->gathered += gathered_.size();
     stats->pieces += coeffs_.size();
   }
   if (groups_.empty()) return false;

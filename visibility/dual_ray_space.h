@@ -26,7 +26,8 @@ struct CellQueryStats {
   uint64_t queries = 0;        // Visible() calls
   uint64_t non_separable = 0;  // answered visible without a planar test
   uint64_t planar_tests = 0;   // planar problems set up
-  uint64_t pieces = 0;         // occluder pieces gathered, summed over planar tests
+  uint64_t gathered = 0;       // occluder pieces gathered from the grid, summed over planar tests
+  uint64_t pieces = 0;         // blocker hull vertices kept, summed over planar tests
   uint64_t rasters = 0;        // bitmaps drawn, summed over resolutions
   uint64_t free_rays = 0;      // planar tests ended by a free ray
   uint64_t occluded = 0;       // Visible() answers false
@@ -70,9 +71,12 @@ class DualRaySpace {
   struct Coeff {
     double a, b, c;  // g(u, v) = a + b u + c v
   };
-  void BuildBlockers(const PlanarProblem& problem);
+  void BuildBlockers(const PlanarProblem& problem, double p_limit);
   bool RasterFull(uint32_t res);
   bool FreeRay(double u, double v) const;
+  // The same question for ray (u, v), answered by tracing it through the occluder grid:
+  // no blockers need building. Exact up to rounding; used to prove visibility early.
+  bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
 
   const OccluderSet& occluders_;
   std::vector<uint32_t> gathered_;
@@ -84,6 +88,7 @@ class DualRaySpace {
     double width = 0.0;           // its blocked width along u on the middle row, for ordering
   };
   bool RowFull(uint32_t res) const;
+  void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
   std::vector<Coeff> coeffs_;             // blockers' hull vertices
   std::vector<Group> groups_;             // blockers, widest first
   std::vector<uint64_t> bits_;            // the raster row being drawn

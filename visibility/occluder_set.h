@@ -3,6 +3,8 @@
 // the contacts between pieces (shared walls, overlaps, a footprint's own diagonals) that let
 // touching buildings fuse into one blocker, and a grid for gathering the pieces in a shaft.
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -45,6 +47,11 @@ class OccluderSet {
   // whose height exceeds `min_height`; each piece once.
   void Gather(std::span<const glm::dvec2> hull, double min_height, std::vector<uint32_t>* out) const;
 
+  // Calls visit(piece) once for each piece in the grid cells the segment a-b crosses, in
+  // order from a, until visit returns true; returns whether it did.
+  template <typename Visit>
+  bool Trace(const glm::dvec2& a, const glm::dvec2& b, Visit&& visit) const;
+
  private:
   std::vector<OccluderPiece> pieces_;
   std::vector<PieceContact> contacts_;
@@ -57,5 +64,43 @@ class OccluderSet {
   mutable std::vector<uint32_t> stamp_;
   mutable uint32_t stamp_value_ = 0;
 };
+
+template <typename Visit>
+bool OccluderSet::Trace(const glm::dvec2& a, const glm::dvec2& b, Visit&& visit) const {
+  if (pieces_.empty()) return false;
+  if (++stamp_value_ == 0) {
+    std::fill(stamp_.begin(), stamp_.end(), 0);
+    stamp_value_ = 1;
+  }
+  // Amanatides-Woo through the grid; cells outside it hold nothing.
+  const glm::dvec2 d = b - a;
+  const glm::dvec2 start = (a - grid_min_) / cell_;
+  int i = static_cast<int>(std::floor(start.x)), j = static_cast<int>(std::floor(start.y));
+  const int step_i = d.x > 0 ? 1 : -1, step_j = d.y > 0 ? 1 : -1;
+  const double dt_x = d.x != 0 ? std::abs(cell_ / d.x) : INFINITY;
+  const double dt_y = d.y != 0 ? std::abs(cell_ / d.y) : INFINITY;
+  double t_x = d.x != 0 ? (d.x > 0 ? (i + 1 - start.x) : (start.x - i)) * dt_x : INFINITY;
+  double t_y = d.y != 0 ? (d.y > 0 ? (j + 1 - start.y) : (start.y - j)) * dt_y : INFINITY;
+  for (int guard = 0; guard < 4 * (nx_ + ny_) + 8; ++guard) {
+    if (i >= 0 && j >= 0 && i < nx_ && j < ny_) {
+      const size_t c = static_cast<size_t>(j) * nx_ + i;
+      for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
+        const uint32_t id = cell_items_[k];
+        if (stamp_[id] == stamp_value_) continue;
+        stamp_[id] = stamp_value_;
+        if (visit(id)) return true;
+      }
+    }
+    if (t_x > 1.0 && t_y > 1.0) break;
+    if (t_x < t_y) {
+      i += step_i;
+      t_x += dt_x;
+    } else {
+      j += step_j;
+      t_y += dt_y;
+    }
+  }
+  return false;
+}
 
 }  // namespace vistream::visibility
