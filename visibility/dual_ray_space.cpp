@@ -407,13 +407,21 @@ bool DualRaySpace::RowFull(uint32_t res) const {
 }
 
 bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
-  // Most B turn out visible: one traced ray often proves it before any blocker is built.
-  if (options.free_ray_test && FreeRayTraced(pr, 0.5, 0.5)) {
-    if (stats != nullptr) {
-      ++stats->planar_tests;
-      ++stats->free_rays;
+  // Most B turn out visible: a few traced rays often prove it before any blocker is built,
+  // and a ray costs only the grid cells it crosses, where the shaft's blockers cost its area.
+  if (options.free_ray_test) {
+    static constexpr double kRays[][2] = {{0.5, 0.5}, {1.0 / 6, 1.0 / 6}, {5.0 / 6, 5.0 / 6}, {1.0 / 6, 5.0 / 6},
+                                          {5.0 / 6, 1.0 / 6}, {0.5, 1.0 / 6}, {0.5, 5.0 / 6}, {1.0 / 6, 0.5},
+                                          {5.0 / 6, 0.5}, {0, 0}, {1, 1}, {0, 1}, {1, 0}};
+    for (const auto& r : kRays) {
+      if (FreeRayTraced(pr, r[0], r[1])) {
+        if (stats != nullptr) {
+          ++stats->planar_tests;
+          ++stats->free_rays;
+        }
+        return false;
+      }
     }
-    return false;
   }
   // Near A first: the buildings around the viewcell usually hide a far B on their own.
   constexpr double kNear = 150.0;
