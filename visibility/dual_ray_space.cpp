@@ -143,7 +143,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr, double p_limit) {
   const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pe, pr.r1 + te * (pr.r2 - pr.r1)),
                               scene_from(pe, pr.l1 + te * (pr.l2 - pr.l1)), scene_from(pr.x1, pr.l1)};
   const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
-  occluders_.Gather(hull, t_min, &gathered_);
+  occluders_.Gather(hull, t_min, &scratch_, &gathered_);
 
   // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
   std::vector<glm::dvec2>& planar = planar_;
@@ -379,7 +379,7 @@ bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   };
   const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
   const auto& pieces = occluders_.pieces();
-  const bool blocked = occluders_.Trace(scene_from(pr.x1, q1), scene_from(pr.x2, q2), [&](uint32_t id) {
+  const bool blocked = occluders_.Trace(scene_from(pr.x1, q1), scene_from(pr.x2, q2), &scratch_, [&](uint32_t id) {
     const OccluderPiece& piece = pieces[id];
     if (piece.height <= t_min) return false;
     double lo = pr.x1, hi = pr.x2;

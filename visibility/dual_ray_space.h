@@ -79,6 +79,7 @@ class DualRaySpace {
   bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
 
   const OccluderSet& occluders_;
+  GatherScratch scratch_;  // per engine, so engines on different threads never share state
   std::vector<uint32_t> gathered_;
   std::vector<double> lo_, hi_;           // blocking strip of each gathered piece
   std::vector<uint32_t> parent_;          // union-find over gathered pieces

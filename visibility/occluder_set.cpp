@@ -221,7 +221,6 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
       for (int i = i0; i <= i1; ++i) set.cell_items_[fill[static_cast<size_t>(j) * set.nx_ + i]++] = id;
     }
   }
-  set.stamp_.assign(n, 0);
 
   // Contacts between pieces whose boxes touch (closed boxes: shared walls count).
   for (size_t c = 0; c + 1 < set.cell_start_.size(); ++c) {
@@ -256,11 +255,13 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
   return set;
 }
 
-void OccluderSet::Gather(std::span<const glm::dvec2> hull, double min_height, std::vector<uint32_t>* out) const {
+void OccluderSet::Gather(std::span<const glm::dvec2> hull, double min_height, GatherScratch* scratch,
+                         std::vector<uint32_t>* out) const {
   if (pieces_.empty() || hull.empty()) return;
-  if (++stamp_value_ == 0) {
-    std::fill(stamp_.begin(), stamp_.end(), 0);
-    stamp_value_ = 1;
+  auto& stamp = scratch->stamp;
+  if (stamp.size() != pieces_.size() || ++scratch->value == 0) {
+    stamp.assign(pieces_.size(), 0);
+    scratch->value = 1;
   }
   glm::dvec2 lo(INFINITY), hi(-INFINITY);
   for (const glm::dvec2& p : hull) {
@@ -290,8 +291,8 @@ void OccluderSet::Gather(std::span<const glm::dvec2> hull, double min_height, st
       const size_t c = static_cast<size_t>(j) * nx_ + i;
       for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
         const uint32_t id = cell_items_[k];
-        if (stamp_[id] == stamp_value_) continue;
-        stamp_[id] = stamp_value_;
+        if (stamp[id] == scratch->value) continue;
+        stamp[id] = scratch->value;
         if (pieces_[id].height > min_height) out->push_back(id);
       }
     }

@@ -31,6 +31,12 @@ struct PieceContact {
   glm::dvec2 w0{0.0}, w1{0.0};
 };
 
+// Per-thread scratch for Gather and Trace: marks pieces already visited in one call.
+struct GatherScratch {
+  std::vector<uint32_t> stamp;
+  uint32_t value = 0;
+};
+
 class OccluderSet {
  public:
   // Decomposes every occluder of `scene` and finds the contacts between pieces.
@@ -45,12 +51,13 @@ class OccluderSet {
 
   // Appends the pieces whose box overlaps the convex polygon `hull` (scene-local xy) and
   // whose height exceeds `min_height`; each piece once.
-  void Gather(std::span<const glm::dvec2> hull, double min_height, std::vector<uint32_t>* out) const;
+  void Gather(std::span<const glm::dvec2> hull, double min_height, GatherScratch* scratch,
+              std::vector<uint32_t>* out) const;
 
   // Calls visit(piece) once for each piece in the grid cells the segment a-b crosses, in
   // order from a, until visit returns true; returns whether it did.
   template <typename Visit>
-  bool Trace(const glm::dvec2& a, const glm::dvec2& b, Visit&& visit) const;
+  bool Trace(const glm::dvec2& a, const glm::dvec2& b, GatherScratch* scratch, Visit&& visit) const;
 
  private:
   std::vector<OccluderPiece> pieces_;
@@ -61,16 +68,15 @@ class OccluderSet {
   double cell_ = 64.0;
   int nx_ = 0, ny_ = 0;
   std::vector<uint32_t> cell_start_, cell_items_;
-  mutable std::vector<uint32_t> stamp_;
-  mutable uint32_t stamp_value_ = 0;
 };
 
 template <typename Visit>
-bool OccluderSet::Trace(const glm::dvec2& a, const glm::dvec2& b, Visit&& visit) const {
+bool OccluderSet::Trace(const glm::dvec2& a, const glm::dvec2& b, GatherScratch* scratch, Visit&& visit) const {
   if (pieces_.empty()) return false;
-  if (++stamp_value_ == 0) {
-    std::fill(stamp_.begin(), stamp_.end(), 0);
-    stamp_value_ = 1;
+  auto& stamp = scratch->stamp;
+  if (stamp.size() != pieces_.size() || ++scratch->value == 0) {
+    stamp.assign(pieces_.size(), 0);
+    scratch->value = 1;
   }
   // Amanatides-Woo through the grid; cells outside it hold nothing.
   const glm::dvec2 d = b - a;
@@ -86,8 +92,8 @@ bool OccluderSet::Trace(const glm::dvec2& a, const glm::dvec2& b, Visit&& visit)
       const size_t c = static_cast<size_t>(j) * nx_ + i;
       for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
         const uint32_t id = cell_items_[k];
-        if (stamp_[id] == stamp_value_) continue;
-        stamp_[id] = stamp_value_;
+        if (stamp[id] == scratch->value) continue;
+        stamp[id] = scratch->value;
         if (visit(id)) return true;
       }
     }
