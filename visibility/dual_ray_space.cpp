@@ -275,11 +275,30 @@ bool DualRaySpace::RasterFull(uint32_t res) {
   const uint32_t words = (res + 63) / 64;
   bits_.assign(static_cast<size_t>(words), 0);
   const double n = res;
+  // Blockers that can never cover a pixel at this resolution are left out: over all rows, a
+  // blocker's interval lies within [UB(1), UA(0)] (both bounds fall as v grows).
+  active_.clear();
+  for (const Group& g : groups_) {
+    double ua = -INFINITY, ub = INFINITY;
+    for (uint32_t k = g.begin; k < g.end; ++k) {
+      const Coeff& c = coeffs_[k];
+      const double ra = -eps_ - c.a, rb = eps_ - c.a - c.c;
+      if (c.b > 0) {
+        ua = std::max(ua, ra / c.b);
+        ub = std::min(ub, rb / c.b);
+      } else {
+        if (ra >= 0) ua = INFINITY;
+        if (rb <= 0) ub = -INFINITY;
+      }
+    }
+    if (std::min(ua, 1.0) - std::max(ub, 0.0) >= 1.0 / n) active_.push_back(&g);
+  }
   for (uint32_t j = 0; j < res; ++j) {
     std::fill(bits_.begin(), bits_.end(), 0);
     const double v0 = j / n, v1 = (j + 1) / n;
     bool full = false;
-    for (const Group& g : groups_) {
+    for (const Group* gp : active_) {
+      const Group& g = *gp;
       // Pixel (i, j) is wholly blocked iff min_k g_k(u1, v1) <= 0 and max_k g_k(u0, v0) >= 0
       // (each g_k rises with u and v); with a margin eps_ against rounding.
       double ua = -INFINITY, ub = INFINITY;
