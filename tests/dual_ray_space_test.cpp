@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/random.h"
+#include "tests/test_util.h"
 
 namespace vistream::visibility {
 namespace {
@@ -16,55 +17,9 @@ using scenes::Aabb;
 using scenes::Occluder25D;
 using scenes::Scene;
 
-// --- The oracle: 3D segments against the prisms, by brute force. ---
-
-double SegmentDistance2D(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
-  const glm::dvec2 d = b - a;
-  const double l2 = glm::dot(d, d);
-  const double t = l2 > 0 ? std::clamp(glm::dot(p - a, d) / l2, 0.0, 1.0) : 0.0;
-  return glm::length(p - (a + d * t));
-}
-
-bool Cross2D(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c, const glm::dvec2& d) {
-  auto o = [](const glm::dvec2& p, const glm::dvec2& q, const glm::dvec2& r) {
-    return (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
-  };
-  return (o(a, b, c) > 0) != (o(a, b, d) > 0) && (o(c, d, a) > 0) != (o(c, d, b) > 0);
-}
-
-bool Inside2D(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
-  bool in = false;
-  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    const glm::dvec2 &u = poly[i], &v = poly[j];
-    if ((u.y > p.y) != (v.y > p.y) && p.x < (v.x - u.x) * (p.y - u.y) / (v.y - u.y) + u.x) in = !in;
-  }
-  return in;
-}
-
-// True when the segment clears every prism by more than `margin` metres (in the ground plane,
-// over the part of the segment below the prism's top). A conservative "free".
-bool SegmentFree(const glm::dvec3& p, const glm::dvec3& q, const std::vector<Occluder25D>& occluders,
-                 double margin = 1e-6) {
-  for (const Occluder25D& oc : occluders) {
-    double t0 = 0, t1 = 1;
-    const double h = oc.height + margin;
-    if (p.z > h && q.z > h) continue;
-    if (p.z > h) t0 = (h - p.z) / (q.z - p.z);
-    if (q.z > h) t1 = (h - p.z) / (q.z - p.z);
-    const glm::dvec2 a = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t0;
-    const glm::dvec2 b = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t1;
-    const auto& fp = oc.footprint;
-    if (fp.size() >= 3 && (Inside2D(fp, a) || Inside2D(fp, b))) return false;
-    for (size_t i = 0; i < fp.size(); ++i) {
-      const glm::dvec2 &u = fp[i], &v = fp[(i + 1) % fp.size()];
-      if (Cross2D(a, b, u, v)) return false;
-      if (SegmentDistance2D(u, a, b) <= margin || SegmentDistance2D(a, u, v) <= margin ||
-          SegmentDistance2D(b, u, v) <= margin) {
-        return false;
-      }
-    }
-  }
-  return true;
+// The oracle: 3D segments against the prisms, by brute force (tests/test_util.h).
+bool SegmentFree(const glm::dvec3& p, const glm::dvec3& q, const std::vector<Occluder25D>& occluders) {
+  return testing::SegmentClearOfPrisms(p, q, occluders, 1e-6);
 }
 
 glm::dvec3 RandomIn(const Aabb& box, scenes::Rng& rng) {

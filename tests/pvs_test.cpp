@@ -8,46 +8,15 @@
 #include "scenes/city_generator.h"
 #include "scenes/progress.h"
 #include "scenes/random.h"
+#include "tests/test_util.h"
 #include "visibility/viewcell_grid.h"
 
 namespace vistream::visibility {
 namespace {
 
-// The oracle: a 3D segment against every prism, brute force, free only with a clear margin.
+// The oracle (tests/test_util.h), free only with a clear margin.
 bool SegmentFree(const glm::dvec3& p, const glm::dvec3& q, const scenes::Scene& scene) {
-  constexpr double kMargin = 1e-4;
-  const glm::dvec2 lo = glm::min(glm::dvec2(p), glm::dvec2(q)) - kMargin;
-  const glm::dvec2 hi = glm::max(glm::dvec2(p), glm::dvec2(q)) + kMargin;
-  for (const scenes::Occluder25D& oc : scene.occluders) {
-    glm::dvec2 bmin(INFINITY), bmax(-INFINITY);
-    for (const glm::dvec2& v : oc.footprint) bmin = glm::min(bmin, v), bmax = glm::max(bmax, v);
-    if (bmin.x > hi.x || bmax.x < lo.x || bmin.y > hi.y || bmax.y < lo.y) continue;
-    const double h = oc.height + kMargin;
-    if (p.z > h && q.z > h) continue;
-    double t0 = 0, t1 = 1;
-    if (p.z > h) t0 = (h - p.z) / (q.z - p.z);
-    if (q.z > h) t1 = (h - p.z) / (q.z - p.z);
-    const glm::dvec2 a = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t0;
-    const glm::dvec2 b = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t1;
-    // Convex footprints (generated): the segment misses iff a separating axis exists among
-    // the footprint's edge normals (with margin) and the segment's own normal.
-    const auto& fp = oc.footprint;
-    bool separated = false;
-    for (size_t i = 0; i < fp.size() && !separated; ++i) {
-      const glm::dvec2 e = fp[(i + 1) % fp.size()] - fp[i];
-      const glm::dvec2 n = glm::normalize(glm::dvec2(e.y, -e.x));  // outward for CCW
-      const double d = glm::dot(fp[i], n);
-      separated = glm::dot(a, n) > d + kMargin && glm::dot(b, n) > d + kMargin;
-    }
-    if (!separated && b != a) {
-      const glm::dvec2 n = glm::normalize(glm::dvec2(b.y - a.y, a.x - b.x));
-      double mn = INFINITY, mx = -INFINITY;
-      for (const glm::dvec2& v : fp) mn = std::min(mn, glm::dot(v - a, n)), mx = std::max(mx, glm::dot(v - a, n));
-      separated = mn > kMargin || mx < -kMargin;
-    }
-    if (!separated) return false;
-  }
-  return true;
+  return testing::SegmentClearOfPrisms(p, q, scene.occluders, 1e-4);
 }
 
 class Pvs : public ::testing::Test {

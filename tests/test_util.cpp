@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 namespace vistream::testing {
@@ -59,6 +60,36 @@ bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, co
       if (SegmentsCross(a, b, u, v)) return false;
       if (SegmentDistance(u, a, b) < clearance || SegmentDistance(a, u, v) < clearance ||
           SegmentDistance(b, u, v) < clearance) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+bool SegmentClearOfPrisms(const glm::dvec3& p, const glm::dvec3& q, const std::vector<scenes::Occluder25D>& prisms,
+                          double margin) {
+  const glm::dvec2 lo = glm::min(glm::dvec2(p), glm::dvec2(q)) - margin;
+  const glm::dvec2 hi = glm::max(glm::dvec2(p), glm::dvec2(q)) + margin;
+  for (const scenes::Occluder25D& oc : prisms) {
+    const auto& fp = oc.footprint;
+    glm::dvec2 bmin(INFINITY), bmax(-INFINITY);
+    for (const glm::dvec2& v : fp) bmin = glm::min(bmin, v), bmax = glm::max(bmax, v);
+    if (bmin.x > hi.x || bmax.x < lo.x || bmin.y > hi.y || bmax.y < lo.y) continue;
+    // The part of the segment below the prism's top (plus the margin).
+    const double h = oc.height + margin;
+    if (p.z > h && q.z > h) continue;
+    double t0 = 0, t1 = 1;
+    if (p.z > h) t0 = (h - p.z) / (q.z - p.z);
+    if (q.z > h) t1 = (h - p.z) / (q.z - p.z);
+    const glm::dvec2 a = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t0;
+    const glm::dvec2 b = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t1;
+    if (fp.size() >= 3 && (Inside(fp, a) || Inside(fp, b))) return false;
+    for (size_t i = 0; i < fp.size(); ++i) {
+      const glm::dvec2 &u = fp[i], &v = fp[(i + 1) % fp.size()];
+      if (SegmentsCross(a, b, u, v)) return false;
+      if (SegmentDistance(u, a, b) <= margin || SegmentDistance(a, u, v) <= margin ||
+          SegmentDistance(b, u, v) <= margin) {
         return false;
       }
     }

@@ -15,6 +15,12 @@ std::string TempDir();
 bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, const glm::dvec2& b,
                              double clearance);
 
+// The oracle for conservative visibility: true when the 3D segment p-q clears every prism
+// (footprint from z = 0 to its height) by more than `margin` metres, tested by brute force
+// (a box test first). A conservative "free": grazing segments count as blocked.
+bool SegmentClearOfPrisms(const glm::dvec3& p, const glm::dvec3& q, const std::vector<scenes::Occluder25D>& prisms,
+                          double margin);
+
 // A hash of every position, normal, index and occluder: equal scenes hash equal.
 uint64_t SceneHash(const scenes::Scene& scene);
 

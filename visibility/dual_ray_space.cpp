@@ -271,49 +271,43 @@ bool DualRaySpace::FreeRay(double u, double v) const {
   return true;
 }
 
+std::pair<double, double> DualRaySpace::RowBounds(const Group& g, double v0, double v1) const {
+  // Pixel [u0, u1] x [v0, v1] is wholly blocked iff min_k g_k(u1, v1) <= 0 and
+  // max_k g_k(u0, v0) >= 0 (each g_k rises with u and v), with a margin eps_ against rounding:
+  // iff u0 >= lo and u1 <= hi.
+  double hi = -INFINITY, lo = INFINITY;
+  for (uint32_t k = g.begin; k < g.end; ++k) {
+    const Coeff& c = coeffs_[k];
+    const double ra = -eps_ - c.a - c.c * v1;  // need b u1 <= ra
+    const double rb = eps_ - c.a - c.c * v0;   // need b u0 >= rb
+    if (c.b > 0) {
+      hi = std::max(hi, ra / c.b);
+      lo = std::min(lo, rb / c.b);
+    } else {
+      if (ra >= 0) hi = INFINITY;
+      if (rb <= 0) lo = -INFINITY;
+    }
+  }
+  return {lo, hi};
+}
+
 bool DualRaySpace::RasterFull(uint32_t res) {
   const uint32_t words = (res + 63) / 64;
   bits_.assign(static_cast<size_t>(words), 0);
   const double n = res;
-  // Blockers that can never cover a pixel at this resolution are left out: over all rows, a
-  // blocker's interval lies within [UB(1), UA(0)] (both bounds fall as v grows).
+  // Blockers that can never cover a pixel at this resolution are left out: both bounds fall as
+  // v grows, so over all rows a blocker's interval lies within RowBounds(g, 1, 0).
   active_.clear();
   for (const Group& g : groups_) {
-    double ua = -INFINITY, ub = INFINITY;
-    for (uint32_t k = g.begin; k < g.end; ++k) {
-      const Coeff& c = coeffs_[k];
-      const double ra = -eps_ - c.a, rb = eps_ - c.a - c.c;
-      if (c.b > 0) {
-        ua = std::max(ua, ra / c.b);
-        ub = std::min(ub, rb / c.b);
-      } else {
-        if (ra >= 0) ua = INFINITY;
-        if (rb <= 0) ub = -INFINITY;
-      }
-    }
-    if (std::min(ua, 1.0) - std::max(ub, 0.0) >= 1.0 / n) active_.push_back(&g);
+    const auto [lo, hi] = RowBounds(g, 1.0, 0.0);
+    if (std::min(hi, 1.0) - std::max(lo, 0.0) >= 1.0 / n) active_.push_back(&g);
   }
   for (uint32_t j = 0; j < res; ++j) {
     std::fill(bits_.begin(), bits_.end(), 0);
     const double v0 = j / n, v1 = (j + 1) / n;
     bool full = false;
     for (const Group* gp : active_) {
-      const Group& g = *gp;
-      // Pixel (i, j) is wholly blocked iff min_k g_k(u1, v1) <= 0 and max_k g_k(u0, v0) >= 0
-      // (each g_k rises with u and v); with a margin eps_ against rounding.
-      double ua = -INFINITY, ub = INFINITY;
-      for (uint32_t k = g.begin; k < g.end; ++k) {
-        const Coeff& c = coeffs_[k];
-        const double ra = -eps_ - c.a - c.c * v1;  // need b u1 <= ra
-        const double rb = eps_ - c.a - c.c * v0;   // need b u0 >= rb
-        if (c.b > 0) {
-          ua = std::max(ua, ra / c.b);
-          ub = std::min(ub, rb / c.b);
-        } else {
-          if (ra >= 0) ua = INFINITY;
-          if (rb <= 0) ub = -INFINITY;
-        }
-      }
+      const auto [ub, ua] = RowBounds(*gp, v0, v1);
       const double first = std::max(0.0, std::ceil(ub * n));
       const double last = std::min(n - 1, std::floor(ua * n) - 1);
       if (!(first <= last)) continue;

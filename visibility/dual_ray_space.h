@@ -9,6 +9,7 @@
 // Touching occluders fuse into one connected blocker through their contacts.
 
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "scenes/aabb.h"
@@ -89,6 +90,8 @@ class DualRaySpace {
     double width = 0.0;           // its blocked width along u on the middle row, for ordering
   };
   bool RowFull(uint32_t res) const;
+  // The wholly blocked pixels of `g` in the row [v0, v1]: those with u0 >= first, u1 <= second.
+  std::pair<double, double> RowBounds(const Group& g, double v0, double v1) const;
   void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
   std::vector<Coeff> coeffs_;             // blockers' hull vertices
   std::vector<Group> groups_;             // blockers, widest first
