@@ -295,19 +295,12 @@ bool DualRaySpace::RasterFull(uint32_t res) {
   const uint32_t words = (res + 63) / 64;
   bits_.assign(static_cast<size_t>(words), 0);
   const double n = res;
-  // Blockers that can never cover a pixel at this resolution are left out: both bounds fall as
-  // v grows, so over all rows a blocker's interval lies within RowBounds(g, 1, 0).
-  active_.clear();
-  for (const Group& g : groups_) {
-    const auto [lo, hi] = RowBounds(g, 1.0, 0.0);
-    if (std::min(hi, 1.0) - std::max(lo, 0.0) >= 1.0 / n) active_.push_back(&g);
-  }
   for (uint32_t j = 0; j < res; ++j) {
     std::fill(bits_.begin(), bits_.end(), 0);
     const double v0 = j / n, v1 = (j + 1) / n;
     bool full = false;
-    for (const Group* gp : active_) {
-      const auto [ub, ua] = RowBounds(*gp, v0, v1);
+    for (const Group& g : groups_) {
+      const auto [ub, ua] = RowBounds(g, v0, v1);
       const double first = std::max(0.0, std::ceil(ub * n));
       const double last = std::min(n - 1, std::floor(ua * n) - 1);
       if (!(first <= last)) continue;

@@ -95,7 +95,6 @@ class DualRaySpace {
   void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
   std::vector<Coeff> coeffs_;             // blockers' hull vertices
   std::vector<Group> groups_;             // blockers, widest first
-  std::vector<const Group*> active_;      // those wide enough to cover a pixel at this resolution
   std::vector<uint64_t> bits_;            // the raster row being drawn
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
