@@ -221,7 +221,7 @@ TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
       const uint32_t res = 16u << rng.Below(5);
       ++cases;
       const bool visible = drs.Visible(kCell, b, CellQueryOptions{.max_res = res});
-      // The accelerations (free rays, near-first blockers) never change an answer.
+      // The accelerations (traced free rays, free-ray tests at gaps) never change an answer.
       ASSERT_EQ(visible, drs.Visible(kCell, b, CellQueryOptions{.max_res = res, .free_ray_test = false}))
           << "seed " << seed << " query " << q << ": " << Describe(s, kCell, b);
       if (visible) continue;

@@ -126,7 +126,7 @@ bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, d
   return true;
 }
 
-void DualRaySpace::BuildBlockers(const PlanarProblem& pr, double p_limit) {
+void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   const auto& pieces = occluders_.pieces();
   if (local_.size() != pieces.size()) local_.assign(pieces.size(), -1);
   gathered_.clear();
@@ -137,11 +137,8 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr, double p_limit) {
     w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
     return w;
   };
-  // Up to p_limit only, when asked: any subset of the blockers that covers RS proves occlusion.
-  const double pe = std::min(p_limit, pr.x2);
-  const double te = (pe - pr.x1) / (pr.x2 - pr.x1);
-  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pe, pr.r1 + te * (pr.r2 - pr.r1)),
-                              scene_from(pe, pr.l1 + te * (pr.l2 - pr.l1)), scene_from(pr.x1, pr.l1)};
+  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pr.x2, pr.r2), scene_from(pr.x2, pr.l2),
+                              scene_from(pr.x1, pr.l1)};
   const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
   occluders_.Gather(hull, t_min, &scratch_, &gathered_);
 
@@ -429,22 +426,7 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
       }
     }
   }
-  // Near A first: the buildings around the viewcell usually hide a far B on their own.
-  constexpr double kNear = 150.0;
-  if (pr.x2 - pr.x1 > 2 * kNear) {
-    BuildBlockers(pr, pr.x1 + kNear);
-    if (stats != nullptr) stats->gathered += gathered_.size();
-    if (!groups_.empty()) {
-      for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
-        if (stats != nullptr) ++stats->rasters;
-        if (RasterFull(res)) {
-          if (stats != nullptr) ++stats->planar_tests;
-          return true;
-        }
-      }
-    }
-  }
-  BuildBlockers(pr, INFINITY);
+  BuildBlockers(pr);
   if (stats != nullptr) {
     ++stats->planar_tests;
     stats->gathered += gathered_.size();

@@ -72,7 +72,7 @@ class DualRaySpace {
   struct Coeff {
     double a, b, c;  // g(u, v) = a + b u + c v
   };
-  void BuildBlockers(const PlanarProblem& problem, double p_limit);
+  void BuildBlockers(const PlanarProblem& problem);
   bool RasterFull(uint32_t res);
   bool FreeRay(double u, double v) const;
   // The same question for ray (u, v), answered by tracing it through the occluder grid:
