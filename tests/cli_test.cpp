@@ -88,4 +88,31 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
   EXPECT_NE(Vistream("frobnicate").exit_code, 0);
 }
 
+TEST(Cli, PvsReportsTheSetOfAViewcell) {
+  const std::string png = Tmp("pvs.png");
+  const RunResult r = Vistream("pvs --scene default --cell 10,10 --res 64 --json --map " + png);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const int objects = j.at("pvs_objects").get<int>();
+  EXPECT_GT(objects, 0);
+  EXPECT_LT(objects, j.at("total_objects").get<int>());
+  EXPECT_GT(j.at("pvs_triangles").get<int>(), objects);
+  EXPECT_GT(j.at("queries").get<int>(), 0);
+  EXPECT_GE(j.at("ms").get<double>(), 0.0);
+  EXPECT_GT(std::filesystem::file_size(png), 1000u);
+}
+
+TEST(Cli, PvsRejectsBadCellsAndMissingBackends) {
+  const RunResult text = Vistream("pvs --scene default --cell ten,3");
+  EXPECT_EQ(text.exit_code, 1);
+  EXPECT_NE(text.out.find("--cell 'ten,3'"), std::string::npos) << text.out;
+  const RunResult outside = Vistream("pvs --scene default --cell 500,3");
+  EXPECT_EQ(outside.exit_code, 1);
+  EXPECT_NE(outside.out.find("outside the grid"), std::string::npos) << outside.out;
+  const RunResult gl = Vistream("pvs --scene default --cell 1,1 --backend gl");
+  EXPECT_EQ(gl.exit_code, 1);
+  EXPECT_NE(gl.out.find("gl"), std::string::npos) << gl.out;
+  EXPECT_NE(Vistream("pvs --scene default --cell 1,1 --res 100").exit_code, 0);  // not a power of two
+}
+
 }  // namespace
