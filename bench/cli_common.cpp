@@ -34,10 +34,12 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
     if (!entry.ok()) return entry.status();
     scene = scenes::BuildScene(*entry, &CancelFlag());
   }
-  if (seconds != nullptr) {
-    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
+  if (seconds != nullptr) *seconds = SecondsSince(start);
   return scene;
+}
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 int Fail(const absl::Status& status) {

@@ -25,10 +25,6 @@ struct PvsArgs {
   bool json = false;
 };
 
-double Since(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
-}
-
 int Pvs(const PvsArgs& a) {
   if (a.json) scenes::Progress::SetQuiet(true);
   if (a.backend != "cpu") {
@@ -63,10 +59,10 @@ int Pvs(const PvsArgs& a) {
 
   auto t0 = std::chrono::steady_clock::now();
   const visibility::KdTree tree = visibility::KdTree::Build(*scene);
-  const double kd_ms = Since(t0);
+  const double kd_ms = 1000.0 * SecondsSince(t0);
   t0 = std::chrono::steady_clock::now();
   const visibility::PvsComputer computer(*scene, tree);
-  const double occluders_ms = Since(t0);
+  const double occluders_ms = 1000.0 * SecondsSince(t0);
   visibility::CellQueryOptions options;
   options.max_res = a.res;
   options.min_res = std::min<uint32_t>(16, a.res);

@@ -23,10 +23,6 @@ namespace vistream::cli {
 
 namespace {
 
-double Since(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
-
 struct GenerateArgs {
   std::string name, output;
   std::optional<uint64_t> seed;
@@ -57,12 +53,12 @@ int Generate(const GenerateArgs& a) {
     return Fail(entry.status());
   }
   if (!scene.ok()) return Fail(scene.status());
-  const double generate_s = Since(start);
+  const double generate_s = SecondsSince(start);
   const auto save_start = std::chrono::steady_clock::now();
   if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
   std::printf("generated %s: %zu objects, %zu triangles, %zu occluders in %.2f s; saved %s in %.2f s\n",
               scene->name.c_str(), scene->objects.size(), scene->TriangleCount(),
-              scene->occluders.size(), generate_s, a.output.c_str(), Since(save_start));
+              scene->occluders.size(), generate_s, a.output.c_str(), SecondsSince(save_start));
   return 0;
 }
 
@@ -79,7 +75,7 @@ int Info(const InfoArgs& a) {
   if (!scene.ok()) return Fail(scene.status());
   const auto kd_start = std::chrono::steady_clock::now();
   const visibility::KdTree tree = visibility::KdTree::Build(*scene, {.leaf_size = a.leaf_size});
-  const double kd_ms = 1000.0 * Since(kd_start);
+  const double kd_ms = 1000.0 * SecondsSince(kd_start);
 
   size_t tiered = 0;
   std::map<scenes::ObjectId, int> per_object;

@@ -32,7 +32,6 @@ class TopViewMap {
   void FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour);
   void StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour);
   void Line(const glm::dvec2& a, const glm::dvec2& b, Rgb colour, int thickness = 1);
-  Rgb At(int x, int y) const { return pixels_[static_cast<size_t>(y) * width_ + x]; }
 
   absl::Status WritePng(const std::string& path) const;
 

@@ -13,12 +13,6 @@ struct Aabb {
   glm::dvec3 min{std::numeric_limits<double>::infinity()};
   glm::dvec3 max{-std::numeric_limits<double>::infinity()};
 
-  static Aabb FromCorners(const glm::dvec3& a, const glm::dvec3& b) {
-    Aabb box;
-    box.Extend(a);
-    box.Extend(b);
-    return box;
-  }
   bool Empty() const { return min.x > max.x || min.y > max.y || min.z > max.z; }
   void Extend(const glm::dvec3& p) {
     min = glm::dvec3(std::min(min.x, p.x), std::min(min.y, p.y), std::min(min.z, p.z));

@@ -12,14 +12,6 @@ Aabb Mesh::Bounds() const {
   return box;
 }
 
-void Mesh::Append(const Mesh& other) {
-  const auto base = static_cast<uint32_t>(positions.size());
-  positions.insert(positions.end(), other.positions.begin(), other.positions.end());
-  normals.insert(normals.end(), other.normals.begin(), other.normals.end());
-  indices.reserve(indices.size() + other.indices.size());
-  for (uint32_t i : other.indices) indices.push_back(base + i);
-}
-
 double SignedArea(std::span<const glm::dvec2> polygon) {
   double twice = 0.0;
   const size_t n = polygon.size();

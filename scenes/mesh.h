@@ -22,8 +22,6 @@ struct Mesh {
 
   size_t TriangleCount() const { return indices.size() / 3; }
   Aabb Bounds() const;
-  // Appends `other`, offsetting its indices.
-  void Append(const Mesh& other);
 };
 
 // Appends a closed, flat-shaded prism: the convex footprint (counter-clockwise, xy metres,

@@ -19,14 +19,6 @@ size_t Scene::VertexCount() const {
   return n;
 }
 
-void Scene::RecomputeBounds() {
-  bounds = Aabb();
-  for (Object& o : objects) {
-    o.bounds = o.mesh.Bounds();
-    bounds.Extend(o.bounds);
-  }
-}
-
 ObjectId Scene::AddObject(std::string object_name, Mesh mesh) {
   Object o;
   o.id = static_cast<ObjectId>(objects.size());

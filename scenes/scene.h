@@ -44,8 +44,6 @@ struct Scene {
 
   size_t TriangleCount() const;
   size_t VertexCount() const;
-  // Recomputes every object's bounds and the scene bounds from the meshes.
-  void RecomputeBounds();
   // Adds an object with the next dense id and returns that id. Bounds are computed here.
   ObjectId AddObject(std::string name, Mesh mesh);
 };

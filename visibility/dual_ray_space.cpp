@@ -131,16 +131,9 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   if (local_.size() != pieces.size()) local_.assign(pieces.size(), -1);
   gathered_.clear();
   // The shaft between the faces, back in scene coordinates, gathers the candidate pieces.
-  auto scene_from = [&](double p, double q) {
-    glm::dvec2 w(0.0);
-    w[pr.axis] = pr.origin[pr.axis] + pr.sign * p;
-    w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
-    return w;
-  };
-  const glm::dvec2 hull[4] = {scene_from(pr.x1, pr.r1), scene_from(pr.x2, pr.r2), scene_from(pr.x2, pr.l2),
-                              scene_from(pr.x1, pr.l1)};
-  const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
-  occluders_.Gather(hull, t_min, &scratch_, &gathered_);
+  const glm::dvec2 hull[4] = {pr.SceneFromPlanar(pr.x1, pr.r1), pr.SceneFromPlanar(pr.x2, pr.r2),
+                              pr.SceneFromPlanar(pr.x2, pr.l2), pr.SceneFromPlanar(pr.x1, pr.l1)};
+  occluders_.Gather(hull, pr.CeilingMin(), &scratch_, &gathered_);
 
   // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
   std::vector<glm::dvec2>& planar = planar_;
@@ -153,11 +146,8 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   hi_.clear();
   for (uint32_t id : gathered_) {
     const OccluderPiece& piece = pieces[id];
-    double lo = pr.x1, hi = pr.x2;
-    if (pr.beta > 0) hi = std::min(hi, (piece.height - pr.alpha) / pr.beta);
-    else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
-    else if (piece.height < pr.alpha) continue;
-    if (!(lo <= hi)) continue;
+    double lo, hi;
+    if (!pr.BlockingStrip(piece.height, &lo, &hi)) continue;
     // Reject from the box first: the frame is axis-aligned, so the box maps to a box.
     {
       const glm::dvec2 c0 = pr.PlanarFromScene(piece.box_min), c1 = pr.PlanarFromScene(piece.box_max);
@@ -374,22 +364,14 @@ bool SegmentMeetsPiece(const glm::dvec2& a, const glm::dvec2& b, const std::vect
 
 bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   const double q1 = pr.r1 + u * (pr.l1 - pr.r1), q2 = pr.r2 + v * (pr.l2 - pr.r2);
-  auto scene_from = [&](double p, double q) {
-    glm::dvec2 w(0.0);
-    w[pr.axis] = pr.origin[pr.axis] + pr.sign * p;
-    w[1 - pr.axis] = pr.origin[1 - pr.axis] + q;
-    return w;
-  };
-  const double t_min = std::min(pr.alpha + pr.beta * pr.x1, pr.alpha + pr.beta * pr.x2);
+  const double t_min = pr.CeilingMin();
   const auto& pieces = occluders_.pieces();
-  const bool blocked = occluders_.Trace(scene_from(pr.x1, q1), scene_from(pr.x2, q2), &scratch_, [&](uint32_t id) {
+  const glm::dvec2 from = pr.SceneFromPlanar(pr.x1, q1), to = pr.SceneFromPlanar(pr.x2, q2);
+  const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
     const OccluderPiece& piece = pieces[id];
     if (piece.height <= t_min) return false;
-    double lo = pr.x1, hi = pr.x2;
-    if (pr.beta > 0) hi = std::min(hi, (piece.height - pr.alpha) / pr.beta);
-    else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
-    else if (piece.height < pr.alpha) return false;
-    if (!(lo <= hi)) return false;
+    double lo, hi;
+    if (!pr.BlockingStrip(piece.height, &lo, &hi)) return false;
     // The ray's part where the piece rises above T.
     const double k = (q2 - q1) / (pr.x2 - pr.x1);
     const glm::dvec2 a(lo, q1 + k * (lo - pr.x1)), b(hi, q1 + k * (hi - pr.x1));

@@ -8,6 +8,7 @@
 // of RS is wholly blocked iff min_k g_k at its upper corner <= 0 <= max_k g_k at its lower.
 // Touching occluders fuse into one connected blocker through their contacts.
 
+#include <algorithm>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -47,6 +48,23 @@ struct PlanarProblem {
 
   glm::dvec2 PlanarFromScene(const glm::dvec2& w) const {
     return {sign * (w[axis] - origin[axis]), w[1 - axis] - origin[1 - axis]};
+  }
+  glm::dvec2 SceneFromPlanar(double p, double q) const {
+    glm::dvec2 w(0.0);
+    w[axis] = origin[axis] + sign * p;
+    w[1 - axis] = origin[1 - axis] + q;
+    return w;
+  }
+  // The lowest point of T over the slab: prisms no taller block nothing.
+  double CeilingMin() const { return std::min(alpha + beta * x1, alpha + beta * x2); }
+  // The part [lo, hi] of the slab where a prism of `height` rises above T; false when none.
+  bool BlockingStrip(double height, double* lo, double* hi) const {
+    *lo = x1;
+    *hi = x2;
+    if (beta > 0) *hi = std::min(*hi, (height - alpha) / beta);
+    else if (beta < 0) *lo = std::max(*lo, (height - alpha) / beta);
+    else if (height < alpha) return false;
+    return *lo <= *hi;
   }
 };
 

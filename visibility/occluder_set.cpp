@@ -147,13 +147,11 @@ void FindContacts(uint32_t ia, uint32_t ib, const OccluderPiece& a, const Occlud
 
 OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
   OccluderSet set;
-  std::vector<uint32_t> owner;  // occluder index of each piece
   for (size_t oi = 0; oi < scene.occluders.size(); ++oi) {
     const scenes::Occluder25D& oc = scene.occluders[oi];
     if (!(oc.height > 0.0)) continue;
     std::vector<glm::dvec2> fp = Distinct(oc.footprint);
     if (fp.empty()) continue;
-    const auto first = static_cast<uint32_t>(set.pieces_.size());
     auto add = [&](std::vector<glm::dvec2> pts) {
       OccluderPiece p;
       p.points = std::move(pts);
@@ -161,7 +159,6 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
       p.object = oc.object;
       Boxes(&p);
       set.pieces_.push_back(std::move(p));
-      owner.push_back(static_cast<uint32_t>(oi));
     };
     if (scenes::SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
     const bool degenerate = fp.size() < 3 || scenes::SignedArea(fp) == 0.0;
@@ -181,7 +178,6 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
         add({fp[i], fp[(i + 1) % fp.size()]});
       }
     }
-    (void)first;
   }
 
   // The grid over all pieces.
