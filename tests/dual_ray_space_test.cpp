@@ -188,30 +188,11 @@ std::string Describe(const Scene& s, const Aabb& a, const Aabb& b) {
   return out.str();
 }
 
-// Random 2.5D scenes on an integer grid, so that collinear edges, rays through vertices and
-// shared walls are common, not rare.
-Scene RandomScene(scenes::Rng& rng) {
-  Scene s;
-  const int n = 5 + static_cast<int>(rng.Below(40));
-  for (int k = 0; k < n; ++k) {
-    const double x = std::floor(rng.Uniform(12, 70)), y = std::floor(rng.Uniform(-40, 50));
-    const double w = 1 + std::floor(rng.Uniform(0, 12)), d = 1 + std::floor(rng.Uniform(0, 12));
-    const double h = std::floor(rng.Uniform(1, 30));
-    if (rng.Chance(0.15)) {
-      s.occluders.push_back(Occluder25D{{{x, y}, {x + w, y + d}, {x, y}}, h, 0});  // a thin wall
-    } else {
-      s.occluders.push_back(Rect(x, y, x + w, y + d, h));
-    }
-    if (rng.Chance(0.3)) s.occluders.push_back(Rect(x + w, y, x + 2 * w, y + d, h + 3));  // a neighbour
-  }
-  return s;
-}
-
 TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
   int occluded = 0, cases = 0;
   for (uint64_t seed = 1; seed <= 300; ++seed) {
     scenes::Rng rng(seed);
-    const Scene s = RandomScene(rng);
+    const Scene s = testing::RandomGridScene(rng);
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
     for (int q = 0; q < 4; ++q) {
@@ -242,7 +223,7 @@ TEST(DualRaySpace, TranslatingEverythingFarAwayChangesNothing) {
   const glm::dvec3 t3(t, 0);
   for (uint64_t seed = 1; seed <= 60; ++seed) {
     scenes::Rng rng(seed);
-    const Scene s = RandomScene(rng);
+    const Scene s = testing::RandomGridScene(rng);
     const Scene far = Translated(s, t);
     const OccluderSet near_set = OccluderSet::Build(s), far_set = OccluderSet::Build(far);
     DualRaySpace near_drs(near_set), far_drs(far_set);

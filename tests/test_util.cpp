@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 
@@ -115,6 +116,26 @@ uint64_t SceneHash(const scenes::Scene& scene) {
   }
   mix(&scene.origin, sizeof(scene.origin));
   return h;
+}
+
+scenes::Scene RandomGridScene(scenes::Rng& rng) {
+  auto rect = [](double x0, double y0, double x1, double y1, double h) {
+    return scenes::Occluder25D{{{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}}, h, 0};
+  };
+  scenes::Scene s;
+  const int n = 5 + static_cast<int>(rng.Below(40));
+  for (int k = 0; k < n; ++k) {
+    const double x = std::floor(rng.Uniform(12, 70)), y = std::floor(rng.Uniform(-40, 50));
+    const double w = 1 + std::floor(rng.Uniform(0, 12)), d = 1 + std::floor(rng.Uniform(0, 12));
+    const double h = std::floor(rng.Uniform(1, 30));
+    if (rng.Chance(0.15)) {
+      s.occluders.push_back(scenes::Occluder25D{{{x, y}, {x + w, y + d}, {x, y}}, h, 0});  // a thin wall
+    } else {
+      s.occluders.push_back(rect(x, y, x + w, y + d, h));
+    }
+    if (rng.Chance(0.3)) s.occluders.push_back(rect(x + w, y, x + 2 * w, y + d, h + 3));  // a neighbour
+  }
+  return s;
 }
 
 }  // namespace vistream::testing

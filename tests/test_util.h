@@ -3,6 +3,7 @@
 
 #include <string>
 
+#include "scenes/random.h"
 #include "scenes/scene.h"
 
 namespace vistream::testing {
@@ -20,6 +21,10 @@ bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, co
 // (a box test first). A conservative "free": grazing segments count as blocked.
 bool SegmentClearOfPrisms(const glm::dvec3& p, const glm::dvec3& q, const std::vector<scenes::Occluder25D>& prisms,
                           double margin);
+
+// A random 2.5D scene on an integer grid in x 12..82, y -40..62, so that collinear edges, rays
+// through vertices and shared walls are common, not rare: boxes, thin walls, neighbours.
+scenes::Scene RandomGridScene(scenes::Rng& rng);
 
 // A hash of every position, normal, index and occluder: equal scenes hash equal.
 uint64_t SceneHash(const scenes::Scene& scene);

@@ -6,6 +6,8 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
+#include "visibility/exact_cover.h"
+
 namespace vistream::visibility {
 
 namespace {
@@ -206,8 +208,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   std::vector<uint32_t> order(kept.size());
   for (uint32_t i = 0; i < kept.size(); ++i) order[i] = i;
   std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return find(x) < find(y); });
-  coeffs_.clear();
-  groups_.clear();
+  blockers_.Clear();
   for (size_t n = 0; n < order.size();) {
     size_t end = n;
     group_points_.clear();
@@ -221,98 +222,28 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     n = end;
   }
   // Widest first: a row usually fills after a few blockers, and the rest are skipped.
-  std::sort(groups_.begin(), groups_.end(), [](const Group& x, const Group& y) { return x.width > y.width; });
-  eps_ = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+  std::sort(blockers_.groups.begin(), blockers_.groups.end(),
+            [](const Blocker& x, const Blocker& y) { return x.width > y.width; });
+  blockers_.eps = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
 }
 
 void DualRaySpace::AddGroup(const PlanarProblem& pr) {
   const double w = pr.x2 - pr.x1;
-  Group g;
-  g.begin = static_cast<uint32_t>(coeffs_.size());
+  Blocker g;
+  g.begin = static_cast<uint32_t>(blockers_.coeffs.size());
   // How much of RS this blocker covers, roughly: its blocked width along u on the middle row.
   double mn = INFINITY, mx = -INFINITY;
   for (const glm::dvec2& p : group_points_) {
     const double t = (p.x - pr.x1) / w;
-    const Coeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
-    coeffs_.push_back(c);
+    const BlockerCoeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
+    blockers_.coeffs.push_back(c);
     const double root = c.b > 0 ? -(c.a + 0.5 * c.c) / c.b : (c.a + 0.5 * c.c <= 0 ? INFINITY : -INFINITY);
     mn = std::min(mn, root);
     mx = std::max(mx, root);
   }
-  g.end = static_cast<uint32_t>(coeffs_.size());
+  g.end = static_cast<uint32_t>(blockers_.coeffs.size());
   g.width = std::min(mx, 1.0) - std::max(mn, 0.0);
-  groups_.push_back(g);
-}
-
-bool DualRaySpace::FreeRay(double u, double v) const {
-  for (const Group& g : groups_) {
-    double mn = INFINITY, mx = -INFINITY;
-    for (uint32_t k = g.begin; k < g.end; ++k) {
-      const Coeff& c = coeffs_[k];
-      const double val = c.a + c.b * u + c.c * v;
-      mn = std::min(mn, val);
-      mx = std::max(mx, val);
-    }
-    if (mn <= 0.0 && mx >= 0.0) return false;
-  }
-  return true;
-}
-
-std::pair<double, double> DualRaySpace::RowBounds(const Group& g, double v0, double v1) const {
-  // Pixel [u0, u1] x [v0, v1] is wholly blocked iff min_k g_k(u1, v1) <= 0 and
-  // max_k g_k(u0, v0) >= 0 (each g_k rises with u and v), with a margin eps_ against rounding:
-  // iff u0 >= lo and u1 <= hi.
-  double hi = -INFINITY, lo = INFINITY;
-  for (uint32_t k = g.begin; k < g.end; ++k) {
-    const Coeff& c = coeffs_[k];
-    const double ra = -eps_ - c.a - c.c * v1;  // need b u1 <= ra
-    const double rb = eps_ - c.a - c.c * v0;   // need b u0 >= rb
-    if (c.b > 0) {
-      hi = std::max(hi, ra / c.b);
-      lo = std::min(lo, rb / c.b);
-    } else {
-      if (ra >= 0) hi = INFINITY;
-      if (rb <= 0) lo = -INFINITY;
-    }
-  }
-  return {lo, hi};
-}
-
-bool DualRaySpace::RasterFull(uint32_t res) {
-  const uint32_t words = (res + 63) / 64;
-  bits_.assign(static_cast<size_t>(words), 0);
-  const double n = res;
-  for (uint32_t j = 0; j < res; ++j) {
-    std::fill(bits_.begin(), bits_.end(), 0);
-    const double v0 = j / n, v1 = (j + 1) / n;
-    bool full = false;
-    for (const Group& g : groups_) {
-      const auto [ub, ua] = RowBounds(g, v0, v1);
-      const double first = std::max(0.0, std::ceil(ub * n));
-      const double last = std::min(n - 1, std::floor(ua * n) - 1);
-      if (!(first <= last)) continue;
-      const auto i0 = static_cast<uint32_t>(first), i1 = static_cast<uint32_t>(last);
-      for (uint32_t wi = i0 / 64; wi <= i1 / 64; ++wi) {
-        const uint32_t s = wi == i0 / 64 ? i0 % 64 : 0, e = wi == i1 / 64 ? i1 % 64 : 63;
-        const uint64_t mask = (e == 63 ? ~0ULL : ((1ULL << (e + 1)) - 1)) & ~((1ULL << s) - 1);
-        bits_[wi] |= mask;
-      }
-      if (RowFull(res)) {
-        full = true;
-        break;
-      }
-    }
-    if (full) continue;
-    // This row decides: a gap means the bitmap is not full at this resolution.
-    for (uint32_t i = 0; i < res; ++i) {
-      if ((bits_[i / 64] >> (i % 64) & 1) == 0) {
-        last_gap_u_ = (i + 0.5) / n;
-        last_gap_v_ = (j + 0.5) / n;
-        return false;
-      }
-    }
-  }
-  return true;
+  blockers_.groups.push_back(g);
 }
 
 namespace {
@@ -382,15 +313,6 @@ bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   return !blocked;
 }
 
-bool DualRaySpace::RowFull(uint32_t res) const {
-  const uint32_t whole = res / 64;
-  for (uint32_t w = 0; w < whole; ++w) {
-    if (bits_[w] != ~0ULL) return false;
-  }
-  const uint32_t rest = res % 64;
-  return rest == 0 || bits_[whole] == (1ULL << rest) - 1;
-}
-
 bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
   // Most B turn out visible: a few traced rays often prove it before any blocker is built,
   // and a ray costs only the grid cells it crosses, where the shaft's blockers cost its area.
@@ -412,14 +334,14 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   if (stats != nullptr) {
     ++stats->planar_tests;
     stats->gathered += gathered_.size();
-    stats->pieces += coeffs_.size();
+    stats->pieces += blockers_.coeffs.size();
   }
-  if (groups_.empty()) return false;
+  if (blockers_.groups.empty()) return false;
   // A free ray among a few before any raster proves the answer already.
   if (options.free_ray_test) {
     for (const auto& [u, v] : {std::pair{0.5, 0.5}, std::pair{0.0, 0.0}, std::pair{1.0, 1.0}, std::pair{0.0, 1.0},
                                std::pair{1.0, 0.0}}) {
-      if (FreeRay(u, v)) {
+      if (blockers_.FreeRay(u, v)) {
         if (stats != nullptr) ++stats->free_rays;
         return false;
       }
@@ -427,13 +349,17 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   }
   for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
     if (stats != nullptr) ++stats->rasters;
-    if (RasterFull(res)) return true;
-    if (options.free_ray_test && FreeRay(last_gap_u_, last_gap_v_)) {
+    uint32_t gap_i = 0, gap_j = 0;
+    if (raster_->Full(blockers_, res, &gap_i, &gap_j)) return true;
+    if (options.free_ray_test && blockers_.FreeRay((gap_i + 0.5) / res, (gap_j + 0.5) / res)) {
       if (stats != nullptr) ++stats->free_rays;
       return false;
     }
   }
-  return false;
+  if (!options.exact) return false;
+  // The raster is conservative, so its gaps may still be covered: only the exact union knows.
+  if (stats != nullptr) ++stats->exact_tests;
+  return ExactlyCovered(blockers_);
 }
 
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "scenes/aabb.h"
+#include "visibility/conservative_raster.h"
 #include "visibility/occluder_set.h"
 
 namespace vistream::visibility {
@@ -22,6 +23,9 @@ struct CellQueryOptions {
   uint32_t min_res = 16;   // first raster resolution
   uint32_t max_res = 128;  // refined by doubling up to this; a power of two, at most 256
   bool free_ray_test = true;  // test uncovered pixel centres exactly: a free ray ends the query
+  // Where the raster at max_res still leaves a gap, decide with the exact union test (CGAL's
+  // exact kernel) instead: the reference for overestimation, not for speed.
+  bool exact = false;
 };
 
 struct CellQueryStats {
@@ -32,6 +36,7 @@ struct CellQueryStats {
   uint64_t pieces = 0;         // blocker hull vertices kept, summed over planar tests
   uint64_t rasters = 0;        // bitmaps drawn, summed over resolutions
   uint64_t free_rays = 0;      // planar tests ended by a free ray
+  uint64_t exact_tests = 0;    // planar tests decided by the exact union test
   uint64_t occluded = 0;       // Visible() answers false
 };
 
@@ -75,7 +80,9 @@ bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, d
 // One query engine per thread: it keeps scratch buffers between queries.
 class DualRaySpace {
  public:
-  explicit DualRaySpace(const OccluderSet& occluders) : occluders_(occluders) {}
+  // `raster` draws the bitmaps (not owned; null: the CPU raster). Both must outlive this.
+  explicit DualRaySpace(const OccluderSet& occluders, PlanarRaster* raster = nullptr)
+      : occluders_(occluders), raster_(raster != nullptr ? raster : &cpu_raster_) {}
 
   // Conservative: false only when every segment from A to B meets an occluder (decided on the
   // shaft's ceiling with a conservative raster). Boxes in scene-local metres.
@@ -86,40 +93,29 @@ class DualRaySpace {
   // blocked.
   bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats);
 
- private:
-  struct Coeff {
-    double a, b, c;  // g(u, v) = a + b u + c v
-  };
+  // Gathers, clips and fuses the occluders of `problem` into blockers(); no raster yet.
   void BuildBlockers(const PlanarProblem& problem);
-  bool RasterFull(uint32_t res);
-  bool FreeRay(double u, double v) const;
+  const Blockers& blockers() const { return blockers_; }
+
+ private:
   // The same question for ray (u, v), answered by tracing it through the occluder grid:
   // no blockers need building. Exact up to rounding; used to prove visibility early.
   bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
 
   const OccluderSet& occluders_;
+  CpuRaster cpu_raster_;
+  PlanarRaster* raster_;
   GatherScratch scratch_;  // per engine, so engines on different threads never share state
   std::vector<uint32_t> gathered_;
   std::vector<double> lo_, hi_;           // blocking strip of each gathered piece
   std::vector<uint32_t> parent_;          // union-find over gathered pieces
   std::vector<int32_t> local_;            // piece id -> index in gathered_, or -1
-  struct Group {
-    uint32_t begin = 0, end = 0;  // the blocker's hull vertices: coeffs_[begin, end)
-    double width = 0.0;           // its blocked width along u on the middle row, for ordering
-  };
-  bool RowFull(uint32_t res) const;
-  // The wholly blocked pixels of `g` in the row [v0, v1]: those with u0 >= first, u1 <= second.
-  std::pair<double, double> RowBounds(const Group& g, double v0, double v1) const;
   void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
-  std::vector<Coeff> coeffs_;             // blockers' hull vertices
-  std::vector<Group> groups_;             // blockers, widest first
-  std::vector<uint64_t> bits_;            // the raster row being drawn
+  Blockers blockers_;
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
   std::vector<std::vector<glm::dvec2>> kept_points_;
   std::vector<uint32_t> kept_;
-  double eps_ = 0.0;
-  double last_gap_u_ = 0.5, last_gap_v_ = 0.5;  // centre of the first uncovered pixel found
 };
 
 }  // namespace vistream::visibility

@@ -34,10 +34,13 @@ class PvsComputer {
   std::vector<PvsResult> ComputeBatch(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
                                       unsigned threads = 0) const;
 
+  // One viewcell with the caller's query engine (built on occluders()), for another raster
+  // backend; on the calling thread.
+  PvsResult Compute(const scenes::Aabb& cell, const CellQueryOptions& options, DualRaySpace* drs) const;
+
   const OccluderSet& occluders() const { return occluders_; }
 
  private:
-  PvsResult Compute(const scenes::Aabb& cell, const CellQueryOptions& options, DualRaySpace* drs) const;
 
   const scenes::Scene& scene_;
   const KdTree& tree_;

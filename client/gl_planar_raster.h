@@ -1,0 +1,48 @@
+#pragma once
+// The paper's hardware path for the planar test: each blocker's region in the dual ray space
+// is drawn as the trapezes and double triangles of its hull edges, white on black, and any
+// black pixel left means a gap. The paper shrinks the polygons by sqrt(2) half pixels so that a
+// pixel centre inside means the whole pixel inside; here the fragment shader makes that test
+// exactly, in double precision, with the same arithmetic as the CPU raster, so both backends
+// set the same pixels (the polygons are drawn a quarter pixel too large, so that no pixel
+// that passes is missed). Needs a GL 4.5 context (client/gl_context.h).
+
+#include <memory>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "client/gl_context.h"
+#include "visibility/conservative_raster.h"
+
+namespace vistream::gl {
+
+class GlPlanarRaster final : public visibility::PlanarRaster {
+ public:
+  // Makes its own off-screen context, current on the calling thread; use it on that thread.
+  static absl::StatusOr<std::unique_ptr<GlPlanarRaster>> Create();
+  ~GlPlanarRaster() override;
+
+  bool Full(const visibility::Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) override;
+  void Draw(const visibility::Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) override;
+
+  uint64_t triangles_drawn() const { return triangles_drawn_; }
+
+ private:
+  GlPlanarRaster() = default;
+  absl::Status Init();
+  // Draws the blockers into the framebuffer and reads the n x n raster back into pixels_.
+  void Render(const visibility::Blockers& blockers, uint32_t n);
+
+  std::unique_ptr<GlContext> context_;
+  unsigned program_ = 0, vao_ = 0, vbo_ = 0, ssbo_ = 0, fbo_ = 0, texture_ = 0;
+  struct Vertex {
+    float u, v;
+    uint32_t begin, end;
+  };
+  std::vector<Vertex> vertices_;
+  std::vector<double> coeffs_;  // the shader's storage buffer: eps, n, then a, b, c, 0 each
+  std::vector<uint8_t> pixels_;
+  uint64_t triangles_drawn_ = 0;
+};
+
+}  // namespace vistream::gl

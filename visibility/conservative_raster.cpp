@@ -1,0 +1,98 @@
+#include "visibility/conservative_raster.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace vistream::visibility {
+
+bool Blockers::FreeRay(double u, double v) const {
+  for (const Blocker& g : groups) {
+    double mn = INFINITY, mx = -INFINITY;
+    for (uint32_t k = g.begin; k < g.end; ++k) {
+      const BlockerCoeff& c = coeffs[k];
+      const double val = c.a + c.b * u + c.c * v;
+      mn = std::min(mn, val);
+      mx = std::max(mx, val);
+    }
+    if (mn <= 0.0 && mx >= 0.0) return false;
+  }
+  return true;
+}
+
+std::pair<double, double> Blockers::RowBounds(const Blocker& g, double v0, double v1) const {
+  // Pixel [u0, u1] x [v0, v1] is wholly blocked iff min_k g_k(u1, v1) <= 0 and
+  // max_k g_k(u0, v0) >= 0 (each g_k rises with u and v), with the margin eps:
+  // iff u0 >= lo and u1 <= hi.
+  double hi = -INFINITY, lo = INFINITY;
+  for (uint32_t k = g.begin; k < g.end; ++k) {
+    const BlockerCoeff& c = coeffs[k];
+    const double ra = -eps - c.a - c.c * v1;  // need b u1 <= ra
+    const double rb = eps - c.a - c.c * v0;   // need b u0 >= rb
+    if (c.b > 0) {
+      hi = std::max(hi, ra / c.b);
+      lo = std::min(lo, rb / c.b);
+    } else {
+      if (ra >= 0) hi = INFINITY;
+      if (rb <= 0) lo = -INFINITY;
+    }
+  }
+  return {lo, hi};
+}
+
+std::pair<double, double> Blockers::PixelBounds(const Blocker& g, uint32_t j, uint32_t n) const {
+  const double nd = n;
+  const auto [lo, hi] = RowBounds(g, j / nd, (j + 1) / nd);
+  return {std::ceil(lo * nd), std::floor(hi * nd) - 1};
+}
+
+bool CpuRaster::RowFull(uint32_t n) const {
+  const uint32_t whole = n / 64;
+  for (uint32_t w = 0; w < whole; ++w) {
+    if (bits_[w] != ~0ULL) return false;
+  }
+  const uint32_t rest = n % 64;
+  return rest == 0 || bits_[whole] == (1ULL << rest) - 1;
+}
+
+bool CpuRaster::DrawRow(const Blockers& blockers, uint32_t j, uint32_t n, bool stop_when_full) {
+  bits_.assign((n + 63) / 64, 0);
+  const double last_column = n - 1;
+  for (const Blocker& g : blockers.groups) {
+    const auto [f, l] = blockers.PixelBounds(g, j, n);
+    const double first = std::max(0.0, f), last = std::min(last_column, l);
+    if (!(first <= last)) continue;
+    const auto i0 = static_cast<uint32_t>(first), i1 = static_cast<uint32_t>(last);
+    for (uint32_t wi = i0 / 64; wi <= i1 / 64; ++wi) {
+      const uint32_t s = wi == i0 / 64 ? i0 % 64 : 0, e = wi == i1 / 64 ? i1 % 64 : 63;
+      const uint64_t mask = (e == 63 ? ~0ULL : ((1ULL << (e + 1)) - 1)) & ~((1ULL << s) - 1);
+      bits_[wi] |= mask;
+    }
+    if (stop_when_full && RowFull(n)) return true;
+  }
+  return RowFull(n);
+}
+
+bool CpuRaster::Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) {
+  for (uint32_t j = 0; j < n; ++j) {
+    if (DrawRow(blockers, j, n, /*stop_when_full=*/true)) continue;
+    // This row decides: a gap means the raster is not full.
+    for (uint32_t i = 0; i < n; ++i) {
+      if ((bits_[i / 64] >> (i % 64) & 1) == 0) {
+        *gap_i = i;
+        *gap_j = j;
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+void CpuRaster::Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) {
+  pixels->assign(static_cast<size_t>(n) * n, 0);
+  for (uint32_t j = 0; j < n; ++j) {
+    DrawRow(blockers, j, n, /*stop_when_full=*/false);
+    for (uint32_t i = 0; i < n; ++i) (*pixels)[static_cast<size_t>(j) * n + i] = bits_[i / 64] >> (i % 64) & 1;
+  }
+}
+
+}  // namespace vistream::visibility

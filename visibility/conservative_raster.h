@@ -1,0 +1,71 @@
+#pragma once
+// The blockers of one planar problem in the dual ray space RS = [0, 1]^2, and the conservative
+// raster that decides whether they cover it.
+//
+// A blocker is a connected set of occluder points p_k; ray (u, v) passes p_k on the side given
+// by the sign of g_k(u, v) = a + b u + c v (b, c >= 0), and the blocker stops exactly the rays
+// with min_k g_k <= 0 <= max_k g_k. Its region is therefore {L(v) <= u <= U(v)} with
+// L = min_k and U = max_k of the roots -(a + c v) / b, both non-increasing in v. Pixel
+// (i, j) = [i/n, (i+1)/n] x [j/n, (j+1)/n] of an n x n raster lies wholly inside that region iff
+// i/n >= L(j/n) and (i+1)/n <= U((j+1)/n), each tested with a margin `eps` in g against rounding.
+// Every backend sets exactly the pixels that pass this test for some blocker (PixelBounds).
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace vistream::visibility {
+
+struct BlockerCoeff {
+  double a, b, c;  // g(u, v) = a + b u + c v
+};
+
+struct Blocker {
+  uint32_t begin = 0, end = 0;  // its hull vertices: Blockers::coeffs[begin, end)
+  double width = 0.0;           // its blocked width along u on the middle row, for ordering
+};
+
+struct Blockers {
+  std::vector<BlockerCoeff> coeffs;
+  std::vector<Blocker> groups;  // widest first: a row usually fills after a few
+  double eps = 0.0;             // margin in g against rounding; makes pixels only rarer
+
+  void Clear() {
+    coeffs.clear();
+    groups.clear();
+  }
+  // Is ray (u, v) blocked by none of the blockers? Exact up to rounding.
+  bool FreeRay(double u, double v) const;
+  // The wholly blocked pixels of `g` in the row [v0, v1] are those with u0 >= first and
+  // u1 <= second (u0, u1 the pixel's sides).
+  std::pair<double, double> RowBounds(const Blocker& g, double v0, double v1) const;
+  // The same as pixel columns of an n-wide raster: pixels [first, last] of row j (empty when
+  // first > last). The one definition every backend follows.
+  std::pair<double, double> PixelBounds(const Blocker& g, uint32_t j, uint32_t n) const;
+};
+
+// A backend that draws blockers into an n x n raster (n a power of two, 1 to 256).
+class PlanarRaster {
+ public:
+  virtual ~PlanarRaster() = default;
+  // True when every pixel is set. Otherwise (*gap_i, *gap_j) is the first clear pixel in
+  // row-major order from j = 0, i = 0.
+  virtual bool Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) = 0;
+  // The whole raster, row-major from j = 0: 1 where set, 0 where clear.
+  virtual void Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) = 0;
+};
+
+// Per-row exact intervals on the CPU, one row at a time, stopping at the first row with a gap.
+class CpuRaster final : public PlanarRaster {
+ public:
+  bool Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) override;
+  void Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) override;
+
+ private:
+  // ORs the blockers into bits_ for row j; stops early once the row is full. True when full.
+  bool DrawRow(const Blockers& blockers, uint32_t j, uint32_t n, bool stop_when_full);
+  bool RowFull(uint32_t n) const;
+  std::vector<uint64_t> bits_;
+};
+
+}  // namespace vistream::visibility
