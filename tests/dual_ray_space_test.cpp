@@ -9,6 +9,7 @@
 
 #include "scenes/random.h"
 #include "tests/test_util.h"
+#include "visibility/exact_cover.h"
 
 namespace vistream::visibility {
 namespace {
@@ -172,6 +173,82 @@ TEST(DualRaySpace, TenThousandOccludersInOneShaft) {
   }
 }
 
+// Every hard case at once: the planar problems and blockers hold no NaN or infinity, the answer
+// is conservative (cpu raster and exact test alike), and moving everything to
+// (500000, 5000000) changes nothing.
+TEST(DualRaySpace, HardCasesStayFiniteConservativeAndTranslationInvariant) {
+  struct Case {
+    std::string name;
+    Scene scene;
+    Aabb a, b;
+  };
+  std::vector<Case> cases;
+  auto add = [&](std::string name, std::vector<Occluder25D> occluders, Aabb a, Aabb b) {
+    Scene s;
+    s.occluders = std::move(occluders);
+    cases.push_back({std::move(name), std::move(s), a, b});
+  };
+  const Aabb b = Box(50, 0, 0, 60, 10, 10);
+  std::vector<Occluder25D> terrace;
+  for (int k = 0; k < 40; ++k) terrace.push_back(Rect(20, -200 + 10 * k, 28, -190 + 10 * k, 25 + k % 7));
+  add("shared walls", terrace, kCell, b);
+  // The shaft's sides are y = 0 and y = 10 here: walls lying along them, and one across.
+  add("edges collinear with the shaft's sides", {Rect(20, -5, 30, 0, 30), Rect(20, 10, 30, 15, 30), Rect(32, 0, 33, 10, 30)},
+      kCell, b);
+  // Corner-to-corner rays of the shaft pass through these vertices.
+  add("rays through vertices", {Rect(25, 2.5, 30, 5, 30), Rect(25, 5, 30, 7.5, 30), Rect(30, 0, 35, 2.5, 30)}, kCell, b);
+  add("zero-thickness wall", {Occluder25D{{{20, -200}, {20, 200}, {20, -200}}, 30, 0}}, kCell, b);
+  add("repeated vertices", {Occluder25D{{{20, -200}, {25, -200}, {25, -200}, {25, 200}, {20, 200}, {20, 200}}, 30, 0}},
+      kCell, b);
+  add("zero-area footprint", {Occluder25D{{{20, 0}, {20, 0}, {20, 0}}, 30, 0}, Rect(22, -100, 23, 100, 30)}, kCell, b);
+  add("B touching A", {Rect(-1000, -1000, 1000, 1000, 500)}, kCell, Box(10, 0, 0, 20, 10, 10));
+  add("0.5 m viewcell", {Rect(20, -5000, 25, 5000, 30)}, Box(0, 0, 1, 0.5, 0.5, 3), b);
+  add("2 km viewcell", {Rect(2100, -50000, 2200, 50000, 300)}, Box(0, 0, 0.5, 2000, 2000, 2.5),
+      Box(2500, 0, 0, 2600, 100, 50));
+  add("T almost vertical", {Rect(10.5, -100, 11, 100, 50)}, kCell, Box(11.5, 0, 0, 12, 10, 5000));
+  std::vector<Occluder25D> many;
+  scenes::Rng rng(7);
+  for (int k = 0; k < 10000; ++k) {
+    const double x = rng.Uniform(15, 985), y = rng.Uniform(-200, 200);
+    many.push_back(Rect(x, y, x + rng.Uniform(0.1, 2), y + rng.Uniform(0.1, 2), rng.Uniform(1, 40)));
+  }
+  add("10,000 occluders in one shaft", many, kCell, Box(990, 0, 0, 1000, 10, 10));
+
+  const glm::dvec3 t(500000, 5000000, 0);
+  int occluded = 0;
+  for (const Case& c : cases) {
+    const OccluderSet set = OccluderSet::Build(c.scene);
+    const OccluderSet far_set = OccluderSet::Build(Translated(c.scene, glm::dvec2(t)));
+    DualRaySpace drs(set), far_drs(far_set);
+    const Aabb fa{c.a.min + t, c.a.max + t}, fb{c.b.min + t, c.b.max + t};
+    for (int axis = 0; axis < 2; ++axis) {
+      for (double sign : {1.0, -1.0}) {
+        PlanarProblem pr;
+        if (!MakePlanarProblem(c.a, c.b, axis, sign, &pr)) continue;
+        for (double x : {pr.origin.x, pr.origin.y, pr.x1, pr.x2, pr.r1, pr.l1, pr.r2, pr.l2, pr.alpha, pr.beta}) {
+          ASSERT_TRUE(std::isfinite(x)) << c.name;
+        }
+        drs.BuildBlockers(pr);
+        ASSERT_TRUE(std::isfinite(drs.blockers().eps)) << c.name;
+        for (const BlockerCoeff& k : drs.blockers().coeffs) {
+          ASSERT_TRUE(std::isfinite(k.a) && std::isfinite(k.b) && std::isfinite(k.c)) << c.name;
+        }
+        for (const Blocker& g : drs.blockers().groups) ASSERT_FALSE(std::isnan(g.width)) << c.name;
+      }
+    }
+    for (bool exact : {false, true}) {
+      const CellQueryOptions options{.max_res = 128, .exact = exact};
+      const bool visible = drs.Visible(c.a, c.b, options);
+      EXPECT_EQ(visible, far_drs.Visible(fa, fb, options)) << c.name << (exact ? ", exact" : ", cpu");
+      if (visible) continue;
+      ++occluded;
+      EXPECT_FALSE(FindFreeSegment(c.a, c.b, c.scene, 3, 4000).has_value())
+          << c.name << (exact ? ", exact" : ", cpu") << ": occluded, but a segment is free";
+    }
+  }
+  EXPECT_GE(occluded, 10);
+}
+
 // --- The property test: never "occluded" while a free segment exists. ---
 
 std::string Describe(const Scene& s, const Aabb& a, const Aabb& b) {
@@ -236,6 +313,95 @@ TEST(DualRaySpace, TranslatingEverythingFarAwayChangesNothing) {
       EXPECT_EQ(sn.rasters, sf.rasters) << "seed " << seed;
     }
   }
+}
+
+// --- The exact planar test. ---
+
+bool ExactVisible(const Scene& s, const Aabb& a, const Aabb& b, CellQueryStats* stats = nullptr) {
+  const OccluderSet set = OccluderSet::Build(s);
+  DualRaySpace drs(set);
+  return drs.Visible(a, b, CellQueryOptions{.max_res = 16, .exact = true}, stats);
+}
+
+TEST(ExactCover, WallOccludesAndGapDoesNot) {
+  Scene s;
+  s.occluders.push_back(Rect(20, -200, 25, 200, 30));
+  EXPECT_FALSE(ExactVisible(s, kCell, Box(50, 0, 0, 60, 10, 10)));
+  // Cut a 2 cm slot through the wall: far narrower than a 16-pixel raster resolves.
+  s.occluders = {Rect(20, -200, 25, 5, 30), Rect(20, 5.02, 25, 200, 30)};
+  CellQueryStats stats;
+  EXPECT_TRUE(ExactVisible(s, kCell, Box(50, 0, 0, 60, 10, 10), &stats));
+  EXPECT_GT(stats.exact_tests, 0u) << "decided before the exact test: the case tests nothing";
+  // With the slot closed the two halves touch and fuse.
+  s.occluders = {Rect(20, -200, 25, 5, 30), Rect(20, 5, 25, 200, 30)};
+  EXPECT_FALSE(ExactVisible(s, kCell, Box(50, 0, 0, 60, 10, 10)));
+}
+
+// The raster is conservative, so it never covers what the exact test leaves open; what the
+// exact test covers has no free ray among many sampled.
+TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
+  int exact_covered = 0, raster_full = 0, raster_missed = 0;
+  CpuRaster raster;
+  for (uint64_t seed = 1; seed <= 120; ++seed) {
+    scenes::Rng rng(seed);
+    const Scene s = testing::RandomGridScene(rng);
+    const OccluderSet set = OccluderSet::Build(s);
+    DualRaySpace drs(set);
+    const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
+    const Aabb b = Box(bx, by, 0, bx + 1 + std::floor(rng.Uniform(0, 10)), by + 1 + std::floor(rng.Uniform(0, 10)),
+                       std::floor(rng.Uniform(1, 25)));
+    for (int axis = 0; axis < 2; ++axis) {
+      for (double sign : {1.0, -1.0}) {
+        PlanarProblem pr;
+        if (!MakePlanarProblem(kCell, b, axis, sign, &pr)) continue;
+        drs.BuildBlockers(pr);
+        const Blockers& blockers = drs.blockers();
+        const bool covered = ExactlyCovered(blockers);
+        uint32_t gi = 0, gj = 0;
+        const bool full = raster.Full(blockers, 64, &gi, &gj);
+        exact_covered += covered;
+        raster_full += full;
+        raster_missed += covered && !full;
+        ASSERT_TRUE(covered || !full) << "seed " << seed << ": the raster covers what the exact test does not";
+        if (!covered) continue;
+        for (int k = 0; k < 2000; ++k) {
+          const double u = rng.Uniform(0, 1), v = rng.Uniform(0, 1);
+          ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << seed << ": covered, yet ray (" << u << ", " << v << ") is free";
+        }
+      }
+    }
+  }
+  EXPECT_GT(exact_covered, 20) << "too few covered cases to mean anything";
+  EXPECT_GT(raster_full, 10);
+  // The exact test is worth having only if it decides cases the raster cannot.
+  EXPECT_GT(raster_missed, 0);
+}
+
+TEST(ExactCover, NeverOccludedWhileAFreeSegmentExists) {
+  int occluded = 0, cases = 0;
+  for (uint64_t seed = 301; seed <= 400; ++seed) {
+    scenes::Rng rng(seed);
+    const Scene s = testing::RandomGridScene(rng);
+    const OccluderSet set = OccluderSet::Build(s);
+    DualRaySpace drs(set);
+    for (int q = 0; q < 3; ++q) {
+      const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
+      const Aabb b = Box(bx, by, 0, bx + 1 + std::floor(rng.Uniform(0, 10)), by + 1 + std::floor(rng.Uniform(0, 10)),
+                         std::floor(rng.Uniform(1, 25)));
+      ++cases;
+      const bool exact = drs.Visible(kCell, b, CellQueryOptions{.max_res = 32, .exact = true});
+      // Anything the raster proves hidden, the exact test proves too.
+      if (!drs.Visible(kCell, b, CellQueryOptions{.max_res = 256})) {
+        ASSERT_FALSE(exact) << "seed " << seed << ": " << Describe(s, kCell, b);
+      }
+      if (exact) continue;
+      ++occluded;
+      const auto free = FindFreeSegment(kCell, b, s, seed * 31 + q, 3000);
+      ASSERT_FALSE(free.has_value()) << "seed " << seed << " query " << q << ": occluded, but a segment is free. "
+                                     << Describe(s, kCell, b);
+    }
+  }
+  EXPECT_GT(occluded, cases / 10) << occluded << " of " << cases;
 }
 
 }  // namespace
