@@ -9,6 +9,7 @@
 #include "bench/cli_common.h"
 #include "bench/commands.h"
 #include "bench/top_view_map.h"
+#include "client/gl_planar_raster.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/pvs.h"
@@ -27,10 +28,6 @@ struct PvsArgs {
 
 int Pvs(const PvsArgs& a) {
   if (a.json) scenes::Progress::SetQuiet(true);
-  if (a.backend != "cpu") {
-    return Fail(absl::UnimplementedError("--backend " + a.backend +
-                                         ": only the cpu backend is in this build (gl and exact are in progress)"));
-  }
   int ci = 0, cj = 0;
   char tail = 0;
   if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
@@ -66,7 +63,15 @@ int Pvs(const PvsArgs& a) {
   visibility::CellQueryOptions options;
   options.max_res = a.res;
   options.min_res = std::min<uint32_t>(16, a.res);
-  const visibility::PvsResult pvs = computer.Compute(cell, options);
+  options.exact = a.backend == "exact";
+  std::unique_ptr<gl::GlPlanarRaster> gl_raster;
+  if (a.backend == "gl") {
+    absl::StatusOr<std::unique_ptr<gl::GlPlanarRaster>> r = gl::GlPlanarRaster::Create();
+    if (!r.ok()) return Fail(r.status());
+    gl_raster = std::move(*r);
+  }
+  visibility::DualRaySpace engine(computer.occluders(), gl_raster.get());
+  const visibility::PvsResult pvs = computer.Compute(cell, options, &engine);
 
   if (!a.map.empty()) {
     TopViewMap map(scene->bounds, 2048, Rgb{250, 250, 250});
@@ -104,6 +109,7 @@ int Pvs(const PvsArgs& a) {
     j["blocker_vertices"] = pvs.stats.pieces;
     j["free_rays"] = pvs.stats.free_rays;
     j["rasters"] = pvs.stats.rasters;
+    j["exact_tests"] = pvs.stats.exact_tests;
     j["setup_ms"] = {{"kd_tree", kd_ms}, {"occluders", occluders_ms}};
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
@@ -132,7 +138,7 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--cell", args->cell, "viewcell grid coordinates I,J")->required();
   c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
       ->check(CLI::PositiveNumber);
-  c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two)")
+  c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two); exact: the raster tried before the exact test")
       ->check(CLI::IsMember({16u, 32u, 64u, 128u, 256u}));
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");

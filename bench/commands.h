@@ -10,5 +10,6 @@ namespace vistream::cli {
 
 void AddSceneCommands(CLI::App& app, std::function<void(int)> done);
 void AddPvsCommand(CLI::App& app, std::function<void(int)> done);
+void AddBenchCommands(CLI::App& app, std::function<void(int)> done);
 
 }  // namespace vistream::cli

@@ -4,7 +4,6 @@
 
 #include "scenes/city_generator.h"
 #include "scenes/progress.h"
-#include "scenes/random.h"
 #include "visibility/pvs.h"
 #include "visibility/viewcell_grid.h"
 
@@ -26,11 +25,7 @@ const LondonPvs& Fixture() {
     x->tree = visibility::KdTree::Build(x->scene);
     x->computer = std::make_unique<visibility::PvsComputer>(x->scene, x->tree);
     const auto grid = visibility::ViewcellGrid::Create(x->scene.bounds, 100.0, 0.5, 2.0);
-    scenes::Rng rng(2001);
-    while (x->cells.size() < 8) {
-      const visibility::CellCoord c{static_cast<int>(rng.Below(grid->nx())), static_cast<int>(rng.Below(grid->ny()))};
-      x->cells.push_back(grid->CellBox(c));
-    }
+    for (const visibility::CellCoord c : grid->Sample(8, 2001)) x->cells.push_back(grid->CellBox(c));
     return x;
   }();
   return *f;

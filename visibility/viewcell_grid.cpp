@@ -5,6 +5,8 @@
 
 #include <absl/strings/str_cat.h>
 
+#include "scenes/random.h"
+
 namespace vistream::visibility {
 
 absl::StatusOr<ViewcellGrid> ViewcellGrid::Create(const scenes::Aabb& bounds, double cell_size,
@@ -33,6 +35,17 @@ absl::StatusOr<ViewcellGrid> ViewcellGrid::Create(const scenes::Aabb& bounds, do
   g.nx_ = static_cast<int>(nx);
   g.ny_ = static_cast<int>(ny);
   return g;
+}
+
+std::vector<CellCoord> ViewcellGrid::Sample(size_t count, uint64_t seed) const {
+  count = std::min(count, CellCount());
+  scenes::Rng rng(seed);
+  std::vector<CellCoord> cells;
+  while (cells.size() < count) {
+    const CellCoord c{static_cast<int>(rng.Below(nx_)), static_cast<int>(rng.Below(ny_))};
+    if (std::find(cells.begin(), cells.end(), c) == cells.end()) cells.push_back(c);
+  }
+  return cells;
 }
 
 scenes::Aabb ViewcellGrid::CellBox(CellCoord c) const {

@@ -42,6 +42,10 @@ class ViewcellGrid {
   scenes::Aabb CellBox(CellCoord c) const;
   scenes::Aabb CellBox(CellId id) const { return CellBox(Coord(id)); }
 
+  // A fixed sample of `count` distinct cells (all of them if fewer), the same for the same
+  // seed and grid: what benchmarks average over.
+  std::vector<CellCoord> Sample(size_t count, uint64_t seed) const;
+
   // The cell whose ground square contains p (scene-local metres); none outside the grid.
   // Points on a shared edge belong to the cell above and to the right.
   std::optional<CellId> CellAt(const glm::dvec2& p) const;

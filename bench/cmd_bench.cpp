@@ -1,0 +1,251 @@
+// vistream bench table1: the paper's Table 1 (Koltun, Chrysanthou, Cohen-Or 2001) with this
+// project's numbers: time per viewcell and overestimation by raster resolution and viewcell
+// size, for the cpu and gl backends in one run.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <map>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench/cli_common.h"
+#include "bench/commands.h"
+#include "client/gl_planar_raster.h"
+#include "scenes/catalog.h"
+#include "scenes/progress.h"
+#include "visibility/pvs.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::cli {
+
+namespace {
+
+struct Table1Args {
+  std::string scene = "london", csv = "table1.csv";
+  std::vector<uint32_t> res = {16, 32, 64, 128, 256};
+  std::vector<double> sizes = {50, 100, 300};
+  std::vector<std::string> backends = {"cpu", "gl"};
+  size_t cells = 4;
+  uint64_t seed = 2001;
+  bool json = false;
+};
+
+// The paper's Table 1 (750 MHz Pentium III, ATI Rage Mobility): seconds and overestimation %,
+// by resolution (rows 16..256) and viewcell size (50, 100, 300 m).
+struct PaperRow {
+  double seconds[3];
+  double overestimation[3];
+};
+const std::map<uint32_t, PaperRow> kPaper = {
+    {16, {{0.4, 0.5, 1.8}, {0.391, 0.518, 1.192}}},  {32, {{0.6, 0.7, 2.7}, {0.335, 0.436, 0.901}}},
+    {64, {{0.9, 1.1, 4.1}, {0.185, 0.240, 0.533}}},  {128, {{2.1, 2.5, 7.8}, {0.012, 0.026, 0.106}}},
+    {256, {{6.6, 7.9, 24}, {0.001, 0.005, 0.019}}}};
+
+const PaperRow* PaperFor(uint32_t res, double size, int* column) {
+  const auto it = kPaper.find(res);
+  *column = size == 50 ? 0 : size == 100 ? 1 : size == 300 ? 2 : -1;
+  return it == kPaper.end() || *column < 0 ? nullptr : &it->second;
+}
+
+struct Row {
+  uint32_t res;
+  double cell_size;
+  std::string backend;
+  double ms = 0, median_ms = 0;  // per viewcell
+  double overestimation_pct = 0;
+  double pvs_objects = 0;         // per viewcell
+};
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+int Table1(const Table1Args& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  for (uint32_t r : a.res) {
+    if (r < 1 || r > 256 || (r & (r - 1)) != 0) {
+      return Fail(absl::InvalidArgumentError(absl::StrFormat("--res %u: expected a power of two, 1 to 256", r)));
+    }
+  }
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
+  if (!scene.ok()) return Fail(scene.status());
+  scenes::ViewcellSpec spec;
+  if (auto entry = scenes::FindCatalogEntry(a.scene); entry.ok()) spec = entry->viewcell;
+  const visibility::KdTree tree = visibility::KdTree::Build(*scene);
+  const visibility::PvsComputer computer(*scene, tree);
+
+  std::unique_ptr<gl::GlPlanarRaster> gl_raster;
+  if (std::find(a.backends.begin(), a.backends.end(), "gl") != a.backends.end()) {
+    absl::StatusOr<std::unique_ptr<gl::GlPlanarRaster>> r = gl::GlPlanarRaster::Create();
+    if (!r.ok()) return Fail(r.status());
+    gl_raster = std::move(*r);
+  }
+  visibility::DualRaySpace cpu_engine(computer.occluders());
+  visibility::DualRaySpace gl_engine(computer.occluders(), gl_raster.get());
+
+  // The ground area of an object, the unit in which occluded area is counted.
+  auto area = [&](scenes::ObjectId id) {
+    const scenes::Aabb& b = scene->objects[id].bounds;
+    return (b.max.x - b.min.x) * (b.max.y - b.min.y);
+  };
+  double total_area = 0;
+  for (const scenes::Object& o : scene->objects) total_area += area(o.id);
+  auto occluded_area = [&](const std::vector<scenes::ObjectId>& pvs) {
+    double visible = 0;
+    for (scenes::ObjectId id : pvs) visible += area(id);
+    return total_area - visible;
+  };
+
+  std::vector<Row> rows;
+  nlohmann::json exact_json = nlohmann::json::array();
+  scenes::Progress progress("table1", a.sizes.size() * a.cells * (1 + a.res.size() * a.backends.size()),
+                            &CancelFlag());
+  for (double size : a.sizes) {
+    absl::StatusOr<visibility::ViewcellGrid> grid =
+        visibility::ViewcellGrid::Create(scene->bounds, size, spec.base_m, 2.0);
+    if (!grid.ok()) return Fail(grid.status());
+    std::vector<scenes::Aabb> cells;
+    for (const visibility::CellCoord c : grid->Sample(a.cells, a.seed)) cells.push_back(grid->CellBox(c));
+
+    // The exact planar test, once per viewcell: P_E.
+    std::vector<double> exact_occluded;
+    std::vector<std::vector<scenes::ObjectId>> exact_pvs;
+    double exact_ms = 0, exact_objects = 0;
+    for (const scenes::Aabb& cell : cells) {
+      const visibility::PvsResult r =
+          computer.Compute(cell, visibility::CellQueryOptions{.max_res = 256, .exact = true}, &cpu_engine);
+      exact_occluded.push_back(occluded_area(r.objects));
+      exact_pvs.push_back(r.objects);
+      exact_ms += r.ms;
+      exact_objects += static_cast<double>(r.objects.size());
+      progress.Advance();
+      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+    }
+    exact_json.push_back({{"cell_size", size},
+                          {"ms", exact_ms / static_cast<double>(cells.size())},
+                          {"pvs_objects", exact_objects / static_cast<double>(cells.size())}});
+
+    for (uint32_t res : a.res) {
+      const visibility::CellQueryOptions options{.min_res = std::min(16u, res), .max_res = res};
+      for (const std::string& backend : a.backends) {
+        Row row{res, size, backend};
+        std::vector<double> ms;
+        double p_e = 0, p_c = 0;
+        for (size_t k = 0; k < cells.size(); ++k) {
+          visibility::DualRaySpace* engine = backend == "gl" ? &gl_engine : &cpu_engine;
+          const visibility::PvsResult r = computer.Compute(cells[k], options, engine);
+          // The exact set must lie inside every conservative one: a self-check, not a figure.
+          if (!std::includes(r.objects.begin(), r.objects.end(), exact_pvs[k].begin(), exact_pvs[k].end())) {
+            return Fail(absl::InternalError(absl::StrFormat(
+                "%s backend at %u^2, %g m viewcell %zu: an object the exact test sees is missing", backend, res,
+                size, k)));
+          }
+          ms.push_back(r.ms);
+          row.pvs_objects += static_cast<double>(r.objects.size());
+          p_e += exact_occluded[k];
+          p_c += occluded_area(r.objects);
+          progress.Advance();
+          if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+        }
+        const auto n = static_cast<double>(cells.size());
+        double sum = 0;
+        for (double m : ms) sum += m;
+        row.ms = sum / n;
+        row.median_ms = Median(ms);
+        row.pvs_objects /= n;
+        row.overestimation_pct = p_e > 0 ? 100.0 * (p_e - p_c) / p_e : 0.0;
+        rows.push_back(row);
+      }
+    }
+  }
+  progress.Finish();
+
+  if (!a.csv.empty()) {
+    std::ofstream out(a.csv);
+    out << "res,cell_size,backend,ms,median_ms,overestimation_pct,pvs_objects\n";
+    for (const Row& r : rows) {
+      out << absl::StrFormat("%u,%g,%s,%.3f,%.3f,%.6f,%.1f\n", r.res, r.cell_size, r.backend, r.ms, r.median_ms,
+                             r.overestimation_pct, r.pvs_objects);
+    }
+    if (!out) return Fail(absl::UnavailableError("cannot write " + a.csv));
+  }
+
+  if (a.json) {
+    nlohmann::json j;
+    j["scene"] = scene->name;
+    j["objects"] = scene->objects.size();
+    j["cells_per_size"] = a.cells;
+    j["seed"] = a.seed;
+    j["rows"] = nlohmann::json::array();
+    for (const Row& r : rows) {
+      j["rows"].push_back({{"res", r.res},
+                           {"cell_size", r.cell_size},
+                           {"backend", r.backend},
+                           {"ms", r.ms},
+                           {"median_ms", r.median_ms},
+                           {"overestimation_pct", r.overestimation_pct},
+                           {"pvs_objects", r.pvs_objects}});
+    }
+    j["exact"] = exact_json;
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+
+  std::printf("Table 1 on %s (%zu objects): mean per viewcell over %zu viewcells per size (2 m high), one "
+              "core for cpu.\nOverestimation (P_E - P_C) / P_E: occluded ground area, counted as the objects' "
+              "ground boxes, exact test vs raster.\n\n",
+              scene->name.c_str(), scene->objects.size(), a.cells);
+  std::printf("| res | viewcell | backend | ms | median ms | overest. %% | PVS objects | paper s | paper overest. %% |\n");
+  std::printf("|---:|---:|---|---:|---:|---:|---:|---:|---:|\n");
+  for (const Row& r : rows) {
+    int column = -1;
+    const PaperRow* paper = PaperFor(r.res, r.cell_size, &column);
+    const std::string ps = paper ? absl::StrFormat("%g", paper->seconds[column]) : "-";
+    const std::string po = paper ? absl::StrFormat("%.3f", paper->overestimation[column]) : "-";
+    std::printf("| %u² | %g m | %s | %.1f | %.1f | %.4f | %.0f | %s | %s |\n", r.res, r.cell_size, r.backend.c_str(),
+                r.ms, r.median_ms, r.overestimation_pct, r.pvs_objects, ps.c_str(), po.c_str());
+  }
+  // The ratio the targets ask for, measured side by side.
+  std::printf("\n");
+  for (const Row& r : rows) {
+    if (r.backend != "gl") continue;
+    for (const Row& c : rows) {
+      if (c.backend == "cpu" && c.res == r.res && c.cell_size == r.cell_size && c.ms > 0) {
+        std::printf("gl / cpu at %u², %g m: %.1fx\n", r.res, r.cell_size, r.ms / c.ms);
+      }
+    }
+  }
+  for (const auto& e : exact_json) {
+    std::printf("exact, %g m: %.1f ms, %.0f PVS objects per viewcell\n", e["cell_size"].get<double>(),
+                e["ms"].get<double>(), e["pvs_objects"].get<double>());
+  }
+  if (!a.csv.empty()) std::printf("csv: %s\n", a.csv.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
+  CLI::App* bench = app.add_subcommand("bench", "benchmarks that reproduce the papers' tables");
+  bench->require_subcommand(1);
+  auto args = std::make_shared<Table1Args>();
+  CLI::App* c = bench->add_subcommand("table1", "dual ray space: time and overestimation by resolution and size");
+  c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->capture_default_str();
+  c->add_option("--cells", args->cells, "viewcells sampled per size")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--seed", args->seed, "seed of the viewcell sample")->capture_default_str();
+  c->add_option("--res", args->res, "raster resolutions")->delimiter(',')->capture_default_str();
+  c->add_option("--sizes", args->sizes, "viewcell sizes in metres")->delimiter(',')->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  c->add_option("--backends", args->backends, "cpu, gl")->delimiter(',')->capture_default_str()
+      ->check(CLI::IsMember({"cpu", "gl"}));
+  c->add_option("--csv", args->csv, "CSV output ('' for none)")->capture_default_str();
+  c->add_flag("--json", args->json, "print one JSON object instead of the Markdown table");
+  c->callback([args, done] { done(Table1(*args)); });
+}
+
+}  // namespace vistream::cli
