@@ -359,6 +359,9 @@ TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
         const bool covered = ExactlyCovered(blockers);
         uint32_t gi = 0, gj = 0;
         const bool full = raster.Full(blockers, 64, &gi, &gj);
+        std::vector<uint8_t> pixels;
+        raster.Draw(blockers, 16, &pixels);
+        ASSERT_EQ(covered, ExactlyCovered(blockers, pixels, 16)) << "seed " << seed << ": starting from the raster's gaps";
         exact_covered += covered;
         raster_full += full;
         raster_missed += covered && !full;

@@ -358,8 +358,17 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   }
   if (!options.exact) return false;
   // The raster is conservative, so its gaps may still be covered: only the exact union knows.
+  // Every clear pixel's centre ray first: one free ray decides, at a fraction of the cost.
+  const uint32_t n = std::max(1u, options.max_res);
+  cpu_raster_.Draw(blockers_, n, &exact_raster_);
+  for (size_t k = 0; k < exact_raster_.size(); ++k) {
+    if (exact_raster_[k] == 0 && blockers_.FreeRay((k % n + 0.5) / n, (k / n + 0.5) / n)) {
+      if (stats != nullptr) ++stats->free_rays;
+      return false;
+    }
+  }
   if (stats != nullptr) ++stats->exact_tests;
-  return ExactlyCovered(blockers_);
+  return ExactlyCovered(blockers_, exact_raster_, n);
 }
 
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,

@@ -112,6 +112,7 @@ class DualRaySpace {
   std::vector<int32_t> local_;            // piece id -> index in gathered_, or -1
   void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
   Blockers blockers_;
+  std::vector<uint8_t> exact_raster_;  // the raster the exact test starts from
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
   std::vector<std::vector<glm::dvec2>> kept_points_;

@@ -44,23 +44,52 @@ Polygon OneSide(const Blockers& blockers, const Blocker& g, int side) {
   return result;
 }
 
-}  // namespace
-
-bool ExactlyCovered(const Blockers& blockers) {
-  if (blockers.groups.empty()) return false;
-  const Point square[] = {Point(0, 0), Point(1, 0), Point(1, 1), Point(0, 1)};
-  PolygonSet free_rays(Polygon(std::begin(square), std::end(square)));
+bool FreeSetEmpties(const Blockers& blockers, PolygonSet free_rays) {
   // Widest blockers first: they empty the free set soonest.
   for (const Blocker& g : blockers.groups) {
+    if (free_rays.is_empty()) return true;
     PolygonSet passing;
     for (int side : {1, -1}) {
       const Polygon p = OneSide(blockers, g, side);
       if (!p.is_empty()) passing.join(p);
     }
     free_rays.intersection(passing);
-    if (free_rays.is_empty()) return true;
   }
-  return false;
+  return free_rays.is_empty();
+}
+
+}  // namespace
+
+bool ExactlyCovered(const Blockers& blockers) {
+  if (blockers.groups.empty()) return false;
+  const Point square[] = {Point(0, 0), Point(1, 0), Point(1, 1), Point(0, 1)};
+  return FreeSetEmpties(blockers, PolygonSet(Polygon(std::begin(square), std::end(square))));
+}
+
+bool ExactlyCovered(const Blockers& blockers, const std::vector<uint8_t>& raster, uint32_t n) {
+  if (blockers.groups.empty()) return false;
+  // The clear pixels, one rectangle per run along a row.
+  std::vector<Polygon> runs;
+  for (uint32_t j = 0; j < n; ++j) {
+    for (uint32_t i = 0; i < n;) {
+      if (raster[static_cast<size_t>(j) * n + i] != 0) {
+        ++i;
+        continue;
+      }
+      uint32_t e = i;
+      while (e < n && raster[static_cast<size_t>(j) * n + e] == 0) ++e;
+      // n is a power of two, so these quotients are exact doubles.
+      const double nd = n;
+      const FT u0(i / nd), u1(e / nd), v0(j / nd), v1((j + 1) / nd);
+      const Point r[] = {Point(u0, v0), Point(u1, v0), Point(u1, v1), Point(u0, v1)};
+      runs.emplace_back(std::begin(r), std::end(r));
+      i = e;
+    }
+  }
+  if (runs.empty()) return true;
+  PolygonSet free_rays;
+  free_rays.join(runs.begin(), runs.end());
+  return FreeSetEmpties(blockers, std::move(free_rays));
 }
 
 }  // namespace vistream::visibility

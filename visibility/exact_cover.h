@@ -14,4 +14,9 @@ namespace vistream::visibility {
 // soon as it is empty. Ignores Blockers::eps.
 bool ExactlyCovered(const Blockers& blockers);
 
+// The same answer, faster: `raster` is the blockers' conservative raster (n x n, row-major,
+// 1 where set, as PlanarRaster::Draw gives it). Its set pixels are covered already, so only
+// the clear ones are searched for free rays.
+bool ExactlyCovered(const Blockers& blockers, const std::vector<uint8_t>& raster, uint32_t n);
+
 }  // namespace vistream::visibility
