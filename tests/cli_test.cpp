@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -114,6 +115,40 @@ TEST(Cli, PvsBackendsAgree) {
   EXPECT_EQ(cpu, gl);  // the same pixels, so the same set
   EXPECT_LE(exact, cpu);
   EXPECT_GT(exact, 0);
+}
+
+TEST(Cli, Table1ReportsBothBackendsAgainstTheExactTest) {
+  const std::string csv = Tmp("table1.csv");
+  const RunResult r =
+      Vistream("bench table1 --scene default --cells 1 --res 16,32 --sizes 100 --json --csv " + csv);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const auto& rows = j.at("rows");
+  ASSERT_EQ(rows.size(), 4u);  // two resolutions, two backends
+  std::map<std::string, std::vector<double>> objects;
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.at("cell_size").get<double>(), 100.0);
+    EXPECT_GT(row.at("ms").get<double>(), 0.0);
+    const double over = row.at("overestimation_pct").get<double>();
+    EXPECT_GE(over, 0.0);
+    EXPECT_LT(over, 100.0);
+    objects[row.at("backend").get<std::string>()].push_back(row.at("pvs_objects").get<double>());
+    EXPECT_TRUE(row.at("res").get<int>() == 16 || row.at("res").get<int>() == 32);
+  }
+  EXPECT_EQ(objects["cpu"], objects["gl"]);  // the same pixels, the same sets
+  // The exact set is the smallest; a finer raster never adds objects.
+  const double exact = j.at("exact").at(0).at("pvs_objects").get<double>();
+  EXPECT_LE(exact, objects["cpu"][1]);
+  EXPECT_LE(objects["cpu"][1], objects["cpu"][0]);
+  std::ifstream in(csv);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "res,cell_size,backend,ms,median_ms,overestimation_pct,pvs_objects");
+  int lines = 0;
+  for (std::string line; std::getline(in, line);) ++lines;
+  EXPECT_EQ(lines, 4);
+  EXPECT_NE(Vistream("bench table1 --scene default --res 100").exit_code, 0);
+  EXPECT_NE(Vistream("bench table1 --scene default --backends vulkan").exit_code, 0);
 }
 
 TEST(Cli, PvsRejectsBadCellsAndBackends) {

@@ -83,6 +83,20 @@ TEST(ViewcellGrid, TranslatingTheSceneByWholeCellsShiftsTheGridExactly) {
   }
 }
 
+TEST(ViewcellGrid, SampleIsFixedDistinctAndInside) {
+  const ViewcellGrid g = Grid();
+  const std::vector<CellCoord> a = g.Sample(10, 7), b = g.Sample(10, 7), c = g.Sample(10, 8);
+  ASSERT_EQ(a.size(), 10u);
+  EXPECT_EQ(a, b);  // the same seed, the same cells
+  EXPECT_NE(a, c);
+  for (size_t k = 0; k < a.size(); ++k) {
+    EXPECT_TRUE(g.Valid(a[k]));
+    for (size_t m = 0; m < k; ++m) EXPECT_FALSE(a[k] == a[m]) << "cell drawn twice";
+  }
+  // Asking for more cells than the grid has gives each once.
+  EXPECT_EQ(g.Sample(g.CellCount() + 5, 1).size(), g.CellCount());
+}
+
 TEST(ViewcellGrid, BadParametersAreErrors) {
   EXPECT_FALSE(ViewcellGrid::Create(kBounds, 0, 0.5, 2).ok());
   EXPECT_FALSE(ViewcellGrid::Create(kBounds, -5, 0.5, 2).ok());
