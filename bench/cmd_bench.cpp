@@ -101,6 +101,13 @@ int Table1(const Table1Args& a) {
     return total_area - visible;
   };
 
+  // Rows go to the CSV as they come, so a long run that is stopped keeps what it measured.
+  std::ofstream csv;
+  if (!a.csv.empty()) {
+    csv.open(a.csv);
+    csv << "res,cell_size,backend,ms,median_ms,overestimation_pct,pvs_objects\n" << std::flush;
+    if (!csv) return Fail(absl::UnavailableError("cannot write " + a.csv));
+  }
   std::vector<Row> rows;
   nlohmann::json exact_json = nlohmann::json::array();
   scenes::Progress progress("table1", a.sizes.size() * a.cells * (1 + a.res.size() * a.backends.size()),
@@ -160,20 +167,21 @@ int Table1(const Table1Args& a) {
         row.pvs_objects /= n;
         row.overestimation_pct = p_e > 0 ? 100.0 * (p_e - p_c) / p_e : 0.0;
         rows.push_back(row);
+        if (csv.is_open()) {
+          csv << absl::StrFormat("%u,%g,%s,%.3f,%.3f,%.6f,%.1f\n", row.res, row.cell_size, row.backend, row.ms,
+                                 row.median_ms, row.overestimation_pct, row.pvs_objects)
+              << std::flush;
+        }
+        if (!a.json) {
+          std::fprintf(stderr, "table1: %u^2, %g m, %s: %.1f ms per viewcell, overestimation %.4f%%\n", res, size,
+                       backend.c_str(), row.ms, row.overestimation_pct);
+        }
       }
     }
   }
   progress.Finish();
 
-  if (!a.csv.empty()) {
-    std::ofstream out(a.csv);
-    out << "res,cell_size,backend,ms,median_ms,overestimation_pct,pvs_objects\n";
-    for (const Row& r : rows) {
-      out << absl::StrFormat("%u,%g,%s,%.3f,%.3f,%.6f,%.1f\n", r.res, r.cell_size, r.backend, r.ms, r.median_ms,
-                             r.overestimation_pct, r.pvs_objects);
-    }
-    if (!out) return Fail(absl::UnavailableError("cannot write " + a.csv));
-  }
+  if (csv.is_open() && !csv) return Fail(absl::UnavailableError("cannot write " + a.csv));
 
   if (a.json) {
     nlohmann::json j;
