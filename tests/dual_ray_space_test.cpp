@@ -273,9 +273,7 @@ TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
     for (int q = 0; q < 4; ++q) {
-      const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
-      const Aabb b = Box(bx, by, 0, bx + 1 + std::floor(rng.Uniform(0, 10)), by + 1 + std::floor(rng.Uniform(0, 10)),
-                         std::floor(rng.Uniform(1, 25)));
+      const Aabb b = testing::RandomGridBox(rng);
       const uint32_t res = 16u << rng.Below(5);
       ++cases;
       const bool visible = drs.Visible(kCell, b, CellQueryOptions{.max_res = res});
@@ -347,9 +345,7 @@ TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
     const Scene s = testing::RandomGridScene(rng);
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
-    const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
-    const Aabb b = Box(bx, by, 0, bx + 1 + std::floor(rng.Uniform(0, 10)), by + 1 + std::floor(rng.Uniform(0, 10)),
-                       std::floor(rng.Uniform(1, 25)));
+    const Aabb b = testing::RandomGridBox(rng);
     for (int axis = 0; axis < 2; ++axis) {
       for (double sign : {1.0, -1.0}) {
         PlanarProblem pr;
@@ -388,9 +384,7 @@ TEST(ExactCover, NeverOccludedWhileAFreeSegmentExists) {
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
     for (int q = 0; q < 3; ++q) {
-      const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
-      const Aabb b = Box(bx, by, 0, bx + 1 + std::floor(rng.Uniform(0, 10)), by + 1 + std::floor(rng.Uniform(0, 10)),
-                         std::floor(rng.Uniform(1, 25)));
+      const Aabb b = testing::RandomGridBox(rng);
       ++cases;
       const bool exact = drs.Visible(kCell, b, CellQueryOptions{.max_res = 32, .exact = true});
       // Anything the raster proves hidden, the exact test proves too.

@@ -59,6 +59,14 @@ class GlRaster : public ::testing::Test {
 };
 GlPlanarRaster* GlRaster::raster_ = nullptr;
 
+scenes::Scene SmallLondon(double size_m, uint64_t seed) {
+  scenes::Progress::SetQuiet(true);
+  scenes::LondonOptions o;
+  o.width_m = o.depth_m = size_m;
+  o.seed = seed;
+  return scenes::GenerateLondon(o);
+}
+
 // The blockers of every separating direction between A and B.
 template <typename F>
 void ForEachPlanarProblem(DualRaySpace& drs, const Aabb& a, const Aabb& b, F&& f) {
@@ -80,9 +88,7 @@ TEST_F(GlRaster, AgreesWithTheCpuPixelForPixelOnRandomScenes) {
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
     for (int q = 0; q < 3; ++q) {
-      const double bx = std::floor(rng.Uniform(30, 90)), by = std::floor(rng.Uniform(-30, 40));
-      const Aabb b{glm::dvec3(bx, by, 0), glm::dvec3(bx + 1 + std::floor(rng.Uniform(0, 10)),
-                                                     by + 1 + std::floor(rng.Uniform(0, 10)), rng.Uniform(1, 25))};
+      const Aabb b = testing::RandomGridBox(rng);
       ForEachPlanarProblem(drs, a, b, [&](const Blockers& blockers) {
         Compare(blockers, "seed " + std::to_string(seed) + " query " + std::to_string(q));
       });
@@ -96,11 +102,7 @@ TEST_F(GlRaster, AgreesWithTheCpuPixelForPixelOnRandomScenes) {
 }
 
 TEST_F(GlRaster, AgreesWithTheCpuPixelForPixelInACity) {
-  scenes::Progress::SetQuiet(true);
-  scenes::LondonOptions o;
-  o.width_m = o.depth_m = 700;
-  o.seed = 3;
-  const scenes::Scene s = scenes::GenerateLondon(o);
+  const scenes::Scene s = SmallLondon(700, 3);
   const visibility::KdTree tree = visibility::KdTree::Build(s);
   const OccluderSet set = OccluderSet::Build(s);
   DualRaySpace drs(set);
@@ -119,11 +121,7 @@ TEST_F(GlRaster, AgreesWithTheCpuPixelForPixelInACity) {
 }
 
 TEST_F(GlRaster, GivesTheSamePvsAsTheCpu) {
-  scenes::Progress::SetQuiet(true);
-  scenes::LondonOptions o;
-  o.width_m = o.depth_m = 600;
-  o.seed = 9;
-  const scenes::Scene s = scenes::GenerateLondon(o);
+  const scenes::Scene s = SmallLondon(600, 9);
   const visibility::KdTree tree = visibility::KdTree::Build(s);
   const visibility::PvsComputer computer(s, tree);
   DualRaySpace gl_engine(computer.occluders(), raster_);

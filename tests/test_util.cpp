@@ -138,4 +138,11 @@ scenes::Scene RandomGridScene(scenes::Rng& rng) {
   return s;
 }
 
+scenes::Aabb RandomGridBox(scenes::Rng& rng) {
+  const double x = std::floor(rng.Uniform(30, 90)), y = std::floor(rng.Uniform(-30, 40));
+  const double w = 1 + std::floor(rng.Uniform(0, 10)), d = 1 + std::floor(rng.Uniform(0, 10));
+  const double h = std::floor(rng.Uniform(1, 25));
+  return scenes::Aabb{glm::dvec3(x, y, 0), glm::dvec3(x + w, y + d, h)};
+}
+
 }  // namespace vistream::testing

@@ -26,6 +26,10 @@ bool SegmentClearOfPrisms(const glm::dvec3& p, const glm::dvec3& q, const std::v
 // through vertices and shared walls are common, not rare: boxes, thin walls, neighbours.
 scenes::Scene RandomGridScene(scenes::Rng& rng);
 
+// A random box B for RandomGridScene queries from a cell at the origin: x 30..100, y -30..50,
+// whole metres, from the ground up to 1..24 m.
+scenes::Aabb RandomGridBox(scenes::Rng& rng);
+
 // A hash of every position, normal, index and occluder: equal scenes hash equal.
 uint64_t SceneHash(const scenes::Scene& scene);
 
