@@ -83,6 +83,9 @@ class DualRaySpace {
   // `raster` draws the bitmaps (not owned; null: the CPU raster). Both must outlive this.
   explicit DualRaySpace(const OccluderSet& occluders, PlanarRaster* raster = nullptr)
       : occluders_(occluders), raster_(raster != nullptr ? raster : &cpu_raster_) {}
+  // raster_ may point into this object.
+  DualRaySpace(const DualRaySpace&) = delete;
+  DualRaySpace& operator=(const DualRaySpace&) = delete;
 
   // Conservative: false only when every segment from A to B meets an occluder (decided on the
   // shaft's ceiling with a conservative raster). Boxes in scene-local metres.

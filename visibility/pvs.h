@@ -41,7 +41,6 @@ class PvsComputer {
   const OccluderSet& occluders() const { return occluders_; }
 
  private:
-
   const scenes::Scene& scene_;
   const KdTree& tree_;
   OccluderSet occluders_;
