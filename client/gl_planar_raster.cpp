@@ -198,7 +198,6 @@ void GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
       }
     }
   }
-  triangles_drawn_ += vertices_.size() / 3;
 
   glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
   glViewport(0, 0, static_cast<GLsizei>(n), static_cast<GLsizei>(n));

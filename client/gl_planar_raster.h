@@ -25,8 +25,6 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
   bool Full(const visibility::Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) override;
   void Draw(const visibility::Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) override;
 
-  uint64_t triangles_drawn() const { return triangles_drawn_; }
-
  private:
   GlPlanarRaster() = default;
   absl::Status Init();
@@ -42,7 +40,6 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
   std::vector<Vertex> vertices_;
   std::vector<double> coeffs_;  // the shader's storage buffer: eps, n, then a, b, c, 0 each
   std::vector<uint8_t> pixels_;
-  uint64_t triangles_drawn_ = 0;
 };
 
 }  // namespace vistream::gl
