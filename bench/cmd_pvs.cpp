@@ -108,7 +108,7 @@ int Pvs(const PvsArgs& a) {
     j["gathered_pieces"] = pvs.stats.gathered;
     j["blocker_vertices"] = pvs.stats.pieces;
     j["free_rays"] = pvs.stats.free_rays;
-    j["rasters"] = pvs.stats.rasters;
+    j["raster_rows"] = pvs.stats.raster_rows;
     j["exact_tests"] = pvs.stats.exact_tests;
     j["setup_ms"] = {{"kd_tree", kd_ms}, {"occluders", occluders_ms}};
     std::printf("%s\n", j.dump(2).c_str());

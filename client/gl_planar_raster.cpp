@@ -1,5 +1,6 @@
 #include "client/gl_planar_raster.h"
 
+#include <algorithm>
 #include <array>
 #include <string>
 
@@ -165,8 +166,14 @@ GlPlanarRaster::~GlPlanarRaster() {
 
 void GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
   // The blockers' hull vertices, for the shader's exact test.
-  coeffs_.assign({blockers.eps, static_cast<double>(n), 0.0, 0.0});
-  for (const visibility::BlockerCoeff& c : blockers.coeffs) coeffs_.insert(coeffs_.end(), {c.a, c.b, c.c, 0.0});
+  next_coeffs_.assign({blockers.eps, static_cast<double>(n), 0.0, 0.0});
+  for (const visibility::BlockerCoeff& c : blockers.coeffs) next_coeffs_.insert(next_coeffs_.end(), {c.a, c.b, c.c, 0.0});
+  next_groups_.clear();
+  for (const visibility::Blocker& g : blockers.groups) next_groups_.emplace_back(g.begin, g.end);
+  if (!pixels_.empty() && next_coeffs_ == coeffs_ && next_groups_ == groups_) return;
+  coeffs_.swap(next_coeffs_);
+  groups_.swap(next_groups_);
+  pixels_.clear();  // until drawn
   glBufferData(GL_SHADER_STORAGE_BUFFER, static_cast<GLsizeiptr>(coeffs_.size() * sizeof(double)), coeffs_.data(),
                GL_STREAM_DRAW);
 
@@ -211,16 +218,15 @@ void GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
   glReadPixels(0, 0, static_cast<GLsizei>(n), static_cast<GLsizei>(n), GL_RED, GL_UNSIGNED_BYTE, pixels_.data());
 }
 
-bool GlPlanarRaster::Full(const visibility::Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) {
+bool GlPlanarRaster::Full(const visibility::Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
+                          std::vector<uint32_t>* gap_rows) {
   Render(blockers, n);
-  for (size_t k = 0; k < pixels_.size(); ++k) {
-    if (pixels_[k] == 0) {
-      *gap_i = static_cast<uint32_t>(k % n);
-      *gap_j = static_cast<uint32_t>(k / n);
-      return false;
-    }
+  gap_rows->clear();
+  for (uint32_t j : rows) {
+    const uint8_t* row = pixels_.data() + static_cast<size_t>(j) * n;
+    if (std::find(row, row + n, 0) != row + n) gap_rows->push_back(j);
   }
-  return true;
+  return gap_rows->empty();
 }
 
 void GlPlanarRaster::Draw(const visibility::Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) {

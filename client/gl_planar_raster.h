@@ -22,13 +22,15 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
   static absl::StatusOr<std::unique_ptr<GlPlanarRaster>> Create();
   ~GlPlanarRaster() override;
 
-  bool Full(const visibility::Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) override;
+  bool Full(const visibility::Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
+            std::vector<uint32_t>* gap_rows) override;
   void Draw(const visibility::Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) override;
 
  private:
   GlPlanarRaster() = default;
   absl::Status Init();
-  // Draws the blockers into the framebuffer and reads the n x n raster back into pixels_.
+  // Draws the blockers into the framebuffer and reads the n x n raster back into pixels_,
+  // unless pixels_ already holds that raster (the caller asks row by row).
   void Render(const visibility::Blockers& blockers, uint32_t n);
 
   std::unique_ptr<GlContext> context_;
@@ -39,7 +41,10 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
   };
   std::vector<Vertex> vertices_;
   std::vector<double> coeffs_;  // the shader's storage buffer: eps, n, then a, b, c, 0 each
-  std::vector<uint8_t> pixels_;
+  std::vector<std::pair<uint32_t, uint32_t>> groups_;  // each blocker's range of coeffs
+  std::vector<double> next_coeffs_;
+  std::vector<std::pair<uint32_t, uint32_t>> next_groups_;
+  std::vector<uint8_t> pixels_;  // the raster of coeffs_ and groups_, once drawn
 };
 
 }  // namespace vistream::gl

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <sstream>
 
 #include <glm/geometric.hpp>
@@ -308,9 +309,82 @@ TEST(DualRaySpace, TranslatingEverythingFarAwayChangesNothing) {
       const Aabb a2{kCell.min + t3, kCell.max + t3}, b2{b.min + t3, b.max + t3};
       CellQueryStats sn, sf;
       EXPECT_EQ(near_drs.Visible(kCell, b, {}, &sn), far_drs.Visible(a2, b2, {}, &sf)) << "seed " << seed;
-      EXPECT_EQ(sn.rasters, sf.rasters) << "seed " << seed;
+      EXPECT_EQ(sn.raster_rows, sf.raster_rows) << "seed " << seed;
     }
   }
+}
+
+// --- Row-by-row refinement and the free-line search. ---
+
+// Calls f(problem, drs) for each planar problem of RandomGridScene queries, seeds [first, last].
+template <typename F>
+void ForEachRandomPlanarProblem(uint64_t first, uint64_t last, F&& f) {
+  for (uint64_t seed = first; seed <= last; ++seed) {
+    scenes::Rng rng(seed);
+    const Scene s = testing::RandomGridScene(rng);
+    const OccluderSet set = OccluderSet::Build(s);
+    DualRaySpace drs(set);
+    for (int q = 0; q < 3; ++q) {
+      const Aabb b = testing::RandomGridBox(rng);
+      for (int axis = 0; axis < 2; ++axis) {
+        for (double sign : {1.0, -1.0}) {
+          PlanarProblem pr;
+          if (MakePlanarProblem(kCell, b, axis, sign, &pr)) f(seed, pr, drs);
+        }
+      }
+    }
+  }
+}
+
+// PlanarOccluded refines only the rows with a gap, one at a time; it must decide exactly as
+// whole rasters at 16, 32 and 64 would: occluded iff one of them is full. With the free-ray
+// search on, it must still agree: a free ray leaves a gap at every resolution.
+TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
+  int occluded = 0, visible = 0;
+  CpuRaster raster;
+  std::vector<uint8_t> pixels;
+  ForEachRandomPlanarProblem(1, 150, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
+    drs.BuildBlockers(pr);
+    bool full = false;
+    for (uint32_t n = 16; n <= 64 && !full && !drs.blockers().groups.empty(); n *= 2) {
+      raster.Draw(drs.blockers(), n, &pixels);
+      full = std::count(pixels.begin(), pixels.end(), 1) == static_cast<long>(pixels.size());
+    }
+    (full ? occluded : visible)++;
+    const CellQueryOptions plain{.max_res = 64, .free_ray_test = false}, searching{.max_res = 64};
+    ASSERT_EQ(full, drs.PlanarOccluded(pr, plain, nullptr)) << "seed " << seed;
+    ASSERT_EQ(full, drs.PlanarOccluded(pr, searching, nullptr)) << "seed " << seed;
+  });
+  EXPECT_GT(occluded, 50);
+  EXPECT_GT(visible, 50);
+}
+
+// FreeOnLine finds a free ray on the line v = const whenever sampling finds one, and any ray it
+// returns is free.
+TEST(Blockers, FreeOnLineFindsAFreeRayWheneverOneExists) {
+  int found = 0, none = 0;
+  std::vector<std::pair<double, double>> scratch;
+  ForEachRandomPlanarProblem(1, 100, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
+    drs.BuildBlockers(pr);
+    const Blockers& blockers = drs.blockers();
+    scenes::Rng rng(seed);
+    for (int k = 0; k < 8; ++k) {
+      const double v = k < 2 ? k : rng.Uniform(0, 1);
+      double u = -1;
+      if (blockers.FreeOnLine(v, &scratch, &u)) {
+        ++found;
+        ASSERT_TRUE(u >= 0 && u <= 1 && blockers.FreeRay(u, v)) << "seed " << seed << ", v " << v << ", u " << u;
+        continue;
+      }
+      ++none;
+      for (int m = 0; m <= 400; ++m) {
+        const double w = m / 400.0;
+        ASSERT_FALSE(blockers.FreeRay(w, v)) << "seed " << seed << ": ray (" << w << ", " << v << ") is free";
+      }
+    }
+  });
+  EXPECT_GT(found, 100);
+  EXPECT_GT(none, 100);
 }
 
 // --- The exact planar test. ---
@@ -353,8 +427,9 @@ TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
         drs.BuildBlockers(pr);
         const Blockers& blockers = drs.blockers();
         const bool covered = ExactlyCovered(blockers);
-        uint32_t gi = 0, gj = 0;
-        const bool full = raster.Full(blockers, 64, &gi, &gj);
+        std::vector<uint32_t> rows(64), gap_rows;
+        std::iota(rows.begin(), rows.end(), 0u);
+        const bool full = raster.Full(blockers, 64, rows, &gap_rows);
         std::vector<uint8_t> pixels;
         raster.Draw(blockers, 16, &pixels);
         ASSERT_EQ(covered, ExactlyCovered(blockers, pixels, 16)) << "seed " << seed << ": starting from the raster's gaps";

@@ -19,6 +19,38 @@ bool Blockers::FreeRay(double u, double v) const {
   return true;
 }
 
+bool Blockers::FreeOnLine(double v, std::vector<std::pair<double, double>>* scratch, double* u) const {
+  auto& spans = *scratch;
+  spans.clear();
+  for (const Blocker& g : groups) {
+    // min_k g_k <= 0 iff u <= max_k root_k, and max_k g_k >= 0 iff u >= min_k root_k.
+    double lo = INFINITY, hi = -INFINITY;
+    for (uint32_t k = g.begin; k < g.end; ++k) {
+      const BlockerCoeff& c = coeffs[k];
+      const double rest = c.a + c.c * v;
+      if (c.b > 0) {
+        const double root = -rest / c.b;
+        lo = std::min(lo, root);
+        hi = std::max(hi, root);
+      } else {
+        if (rest <= 0) hi = INFINITY;
+        if (rest >= 0) lo = -INFINITY;
+      }
+    }
+    if (lo <= hi && hi >= 0.0 && lo <= 1.0) spans.emplace_back(lo, hi);
+  }
+  std::sort(spans.begin(), spans.end());
+  // Sweep: [0, cur] is covered so far, up to a gap; a gap's middle is where rounding matters
+  // least, and FreeRay has the last word.
+  double cur = 0.0;
+  for (const auto& [lo, hi] : spans) {
+    if (lo > cur && FreeRay(*u = 0.5 * (cur + lo), v)) return true;
+    cur = std::max(cur, hi);
+    if (cur >= 1.0) return false;
+  }
+  return FreeRay(*u = 0.5 * (cur + 1.0), v);
+}
+
 std::pair<double, double> Blockers::RowBounds(const Blocker& g, double v0, double v1) const {
   // Pixel [u0, u1] x [v0, v1] is wholly blocked iff min_k g_k(u1, v1) <= 0 and
   // max_k g_k(u0, v0) >= 0 (each g_k rises with u and v), with the margin eps:
@@ -72,19 +104,13 @@ bool CpuRaster::DrawRow(const Blockers& blockers, uint32_t j, uint32_t n, bool s
   return RowFull(n);
 }
 
-bool CpuRaster::Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) {
-  for (uint32_t j = 0; j < n; ++j) {
-    if (DrawRow(blockers, j, n, /*stop_when_full=*/true)) continue;
-    // This row decides: a gap means the raster is not full.
-    for (uint32_t i = 0; i < n; ++i) {
-      if ((bits_[i / 64] >> (i % 64) & 1) == 0) {
-        *gap_i = i;
-        *gap_j = j;
-        return false;
-      }
-    }
+bool CpuRaster::Full(const Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
+                     std::vector<uint32_t>* gap_rows) {
+  gap_rows->clear();
+  for (uint32_t j : rows) {
+    if (!DrawRow(blockers, j, n, /*stop_when_full=*/true)) gap_rows->push_back(j);
   }
-  return true;
+  return gap_rows->empty();
 }
 
 void CpuRaster::Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) {

@@ -11,6 +11,7 @@
 // Every backend sets exactly the pixels that pass this test for some blocker (PixelBounds).
 
 #include <cstdint>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -36,6 +37,10 @@ struct Blockers {
   }
   // Is ray (u, v) blocked by none of the blockers? Exact up to rounding.
   bool FreeRay(double u, double v) const;
+  // Is some ray on the line v = const free? Each blocker stops the interval [L(v), U(v)] of
+  // it; a gap in their union within [0, 1], confirmed by FreeRay, is returned in *u.
+  // `scratch` holds the intervals.
+  bool FreeOnLine(double v, std::vector<std::pair<double, double>>* scratch, double* u) const;
   // The wholly blocked pixels of `g` in the row [v0, v1] are those with u0 >= first and
   // u1 <= second (u0, u1 the pixel's sides).
   std::pair<double, double> RowBounds(const Blocker& g, double v0, double v1) const;
@@ -48,9 +53,12 @@ struct Blockers {
 class PlanarRaster {
  public:
   virtual ~PlanarRaster() = default;
-  // True when every pixel is set. Otherwise (*gap_i, *gap_j) is the first clear pixel in
-  // row-major order from j = 0, i = 0.
-  virtual bool Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) = 0;
+  // Whether rows `rows` (ascending) of the raster are full: the caller knows the others are (a
+  // coarser raster proved them: a wholly blocked pixel's quarters are wholly blocked too), so
+  // a backend may skip them. Sets *gap_rows to those of `rows` with a clear pixel, ascending;
+  // true when there are none.
+  virtual bool Full(const Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
+                    std::vector<uint32_t>* gap_rows) = 0;
   // The whole raster, row-major from j = 0: 1 where set, 0 where clear.
   virtual void Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) = 0;
 };
@@ -58,7 +66,8 @@ class PlanarRaster {
 // Per-row exact intervals on the CPU, one row at a time, stopping at the first row with a gap.
 class CpuRaster final : public PlanarRaster {
  public:
-  bool Full(const Blockers& blockers, uint32_t n, uint32_t* gap_i, uint32_t* gap_j) override;
+  bool Full(const Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
+            std::vector<uint32_t>* gap_rows) override;
   void Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) override;
 
  private:

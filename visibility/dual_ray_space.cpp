@@ -135,7 +135,22 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   // The shaft between the faces, back in scene coordinates, gathers the candidate pieces.
   const glm::dvec2 hull[4] = {pr.SceneFromPlanar(pr.x1, pr.r1), pr.SceneFromPlanar(pr.x2, pr.r2),
                               pr.SceneFromPlanar(pr.x2, pr.l2), pr.SceneFromPlanar(pr.x1, pr.l1)};
-  occluders_.Gather(hull, pr.CeilingMin(), &scratch_, &gathered_);
+  // Pieces (and grid cells) that rise above T nowhere over the slab, or only beside the
+  // shaft: rejected by their box. The frame is axis-aligned, so a box maps to a box.
+  const double t_min = pr.CeilingMin(), inv_w = 1.0 / (pr.x2 - pr.x1);
+  auto keep = [&](const PieceBounds& b) {
+    double lo, hi;
+    if (!(b.height > t_min) || !pr.BlockingStrip(b.height, &lo, &hi)) return false;
+    const glm::dvec2 c0 = pr.PlanarFromScene(b.min), c1 = pr.PlanarFromScene(b.max);
+    const double p0 = std::max(std::min(c0.x, c1.x), lo), p1 = std::min(std::max(c0.x, c1.x), hi);
+    if (p0 > p1) return false;
+    const double q0 = std::min(c0.y, c1.y), q1 = std::max(c0.y, c1.y);
+    const double t0 = (p0 - pr.x1) * inv_w, t1 = (p1 - pr.x1) * inv_w;
+    const double l_max = std::max(pr.l1 + t0 * (pr.l2 - pr.l1), pr.l1 + t1 * (pr.l2 - pr.l1));
+    const double r_min = std::min(pr.r1 + t0 * (pr.r2 - pr.r1), pr.r1 + t1 * (pr.r2 - pr.r1));
+    return q0 <= l_max && q1 >= r_min;
+  };
+  occluders_.Gather(hull, keep, &scratch_, &gathered_);
 
   // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
   std::vector<glm::dvec2>& planar = planar_;
@@ -150,17 +165,6 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     const OccluderPiece& piece = pieces[id];
     double lo, hi;
     if (!pr.BlockingStrip(piece.height, &lo, &hi)) continue;
-    // Reject from the box first: the frame is axis-aligned, so the box maps to a box.
-    {
-      const glm::dvec2 c0 = pr.PlanarFromScene(piece.box_min), c1 = pr.PlanarFromScene(piece.box_max);
-      const double p0 = std::max(std::min(c0.x, c1.x), lo), p1 = std::min(std::max(c0.x, c1.x), hi);
-      if (p0 > p1) continue;
-      const double q0 = std::min(c0.y, c1.y), q1 = std::max(c0.y, c1.y);
-      const double t0 = (p0 - pr.x1) / (pr.x2 - pr.x1), t1 = (p1 - pr.x1) / (pr.x2 - pr.x1);
-      const double l_max = std::max(pr.l1 + t0 * (pr.l2 - pr.l1), pr.l1 + t1 * (pr.l2 - pr.l1));
-      const double r_min = std::min(pr.r1 + t0 * (pr.r2 - pr.r1), pr.r1 + t1 * (pr.r2 - pr.r1));
-      if (q0 > l_max || q1 < r_min) continue;
-    }
     planar.clear();
     for (const glm::dvec2& w : piece.points) planar.push_back(pr.PlanarFromScene(w));
     ClipStrip(planar, lo, hi, &clipped, &clip_tmp_);
@@ -337,25 +341,31 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     stats->pieces += blockers_.coeffs.size();
   }
   if (blockers_.groups.empty()) return false;
-  // A free ray among a few before any raster proves the answer already.
-  if (options.free_ray_test) {
-    for (const auto& [u, v] : {std::pair{0.5, 0.5}, std::pair{0.0, 0.0}, std::pair{1.0, 1.0}, std::pair{0.0, 1.0},
-                               std::pair{1.0, 0.0}}) {
-      if (blockers_.FreeRay(u, v)) {
-        if (stats != nullptr) ++stats->free_rays;
-        return false;
-      }
-    }
-  }
-  for (uint32_t res = std::max(1u, options.min_res); res <= options.max_res; res *= 2) {
-    if (stats != nullptr) ++stats->rasters;
-    uint32_t gap_i = 0, gap_j = 0;
-    if (raster_->Full(blockers_, res, &gap_i, &gap_j)) return true;
-    if (options.free_ray_test && blockers_.FreeRay((gap_i + 0.5) / res, (gap_j + 0.5) / res)) {
+  // Row by row, depth first: a row with a gap at n is searched for a free ray along its middle
+  // line, exactly, then split into its two rows at 2n (a row full at n is full at 2n). The
+  // raster is full when every row is; a row still with a gap at max_res leaves B visible.
+  const uint32_t n0 = std::clamp(options.min_res, 1u, std::max(1u, options.max_res));
+  row_stack_.clear();
+  bool undecided = false;
+  for (uint32_t j = n0; j-- > 0;) row_stack_.push_back({n0, j});
+  while (!row_stack_.empty()) {
+    const auto [res, j] = row_stack_.back();
+    row_stack_.pop_back();
+    if (stats != nullptr) ++stats->raster_rows;
+    if (raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
+    double u = 0.0;
+    if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {
       if (stats != nullptr) ++stats->free_rays;
       return false;
     }
+    if (2 * res > options.max_res) {
+      undecided = true;
+      break;
+    }
+    row_stack_.push_back({2 * res, 2 * j + 1});
+    row_stack_.push_back({2 * res, 2 * j});
   }
+  if (!undecided) return true;
   if (!options.exact) return false;
   // The raster is conservative, so its gaps may still be covered: only the exact union knows.
   // Every clear pixel's centre ray first: one free ray decides, at a fraction of the cost.
@@ -374,16 +384,24 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
                            CellQueryStats* stats) {
   if (stats != nullptr) ++stats->queries;
-  bool separable = false;
-  PlanarProblem pr;
+  // Up to two planes separate A and B (one per axis); the one with the longer slab first:
+  // its shaft holds more occluders, so it is likelier to prove B hidden.
+  PlanarProblem pr[2];
+  int count = 0;
   for (int axis = 0; axis < 2; ++axis) {
     for (double sign : {1.0, -1.0}) {
-      if (!MakePlanarProblem(a, b, axis, sign, &pr)) continue;
-      separable = true;
-      if (PlanarOccluded(pr, options, stats)) {
-        if (stats != nullptr) ++stats->occluded;
-        return false;
+      if (MakePlanarProblem(a, b, axis, sign, &pr[count])) {
+        ++count;
+        break;
       }
+    }
+  }
+  if (count == 2 && pr[1].x2 - pr[1].x1 > pr[0].x2 - pr[0].x1) std::swap(pr[0], pr[1]);
+  const bool separable = count > 0;
+  for (int k = 0; k < count; ++k) {
+    if (PlanarOccluded(pr[k], options, stats)) {
+      if (stats != nullptr) ++stats->occluded;
+      return false;
     }
   }
   if (!separable && stats != nullptr) ++stats->non_separable;

@@ -34,7 +34,7 @@ struct CellQueryStats {
   uint64_t planar_tests = 0;   // planar problems set up
   uint64_t gathered = 0;       // occluder pieces gathered from the grid, summed over planar tests
   uint64_t pieces = 0;         // blocker hull vertices kept, summed over planar tests
-  uint64_t rasters = 0;        // bitmaps drawn, summed over resolutions
+  uint64_t raster_rows = 0;    // raster rows tested, summed over resolutions
   uint64_t free_rays = 0;      // planar tests ended by a free ray
   uint64_t exact_tests = 0;    // planar tests decided by the exact union test
   uint64_t occluded = 0;       // Visible() answers false
@@ -116,6 +116,9 @@ class DualRaySpace {
   void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
   Blockers blockers_;
   std::vector<uint8_t> exact_raster_;  // the raster the exact test starts from
+  std::vector<std::pair<double, double>> spans_;  // FreeOnLine's scratch
+  std::vector<std::pair<uint32_t, uint32_t>> row_stack_;  // (resolution, row) still in question
+  std::vector<uint32_t> gap_rows_;
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
   std::vector<std::vector<glm::dvec2>> kept_points_;

@@ -218,6 +218,22 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     }
   }
 
+  set.bounds_.resize(n);
+  for (uint32_t id = 0; id < n; ++id) {
+    const OccluderPiece& p = set.pieces_[id];
+    set.bounds_[id] = {p.box_min, p.box_max, p.height};
+  }
+  set.cell_bounds_.assign(count.size() - 1, PieceBounds{glm::dvec2(INFINITY), glm::dvec2(-INFINITY), 0.0});
+  for (size_t c = 0; c + 1 < count.size(); ++c) {
+    PieceBounds& cb = set.cell_bounds_[c];
+    for (uint32_t k = count[c]; k < count[c + 1]; ++k) {
+      const PieceBounds& pb = set.bounds_[set.cell_items_[k]];
+      cb.min = glm::min(cb.min, pb.min);
+      cb.max = glm::max(cb.max, pb.max);
+      cb.height = std::max(cb.height, pb.height);
+    }
+  }
+
   // Contacts between pieces whose boxes touch (closed boxes: shared walls count).
   for (size_t c = 0; c + 1 < set.cell_start_.size(); ++c) {
     for (uint32_t x = set.cell_start_[c]; x < set.cell_start_[c + 1]; ++x) {
@@ -249,50 +265,6 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     set.contact_index_[at[set.contacts_[k].b]++] = k;
   }
   return set;
-}
-
-void OccluderSet::Gather(std::span<const glm::dvec2> hull, double min_height, GatherScratch* scratch,
-                         std::vector<uint32_t>* out) const {
-  if (pieces_.empty() || hull.empty()) return;
-  auto& stamp = scratch->stamp;
-  if (stamp.size() != pieces_.size() || ++scratch->value == 0) {
-    stamp.assign(pieces_.size(), 0);
-    scratch->value = 1;
-  }
-  glm::dvec2 lo(INFINITY), hi(-INFINITY);
-  for (const glm::dvec2& p : hull) {
-    lo = glm::min(lo, p);
-    hi = glm::max(hi, p);
-  }
-  const int j0 = std::clamp(static_cast<int>(std::floor((lo.y - grid_min_.y) / cell_)), 0, ny_ - 1);
-  const int j1 = std::clamp(static_cast<int>(std::floor((hi.y - grid_min_.y) / cell_)), 0, ny_ - 1);
-  for (int j = j0; j <= j1; ++j) {
-    // The hull's x-extent within this row of cells.
-    const double y0 = grid_min_.y + j * cell_, y1 = y0 + cell_;
-    double xl = INFINITY, xr = -INFINITY;
-    for (size_t k = 0; k < hull.size(); ++k) {
-      const glm::dvec2 &a = hull[k], &b = hull[(k + 1) % hull.size()];
-      if (a.y >= y0 && a.y <= y1) xl = std::min(xl, a.x), xr = std::max(xr, a.x);
-      for (double y : {y0, y1}) {
-        if ((a.y < y) != (b.y < y)) {
-          const double x = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
-          xl = std::min(xl, x), xr = std::max(xr, x);
-        }
-      }
-    }
-    if (xl > xr) continue;
-    const int i0 = std::clamp(static_cast<int>(std::floor((xl - grid_min_.x) / cell_)), 0, nx_ - 1);
-    const int i1 = std::clamp(static_cast<int>(std::floor((xr - grid_min_.x) / cell_)), 0, nx_ - 1);
-    for (int i = i0; i <= i1; ++i) {
-      const size_t c = static_cast<size_t>(j) * nx_ + i;
-      for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
-        const uint32_t id = cell_items_[k];
-        if (stamp[id] == scratch->value) continue;
-        stamp[id] = scratch->value;
-        if (pieces_[id].height > min_height) out->push_back(id);
-      }
-    }
-  }
 }
 
 }  // namespace vistream::visibility

@@ -9,6 +9,7 @@
 #include <span>
 #include <vector>
 
+#include <glm/common.hpp>
 #include <glm/vec2.hpp>
 
 #include "scenes/scene.h"
@@ -31,6 +32,12 @@ struct PieceContact {
   glm::dvec2 w0{0.0}, w1{0.0};
 };
 
+// A box in xy and the height of what stands on it: a piece's, or the union of a grid cell's.
+struct PieceBounds {
+  glm::dvec2 min{0.0}, max{0.0};
+  double height = 0.0;
+};
+
 // Per-thread scratch for Gather and Trace: marks pieces already visited in one call.
 struct GatherScratch {
   std::vector<uint32_t> stamp;
@@ -49,10 +56,14 @@ class OccluderSet {
     return {contact_index_.data() + contact_start_[piece], contact_start_[piece + 1] - contact_start_[piece]};
   }
 
-  // Appends the pieces whose box overlaps the convex polygon `hull` (scene-local xy) and
-  // whose height exceeds `min_height`; each piece once.
-  void Gather(std::span<const glm::dvec2> hull, double min_height, GatherScratch* scratch,
-              std::vector<uint32_t>* out) const;
+  const PieceBounds& bounds(uint32_t piece) const { return bounds_[piece]; }
+
+  // Appends each piece, once, whose box overlaps the convex polygon `hull` (scene-local xy)
+  // and for whose bounds keep(bounds) is true. `keep` must be monotone: true for bounds
+  // whenever true for bounds that they contain. A grid cell for whose bounds (the union of
+  // its pieces') keep is false is skipped whole.
+  template <typename Keep>
+  void Gather(std::span<const glm::dvec2> hull, Keep&& keep, GatherScratch* scratch, std::vector<uint32_t>* out) const;
 
   // Calls visit(piece) once for each piece in the grid cells the segment a-b crosses, in
   // order from a, until visit returns true; returns whether it did.
@@ -60,7 +71,12 @@ class OccluderSet {
   bool Trace(const glm::dvec2& a, const glm::dvec2& b, GatherScratch* scratch, Visit&& visit) const;
 
  private:
+  // The cells of the grid that `hull` overlaps, as runs [i0, i1] of row j.
+  template <typename Run>
+  void CellRuns(std::span<const glm::dvec2> hull, Run&& run) const;
+
   std::vector<OccluderPiece> pieces_;
+  std::vector<PieceBounds> bounds_;  // of each piece, compact for gathering
   std::vector<PieceContact> contacts_;
   std::vector<uint32_t> contact_start_, contact_index_;
   // Uniform grid: cell (i, j) lists the pieces whose box overlaps it.
@@ -68,7 +84,63 @@ class OccluderSet {
   double cell_ = 64.0;
   int nx_ = 0, ny_ = 0;
   std::vector<uint32_t> cell_start_, cell_items_;
+  std::vector<PieceBounds> cell_bounds_;  // the union of each cell's pieces' bounds
 };
+
+template <typename Run>
+void OccluderSet::CellRuns(std::span<const glm::dvec2> hull, Run&& run) const {
+  glm::dvec2 lo(INFINITY), hi(-INFINITY);
+  for (const glm::dvec2& p : hull) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const int j0 = std::clamp(static_cast<int>(std::floor((lo.y - grid_min_.y) / cell_)), 0, ny_ - 1);
+  const int j1 = std::clamp(static_cast<int>(std::floor((hi.y - grid_min_.y) / cell_)), 0, ny_ - 1);
+  for (int j = j0; j <= j1; ++j) {
+    // The hull's x-extent within this row of cells.
+    const double y0 = grid_min_.y + j * cell_, y1 = y0 + cell_;
+    double xl = INFINITY, xr = -INFINITY;
+    for (size_t k = 0; k < hull.size(); ++k) {
+      const glm::dvec2 &a = hull[k], &b = hull[(k + 1) % hull.size()];
+      if (a.y >= y0 && a.y <= y1) xl = std::min(xl, a.x), xr = std::max(xr, a.x);
+      for (double y : {y0, y1}) {
+        if ((a.y < y) != (b.y < y)) {
+          const double x = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
+          xl = std::min(xl, x), xr = std::max(xr, x);
+        }
+      }
+    }
+    if (xl > xr) continue;
+    const int i0 = std::clamp(static_cast<int>(std::floor((xl - grid_min_.x) / cell_)), 0, nx_ - 1);
+    const int i1 = std::clamp(static_cast<int>(std::floor((xr - grid_min_.x) / cell_)), 0, nx_ - 1);
+    run(j, i0, i1);
+  }
+}
+
+template <typename Keep>
+void OccluderSet::Gather(std::span<const glm::dvec2> hull, Keep&& keep, GatherScratch* scratch,
+                         std::vector<uint32_t>* out) const {
+  if (pieces_.empty() || hull.empty()) return;
+  auto& stamp = scratch->stamp;
+  if (stamp.size() != pieces_.size() || ++scratch->value == 0) {
+    stamp.assign(pieces_.size(), 0);
+    scratch->value = 1;
+  }
+  // A piece in a skipped cell is still met in its other cells: keep is false for it there
+  // too, unless another cell's bounds let it through, where it is tested itself.
+  CellRuns(hull, [&](int j, int i0, int i1) {
+    for (int i = i0; i <= i1; ++i) {
+      const size_t c = static_cast<size_t>(j) * nx_ + i;
+      if (cell_start_[c] == cell_start_[c + 1] || !keep(cell_bounds_[c])) continue;
+      for (uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
+        const uint32_t id = cell_items_[k];
+        if (stamp[id] == scratch->value) continue;
+        stamp[id] = scratch->value;
+        if (keep(bounds_[id])) out->push_back(id);
+      }
+    }
+  });
+}
 
 template <typename Visit>
 bool OccluderSet::Trace(const glm::dvec2& a, const glm::dvec2& b, GatherScratch* scratch, Visit&& visit) const {
