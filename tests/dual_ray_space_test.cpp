@@ -359,6 +359,49 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
   EXPECT_GT(visible, 50);
 }
 
+// A hint only saves time: whatever line it names, the answer stays the same. A witness comes
+// only with "visible", and as a hint it proves the same query visible again at once.
+TEST(DualRaySpace, HintsNeverChangeAnAnswerAndWitnessesProveVisibility) {
+  int witnessed = 0, hinted_queries = 0;
+  for (uint64_t seed = 1; seed <= 120; ++seed) {
+    scenes::Rng rng(seed);
+    const Scene s = testing::RandomGridScene(rng);
+    const OccluderSet set = OccluderSet::Build(s);
+    DualRaySpace drs(set);
+    for (int q = 0; q < 4; ++q) {
+      const Aabb b = testing::RandomGridBox(rng);
+      FreeLine witness;
+      const bool visible = drs.Visible(kCell, b, {}, nullptr, {}, &witness);
+      if (witness.valid) {
+        ++witnessed;
+        ASSERT_TRUE(visible) << "seed " << seed;
+        ASSERT_TRUE(drs.Visible(kCell, b, {}, nullptr, witness)) << "seed " << seed;
+        // It is a free ray (u, v) of the planar problem it came from: on A's face and B's.
+        int free_in = 0;
+        for (int axis = 0; axis < 2; ++axis) {
+          for (double sign : {1.0, -1.0}) {
+            PlanarProblem pr;
+            if (!MakePlanarProblem(kCell, b, axis, sign, &pr)) continue;
+            const glm::dvec2 from = pr.PlanarFromScene(witness.from), to = pr.PlanarFromScene(witness.to);
+            if (std::abs(from.x - pr.x1) > 1e-9 || std::abs(to.x - pr.x2) > 1e-9) continue;
+            drs.BuildBlockers(pr);
+            free_in += drs.blockers().FreeRay((from.y - pr.r1) / (pr.l1 - pr.r1), (to.y - pr.r2) / (pr.l2 - pr.r2));
+          }
+        }
+        EXPECT_EQ(free_in, 1) << "seed " << seed << ": the witness is no free ray";
+      }
+      for (int h = 0; h < 4; ++h) {
+        const FreeLine hint{{rng.Uniform(-5, 15), rng.Uniform(-10, 20)}, {rng.Uniform(20, 100), rng.Uniform(-40, 60)},
+                            true};
+        ++hinted_queries;
+        ASSERT_EQ(visible, drs.Visible(kCell, b, {}, nullptr, hint)) << "seed " << seed << ", hint " << h;
+      }
+    }
+  }
+  EXPECT_GT(witnessed, 100);
+  EXPECT_GT(hinted_queries, 1000);
+}
+
 // FreeOnLine finds a free ray on the line v = const whenever sampling finds one, and any ray it
 // returns is free.
 TEST(Blockers, FreeOnLineFindsAFreeRayWheneverOneExists) {

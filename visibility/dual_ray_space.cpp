@@ -73,14 +73,15 @@ void ClipStrip(const std::vector<glm::dvec2>& in, double lo, double hi, std::vec
 
 // Replaces `points` by the vertices of their convex hull (Andrew's monotone chain). A vertex
 // lost to rounding only shrinks the blocked region: the answer stays conservative.
-void ConvexHull(std::vector<glm::dvec2>* points) {
+void ConvexHull(std::vector<glm::dvec2>* points, std::vector<glm::dvec2>* scratch) {
   auto& p = *points;
   if (p.size() <= 2) return;
   std::sort(p.begin(), p.end(), [](const glm::dvec2& a, const glm::dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
   auto cross = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
     return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
   };
-  std::vector<glm::dvec2> hull(2 * p.size());
+  std::vector<glm::dvec2>& hull = *scratch;
+  hull.resize(2 * p.size());
   size_t k = 0;
   for (size_t i = 0; i < p.size(); ++i) {
     while (k >= 2 && cross(hull[k - 2], hull[k - 1], p[i]) <= 0) --k;
@@ -153,38 +154,52 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   occluders_.Gather(hull, keep, &scratch_, &gathered_);
 
   // Clip each piece to the slab and to where it rises above T; keep those inside the shaft.
-  std::vector<glm::dvec2>& planar = planar_;
-  std::vector<glm::dvec2>& clipped = clipped_;
-  auto& kept_points = kept_points_;
-  auto& kept = kept_;
-  kept.clear();
-  size_t kept_count = 0;
+  // Kept pieces' points go to kept_points_, piece i's from kept_begin_[i].
+  kept_.clear();
+  kept_begin_.clear();
+  kept_points_.clear();
   lo_.clear();
   hi_.clear();
   for (uint32_t id : gathered_) {
     const OccluderPiece& piece = pieces[id];
     double lo, hi;
     if (!pr.BlockingStrip(piece.height, &lo, &hi)) continue;
-    planar.clear();
-    for (const glm::dvec2& w : piece.points) planar.push_back(pr.PlanarFromScene(w));
-    ClipStrip(planar, lo, hi, &clipped, &clip_tmp_);
-    if (clipped.empty()) continue;
+    const size_t begin = kept_points_.size();
+    double p_min = INFINITY, p_max = -INFINITY;
+    for (const glm::dvec2& w : piece.points) {
+      const glm::dvec2 p = pr.PlanarFromScene(w);
+      kept_points_.push_back(p);
+      p_min = std::min(p_min, p.x);
+      p_max = std::max(p_max, p.x);
+    }
+    if (p_min < lo || p_max > hi) {
+      planar_.assign(kept_points_.begin() + static_cast<ptrdiff_t>(begin), kept_points_.end());
+      ClipStrip(planar_, lo, hi, &clipped_, &clip_tmp_);
+      kept_points_.resize(begin);
+      if (clipped_.empty()) continue;
+      kept_points_.insert(kept_points_.end(), clipped_.begin(), clipped_.end());
+    }
     // Entirely beside the shaft: blocks no ray of RS.
     bool above = true, below = true;
-    for (const glm::dvec2& p : clipped) {
+    for (size_t k = begin; k < kept_points_.size(); ++k) {
+      const glm::dvec2& p = kept_points_[k];
       const double t = (p.x - pr.x1) / (pr.x2 - pr.x1);
       const double l = pr.l1 + t * (pr.l2 - pr.l1), r = pr.r1 + t * (pr.r2 - pr.r1);
       above &= p.y > l;
       below &= p.y < r;
     }
-    if (above || below) continue;
-    local_[id] = static_cast<int32_t>(kept.size());
-    kept.push_back(id);
-    if (kept_points.size() <= kept_count) kept_points.emplace_back();
-    kept_points[kept_count++].assign(clipped.begin(), clipped.end());
+    if (above || below) {
+      kept_points_.resize(begin);
+      continue;
+    }
+    local_[id] = static_cast<int32_t>(kept_.size());
+    kept_.push_back(id);
+    kept_begin_.push_back(static_cast<uint32_t>(begin));
     lo_.push_back(lo);
     hi_.push_back(hi);
   }
+  kept_begin_.push_back(static_cast<uint32_t>(kept_points_.size()));
+  const auto& kept = kept_;
 
   // Fuse: kept pieces whose contact survives both clips are one connected blocker.
   parent_.resize(kept.size());
@@ -193,6 +208,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     while (parent_[x] != x) x = parent_[x] = parent_[parent_[x]];
     return x;
   };
+  bool fused = false;
   for (uint32_t i = 0; i < kept.size(); ++i) {
     for (uint32_t k : occluders_.ContactsOf(kept[i])) {
       const PieceContact& c = occluders_.contacts()[k];
@@ -202,28 +218,48 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       const double w0 = pr.PlanarFromScene(c.w0).x, w1 = pr.PlanarFromScene(c.w1).x;
       const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
       const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
-      if (lo <= hi) parent_[find(i)] = find(static_cast<uint32_t>(j));
+      if (lo <= hi) {
+        parent_[find(i)] = find(static_cast<uint32_t>(j));
+        fused = true;
+      }
     }
   }
   for (uint32_t id : kept) local_[id] = -1;
 
   // Each blocker blocks exactly the rays that separate its points, so only the convex hull of
-  // its points matters: g is affine in the point. Turn the hull vertices into coefficients.
-  std::vector<uint32_t> order(kept.size());
-  for (uint32_t i = 0; i < kept.size(); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return find(x) < find(y); });
+  // its points matters: g is affine in the point. Turn the hull vertices into coefficients. A
+  // piece alone is convex already; its clipped points serve as they are.
   blockers_.Clear();
-  for (size_t n = 0; n < order.size();) {
-    size_t end = n;
-    group_points_.clear();
-    while (end < order.size() && find(order[end]) == find(order[n])) {
-      const auto& pts = kept_points[order[end]];
-      group_points_.insert(group_points_.end(), pts.begin(), pts.end());
-      ++end;
+  auto points_of = [&](uint32_t i) {
+    return std::span(kept_points_.data() + kept_begin_[i], kept_begin_[i + 1] - kept_begin_[i]);
+  };
+  if (!fused) {
+    for (uint32_t i = 0; i < kept.size(); ++i) AddGroup(pr, points_of(i));
+  } else {
+    order_.resize(kept.size());
+    for (uint32_t i = 0; i < kept.size(); ++i) {
+      parent_[i] = find(i);
+      order_[i] = i;
     }
-    ConvexHull(&group_points_);
-    AddGroup(pr);
-    n = end;
+    std::sort(order_.begin(), order_.end(), [&](uint32_t x, uint32_t y) {
+      return parent_[x] < parent_[y] || (parent_[x] == parent_[y] && x < y);
+    });
+    for (size_t n = 0; n < order_.size();) {
+      size_t end = n + 1;
+      while (end < order_.size() && parent_[order_[end]] == parent_[order_[n]]) ++end;
+      if (end == n + 1) {
+        AddGroup(pr, points_of(order_[n]));
+      } else {
+        group_points_.clear();
+        for (size_t m = n; m < end; ++m) {
+          const auto pts = points_of(order_[m]);
+          group_points_.insert(group_points_.end(), pts.begin(), pts.end());
+        }
+        ConvexHull(&group_points_, &hull_scratch_);
+        AddGroup(pr, group_points_);
+      }
+      n = end;
+    }
   }
   // Widest first: a row usually fills after a few blockers, and the rest are skipped.
   std::sort(blockers_.groups.begin(), blockers_.groups.end(),
@@ -231,13 +267,13 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   blockers_.eps = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
 }
 
-void DualRaySpace::AddGroup(const PlanarProblem& pr) {
+void DualRaySpace::AddGroup(const PlanarProblem& pr, std::span<const glm::dvec2> points) {
   const double w = pr.x2 - pr.x1;
   Blocker g;
   g.begin = static_cast<uint32_t>(blockers_.coeffs.size());
   // How much of RS this blocker covers, roughly: its blocked width along u on the middle row.
   double mn = INFINITY, mx = -INFINITY;
-  for (const glm::dvec2& p : group_points_) {
+  for (const glm::dvec2& p : points) {
     const double t = (p.x - pr.x1) / w;
     const BlockerCoeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
     blockers_.coeffs.push_back(c);
@@ -317,19 +353,48 @@ bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   return !blocked;
 }
 
-bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats) {
+namespace {
+
+// The ray (u, v) of `pr` along `line`, if the line crosses both s1 and s2.
+bool RayOnLine(const PlanarProblem& pr, const FreeLine& line, double* u, double* v) {
+  if (!line.valid) return false;
+  const glm::dvec2 a = pr.PlanarFromScene(line.from), b = pr.PlanarFromScene(line.to);
+  if (!(b.x != a.x) || !(pr.l1 > pr.r1) || !(pr.l2 > pr.r2)) return false;
+  const double k = (b.y - a.y) / (b.x - a.x);
+  *u = (a.y + k * (pr.x1 - a.x) - pr.r1) / (pr.l1 - pr.r1);
+  *v = (a.y + k * (pr.x2 - a.x) - pr.r2) / (pr.l2 - pr.r2);
+  return *u >= 0 && *u <= 1 && *v >= 0 && *v <= 1;
+}
+
+}  // namespace
+
+void DualRaySpace::SetWitness(const PlanarProblem& pr, double u, double v, FreeLine* witness) const {
+  if (witness == nullptr) return;
+  witness->from = pr.SceneFromPlanar(pr.x1, pr.r1 + u * (pr.l1 - pr.r1));
+  witness->to = pr.SceneFromPlanar(pr.x2, pr.r2 + v * (pr.l2 - pr.r2));
+  witness->valid = true;
+}
+
+bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats,
+                                  const FreeLine& hint, FreeLine* witness) {
+  if (witness != nullptr) witness->valid = false;
   // Most B turn out visible: a few traced rays often prove it before any blocker is built,
   // and a ray costs only the grid cells it crosses, where the shaft's blockers cost its area.
+  // The hint first: the line that proved a box around B visible often proves B visible too.
   if (options.free_ray_test) {
     static constexpr double kRays[][2] = {{0.5, 0.5}, {1.0 / 6, 1.0 / 6}, {5.0 / 6, 5.0 / 6}, {1.0 / 6, 5.0 / 6},
                                           {5.0 / 6, 1.0 / 6}, {0.5, 1.0 / 6}, {0.5, 5.0 / 6}, {1.0 / 6, 0.5},
                                           {5.0 / 6, 0.5}, {0, 0}, {1, 1}, {0, 1}, {1, 0}};
-    for (const auto& r : kRays) {
-      if (FreeRayTraced(pr, r[0], r[1])) {
+    double hu = 0, hv = 0;
+    const bool hinted = RayOnLine(pr, hint, &hu, &hv);
+    for (int k = hinted ? -1 : 0; k < static_cast<int>(std::size(kRays)); ++k) {
+      const double u = k < 0 ? hu : kRays[k][0], v = k < 0 ? hv : kRays[k][1];
+      if (FreeRayTraced(pr, u, v)) {
         if (stats != nullptr) {
           ++stats->planar_tests;
           ++stats->free_rays;
         }
+        SetWitness(pr, u, v, witness);
         return false;
       }
     }
@@ -356,6 +421,7 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     double u = 0.0;
     if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {
       if (stats != nullptr) ++stats->free_rays;
+      SetWitness(pr, u, (j + 0.5) / res, witness);
       return false;
     }
     if (2 * res > options.max_res) {
@@ -374,6 +440,7 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   for (size_t k = 0; k < exact_raster_.size(); ++k) {
     if (exact_raster_[k] == 0 && blockers_.FreeRay((k % n + 0.5) / n, (k / n + 0.5) / n)) {
       if (stats != nullptr) ++stats->free_rays;
+      SetWitness(pr, (k % n + 0.5) / n, (k / n + 0.5) / n, witness);
       return false;
     }
   }
@@ -382,7 +449,8 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
 }
 
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
-                           CellQueryStats* stats) {
+                           CellQueryStats* stats, const FreeLine& hint, FreeLine* witness) {
+  if (witness != nullptr) witness->valid = false;
   if (stats != nullptr) ++stats->queries;
   // Up to two planes separate A and B (one per axis); the one with the longer slab first:
   // its shaft holds more occluders, so it is likelier to prove B hidden.
@@ -398,13 +466,17 @@ bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const C
   }
   if (count == 2 && pr[1].x2 - pr[1].x1 > pr[0].x2 - pr[0].x1) std::swap(pr[0], pr[1]);
   const bool separable = count > 0;
+  FreeLine found, each;
   for (int k = 0; k < count; ++k) {
-    if (PlanarOccluded(pr[k], options, stats)) {
+    const bool occluded = PlanarOccluded(pr[k], options, stats, hint, &each);
+    if (each.valid) found = each;
+    if (occluded) {
       if (stats != nullptr) ++stats->occluded;
       return false;
     }
   }
   if (!separable && stats != nullptr) ++stats->non_separable;
+  if (witness != nullptr) *witness = found;
   return true;
 }
 

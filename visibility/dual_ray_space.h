@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -77,6 +78,13 @@ struct PlanarProblem {
 // false when that plane does not separate them.
 bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, double sign, PlanarProblem* out);
 
+// A line in the scene's xy plane, through `from` (on A's side) and `to` (on B's side): the
+// ground track of a ray that a planar test found free.
+struct FreeLine {
+  glm::dvec2 from{0.0}, to{0.0};
+  bool valid = false;
+};
+
 // One query engine per thread: it keeps scratch buffers between queries.
 class DualRaySpace {
  public:
@@ -89,12 +97,17 @@ class DualRaySpace {
 
   // Conservative: false only when every segment from A to B meets an occluder (decided on the
   // shaft's ceiling with a conservative raster). Boxes in scene-local metres.
+  //
+  // `hint`, when valid, is a line worth tracing first (a free one found for a box around B,
+  // say): it only saves time. When B is visible and a free ray proved it, *witness (if not
+  // null) is set to that ray's line; otherwise it is marked invalid.
   bool Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
-               CellQueryStats* stats = nullptr);
+               CellQueryStats* stats = nullptr, const FreeLine& hint = {}, FreeLine* witness = nullptr);
 
   // The planar test of one separating direction: true when the raster proves every ray of RS
-  // blocked.
-  bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats);
+  // blocked. `hint` and `witness` as for Visible.
+  bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats,
+                      const FreeLine& hint = {}, FreeLine* witness = nullptr);
 
   // Gathers, clips and fuses the occluders of `problem` into blockers(); no raster yet.
   void BuildBlockers(const PlanarProblem& problem);
@@ -104,6 +117,8 @@ class DualRaySpace {
   // The same question for ray (u, v), answered by tracing it through the occluder grid:
   // no blockers need building. Exact up to rounding; used to prove visibility early.
   bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
+  // *witness = the line of ray (u, v), if witness is not null.
+  void SetWitness(const PlanarProblem& problem, double u, double v, FreeLine* witness) const;
 
   const OccluderSet& occluders_;
   CpuRaster cpu_raster_;
@@ -113,16 +128,16 @@ class DualRaySpace {
   std::vector<double> lo_, hi_;           // blocking strip of each gathered piece
   std::vector<uint32_t> parent_;          // union-find over gathered pieces
   std::vector<int32_t> local_;            // piece id -> index in gathered_, or -1
-  void AddGroup(const PlanarProblem& problem);  // from group_points_ (a convex hull)
+  void AddGroup(const PlanarProblem& problem, std::span<const glm::dvec2> points);  // one blocker
   Blockers blockers_;
   std::vector<uint8_t> exact_raster_;  // the raster the exact test starts from
   std::vector<std::pair<double, double>> spans_;  // FreeOnLine's scratch
   std::vector<std::pair<uint32_t, uint32_t>> row_stack_;  // (resolution, row) still in question
   std::vector<uint32_t> gap_rows_;
   // Scratch, kept between queries to spare allocations.
-  std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_;
-  std::vector<std::vector<glm::dvec2>> kept_points_;
-  std::vector<uint32_t> kept_;
+  std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_, hull_scratch_;
+  std::vector<glm::dvec2> kept_points_;  // the kept pieces' clipped points, one after another
+  std::vector<uint32_t> kept_, kept_begin_, order_;
 };
 
 }  // namespace vistream::visibility

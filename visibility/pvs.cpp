@@ -20,16 +20,21 @@ PvsResult PvsComputer::Compute(const scenes::Aabb& cell, const CellQueryOptions&
   PvsResult result;
   if (tree_.empty()) return result;
   const auto& nodes = tree_.nodes();
-  std::vector<int32_t> stack = {0};
+  // Each node waits with the line of the free ray that proved its parent visible: the
+  // likeliest free ray for it too.
+  std::vector<std::pair<int32_t, FreeLine>> stack = {{0, FreeLine{}}};
   while (!stack.empty()) {
-    const KdNode& node = nodes[stack.back()];
+    const auto [index, hint] = stack.back();
     stack.pop_back();
-    if (!drs->Visible(cell, node.bounds, options, &result.stats)) continue;
+    const KdNode& node = nodes[index];
+    FreeLine witness;
+    if (!drs->Visible(cell, node.bounds, options, &result.stats, hint, &witness)) continue;
     if (node.IsLeaf()) {
       for (ObjectId id : tree_.LeafObjects(node)) result.objects.push_back(id);
     } else {
-      stack.push_back(node.right);
-      stack.push_back(node.left);
+      if (!witness.valid) witness = hint;
+      stack.emplace_back(node.right, witness);
+      stack.emplace_back(node.left, witness);
     }
   }
   std::sort(result.objects.begin(), result.objects.end());
