@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <string>
 
 #define GL_GLEXT_PROTOTYPES
@@ -164,18 +165,23 @@ GlPlanarRaster::~GlPlanarRaster() {
   glDeleteProgram(program_);
 }
 
-void GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
-  // The blockers' hull vertices, for the shader's exact test.
-  next_coeffs_.assign({blockers.eps, static_cast<double>(n), 0.0, 0.0});
+const std::vector<uint8_t>& GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
+  // The blockers' hull vertices, for the shader's exact test (n is filled in per raster).
+  next_coeffs_.assign({blockers.eps, 0.0, 0.0, 0.0});
   for (const visibility::BlockerCoeff& c : blockers.coeffs) next_coeffs_.insert(next_coeffs_.end(), {c.a, c.b, c.c, 0.0});
   next_groups_.clear();
   for (const visibility::Blocker& g : blockers.groups) next_groups_.emplace_back(g.begin, g.end);
-  if (!pixels_.empty() && next_coeffs_ == coeffs_ && next_groups_ == groups_) return;
-  coeffs_.swap(next_coeffs_);
-  groups_.swap(next_groups_);
-  pixels_.clear();  // until drawn
+  if (next_coeffs_ != coeffs_ || next_groups_ != groups_ || coeffs_.empty()) {
+    coeffs_.swap(next_coeffs_);
+    groups_.swap(next_groups_);
+    for (auto& r : rasters_) r.clear();
+  }
+  std::vector<uint8_t>& pixels = rasters_[std::min(std::countr_zero(n), 8)];
+  if (pixels.size() == static_cast<size_t>(n) * n) return pixels;
+  coeffs_[1] = n;
   glBufferData(GL_SHADER_STORAGE_BUFFER, static_cast<GLsizeiptr>(coeffs_.size() * sizeof(double)), coeffs_.data(),
                GL_STREAM_DRAW);
+  coeffs_[1] = 0.0;  // the key leaves n out
 
   // A convex blocker stops a ray iff the ray meets one of its hull edges, and the rays
   // meeting edge pq are those where g_p and g_q differ in sign: a trapeze, or a double
@@ -214,25 +220,26 @@ void GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
   glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices_.size() * sizeof(Vertex)), vertices_.data(),
                GL_STREAM_DRAW);
   glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(vertices_.size()));
-  pixels_.resize(static_cast<size_t>(n) * n);
-  glReadPixels(0, 0, static_cast<GLsizei>(n), static_cast<GLsizei>(n), GL_RED, GL_UNSIGNED_BYTE, pixels_.data());
+  pixels.resize(static_cast<size_t>(n) * n);
+  glReadPixels(0, 0, static_cast<GLsizei>(n), static_cast<GLsizei>(n), GL_RED, GL_UNSIGNED_BYTE, pixels.data());
+  return pixels;
 }
 
 bool GlPlanarRaster::Full(const visibility::Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
                           std::vector<uint32_t>* gap_rows) {
-  Render(blockers, n);
+  const std::vector<uint8_t>& pixels = Render(blockers, n);
   gap_rows->clear();
   for (uint32_t j : rows) {
-    const uint8_t* row = pixels_.data() + static_cast<size_t>(j) * n;
+    const uint8_t* row = pixels.data() + static_cast<size_t>(j) * n;
     if (std::find(row, row + n, 0) != row + n) gap_rows->push_back(j);
   }
   return gap_rows->empty();
 }
 
 void GlPlanarRaster::Draw(const visibility::Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) {
-  Render(blockers, n);
-  pixels->resize(pixels_.size());
-  for (size_t k = 0; k < pixels_.size(); ++k) (*pixels)[k] = pixels_[k] != 0 ? 1 : 0;
+  const std::vector<uint8_t>& drawn = Render(blockers, n);
+  pixels->resize(drawn.size());
+  for (size_t k = 0; k < drawn.size(); ++k) (*pixels)[k] = drawn[k] != 0 ? 1 : 0;
 }
 
 }  // namespace vistream::gl

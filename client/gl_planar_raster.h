@@ -7,6 +7,7 @@
 // set the same pixels (the polygons are drawn a quarter pixel too large, so that no pixel
 // that passes is missed). Needs a GL 4.5 context (client/gl_context.h).
 
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -29,9 +30,9 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
  private:
   GlPlanarRaster() = default;
   absl::Status Init();
-  // Draws the blockers into the framebuffer and reads the n x n raster back into pixels_,
-  // unless pixels_ already holds that raster (the caller asks row by row).
-  void Render(const visibility::Blockers& blockers, uint32_t n);
+  // The n x n raster of the blockers: drawn into the framebuffer and read back, unless drawn
+  // already for the same blockers (the caller asks row by row, from resolution to resolution).
+  const std::vector<uint8_t>& Render(const visibility::Blockers& blockers, uint32_t n);
 
   std::unique_ptr<GlContext> context_;
   unsigned program_ = 0, vao_ = 0, vbo_ = 0, ssbo_ = 0, fbo_ = 0, texture_ = 0;
@@ -44,7 +45,7 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
   std::vector<std::pair<uint32_t, uint32_t>> groups_;  // each blocker's range of coeffs
   std::vector<double> next_coeffs_;
   std::vector<std::pair<uint32_t, uint32_t>> next_groups_;
-  std::vector<uint8_t> pixels_;  // the raster of coeffs_ and groups_, once drawn
+  std::array<std::vector<uint8_t>, 9> rasters_;  // of coeffs_ and groups_ at n = 2^k, once drawn
 };
 
 }  // namespace vistream::gl
