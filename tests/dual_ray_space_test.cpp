@@ -337,26 +337,63 @@ void ForEachRandomPlanarProblem(uint64_t first, uint64_t last, F&& f) {
 }
 
 // PlanarOccluded refines only the rows with a gap, one at a time; it must decide exactly as
-// whole rasters at 16, 32 and 64 would: occluded iff one of them is full. With the free-ray
-// search on, it must still agree: a free ray leaves a gap at every resolution.
+// whole rasters at 16, 32 and 64 would: occluded iff at one resolution every row is full or
+// covered by the blockers together (BandCovered). With the free-ray search on, it must still
+// agree: a free ray leaves a gap at every resolution.
 TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
-  int occluded = 0, visible = 0;
+  int occluded = 0, visible = 0, union_helped = 0;
   CpuRaster raster;
   std::vector<uint8_t> pixels;
+  std::vector<std::pair<double, double>> scratch;
   ForEachRandomPlanarProblem(1, 150, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
     drs.BuildBlockers(pr);
-    bool full = false;
-    for (uint32_t n = 16; n <= 64 && !full && !drs.blockers().groups.empty(); n *= 2) {
-      raster.Draw(drs.blockers(), n, &pixels);
-      full = std::count(pixels.begin(), pixels.end(), 1) == static_cast<long>(pixels.size());
+    const Blockers& blockers = drs.blockers();
+    bool covered = false, raster_full = false;
+    for (uint32_t n = 16; n <= 64 && !covered && !blockers.groups.empty(); n *= 2) {
+      raster.Draw(blockers, n, &pixels);
+      raster_full |= std::count(pixels.begin(), pixels.end(), 1) == static_cast<long>(pixels.size());
+      covered = true;
+      for (uint32_t j = 0; j < n && covered; ++j) {
+        const bool row_full = std::count(pixels.begin() + j * n, pixels.begin() + (j + 1) * n, 1) == n;
+        covered = row_full || blockers.BandCovered(static_cast<double>(j) / n, (j + 1.0) / n, &scratch);
+      }
     }
-    (full ? occluded : visible)++;
+    ASSERT_TRUE(covered || !raster_full) << "seed " << seed;
+    union_helped += covered && !raster_full;
+    (covered ? occluded : visible)++;
     const CellQueryOptions plain{.max_res = 64, .free_ray_test = false}, searching{.max_res = 64};
-    ASSERT_EQ(full, drs.PlanarOccluded(pr, plain, nullptr)) << "seed " << seed;
-    ASSERT_EQ(full, drs.PlanarOccluded(pr, searching, nullptr)) << "seed " << seed;
+    ASSERT_EQ(covered, drs.PlanarOccluded(pr, plain, nullptr)) << "seed " << seed;
+    ASSERT_EQ(covered, drs.PlanarOccluded(pr, searching, nullptr)) << "seed " << seed;
   });
   EXPECT_GT(occluded, 50);
   EXPECT_GT(visible, 50);
+  EXPECT_GT(union_helped, 5) << "blockers together never covered what none covers alone";
+}
+
+// BandCovered is sound: where it says a band is covered, no ray in it is free.
+TEST(Blockers, BandCoveredOnlyWhereNoRayIsFree) {
+  int covered = 0, open = 0;
+  std::vector<std::pair<double, double>> scratch;
+  ForEachRandomPlanarProblem(1, 100, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
+    drs.BuildBlockers(pr);
+    const Blockers& blockers = drs.blockers();
+    scenes::Rng rng(seed);
+    for (uint32_t n : {4u, 16u, 64u}) {
+      const uint32_t j = static_cast<uint32_t>(rng.Below(n));
+      const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
+      if (!blockers.BandCovered(v0, v1, &scratch)) {
+        ++open;
+        continue;
+      }
+      ++covered;
+      for (int m = 0; m < 300; ++m) {
+        const double u = rng.Uniform(0, 1), v = rng.Uniform(v0, v1);
+        ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << seed << ": ray (" << u << ", " << v << ") is free";
+      }
+    }
+  });
+  EXPECT_GT(covered, 100);
+  EXPECT_GT(open, 100);
 }
 
 // A hint only saves time: whatever line it names, the answer stays the same. A witness comes

@@ -51,6 +51,23 @@ bool Blockers::FreeOnLine(double v, std::vector<std::pair<double, double>>* scra
   return FreeRay(*u = 0.5 * (cur + 1.0), v);
 }
 
+bool Blockers::BandCovered(double v0, double v1, std::vector<std::pair<double, double>>* scratch) const {
+  auto& spans = *scratch;
+  spans.clear();
+  for (const Blocker& g : groups) {
+    const auto [lo, hi] = RowBounds(g, v0, v1);
+    if (lo <= hi && hi >= 0.0 && lo <= 1.0) spans.emplace_back(lo, hi);
+  }
+  std::sort(spans.begin(), spans.end());
+  double cur = 0.0;  // [0, cur] is covered
+  for (const auto& [lo, hi] : spans) {
+    if (lo > cur) return false;
+    cur = std::max(cur, hi);
+    if (cur >= 1.0) return true;
+  }
+  return false;
+}
+
 std::pair<double, double> Blockers::RowBounds(const Blocker& g, double v0, double v1) const {
   // Pixel [u0, u1] x [v0, v1] is wholly blocked iff min_k g_k(u1, v1) <= 0 and
   // max_k g_k(u0, v0) >= 0 (each g_k rises with u and v), with the margin eps:

@@ -41,6 +41,10 @@ struct Blockers {
   // it; a gap in their union within [0, 1], confirmed by FreeRay, is returned in *u.
   // `scratch` holds the intervals.
   bool FreeOnLine(double v, std::vector<std::pair<double, double>>* scratch, double* u) const;
+  // Is the whole band v0 <= v <= v1 blocked? Each blocker blocks the u in its RowBounds for
+  // every v of the band; true when their union covers [0, 1]. Sound where a row of pixels
+  // needs each pixel inside one blocker: pixels covered by two blockers together count too.
+  bool BandCovered(double v0, double v1, std::vector<std::pair<double, double>>* scratch) const;
   // The wholly blocked pixels of `g` in the row [v0, v1] are those with u0 >= first and
   // u1 <= second (u0, u1 the pixel's sides).
   std::pair<double, double> RowBounds(const Blocker& g, double v0, double v1) const;

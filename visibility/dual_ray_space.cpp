@@ -418,6 +418,8 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     row_stack_.pop_back();
     if (stats != nullptr) ++stats->raster_rows;
     if (raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
+    // Pixels that no one blocker covers may still be covered by several together.
+    if (blockers_.BandCovered(static_cast<double>(j) / res, static_cast<double>(j + 1) / res, &spans_)) continue;
     double u = 0.0;
     if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {
       if (stats != nullptr) ++stats->free_rays;
