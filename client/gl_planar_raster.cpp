@@ -32,7 +32,7 @@ void main() {
 constexpr const char* kFragmentShader = R"(#version 450
 layout(std430, binding = 0) readonly buffer Blockers {
   dvec4 params;  // eps, n
-  dvec4 coeff[];  // a, b, c of each hull vertex
+  dvec4 coeff[];  // a, b, c, 1 / b of each hull vertex
 };
 flat in uvec2 blocker;
 layout(location = 0) out vec4 colour;
@@ -47,8 +47,8 @@ void main() {
     precise double ra = -eps - c.x - c.z * v1;
     precise double rb = eps - c.x - c.z * v0;
     if (c.y > 0.0lf) {
-      precise double qa = ra / c.y;
-      precise double qb = rb / c.y;
+      precise double qa = ra * c.w;
+      precise double qb = rb * c.w;
       hi = max(hi, qa);
       lo = min(lo, qb);
     } else {
@@ -168,7 +168,7 @@ GlPlanarRaster::~GlPlanarRaster() {
 const std::vector<uint8_t>& GlPlanarRaster::Render(const visibility::Blockers& blockers, uint32_t n) {
   // The blockers' hull vertices, for the shader's exact test (n is filled in per raster).
   next_coeffs_.assign({blockers.eps, 0.0, 0.0, 0.0});
-  for (const visibility::BlockerCoeff& c : blockers.coeffs) next_coeffs_.insert(next_coeffs_.end(), {c.a, c.b, c.c, 0.0});
+  for (const visibility::BlockerCoeff& c : blockers.coeffs) next_coeffs_.insert(next_coeffs_.end(), {c.a, c.b, c.c, c.inv_b});
   next_groups_.clear();
   for (const visibility::Blocker& g : blockers.groups) next_groups_.emplace_back(g.begin, g.end);
   if (next_coeffs_ != coeffs_ || next_groups_ != groups_ || coeffs_.empty()) {

@@ -41,7 +41,7 @@ class GlPlanarRaster final : public visibility::PlanarRaster {
     uint32_t begin, end;
   };
   std::vector<Vertex> vertices_;
-  std::vector<double> coeffs_;  // the shader's storage buffer: eps, n, then a, b, c, 0 each
+  std::vector<double> coeffs_;  // the shader's storage buffer: eps, n, then a, b, c, 1 / b each
   std::vector<std::pair<uint32_t, uint32_t>> groups_;  // each blocker's range of coeffs
   std::vector<double> next_coeffs_;
   std::vector<std::pair<uint32_t, uint32_t>> next_groups_;

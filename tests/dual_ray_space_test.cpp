@@ -232,7 +232,7 @@ TEST(DualRaySpace, HardCasesStayFiniteConservativeAndTranslationInvariant) {
         drs.BuildBlockers(pr);
         ASSERT_TRUE(std::isfinite(drs.blockers().eps)) << c.name;
         for (const BlockerCoeff& k : drs.blockers().coeffs) {
-          ASSERT_TRUE(std::isfinite(k.a) && std::isfinite(k.b) && std::isfinite(k.c)) << c.name;
+          ASSERT_TRUE(std::isfinite(k.a) && std::isfinite(k.b) && std::isfinite(k.c) && std::isfinite(k.inv_b)) << c.name;
         }
         for (const Blocker& g : drs.blockers().groups) ASSERT_FALSE(std::isnan(g.width)) << c.name;
       }

@@ -29,7 +29,7 @@ bool Blockers::FreeOnLine(double v, std::vector<std::pair<double, double>>* scra
       const BlockerCoeff& c = coeffs[k];
       const double rest = c.a + c.c * v;
       if (c.b > 0) {
-        const double root = -rest / c.b;
+        const double root = -rest * c.inv_b;
         lo = std::min(lo, root);
         hi = std::max(hi, root);
       } else {
@@ -78,8 +78,8 @@ std::pair<double, double> Blockers::RowBounds(const Blocker& g, double v0, doubl
     const double ra = -eps - c.a - c.c * v1;  // need b u1 <= ra
     const double rb = eps - c.a - c.c * v0;   // need b u0 >= rb
     if (c.b > 0) {
-      hi = std::max(hi, ra / c.b);
-      lo = std::min(lo, rb / c.b);
+      hi = std::max(hi, ra * c.inv_b);
+      lo = std::min(lo, rb * c.inv_b);
     } else {
       if (ra >= 0) hi = INFINITY;
       if (rb <= 0) lo = -INFINITY;

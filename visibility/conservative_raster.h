@@ -10,6 +10,7 @@
 // i/n >= L(j/n) and (i+1)/n <= U((j+1)/n), each tested with a margin `eps` in g against rounding.
 // Every backend sets exactly the pixels that pass this test for some blocker (PixelBounds).
 
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <utility>
@@ -19,6 +20,13 @@ namespace vistream::visibility {
 
 struct BlockerCoeff {
   double a, b, c;  // g(u, v) = a + b u + c v
+  double inv_b;    // 1 / b where b > 0, else 0: roots by multiplication, the same in every backend
+
+  // A b so small that 1 / b overflows counts as 0: g then no longer depends on u.
+  static BlockerCoeff Of(double a, double b, double c) {
+    const double inv = b > 0 ? 1.0 / b : 0.0;
+    return std::isfinite(inv) ? BlockerCoeff{a, b, c, inv} : BlockerCoeff{a, 0.0, c, 0.0};
+  }
 };
 
 struct Blocker {

@@ -275,7 +275,7 @@ void DualRaySpace::AddGroup(const PlanarProblem& pr, std::span<const glm::dvec2>
   double mn = INFINITY, mx = -INFINITY;
   for (const glm::dvec2& p : points) {
     const double t = (p.x - pr.x1) / w;
-    const BlockerCoeff c{(1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2)};
+    const BlockerCoeff c = BlockerCoeff::Of((1 - t) * pr.r1 + t * pr.r2 - p.y, (1 - t) * (pr.l1 - pr.r1), t * (pr.l2 - pr.r2));
     blockers_.coeffs.push_back(c);
     const double root = c.b > 0 ? -(c.a + 0.5 * c.c) / c.b : (c.a + 0.5 * c.c <= 0 ? INFINITY : -INFINITY);
     mn = std::min(mn, root);
