@@ -266,30 +266,61 @@ std::string Describe(const Scene& s, const Aabb& a, const Aabb& b) {
   return out.str();
 }
 
-TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
-  int occluded = 0, cases = 0;
-  for (uint64_t seed = 1; seed <= 300; ++seed) {
+// One random query from kCell: a RandomGridScene, its query engine, and a box B in it.
+struct RandomQuery {
+  uint64_t seed;
+  int q;            // the query's number within its seed
+  scenes::Rng& rng;  // the seed's generator, for the test's own draws
+  const Scene& s;
+  DualRaySpace& drs;
+  Aabb b;
+};
+
+// Calls f(query) for `per_seed` random boxes B in each RandomGridScene, seeds [first, last].
+template <typename F>
+void ForEachRandomQuery(uint64_t first, uint64_t last, int per_seed, F&& f) {
+  for (uint64_t seed = first; seed <= last; ++seed) {
     scenes::Rng rng(seed);
     const Scene s = testing::RandomGridScene(rng);
     const OccluderSet set = OccluderSet::Build(s);
     DualRaySpace drs(set);
-    for (int q = 0; q < 4; ++q) {
-      const Aabb b = testing::RandomGridBox(rng);
-      const uint32_t res = 16u << rng.Below(5);
-      ++cases;
-      const bool visible = drs.Visible(kCell, b, CellQueryOptions{.max_res = res});
-      // The accelerations (traced free rays, free-ray tests at gaps) never change an answer.
-      ASSERT_EQ(visible, drs.Visible(kCell, b, CellQueryOptions{.max_res = res, .free_ray_test = false}))
-          << "seed " << seed << " query " << q << ": " << Describe(s, kCell, b);
-      if (visible) continue;
-      ++occluded;
-      const auto free = FindFreeSegment(kCell, b, s, seed * 31 + q, 3000);
-      ASSERT_FALSE(free.has_value()) << "seed " << seed << " query " << q << " res " << res
-                                     << ": occluded, but the segment (" << free->first.x << ", " << free->first.y
-                                     << ", " << free->first.z << ") - (" << free->second.x << ", " << free->second.y
-                                     << ", " << free->second.z << ") is free. " << Describe(s, kCell, b);
-    }
+    for (int q = 0; q < per_seed; ++q) f(RandomQuery{seed, q, rng, s, drs, testing::RandomGridBox(rng)});
   }
+}
+
+// Calls f(query, problem, blockers) for each planar problem of those queries, its blockers
+// built.
+template <typename F>
+void ForEachRandomPlanarProblem(uint64_t first, uint64_t last, int per_seed, F&& f) {
+  ForEachRandomQuery(first, last, per_seed, [&](const RandomQuery& r) {
+    for (int axis = 0; axis < 2; ++axis) {
+      for (double sign : {1.0, -1.0}) {
+        PlanarProblem pr;
+        if (!MakePlanarProblem(kCell, r.b, axis, sign, &pr)) continue;
+        r.drs.BuildBlockers(pr);
+        f(r, pr, r.drs.blockers());
+      }
+    }
+  });
+}
+
+TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
+  int occluded = 0, cases = 0;
+  ForEachRandomQuery(1, 300, 4, [&](const RandomQuery& r) {
+    const uint32_t res = 16u << r.rng.Below(5);
+    ++cases;
+    const bool visible = r.drs.Visible(kCell, r.b, CellQueryOptions{.max_res = res});
+    // The accelerations (traced free rays, free-ray tests at gaps) never change an answer.
+    ASSERT_EQ(visible, r.drs.Visible(kCell, r.b, CellQueryOptions{.max_res = res, .free_ray_test = false}))
+        << "seed " << r.seed << " query " << r.q << ": " << Describe(r.s, kCell, r.b);
+    if (visible) return;
+    ++occluded;
+    const auto free = FindFreeSegment(kCell, r.b, r.s, r.seed * 31 + r.q, 3000);
+    ASSERT_FALSE(free.has_value()) << "seed " << r.seed << " query " << r.q << " res " << res
+                                   << ": occluded, but the segment (" << free->first.x << ", " << free->first.y
+                                   << ", " << free->first.z << ") - (" << free->second.x << ", " << free->second.y
+                                   << ", " << free->second.z << ") is free. " << Describe(r.s, kCell, r.b);
+  });
   // The test means something only if occlusion is found often.
   EXPECT_GT(occluded, cases / 10) << occluded << " of " << cases;
 }
@@ -316,26 +347,6 @@ TEST(DualRaySpace, TranslatingEverythingFarAwayChangesNothing) {
 
 // --- Row-by-row refinement and the free-line search. ---
 
-// Calls f(problem, drs) for each planar problem of RandomGridScene queries, seeds [first, last].
-template <typename F>
-void ForEachRandomPlanarProblem(uint64_t first, uint64_t last, F&& f) {
-  for (uint64_t seed = first; seed <= last; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    for (int q = 0; q < 3; ++q) {
-      const Aabb b = testing::RandomGridBox(rng);
-      for (int axis = 0; axis < 2; ++axis) {
-        for (double sign : {1.0, -1.0}) {
-          PlanarProblem pr;
-          if (MakePlanarProblem(kCell, b, axis, sign, &pr)) f(seed, pr, drs);
-        }
-      }
-    }
-  }
-}
-
 // PlanarOccluded refines only the rows with a gap, one at a time; it must decide exactly as
 // whole rasters at 16, 32 and 64 would: occluded iff at one resolution every row is full or
 // covered by the blockers together (BandCovered). With the free-ray search on, it must still
@@ -345,9 +356,7 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
   CpuRaster raster;
   std::vector<uint8_t> pixels;
   std::vector<std::pair<double, double>> scratch;
-  ForEachRandomPlanarProblem(1, 150, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
-    drs.BuildBlockers(pr);
-    const Blockers& blockers = drs.blockers();
+  ForEachRandomPlanarProblem(1, 150, 3, [&](const RandomQuery& r, const PlanarProblem& pr, const Blockers& blockers) {
     bool covered = false, raster_full = false;
     for (uint32_t n = 16; n <= 64 && !covered && !blockers.groups.empty(); n *= 2) {
       raster.Draw(blockers, n, &pixels);
@@ -358,12 +367,12 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
         covered = row_full || blockers.BandCovered(static_cast<double>(j) / n, (j + 1.0) / n, &scratch);
       }
     }
-    ASSERT_TRUE(covered || !raster_full) << "seed " << seed;
+    ASSERT_TRUE(covered || !raster_full) << "seed " << r.seed;
     union_helped += covered && !raster_full;
     (covered ? occluded : visible)++;
     const CellQueryOptions plain{.max_res = 64, .free_ray_test = false}, searching{.max_res = 64};
-    ASSERT_EQ(covered, drs.PlanarOccluded(pr, plain, nullptr)) << "seed " << seed;
-    ASSERT_EQ(covered, drs.PlanarOccluded(pr, searching, nullptr)) << "seed " << seed;
+    ASSERT_EQ(covered, r.drs.PlanarOccluded(pr, plain, nullptr)) << "seed " << r.seed;
+    ASSERT_EQ(covered, r.drs.PlanarOccluded(pr, searching, nullptr)) << "seed " << r.seed;
   });
   EXPECT_GT(occluded, 50);
   EXPECT_GT(visible, 50);
@@ -374,12 +383,9 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
 TEST(Blockers, BandCoveredOnlyWhereNoRayIsFree) {
   int covered = 0, open = 0;
   std::vector<std::pair<double, double>> scratch;
-  ForEachRandomPlanarProblem(1, 100, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
-    drs.BuildBlockers(pr);
-    const Blockers& blockers = drs.blockers();
-    scenes::Rng rng(seed);
+  ForEachRandomPlanarProblem(1, 100, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
     for (uint32_t n : {4u, 16u, 64u}) {
-      const uint32_t j = static_cast<uint32_t>(rng.Below(n));
+      const uint32_t j = static_cast<uint32_t>(r.rng.Below(n));
       const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
       if (!blockers.BandCovered(v0, v1, &scratch)) {
         ++open;
@@ -387,8 +393,8 @@ TEST(Blockers, BandCoveredOnlyWhereNoRayIsFree) {
       }
       ++covered;
       for (int m = 0; m < 300; ++m) {
-        const double u = rng.Uniform(0, 1), v = rng.Uniform(v0, v1);
-        ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << seed << ": ray (" << u << ", " << v << ") is free";
+        const double u = r.rng.Uniform(0, 1), v = r.rng.Uniform(v0, v1);
+        ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << r.seed << ": ray (" << u << ", " << v << ") is free";
       }
     }
   });
@@ -400,41 +406,34 @@ TEST(Blockers, BandCoveredOnlyWhereNoRayIsFree) {
 // only with "visible", and as a hint it proves the same query visible again at once.
 TEST(DualRaySpace, HintsNeverChangeAnAnswerAndWitnessesProveVisibility) {
   int witnessed = 0, hinted_queries = 0;
-  for (uint64_t seed = 1; seed <= 120; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    for (int q = 0; q < 4; ++q) {
-      const Aabb b = testing::RandomGridBox(rng);
-      FreeLine witness;
-      const bool visible = drs.Visible(kCell, b, {}, nullptr, {}, &witness);
-      if (witness.valid) {
-        ++witnessed;
-        ASSERT_TRUE(visible) << "seed " << seed;
-        ASSERT_TRUE(drs.Visible(kCell, b, {}, nullptr, witness)) << "seed " << seed;
-        // It is a free ray (u, v) of the planar problem it came from: on A's face and B's.
-        int free_in = 0;
-        for (int axis = 0; axis < 2; ++axis) {
-          for (double sign : {1.0, -1.0}) {
-            PlanarProblem pr;
-            if (!MakePlanarProblem(kCell, b, axis, sign, &pr)) continue;
-            const glm::dvec2 from = pr.PlanarFromScene(witness.from), to = pr.PlanarFromScene(witness.to);
-            if (std::abs(from.x - pr.x1) > 1e-9 || std::abs(to.x - pr.x2) > 1e-9) continue;
-            drs.BuildBlockers(pr);
-            free_in += drs.blockers().FreeRay((from.y - pr.r1) / (pr.l1 - pr.r1), (to.y - pr.r2) / (pr.l2 - pr.r2));
-          }
+  ForEachRandomQuery(1, 120, 4, [&](const RandomQuery& r) {
+    FreeLine witness;
+    const bool visible = r.drs.Visible(kCell, r.b, {}, nullptr, {}, &witness);
+    if (witness.valid) {
+      ++witnessed;
+      ASSERT_TRUE(visible) << "seed " << r.seed;
+      ASSERT_TRUE(r.drs.Visible(kCell, r.b, {}, nullptr, witness)) << "seed " << r.seed;
+      // It is a free ray (u, v) of the planar problem it came from: on A's face and B's.
+      int free_in = 0;
+      for (int axis = 0; axis < 2; ++axis) {
+        for (double sign : {1.0, -1.0}) {
+          PlanarProblem pr;
+          if (!MakePlanarProblem(kCell, r.b, axis, sign, &pr)) continue;
+          const glm::dvec2 from = pr.PlanarFromScene(witness.from), to = pr.PlanarFromScene(witness.to);
+          if (std::abs(from.x - pr.x1) > 1e-9 || std::abs(to.x - pr.x2) > 1e-9) continue;
+          r.drs.BuildBlockers(pr);
+          free_in += r.drs.blockers().FreeRay((from.y - pr.r1) / (pr.l1 - pr.r1), (to.y - pr.r2) / (pr.l2 - pr.r2));
         }
-        EXPECT_EQ(free_in, 1) << "seed " << seed << ": the witness is no free ray";
       }
-      for (int h = 0; h < 4; ++h) {
-        const FreeLine hint{{rng.Uniform(-5, 15), rng.Uniform(-10, 20)}, {rng.Uniform(20, 100), rng.Uniform(-40, 60)},
-                            true};
-        ++hinted_queries;
-        ASSERT_EQ(visible, drs.Visible(kCell, b, {}, nullptr, hint)) << "seed " << seed << ", hint " << h;
-      }
+      EXPECT_EQ(free_in, 1) << "seed " << r.seed << ": the witness is no free ray";
     }
-  }
+    for (int h = 0; h < 4; ++h) {
+      const FreeLine hint{{r.rng.Uniform(-5, 15), r.rng.Uniform(-10, 20)},
+                          {r.rng.Uniform(20, 100), r.rng.Uniform(-40, 60)}, true};
+      ++hinted_queries;
+      ASSERT_EQ(visible, r.drs.Visible(kCell, r.b, {}, nullptr, hint)) << "seed " << r.seed << ", hint " << h;
+    }
+  });
   EXPECT_GT(witnessed, 100);
   EXPECT_GT(hinted_queries, 1000);
 }
@@ -444,22 +443,19 @@ TEST(DualRaySpace, HintsNeverChangeAnAnswerAndWitnessesProveVisibility) {
 TEST(Blockers, FreeOnLineFindsAFreeRayWheneverOneExists) {
   int found = 0, none = 0;
   std::vector<std::pair<double, double>> scratch;
-  ForEachRandomPlanarProblem(1, 100, [&](uint64_t seed, const PlanarProblem& pr, DualRaySpace& drs) {
-    drs.BuildBlockers(pr);
-    const Blockers& blockers = drs.blockers();
-    scenes::Rng rng(seed);
+  ForEachRandomPlanarProblem(1, 100, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
     for (int k = 0; k < 8; ++k) {
-      const double v = k < 2 ? k : rng.Uniform(0, 1);
+      const double v = k < 2 ? k : r.rng.Uniform(0, 1);
       double u = -1;
       if (blockers.FreeOnLine(v, &scratch, &u)) {
         ++found;
-        ASSERT_TRUE(u >= 0 && u <= 1 && blockers.FreeRay(u, v)) << "seed " << seed << ", v " << v << ", u " << u;
+        ASSERT_TRUE(u >= 0 && u <= 1 && blockers.FreeRay(u, v)) << "seed " << r.seed << ", v " << v << ", u " << u;
         continue;
       }
       ++none;
       for (int m = 0; m <= 400; ++m) {
         const double w = m / 400.0;
-        ASSERT_FALSE(blockers.FreeRay(w, v)) << "seed " << seed << ": ray (" << w << ", " << v << ") is free";
+        ASSERT_FALSE(blockers.FreeRay(w, v)) << "seed " << r.seed << ": ray (" << w << ", " << v << ") is free";
       }
     }
   });
@@ -494,37 +490,24 @@ TEST(ExactCover, WallOccludesAndGapDoesNot) {
 TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
   int exact_covered = 0, raster_full = 0, raster_missed = 0;
   CpuRaster raster;
-  for (uint64_t seed = 1; seed <= 120; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    const Aabb b = testing::RandomGridBox(rng);
-    for (int axis = 0; axis < 2; ++axis) {
-      for (double sign : {1.0, -1.0}) {
-        PlanarProblem pr;
-        if (!MakePlanarProblem(kCell, b, axis, sign, &pr)) continue;
-        drs.BuildBlockers(pr);
-        const Blockers& blockers = drs.blockers();
-        const bool covered = ExactlyCovered(blockers);
-        std::vector<uint32_t> rows(64), gap_rows;
-        std::iota(rows.begin(), rows.end(), 0u);
-        const bool full = raster.Full(blockers, 64, rows, &gap_rows);
-        std::vector<uint8_t> pixels;
-        raster.Draw(blockers, 16, &pixels);
-        ASSERT_EQ(covered, ExactlyCovered(blockers, pixels, 16)) << "seed " << seed << ": starting from the raster's gaps";
-        exact_covered += covered;
-        raster_full += full;
-        raster_missed += covered && !full;
-        ASSERT_TRUE(covered || !full) << "seed " << seed << ": the raster covers what the exact test does not";
-        if (!covered) continue;
-        for (int k = 0; k < 2000; ++k) {
-          const double u = rng.Uniform(0, 1), v = rng.Uniform(0, 1);
-          ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << seed << ": covered, yet ray (" << u << ", " << v << ") is free";
-        }
-      }
+  ForEachRandomPlanarProblem(1, 120, 1, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    const bool covered = ExactlyCovered(blockers);
+    std::vector<uint32_t> rows(64), gap_rows;
+    std::iota(rows.begin(), rows.end(), 0u);
+    const bool full = raster.Full(blockers, 64, rows, &gap_rows);
+    std::vector<uint8_t> pixels;
+    raster.Draw(blockers, 16, &pixels);
+    ASSERT_EQ(covered, ExactlyCovered(blockers, pixels, 16)) << "seed " << r.seed << ": starting from the raster's gaps";
+    exact_covered += covered;
+    raster_full += full;
+    raster_missed += covered && !full;
+    ASSERT_TRUE(covered || !full) << "seed " << r.seed << ": the raster covers what the exact test does not";
+    if (!covered) return;
+    for (int k = 0; k < 2000; ++k) {
+      const double u = r.rng.Uniform(0, 1), v = r.rng.Uniform(0, 1);
+      ASSERT_FALSE(blockers.FreeRay(u, v)) << "seed " << r.seed << ": covered, yet ray (" << u << ", " << v << ") is free";
     }
-  }
+  });
   EXPECT_GT(exact_covered, 20) << "too few covered cases to mean anything";
   EXPECT_GT(raster_full, 10);
   // The exact test is worth having only if it decides cases the raster cannot.
@@ -533,26 +516,19 @@ TEST(ExactCover, BracketsTheRasterAndAgreesWithSampledRays) {
 
 TEST(ExactCover, NeverOccludedWhileAFreeSegmentExists) {
   int occluded = 0, cases = 0;
-  for (uint64_t seed = 301; seed <= 400; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    for (int q = 0; q < 3; ++q) {
-      const Aabb b = testing::RandomGridBox(rng);
-      ++cases;
-      const bool exact = drs.Visible(kCell, b, CellQueryOptions{.max_res = 32, .exact = true});
-      // Anything the raster proves hidden, the exact test proves too.
-      if (!drs.Visible(kCell, b, CellQueryOptions{.max_res = 256})) {
-        ASSERT_FALSE(exact) << "seed " << seed << ": " << Describe(s, kCell, b);
-      }
-      if (exact) continue;
-      ++occluded;
-      const auto free = FindFreeSegment(kCell, b, s, seed * 31 + q, 3000);
-      ASSERT_FALSE(free.has_value()) << "seed " << seed << " query " << q << ": occluded, but a segment is free. "
-                                     << Describe(s, kCell, b);
+  ForEachRandomQuery(301, 400, 3, [&](const RandomQuery& r) {
+    ++cases;
+    const bool exact = r.drs.Visible(kCell, r.b, CellQueryOptions{.max_res = 32, .exact = true});
+    // Anything the raster proves hidden, the exact test proves too.
+    if (!r.drs.Visible(kCell, r.b, CellQueryOptions{.max_res = 256})) {
+      ASSERT_FALSE(exact) << "seed " << r.seed << ": " << Describe(r.s, kCell, r.b);
     }
-  }
+    if (exact) return;
+    ++occluded;
+    const auto free = FindFreeSegment(kCell, r.b, r.s, r.seed * 31 + r.q, 3000);
+    ASSERT_FALSE(free.has_value()) << "seed " << r.seed << " query " << r.q << ": occluded, but a segment is free. "
+                                   << Describe(r.s, kCell, r.b);
+  });
   EXPECT_GT(occluded, cases / 10) << occluded << " of " << cases;
 }
 

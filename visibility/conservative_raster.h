@@ -50,8 +50,8 @@ struct Blockers {
   // `scratch` holds the intervals.
   bool FreeOnLine(double v, std::vector<std::pair<double, double>>* scratch, double* u) const;
   // Is the whole band v0 <= v <= v1 blocked? Each blocker blocks the u in its RowBounds for
-  // every v of the band; true when their union covers [0, 1]. Sound where a row of pixels
-  // needs each pixel inside one blocker: pixels covered by two blockers together count too.
+  // every v of the band; true when their union covers [0, 1]. Stronger than a full row of
+  // the raster, which needs each pixel inside one blocker.
   bool BandCovered(double v0, double v1, std::vector<std::pair<double, double>>* scratch) const;
   // The wholly blocked pixels of `g` in the row [v0, v1] are those with u0 >= first and
   // u1 <= second (u0, u1 the pixel's sides).
@@ -75,7 +75,8 @@ class PlanarRaster {
   virtual void Draw(const Blockers& blockers, uint32_t n, std::vector<uint8_t>* pixels) = 0;
 };
 
-// Per-row exact intervals on the CPU, one row at a time, stopping at the first row with a gap.
+// Per-row exact intervals on the CPU, only the rows asked for; a row stops at the blocker that
+// fills it.
 class CpuRaster final : public PlanarRaster {
  public:
   bool Full(const Blockers& blockers, uint32_t n, std::span<const uint32_t> rows,
