@@ -58,10 +58,11 @@ class OccluderSet {
 
   const PieceBounds& bounds(uint32_t piece) const { return bounds_[piece]; }
 
-  // Appends each piece, once, whose box overlaps the convex polygon `hull` (scene-local xy)
-  // and for whose bounds keep(bounds) is true. `keep` must be monotone: true for bounds
-  // whenever true for bounds that they contain. A grid cell for whose bounds (the union of
-  // its pieces') keep is false is skipped whole.
+  // Appends each piece, once, that is listed in a grid cell the convex polygon `hull`
+  // (scene-local xy) overlaps and for whose bounds keep(bounds) is true: so at least every
+  // such piece whose box meets the hull. `keep` must be monotone (true for bounds whenever
+  // true for bounds inside them): a cell for whose bounds, the union of its pieces', keep is
+  // false is skipped whole.
   template <typename Keep>
   void Gather(std::span<const glm::dvec2> hull, Keep&& keep, GatherScratch* scratch, std::vector<uint32_t>* out) const;
 
