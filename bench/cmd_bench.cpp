@@ -254,6 +254,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--csv", args->csv, "CSV output ('' for none)")->capture_default_str();
   c->add_flag("--json", args->json, "print one JSON object instead of the Markdown table");
   c->callback([args, done] { done(Table1(*args)); });
+  AddBenchEpsilonCommand(bench, done);
 }
 
 }  // namespace vistream::cli

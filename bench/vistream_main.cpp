@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   auto done = [&exit_code](int code) { exit_code = code; };
   vistream::cli::AddSceneCommands(app, done);
   vistream::cli::AddPvsCommand(app, done);
+  vistream::cli::AddEpsilonCommand(app, done);
   vistream::cli::AddBenchCommands(app, done);
   vistream::cli::InstallCancelHandler();
   try {

@@ -1,0 +1,233 @@
+// vistream bench epsilon: Tables 1 and 2 of Cohen-Or & Zadicario 1998 with this project's
+// numbers: culling over random ground-level neighbourhoods, and the time each optimisation
+// column takes, all columns over the same neighbourhoods in one run.
+#include <algorithm>
+#include <cstdio>
+#include <map>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench/cli_common.h"
+#include "bench/commands.h"
+#include "scenes/catalog.h"
+#include "scenes/progress.h"
+#include "visibility/epsilon_superset.h"
+
+namespace vistream::cli {
+
+namespace {
+
+struct BenchEpsilonArgs {
+  std::string scene = "city1";
+  std::vector<std::string> opts = {"none", "boxes", "occluders", "rays", "paper", "all"};
+  size_t count = 100;
+  uint64_t seed = 1998;
+  double size = 0.0;  // 0: a quarter of the typical object
+  bool json = false;
+};
+
+// The paper's figures (SGI R4400): Table 1 per model, Table 2 (city1) per column.
+struct PaperTable1 {
+  double polygons, occluded_polygons, boxes, occluded_boxes, first_occluders;
+};
+const std::map<std::string, PaperTable1> kPaperTable1 = {{"city1", {21280, 20062, 2128, 1954, 1427}},
+                                                         {"city2", {21280, 18713, 2128, 1755, 1225}}};
+struct PaperTable2 {
+  double total_ms, box_ms, polygon_ms, box_tests, polygon_tests;  // -1: not applicable
+};
+const std::map<std::string, PaperTable2> kPaperTable2 = {{"none", {30170, -1, 29820, -1, 517800}},
+                                                         {"boxes", {8900, 7450, 1410, 135278, 38648}},
+                                                         {"occluders", {8850, 7340, 1400, 135089, 38648}},
+                                                         {"rays", {7040, 5540, 1410, 45570, 38648}},
+                                                         {"paper", {7030, 5550, 1390, 42414, 38648}},
+                                                         {"all", {7030, 5550, 1390, 42414, 38648}}};
+
+struct Column {
+  std::string opt;
+  std::vector<double> ms;
+  double box_ms = 0, polygon_ms = 0, rays = 0, traversals = 0, box_tests = 0, polygon_tests = 0;
+  double visible_triangles = 0, total_triangles = 0, occluded_boxes = 0, total_boxes = 0, first_occluders = 0;
+};
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+std::string Paper(double v) { return v < 0 ? "-" : absl::StrFormat("%.0f", v); }
+
+int BenchEpsilon(const BenchEpsilonArgs& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  std::vector<visibility::EpsilonOptions> options;
+  for (const std::string& name : a.opts) {
+    absl::StatusOr<visibility::EpsilonOptions> o = visibility::EpsilonOptions::FromName(name);
+    if (!o.ok()) return Fail(absl::InvalidArgumentError("--opts: " + std::string(o.status().message())));
+    options.push_back(*o);
+  }
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
+  if (!scene.ok()) return Fail(scene.status());
+  scenes::ViewcellSpec spec;
+  if (auto entry = scenes::FindCatalogEntry(a.scene); entry.ok()) spec = entry->viewcell;
+  const double typical = visibility::TypicalObjectSize(*scene);
+  const double size = a.size > 0 ? a.size : 0.25 * typical;
+  const std::vector<scenes::Aabb> boxes = visibility::SampleNeighbourhoods(*scene, a.count, size, spec.base_m, a.seed);
+  if (boxes.empty()) return Fail(absl::FailedPreconditionError("no free ground-level neighbourhood found in " + a.scene));
+  absl::StatusOr<std::unique_ptr<visibility::EpsilonSuperset>> eps = visibility::EpsilonSuperset::Create(*scene);
+  if (!eps.ok()) return Fail(eps.status());
+
+  std::vector<Column> columns(options.size());
+  for (size_t c = 0; c < options.size(); ++c) columns[c].opt = a.opts[c];
+  scenes::Progress progress("epsilon", boxes.size() * options.size(), &CancelFlag());
+  // Columns alternate per neighbourhood, so that a noisy stretch of the run hits all alike.
+  for (size_t k = 0; k < boxes.size(); ++k) {
+    std::vector<uint32_t> reference;
+    for (size_t c = 0; c < options.size(); ++c) {
+      const visibility::EpsilonResult r = (*eps)->Compute(boxes[k], options[c]);
+      // Every column is the same conservative test with different shortcuts: a column that
+      // drops hidden occluders may keep more, none may keep less than the first column.
+      if (c == 0) {
+        reference = r.triangles;
+      } else if (!std::includes(r.triangles.begin(), r.triangles.end(), reference.begin(), reference.end()) ||
+                 (!options[c].drop_hidden_occluders && !options[0].drop_hidden_occluders && r.triangles != reference)) {
+        return Fail(absl::InternalError(absl::StrFormat(
+            "neighbourhood %zu: column %s gives a different superset from column %s", k, a.opts[c], a.opts[0])));
+      }
+      Column& col = columns[c];
+      const visibility::EpsilonStats& s = r.stats;
+      col.ms.push_back(s.ms);
+      col.box_ms += s.box_ms;
+      col.polygon_ms += s.polygon_ms;
+      col.rays += static_cast<double>(s.rays);
+      col.traversals += static_cast<double>(s.traversals);
+      col.box_tests += static_cast<double>(s.box_ray_tests);
+      col.polygon_tests += static_cast<double>(s.polygon_ray_tests);
+      col.visible_triangles += static_cast<double>(s.visible_triangles);
+      col.total_triangles += static_cast<double>(s.total_triangles);
+      col.occluded_boxes += static_cast<double>(s.occluded_boxes);
+      col.total_boxes += static_cast<double>(s.total_boxes);
+      col.first_occluders += static_cast<double>(s.first_occluders);
+      progress.Advance();
+      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+    }
+  }
+  progress.Finish();
+  const auto n = static_cast<double>(boxes.size());
+  auto mean = [n](double sum) { return sum / n; };
+
+  // Table 1 from the fully optimised column (the last one given).
+  const Column& full = columns.back();
+  const PaperTable1* p1 = kPaperTable1.count(scene->name) ? &kPaperTable1.at(scene->name) : nullptr;
+  const double polygons = mean(full.total_triangles), occluded = polygons - mean(full.visible_triangles);
+
+  if (a.json) {
+    nlohmann::json j;
+    j["scene"] = scene->name;
+    j["neighbourhoods"] = boxes.size();
+    j["size"] = size;
+    j["typical_object_size"] = typical;
+    j["seed"] = a.seed;
+    j["prisms"] = (*eps)->prism_count();
+    j["table1"] = {{"opt", full.opt},
+                   {"total_polygons", polygons},
+                   {"occluded_polygons", occluded},
+                   {"occluded_polygons_pct", polygons > 0 ? 100.0 * occluded / polygons : 0.0},
+                   {"total_boxes", mean(full.total_boxes)},
+                   {"occluded_boxes", mean(full.occluded_boxes)},
+                   {"first_occluders", mean(full.first_occluders)}};
+    j["table2"] = nlohmann::json::array();
+    for (const Column& c : columns) {
+      double sum = 0;
+      for (double m : c.ms) sum += m;
+      j["table2"].push_back({{"opt", c.opt},
+                             {"ms", sum / n},
+                             {"median_ms", Median(c.ms)},
+                             {"box_ms", mean(c.box_ms)},
+                             {"polygon_ms", mean(c.polygon_ms)},
+                             {"rays", mean(c.rays)},
+                             {"traversals", mean(c.traversals)},
+                             {"box_ray_tests", mean(c.box_tests)},
+                             {"polygon_ray_tests", mean(c.polygon_tests)},
+                             {"visible_triangles", mean(c.visible_triangles)}});
+    }
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+
+  std::printf("ε-superset on %s: %zu random ground-level neighbourhoods of %.2f m (a quarter of the typical "
+              "object, %.2f m), bottom %.2f m above the ground, seed %llu; %zu convex prisms. Means per "
+              "neighbourhood, one core.\n\n",
+              scene->name.c_str(), boxes.size(), size, typical, spec.base_m,
+              static_cast<unsigned long long>(a.seed), (*eps)->prism_count());
+  std::printf("Table 1 (column %s)\n\n| | this run | paper |\n|---|---:|---:|\n", full.opt.c_str());
+  auto row1 = [&](const char* name, double v, double paper) {
+    std::printf("| %s | %.1f | %s |\n", name, v, p1 ? Paper(paper).c_str() : "-");
+  };
+  row1("total polygons (triangles here)", polygons, p1 ? p1->polygons : -1);
+  row1("occluded polygons", occluded, p1 ? p1->occluded_polygons : -1);
+  row1("total bounding boxes", mean(full.total_boxes), p1 ? p1->boxes : -1);
+  row1("occluded boxes", mean(full.occluded_boxes), p1 ? p1->occluded_boxes : -1);
+  row1("first occluders", mean(full.first_occluders), p1 ? p1->first_occluders : -1);
+  std::printf("| occluded polygons %% | %.2f | %s |\n", polygons > 0 ? 100.0 * occluded / polygons : 0.0,
+              p1 ? absl::StrFormat("%.2f", 100.0 * p1->occluded_polygons / p1->polygons).c_str() : "-");
+
+  std::printf("\nTable 2 (ms per neighbourhood; the paper's city1 figures in brackets)\n\n| | ");
+  for (const Column& c : columns) std::printf("%s | ", c.opt.c_str());
+  std::printf("\n|---|");
+  for (size_t c = 0; c < columns.size(); ++c) std::printf("---:|");
+  std::printf("\n");
+  auto row2 = [&](const char* name, auto value, auto paper) {
+    std::printf("| %s | ", name);
+    for (const Column& c : columns) {
+      const auto it = kPaperTable2.find(c.opt);
+      std::printf("%s (%s) | ", value(c).c_str(), it == kPaperTable2.end() ? "-" : Paper(paper(it->second)).c_str());
+    }
+    std::printf("\n");
+  };
+  auto fmt = [](double v) { return absl::StrFormat(v < 100 ? "%.2f" : "%.0f", v); };
+  row2(
+      "total time, mean",
+      [&](const Column& c) {
+        double sum = 0;
+        for (double m : c.ms) sum += m;
+        return fmt(sum / n);
+      },
+      [](const PaperTable2& p) { return p.total_ms; });
+  row2("total time, median", [&](const Column& c) { return fmt(Median(c.ms)); }, [](const PaperTable2&) { return -1.0; });
+  row2("box occlusion time", [&](const Column& c) { return fmt(mean(c.box_ms)); },
+       [](const PaperTable2& p) { return p.box_ms; });
+  row2("polygon occlusion time", [&](const Column& c) { return fmt(mean(c.polygon_ms)); },
+       [](const PaperTable2& p) { return p.polygon_ms; });
+  row2("ray / occluder tests, boxes", [&](const Column& c) { return fmt(mean(c.box_tests)); },
+       [](const PaperTable2& p) { return p.box_tests; });
+  row2("ray / occluder tests, polygons", [&](const Column& c) { return fmt(mean(c.polygon_tests)); },
+       [](const PaperTable2& p) { return p.polygon_tests; });
+  row2("rays", [&](const Column& c) { return fmt(mean(c.rays)); }, [](const PaperTable2&) { return -1.0; });
+  row2("Embree traversals", [&](const Column& c) { return fmt(mean(c.traversals)); },
+       [](const PaperTable2&) { return -1.0; });
+  row2("visible triangles", [&](const Column& c) { return fmt(mean(c.visible_triangles)); },
+       [](const PaperTable2&) { return -1.0; });
+  return 0;
+}
+
+}  // namespace
+
+void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done) {
+  auto args = std::make_shared<BenchEpsilonArgs>();
+  CLI::App* c = bench->add_subcommand("epsilon", "ε-superset: the paper's Tables 1 and 2 over random neighbourhoods");
+  c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name (city1, city2)")->capture_default_str();
+  c->add_option("--count", args->count, "neighbourhoods")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--seed", args->seed, "seed of the neighbourhood sample")->capture_default_str();
+  c->add_option("--size", args->size, "neighbourhood edge in metres (default: a quarter of the typical object)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--opts", args->opts, "columns: none, boxes, occluders, rays, paper, all")
+      ->delimiter(',')
+      ->capture_default_str()
+      ->check(CLI::IsMember({"none", "boxes", "occluders", "rays", "paper", "all"}));
+  c->add_flag("--json", args->json, "print one JSON object instead of the Markdown tables");
+  c->callback([args, done] { done(BenchEpsilon(*args)); });
+}
+
+}  // namespace vistream::cli

@@ -1,0 +1,631 @@
+#include "visibility/epsilon_superset.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <thread>
+#include <tuple>
+
+#include <absl/strings/str_cat.h>
+#include <embree3/rtcore.h>
+#include <glm/geometric.hpp>
+
+#include "scenes/random.h"
+#include "visibility/occluder_set.h"
+
+namespace vistream::visibility {
+
+absl::StatusOr<EpsilonOptions> EpsilonOptions::FromName(std::string_view name) {
+  if (name == "none") return EpsilonOptions{false, false, false, false, false, false};
+  if (name == "boxes") return EpsilonOptions{true, false, false, false, false, false};
+  if (name == "occluders") return EpsilonOptions{true, true, false, false, false, false};
+  if (name == "rays") return EpsilonOptions{true, false, true, false, false, false};
+  if (name == "paper") return EpsilonOptions{true, true, true, false, false, false};
+  if (name == "all") return EpsilonOptions{true, true, true, true, true, true};
+  return absl::InvalidArgumentError(
+      absl::StrCat("optimisation '", std::string(name), "': expected none, boxes, occluders, rays, paper or all"));
+}
+
+struct EpsilonSuperset::Embree {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  ~Embree() {
+    if (scene != nullptr) rtcReleaseScene(scene);
+    if (device != nullptr) rtcReleaseDevice(device);
+  }
+};
+
+namespace {
+
+double Ms(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The distinct corners of a box: 8, or fewer when it is flat along some axis. Bit a of
+// `bits` says whether the corner is on the max side along axis a; a corner of a flat axis is
+// on both sides.
+struct Corner {
+  glm::dvec3 p;
+  uint8_t bits;
+};
+
+int Corners(const Aabb& b, std::array<Corner, 8>* out) {
+  int n = 0;
+  for (uint8_t bits = 0; bits < 8; ++bits) {
+    bool duplicate = false;
+    for (int a = 0; a < 3; ++a) duplicate |= ((bits >> a) & 1) && b.min[a] == b.max[a];
+    if (duplicate) continue;
+    (*out)[n++] = {glm::dvec3((bits & 1) ? b.max.x : b.min.x, (bits & 2) ? b.max.y : b.min.y,
+                              (bits & 4) ? b.max.z : b.min.z),
+                   bits};
+  }
+  return n;
+}
+
+// Whether `c` lies on the face of `b` on side `max_side` of axis `a`.
+bool OnFace(const Aabb& b, const Corner& c, int a, bool max_side) {
+  return b.min[a] == b.max[a] || (((c.bits >> a) & 1) != 0) == max_side;
+}
+
+bool Overlap(const Aabb& a, const Aabb& b) {
+  for (int k = 0; k < 3; ++k) {
+    if (a.max[k] < b.min[k] || b.max[k] < a.min[k]) return false;
+  }
+  return true;
+}
+
+double BoxDistance2(const Aabb& a, const Aabb& b) {
+  double d2 = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double gap = std::max({0.0, b.min[k] - a.max[k], a.min[k] - b.max[k]});
+    d2 += gap * gap;
+  }
+  return d2;
+}
+
+}  // namespace
+
+// A segment from a corner of the neighbourhood to an occludee vertex, relative to the query
+// origin: e + t·d for t in [0, 1].
+struct Ray {
+  glm::dvec3 e, d;
+};
+
+// One neighbourhood's computation: the box's corners, the per-occludee rays, the hidden
+// objects that stop being occluders, and Embree's intersect context.
+struct EpsilonSuperset::Query {
+  // Embree passes this back to the intersect callback; `base` must come first.
+  struct TraceContext {
+    RTCIntersectContext base;
+    Query* query;
+    const Ray* ray;
+  };
+  static constexpr uint32_t kNone = ~0u;
+
+  const EpsilonSuperset& set;
+  const EpsilonOptions& options;
+  Aabb box;
+  glm::dvec3 q;  // query origin: geometric decisions use coordinates relative to it
+  std::array<glm::dvec3, 8> corner;  // the box's distinct corners, relative to q
+  // For a vertex in region r (per axis: 0 below the box, 1 within, 2 above; r = x + 3y + 9z),
+  // the corners to cast from: those on a face of the box that the vertex lies strictly
+  // outside of. A segment from any other corner enters the box through such a face, at a
+  // point those corners imply. None for r = 13: a vertex in the box, which nothing hides.
+  std::array<uint8_t, 27> corner_mask{};
+  std::vector<uint8_t> dropped;  // per object: hidden, so no longer an occluder
+  std::optional<ObjectId> skip;  // the occludee's own object, while testing its box
+  std::vector<std::pair<double, uint32_t>> hits;
+  std::vector<Ray> rays;
+  std::array<uint32_t, 2> recent = {kNone, kNone};  // the prisms that hid the last occludees
+  uint64_t* ray_tests = nullptr;
+  EpsilonStats stats;
+
+  Query(const EpsilonSuperset& s, const EpsilonOptions& o, const Aabb& b)
+      : set(s), options(o), box(b), q(b.min), dropped(o.drop_hidden_occluders ? s.scene_.objects.size() : 0, 0) {
+    std::array<Corner, 8> c;
+    const int n = Corners(box, &c);
+    for (int r = 0; r < 27; ++r) {
+      if (r == 13) continue;
+      const int side[3] = {r % 3, (r / 3) % 3, r / 9};
+      for (int k = 0; k < n; ++k) {
+        bool needed = !options.silhouette_rays;
+        for (int a = 0; a < 3 && !needed; ++a) {
+          needed = (side[a] == 0 && OnFace(box, c[k], a, false)) || (side[a] == 2 && OnFace(box, c[k], a, true));
+        }
+        if (needed) corner_mask[r] |= static_cast<uint8_t>(1u << k);
+      }
+    }
+    for (int k = 0; k < n; ++k) corner[k] = c[k].p - q;
+    corner_count = n;
+  }
+  int corner_count = 0;
+
+  // A prism may occlude unless its object is hidden (and so dropped), is the occludee itself
+  // (testing boxes), or its box meets the neighbourhood, which may then lie in its solid.
+  bool Usable(uint32_t prism) const {
+    const ObjectId object = set.prisms_[prism].object;
+    if (skip == object) return false;
+    if (!dropped.empty() && dropped[object]) return false;
+    return !Overlap(set.scene_.objects[object].bounds, box);
+  }
+
+  bool Crosses(uint32_t prism, const Ray& r) {
+    ++*ray_tests;
+    double t_in = 0.0;
+    return set.Crosses(prism, q, r.e, r.d, &t_in);
+  }
+
+  static void Intersect(const RTCIntersectFunctionNArguments* args) {
+    if (args->valid[0] == 0) return;
+    auto* ctx = reinterpret_cast<TraceContext*>(args->context);
+    Query& query = *ctx->query;
+    if (!query.Usable(args->primID)) return;
+    ++*query.ray_tests;
+    double t_in = 0.0;
+    if (query.set.Crosses(args->primID, query.q, ctx->ray->e, ctx->ray->d, &t_in)) {
+      query.hits.emplace_back(t_in, args->primID);
+    }
+    // No hit is reported, so Embree goes on to every prism box along the segment.
+  }
+
+  // Every usable prism `r` crosses, nearest first, into `hits`: one Embree all-hits traversal.
+  void Trace(const Ray& r) {
+    hits.clear();
+    TraceContext ctx;
+    rtcInitIntersectContext(&ctx.base);
+    ctx.query = this;
+    ctx.ray = &r;
+    const glm::dvec3 o = q + r.e - set.frame_;
+    RTCRayHit rh{};
+    rh.ray.org_x = static_cast<float>(o.x);
+    rh.ray.org_y = static_cast<float>(o.y);
+    rh.ray.org_z = static_cast<float>(o.z);
+    rh.ray.dir_x = static_cast<float>(r.d.x);
+    rh.ray.dir_y = static_cast<float>(r.d.y);
+    rh.ray.dir_z = static_cast<float>(r.d.z);
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = 1.0f;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(set.embree_->scene, &ctx.base, &rh);
+    ++stats.traversals;
+    std::sort(hits.begin(), hits.end());
+  }
+
+  // Appends to `rays` the rays to vertex `p` (absolute). False if `p` lies in the box.
+  bool AddRays(const glm::dvec3& p) {
+    const int r = (p.x < box.min.x ? 0 : p.x > box.max.x ? 2 : 1) + 3 * (p.y < box.min.y ? 0 : p.y > box.max.y ? 2 : 1) +
+                  9 * (p.z < box.min.z ? 0 : p.z > box.max.z ? 2 : 1);
+    if (r == 13) return false;
+    const glm::dvec3 pq = p - q;
+    const unsigned mask = corner_mask[r];
+    for (int k = 0; k < corner_count; ++k) {
+      if (mask & (1u << k)) {
+        rays.push_back({corner[k], pq - corner[k]});
+      } else {
+        ++stats.skipped_rays;
+      }
+    }
+    return true;
+  }
+
+  // Whether box `b` is hidden; prisms of `own` (the object it bounds) are not tried.
+  bool BoxHidden(const Aabb& b, std::optional<ObjectId> own, uint64_t* tests, bool* first) {
+    *first = false;
+    if (Overlap(b, box)) return false;
+    // The box's corners on faces that some point of the neighbourhood lies outside of: from
+    // any such point, a segment to another corner enters the box through one of them.
+    std::array<Corner, 8> pc;
+    const int n = Corners(b, &pc);
+    rays.clear();
+    for (int c = 0; c < n; ++c) {
+      bool needed = !options.silhouette_rays;
+      for (int a = 0; a < 3 && !needed; ++a) {
+        needed = (box.min[a] < b.min[a] && OnFace(b, pc[c], a, false)) ||
+                 (box.max[a] > b.max[a] && OnFace(b, pc[c], a, true));
+      }
+      if (!needed) {
+        stats.skipped_rays += corner_count;
+      } else if (!AddRays(pc[c].p)) {
+        return false;
+      }
+    }
+    skip = own;
+    const bool hidden = Hidden(std::nullopt, tests, first);
+    skip.reset();
+    return hidden;
+  }
+
+  // Whether one usable prism is crossed by every ray in `rays`. The hints (when on) are
+  // tried first: the occluders that hid the last occludees, and `own`'s prisms, which hide
+  // the far side of their object. Then the first ray gathers every prism it crosses and the
+  // others are tried nearest first; *first says the nearest one was it.
+  bool Hidden(std::optional<ObjectId> own, uint64_t* tests, bool* first) {
+    *first = false;
+    if (rays.empty()) return false;
+    ray_tests = tests;
+    size_t reached = 0;
+    auto crosses_all = [&](uint32_t prism, size_t from) {
+      for (size_t r = from; r < rays.size(); ++r) {
+        reached = std::max(reached, r);
+        if (!Crosses(prism, rays[r])) return false;
+      }
+      return true;
+    };
+    auto found = [&](uint32_t prism) {
+      stats.rays += reached + 1;
+      if (options.hints && recent[0] != prism) recent[1] = recent[0], recent[0] = prism;
+      return true;
+    };
+    if (options.hints) {
+      for (uint32_t prism : recent) {
+        if (prism != kNone && Usable(prism) && crosses_all(prism, 0)) return found(prism);
+      }
+      if (own.has_value()) {
+        for (uint32_t prism : set.PrismsOf(*own)) {
+          if (Usable(prism) && crosses_all(prism, 0)) return found(prism);
+        }
+      }
+    }
+    Trace(rays[0]);
+    for (size_t h = 0; h < hits.size(); ++h) {
+      if (crosses_all(hits[h].second, 1)) {
+        *first = h == 0;
+        return found(hits[h].second);
+      }
+    }
+    stats.rays += reached + 1;
+    return false;
+  }
+
+  // The triangles of `object` that no single prism hides, appended as ids to `out`. With
+  // shared vertices, each distinct vertex gets the complete set of prisms that hide it from
+  // the whole box (one traversal), and a triangle is hidden when its three sets meet: the
+  // same test as triangle by triangle, with a third of the rays.
+  void VisibleTriangles(ObjectId object, uint64_t* tests, std::vector<uint32_t>* out) {
+    const scenes::Mesh& mesh = set.scene_.objects[object].mesh;
+    const auto n = static_cast<uint32_t>(mesh.TriangleCount());
+    stats.tested_triangles += n;
+    if (!options.shared_vertices) {
+      for (uint32_t t = 0; t < n; ++t) {
+        rays.clear();
+        bool first = false, inside = false;
+        for (int k = 0; k < 3; ++k) inside |= !AddRays(glm::dvec3(mesh.positions[mesh.indices[3 * t + k]]));
+        if (inside || !Hidden(object, tests, &first)) out->push_back(set.TriangleId(object, t));
+      }
+      return;
+    }
+    ray_tests = tests;
+    // Distinct positions: flat-shaded meshes repeat each corner once per face.
+    order.resize(mesh.positions.size());
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    auto key = [&](uint32_t i) {
+      const glm::vec3& v = mesh.positions[i];
+      return std::tuple(v.x, v.y, v.z);
+    };
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+    unique_of.resize(mesh.positions.size());
+    uint32_t distinct = 0;
+    for (size_t i = 0; i < order.size(); ++i) {
+      if (i > 0 && key(order[i]) != key(order[i - 1])) ++distinct;
+      unique_of[order[i]] = distinct;
+    }
+    vertex_state.assign(order.empty() ? 0 : distinct + 1, kUnknown);
+    vertex_hiders.resize(vertex_state.size());
+    auto hiders = [&](uint32_t position) -> const std::vector<uint32_t>* {
+      const uint32_t u = unique_of[position];
+      if (vertex_state[u] == kUnknown) {
+        rays.clear();
+        std::vector<uint32_t>& h = vertex_hiders[u];
+        h.clear();
+        if (!AddRays(glm::dvec3(mesh.positions[position]))) {
+          vertex_state[u] = kInBox;
+        } else {
+          Trace(rays[0]);
+          for (const auto& hit : hits) {
+            bool all = true;
+            for (size_t r = 1; r < rays.size() && all; ++r) all = Crosses(hit.second, rays[r]);
+            if (all) h.push_back(hit.second);
+          }
+          std::sort(h.begin(), h.end());
+          stats.rays += rays.size();
+          vertex_state[u] = kKnown;
+        }
+      }
+      return vertex_state[u] == kInBox ? nullptr : &vertex_hiders[u];
+    };
+    for (uint32_t t = 0; t < n; ++t) {
+      bool hidden = true;
+      common.clear();
+      for (int k = 0; k < 3 && hidden; ++k) {
+        const std::vector<uint32_t>* h = hiders(mesh.indices[3 * t + k]);
+        if (h == nullptr || h->empty()) {
+          hidden = false;
+        } else if (k == 0) {
+          common = *h;
+        } else {
+          scratch.clear();
+          std::set_intersection(common.begin(), common.end(), h->begin(), h->end(), std::back_inserter(scratch));
+          common.swap(scratch);
+          hidden = !common.empty();
+        }
+      }
+      if (!hidden) out->push_back(set.TriangleId(object, t));
+    }
+  }
+  static constexpr uint8_t kUnknown = 0, kKnown = 1, kInBox = 2;
+  std::vector<uint32_t> order, unique_of, common, scratch;
+  std::vector<uint8_t> vertex_state;
+  std::vector<std::vector<uint32_t>> vertex_hiders;
+};
+
+EpsilonSuperset::EpsilonSuperset(const scenes::Scene& scene) : scene_(scene) {}
+
+EpsilonSuperset::~EpsilonSuperset() = default;
+
+absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const scenes::Scene& scene) {
+  std::unique_ptr<EpsilonSuperset> s(new EpsilonSuperset(scene));
+  s->triangle_base_.reserve(scene.objects.size() + 1);
+  uint32_t base = 0;
+  for (const scenes::Object& o : scene.objects) {
+    s->triangle_base_.push_back(base);
+    base += static_cast<uint32_t>(o.mesh.TriangleCount());
+  }
+  s->triangle_base_.push_back(base);
+
+  // Convex prisms: the occluder set's convex pieces; a degenerate piece (a segment from a
+  // zero-area footprint) has no interior and hides nothing.
+  const OccluderSet occluders = OccluderSet::Build(scene);
+  for (const OccluderPiece& piece : occluders.pieces()) {
+    if (piece.points.size() < 3 || !(piece.height > 0.0)) continue;
+    Prism prism;
+    prism.first_edge = static_cast<uint32_t>(s->edge_point_.size());
+    prism.height = piece.height;
+    prism.object = piece.object;
+    const size_t n = piece.points.size();
+    for (size_t k = 0; k < n; ++k) {
+      const glm::dvec2 a = piece.points[k], b = piece.points[(k + 1) % n];
+      const double len = glm::length(b - a);
+      if (!(len > 0.0)) continue;
+      s->edge_point_.push_back(a);
+      s->edge_normal_.push_back(glm::dvec2(-(b.y - a.y), b.x - a.x) / len);
+    }
+    prism.edge_count = static_cast<uint32_t>(s->edge_point_.size()) - prism.first_edge;
+    if (prism.edge_count < 3) {
+      s->edge_point_.resize(prism.first_edge);
+      s->edge_normal_.resize(prism.first_edge);
+      continue;
+    }
+    s->prisms_.push_back(prism);
+    s->prism_min_.emplace_back(piece.box_min, 0.0);
+    s->prism_max_.emplace_back(piece.box_max, piece.height);
+  }
+  s->object_prism_start_.assign(scene.objects.size() + 1, 0);
+  for (const Prism& p : s->prisms_) ++s->object_prism_start_[p.object + 1];
+  for (size_t i = 0; i < scene.objects.size(); ++i) s->object_prism_start_[i + 1] += s->object_prism_start_[i];
+  s->object_prisms_.resize(s->prisms_.size());
+  std::vector<uint32_t> fill(s->object_prism_start_.begin(), s->object_prism_start_.end() - 1);
+  for (uint32_t i = 0; i < s->prisms_.size(); ++i) s->object_prisms_[fill[s->prisms_[i].object]++] = i;
+  s->tree_ = KdTree::Build(scene);
+  if (!scene.bounds.Empty()) s->frame_ = 0.5 * (scene.bounds.min + scene.bounds.max);
+
+  s->embree_ = std::make_unique<Embree>();
+  Embree& em = *s->embree_;
+  em.device = rtcNewDevice(nullptr);
+  if (em.device == nullptr) {
+    return absl::InternalError(absl::StrCat("Embree: cannot create a device (error ", rtcGetDeviceError(nullptr), ")"));
+  }
+  em.scene = rtcNewScene(em.device);
+  rtcSetSceneFlags(em.scene, RTC_SCENE_FLAG_ROBUST);
+  if (!s->prisms_.empty()) {
+    RTCGeometry geom = rtcNewGeometry(em.device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(s->prisms_.size()));
+    rtcSetGeometryUserData(geom, s.get());
+    // Boxes in floats relative to frame_, grown so that rounding never loses a prism the
+    // exact segment reaches: Embree only proposes, Crosses decides.
+    rtcSetGeometryBoundsFunction(
+        geom,
+        [](const RTCBoundsFunctionArguments* args) {
+          const auto* self = static_cast<const EpsilonSuperset*>(args->geometryUserPtr);
+          const glm::dvec3 lo = self->prism_min_[args->primID] - self->frame_;
+          const glm::dvec3 hi = self->prism_max_[args->primID] - self->frame_;
+          const double m = 1e-2 + 1e-5 * std::max({std::abs(lo.x), std::abs(lo.y), std::abs(hi.x), std::abs(hi.y),
+                                                   std::abs(hi.z)});
+          RTCBounds* b = args->bounds_o;
+          b->lower_x = static_cast<float>(lo.x - m);
+          b->lower_y = static_cast<float>(lo.y - m);
+          b->lower_z = static_cast<float>(lo.z - m);
+          b->upper_x = static_cast<float>(hi.x + m);
+          b->upper_y = static_cast<float>(hi.y + m);
+          b->upper_z = static_cast<float>(hi.z + m);
+        },
+        nullptr);
+    rtcSetGeometryIntersectFunction(geom, &Query::Intersect);
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(em.scene, geom);
+    rtcReleaseGeometry(geom);
+  }
+  rtcCommitScene(em.scene);
+  if (const RTCError err = rtcGetDeviceError(em.device); err != RTC_ERROR_NONE) {
+    return absl::InternalError(absl::StrCat("Embree: building the occluder scene failed (error ", err, ")"));
+  }
+  return s;
+}
+
+ObjectId EpsilonSuperset::ObjectOfTriangle(uint32_t id) const {
+  return static_cast<ObjectId>(std::upper_bound(triangle_base_.begin(), triangle_base_.end(), id) -
+                               triangle_base_.begin() - 1);
+}
+
+bool EpsilonSuperset::Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3& e, const glm::dvec3& d,
+                              double* t_in) const {
+  // Clip t in [0, 1] to each half-space f0 + t·f1 >= 0 of the shrunk prism.
+  double t0 = 0.0, t1 = 1.0;
+  auto clip = [&](double f0, double f1) {
+    if (f1 == 0.0) return f0 >= 0.0;
+    const double t = -f0 / f1;
+    if (f1 > 0.0) {
+      t0 = std::max(t0, t);
+    } else {
+      t1 = std::min(t1, t);
+    }
+    return t0 < t1;
+  };
+  const Prism& p = prisms_[i];
+  const double z = q.z + e.z;
+  if (!clip(z - kShrinkM, d.z) || !clip(p.height - kShrinkM - z, -d.z)) return false;
+  const glm::dvec2 qe(q.x, q.y), ee(e.x, e.y), dd(d.x, d.y);
+  for (uint32_t k = p.first_edge; k < p.first_edge + p.edge_count; ++k) {
+    const glm::dvec2 w = (qe - edge_point_[k]) + ee;
+    if (!clip(glm::dot(edge_normal_[k], w) - kShrinkM, glm::dot(edge_normal_[k], dd))) return false;
+  }
+  *t_in = t0;
+  return true;
+}
+
+EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& options) const {
+  std::vector<ObjectId> all(scene_.objects.size());
+  for (ObjectId i = 0; i < all.size(); ++i) all[i] = i;
+  return Compute(box, options, all);
+}
+
+EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& options,
+                                       std::span<const ObjectId> objects) const {
+  const auto start = std::chrono::steady_clock::now();
+  Query query(*this, options, box);
+  EpsilonStats& st = query.stats;
+
+  // Stage 1: object boxes, nearest first, so that hidden objects stop being occluders
+  // before the farther boxes they might otherwise be tried on. With the hierarchy, a kd-tree
+  // node's box is tested before its objects: hidden, it hides every object below it.
+  std::vector<ObjectId> survivors;
+  if (options.boxes) {
+    auto hide = [&](ObjectId id, bool first) {
+      ++st.occluded_boxes;
+      st.first_occluders += first ? 1 : 0;
+      if (!query.dropped.empty()) query.dropped[id] = 1;
+    };
+    auto test_object = [&](ObjectId id) {
+      bool first = false;
+      if (query.BoxHidden(scene_.objects[id].bounds, id, &st.box_ray_tests, &first)) {
+        hide(id, first);
+      } else {
+        survivors.push_back(id);
+      }
+    };
+    if (options.hierarchy) {
+      KdTree subset;
+      const KdTree* tree = &tree_;
+      if (objects.size() != scene_.objects.size()) {
+        std::vector<Aabb> boxes(scene_.objects.size());
+        for (ObjectId id : objects) boxes[id] = scene_.objects[id].bounds;
+        subset = KdTree::Build(boxes);
+        tree = &subset;
+      }
+      if (!tree->empty()) {
+        st.total_boxes = tree->root().count;
+        const std::vector<KdNode>& nodes = tree->nodes();
+        std::vector<uint32_t> stack = {0};
+        while (!stack.empty()) {
+          const KdNode& node = nodes[stack.back()];
+          stack.pop_back();
+          bool first = false;
+          if (node.count > 1 && query.BoxHidden(node.bounds, std::nullopt, &st.box_ray_tests, &first)) {
+            for (ObjectId id : tree->ObjectsBelow(node)) hide(id, first);
+            continue;
+          }
+          if (node.IsLeaf()) {
+            for (ObjectId id : tree->LeafObjects(node)) test_object(id);
+            continue;
+          }
+          // Nearer child on top of the stack.
+          const bool left_first = BoxDistance2(box, nodes[node.left].bounds) <= BoxDistance2(box, nodes[node.right].bounds);
+          stack.push_back(static_cast<uint32_t>(left_first ? node.right : node.left));
+          stack.push_back(static_cast<uint32_t>(left_first ? node.left : node.right));
+        }
+      }
+    } else {
+      std::vector<std::pair<double, ObjectId>> order;
+      order.reserve(objects.size());
+      for (ObjectId id : objects) {
+        if (!scene_.objects[id].bounds.Empty()) order.emplace_back(BoxDistance2(box, scene_.objects[id].bounds), id);
+      }
+      std::sort(order.begin(), order.end());
+      st.total_boxes = order.size();
+      for (const auto& entry : order) test_object(entry.second);
+    }
+    std::sort(survivors.begin(), survivors.end());
+  } else {
+    for (ObjectId id : objects) {
+      if (!scene_.objects[id].bounds.Empty()) survivors.push_back(id);
+    }
+  }
+  st.box_ms = Ms(start);
+
+  // Stage 2: the triangles of the surviving objects, one by one.
+  const auto t2 = std::chrono::steady_clock::now();
+  EpsilonResult result;
+  for (ObjectId id : objects) st.total_triangles += scene_.objects[id].mesh.TriangleCount();
+  for (ObjectId id : survivors) {
+    const size_t before = result.triangles.size();
+    query.VisibleTriangles(id, &st.polygon_ray_tests, &result.triangles);
+    if (result.triangles.size() > before) result.objects.push_back(id);
+  }
+  std::sort(result.triangles.begin(), result.triangles.end());
+  st.visible_triangles = result.triangles.size();
+  st.polygon_ms = Ms(t2);
+  st.ms = Ms(start);
+  result.stats = st;
+  return result;
+}
+
+std::vector<EpsilonResult> EpsilonSuperset::ComputeBatch(std::span<const Aabb> boxes, const EpsilonOptions& options,
+                                                         unsigned threads) const {
+  std::vector<EpsilonResult> results(boxes.size());
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = std::min<unsigned>(threads, static_cast<unsigned>(boxes.size()));
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i = next++; i < boxes.size(); i = next++) results[i] = Compute(boxes[i], options);
+  };
+  std::vector<std::jthread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  return results;
+}
+
+double TypicalObjectSize(const scenes::Scene& scene) {
+  std::vector<double> sizes;
+  for (const scenes::Object& o : scene.objects) {
+    if (!o.bounds.Empty()) sizes.push_back(0.5 * ((o.bounds.max.x - o.bounds.min.x) + (o.bounds.max.y - o.bounds.min.y)));
+  }
+  if (sizes.empty()) return 0.0;
+  std::nth_element(sizes.begin(), sizes.begin() + static_cast<long>(sizes.size() / 2), sizes.end());
+  return sizes[sizes.size() / 2];
+}
+
+std::vector<Aabb> SampleNeighbourhoods(const scenes::Scene& scene, size_t count, double size, double base,
+                                       uint64_t seed) {
+  std::vector<Aabb> out;
+  if (scene.bounds.Empty()) return out;
+  scenes::Rng rng(seed);
+  const glm::dvec2 lo(scene.bounds.min), hi(scene.bounds.max);
+  for (size_t tries = 0; out.size() < count && tries < 1000 * count; ++tries) {
+    const glm::dvec3 c(rng.Uniform(lo.x, hi.x), rng.Uniform(lo.y, hi.y), base + 0.5 * size);
+    const Aabb box{c - 0.5 * size, c + 0.5 * size};
+    bool free = true;
+    for (const scenes::Object& o : scene.objects) {
+      if (!o.bounds.Empty() && Overlap(o.bounds, box)) {
+        free = false;
+        break;
+      }
+    }
+    if (free) out.push_back(box);
+  }
+  return out;
+}
+
+}  // namespace vistream::visibility
