@@ -164,4 +164,56 @@ TEST(Cli, PvsRejectsBadCellsAndBackends) {
   EXPECT_NE(Vistream("pvs --scene default --cell 1,1 --res 100").exit_code, 0);  // not a power of two
 }
 
+TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {
+  const std::string png = Tmp("epsilon.png");
+  // A street crossing of city1 (lots of 25 m, buildings at least 2.5 m from the lot edge).
+  const RunResult r = Vistream("epsilon --scene city1 --at 0,0,2 --size 3.75 --json --map " + png);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const int visible = j.at("visible_triangles").get<int>(), total = j.at("total_triangles").get<int>();
+  EXPECT_GT(visible, 0);
+  EXPECT_LT(visible, total / 10);
+  EXPECT_EQ(total, 38304);
+  EXPECT_EQ(j.at("total_boxes").get<int>(), 2128);
+  EXPECT_GT(j.at("occluded_boxes").get<int>(), 1000);
+  EXPECT_GT(j.at("rays").get<int>(), 0);
+  EXPECT_GE(j.at("ms").get<double>(), 0.0);
+  EXPECT_GT(std::filesystem::file_size(png), 1000u);
+  // Every column gives the same set here (dropping hidden occluders may only keep more).
+  const RunResult none = Vistream("epsilon --scene city1 --at 0,0,2 --size 3.75 --json --opt none");
+  ASSERT_EQ(none.exit_code, 0) << none.out;
+  EXPECT_LE(nlohmann::json::parse(none.out).at("visible_triangles").get<int>(), visible);
+}
+
+TEST(Cli, EpsilonRejectsBadPositions) {
+  const RunResult text = Vistream("epsilon --scene city1 --at 1,2 --size 3");
+  EXPECT_EQ(text.exit_code, 1);
+  EXPECT_NE(text.out.find("--at '1,2'"), std::string::npos) << text.out;
+  const RunResult nan = Vistream("epsilon --scene city1 --at nan,0,2 --size 3");
+  EXPECT_EQ(nan.exit_code, 1);
+  EXPECT_NE(nan.out.find("finite"), std::string::npos) << nan.out;
+  const RunResult outside = Vistream("epsilon --scene city1 --at 5000,0,2 --size 3");
+  EXPECT_EQ(outside.exit_code, 1);
+  EXPECT_NE(outside.out.find("outside the scene"), std::string::npos) << outside.out;
+  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size -1").exit_code, 0);
+  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest").exit_code, 0);
+}
+
+TEST(Cli, BenchEpsilonReproducesBothTables) {
+  const RunResult r = Vistream("bench epsilon --scene city2 --count 3 --opts none,paper,all --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("neighbourhoods").get<int>(), 3);
+  EXPECT_GT(j.at("size").get<double>(), 2.0);
+  const auto& t1 = j.at("table1");
+  EXPECT_EQ(t1.at("total_boxes").get<double>(), 2128.0);
+  EXPECT_GT(t1.at("occluded_polygons").get<double>(), 0.5 * t1.at("total_polygons").get<double>());
+  const auto& t2 = j.at("table2");
+  ASSERT_EQ(t2.size(), 3u);
+  EXPECT_EQ(t2[0].at("opt"), "none");
+  for (const auto& c : t2) EXPECT_GT(c.at("ms").get<double>(), 0.0);
+  EXPECT_EQ(t2[0].at("traversals").get<double>(), t1.at("total_polygons").get<double>());  // one per triangle
+  EXPECT_LT(t2[2].at("traversals").get<double>(), t2[1].at("traversals").get<double>());
+}
+
 }  // namespace
