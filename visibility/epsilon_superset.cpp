@@ -102,6 +102,8 @@ struct EpsilonSuperset::Query {
     RTCIntersectContext base;
     Query* query;
     const Ray* ray;
+    bool stop_at_hider;  // test each crossing prism on every ray at once, stop at a hider
+    uint32_t hider;
   };
   static constexpr uint32_t kNone = ~0u;
 
@@ -162,22 +164,37 @@ struct EpsilonSuperset::Query {
     if (args->valid[0] == 0) return;
     auto* ctx = reinterpret_cast<TraceContext*>(args->context);
     Query& query = *ctx->query;
-    if (!query.Usable(args->primID)) return;
+    if (ctx->hider != kNone || !query.Usable(args->primID)) return;
     ++*query.ray_tests;
     double t_in = 0.0;
-    if (query.set.Crosses(args->primID, query.q, ctx->ray->e, ctx->ray->d, &t_in)) {
+    if (!query.set.Crosses(args->primID, query.q, ctx->ray->e, ctx->ray->d, &t_in)) return;
+    if (!ctx->stop_at_hider) {
+      // No hit is reported, so Embree goes on to every prism box along the segment.
       query.hits.emplace_back(t_in, args->primID);
+      return;
     }
-    // No hit is reported, so Embree goes on to every prism box along the segment.
+    for (size_t r = 1; r < query.rays.size(); ++r) {
+      if (!query.Crosses(args->primID, query.rays[r])) return;
+    }
+    // A hider: report a hit at t = 0, so that Embree gives up the rest of the segment.
+    ctx->hider = args->primID;
+    RTCRayN_tfar(RTCRayHitN_RayN(args->rayhit, args->N), args->N, 0) = 0.0f;
+    RTCHitN* hit = RTCRayHitN_HitN(args->rayhit, args->N);
+    RTCHitN_geomID(hit, args->N, 0) = args->geomID;
+    RTCHitN_primID(hit, args->N, 0) = args->primID;
   }
 
-  // Every usable prism `r` crosses, nearest first, into `hits`: one Embree all-hits traversal.
-  void Trace(const Ray& r) {
+  // Every usable prism `r` crosses, nearest first, into `hits`: one Embree all-hits
+  // traversal. With `stop_at_hider`, each is tried on every ray in `rays` as it is met, and
+  // the first that all cross ends the traversal and is returned (kNone if none).
+  uint32_t Trace(const Ray& r, bool stop_at_hider = false) {
     hits.clear();
     TraceContext ctx;
     rtcInitIntersectContext(&ctx.base);
     ctx.query = this;
     ctx.ray = &r;
+    ctx.stop_at_hider = stop_at_hider;
+    ctx.hider = kNone;
     const glm::dvec3 o = q + r.e - set.frame_;
     RTCRayHit rh{};
     rh.ray.org_x = static_cast<float>(o.x);
@@ -193,6 +210,7 @@ struct EpsilonSuperset::Query {
     rtcIntersect1(set.embree_->scene, &ctx.base, &rh);
     ++stats.traversals;
     std::sort(hits.begin(), hits.end());
+    return ctx.hider;
   }
 
   // Appends to `rays` the rays to vertex `p` (absolute). False if `p` lies in the box.
@@ -239,6 +257,27 @@ struct EpsilonSuperset::Query {
     return hidden;
   }
 
+  // Puts next to rays[0] the rays least like it: the one whose ends lie farthest from its
+  // ends, then the one farthest from both. A prism that is not a hider then usually fails
+  // on the second or third ray instead of on a late one.
+  void SpreadRays() {
+    auto far_from = [&](size_t from, auto&& distance) {
+      size_t best = from;
+      double best_d = -1.0;
+      for (size_t r = from; r < rays.size(); ++r) {
+        const double d = distance(rays[r]);
+        if (d > best_d) best = r, best_d = d;
+      }
+      std::swap(rays[from], rays[best]);
+    };
+    auto dist = [](const Ray& a, const Ray& b) {
+      const glm::dvec3 de = a.e - b.e, dp = (a.e + a.d) - (b.e + b.d);
+      return glm::dot(de, de) + glm::dot(dp, dp);
+    };
+    if (rays.size() > 2) far_from(1, [&](const Ray& r) { return dist(r, rays[0]); });
+    if (rays.size() > 3) far_from(2, [&](const Ray& r) { return std::min(dist(r, rays[0]), dist(r, rays[1])); });
+  }
+
   // Whether one usable prism is crossed by every ray in `rays`. The hints (when on) are
   // tried first: the occluders that hid the last occludees, and `own`'s prisms, which hide
   // the far side of their object. Then the first ray gathers every prism it crosses and the
@@ -247,6 +286,7 @@ struct EpsilonSuperset::Query {
     *first = false;
     if (rays.empty()) return false;
     ray_tests = tests;
+    if (options.hints) SpreadRays();
     size_t reached = 0;
     auto crosses_all = [&](uint32_t prism, size_t from) {
       for (size_t r = from; r < rays.size(); ++r) {
@@ -269,6 +309,16 @@ struct EpsilonSuperset::Query {
           if (Usable(prism) && crosses_all(prism, 0)) return found(prism);
         }
       }
+    }
+    if (options.hints) {
+      // The hints missed: stop at the first hider met rather than sort them all.
+      const uint32_t hider = Trace(rays[0], true);
+      if (hider != kNone) {
+        reached = rays.size() - 1;
+        return found(hider);
+      }
+      stats.rays += rays.size();
+      return false;
     }
     Trace(rays[0]);
     for (size_t h = 0; h < hits.size(); ++h) {
@@ -324,6 +374,7 @@ struct EpsilonSuperset::Query {
         if (!AddRays(glm::dvec3(mesh.positions[position]))) {
           vertex_state[u] = kInBox;
         } else {
+          SpreadRays();
           Trace(rays[0]);
           for (const auto& hit : hits) {
             bool all = true;
@@ -382,7 +433,7 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
   for (const OccluderPiece& piece : occluders.pieces()) {
     if (piece.points.size() < 3 || !(piece.height > 0.0)) continue;
     Prism prism;
-    prism.first_edge = static_cast<uint32_t>(s->edge_point_.size());
+    prism.first_edge = static_cast<uint32_t>(s->edges_.size());
     prism.height = piece.height;
     prism.object = piece.object;
     const size_t n = piece.points.size();
@@ -390,13 +441,11 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
       const glm::dvec2 a = piece.points[k], b = piece.points[(k + 1) % n];
       const double len = glm::length(b - a);
       if (!(len > 0.0)) continue;
-      s->edge_point_.push_back(a);
-      s->edge_normal_.push_back(glm::dvec2(-(b.y - a.y), b.x - a.x) / len);
+      s->edges_.push_back(Edge{-(b.y - a.y) / len, (b.x - a.x) / len, a.x, a.y});
     }
-    prism.edge_count = static_cast<uint32_t>(s->edge_point_.size()) - prism.first_edge;
+    prism.edge_count = static_cast<uint32_t>(s->edges_.size()) - prism.first_edge;
     if (prism.edge_count < 3) {
-      s->edge_point_.resize(prism.first_edge);
-      s->edge_normal_.resize(prism.first_edge);
+      s->edges_.resize(prism.first_edge);
       continue;
     }
     s->prisms_.push_back(prism);
@@ -462,28 +511,30 @@ ObjectId EpsilonSuperset::ObjectOfTriangle(uint32_t id) const {
 
 bool EpsilonSuperset::Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3& e, const glm::dvec3& d,
                               double* t_in) const {
-  // Clip t in [0, 1] to each half-space f0 + t·f1 >= 0 of the shrunk prism.
-  double t0 = 0.0, t1 = 1.0;
-  auto clip = [&](double f0, double f1) {
-    if (f1 == 0.0) return f0 >= 0.0;
-    const double t = -f0 / f1;
-    if (f1 > 0.0) {
-      t0 = std::max(t0, t);
-    } else {
-      t1 = std::min(t1, t);
-    }
-    return t0 < t1;
-  };
+  // Clip t in [0, 1] to each half-space f0 + t·f1 >= 0 of the shrunk prism (Cyrus-Beck): a
+  // constraint with f1 > 0 bounds t from below, f1 < 0 from above, f1 = 0 holds everywhere
+  // or nowhere. Branch-free over the walls, which are few.
   const Prism& p = prisms_[i];
+  double t0 = 0.0, t1 = 1.0;
+  bool ok = true;
+  auto clip = [&](double f0, double f1) {
+    const double t = -f0 / f1;
+    t0 = f1 > 0.0 ? std::max(t0, t) : t0;
+    t1 = f1 < 0.0 ? std::min(t1, t) : t1;
+    ok &= f1 != 0.0 || f0 >= 0.0;
+  };
   const double z = q.z + e.z;
-  if (!clip(z - kShrinkM, d.z) || !clip(p.height - kShrinkM - z, -d.z)) return false;
-  const glm::dvec2 qe(q.x, q.y), ee(e.x, e.y), dd(d.x, d.y);
-  for (uint32_t k = p.first_edge; k < p.first_edge + p.edge_count; ++k) {
-    const glm::dvec2 w = (qe - edge_point_[k]) + ee;
-    if (!clip(glm::dot(edge_normal_[k], w) - kShrinkM, glm::dot(edge_normal_[k], dd))) return false;
+  clip(z - kShrinkM, d.z);
+  clip(p.height - kShrinkM - z, -d.z);
+  const double wx = q.x + e.x, wy = q.y + e.y;
+  const Edge* edge = edges_.data() + p.first_edge;
+  for (uint32_t k = 0; k < p.edge_count; ++k) {
+    const Edge& g = edge[k];
+    clip(g.nx * ((q.x - g.ax) + e.x) + g.ny * ((q.y - g.ay) + e.y) - kShrinkM, g.nx * d.x + g.ny * d.y);
   }
+  (void)wx, (void)wy;
   *t_in = t0;
-  return true;
+  return ok && t0 < t1;
 }
 
 EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& options) const {

@@ -121,7 +121,10 @@ class EpsilonSuperset {
 
   const scenes::Scene& scene_;
   std::vector<Prism> prisms_;
-  std::vector<glm::dvec2> edge_point_, edge_normal_;  // per edge: a point, the unit inward normal
+  struct Edge {
+    double nx, ny, ax, ay;  // the unit inward normal, a point of the wall
+  };
+  std::vector<Edge> edges_;
   std::vector<glm::dvec3> prism_min_, prism_max_;    // prism boxes, for Embree
   std::vector<uint32_t> triangle_base_;              // per object, plus the total at the end
   std::vector<uint32_t> object_prism_start_, object_prisms_;  // the prisms of each object
