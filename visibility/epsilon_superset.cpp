@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <optional>
@@ -219,13 +220,14 @@ struct EpsilonSuperset::Query {
                   9 * (p.z < box.min.z ? 0 : p.z > box.max.z ? 2 : 1);
     if (r == 13) return false;
     const glm::dvec3 pq = p - q;
-    const unsigned mask = corner_mask[r];
-    for (int k = 0; k < corner_count; ++k) {
-      if (mask & (1u << k)) {
-        rays.push_back({corner[k], pq - corner[k]});
-      } else {
-        ++stats.skipped_rays;
-      }
+    unsigned mask = corner_mask[r];
+    const int n = std::popcount(mask);
+    stats.skipped_rays += static_cast<uint64_t>(corner_count - n);
+    const size_t at = rays.size();
+    rays.resize(at + static_cast<size_t>(n));
+    for (Ray* out = rays.data() + at; mask != 0; mask &= mask - 1, ++out) {
+      const glm::dvec3& c = corner[std::countr_zero(mask)];
+      *out = Ray{c, pq - c};
     }
     return true;
   }
@@ -257,25 +259,14 @@ struct EpsilonSuperset::Query {
     return hidden;
   }
 
-  // Puts next to rays[0] the rays least like it: the one whose ends lie farthest from its
-  // ends, then the one farthest from both. A prism that is not a hider then usually fails
-  // on the second or third ray instead of on a late one.
+  // Puts next to rays[0] rays least like it, so that a prism that is not a hider usually
+  // fails on the second or third ray rather than on a late one. Rays run over vertices and,
+  // per vertex, over corners, both in the order of their coordinate bits: the last ray joins
+  // the corner and vertex opposite the first's, and the middle one is halfway between.
   void SpreadRays() {
-    auto far_from = [&](size_t from, auto&& distance) {
-      size_t best = from;
-      double best_d = -1.0;
-      for (size_t r = from; r < rays.size(); ++r) {
-        const double d = distance(rays[r]);
-        if (d > best_d) best = r, best_d = d;
-      }
-      std::swap(rays[from], rays[best]);
-    };
-    auto dist = [](const Ray& a, const Ray& b) {
-      const glm::dvec3 de = a.e - b.e, dp = (a.e + a.d) - (b.e + b.d);
-      return glm::dot(de, de) + glm::dot(dp, dp);
-    };
-    if (rays.size() > 2) far_from(1, [&](const Ray& r) { return dist(r, rays[0]); });
-    if (rays.size() > 3) far_from(2, [&](const Ray& r) { return std::min(dist(r, rays[0]), dist(r, rays[1])); });
+    const size_t n = rays.size();
+    if (n > 2) std::swap(rays[1], rays[n - 1]);
+    if (n > 4) std::swap(rays[2], rays[n / 2]);
   }
 
   // Whether one usable prism is crossed by every ray in `rays`. The hints (when on) are
