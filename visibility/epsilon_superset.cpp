@@ -340,29 +340,17 @@ struct EpsilonSuperset::Query {
       return;
     }
     ray_tests = tests;
-    // Distinct positions: flat-shaded meshes repeat each corner once per face.
-    order.resize(mesh.positions.size());
-    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-    auto key = [&](uint32_t i) {
-      const glm::vec3& v = mesh.positions[i];
-      return std::tuple(v.x, v.y, v.z);
-    };
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
-    unique_of.resize(mesh.positions.size());
-    uint32_t distinct = 0;
-    for (size_t i = 0; i < order.size(); ++i) {
-      if (i > 0 && key(order[i]) != key(order[i - 1])) ++distinct;
-      unique_of[order[i]] = distinct;
-    }
-    vertex_state.assign(order.empty() ? 0 : distinct + 1, kUnknown);
-    vertex_hiders.resize(vertex_state.size());
-    auto hiders = [&](uint32_t position) -> const std::vector<uint32_t>* {
-      const uint32_t u = unique_of[position];
+    const uint32_t first_vertex = set.vertex_start_[object];
+    const uint32_t distinct = set.vertex_start_[object + 1] - first_vertex;
+    const uint32_t* corner_of = set.triangle_vertex_.data() + 3 * static_cast<size_t>(set.triangle_base_[object]);
+    vertex_state.assign(distinct, kUnknown);
+    vertex_hiders.resize(distinct);
+    auto hiders = [&](uint32_t u) -> const std::vector<uint32_t>* {
       if (vertex_state[u] == kUnknown) {
         rays.clear();
         std::vector<uint32_t>& h = vertex_hiders[u];
         h.clear();
-        if (!AddRays(glm::dvec3(mesh.positions[position]))) {
+        if (!AddRays(glm::dvec3(set.vertices_[first_vertex + u]))) {
           vertex_state[u] = kInBox;
         } else {
           SpreadRays();
@@ -383,7 +371,7 @@ struct EpsilonSuperset::Query {
       bool hidden = true;
       common.clear();
       for (int k = 0; k < 3 && hidden; ++k) {
-        const std::vector<uint32_t>* h = hiders(mesh.indices[3 * t + k]);
+        const std::vector<uint32_t>* h = hiders(corner_of[3 * t + k]);
         if (h == nullptr || h->empty()) {
           hidden = false;
         } else if (k == 0) {
@@ -399,7 +387,7 @@ struct EpsilonSuperset::Query {
     }
   }
   static constexpr uint8_t kUnknown = 0, kKnown = 1, kInBox = 2;
-  std::vector<uint32_t> order, unique_of, common, scratch;
+  std::vector<uint32_t> common, scratch;
   std::vector<uint8_t> vertex_state;
   std::vector<std::vector<uint32_t>> vertex_hiders;
 };
@@ -414,9 +402,55 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
   uint32_t base = 0;
   for (const scenes::Object& o : scene.objects) {
     s->triangle_base_.push_back(base);
+  // Distinct vertex positions per object: flat-shaded meshes repeat each corner once per face.
+  s->vertex_start_.reserve(scene.objects.size() + 1);
+  s->triangle_vertex_.reserve(3 * static_cast<size_t>(base));
+  std::vector<uint32_t> order, distinct_of;
+  for (const scenes::Object& o : scene.objects) {
+    s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
+    const std::vector<glm::vec3>& pos = o.mesh.positions;
+    auto key = [&](uint32_t i) { return std::tuple(pos[i].x, pos[i].y, pos[i].z); };
+    order.resize(pos.size());
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+    distinct_of.resize(pos.size());
+    uint32_t distinct = 0;
+    for (size_t i = 0; i < order.size(); ++i) {
+      if (i == 0 || key(order[i]) != key(order[i - 1])) {
+        if (i > 0) ++distinct;
+        s->vertices_.push_back(pos[order[i]]);
+      }
+      distinct_of[order[i]] = distinct;
+    }
+    for (uint32_t index : o.mesh.indices) s->triangle_vertex_.push_back(distinct_of[index]);
+  }
+  s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
     base += static_cast<uint32_t>(o.mesh.TriangleCount());
   }
   s->triangle_base_.push_back(base);
+  // Distinct vertex positions per object: flat-shaded meshes repeat each corner once per face.
+  s->vertex_start_.reserve(scene.objects.size() + 1);
+  s->triangle_vertex_.reserve(3 * static_cast<size_t>(base));
+  std::vector<uint32_t> order, distinct_of;
+  for (const scenes::Object& o : scene.objects) {
+    s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
+    const std::vector<glm::vec3>& pos = o.mesh.positions;
+    auto key = [&](uint32_t i) { return std::tuple(pos[i].x, pos[i].y, pos[i].z); };
+    order.resize(pos.size());
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+    distinct_of.resize(pos.size());
+    uint32_t distinct = 0;
+    for (size_t i = 0; i < order.size(); ++i) {
+      if (i == 0 || key(order[i]) != key(order[i - 1])) {
+        if (i > 0) ++distinct;
+        s->vertices_.push_back(pos[order[i]]);
+      }
+      distinct_of[order[i]] = distinct;
+    }
+    for (uint32_t index : o.mesh.indices) s->triangle_vertex_.push_back(distinct_of[index]);
+  }
+  s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
 
   // Convex prisms: the occluder set's convex pieces; a degenerate piece (a segment from a
   // zero-area footprint) has no interior and hides nothing.

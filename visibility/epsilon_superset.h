@@ -128,6 +128,10 @@ class EpsilonSuperset {
   std::vector<glm::dvec3> prism_min_, prism_max_;    // prism boxes, for Embree
   std::vector<uint32_t> triangle_base_;              // per object, plus the total at the end
   std::vector<uint32_t> object_prism_start_, object_prisms_;  // the prisms of each object
+  // Distinct vertex positions of each object (from vertex_start_[object]), and for each
+  // triangle corner (3 per TriangleId) its position's index among its object's.
+  std::vector<uint32_t> vertex_start_, triangle_vertex_;
+  std::vector<glm::vec3> vertices_;
   std::span<const uint32_t> PrismsOf(ObjectId object) const {
     return {object_prisms_.data() + object_prism_start_[object], object_prism_start_[object + 1] - object_prism_start_[object]};
   }
