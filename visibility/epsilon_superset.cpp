@@ -402,32 +402,10 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
   uint32_t base = 0;
   for (const scenes::Object& o : scene.objects) {
     s->triangle_base_.push_back(base);
-  // Distinct vertex positions per object: flat-shaded meshes repeat each corner once per face.
-  s->vertex_start_.reserve(scene.objects.size() + 1);
-  s->triangle_vertex_.reserve(3 * static_cast<size_t>(base));
-  std::vector<uint32_t> order, distinct_of;
-  for (const scenes::Object& o : scene.objects) {
-    s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
-    const std::vector<glm::vec3>& pos = o.mesh.positions;
-    auto key = [&](uint32_t i) { return std::tuple(pos[i].x, pos[i].y, pos[i].z); };
-    order.resize(pos.size());
-    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
-    distinct_of.resize(pos.size());
-    uint32_t distinct = 0;
-    for (size_t i = 0; i < order.size(); ++i) {
-      if (i == 0 || key(order[i]) != key(order[i - 1])) {
-        if (i > 0) ++distinct;
-        s->vertices_.push_back(pos[order[i]]);
-      }
-      distinct_of[order[i]] = distinct;
-    }
-    for (uint32_t index : o.mesh.indices) s->triangle_vertex_.push_back(distinct_of[index]);
-  }
-  s->vertex_start_.push_back(static_cast<uint32_t>(s->vertices_.size()));
     base += static_cast<uint32_t>(o.mesh.TriangleCount());
   }
   s->triangle_base_.push_back(base);
+
   // Distinct vertex positions per object: flat-shaded meshes repeat each corner once per face.
   s->vertex_start_.reserve(scene.objects.size() + 1);
   s->triangle_vertex_.reserve(3 * static_cast<size_t>(base));
