@@ -90,7 +90,8 @@ class EpsilonSuperset {
   // The superset for the neighbourhood `box` (scene-local metres; a zero-size box is a single
   // viewpoint), over every object, on the calling thread. Thread-safe.
   EpsilonResult Compute(const Aabb& box, const EpsilonOptions& options) const;
-  // The same over `objects` only (e.g. the viewcell's PVS: what it leaves out stays out).
+  // The same over `objects` only, distinct ids (e.g. the viewcell's PVS: what it leaves out
+  // stays out). Every prism still occludes.
   EpsilonResult Compute(const Aabb& box, const EpsilonOptions& options, std::span<const ObjectId> objects) const;
   // Several neighbourhoods on up to `threads` threads (0: one per core); results in order.
   std::vector<EpsilonResult> ComputeBatch(std::span<const Aabb> boxes, const EpsilonOptions& options,
