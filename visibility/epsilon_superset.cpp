@@ -571,14 +571,18 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
       }
     };
     if (options.hierarchy) {
+      // The scene's tree, or one over the list alone, whose leaves hold positions in it.
       KdTree subset;
       const KdTree* tree = &tree_;
-      if (objects.size() != scene_.objects.size()) {
-        std::vector<Aabb> boxes(scene_.objects.size());
-        for (ObjectId id : objects) boxes[id] = scene_.objects[id].bounds;
+      const bool whole = objects.size() == scene_.objects.size();
+      if (!whole) {
+        std::vector<Aabb> boxes;
+        boxes.reserve(objects.size());
+        for (ObjectId id : objects) boxes.push_back(scene_.objects[id].bounds);
         subset = KdTree::Build(boxes);
         tree = &subset;
       }
+      auto id_of = [&](ObjectId k) { return whole ? k : objects[k]; };
       if (!tree->empty()) {
         st.total_boxes = tree->root().count;
         const std::vector<KdNode>& nodes = tree->nodes();
@@ -588,11 +592,11 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
           stack.pop_back();
           bool first = false;
           if (node.count > 1 && query.BoxHidden(node.bounds, std::nullopt, &st.box_ray_tests, &first)) {
-            for (ObjectId id : tree->ObjectsBelow(node)) hide(id, first);
+            for (ObjectId k : tree->ObjectsBelow(node)) hide(id_of(k), first);
             continue;
           }
           if (node.IsLeaf()) {
-            for (ObjectId id : tree->LeafObjects(node)) test_object(id);
+            for (ObjectId k : tree->LeafObjects(node)) test_object(id_of(k));
             continue;
           }
           // Nearer child on top of the stack.
