@@ -214,6 +214,13 @@ TEST(Cli, BenchEpsilonReproducesBothTables) {
   for (const auto& c : t2) EXPECT_GT(c.at("ms").get<double>(), 0.0);
   EXPECT_EQ(t2[0].at("traversals").get<double>(), t1.at("total_polygons").get<double>());  // one per triangle
   EXPECT_LT(t2[2].at("traversals").get<double>(), t2[1].at("traversals").get<double>());
+  // As a server asks: only over each neighbourhood's viewcell PVS, which holds fewer objects.
+  const RunResult p = Vistream("bench epsilon --scene city2 --count 2 --opts all --pvs-cell 50 --json");
+  ASSERT_EQ(p.exit_code, 0) << p.out;
+  const nlohmann::json k = nlohmann::json::parse(p.out);
+  EXPECT_GT(k.at("pvs_objects").get<double>(), 0.0);
+  EXPECT_LT(k.at("table1").at("total_boxes").get<double>(), 2128.0);
+  EXPECT_EQ(k.at("table1").at("total_boxes").get<double>(), k.at("pvs_objects").get<double>());
 }
 
 }  // namespace
