@@ -529,13 +529,11 @@ bool EpsilonSuperset::Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3&
   const double z = q.z + e.z;
   clip(z - kShrinkM, d.z);
   clip(p.height - kShrinkM - z, -d.z);
-  const double wx = q.x + e.x, wy = q.y + e.y;
   const Edge* edge = edges_.data() + p.first_edge;
   for (uint32_t k = 0; k < p.edge_count; ++k) {
     const Edge& g = edge[k];
     clip(g.nx * ((q.x - g.ax) + e.x) + g.ny * ((q.y - g.ay) + e.y) - kShrinkM, g.nx * d.x + g.ny * d.y);
   }
-  (void)wx, (void)wy;
   *t_in = t0;
   return ok && t0 < t1;
 }
@@ -623,7 +621,7 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
   }
   st.box_ms = Ms(start);
 
-  // Stage 2: the triangles of the surviving objects, one by one.
+  // Stage 2: the triangles of the surviving objects.
   const auto t2 = std::chrono::steady_clock::now();
   EpsilonResult result;
   for (ObjectId id : objects) st.total_triangles += scene_.objects[id].mesh.TriangleCount();
