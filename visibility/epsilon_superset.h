@@ -43,8 +43,9 @@ struct EpsilonOptions {
   bool silhouette_rays = true;        // skip the rays that others imply (redundant rays)
   // Beyond the paper: test kd-tree node boxes top-down before the objects' own;
   bool hierarchy = true;
-  // and before tracing, try the occluders that hid the last occludees and, for a triangle,
-  // its own object's prisms (which hide the object's far side).
+  // and before tracing, try the prisms that hid the last occludees (and, testing triangles
+  // one by one, the triangle's own object's, which hide the object's far side); a traversal
+  // then stops at the first hider it meets;
   bool hints = true;
   // and find, per distinct vertex of an object, every prism that hides it from the box; a
   // triangle is hidden when its vertices' sets meet.
@@ -60,10 +61,10 @@ struct EpsilonStats {
   uint64_t first_occluders = 0;    // hidden boxes whose occluder was the first one met
   uint64_t total_triangles = 0;    // triangles of the objects considered
   uint64_t visible_triangles = 0;  // in the superset
-  uint64_t tested_triangles = 0;   // triangles tested one by one
+  uint64_t tested_triangles = 0;   // triangles of the objects whose box survived
   uint64_t rays = 0;               // box-corner to occludee-vertex rays tested
   uint64_t skipped_rays = 0;       // rays left out as implied by others
-  uint64_t traversals = 0;         // Embree all-hits traversals (one per occludee)
+  uint64_t traversals = 0;         // Embree all-hits traversals (one per occludee or distinct vertex)
   uint64_t box_ray_tests = 0;      // exact ray / prism tests while testing boxes
   uint64_t polygon_ray_tests = 0;  // exact ray / prism tests while testing triangles
   double box_ms = 0.0, polygon_ms = 0.0, ms = 0.0;
