@@ -2,12 +2,10 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
 #include <optional>
-#include <thread>
 #include <tuple>
 
 #include <absl/strings/str_cat.h>
@@ -16,6 +14,7 @@
 
 #include "scenes/random.h"
 #include "visibility/occluder_set.h"
+#include "visibility/parallel.h"
 
 namespace vistream::visibility {
 
@@ -69,13 +68,6 @@ int Corners(const Aabb& b, std::array<Corner, 8>* out) {
 // Whether `c` lies on the face of `b` on side `max_side` of axis `a`.
 bool OnFace(const Aabb& b, const Corner& c, int a, bool max_side) {
   return b.min[a] == b.max[a] || (((c.bits >> a) & 1) != 0) == max_side;
-}
-
-bool Overlap(const Aabb& a, const Aabb& b) {
-  for (int k = 0; k < 3; ++k) {
-    if (a.max[k] < b.min[k] || b.max[k] < a.min[k]) return false;
-  }
-  return true;
 }
 
 double BoxDistance2(const Aabb& a, const Aabb& b) {
@@ -152,7 +144,7 @@ struct EpsilonSuperset::Query {
     const ObjectId object = set.prisms_[prism].object;
     if (skip == object) return false;
     if (!dropped.empty() && dropped[object]) return false;
-    return !Overlap(set.scene_.objects[object].bounds, box);
+    return !set.scene_.objects[object].bounds.Overlaps(box);
   }
 
   bool Crosses(uint32_t prism, const Ray& r) {
@@ -235,7 +227,7 @@ struct EpsilonSuperset::Query {
   // Whether box `b` is hidden; prisms of `own` (the object it bounds) are not tried.
   bool BoxHidden(const Aabb& b, std::optional<ObjectId> own, uint64_t* tests, bool* first) {
     *first = false;
-    if (Overlap(b, box)) return false;
+    if (b.Overlaps(box)) return false;
     // The box's corners on faces that some point of the neighbourhood lies outside of: from
     // any such point, a segment to another corner enters the box through one of them.
     std::array<Corner, 8> pc;
@@ -641,15 +633,7 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
 std::vector<EpsilonResult> EpsilonSuperset::ComputeBatch(std::span<const Aabb> boxes, const EpsilonOptions& options,
                                                          unsigned threads) const {
   std::vector<EpsilonResult> results(boxes.size());
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
-  threads = std::min<unsigned>(threads, static_cast<unsigned>(boxes.size()));
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t i = next++; i < boxes.size(); i = next++) results[i] = Compute(boxes[i], options);
-  };
-  std::vector<std::jthread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
+  ParallelFor(boxes.size(), threads, [&] { return [&](size_t i) { results[i] = Compute(boxes[i], options); }; });
   return results;
 }
 
@@ -674,7 +658,7 @@ std::vector<Aabb> SampleNeighbourhoods(const scenes::Scene& scene, size_t count,
     const Aabb box{c - 0.5 * size, c + 0.5 * size};
     bool free = true;
     for (const scenes::Object& o : scene.objects) {
-      if (!o.bounds.Empty() && Overlap(o.bounds, box)) {
+      if (!o.bounds.Empty() && o.bounds.Overlaps(box)) {
         free = false;
         break;
       }

@@ -1,9 +1,10 @@
 #include "visibility/pvs.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <thread>
+#include <memory>
+
+#include "visibility/parallel.h"
 
 namespace vistream::visibility {
 
@@ -46,16 +47,12 @@ PvsResult PvsComputer::Compute(const scenes::Aabb& cell, const CellQueryOptions&
 std::vector<PvsResult> PvsComputer::ComputeBatch(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
                                                  unsigned threads) const {
   std::vector<PvsResult> results(cells.size());
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
-  threads = std::min<unsigned>(threads, static_cast<unsigned>(cells.size()));
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    DualRaySpace drs(occluders_);
-    for (size_t i = next++; i < cells.size(); i = next++) results[i] = Compute(cells[i], options, &drs);
-  };
-  std::vector<std::jthread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
+  // One query engine per thread: it keeps scratch between cells.
+  ParallelFor(cells.size(), threads, [&] {
+    return [&, drs = std::make_shared<DualRaySpace>(occluders_)](size_t i) {
+      results[i] = Compute(cells[i], options, drs.get());
+    };
+  });
   return results;
 }
 
