@@ -1,7 +1,9 @@
 #include "bench/cli_common.h"
 
 #include <chrono>
+#include <cerrno>
 #include <csignal>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 
@@ -36,6 +38,41 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
   }
   if (seconds != nullptr) *seconds = SecondsSince(start);
   return scene;
+}
+
+scenes::ViewcellSpec ViewcellSpecFor(const std::string& scene_arg, double cell_size) {
+  scenes::ViewcellSpec spec;
+  const std::string ext = std::filesystem::path(scene_arg).extension().string();
+  if (ext != ".glb" && ext != ".gltf") {
+    if (auto entry = scenes::FindCatalogEntry(scene_arg); entry.ok()) spec = entry->viewcell;
+  }
+  if (cell_size > 0.0) spec.size_m = cell_size;
+  return spec;
+}
+
+absl::StatusOr<visibility::ViewcellGrid> GridFor(const scenes::Scene& scene, const scenes::ViewcellSpec& spec) {
+  return visibility::ViewcellGrid::Create(scene.bounds, spec.size_m, spec.base_m, spec.height_m);
+}
+
+absl::StatusOr<std::string> ReadFile(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return absl::NotFoundError("cannot open '" + path + "': " + std::strerror(errno));
+  std::string bytes;
+  char buf[1 << 16];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0) bytes.append(buf, n);
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed) return absl::DataLossError("cannot read '" + path + "'");
+  return bytes;
+}
+
+absl::Status WriteFile(const std::string& path, const std::string& bytes) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) return absl::PermissionDeniedError("cannot write '" + path + "': " + std::strerror(errno));
+  const bool ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  if (std::fclose(f) != 0 || !ok) return absl::DataLossError("cannot write '" + path + "' (disk full?)");
+  return absl::OkStatus();
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {

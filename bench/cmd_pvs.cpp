@@ -34,18 +34,11 @@ int Pvs(const PvsArgs& a) {
     return Fail(absl::InvalidArgumentError("--cell '" + a.cell + "': expected I,J (two integers)"));
   }
   // Viewcell size and band: the option, else the catalog entry's, else 100 m at eye level.
-  scenes::ViewcellSpec spec;
-  const std::string ext = std::filesystem::path(a.scene).extension().string();
-  if (ext != ".glb" && ext != ".gltf") {
-    if (auto entry = scenes::FindCatalogEntry(a.scene); entry.ok()) spec = entry->viewcell;
-  }
-  if (a.cell_size > 0.0) spec.size_m = a.cell_size;
-
+  const scenes::ViewcellSpec spec = ViewcellSpecFor(a.scene, a.cell_size);
   double load_s = 0.0;
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid =
-      visibility::ViewcellGrid::Create(scene->bounds, spec.size_m, spec.base_m, spec.height_m);
+  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
   if (!grid.ok()) return Fail(grid.status());
   const visibility::CellCoord coord{ci, cj};
   if (!grid->Valid(coord)) {

@@ -11,6 +11,7 @@ namespace vistream::cli {
 void AddSceneCommands(CLI::App& app, std::function<void(int)> done);
 void AddPvsCommand(CLI::App& app, std::function<void(int)> done);
 void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done);
+void AddAgvsCommand(CLI::App& app, std::function<void(int)> done);
 void AddBenchCommands(CLI::App& app, std::function<void(int)> done);
 // `bench epsilon`, added to the bench subcommand by AddBenchCommands.
 void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);

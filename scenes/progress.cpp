@@ -46,8 +46,8 @@ void Progress::Print(bool final_line) {
     last_permille_ = permille;
     constexpr int kWidth = 30;
     const int filled = permille * kWidth / 1000;
-    std::fprintf(stderr, "\r%-24s [%.*s%*s] %5.1f%%  %6.1f s", label_.c_str(), filled,
-                 "##############################", kWidth - filled, "", permille / 10.0, seconds);
+    std::fprintf(stderr, "\r%-24s [%.*s%*s] %5.1f%%  %6.1f s  %s", label_.c_str(), filled,
+                 "##############################", kWidth - filled, "", permille / 10.0, seconds, detail_.c_str());
     if (final_line) std::fputc('\n', stderr);
     std::fflush(stderr);
     return;
@@ -58,7 +58,7 @@ void Progress::Print(bool final_line) {
   if (final_line) {
     std::fprintf(stderr, "%s: done in %.2f s\n", label_.c_str(), seconds);
   } else {
-    std::fprintf(stderr, "%s: %d%% after %.1f s\n", label_.c_str(), decile * 10, seconds);
+    std::fprintf(stderr, "%s: %d%% after %.1f s  %s\n", label_.c_str(), decile * 10, seconds, detail_.c_str());
   }
 }
 

@@ -18,6 +18,8 @@ class Progress {
   Progress& operator=(const Progress&) = delete;
 
   void Advance(uint64_t units = 1);
+  // A short text shown after the bar (rates, estimates); printed with the next update.
+  void SetDetail(std::string detail) { detail_ = std::move(detail); }
   // Marks the work complete and prints the elapsed time.
   void Finish();
   bool Cancelled() const { return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed); }
@@ -29,6 +31,7 @@ class Progress {
   void Print(bool final_line);
 
   std::string label_;
+  std::string detail_;
   uint64_t total_;
   uint64_t done_ = 0;
   int last_decile_ = -1;

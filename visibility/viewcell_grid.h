@@ -34,6 +34,14 @@ class ViewcellGrid {
   int ny() const { return ny_; }
   size_t CellCount() const { return static_cast<size_t>(nx_) * static_cast<size_t>(ny_); }
   double cell_size() const { return size_; }
+  double base_z() const { return base_z_; }
+  double height() const { return height_; }
+  // Scene-local corner of cell (0, 0) in xy.
+  glm::dvec2 corner() const { return {x0_, y0_}; }
+  // The box all cells together cover.
+  scenes::Aabb Bounds() const {
+    return {glm::dvec3(x0_, y0_, base_z_), glm::dvec3(x0_ + nx_ * size_, y0_ + ny_ * size_, base_z_ + height_)};
+  }
 
   bool Valid(CellCoord c) const { return c.i >= 0 && c.j >= 0 && c.i < nx_ && c.j < ny_; }
   // Preconditions: Valid(c), id < CellCount().

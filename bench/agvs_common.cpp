@@ -1,0 +1,93 @@
+#include "bench/agvs_common.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "bench/cli_common.h"
+#include "bench/top_view_map.h"
+
+namespace vistream::cli {
+
+absl::StatusOr<SampledScene> SampledScene::Load(const std::string& scene_arg, double cell_size,
+                                                const visibility::AgvsOptions& options) {
+  const scenes::ViewcellSpec spec = ViewcellSpecFor(scene_arg, cell_size);
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(scene_arg);
+  if (!scene.ok()) return scene.status();
+  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
+  if (!grid.ok()) return grid.status();
+  absl::StatusOr<std::unique_ptr<visibility::GlobalSampler>> sampler =
+      visibility::GlobalSampler::Create(*scene, *grid, options);
+  if (!sampler.ok()) return sampler.status();
+  return SampledScene{std::move(*scene), *grid, std::move(*sampler)};
+}
+
+absl::StatusOr<visibility::FilterOptions> FilterFromName(const std::string& name) {
+  visibility::FilterOptions f;
+  if (name == "none") return f;
+  if (name == "object" || name == "both") f.object_space = true;
+  if (name == "view" || name == "both") f.view_space = true;
+  if (!f.object_space && !f.view_space) {
+    return absl::InvalidArgumentError("--filter '" + name + "': expected none, object, view or both");
+  }
+  return f;
+}
+
+visibility::PvsFile MakePvsFile(const SampledScene& s, const visibility::GlobalPvs& sets) {
+  visibility::PvsFile f;
+  f.scene = s.scene.name;
+  f.cell_size = s.grid.cell_size();
+  f.base_z = s.grid.base_z();
+  f.height = s.grid.height();
+  f.corner_x = s.grid.corner().x;
+  f.corner_y = s.grid.corner().y;
+  f.nx = s.grid.nx();
+  f.ny = s.grid.ny();
+  f.strategy = visibility::StrategyName(s.sampler->options().strategy);
+  f.samples = s.sampler->stats().samples;
+  f.seconds = s.sampler->stats().seconds;
+  f.estimated_pixel_error = s.sampler->stats().estimated_pixel_error;
+  f.sets = sets;
+  return f;
+}
+
+double MeanTriangles(const scenes::Scene& scene, const visibility::GlobalPvs& sets) {
+  if (sets.cell_count() == 0) return 0.0;
+  double sum = 0.0;
+  for (visibility::CellId c = 0; c < sets.cell_count(); ++c) {
+    for (scenes::ObjectId o : sets.Objects(c)) {
+      if (o < scene.objects.size()) sum += static_cast<double>(scene.objects[o].mesh.TriangleCount());
+    }
+  }
+  return sum / static_cast<double>(sets.cell_count());
+}
+
+HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
+                          const visibility::GlobalPvs& sets, const std::string& png) {
+  HeatmapStats h;
+  std::vector<uint64_t> cost(sets.cell_count(), 0);
+  double sum = 0.0;
+  for (visibility::CellId c = 0; c < sets.cell_count(); ++c) {
+    for (scenes::ObjectId o : sets.Objects(c)) {
+      if (o < scene.objects.size()) cost[c] += scene.objects[o].mesh.TriangleCount();
+    }
+    h.max_triangles = std::max(h.max_triangles, cost[c]);
+    sum += static_cast<double>(cost[c]);
+  }
+  h.mean_triangles = sets.cell_count() > 0 ? sum / static_cast<double>(sets.cell_count()) : 0.0;
+  scenes::Aabb area = grid.Bounds();
+  area.Extend(scene.bounds);
+  TopViewMap map(area, 2048, Rgb{250, 250, 250});
+  const double top = std::log1p(static_cast<double>(std::max<uint64_t>(h.max_triangles, 1)));
+  for (visibility::CellId c = 0; c < sets.cell_count(); ++c) {
+    const scenes::Aabb b = grid.CellBox(c);
+    const std::vector<glm::dvec2> square = {{b.min.x, b.min.y}, {b.max.x, b.min.y}, {b.max.x, b.max.y}, {b.min.x, b.max.y}};
+    map.FillPolygon(square, Ramp(std::log1p(static_cast<double>(cost[c])) / top));
+  }
+  for (const auto& oc : scene.occluders) map.StrokePolygon(oc.footprint, Rgb{40, 40, 40});
+  h.width = map.width();
+  h.height = map.height();
+  h.status = map.WritePng(png);
+  return h;
+}
+
+}  // namespace vistream::cli

@@ -1,0 +1,1317 @@
+#include "visibility/agvs.h"
+
+#include <embree3/rtcore.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <numbers>
+#include <unordered_map>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+#include <glm/geometric.hpp>
+
+#include "scenes/progress.h"
+#include "scenes/random.h"
+#include "visibility/bytes.h"
+#include "visibility/kdtree.h"
+#include "visibility/parallel.h"
+#include "visibility/pvs_file.h"
+
+namespace vistream::visibility {
+
+namespace {
+
+using scenes::ObjectId;
+using scenes::Rng;
+
+constexpr uint32_t kChunk = 512;  // samples per chunk: one distribution, one random stream
+constexpr ObjectId kNoObject = std::numeric_limits<ObjectId>::max();
+constexpr int kSilhouetteSteps = 6;  // bisection steps of the silhouette search
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kSurfaceOffset = 1e-3;  // metres a ray leaves a surface point before it counts
+constexpr uint32_t kMaxMutationCount = 63;
+
+uint64_t Mix(uint64_t a, uint64_t b) {
+  uint64_t z = a * 0x9e3779b97f4a7c15ULL + b + 0x632be59bd9b4e019ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+glm::dvec3 UniformDirection(Rng& rng) {
+  const double phi = 2.0 * std::numbers::pi * rng.Uniform();
+  const double cos_t = 1.0 - 2.0 * rng.Uniform();
+  const double sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
+  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+}
+
+// Two unit vectors completing unit `n` to an orthonormal basis.
+void Basis(const glm::dvec3& n, glm::dvec3* b1, glm::dvec3* b2) {
+  const glm::dvec3 a = std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  *b1 = glm::normalize(glm::cross(n, a));
+  *b2 = glm::cross(n, *b1);
+}
+
+double Gaussian(Rng& rng) {
+  const double u1 = 1.0 - rng.Uniform();  // (0, 1]
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * rng.Uniform());
+}
+
+double BoxRadius(const Aabb& b) { return 0.5 * glm::length(b.Extent()); }
+
+double BoxDistance(const Aabb& a, const Aabb& b) {
+  double s = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double gap = std::max({0.0, a.min[k] - b.max[k], b.min[k] - a.max[k]});
+    s += gap * gap;
+  }
+  return std::sqrt(s);
+}
+
+struct Sample {
+  glm::dvec3 origin{0.0}, dir{0.0};  // frame-relative; dir is unit length
+  double t_fwd = kInf, t_rev = kInf;  // distances to the hits along +dir and -dir
+  ObjectId fwd = kNoObject, rev = kNoObject;
+  Distribution dist = Distribution::kViewSpaceDirection;
+  bool valid = false;
+  CellId origin_cell = 0;  // view space-direction and ref samples
+};
+
+struct Candidate {
+  glm::dvec3 from{0.0}, to{0.0};  // the segment's origin and the point where `object` was hit
+  double r_from = 0.0, r_to = 0.0;  // radii of what lies at each end
+  ObjectId object = kNoObject;
+  uint32_t mutations = 0;
+};
+
+// The mutation candidates, by how often each was mutated: the least mutated is taken first,
+// the most mutated dropped first when full.
+class MutationBuffer {
+ public:
+  explicit MutationBuffer(size_t capacity) : capacity_(capacity), buckets_(kMaxMutationCount + 1) {}
+
+  size_t size() const { return size_; }
+  void Add(Candidate c) {
+    if (capacity_ == 0) return;
+    if (size_ == capacity_) DropMostMutated();
+    c.mutations = std::min(c.mutations, kMaxMutationCount);
+    uint32_t slot;
+    if (!free_.empty()) {
+      slot = free_.back();
+      free_.pop_back();
+      pool_[slot] = c;
+    } else {
+      slot = static_cast<uint32_t>(pool_.size());
+      pool_.push_back(c);
+    }
+    buckets_[c.mutations].push_back(slot);
+    lowest_ = std::min<size_t>(lowest_, c.mutations);
+    ++size_;
+  }
+  // Precondition: size() > 0. A least-mutated candidate (random among equals), as it was
+  // before this mutation; its count goes up by one.
+  Candidate Take(Rng& rng) {
+    while (buckets_[lowest_].empty()) ++lowest_;
+    std::vector<uint32_t>& bucket = buckets_[lowest_];
+    const size_t i = rng.Below(bucket.size());
+    const uint32_t slot = bucket[i];
+    bucket[i] = bucket.back();
+    bucket.pop_back();
+    Candidate c = pool_[slot];
+    pool_[slot].mutations = std::min(c.mutations + 1, kMaxMutationCount);
+    buckets_[pool_[slot].mutations].push_back(slot);
+    return c;
+  }
+  // Drops every candidate whose end lies on `object`.
+  void Forget(ObjectId object) {
+    for (std::vector<uint32_t>& bucket : buckets_) {
+      std::erase_if(bucket, [&](uint32_t slot) {
+        if (pool_[slot].object != object) return false;
+        free_.push_back(slot);
+        --size_;
+        return true;
+      });
+    }
+  }
+  template <typename F>
+  void ForEach(F&& f) const {
+    for (const std::vector<uint32_t>& bucket : buckets_) {
+      for (uint32_t slot : bucket) f(pool_[slot]);
+    }
+  }
+
+ private:
+  void DropMostMutated() {
+    for (size_t b = buckets_.size(); b-- > 0;) {
+      if (buckets_[b].empty()) continue;
+      free_.push_back(buckets_[b].back());
+      buckets_[b].pop_back();
+      --size_;
+      return;
+    }
+  }
+  size_t capacity_;
+  size_t size_ = 0, lowest_ = 0;
+  std::vector<Candidate> pool_;
+  std::vector<uint32_t> free_;
+  std::vector<std::vector<uint32_t>> buckets_;
+};
+
+struct NewEntry {
+  CellId cell;
+  ObjectId object;
+  uint32_t sample;  // index in its chunk's samples
+  double t;         // a point of the segment inside the cell
+};
+
+struct ChunkPlan {
+  Distribution dist;
+  std::vector<Candidate> candidates;  // mutation chunks: one per sample
+};
+
+struct ChunkResult {
+  std::vector<Sample> samples;
+  std::vector<uint16_t> c_fwd, c_rev;  // per sample: new entries its ends found
+  std::vector<NewEntry> entries;
+  uint64_t embree_rays = 0, discovery_rays = 0, discarded = 0;
+  uint64_t contribution = 0;
+  uint64_t estimator_rays = 0, estimator_hits = 0;
+};
+
+}  // namespace
+
+const char* StrategyName(SamplingStrategy s) {
+  switch (s) {
+    case SamplingStrategy::kAgvs: return "agvs";
+    case SamplingStrategy::kSgvs: return "sgvs";
+    case SamplingStrategy::kRef: return "ref";
+  }
+  return "?";
+}
+
+absl::StatusOr<SamplingStrategy> StrategyFromName(std::string_view name) {
+  for (SamplingStrategy s : {SamplingStrategy::kAgvs, SamplingStrategy::kSgvs, SamplingStrategy::kRef}) {
+    if (name == StrategyName(s)) return s;
+  }
+  return absl::InvalidArgumentError(absl::StrCat("unknown sampling strategy '", std::string(name), "' (agvs, sgvs or ref)"));
+}
+
+const char* DistributionName(Distribution d) {
+  switch (d) {
+    case Distribution::kViewSpaceDirection: return "view_space_direction";
+    case Distribution::kObjectDirection: return "object_direction";
+    case Distribution::kTwoPoint: return "two_point";
+    case Distribution::kTwoPointMutation: return "two_point_mutation";
+    case Distribution::kSilhouetteMutation: return "silhouette_mutation";
+    case Distribution::kRef: return "ref";
+  }
+  return "?";
+}
+
+bool BoxMeetsShaft(const Aabb& a, const Aabb& b, const Aabb& c) {
+  // hull(A ∪ B) is the union over t in [0, 1] of the boxes (1 - t) A + t B; each axis bounds t
+  // by two linear inequalities.
+  double lo = 0.0, hi = 1.0;
+  auto need = [&](double f0, double f1) {  // f0 + t f1 <= 0
+    if (f1 == 0.0) {
+      if (f0 > 0.0) hi = -1.0;
+      return;
+    }
+    const double t = -f0 / f1;
+    if (f1 > 0.0) hi = std::min(hi, t);
+    else lo = std::max(lo, t);
+  };
+  for (int k = 0; k < 3; ++k) {
+    // (1 - t) a.min + t b.min <= c.max and (1 - t) a.max + t b.max >= c.min.
+    need(a.min[k] - c.max[k], b.min[k] - a.min[k]);
+    need(c.min[k] - a.max[k], a.max[k] - b.max[k]);
+  }
+  return lo <= hi;
+}
+
+// --- The sampler's state beyond the header. ---
+
+struct GlobalSampler::Impl {
+  struct Object {
+    std::vector<glm::vec3> verts;  // frame-relative
+    std::vector<uint32_t> indices;
+    std::vector<double> area_cdf;  // per triangle, cumulative
+    Aabb bounds;                   // frame-relative, from verts
+    double radius = 0.0;
+    bool alive = true;
+  };
+  std::vector<Object> objects;
+  std::vector<ObjectId> sampleable;  // alive objects with surface area
+  glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
+  Aabb view_space;                   // frame-relative
+  double cell_radius = 0.0;
+
+  RTCDevice device = nullptr;
+  RTCScene rtc = nullptr;
+  bool dirty = false;  // edits not yet committed
+
+  MutationBuffer buffer{0};
+  std::array<double, kDistributionCount> ema_contribution{}, ema_cost{};
+  std::array<double, kDistributionCount> probability{};
+  std::vector<std::pair<uint64_t, uint64_t>> estimator_window;  // per batch: rays, new-entry rays
+  std::vector<uint64_t> cell_samples;  // valid samples that pierced each cell
+  std::vector<uint64_t> object_hits;   // valid sample ends on each object
+
+  std::vector<bool> witness_cell;
+  std::unordered_map<uint64_t, Witness> witnesses;  // key: cell << 32 | object
+
+  KdTree tree;  // over object boxes, for the object-space filter
+  bool tree_stale = true;
+
+  ~Impl() {
+    if (rtc != nullptr) rtcReleaseScene(rtc);
+    if (device != nullptr) rtcReleaseDevice(device);
+  }
+
+  void Attach(ObjectId id) {
+    const Object& o = objects[id];
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(
+        rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), o.verts.size()));
+    for (size_t i = 0; i < o.verts.size(); ++i) {
+      v[3 * i] = o.verts[i].x;
+      v[3 * i + 1] = o.verts[i].y;
+      v[3 * i + 2] = o.verts[i].z;
+    }
+    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                              3 * sizeof(uint32_t), o.indices.size() / 3));
+    std::copy(o.indices.begin(), o.indices.end(), ix);
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(rtc, g, id);
+    rtcReleaseGeometry(g);
+    dirty = true;
+  }
+  void Commit() {
+    if (!dirty) return;
+    rtcCommitScene(rtc);
+    dirty = false;
+  }
+  void RebuildSampleable() {
+    sampleable.clear();
+    for (ObjectId id = 0; id < objects.size(); ++id) {
+      if (objects[id].alive && !objects[id].area_cdf.empty() && objects[id].area_cdf.back() > 0.0) {
+        sampleable.push_back(id);
+      }
+    }
+  }
+
+  // Fills `o` from scene-local positions; false if a position is not finite or an index is
+  // out of range.
+  bool MakeObject(const scenes::Mesh& mesh, Object* o) const {
+    o->verts.clear();
+    o->bounds = Aabb{};
+    for (const glm::vec3& p : mesh.positions) {
+      const glm::dvec3 q = glm::dvec3(p) - frame;
+      if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) return false;
+      o->verts.emplace_back(q);
+      o->bounds.Extend(glm::dvec3(o->verts.back()));
+    }
+    for (uint32_t i : mesh.indices) {
+      if (i >= mesh.positions.size()) return false;
+    }
+    o->indices.assign(mesh.indices.begin(), mesh.indices.end() - mesh.indices.size() % 3);
+    o->area_cdf.clear();
+    double sum = 0.0;
+    for (size_t t = 0; t + 2 < o->indices.size(); t += 3) {
+      const glm::dvec3 a(o->verts[o->indices[t]]), b(o->verts[o->indices[t + 1]]), c(o->verts[o->indices[t + 2]]);
+      sum += 0.5 * glm::length(glm::cross(b - a, c - a));
+      o->area_cdf.push_back(sum);
+    }
+    o->radius = BoxRadius(o->bounds);
+    o->alive = true;
+    return true;
+  }
+
+  glm::dvec3 TriangleNormal(ObjectId id, uint32_t prim) const {
+    const Object& o = objects[id];
+    const glm::dvec3 a(o.verts[o.indices[3 * prim]]), b(o.verts[o.indices[3 * prim + 1]]),
+        c(o.verts[o.indices[3 * prim + 2]]);
+    return glm::cross(b - a, c - a);
+  }
+
+  // Whether the ray from `from` through `through` (beyond `from`) meets object `id`.
+  bool RayHitsObject(const glm::dvec3& from, const glm::dvec3& through, ObjectId id) const {
+    const Object& o = objects[id];
+    const glm::dvec3 d = through - from;
+    // Slab test against the object's box first.
+    double t0 = 0.0, t1 = kInf;
+    for (int k = 0; k < 3; ++k) {
+      if (d[k] == 0.0) {
+        if (from[k] < o.bounds.min[k] || from[k] > o.bounds.max[k]) return false;
+        continue;
+      }
+      double a = (o.bounds.min[k] - from[k]) / d[k], b = (o.bounds.max[k] - from[k]) / d[k];
+      if (a > b) std::swap(a, b);
+      t0 = std::max(t0, a);
+      t1 = std::min(t1, b);
+      if (t0 > t1) return false;
+    }
+    for (size_t t = 0; t + 2 < o.indices.size(); t += 3) {
+      const glm::dvec3 a(o.verts[o.indices[t]]), b(o.verts[o.indices[t + 1]]), c(o.verts[o.indices[t + 2]]);
+      const glm::dvec3 e1 = b - a, e2 = c - a, p = glm::cross(d, e2);
+      const double det = glm::dot(e1, p);
+      if (det == 0.0) continue;
+      const double inv = 1.0 / det;
+      const glm::dvec3 s = from - a;
+      const double u = glm::dot(s, p) * inv;
+      if (u < 0.0 || u > 1.0) continue;
+      const glm::dvec3 q = glm::cross(s, e1);
+      const double v = glm::dot(d, q) * inv;
+      if (v < 0.0 || u + v > 1.0) continue;
+      if (glm::dot(e2, q) * inv > 1e-9) return true;
+    }
+    return false;
+  }
+};
+
+// --- Drawing and casting samples (read-only on the sampler; one per thread). ---
+
+namespace {
+
+class Worker {
+ public:
+  using Impl = GlobalSampler::Impl;
+  Worker(const Impl& impl, const ViewcellGrid& grid, const GlobalPvs& pvs, const AgvsOptions& options)
+      : s_(impl), grid_(grid), pvs_(pvs), options_(options) {}
+
+  void Run(const ChunkPlan& plan, uint64_t seed, ChunkResult* out) {
+    Rng rng(seed);
+    out_ = out;
+    for (uint32_t i = 0; i < kChunk; ++i) {
+      switch (plan.dist) {
+        case Distribution::kViewSpaceDirection: {
+          Sample smp;
+          smp.dist = plan.dist;
+          smp.origin = ViewSpacePoint(rng, &smp.origin_cell);
+          smp.dir = UniformDirection(rng);
+          CastBoth(&smp, 0.0);
+          Emit(smp);
+          break;
+        }
+        case Distribution::kRef: {
+          Sample smp;
+          smp.dist = plan.dist;
+          smp.origin = ViewSpacePoint(rng, &smp.origin_cell);
+          smp.dir = UniformDirection(rng);
+          Hit h = Cast(smp.origin, smp.dir, 0.0);
+          smp.valid = !h.back;
+          smp.t_fwd = h.t;
+          smp.fwd = h.object;
+          smp.t_rev = 0.0;
+          Emit(smp);
+          break;
+        }
+        case Distribution::kObjectDirection: {
+          if (s_.sampleable.empty()) break;
+          glm::dvec3 n;
+          ObjectId o;
+          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
+          glm::dvec3 b1, b2;
+          Basis(n, &b1, &b2);
+          const double phi = 2.0 * std::numbers::pi * rng.Uniform();
+          const double cos_t = std::sqrt(rng.Uniform()), sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
+          Sample smp;
+          smp.dist = plan.dist;
+          smp.origin = p;
+          smp.dir = sin_t * std::cos(phi) * b1 + sin_t * std::sin(phi) * b2 + cos_t * n;
+          const Hit h = Cast(p, smp.dir, kSurfaceOffset);
+          smp.valid = !h.back;
+          smp.t_fwd = h.t;
+          smp.fwd = h.object;
+          smp.t_rev = 0.0;
+          smp.rev = o;
+          Emit(smp);
+          break;
+        }
+        case Distribution::kTwoPoint: {
+          if (s_.sampleable.empty()) break;
+          CellId cell;
+          const glm::dvec3 v = ViewSpacePoint(rng, &cell);
+          glm::dvec3 n;
+          ObjectId o;
+          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
+          EmitSegment(v, p, plan.dist);
+          break;
+        }
+        case Distribution::kTwoPointMutation: {
+          const Candidate& c = plan.candidates[i];
+          const glm::dvec3 u = glm::normalize(c.to - c.from);
+          glm::dvec3 b1, b2;
+          Basis(u, &b1, &b2);
+          const double g1 = Gaussian(rng), g2 = Gaussian(rng), g3 = Gaussian(rng), g4 = Gaussian(rng);
+          const glm::dvec3 from = c.from + c.r_from * (g1 * b1 + g2 * b2);
+          const glm::dvec3 to = c.to + c.r_to * (g3 * b1 + g4 * b2);
+          EmitSegment(from, to, plan.dist);
+          break;
+        }
+        case Distribution::kSilhouetteMutation: {
+          const Candidate& c = plan.candidates[i];
+          const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
+          const Sample smp = EmitSegment(c.from, to, plan.dist);
+          if (!smp.valid || smp.fwd == kNoObject) break;
+          // A depth discontinuity behind the silhouette: search the silhouette again from the
+          // far hit point back towards the view space (the reverse sampling of GVS).
+          const glm::dvec3 hit = smp.origin + smp.t_fwd * smp.dir;
+          if (glm::length(hit - to) > options_.depth_discontinuity_k * c.r_to) {
+            const glm::dvec3 back = Silhouette(hit, to, c.r_to, c.object, rng);
+            EmitSegment(hit, back, plan.dist);
+          }
+          break;
+        }
+      }
+    }
+  }
+
+ private:
+  struct Hit {
+    double t = kInf;
+    ObjectId object = kNoObject;
+    bool back = false;
+  };
+
+  glm::dvec3 ViewSpacePoint(Rng& rng, CellId* cell) {
+    const CellId c = static_cast<CellId>(rng.Below(grid_.CellCount()));
+    const Aabb box = grid_.CellBox(c);
+    const glm::dvec3 lo = box.min - s_.frame, ext = box.Extent();
+    *cell = c;
+    return lo + glm::dvec3(rng.Uniform() * ext.x, rng.Uniform() * ext.y, rng.Uniform() * ext.z);
+  }
+
+  glm::dvec3 SurfacePoint(Rng& rng, ObjectId* id, glm::dvec3* normal) {
+    *id = s_.sampleable[rng.Below(s_.sampleable.size())];
+    const Impl::Object& o = s_.objects[*id];
+    const double x = rng.Uniform() * o.area_cdf.back();
+    const size_t t = std::min<size_t>(std::upper_bound(o.area_cdf.begin(), o.area_cdf.end(), x) - o.area_cdf.begin(),
+                                      o.area_cdf.size() - 1);
+    const glm::dvec3 a(o.verts[o.indices[3 * t]]), b(o.verts[o.indices[3 * t + 1]]), c(o.verts[o.indices[3 * t + 2]]);
+    double u = rng.Uniform(), v = rng.Uniform();
+    if (u + v > 1.0) {
+      u = 1.0 - u;
+      v = 1.0 - v;
+    }
+    const glm::dvec3 n = glm::cross(b - a, c - a);
+    const double len = glm::length(n);
+    *normal = len > 0.0 ? n / len : glm::dvec3(0, 0, 1);
+    return a + u * (b - a) + v * (c - a);
+  }
+
+  Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    rh.ray.org_x = static_cast<float>(origin.x);
+    rh.ray.org_y = static_cast<float>(origin.y);
+    rh.ray.org_z = static_cast<float>(origin.z);
+    rh.ray.dir_x = static_cast<float>(dir.x);
+    rh.ray.dir_y = static_cast<float>(dir.y);
+    rh.ray.dir_z = static_cast<float>(dir.z);
+    rh.ray.tnear = static_cast<float>(tnear);
+    rh.ray.tfar = std::numeric_limits<float>::infinity();
+    rh.ray.mask = ~0u;
+    rh.ray.flags = 0;
+    rh.ray.time = 0.0f;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(s_.rtc, &ctx, &rh);
+    ++out_->embree_rays;
+    Hit h;
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
+    h.t = rh.ray.tfar;
+    h.object = rh.hit.geomID;
+    h.back = options_.backface_rule && glm::dot(s_.TriangleNormal(h.object, rh.hit.primID), dir) > 0.0;
+    return h;
+  }
+
+  void CastBoth(Sample* smp, double tnear) {
+    const Hit f = Cast(smp->origin, smp->dir, tnear), r = Cast(smp->origin, -smp->dir, tnear);
+    smp->valid = !f.back && !r.back;
+    smp->t_fwd = f.t;
+    smp->fwd = f.object;
+    smp->t_rev = r.t;
+    smp->rev = r.object;
+  }
+
+  // The sample on the line from `a` to `b`, cast both ways from their midpoint.
+  const Sample& EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist) {
+    Sample smp;
+    smp.dist = dist;
+    const glm::dvec3 d = b - a;
+    const double len = glm::length(d);
+    smp.origin = 0.5 * (a + b);
+    smp.dir = len > 0.0 && std::isfinite(len) ? d / len : glm::dvec3(0, 0, 1);
+    CastBoth(&smp, 0.0);
+    return Emit(smp);
+  }
+
+  // The point near `to`, off `object`'s silhouette seen from `from`: along a random direction
+  // in the plane through `to` normal to the segment, bisect between a point whose ray from
+  // `from` meets the object and one whose ray misses it, and keep the missing one.
+  glm::dvec3 Silhouette(const glm::dvec3& from, const glm::dvec3& to, double radius, ObjectId object, Rng& rng) {
+    const glm::dvec3 seg = to - from;
+    const double len = glm::length(seg);
+    if (!(len > 0.0) || object >= s_.objects.size()) return to;
+    glm::dvec3 b1, b2;
+    Basis(seg / len, &b1, &b2);
+    const double phi = 2.0 * std::numbers::pi * rng.Uniform();
+    const glm::dvec3 d = std::cos(phi) * b1 + std::sin(phi) * b2;
+    const glm::dvec3 far = to + radius * d;
+    if (!s_.objects[object].alive) return far;
+    auto hits = [&](double lambda) {
+      ++out_->discovery_rays;
+      return s_.RayHitsObject(from, to + lambda * radius * d, object);
+    };
+    // The far end first: when even it meets the object there is no silhouette within reach.
+    if (hits(1.0)) return far;
+    double lo = 0.0, hi = 1.0;
+    if (!hits(0.0)) {
+      // The candidate's own ray misses (it grazed or came from a reverse search): look for
+      // the object on the other side.
+      if (!hits(-1.0)) return far;
+      lo = -1.0;
+      hi = 0.0;
+      for (int k = 0; k < kSilhouetteSteps; ++k) {
+        const double mid = 0.5 * (lo + hi);
+        (hits(mid) ? lo : hi) = mid;
+      }
+      return to + hi * radius * d;
+    }
+    for (int k = 0; k < kSilhouetteSteps; ++k) {
+      const double mid = 0.5 * (lo + hi);
+      (hits(mid) ? lo : hi) = mid;
+    }
+    return to + hi * radius * d;
+  }
+
+  // Walks the viewcells the sample's free segment pierces and records what is new in them.
+  const Sample& Emit(const Sample& smp) {
+    ChunkResult& out = *out_;
+    const uint32_t index = static_cast<uint32_t>(out.samples.size());
+    out.samples.push_back(smp);
+    out.c_fwd.push_back(0);
+    out.c_rev.push_back(0);
+    if (!smp.valid) {
+      ++out.discarded;
+      return out.samples.back();
+    }
+    if (smp.dist == Distribution::kRef) {
+      // A ref ray is a camera ray too: a uniform point and direction in a uniform cell.
+      ++out.estimator_rays;
+      if (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) {
+        ++out.estimator_hits;
+        out.entries.push_back({smp.origin_cell, smp.fwd, index, 0.0});
+        out.c_fwd.back() = 1;
+        ++out.contribution;
+      }
+      return out.samples.back();
+    }
+    if (smp.dist == Distribution::kViewSpaceDirection) {
+      // The estimator's camera rays: each direction from a uniform point is one.
+      out.estimator_rays += 2;
+      out.estimator_hits += (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) +
+                            (smp.rev != kNoObject && !pvs_.Contains(smp.origin_cell, smp.rev));
+    }
+    if (smp.fwd == kNoObject && smp.rev == kNoObject) return out.samples.back();
+    uint32_t c_fwd = 0, c_rev = 0;
+    VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+      if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
+        out.entries.push_back({cell, smp.fwd, index, t});
+        ++c_fwd;
+      }
+      if (smp.rev != kNoObject && !pvs_.Contains(cell, smp.rev)) {
+        out.entries.push_back({cell, smp.rev, index, t});
+        ++c_rev;
+      }
+    });
+    out.c_fwd.back() = static_cast<uint16_t>(std::min<uint32_t>(c_fwd, 65535));
+    out.c_rev.back() = static_cast<uint16_t>(std::min<uint32_t>(c_rev, 65535));
+    out.contribution += c_fwd + c_rev;
+    return out.samples.back();
+  }
+
+ public:
+  // Calls visit(cell, t) for each viewcell the part [t0, t1] of the line origin + t dir
+  // passes through, with t a parameter inside that cell, in order along the line.
+  template <typename F>
+  void VisitCells(const glm::dvec3& origin, const glm::dvec3& dir, double t0, double t1, F&& visit) const {
+    const Aabb& vs = s_.view_space;
+    for (int k = 0; k < 3; ++k) {
+      if (dir[k] == 0.0) {
+        if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return;
+        continue;
+      }
+      double a = (vs.min[k] - origin[k]) / dir[k], b = (vs.max[k] - origin[k]) / dir[k];
+      if (a > b) std::swap(a, b);
+      t0 = std::max(t0, a);
+      t1 = std::min(t1, b);
+    }
+    if (!(t0 <= t1)) return;
+    const double size = grid_.cell_size();
+    const glm::dvec3 p = origin + t0 * dir;
+    int i = std::clamp(static_cast<int>(std::floor((p.x - vs.min.x) / size)), 0, grid_.nx() - 1);
+    int j = std::clamp(static_cast<int>(std::floor((p.y - vs.min.y) / size)), 0, grid_.ny() - 1);
+    const int si = dir.x > 0 ? 1 : (dir.x < 0 ? -1 : 0), sj = dir.y > 0 ? 1 : (dir.y < 0 ? -1 : 0);
+    auto next = [&](int s, int idx, double lo, double o, double d) {
+      if (s == 0) return kInf;
+      const double edge = lo + (s > 0 ? idx + 1 : idx) * size;
+      return (edge - o) / d;
+    };
+    double tx = next(si, i, vs.min.x, origin.x, dir.x), ty = next(sj, j, vs.min.y, origin.y, dir.y);
+    const double dtx = si != 0 ? size / std::abs(dir.x) : kInf, dty = sj != 0 ? size / std::abs(dir.y) : kInf;
+    double t = t0;
+    for (;;) {
+      const double exit = std::min({tx, ty, t1});
+      visit(grid_.Id({i, j}), 0.5 * (t + exit));
+      if (exit >= t1) return;
+      t = exit;
+      if (tx <= ty) {
+        i += si;
+        tx += dtx;
+      } else {
+        j += sj;
+        ty += dty;
+      }
+      if (i < 0 || j < 0 || i >= grid_.nx() || j >= grid_.ny()) return;
+    }
+  }
+
+ private:
+  const Impl& s_;
+  const ViewcellGrid& grid_;
+  const GlobalPvs& pvs_;
+  const AgvsOptions& options_;
+  ChunkResult* out_ = nullptr;
+};
+
+}  // namespace
+
+// --- GlobalSampler ---
+
+namespace {
+// The pixel-error estimate over the newest batches that hold enough camera rays: the weak law
+// of large numbers with P = 0.9, k = 0.5 asks N >= (1 - e) / (k² e (1 - P)).
+void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats) {
+  uint64_t n = 0, nc = 0;
+  bool settled = false;
+  for (size_t b = m.estimator_window.size(); b-- > 0;) {
+    n += m.estimator_window[b].first;
+    nc += m.estimator_window[b].second;
+    if (n == 0) continue;
+    // With no contributing ray yet, size the window as if the next one were.
+    const double e = static_cast<double>(std::max<uint64_t>(nc, 1)) / static_cast<double>(n);
+    if (static_cast<double>(n) >= (1.0 - e) / (0.25 * e * 0.1)) {
+      settled = true;
+      break;
+    }
+  }
+  stats->estimated_pixel_error = n > 0 ? options.resolution * static_cast<double>(nc) / static_cast<double>(n) : 0.0;
+  stats->estimate_settled = settled;
+}
+}  // namespace
+
+GlobalSampler::GlobalSampler(const ViewcellGrid& grid, const AgvsOptions& options)
+    : grid_(grid), options_(options), impl_(std::make_unique<Impl>()) {}
+
+GlobalSampler::~GlobalSampler() = default;
+
+absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scenes::Scene& scene,
+                                                                    const ViewcellGrid& grid,
+                                                                    const AgvsOptions& options) {
+  if (grid.CellCount() == 0) return absl::InvalidArgumentError("global sampling over an empty viewcell grid");
+  if (scene.TriangleCount() == 0) return absl::InvalidArgumentError("global sampling over a scene without triangles");
+  if (options.batch_samples == 0) return absl::InvalidArgumentError("global sampling: batch_samples must be positive");
+  std::unique_ptr<GlobalSampler> s(new GlobalSampler(grid, options));
+  Impl& m = *s->impl_;
+  // The frame's origin is the grid's corner, a multiple of the cell size: moving the scene by
+  // whole cells moves the frame with it and leaves every frame-relative float as it was.
+  m.frame = glm::dvec3(grid.corner(), 0.0);
+  m.view_space = grid.Bounds();
+  m.view_space.min -= m.frame;
+  m.view_space.max -= m.frame;
+  m.cell_radius = BoxRadius(grid.CellBox(CellId{0}));
+  m.buffer = MutationBuffer(options.mutation_buffer);
+  m.device = rtcNewDevice(nullptr);
+  if (m.device == nullptr) {
+    return absl::InternalError(absl::StrCat("Embree: cannot create a device (error ", rtcGetDeviceError(nullptr), ")"));
+  }
+  m.rtc = rtcNewScene(m.device);
+  rtcSetSceneFlags(m.rtc, RTC_SCENE_FLAG_ROBUST);
+  m.objects.resize(scene.objects.size());
+  for (ObjectId id = 0; id < scene.objects.size(); ++id) {
+    if (!m.MakeObject(scene.objects[id].mesh, &m.objects[id])) {
+      return absl::InvalidArgumentError(absl::StrCat("object ", id, " (", scene.objects[id].name,
+                                                     ") has a non-finite position or an index out of range"));
+    }
+    if (!m.objects[id].indices.empty()) m.Attach(id);
+  }
+  m.Commit();
+  if (const RTCError err = rtcGetDeviceError(m.device); err != RTC_ERROR_NONE) {
+    return absl::InternalError(absl::StrCat("Embree: building the scene failed (error ", err, ")"));
+  }
+  m.RebuildSampleable();
+  s->pvs_ = GlobalPvs(grid.CellCount(), scene.objects.size());
+  m.cell_samples.assign(grid.CellCount(), 0);
+  m.object_hits.assign(scene.objects.size(), 0);
+  m.witness_cell.assign(grid.CellCount(), false);
+  return s;
+}
+
+void GlobalSampler::RunBatch() {
+  const auto start = std::chrono::steady_clock::now();
+  Impl& m = *impl_;
+  m.Commit();
+
+  // Which distributions, in what shares.
+  std::vector<Distribution> available;
+  switch (options_.strategy) {
+    case SamplingStrategy::kRef: available = {Distribution::kRef}; break;
+    case SamplingStrategy::kSgvs: available = {Distribution::kViewSpaceDirection}; break;
+    case SamplingStrategy::kAgvs:
+      available = {Distribution::kViewSpaceDirection, Distribution::kObjectDirection, Distribution::kTwoPoint};
+      if (m.buffer.size() > 0) {
+        available.push_back(Distribution::kTwoPointMutation);
+        available.push_back(Distribution::kSilhouetteMutation);
+      }
+      break;
+  }
+  std::array<double, kDistributionCount> share{};
+  {
+    double sum = 0.0;
+    for (Distribution d : available) {
+      const auto k = static_cast<size_t>(d);
+      // Until a distribution has been tried, it gets the best weight seen.
+      share[k] = m.ema_cost[k] > 0.0 ? m.ema_contribution[k] / m.ema_cost[k] : -1.0;
+    }
+    double best = 0.0;
+    for (Distribution d : available) best = std::max(best, share[static_cast<size_t>(d)]);
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      if (w < 0.0) w = best > 0.0 ? best : 1.0;
+      sum += w;
+    }
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      w = sum > 0.0 ? w / sum : 1.0 / available.size();
+    }
+    // The floor keeps every distribution alive (the stationary ones make the whole progressive).
+    const double floor = std::min(options_.min_probability, 1.0 / available.size());
+    sum = 0.0;
+    for (Distribution d : available) sum += std::max(share[static_cast<size_t>(d)], floor);
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      w = std::max(w, floor) / sum;
+    }
+  }
+  const uint32_t chunks = (options_.batch_samples + kChunk - 1) / kChunk;
+  std::vector<uint32_t> quota(kDistributionCount, 0);
+  {
+    uint32_t given = 0;
+    std::vector<std::pair<double, size_t>> remainders;
+    for (Distribution d : available) {
+      const auto k = static_cast<size_t>(d);
+      const double exact = share[k] * chunks;
+      quota[k] = std::max<uint32_t>(1, static_cast<uint32_t>(exact));
+      given += quota[k];
+      remainders.emplace_back(exact - std::floor(exact), k);
+    }
+    std::sort(remainders.begin(), remainders.end(), [](auto& a, auto& b) {
+      return a.first != b.first ? a.first > b.first : a.second < b.second;
+    });
+    for (size_t r = 0; given < chunks; r = (r + 1) % remainders.size(), ++given) ++quota[remainders[r].second];
+  }
+  for (Distribution d : available) stats_.distributions[static_cast<size_t>(d)].probability = share[static_cast<size_t>(d)];
+
+  const uint64_t batch = stats_.batches;
+  std::vector<ChunkPlan> plans;
+  Rng take_rng(Mix(options_.seed, Mix(batch, 0xb0ffe7)));
+  for (Distribution d : available) {
+    for (uint32_t q = 0; q < quota[static_cast<size_t>(d)]; ++q) {
+      ChunkPlan plan{d, {}};
+      if (d == Distribution::kTwoPointMutation || d == Distribution::kSilhouetteMutation) {
+        plan.candidates.reserve(kChunk);
+        for (uint32_t i = 0; i < kChunk; ++i) plan.candidates.push_back(m.buffer.Take(take_rng));
+      }
+      plans.push_back(std::move(plan));
+    }
+  }
+
+  // Draw and cast in parallel; the sets are only read.
+  std::vector<ChunkResult> results(plans.size());
+  ParallelFor(plans.size(), options_.threads, [&] {
+    return [&, worker = Worker(m, grid_, pvs_, options_)](size_t c) mutable {
+      results[c].samples.reserve(kChunk);
+      worker.Run(plans[c], Mix(options_.seed, Mix(batch, c)), &results[c]);
+    };
+  });
+
+  // Apply in chunk order.
+  std::array<uint64_t, kDistributionCount> contribution{}, cost{}, drawn{};
+  uint64_t est_rays = 0, est_hits = 0;
+  Worker walker(m, grid_, pvs_, options_);
+  for (size_t c = 0; c < plans.size(); ++c) {
+    const ChunkResult& r = results[c];
+    const auto k = static_cast<size_t>(plans[c].dist);
+    for (const NewEntry& e : r.entries) {
+      if (!pvs_.Insert(e.cell, e.object)) continue;
+      ++stats_.entries;
+      if (m.witness_cell[e.cell]) {
+        const Sample& smp = r.samples[e.sample];
+        const double t_obj = e.object == smp.fwd ? smp.t_fwd : -smp.t_rev;
+        m.witnesses.emplace(uint64_t{e.cell} << 32 | e.object,
+                            Witness{m.frame + smp.origin + e.t * smp.dir, m.frame + smp.origin + t_obj * smp.dir});
+      }
+    }
+    for (size_t i = 0; i < r.samples.size(); ++i) {
+      const Sample& smp = r.samples[i];
+      if (!smp.valid) continue;
+      // Per-cell and per-object sampling densities, for the object-space filter.
+      if (smp.dist != Distribution::kRef) {
+        walker.VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double) { ++m.cell_samples[cell]; });
+        if (smp.rev != kNoObject) ++m.object_hits[smp.rev];
+      } else {
+        ++m.cell_samples[smp.origin_cell];
+      }
+      if (smp.fwd != kNoObject) ++m.object_hits[smp.fwd];
+      if (options_.strategy != SamplingStrategy::kAgvs) continue;
+      // Contributing ends become mutation candidates: the hit point, and the other end (a
+      // hit, or where the segment leaves the view space).
+      auto other_end = [&](bool fwd_end, glm::dvec3* p, double* r_end) {
+        const double t = fwd_end ? -smp.t_rev : smp.t_fwd;
+        const ObjectId o = fwd_end ? smp.rev : smp.fwd;
+        if (o != kNoObject) {
+          *p = smp.origin + t * smp.dir;
+          *r_end = m.objects[o].radius;
+          return;
+        }
+        double last = 0.0;
+        bool any = false;
+        walker.VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId, double tc) {
+          if (!any || (fwd_end ? tc < last : tc > last)) last = tc;
+          any = true;
+        });
+        *p = smp.origin + last * smp.dir;
+        *r_end = m.cell_radius;
+      };
+      if (r.c_fwd[i] > 0 && smp.fwd != kNoObject) {
+        Candidate cand;
+        other_end(true, &cand.from, &cand.r_from);
+        cand.to = smp.origin + smp.t_fwd * smp.dir;
+        cand.r_to = m.objects[smp.fwd].radius;
+        cand.object = smp.fwd;
+        m.buffer.Add(cand);
+      }
+      if (r.c_rev[i] > 0 && smp.rev != kNoObject) {
+        Candidate cand;
+        other_end(false, &cand.from, &cand.r_from);
+        cand.to = smp.origin - smp.t_rev * smp.dir;
+        cand.r_to = m.objects[smp.rev].radius;
+        cand.object = smp.rev;
+        m.buffer.Add(cand);
+      }
+    }
+    contribution[k] += r.contribution;
+    cost[k] += r.embree_rays + r.discovery_rays;
+    drawn[k] += r.samples.size();
+    stats_.samples += r.samples.size();
+    stats_.rays += r.embree_rays;
+    stats_.discarded_samples += r.discarded;
+    est_rays += r.estimator_rays;
+    est_hits += r.estimator_hits;
+  }
+  for (size_t k = 0; k < kDistributionCount; ++k) {
+    DistributionStats& d = stats_.distributions[k];
+    d.samples += drawn[k];
+    d.rays += cost[k];
+    d.contribution += contribution[k];
+    if (drawn[k] > 0) {
+      // Half-life of one batch: the window is about the last two batches.
+      m.ema_contribution[k] = 0.5 * m.ema_contribution[k] + static_cast<double>(contribution[k]);
+      m.ema_cost[k] = 0.5 * m.ema_cost[k] + static_cast<double>(cost[k]);
+    }
+  }
+
+  m.estimator_window.emplace_back(est_rays, est_hits);
+  UpdateEstimate(m, options_, &stats_);
+  stats_.mutation_candidates = m.buffer.size();
+  ++stats_.batches;
+  stats_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void GlobalSampler::Run(const RunLimits& limits, const std::atomic<bool>* cancel, const std::string& progress_label) {
+  const uint64_t start_samples = stats_.samples;
+  const double start_seconds = stats_.seconds;
+  std::unique_ptr<scenes::Progress> progress;
+  if (!progress_label.empty()) progress = std::make_unique<scenes::Progress>(progress_label, 1000, cancel);
+  uint64_t shown = 0;
+  for (;;) {
+    const double ran = stats_.seconds - start_seconds;
+    const uint64_t ran_samples = stats_.samples - start_samples;
+    double fraction = 0.0;
+    bool done = false;
+    if (limits.seconds > 0) {
+      fraction = std::max(fraction, ran / limits.seconds);
+      done |= ran >= limits.seconds;
+    }
+    if (limits.samples > 0) {
+      fraction = std::max(fraction, static_cast<double>(ran_samples) / static_cast<double>(limits.samples));
+      done |= ran_samples >= limits.samples;
+    }
+    if (limits.pixel_error > 0 && stats_.batches > 0) {
+      // Progress on a log scale from the first estimate down to the target.
+      const double e = std::max(stats_.estimated_pixel_error, 1e-12);
+      fraction = std::max(fraction, std::clamp(1.0 - std::log(e / limits.pixel_error) / std::log(1e6), 0.0, 1.0));
+      done |= stats_.estimate_settled && stats_.estimated_pixel_error <= limits.pixel_error;
+    }
+    if (limits.seconds <= 0 && limits.samples == 0 && limits.pixel_error <= 0) done = true;
+    if (progress != nullptr) {
+      const uint64_t now = static_cast<uint64_t>(std::clamp(fraction, 0.0, 1.0) * 1000);
+      progress->SetDetail(absl::StrFormat("%.2f M samples/s, error %.1f px",
+                                          ran > 0 ? ran_samples / ran * 1e-6 : 0.0, stats_.estimated_pixel_error));
+      if (now > shown) {
+        progress->Advance(now - shown);
+        shown = now;
+      }
+    }
+    if (done || (cancel != nullptr && cancel->load())) break;
+    RunBatch();
+  }
+  if (progress != nullptr) progress->Finish();
+}
+
+void GlobalSampler::RecordWitnesses(std::span<const CellId> cells) {
+  for (CellId c : cells) {
+    if (c < impl_->witness_cell.size()) impl_->witness_cell[c] = true;
+  }
+}
+
+std::optional<Witness> GlobalSampler::WitnessOf(CellId cell, scenes::ObjectId object) const {
+  const auto it = impl_->witnesses.find(uint64_t{cell} << 32 | object);
+  if (it == impl_->witnesses.end()) return std::nullopt;
+  return it->second;
+}
+
+// --- Filters ---
+
+std::vector<scenes::ObjectId> GlobalSampler::Filtered(CellId cell, const FilterOptions& filter) const {
+  Impl& m = *impl_;
+  std::vector<ObjectId> base = pvs_.Objects(cell);
+  if (!filter.object_space && !filter.view_space) return base;
+  std::vector<bool> in(pvs_.object_count(), false);
+  for (ObjectId o : base) in[o] = true;
+  std::vector<ObjectId> out = base;
+  if (filter.view_space) {
+    for (CellId n : grid_.Neighbours(cell)) {
+      const std::vector<ObjectId> theirs = pvs_.Objects(n);
+      size_t common = 0;
+      for (ObjectId o : theirs) common += in[o];
+      const size_t uni = base.size() + theirs.size() - common;
+      if (uni == 0 || static_cast<double>(common) / static_cast<double>(uni) < filter.view_similarity) continue;
+      for (ObjectId o : theirs) {
+        if (!in[o] && m.objects[o].alive) {
+          in[o] = true;
+          out.push_back(o);
+        }
+      }
+    }
+  }
+  if (filter.object_space && !base.empty()) {
+    if (m.tree_stale) {
+      std::vector<Aabb> boxes(m.objects.size());
+      for (ObjectId o = 0; o < m.objects.size(); ++o) {
+        if (m.objects[o].alive) boxes[o] = m.objects[o].bounds;
+      }
+      m.tree = KdTree::Build(boxes);
+      m.tree_stale = false;
+    }
+    Aabb cell_box = grid_.CellBox(cell);
+    cell_box.min -= m.frame;
+    cell_box.max -= m.frame;
+    const double n_v = static_cast<double>(std::max<uint64_t>(m.cell_samples[cell], 1));
+    std::vector<int32_t> stack;
+    for (ObjectId o : base) {
+      const Impl::Object& obj = m.objects[o];
+      const double e_g = 2.0 * BoxDistance(cell_box, obj.bounds) / std::sqrt(n_v);
+      const double e_l = obj.radius / std::sqrt(static_cast<double>(std::max<uint64_t>(m.object_hits[o], 1)));
+      const double e = filter.k * std::min(e_g, e_l);
+      Aabb grown = obj.bounds;
+      grown.min -= glm::dvec3(e);
+      grown.max += glm::dvec3(e);
+      if (m.tree.empty()) continue;
+      stack.assign(1, 0);
+      while (!stack.empty()) {
+        const KdNode& node = m.tree.nodes()[stack.back()];
+        stack.pop_back();
+        if (!node.bounds.Overlaps(grown)) continue;
+        if (!node.IsLeaf()) {
+          stack.push_back(node.left);
+          stack.push_back(node.right);
+          continue;
+        }
+        for (ObjectId q : m.tree.LeafObjects(node)) {
+          if (!in[q] && m.objects[q].bounds.Overlaps(grown)) {
+            in[q] = true;
+            out.push_back(q);
+          }
+        }
+      }
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+GlobalPvs GlobalSampler::FilteredAll(const FilterOptions& filter) const {
+  if (!filter.object_space && !filter.view_space) return pvs_;
+  GlobalPvs out(pvs_.cell_count(), pvs_.object_count());
+  for (CellId c = 0; c < pvs_.cell_count(); ++c) out.Assign(c, Filtered(c, filter));
+  return out;
+}
+
+// --- Dynamic edits ---
+
+namespace {
+void EraseWitness(std::unordered_map<uint64_t, Witness>* w, CellId c, ObjectId o) {
+  w->erase(uint64_t{c} << 32 | o);
+}
+}  // namespace
+
+absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
+  Impl& m = *impl_;
+  if (id >= m.objects.size() || !m.objects[id].alive) {
+    return absl::NotFoundError(absl::StrCat("delete: no object ", id));
+  }
+  if (!m.objects[id].indices.empty()) {
+    rtcDetachGeometry(m.rtc, id);
+    m.dirty = true;
+  }
+  m.objects[id].alive = false;
+  for (CellId c = 0; c < pvs_.cell_count(); ++c) {
+    if (pvs_.Contains(c, id)) {
+      pvs_.Erase(c, id);
+      EraseWitness(&m.witnesses, c, id);
+      --stats_.entries;
+    }
+  }
+  m.buffer.Forget(id);
+  m.RebuildSampleable();
+  m.tree_stale = true;
+  return absl::OkStatus();
+}
+
+namespace {
+// Removes from every cell's set what `id` may now hide there.
+void RemovePenumbra(GlobalSampler::Impl& m, const ViewcellGrid& grid, GlobalPvs* pvs, AgvsStats* stats, ObjectId id) {
+  const Aabb& blocker = m.objects[id].bounds;
+  for (CellId c = 0; c < pvs->cell_count(); ++c) {
+    Aabb cell = grid.CellBox(c);
+    cell.min -= m.frame;
+    cell.max -= m.frame;
+    for (ObjectId o : pvs->Objects(c)) {
+      if (o == id || !BoxMeetsShaft(cell, m.objects[o].bounds, blocker)) continue;
+      pvs->Erase(c, o);
+      m.witnesses.erase(uint64_t{c} << 32 | o);
+      --stats->entries;
+    }
+  }
+}
+}  // namespace
+
+absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh& mesh) {
+  Impl& m = *impl_;
+  Impl::Object o;
+  if (mesh.indices.size() < 3) return absl::InvalidArgumentError("insert: the mesh has no triangle");
+  if (!m.MakeObject(mesh, &o)) {
+    return absl::InvalidArgumentError("insert: the mesh has a non-finite position or an index out of range");
+  }
+  const auto id = static_cast<ObjectId>(m.objects.size());
+  m.objects.push_back(std::move(o));
+  m.Attach(id);
+  pvs_.ResizeObjects(m.objects.size());
+  m.object_hits.push_back(0);
+  RemovePenumbra(m, grid_, &pvs_, &stats_, id);
+  m.RebuildSampleable();
+  m.tree_stale = true;
+  return id;
+}
+
+absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& offset) {
+  Impl& m = *impl_;
+  if (id >= m.objects.size() || !m.objects[id].alive) return absl::NotFoundError(absl::StrCat("move: no object ", id));
+  if (!std::isfinite(offset.x) || !std::isfinite(offset.y) || !std::isfinite(offset.z)) {
+    return absl::InvalidArgumentError("move: the offset is not finite");
+  }
+  if (absl::Status st = DeleteObject(id); !st.ok()) return st;
+  Impl::Object& o = m.objects[id];
+  o.bounds = Aabb{};
+  for (glm::vec3& v : o.verts) {
+    v = glm::vec3(glm::dvec3(v) + offset);
+    o.bounds.Extend(glm::dvec3(v));
+  }
+  o.alive = true;
+  if (!o.indices.empty()) m.Attach(id);
+  RemovePenumbra(m, grid_, &pvs_, &stats_, id);
+  m.RebuildSampleable();
+  m.tree_stale = true;
+  return absl::OkStatus();
+}
+
+// --- Saved state ---
+
+namespace {
+constexpr char kStateMagic[8] = {'V', 'S', 'A', 'G', 'V', 'S', '0', '1'};
+}  // namespace
+
+std::string GlobalSampler::SaveState() const {
+  const Impl& m = *impl_;
+  ByteWriter w;
+  w.PutRaw(std::string_view(kStateMagic, 8));
+  w.Put<uint64_t>(pvs_.object_count());
+  w.Put<uint64_t>(pvs_.cell_count());
+  w.Put(grid_.cell_size());
+  w.Put(grid_.corner().x);
+  w.Put(grid_.corner().y);
+  w.Put<uint32_t>(static_cast<uint32_t>(options_.strategy));
+  w.Put(options_.seed);
+  w.Put(stats_.batches);
+  w.Put(stats_.samples);
+  w.Put(stats_.rays);
+  w.Put(stats_.discarded_samples);
+  w.Put(stats_.seconds);
+  for (const DistributionStats& d : stats_.distributions) {
+    w.Put(d.samples);
+    w.Put(d.rays);
+    w.Put(d.contribution);
+    w.Put(d.probability);
+  }
+  for (size_t k = 0; k < kDistributionCount; ++k) {
+    w.Put(m.ema_contribution[k]);
+    w.Put(m.ema_cost[k]);
+  }
+  w.PutVarint(m.estimator_window.size());
+  for (const auto& [n, nc] : m.estimator_window) {
+    w.PutVarint(n);
+    w.PutVarint(nc);
+  }
+  for (uint64_t n : m.cell_samples) w.PutVarint(n);
+  for (uint64_t n : m.object_hits) w.PutVarint(n);
+  w.PutVarint(m.buffer.size());
+  m.buffer.ForEach([&](const Candidate& c) {
+    w.Put(c.from);
+    w.Put(c.to);
+    w.Put(c.r_from);
+    w.Put(c.r_to);
+    w.Put(c.object);
+    w.Put(c.mutations);
+  });
+  EncodeSets(pvs_, &w);
+  return std::move(w.bytes());
+}
+
+absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string& where) {
+  Impl& m = *impl_;
+  ByteReader r(bytes, where);
+  char magic[8];
+  for (char& ch : magic) {
+    if (absl::Status st = r.Get(&ch, "the magic"); !st.ok()) return st;
+  }
+  if (std::string_view(magic, 8) != std::string_view(kStateMagic, 8)) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": not a vistream sampling state (no VSAGVS01 magic)"));
+  }
+  uint64_t objects = 0, cells = 0;
+  double size = 0, cx = 0, cy = 0;
+  uint32_t strategy = 0;
+  uint64_t seed = 0;
+  absl::Status st = r.Get(&objects, "the object count");
+  if (st.ok()) st = r.Get(&cells, "the cell count");
+  if (st.ok()) st = r.Get(&size, "the cell size");
+  if (st.ok()) st = r.Get(&cx, "the corner x");
+  if (st.ok()) st = r.Get(&cy, "the corner y");
+  if (st.ok()) st = r.Get(&strategy, "the strategy");
+  if (st.ok()) st = r.Get(&seed, "the seed");
+  if (!st.ok()) return st;
+  if (objects != pvs_.object_count() || cells != pvs_.cell_count() || size != grid_.cell_size() ||
+      cx != grid_.corner().x || cy != grid_.corner().y) {
+    return r.Error(absl::StrCat("made for ", objects, " objects and ", cells, " cells of ", size,
+                                " m; this scene has ", pvs_.object_count(), " objects and ", pvs_.cell_count(),
+                                " cells of ", grid_.cell_size(), " m"));
+  }
+  if (strategy != static_cast<uint32_t>(options_.strategy) || seed != options_.seed) {
+    return r.Error(absl::StrCat("made with strategy ", strategy, " and seed ", seed, "; resume with the same ones"));
+  }
+  AgvsStats s;
+  st = r.Get(&s.batches, "batches");
+  if (st.ok()) st = r.Get(&s.samples, "samples");
+  if (st.ok()) st = r.Get(&s.rays, "rays");
+  if (st.ok()) st = r.Get(&s.discarded_samples, "discarded samples");
+  if (st.ok()) st = r.Get(&s.seconds, "seconds");
+  for (DistributionStats& d : s.distributions) {
+    if (st.ok()) st = r.Get(&d.samples, "distribution samples");
+    if (st.ok()) st = r.Get(&d.rays, "distribution rays");
+    if (st.ok()) st = r.Get(&d.contribution, "distribution contribution");
+    if (st.ok()) st = r.Get(&d.probability, "distribution probability");
+  }
+  std::array<double, kDistributionCount> ema_c{}, ema_cost{};
+  for (size_t k = 0; k < kDistributionCount && st.ok(); ++k) {
+    st = r.Get(&ema_c[k], "mixture weights");
+    if (st.ok()) st = r.Get(&ema_cost[k], "mixture costs");
+  }
+  uint64_t window = 0;
+  if (st.ok()) st = r.GetVarint(&window, "the estimator window");
+  if (!st.ok()) return st;
+  if (window > r.remaining()) return r.Error("estimator window longer than the file");
+  std::vector<std::pair<uint64_t, uint64_t>> est(window);
+  for (auto& [n, nc] : est) {
+    if (st.ok()) st = r.GetVarint(&n, "estimator rays");
+    if (st.ok()) st = r.GetVarint(&nc, "estimator hits");
+  }
+  std::vector<uint64_t> cell_samples(cells), object_hits(objects);
+  for (uint64_t& n : cell_samples) {
+    if (st.ok()) st = r.GetVarint(&n, "cell sample counts");
+  }
+  for (uint64_t& n : object_hits) {
+    if (st.ok()) st = r.GetVarint(&n, "object hit counts");
+  }
+  uint64_t candidates = 0;
+  if (st.ok()) st = r.GetVarint(&candidates, "the candidate count");
+  if (!st.ok()) return st;
+  if (candidates > r.remaining()) return r.Error("more mutation candidates than bytes left");
+  MutationBuffer buffer(options_.mutation_buffer);
+  for (uint64_t i = 0; i < candidates && st.ok(); ++i) {
+    Candidate c;
+    st = r.Get(&c.from, "a candidate");
+    if (st.ok()) st = r.Get(&c.to, "a candidate");
+    if (st.ok()) st = r.Get(&c.r_from, "a candidate");
+    if (st.ok()) st = r.Get(&c.r_to, "a candidate");
+    if (st.ok()) st = r.Get(&c.object, "a candidate");
+    if (st.ok()) st = r.Get(&c.mutations, "a candidate");
+    if (st.ok() && c.object >= objects) st = r.Error(absl::StrCat("candidate ", i, " names object ", c.object));
+    if (st.ok()) buffer.Add(c);
+  }
+  if (!st.ok()) return st;
+  GlobalPvs sets(cells, objects);
+  if (st = DecodeSets(&r, &sets); !st.ok()) return st;
+  if (!r.AtEnd()) return r.Error(absl::StrCat(r.remaining(), " bytes follow the sets"));
+  s.entries = sets.TotalEntries();
+  s.mutation_candidates = buffer.size();
+  pvs_ = std::move(sets);
+  stats_ = s;
+  m.ema_contribution = ema_c;
+  m.ema_cost = ema_cost;
+  m.estimator_window = std::move(est);
+  m.cell_samples = std::move(cell_samples);
+  m.object_hits = std::move(object_hits);
+  m.buffer = std::move(buffer);
+  m.witnesses.clear();
+  UpdateEstimate(m, options_, &stats_);
+  return absl::OkStatus();
+}
+
+}  // namespace vistream::visibility

@@ -1,0 +1,131 @@
+#include "visibility/pvs_file.h"
+
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+
+#include "visibility/bytes.h"
+
+namespace vistream::visibility {
+
+namespace {
+constexpr char kMagic[8] = {'V', 'S', 'P', 'V', 'S', '0', '0', '1'};
+constexpr uint32_t kVersion = 1;
+constexpr uint64_t kMaxObjects = uint64_t{1} << 32;
+constexpr uint64_t kMaxCells = uint64_t{1} << 31;
+}  // namespace
+
+bool PvsFile::Matches(const ViewcellGrid& grid) const {
+  return nx == grid.nx() && ny == grid.ny() && cell_size == grid.cell_size() && base_z == grid.base_z() &&
+         height == grid.height() && corner_x == grid.corner().x && corner_y == grid.corner().y;
+}
+
+void EncodeSets(const GlobalPvs& sets, ByteWriter* out) {
+  for (CellId c = 0; c < sets.cell_count(); ++c) {
+    const std::vector<scenes::ObjectId> ids = sets.Objects(c);
+    out->PutVarint(ids.size());
+    uint64_t next = 0;  // the smallest id the next one may be
+    for (scenes::ObjectId id : ids) {
+      out->PutVarint(id - next);
+      next = uint64_t{id} + 1;
+    }
+  }
+}
+
+absl::Status DecodeSets(ByteReader* in, GlobalPvs* sets) {
+  std::vector<scenes::ObjectId> ids;
+  for (CellId c = 0; c < sets->cell_count(); ++c) {
+    uint64_t count = 0;
+    if (absl::Status st = in->GetVarint(&count, absl::StrCat("cell ", c, " count")); !st.ok()) return st;
+    if (count > sets->object_count()) {
+      return in->Error(absl::StrCat("cell ", c, " lists ", count, " objects, but the scene has ", sets->object_count()));
+    }
+    ids.clear();
+    uint64_t next = 0;
+    for (uint64_t k = 0; k < count; ++k) {
+      uint64_t gap = 0;
+      if (absl::Status st = in->GetVarint(&gap, absl::StrCat("cell ", c, " id ", k)); !st.ok()) return st;
+      const uint64_t id = next + gap;
+      if (gap >= sets->object_count() || id >= sets->object_count()) {
+        return in->Error(absl::StrCat("cell ", c, " id ", k, " is past the scene's ", sets->object_count(), " objects"));
+      }
+      ids.push_back(static_cast<scenes::ObjectId>(id));
+      next = id + 1;
+    }
+    sets->Assign(c, ids);
+  }
+  return absl::OkStatus();
+}
+
+std::string EncodePvsFile(const PvsFile& f) {
+  ByteWriter w;
+  w.PutRaw(std::string_view(kMagic, sizeof(kMagic)));
+  w.Put<uint32_t>(kVersion);
+  w.PutString(f.scene);
+  w.Put<uint64_t>(f.sets.object_count());
+  w.Put(f.cell_size);
+  w.Put(f.base_z);
+  w.Put(f.height);
+  w.Put(f.corner_x);
+  w.Put(f.corner_y);
+  w.Put(f.nx);
+  w.Put(f.ny);
+  w.PutString(f.strategy);
+  w.Put(f.samples);
+  w.Put(f.seconds);
+  w.Put(f.estimated_pixel_error);
+  EncodeSets(f.sets, &w);
+  return std::move(w.bytes());
+}
+
+absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where) {
+  ByteReader r(bytes, where);
+  PvsFile f;
+  char magic[8];
+  for (char& ch : magic) {
+    if (absl::Status st = r.Get(&ch, "the magic"); !st.ok()) return st;
+  }
+  if (std::string_view(magic, 8) != std::string_view(kMagic, 8)) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": not a vistream PVS file (no VSPVS001 magic)"));
+  }
+  uint32_t version = 0;
+  if (absl::Status st = r.Get(&version, "the version"); !st.ok()) return st;
+  if (version != kVersion) return r.Error(absl::StrCat("version ", version, " is not supported (only ", kVersion, ")"));
+  uint64_t objects = 0;
+  absl::Status st = r.GetString(&f.scene, "the scene name", 4096);
+  if (st.ok()) st = r.Get(&objects, "the object count");
+  if (st.ok() && objects > kMaxObjects) st = r.Error(absl::StrCat("object count ", objects, " is too large"));
+  if (st.ok()) st = r.Get(&f.cell_size, "the cell size");
+  if (st.ok()) st = r.Get(&f.base_z, "the base z");
+  if (st.ok()) st = r.Get(&f.height, "the height");
+  if (st.ok()) st = r.Get(&f.corner_x, "the corner x");
+  if (st.ok()) st = r.Get(&f.corner_y, "the corner y");
+  if (st.ok()) st = r.Get(&f.nx, "nx");
+  if (st.ok()) st = r.Get(&f.ny, "ny");
+  if (!st.ok()) return st;
+  if (!(std::isfinite(f.cell_size) && f.cell_size > 0 && std::isfinite(f.height) && f.height > 0 &&
+        std::isfinite(f.base_z) && std::isfinite(f.corner_x) && std::isfinite(f.corner_y))) {
+    return r.Error("the grid has a non-finite or non-positive size");
+  }
+  if (f.nx <= 0 || f.ny <= 0 || static_cast<uint64_t>(f.nx) * static_cast<uint64_t>(f.ny) > kMaxCells) {
+    return r.Error(absl::StrCat("grid of ", f.nx, " x ", f.ny, " cells is empty or too large"));
+  }
+  const uint64_t cells = static_cast<uint64_t>(f.nx) * static_cast<uint64_t>(f.ny);
+  st = r.GetString(&f.strategy, "the strategy", 64);
+  if (st.ok()) st = r.Get(&f.samples, "the sample count");
+  if (st.ok()) st = r.Get(&f.seconds, "the seconds");
+  if (st.ok()) st = r.Get(&f.estimated_pixel_error, "the estimated pixel error");
+  if (!st.ok()) return st;
+  // Every cell takes at least one byte: refuse what the remaining bytes cannot hold before
+  // allocating the sets.
+  if (cells > r.remaining()) return r.Error(absl::StrCat("too few bytes left for ", cells, " cells"));
+  if (cells * ((objects + 63) / 64) > (uint64_t{1} << 28)) {
+    return r.Error(absl::StrCat(cells, " cells of ", objects, " objects would need more than 2 GiB of sets"));
+  }
+  f.sets = GlobalPvs(cells, objects);
+  if (st = DecodeSets(&r, &f.sets); !st.ok()) return st;
+  if (!r.AtEnd()) return r.Error(absl::StrCat(r.remaining(), " bytes follow the last cell"));
+  return f;
+}
+
+}  // namespace vistream::visibility

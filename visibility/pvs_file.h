@@ -1,0 +1,48 @@
+#pragma once
+// The PVS file: every viewcell's potentially visible set for one scene and grid, as a server
+// serves them. Written by `vistream agvs -o`; decoding is strict (the bytes may come from
+// anywhere) and every error names the source and the byte offset.
+//
+// Layout, little-endian: "VSPVS001", u32 version (1), scene name (varint length + bytes),
+// u64 object count, grid (f64 cell size, base z, height, corner x, corner y; i32 nx, ny),
+// provenance (strategy name, u64 samples, f64 seconds, f64 estimated pixel error), then per
+// cell in id order: varint count, then the ascending ids as varint gaps (first id, then each
+// id minus the previous one minus one). Nothing may follow.
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include <absl/status/statusor.h>
+
+#include "visibility/global_pvs.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::visibility {
+
+struct PvsFile {
+  std::string scene;
+  double cell_size = 0.0, base_z = 0.0, height = 0.0;
+  double corner_x = 0.0, corner_y = 0.0;
+  int32_t nx = 0, ny = 0;
+  std::string strategy;
+  uint64_t samples = 0;
+  double seconds = 0.0;
+  double estimated_pixel_error = 0.0;
+  GlobalPvs sets;  // cells nx * ny, objects: the scene's object count
+
+  // Whether the file was made for `grid` (same cells, exactly).
+  bool Matches(const ViewcellGrid& grid) const;
+};
+
+std::string EncodePvsFile(const PvsFile& file);
+absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where);
+
+// The per-cell lists of `sets` as ascending varint gaps, and back (shared with the sampler's
+// saved state).
+class ByteWriter;
+class ByteReader;
+void EncodeSets(const GlobalPvs& sets, ByteWriter* out);
+absl::Status DecodeSets(ByteReader* in, GlobalPvs* sets);
+
+}  // namespace vistream::visibility
