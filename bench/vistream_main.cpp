@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   vistream::cli::AddPvsCommand(app, done);
   vistream::cli::AddEpsilonCommand(app, done);
   vistream::cli::AddAgvsCommand(app, done);
+  vistream::cli::AddCheckCommand(app, done);
   vistream::cli::AddBenchCommands(app, done);
   vistream::cli::InstallCancelHandler();
   try {

@@ -383,6 +383,33 @@ class Worker {
   Worker(const Impl& impl, const ViewcellGrid& grid, const GlobalPvs& pvs, const AgvsOptions& options)
       : s_(impl), grid_(grid), pvs_(pvs), options_(options) {}
 
+  // See GlobalSampler::SampleFromBox.
+  std::vector<BoxHit> FromBox(const Aabb& box, size_t rays, uint64_t seed) {
+    Rng rng(seed);
+    ChunkResult scratch;
+    out_ = &scratch;
+    std::vector<BoxHit> hits;
+    const glm::dvec3 lo = box.min - s_.frame, ext = box.Extent();
+    for (size_t i = 0; i < rays; ++i) {
+      const glm::dvec3 p = lo + glm::dvec3(rng.Uniform() * ext.x, rng.Uniform() * ext.y, rng.Uniform() * ext.z);
+      glm::dvec3 dir;
+      if (i % 2 == 0 || s_.sampleable.empty()) {
+        dir = UniformDirection(rng);
+      } else {
+        glm::dvec3 n;
+        ObjectId o;
+        const glm::dvec3 q = SurfacePoint(rng, &o, &n) - p;
+        const double len = glm::length(q);
+        if (!(len > 0.0)) continue;
+        dir = q / len;
+      }
+      const Hit h = Cast(p, dir, 0.0);
+      if (h.object == kNoObject || h.back) continue;
+      hits.push_back({h.object, h.prim, s_.frame + p, s_.frame + p + h.t * dir});
+    }
+    return hits;
+  }
+
   void Run(const ChunkPlan& plan, uint64_t seed, ChunkResult* out) {
     Rng rng(seed);
     out_ = out;
@@ -475,6 +502,7 @@ class Worker {
   struct Hit {
     double t = kInf;
     ObjectId object = kNoObject;
+    uint32_t prim = 0;
     bool back = false;
   };
 
@@ -527,6 +555,7 @@ class Worker {
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
     h.t = rh.ray.tfar;
     h.object = rh.hit.geomID;
+    h.prim = rh.hit.primID;
     h.back = options_.backface_rule && glm::dot(s_.TriangleNormal(h.object, rh.hit.primID), dir) > 0.0;
     return h;
   }
@@ -998,6 +1027,11 @@ std::optional<Witness> GlobalSampler::WitnessOf(CellId cell, scenes::ObjectId ob
   return it->second;
 }
 
+std::vector<BoxHit> GlobalSampler::SampleFromBox(const scenes::Aabb& box, size_t rays, uint64_t seed) const {
+  Worker w(*impl_, grid_, pvs_, options_);
+  return w.FromBox(box, rays, seed);
+}
+
 // --- Filters ---
 
 std::vector<scenes::ObjectId> GlobalSampler::Filtered(CellId cell, const FilterOptions& filter) const {
@@ -1103,6 +1137,7 @@ absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
   m.buffer.Forget(id);
   m.RebuildSampleable();
   m.tree_stale = true;
+  m.Commit();
   return absl::OkStatus();
 }
 
@@ -1139,6 +1174,7 @@ absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh&
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
   m.RebuildSampleable();
   m.tree_stale = true;
+  m.Commit();
   return id;
 }
 
@@ -1160,6 +1196,7 @@ absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& of
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
   m.RebuildSampleable();
   m.tree_stale = true;
+  m.Commit();
   return absl::OkStatus();
 }
 

@@ -98,6 +98,14 @@ struct Witness {
   glm::dvec3 from{0.0}, to{0.0};
 };
 
+// A triangle seen from a box: the ray from `from` (inside the box) hit triangle `triangle` (its
+// index in the object's mesh) of `object` at `to` (scene-local metres).
+struct BoxHit {
+  scenes::ObjectId object = 0;
+  uint32_t triangle = 0;
+  glm::dvec3 from{0.0}, to{0.0};
+};
+
 // The paper's section 5: grow each set by objects that are likely visible given how densely
 // its cell has been sampled. Both off: the sampled sets themselves.
 struct FilterOptions {
@@ -140,6 +148,12 @@ class GlobalSampler {
   // Keeps, for the listed cells, the first segment that added each object (for reports).
   void RecordWitnesses(std::span<const CellId> cells);
   std::optional<Witness> WitnessOf(CellId cell, scenes::ObjectId object) const;
+
+  // Triangle-level sampled visibility from a small box (the ε-superset's oracle): `rays` rays
+  // from uniform points of `box`, half in uniform directions, half towards uniform points on
+  // uniform objects, each reporting the front face it hits first. Deterministic for a seed;
+  // thread-safe with other const calls.
+  std::vector<BoxHit> SampleFromBox(const scenes::Aabb& box, size_t rays, uint64_t seed) const;
 
   // The cell's set grown by the filters, ascending.
   std::vector<scenes::ObjectId> Filtered(CellId cell, const FilterOptions& filter) const;
