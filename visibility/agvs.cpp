@@ -258,14 +258,23 @@ struct GlobalSampler::Impl {
   std::array<double, kDistributionCount> ema_contribution{}, ema_cost{};
   std::array<double, kDistributionCount> probability{};
   std::vector<std::pair<uint64_t, uint64_t>> estimator_window;  // per batch: rays, new-entry rays
+  double estimate_target_pixels = 1.0;  // the error the estimator's window is sized to tell
   std::vector<uint64_t> cell_samples;  // valid samples that pierced each cell
   std::vector<uint64_t> object_hits;   // valid sample ends on each object
 
   std::vector<bool> witness_cell;
   std::unordered_map<uint64_t, Witness> witnesses;  // key: cell << 32 | object
 
-  KdTree tree;  // over object boxes, for the object-space filter
-  bool tree_stale = true;
+  KdTree tree;  // over the boxes of live objects, for the object-space filter
+
+  // Rebuilt after every edit, never lazily, so that const calls stay thread-safe.
+  void RebuildTree() {
+    std::vector<Aabb> boxes(objects.size());
+    for (ObjectId o = 0; o < objects.size(); ++o) {
+      if (objects[o].alive) boxes[o] = objects[o].bounds;
+    }
+    tree = KdTree::Build(boxes);
+  }
 
   ~Impl() {
     if (rtc != nullptr) rtcReleaseScene(rtc);
@@ -471,7 +480,8 @@ class Worker {
         }
         case Distribution::kTwoPointMutation: {
           const Candidate& c = plan.candidates[i];
-          const glm::dvec3 u = glm::normalize(c.to - c.from);
+          const double len = glm::length(c.to - c.from);  // positive: see add_candidate in RunBatch
+          const glm::dvec3 u = (c.to - c.from) / len;
           glm::dvec3 b1, b2;
           Basis(u, &b1, &b2);
           const double g1 = Gaussian(rng), g2 = Gaussian(rng), g3 = Gaussian(rng), g4 = Gaussian(rng);
@@ -543,6 +553,11 @@ class Worker {
     rh.ray.dir_y = static_cast<float>(dir.y);
     rh.ray.dir_z = static_cast<float>(dir.z);
     rh.ray.tnear = static_cast<float>(tnear);
+    if (!std::isfinite(rh.ray.org_x + rh.ray.org_y + rh.ray.org_z + rh.ray.dir_x + rh.ray.dir_y + rh.ray.dir_z)) {
+      Hit bad;
+      bad.back = true;  // discarded, as a ray Embree cannot take
+      return bad;
+    }
     rh.ray.tfar = std::numeric_limits<float>::infinity();
     rh.ray.mask = ~0u;
     rh.ray.flags = 0;
@@ -725,24 +740,31 @@ class Worker {
 // --- GlobalSampler ---
 
 namespace {
-// The pixel-error estimate over the newest batches that hold enough camera rays: the weak law
-// of large numbers with P = 0.9, k = 0.5 asks N >= (1 - e) / (k² e (1 - P)).
+// Camera rays the weak law of large numbers asks for to tell a ray share e with P = 0.9,
+// k = 0.5: N >= (1 - e) / (k² e (1 - P)).
+double RaysToTell(double e) { return (1.0 - e) / (0.25 * e * 0.1); }
+
+// The pixel-error estimate over the newest batches that hold enough camera rays to tell apart
+// the share they show, or the target share when that is larger: a high error is told from a
+// short window, one near the target needs a long one. Without enough rays in all batches
+// together the estimate is over all of them and not settled.
 void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats) {
+  const double target_share = std::clamp(m.estimate_target_pixels / options.resolution, 1e-12, 0.5);
   uint64_t n = 0, nc = 0;
   bool settled = false;
   for (size_t b = m.estimator_window.size(); b-- > 0;) {
     n += m.estimator_window[b].first;
     nc += m.estimator_window[b].second;
     if (n == 0) continue;
-    // With no contributing ray yet, size the window as if the next one were.
-    const double e = static_cast<double>(std::max<uint64_t>(nc, 1)) / static_cast<double>(n);
-    if (static_cast<double>(n) >= (1.0 - e) / (0.25 * e * 0.1)) {
+    const double share = static_cast<double>(nc) / static_cast<double>(n);
+    if (static_cast<double>(n) >= RaysToTell(std::max(share, target_share))) {
       settled = true;
       break;
     }
   }
   stats->estimated_pixel_error = n > 0 ? options.resolution * static_cast<double>(nc) / static_cast<double>(n) : 0.0;
   stats->estimate_settled = settled;
+  stats->estimate_rays = n;
 }
 }  // namespace
 
@@ -786,6 +808,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
     return absl::InternalError(absl::StrCat("Embree: building the scene failed (error ", err, ")"));
   }
   m.RebuildSampleable();
+  m.RebuildTree();
   s->pvs_ = GlobalPvs(grid.CellCount(), scene.objects.size());
   m.cell_samples.assign(grid.CellCount(), 0);
   m.object_hits.assign(scene.objects.size(), 0);
@@ -929,13 +952,18 @@ void GlobalSampler::RunBatch() {
         *p = smp.origin + last * smp.dir;
         *r_end = m.cell_radius;
       };
+      // A segment that only touches the view space at a surface point gives no direction.
+      auto add_candidate = [&](const Candidate& cand) {
+        const double len = glm::length(cand.to - cand.from);
+        if (len > 1e-6 && std::isfinite(len)) m.buffer.Add(cand);
+      };
       if (r.c_fwd[i] > 0 && smp.fwd != kNoObject) {
         Candidate cand;
         other_end(true, &cand.from, &cand.r_from);
         cand.to = smp.origin + smp.t_fwd * smp.dir;
         cand.r_to = m.objects[smp.fwd].radius;
         cand.object = smp.fwd;
-        m.buffer.Add(cand);
+        add_candidate(cand);
       }
       if (r.c_rev[i] > 0 && smp.rev != kNoObject) {
         Candidate cand;
@@ -943,7 +971,7 @@ void GlobalSampler::RunBatch() {
         cand.to = smp.origin - smp.t_rev * smp.dir;
         cand.r_to = m.objects[smp.rev].radius;
         cand.object = smp.rev;
-        m.buffer.Add(cand);
+        add_candidate(cand);
       }
     }
     contribution[k] += r.contribution;
@@ -977,6 +1005,10 @@ void GlobalSampler::RunBatch() {
 void GlobalSampler::Run(const RunLimits& limits, const std::atomic<bool>* cancel, const std::string& progress_label) {
   const uint64_t start_samples = stats_.samples;
   const double start_seconds = stats_.seconds;
+  if (limits.pixel_error > 0) {
+    impl_->estimate_target_pixels = limits.pixel_error;
+    UpdateEstimate(*impl_, options_, &stats_);
+  }
   std::unique_ptr<scenes::Progress> progress;
   if (!progress_label.empty()) progress = std::make_unique<scenes::Progress>(progress_label, 1000, cancel);
   uint64_t shown = 0;
@@ -1035,7 +1067,7 @@ std::vector<BoxHit> GlobalSampler::SampleFromBox(const scenes::Aabb& box, size_t
 // --- Filters ---
 
 std::vector<scenes::ObjectId> GlobalSampler::Filtered(CellId cell, const FilterOptions& filter) const {
-  Impl& m = *impl_;
+  const Impl& m = *impl_;
   std::vector<ObjectId> base = pvs_.Objects(cell);
   if (!filter.object_space && !filter.view_space) return base;
   std::vector<bool> in(pvs_.object_count(), false);
@@ -1057,14 +1089,6 @@ std::vector<scenes::ObjectId> GlobalSampler::Filtered(CellId cell, const FilterO
     }
   }
   if (filter.object_space && !base.empty()) {
-    if (m.tree_stale) {
-      std::vector<Aabb> boxes(m.objects.size());
-      for (ObjectId o = 0; o < m.objects.size(); ++o) {
-        if (m.objects[o].alive) boxes[o] = m.objects[o].bounds;
-      }
-      m.tree = KdTree::Build(boxes);
-      m.tree_stale = false;
-    }
     Aabb cell_box = grid_.CellBox(cell);
     cell_box.min -= m.frame;
     cell_box.max -= m.frame;
@@ -1136,7 +1160,7 @@ absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
   }
   m.buffer.Forget(id);
   m.RebuildSampleable();
-  m.tree_stale = true;
+  m.RebuildTree();
   m.Commit();
   return absl::OkStatus();
 }
@@ -1173,7 +1197,7 @@ absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh&
   m.object_hits.push_back(0);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
   m.RebuildSampleable();
-  m.tree_stale = true;
+  m.RebuildTree();
   m.Commit();
   return id;
 }
@@ -1195,7 +1219,7 @@ absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& of
   if (!o.indices.empty()) m.Attach(id);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
   m.RebuildSampleable();
-  m.tree_stale = true;
+  m.RebuildTree();
   m.Commit();
   return absl::OkStatus();
 }
@@ -1330,6 +1354,11 @@ absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string&
     if (st.ok()) st = r.Get(&c.object, "a candidate");
     if (st.ok()) st = r.Get(&c.mutations, "a candidate");
     if (st.ok() && c.object >= objects) st = r.Error(absl::StrCat("candidate ", i, " names object ", c.object));
+    const double len = glm::length(c.to - c.from);
+    if (st.ok() && !(len > 1e-6 && std::isfinite(len) && c.r_from >= 0 && c.r_to >= 0 && std::isfinite(c.r_from) &&
+                     std::isfinite(c.r_to))) {
+      st = r.Error(absl::StrCat("candidate ", i, " is not a finite segment"));
+    }
     if (st.ok()) buffer.Add(c);
   }
   if (!st.ok()) return st;

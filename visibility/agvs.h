@@ -89,6 +89,7 @@ struct AgvsStats {
   std::array<DistributionStats, kDistributionCount> distributions{};
   double estimated_pixel_error = 0.0;  // pixels of a `resolution` camera
   bool estimate_settled = false;       // the window held enough rays for P = 0.9, k = 0.5
+  uint64_t estimate_rays = 0;          // camera rays in the estimator's window
   size_t mutation_candidates = 0;
 };
 
