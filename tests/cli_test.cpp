@@ -223,4 +223,79 @@ TEST(Cli, BenchEpsilonReproducesBothTables) {
   EXPECT_EQ(k.at("table1").at("total_boxes").get<double>(), k.at("pvs_objects").get<double>());
 }
 
+TEST(Cli, AgvsReportsItsFiguresAndWritesAPvsFileTheHeatmapReads) {
+  const std::string pvs = Tmp("city1.pvs"), png = Tmp("heat.png"), state = Tmp("city1.state");
+  const RunResult r = Vistream("agvs --scene city1 --samples 300000 --batch 16384 -o " + pvs + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_GE(j.at("samples").get<double>(), 300000.0);
+  EXPECT_GT(j.at("samples_per_s").get<double>(), 0.0);
+  EXPECT_GT(j.at("seconds").get<double>(), 0.0);
+  EXPECT_GE(j.at("estimated_pixel_error").get<double>(), 0.0);
+  EXPECT_EQ(j.at("cells").get<int>(), 560);
+  const double mean = j.at("mean_pvs_objects").get<double>();
+  EXPECT_GT(mean, 10.0);
+  EXPECT_LT(mean, 2128.0);
+  EXPECT_GT(std::filesystem::file_size(pvs), 560u);
+
+  const RunResult h = Vistream("agvs heatmap --scene city1 --pvs " + pvs + " -o " + png + " --json");
+  ASSERT_EQ(h.exit_code, 0) << h.out;
+  const nlohmann::json k = nlohmann::json::parse(h.out);
+  EXPECT_EQ(k.at("cells").get<int>(), 560);
+  EXPECT_GT(k.at("max_pvs_triangles").get<double>(), k.at("mean_pvs_triangles").get<double>());
+  EXPECT_GT(std::filesystem::file_size(png), 1000u);
+
+  // Resuming adds to the saved state.
+  const RunResult a = Vistream("agvs --scene city1 --samples 100000 --batch 16384 --state " + state + " --json");
+  ASSERT_EQ(a.exit_code, 0) << a.out;
+  const RunResult b = Vistream("agvs --scene city1 --samples 100000 --batch 16384 --state " + state + " --json");
+  ASSERT_EQ(b.exit_code, 0) << b.out;
+  EXPECT_GE(nlohmann::json::parse(b.out).at("samples").get<double>(),
+            nlohmann::json::parse(a.out).at("samples").get<double>() + 100000.0);
+  EXPECT_GE(nlohmann::json::parse(b.out).at("mean_pvs_objects").get<double>(),
+            nlohmann::json::parse(a.out).at("mean_pvs_objects").get<double>());
+}
+
+TEST(Cli, AgvsRejectsBadInput) {
+  const RunResult none = Vistream("agvs --scene city1");
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_NE(none.out.find("--seconds"), std::string::npos) << none.out;
+  const RunResult strategy = Vistream("agvs --scene city1 --samples 10 --strategy gvs");
+  EXPECT_EQ(strategy.exit_code, 1);
+  EXPECT_NE(strategy.out.find("'gvs'"), std::string::npos) << strategy.out;
+  EXPECT_NE(Vistream("agvs --scene city1 --samples 10 --filter blur").exit_code, 0);
+  // A PVS file that is not one, and one made for another scene.
+  const std::string junk = Tmp("junk.pvs"), city1 = Tmp("other.pvs");
+  std::ofstream(junk) << "not a pvs file";
+  const RunResult bad = Vistream("agvs heatmap --scene city1 --pvs " + junk + " -o " + Tmp("x.png"));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.out.find(junk), std::string::npos) << bad.out;
+  ASSERT_EQ(Vistream("agvs --scene city1 --samples 1000 -o " + city1 + " --json").exit_code, 0);
+  const RunResult other = Vistream("agvs heatmap --scene default --pvs " + city1 + " -o " + Tmp("y.png"));
+  EXPECT_EQ(other.exit_code, 1);
+  EXPECT_NE(other.out.find("another scene"), std::string::npos) << other.out;
+  EXPECT_NE(Vistream("agvs heatmap --scene city1 -o " + Tmp("z.png")).exit_code, 0);  // nothing to draw
+}
+
+// The project's main correctness check, end to end: nothing sampling sees from any viewcell
+// of city1, or from a subset of London's, is missing from the conservative sets.
+TEST(Cli, CheckConservativeFindsNoViolationOnCity1) {
+  const RunResult r = Vistream("check-conservative --scene city1 --seconds 5 --neighbourhoods 10 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("cells").get<int>(), 560);
+  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
+  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), 560 * 50.0);
+  EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0);
+}
+
+TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {
+  const RunResult r = Vistream("check-conservative --scene london --cells 8 --seconds 10 --neighbourhoods 10 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("cells").get<int>(), 8);
+  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
+  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), 8 * 20.0);
+}
+
 }  // namespace
