@@ -236,10 +236,18 @@ bool BoxMeetsShaft(const Aabb& a, const Aabb& b, const Aabb& c) {
 // --- The sampler's state beyond the header. ---
 
 struct GlobalSampler::Impl {
+  // A triangle as the samplers read it: a corner, two edges, and the cumulative surface area of
+  // the object's triangles up to this one (to draw uniform surface points). Float: drawing
+  // samples and searching silhouettes are heuristics; visibility itself is Embree's.
+  struct Tri {
+    glm::vec3 a, e1, e2;
+    float cdf;
+  };
   struct Object {
-    std::vector<glm::vec3> verts;  // frame-relative
+    std::vector<glm::vec3> verts;  // frame-relative (for Embree and edits)
     std::vector<uint32_t> indices;
-    std::vector<double> area_cdf;  // per triangle, cumulative
+    std::vector<Tri> tris;         // from verts and indices
+    double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
     bool alive = true;
@@ -307,10 +315,21 @@ struct GlobalSampler::Impl {
   void RebuildSampleable() {
     sampleable.clear();
     for (ObjectId id = 0; id < objects.size(); ++id) {
-      if (objects[id].alive && !objects[id].area_cdf.empty() && objects[id].area_cdf.back() > 0.0) {
+      if (objects[id].alive && objects[id].area > 0.0) {
         sampleable.push_back(id);
       }
     }
+  }
+
+  static void BuildTris(Object* o) {
+    o->tris.clear();
+    double sum = 0.0;
+    for (size_t t = 0; t + 2 < o->indices.size(); t += 3) {
+      const glm::vec3 a = o->verts[o->indices[t]], b = o->verts[o->indices[t + 1]], c = o->verts[o->indices[t + 2]];
+      sum += 0.5 * glm::length(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a)));
+      o->tris.push_back({a, b - a, c - a, static_cast<float>(sum)});
+    }
+    o->area = sum;
   }
 
   // Fills `o` from scene-local positions; false if a position is not finite or an index is
@@ -328,23 +347,10 @@ struct GlobalSampler::Impl {
       if (i >= mesh.positions.size()) return false;
     }
     o->indices.assign(mesh.indices.begin(), mesh.indices.end() - mesh.indices.size() % 3);
-    o->area_cdf.clear();
-    double sum = 0.0;
-    for (size_t t = 0; t + 2 < o->indices.size(); t += 3) {
-      const glm::dvec3 a(o->verts[o->indices[t]]), b(o->verts[o->indices[t + 1]]), c(o->verts[o->indices[t + 2]]);
-      sum += 0.5 * glm::length(glm::cross(b - a, c - a));
-      o->area_cdf.push_back(sum);
-    }
+    BuildTris(o);
     o->radius = BoxRadius(o->bounds);
     o->alive = true;
     return true;
-  }
-
-  glm::dvec3 TriangleNormal(ObjectId id, uint32_t prim) const {
-    const Object& o = objects[id];
-    const glm::dvec3 a(o.verts[o.indices[3 * prim]]), b(o.verts[o.indices[3 * prim + 1]]),
-        c(o.verts[o.indices[3 * prim + 2]]);
-    return glm::cross(b - a, c - a);
   }
 
   // Whether the ray from `from` through `through` (beyond `from`) meets object `id`.
@@ -364,19 +370,19 @@ struct GlobalSampler::Impl {
       t1 = std::min(t1, b);
       if (t0 > t1) return false;
     }
-    for (size_t t = 0; t + 2 < o.indices.size(); t += 3) {
-      const glm::dvec3 a(o.verts[o.indices[t]]), b(o.verts[o.indices[t + 1]]), c(o.verts[o.indices[t + 2]]);
-      const glm::dvec3 e1 = b - a, e2 = c - a, p = glm::cross(d, e2);
-      const double det = glm::dot(e1, p);
-      if (det == 0.0) continue;
-      const double inv = 1.0 / det;
-      const glm::dvec3 s = from - a;
-      const double u = glm::dot(s, p) * inv;
-      if (u < 0.0 || u > 1.0) continue;
-      const glm::dvec3 q = glm::cross(s, e1);
-      const double v = glm::dot(d, q) * inv;
-      if (v < 0.0 || u + v > 1.0) continue;
-      if (glm::dot(e2, q) * inv > 1e-9) return true;
+    const glm::vec3 df(d), fromf(from);
+    for (const Tri& tri : o.tris) {
+      const glm::vec3 p = glm::cross(df, tri.e2);
+      const float det = glm::dot(tri.e1, p);
+      if (det == 0.0f) continue;
+      const float inv = 1.0f / det;
+      const glm::vec3 sv = fromf - tri.a;
+      const float u = glm::dot(sv, p) * inv;
+      if (u < 0.0f || u > 1.0f) continue;
+      const glm::vec3 q = glm::cross(sv, tri.e1);
+      const float v = glm::dot(df, q) * inv;
+      if (v < 0.0f || u + v > 1.0f) continue;
+      if (glm::dot(tri.e2, q) * inv > 1e-6f) return true;
     }
     return false;
   }
@@ -527,19 +533,22 @@ class Worker {
   glm::dvec3 SurfacePoint(Rng& rng, ObjectId* id, glm::dvec3* normal) {
     *id = s_.sampleable[rng.Below(s_.sampleable.size())];
     const Impl::Object& o = s_.objects[*id];
-    const double x = rng.Uniform() * o.area_cdf.back();
-    const size_t t = std::min<size_t>(std::upper_bound(o.area_cdf.begin(), o.area_cdf.end(), x) - o.area_cdf.begin(),
-                                      o.area_cdf.size() - 1);
-    const glm::dvec3 a(o.verts[o.indices[3 * t]]), b(o.verts[o.indices[3 * t + 1]]), c(o.verts[o.indices[3 * t + 2]]);
+    const float x = static_cast<float>(rng.Uniform() * o.area);
+    const size_t t = std::min<size_t>(
+        std::upper_bound(o.tris.begin(), o.tris.end(), x, [](float v, const Impl::Tri& tri) { return v < tri.cdf; }) -
+            o.tris.begin(),
+        o.tris.size() - 1);
+    const Impl::Tri& tri = o.tris[t];
+    const glm::dvec3 a(tri.a), e1(tri.e1), e2(tri.e2);
     double u = rng.Uniform(), v = rng.Uniform();
     if (u + v > 1.0) {
       u = 1.0 - u;
       v = 1.0 - v;
     }
-    const glm::dvec3 n = glm::cross(b - a, c - a);
+    const glm::dvec3 n = glm::cross(e1, e2);
     const double len = glm::length(n);
     *normal = len > 0.0 ? n / len : glm::dvec3(0, 0, 1);
-    return a + u * (b - a) + v * (c - a);
+    return a + u * e1 + v * e2;
   }
 
   Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear) {
@@ -571,7 +580,9 @@ class Worker {
     h.t = rh.ray.tfar;
     h.object = rh.hit.geomID;
     h.prim = rh.hit.primID;
-    h.back = options_.backface_rule && glm::dot(s_.TriangleNormal(h.object, rh.hit.primID), dir) > 0.0;
+    // Embree's geometry normal is cross(v1 - v0, v2 - v0), as the meshes' outward normals are
+    // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
+    h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
     return h;
   }
 
@@ -647,6 +658,7 @@ class Worker {
       return out.samples.back();
     }
     if (smp.dist == Distribution::kRef) {
+      if (cell_counts_ != nullptr) ++(*cell_counts_)[smp.origin_cell];
       // A ref ray is a camera ray too: a uniform point and direction in a uniform cell.
       ++out.estimator_rays;
       if (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) {
@@ -663,9 +675,10 @@ class Worker {
       out.estimator_hits += (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) +
                             (smp.rev != kNoObject && !pvs_.Contains(smp.origin_cell, smp.rev));
     }
-    if (smp.fwd == kNoObject && smp.rev == kNoObject) return out.samples.back();
     uint32_t c_fwd = 0, c_rev = 0;
     VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+      // Every valid segment counts towards its cells' sampling density (the object-space filter).
+      if (cell_counts_ != nullptr) ++(*cell_counts_)[cell];
       if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
         out.entries.push_back({cell, smp.fwd, index, t});
         ++c_fwd;
@@ -733,6 +746,10 @@ class Worker {
   const GlobalPvs& pvs_;
   const AgvsOptions& options_;
   ChunkResult* out_ = nullptr;
+  std::vector<uint64_t>* cell_counts_ = nullptr;  // this thread's samples per cell, if counted
+
+ public:
+  void CountCellsInto(std::vector<uint64_t>* counts) { cell_counts_ = counts; }
 };
 
 }  // namespace
@@ -795,6 +812,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   }
   m.rtc = rtcNewScene(m.device);
   rtcSetSceneFlags(m.rtc, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(m.rtc, RTC_BUILD_QUALITY_HIGH);
   m.objects.resize(scene.objects.size());
   for (ObjectId id = 0; id < scene.objects.size(); ++id) {
     if (!m.MakeObject(scene.objects[id].mesh, &m.objects[id])) {
@@ -897,12 +915,24 @@ void GlobalSampler::RunBatch() {
 
   // Draw and cast in parallel; the sets are only read.
   std::vector<ChunkResult> results(plans.size());
+  std::mutex counts_mutex;
+  std::vector<std::unique_ptr<std::vector<uint64_t>>> counts;  // per thread
   ParallelFor(plans.size(), options_.threads, [&] {
-    return [&, worker = Worker(m, grid_, pvs_, options_)](size_t c) mutable {
+    Worker worker(m, grid_, pvs_, options_);
+    {
+      const std::lock_guard lock(counts_mutex);
+      counts.push_back(std::make_unique<std::vector<uint64_t>>(grid_.CellCount(), 0));
+      worker.CountCellsInto(counts.back().get());
+    }
+    return [&, worker](size_t c) mutable {
       results[c].samples.reserve(kChunk);
       worker.Run(plans[c], Mix(options_.seed, Mix(batch, c)), &results[c]);
     };
   });
+
+  for (const auto& per_thread : counts) {
+    for (CellId c = 0; c < grid_.CellCount(); ++c) m.cell_samples[c] += (*per_thread)[c];
+  }
 
   // Apply in chunk order.
   std::array<uint64_t, kDistributionCount> contribution{}, cost{}, drawn{};
@@ -925,12 +955,7 @@ void GlobalSampler::RunBatch() {
       const Sample& smp = r.samples[i];
       if (!smp.valid) continue;
       // Per-cell and per-object sampling densities, for the object-space filter.
-      if (smp.dist != Distribution::kRef) {
-        walker.VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double) { ++m.cell_samples[cell]; });
-        if (smp.rev != kNoObject) ++m.object_hits[smp.rev];
-      } else {
-        ++m.cell_samples[smp.origin_cell];
-      }
+      if (smp.rev != kNoObject && smp.dist != Distribution::kRef) ++m.object_hits[smp.rev];
       if (smp.fwd != kNoObject) ++m.object_hits[smp.fwd];
       if (options_.strategy != SamplingStrategy::kAgvs) continue;
       // Contributing ends become mutation candidates: the hit point, and the other end (a
@@ -1215,6 +1240,7 @@ absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& of
     v = glm::vec3(glm::dvec3(v) + offset);
     o.bounds.Extend(glm::dvec3(v));
   }
+  Impl::BuildTris(&o);
   o.alive = true;
   if (!o.indices.empty()) m.Attach(id);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
