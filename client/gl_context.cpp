@@ -35,6 +35,8 @@ absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateOffscreen() {
   return context;
 }
 
+void* GlContext::ProcAddress(const char* name) { return reinterpret_cast<void*>(OSMesaGetProcAddress(name)); }
+
 absl::Status GlContext::MakeCurrent() {
   if (!OSMesaMakeCurrent(impl_->context, impl_->pixel.data(), GL_UNSIGNED_BYTE, 1, 1)) {
     return absl::InternalError("OSMesaMakeCurrent failed");

@@ -20,6 +20,8 @@ class GlContext {
 
   // Makes this context current on the calling thread.
   absl::Status MakeCurrent();
+  // A GL entry point the library does not export directly (e.g. glClipControl); null if none.
+  static void* ProcAddress(const char* name);
 
  private:
   struct Impl;

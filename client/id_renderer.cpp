@@ -1,0 +1,216 @@
+#include "client/id_renderer.h"
+
+#include <cmath>
+#include <string>
+
+#define GL_GLEXT_PROTOTYPES
+#include <GL/gl.h>
+#include <GL/glext.h>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "glm/geometric.hpp"
+
+namespace vistream::gl {
+
+namespace {
+
+constexpr const char* kVertexShader = R"(#version 450
+layout(location = 0) in vec3 position;
+layout(location = 1) in uint id_in;
+uniform mat4 view_projection;
+flat out uint id;
+void main() {
+  id = id_in;
+  gl_Position = view_projection * vec4(position, 1.0);
+}
+)";
+
+constexpr const char* kFragmentShader = R"(#version 450
+flat in uint id;
+layout(location = 0) out uint seen;
+void main() {
+  seen = gl_FrontFacing ? id + 1u : 0x80000000u;
+}
+)";
+
+struct Vertex {
+  float x, y, z;
+  uint32_t id;
+};
+
+absl::StatusOr<GLuint> Compile(GLenum type, const char* source) {
+  const GLuint shader = glCreateShader(type);
+  glShaderSource(shader, 1, &source, nullptr);
+  glCompileShader(shader);
+  GLint ok = 0;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[4096] = {};
+    glGetShaderInfoLog(shader, sizeof(log), nullptr, log);
+    glDeleteShader(shader);
+    return absl::InternalError(std::string("id renderer shader does not compile: ") + log);
+  }
+  return shader;
+}
+
+// The solid angle of the part [0, u] x [0, v] of a cube face at distance 1, signed.
+double CornerAngle(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
+
+}  // namespace
+
+IdRenderer::~IdRenderer() {
+  if (context_ == nullptr || !context_->MakeCurrent().ok()) return;
+  glDeleteProgram(program_);
+  glDeleteVertexArrays(1, &vao_);
+  glDeleteBuffers(1, &vbo_);
+  glDeleteBuffers(1, &ibo_);
+  glDeleteFramebuffers(1, &fbo_);
+  glDeleteTextures(1, &ids_);
+  glDeleteRenderbuffers(1, &depth_);
+}
+
+absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Scene& scene, int size) {
+  if (size < 1 || size > 4096) return absl::InvalidArgumentError(absl::StrCat("id renderer: face size ", size));
+  auto r = std::unique_ptr<IdRenderer>(new IdRenderer());
+  absl::StatusOr<std::unique_ptr<GlContext>> context = GlContext::CreateOffscreen();
+  if (!context.ok()) return context.status();
+  r->context_ = std::move(*context);
+  r->size_ = size;
+  r->clip_control_ = GlContext::ProcAddress("glClipControl");
+  if (r->clip_control_ == nullptr) return absl::UnavailableError("id renderer: the GL has no glClipControl");
+  if (absl::Status s = r->Init(scene); !s.ok()) return s;
+  return r;
+}
+
+absl::Status IdRenderer::Init(const scenes::Scene& scene) {
+  absl::StatusOr<GLuint> vs = Compile(GL_VERTEX_SHADER, kVertexShader);
+  if (!vs.ok()) return vs.status();
+  absl::StatusOr<GLuint> fs = Compile(GL_FRAGMENT_SHADER, kFragmentShader);
+  if (!fs.ok()) return fs.status();
+  program_ = glCreateProgram();
+  glAttachShader(program_, *vs);
+  glAttachShader(program_, *fs);
+  glLinkProgram(program_);
+  glDeleteShader(*vs);
+  glDeleteShader(*fs);
+  GLint linked = 0;
+  glGetProgramiv(program_, GL_LINK_STATUS, &linked);
+  if (!linked) return absl::InternalError("id renderer program does not link");
+
+  std::vector<Vertex> vertices;
+  std::vector<uint32_t> indices;
+  vertices.reserve(scene.VertexCount());
+  indices.reserve(3 * scene.TriangleCount());
+  for (const scenes::Object& o : scene.objects) {
+    const auto base = static_cast<uint32_t>(vertices.size());
+    for (const glm::vec3& p : o.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
+    for (uint32_t i : o.mesh.indices) indices.push_back(base + i);
+  }
+  index_count_ = indices.size();
+  glGenVertexArrays(1, &vao_);
+  glBindVertexArray(vao_);
+  glGenBuffers(1, &vbo_);
+  glBindBuffer(GL_ARRAY_BUFFER, vbo_);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(Vertex)), vertices.data(),
+               GL_STATIC_DRAW);
+  glGenBuffers(1, &ibo_);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(indices.size() * sizeof(uint32_t)), indices.data(),
+               GL_STATIC_DRAW);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(Vertex), nullptr);
+  glEnableVertexAttribArray(1);
+  glVertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(Vertex), reinterpret_cast<const void*>(3 * sizeof(float)));
+  glBindVertexArray(0);
+
+  glGenTextures(1, &ids_);
+  glBindTexture(GL_TEXTURE_2D, ids_);
+  glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32UI, size_, size_);
+  glGenRenderbuffers(1, &depth_);
+  glBindRenderbuffer(GL_RENDERBUFFER, depth_);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, size_, size_);
+  glGenFramebuffers(1, &fbo_);
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, ids_, 0);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_);
+  const GLenum complete = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (complete != GL_FRAMEBUFFER_COMPLETE) {
+    return absl::InternalError("id renderer framebuffer is incomplete");
+  }
+  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while uploading the scene"));
+  }
+
+  weights_.resize(static_cast<size_t>(size_) * size_);
+  for (int y = 0; y < size_; ++y) {
+    const double v0 = 2.0 * y / size_ - 1.0, v1 = 2.0 * (y + 1) / size_ - 1.0;
+    for (int x = 0; x < size_; ++x) {
+      const double u0 = 2.0 * x / size_ - 1.0, u1 = 2.0 * (x + 1) / size_ - 1.0;
+      weights_[static_cast<size_t>(y) * size_ + x] =
+          CornerAngle(u1, v1) - CornerAngle(u0, v1) - CornerAngle(u1, v0) + CornerAngle(u0, v0);
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(const glm::dvec3& eye) {
+  if (absl::Status s = context_->MakeCurrent(); !s.ok()) return s;
+  const glm::dvec3 forward[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  const glm::dvec3 up[6] = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 1, 0}, {0, 1, 0}};
+  constexpr double kNear = 0.01;  // metres
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  glViewport(0, 0, size_, size_);
+  // Reversed depth: 1 at the near plane, 0 at infinity, in a float buffer.
+  const auto clip_control = reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_);
+  clip_control(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_GREATER);
+  glDisable(GL_CULL_FACE);
+  glUseProgram(program_);
+  glBindVertexArray(vao_);
+  const GLint loc = glGetUniformLocation(program_, "view_projection");
+  std::array<std::vector<uint32_t>, 6> faces;
+  for (int f = 0; f < 6; ++f) {
+    const glm::dvec3 fw = forward[f];
+    const glm::dvec3 s = glm::normalize(glm::cross(fw, up[f]));
+    const glm::dvec3 u = glm::cross(s, fw);
+    // Column-major: view rows s, u, -fw with the eye's translation, then a 90-degree
+    // perspective with reversed infinite depth (clip z = near, clip w = -view z).
+    double m[16] = {};
+    const glm::dvec3 rows[3] = {s, u, -fw};
+    double view[3][4];
+    for (int r = 0; r < 3; ++r) {
+      view[r][0] = rows[r].x;
+      view[r][1] = rows[r].y;
+      view[r][2] = rows[r].z;
+      view[r][3] = -glm::dot(rows[r], eye);
+    }
+    for (int c = 0; c < 4; ++c) {
+      m[4 * c + 0] = view[0][c];             // x
+      m[4 * c + 1] = view[1][c];             // y
+      m[4 * c + 2] = c == 3 ? kNear : 0.0;   // z
+      m[4 * c + 3] = -view[2][c];            // w
+    }
+    float mf[16];
+    for (int k = 0; k < 16; ++k) mf[k] = static_cast<float>(m[k]);
+    glUniformMatrix4fv(loc, 1, GL_FALSE, mf);
+    const GLuint zero[4] = {0, 0, 0, 0};
+    glClearBufferuiv(GL_COLOR, 0, zero);
+    const GLfloat far_depth = 0.0f;
+    glClearBufferfv(GL_DEPTH, 0, &far_depth);
+    glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(index_count_), GL_UNSIGNED_INT, nullptr);
+    faces[f].resize(static_cast<size_t>(size_) * size_);
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    glReadPixels(0, 0, size_, size_, GL_RED_INTEGER, GL_UNSIGNED_INT, faces[f].data());
+  }
+  clip_control(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while drawing"));
+  }
+  return faces;
+}
+
+}  // namespace vistream::gl

@@ -1,0 +1,54 @@
+#pragma once
+// Renders which object each pixel sees: the measured side of the pixel error. Every triangle
+// of a scene goes to the GPU once, tagged with its object; a view is a cube map around a
+// point (six 90-degree faces), so that the whole sphere of directions is covered, as the
+// sampler's uniform camera rays cover it. Depth is reversed 32-bit float, so that buildings
+// a metre apart a kilometre away are still told apart. Needs a GL 4.5 context
+// (client/gl_context.h); makes its own.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "client/gl_context.h"
+#include "glm/vec3.hpp"
+#include "scenes/scene.h"
+
+namespace vistream::gl {
+
+// What a pixel sees: nothing, the front of object id - 1, or a back face (the eye is inside a
+// solid, or sees through a crack).
+inline constexpr uint32_t kNothing = 0;
+inline constexpr uint32_t kBackFace = 0x80000000u;
+
+class IdRenderer {
+ public:
+  // Uploads the scene's triangles; faces of `size` x `size` pixels. Errors: no context, a
+  // size outside 1..4096, GL failing.
+  static absl::StatusOr<std::unique_ptr<IdRenderer>> Create(const scenes::Scene& scene, int size);
+  ~IdRenderer();
+  IdRenderer(const IdRenderer&) = delete;
+  IdRenderer& operator=(const IdRenderer&) = delete;
+
+  int size() const { return size_; }
+  // The six faces (+x, -x, +y, -y, +z, -z) seen from `eye` (scene-local metres), each size²
+  // values, row by row: kNothing, object id + 1, or kBackFace set.
+  absl::StatusOr<std::array<std::vector<uint32_t>, 6>> RenderCube(const glm::dvec3& eye);
+  // The solid angle of pixel (x, y) of any face; the 6 size² weights sum to 4 pi.
+  double PixelSolidAngle(int x, int y) const { return weights_[static_cast<size_t>(y) * size_ + x]; }
+
+ private:
+  IdRenderer() = default;
+  absl::Status Init(const scenes::Scene& scene);
+
+  std::unique_ptr<GlContext> context_;
+  int size_ = 0;
+  unsigned program_ = 0, vao_ = 0, vbo_ = 0, ibo_ = 0, fbo_ = 0, ids_ = 0, depth_ = 0;
+  size_t index_count_ = 0;
+  void* clip_control_ = nullptr;  // glClipControl
+  std::vector<double> weights_;
+};
+
+}  // namespace vistream::gl
