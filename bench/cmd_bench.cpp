@@ -255,6 +255,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_flag("--json", args->json, "print one JSON object instead of the Markdown table");
   c->callback([args, done] { done(Table1(*args)); });
   AddBenchEpsilonCommand(bench, done);
+  AddBenchAgvsCommand(bench, done);
 }
 
 }  // namespace vistream::cli

@@ -16,5 +16,7 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done);
 void AddBenchCommands(CLI::App& app, std::function<void(int)> done);
 // `bench epsilon`, added to the bench subcommand by AddBenchCommands.
 void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);
+// `bench agvs`, likewise.
+void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done);
 
 }  // namespace vistream::cli

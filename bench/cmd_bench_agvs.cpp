@@ -1,0 +1,359 @@
+// vistream bench agvs: the paper's convergence comparison. AGVS, SGVS (view space-direction
+// only) and REF (a random cell, a random ray) sample the same scene side by side, a batch
+// each in turn, so that the machine's noise falls on all three alike. Reports mean PVS size
+// against sampling time, how much sooner each reaches the size REF ends with, and the
+// estimated pixel error against the pixel error measured by rendering: object-id cube maps
+// from random points of random cells (OSMesa), a pixel wrong when the object it shows is not
+// in that cell's PVS, weighted by its solid angle and scaled to the estimator's 1024 x 1024.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <numbers>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench/cli_common.h"
+#include "bench/commands.h"
+#include "bench/top_view_map.h"
+#include "client/id_renderer.h"
+#include "scenes/progress.h"
+#include "scenes/random.h"
+#include "visibility/agvs.h"
+
+namespace vistream::cli {
+
+namespace {
+
+using visibility::GlobalSampler;
+using visibility::SamplingStrategy;
+
+struct BenchAgvsArgs {
+  std::string scene = "london";
+  double seconds = 60.0;  // sampling time of each strategy
+  int views = 24;
+  int res = 128;
+  uint32_t batch = 1u << 14;
+  int checkpoints = 7;
+  double cell_size = 0.0;
+  uint64_t seed = 1;
+  unsigned threads = 0;
+  std::string plot;
+  bool json = false;
+};
+
+// A rendered view: its cell and the solid angle each visible object covers.
+struct View {
+  visibility::CellId cell = 0;
+  glm::dvec3 eye{0.0};
+  std::vector<std::pair<scenes::ObjectId, double>> objects;  // ascending ids
+};
+
+struct Checkpoint {
+  double seconds = 0.0, mean_objects = 0.0, estimated = 0.0, measured = 0.0;
+  uint64_t samples = 0;
+};
+
+struct Track {
+  SamplingStrategy strategy;
+  std::unique_ptr<GlobalSampler> sampler;
+  std::vector<std::pair<double, double>> curve;  // seconds, mean PVS objects
+  std::vector<Checkpoint> checkpoints;
+  size_t next_checkpoint = 0;
+};
+
+constexpr double kResolution = 1024.0 * 1024.0;
+
+// Pixels of a 1024 x 1024 camera: the share of the sphere, over the views, whose object is
+// missing from the view's cell's set.
+double MeasuredError(const std::vector<View>& views, const visibility::GlobalPvs& pvs) {
+  if (views.empty()) return 0.0;
+  double wrong = 0.0;
+  for (const View& v : views) {
+    for (const auto& [o, w] : v.objects) {
+      if (!pvs.Contains(v.cell, o)) wrong += w;
+    }
+  }
+  return kResolution * wrong / (4.0 * std::numbers::pi * static_cast<double>(views.size()));
+}
+
+// The first time the curve reaches `size`, linearly between its points; negative if never.
+double TimeToReach(const std::vector<std::pair<double, double>>& curve, double size) {
+  double t0 = 0.0, s0 = 0.0;
+  for (const auto& [t, s] : curve) {
+    if (s >= size) return s > s0 ? t0 + (t - t0) * (size - s0) / (s - s0) : t;
+    t0 = t;
+    s0 = s;
+  }
+  return -1.0;
+}
+
+Rgb StrategyColour(SamplingStrategy s) {
+  switch (s) {
+    case SamplingStrategy::kAgvs: return {250, 200, 30};
+    case SamplingStrategy::kSgvs: return {40, 170, 160};
+    case SamplingStrategy::kRef: return {220, 60, 50};
+  }
+  return {255, 255, 255};
+}
+
+// Two panels on a log time axis: mean PVS size (top, linear) and pixel error (bottom, log;
+// estimated as lines, measured as squares).
+absl::Status WritePlot(const std::vector<Track>& tracks, double seconds, const std::string& png) {
+  constexpr double kW = 1000, kPanel = 400, kGap = 40;
+  TopViewMap map(scenes::Aabb{glm::dvec3(-40, -40, 0), glm::dvec3(kW + 20, 2 * kPanel + kGap + 20, 1)}, 1060,
+                 Rgb{20, 20, 28});
+  double t_min = seconds;
+  double max_size = 1.0, e_min = 1e300, e_max = 1e-300;
+  for (const Track& tr : tracks) {
+    if (!tr.curve.empty()) t_min = std::min(t_min, tr.curve.front().first);
+    for (const auto& [t, s] : tr.curve) max_size = std::max(max_size, s);
+    for (const Checkpoint& c : tr.checkpoints) {
+      for (double e : {c.estimated, c.measured}) {
+        if (e > 0) e_min = std::min(e_min, e), e_max = std::max(e_max, e);
+      }
+    }
+  }
+  t_min = std::max(t_min, 1e-3);
+  if (!(e_min < e_max)) e_min = 0.1, e_max = 10.0;
+  const double lt0 = std::floor(std::log10(t_min)), lt1 = std::ceil(std::log10(seconds));
+  const double le0 = std::floor(std::log10(e_min)), le1 = std::ceil(std::log10(e_max));
+  auto x_of = [&](double t) { return kW * (std::log10(std::max(t, std::pow(10.0, lt0))) - lt0) / std::max(lt1 - lt0, 1.0); };
+  auto y_size = [&](double s) { return kPanel + kGap + kPanel * s / max_size; };
+  auto y_err = [&](double e) { return kPanel * (std::log10(std::max(e, e_min)) - le0) / std::max(le1 - le0, 1.0); };
+  const Rgb axis{110, 110, 120}, grid{50, 50, 60};
+  // Decades of time, tenths of the size range, decades of error.
+  for (double l = lt0; l <= lt1; ++l) {
+    map.Line({x_of(std::pow(10, l)), 0}, {x_of(std::pow(10, l)), kPanel}, grid);
+    map.Line({x_of(std::pow(10, l)), kPanel + kGap}, {x_of(std::pow(10, l)), 2 * kPanel + kGap}, grid);
+  }
+  for (int k = 1; k <= 10; ++k) map.Line({0, y_size(max_size * k / 10)}, {kW, y_size(max_size * k / 10)}, grid);
+  for (double l = le0; l <= le1; ++l) map.Line({0, y_err(std::pow(10, l))}, {kW, y_err(std::pow(10, l))}, grid);
+  map.Line({0, kPanel + kGap}, {kW, kPanel + kGap}, axis);
+  map.Line({0, kPanel + kGap}, {0, 2 * kPanel + kGap}, axis);
+  map.Line({0, 0}, {kW, 0}, axis);
+  map.Line({0, 0}, {0, kPanel}, axis);
+  for (const Track& tr : tracks) {
+    const Rgb c = StrategyColour(tr.strategy);
+    for (size_t i = 1; i < tr.curve.size(); ++i) {
+      map.Line({x_of(tr.curve[i - 1].first), y_size(tr.curve[i - 1].second)},
+               {x_of(tr.curve[i].first), y_size(tr.curve[i].second)}, c, 2);
+    }
+    for (size_t i = 0; i < tr.checkpoints.size(); ++i) {
+      const Checkpoint& p = tr.checkpoints[i];
+      if (i > 0) {
+        const Checkpoint& q = tr.checkpoints[i - 1];
+        map.Line({x_of(q.seconds), y_err(q.estimated)}, {x_of(p.seconds), y_err(p.estimated)}, c, 2);
+      }
+      const double x = x_of(p.seconds), y = y_err(p.measured);
+      const std::vector<glm::dvec2> square = {{x - 5, y - 5}, {x + 5, y - 5}, {x + 5, y + 5}, {x - 5, y + 5}};
+      map.FillPolygon(square, c);
+    }
+  }
+  return map.WritePng(png);
+}
+
+int BenchAgvs(const BenchAgvsArgs& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
+  const scenes::ViewcellSpec spec = ViewcellSpecFor(a.scene, a.cell_size);
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
+  if (!scene.ok()) return Fail(scene.status());
+  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
+  if (!grid.ok()) return Fail(grid.status());
+
+  // The measured side first: views from uniform points of uniform cells, as the estimator's
+  // camera rays start; a view that sees a back face starts inside a building and is drawn
+  // again (the sampler discards such rays too).
+  std::vector<View> views;
+  {
+    absl::StatusOr<std::unique_ptr<gl::IdRenderer>> renderer = gl::IdRenderer::Create(*scene, a.res);
+    if (!renderer.ok()) return Fail(renderer.status());
+    scenes::Rng rng(scenes::Rng(a.seed).Next() ^ 0x51ed27);
+    scenes::Progress progress("rendering views", static_cast<uint64_t>(a.views), &CancelFlag());
+    InstallCancelHandler();
+    for (int tries = 0; static_cast<int>(views.size()) < a.views && tries < 50 * a.views; ++tries) {
+      View v;
+      v.cell = static_cast<visibility::CellId>(rng.Below(grid->CellCount()));
+      const scenes::Aabb box = grid->CellBox(v.cell);
+      v.eye = glm::dvec3(rng.Uniform(box.min.x, box.max.x), rng.Uniform(box.min.y, box.max.y),
+                         rng.Uniform(box.min.z, box.max.z));
+      absl::StatusOr<std::array<std::vector<uint32_t>, 6>> cube = (*renderer)->RenderCube(v.eye);
+      if (!cube.ok()) return Fail(cube.status());
+      std::map<scenes::ObjectId, double> seen;
+      bool inside = false;
+      for (const std::vector<uint32_t>& face : *cube) {
+        for (int y = 0; y < a.res && !inside; ++y) {
+          for (int x = 0; x < a.res; ++x) {
+            const uint32_t id = face[static_cast<size_t>(y) * a.res + x];
+            if ((id & gl::kBackFace) != 0) {
+              inside = true;
+              break;
+            }
+            if (id != gl::kNothing) seen[id - 1] += (*renderer)->PixelSolidAngle(x, y);
+          }
+        }
+      }
+      if (inside) continue;
+      v.objects.assign(seen.begin(), seen.end());
+      views.push_back(std::move(v));
+      progress.Advance();
+      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+    }
+    progress.Finish();
+  }
+
+  std::vector<Track> tracks;
+  for (SamplingStrategy st : {SamplingStrategy::kAgvs, SamplingStrategy::kSgvs, SamplingStrategy::kRef}) {
+    visibility::AgvsOptions o;
+    o.strategy = st;
+    o.seed = a.seed;
+    o.threads = a.threads;
+    o.batch_samples = a.batch;
+    absl::StatusOr<std::unique_ptr<GlobalSampler>> s = GlobalSampler::Create(*scene, *grid, o);
+    if (!s.ok()) return Fail(s.status());
+    tracks.push_back({st, std::move(*s), {}, {}, 0});
+  }
+  // Checkpoints at T / 2^k.
+  std::vector<double> marks;
+  for (int k = a.checkpoints - 1; k >= 0; --k) marks.push_back(a.seconds / std::pow(2.0, k));
+
+  const double cells = static_cast<double>(grid->CellCount());
+  {
+    scenes::Progress progress("sampling " + scene->name + " (agvs, sgvs, ref in turn)", 1000, &CancelFlag());
+    uint64_t shown = 0;
+    for (;;) {
+      Track* next = nullptr;
+      for (Track& t : tracks) {
+        if (t.sampler->stats().seconds < a.seconds &&
+            (next == nullptr || t.sampler->stats().seconds < next->sampler->stats().seconds)) {
+          next = &t;
+        }
+      }
+      if (next == nullptr) break;
+      next->sampler->RunBatch();
+      const visibility::AgvsStats& st = next->sampler->stats();
+      next->curve.emplace_back(st.seconds, static_cast<double>(st.entries) / cells);
+      while (next->next_checkpoint < marks.size() && st.seconds >= marks[next->next_checkpoint]) {
+        next->checkpoints.push_back({st.seconds, static_cast<double>(st.entries) / cells, st.estimated_pixel_error,
+                                     MeasuredError(views, next->sampler->pvs()), st.samples});
+        ++next->next_checkpoint;
+      }
+      double least = a.seconds;
+      for (const Track& t : tracks) least = std::min(least, t.sampler->stats().seconds);
+      const auto now = static_cast<uint64_t>(std::clamp(least / a.seconds, 0.0, 1.0) * 1000);
+      progress.SetDetail(absl::StrFormat("agvs %.0f, sgvs %.0f, ref %.0f objects", tracks[0].curve.empty() ? 0.0 : tracks[0].curve.back().second,
+                                         tracks[1].curve.empty() ? 0.0 : tracks[1].curve.back().second,
+                                         tracks[2].curve.empty() ? 0.0 : tracks[2].curve.back().second));
+      if (now > shown) {
+        progress.Advance(now - shown);
+        shown = now;
+      }
+      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+    }
+    progress.Finish();
+  }
+
+  const Track& ref = tracks[2];
+  const double ref_final = ref.curve.back().second, ref_seconds = ref.curve.back().first;
+  nlohmann::json j;
+  j["scene"] = scene->name;
+  j["cells"] = grid->CellCount();
+  j["cell_size"] = grid->cell_size();
+  j["objects"] = scene->objects.size();
+  j["seconds"] = a.seconds;
+  j["views"] = views.size();
+  j["view_resolution"] = a.res;
+  j["ref_final_mean_pvs_objects"] = ref_final;
+  for (const Track& t : tracks) {
+    const visibility::AgvsStats& st = t.sampler->stats();
+    nlohmann::json s;
+    s["samples"] = st.samples;
+    s["rays"] = st.rays;
+    s["seconds"] = st.seconds;
+    s["samples_per_s"] = st.samples / st.seconds;
+    s["rays_per_s"] = st.rays / st.seconds;
+    s["final_mean_pvs_objects"] = t.curve.back().second;
+    const double reach = TimeToReach(t.curve, ref_final);
+    s["time_to_ref_final"] = reach;
+    s["speedup_vs_ref"] = reach > 0 ? ref_seconds / reach : 0.0;
+    nlohmann::json cps = nlohmann::json::array();
+    for (const Checkpoint& c : t.checkpoints) {
+      cps.push_back({{"seconds", c.seconds},
+                     {"samples", c.samples},
+                     {"mean_pvs_objects", c.mean_objects},
+                     {"estimated_pixel_error", c.estimated},
+                     {"measured_pixel_error", c.measured}});
+    }
+    s["checkpoints"] = cps;
+    nlohmann::json curve = nlohmann::json::array();
+    for (const auto& [sec, size] : t.curve) curve.push_back({sec, size});
+    s["curve"] = curve;
+    j["strategies"][visibility::StrategyName(t.strategy)] = s;
+  }
+  if (!a.plot.empty()) {
+    if (absl::Status st = WritePlot(tracks, a.seconds, a.plot); !st.ok()) return Fail(st);
+    j["plot"] = a.plot;
+  }
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s: %zu cells of %.0f m, %zu objects; %.0f s of sampling each, side by side; %zu views of 6 x %d^2\n",
+              scene->name.c_str(), grid->CellCount(), grid->cell_size(), scene->objects.size(), a.seconds, views.size(),
+              a.res);
+  std::printf("\nmean PVS size (objects) and pixel error (of 1024 x 1024: estimated / measured by rendering)\n");
+  std::printf("%9s | %-32s | %-32s | %-32s\n", "seconds", "agvs", "sgvs", "ref");
+  for (size_t k = 0; k < marks.size(); ++k) {
+    std::printf("%9.2f", marks[k]);
+    for (const Track& t : tracks) {
+      if (k < t.checkpoints.size()) {
+        const Checkpoint& c = t.checkpoints[k];
+        std::printf(" | %8.1f obj %9.1f / %9.1f px", c.mean_objects, c.estimated, c.measured);
+      } else {
+        std::printf(" | %-32s", "-");
+      }
+    }
+    std::printf("\n");
+  }
+  std::printf("\n");
+  for (const Track& t : tracks) {
+    const visibility::AgvsStats& st = t.sampler->stats();
+    const double reach = TimeToReach(t.curve, ref_final);
+    std::printf("%-5s %7.3f M samples/s %7.3f M rays/s; final %.1f objects; REF's final %.1f reached after %s\n",
+                visibility::StrategyName(t.strategy), st.samples / st.seconds * 1e-6, st.rays / st.seconds * 1e-6,
+                t.curve.back().second, ref_final,
+                reach > 0 ? absl::StrFormat("%.2f s (%.1fx sooner than REF)", reach, ref_seconds / reach).c_str()
+                          : "never");
+  }
+  if (!a.plot.empty()) {
+    std::printf("plot: %s (log time; top: mean PVS objects, bottom: pixel error, log, lines estimated, squares "
+                "measured; agvs yellow, sgvs teal, ref red)\n",
+                a.plot.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
+  auto args = std::make_shared<BenchAgvsArgs>();
+  CLI::App* c = bench->add_subcommand(
+      "agvs", "AGVS, SGVS and REF side by side: PVS size against time, estimated against rendered pixel error");
+  c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file");
+  c->add_option("--seconds", args->seconds, "sampling time of each strategy")->check(CLI::PositiveNumber);
+  c->add_option("--views", args->views, "rendered views for the measured pixel error")->check(CLI::Range(1, 100000));
+  c->add_option("--res", args->res, "pixels per cube face side")->check(CLI::Range(8, 1024));
+  c->add_option("--batch", args->batch, "samples per batch")->check(CLI::Range(1u, 1u << 24));
+  c->add_option("--checkpoints", args->checkpoints, "table rows, at T / 2^k")->check(CLI::Range(1, 30));
+  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)");
+  c->add_option("--seed", args->seed, "random seed");
+  c->add_option("--threads", args->threads, "worker threads (0: one per core)");
+  c->add_option("--plot", args->plot, "write the convergence plot (PNG)");
+  c->add_flag("--json", args->json, "print the result as JSON");
+  c->callback([args, done] { done(BenchAgvs(*args)); });
+}
+
+}  // namespace vistream::cli
