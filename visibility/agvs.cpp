@@ -811,7 +811,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
     return absl::InternalError(absl::StrCat("Embree: cannot create a device (error ", rtcGetDeviceError(nullptr), ")"));
   }
   m.rtc = rtcNewScene(m.device);
-  rtcSetSceneFlags(m.rtc, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneFlags(m.rtc, options.robust_traversal ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
   rtcSetSceneBuildQuality(m.rtc, RTC_BUILD_QUALITY_HIGH);
   m.objects.resize(scene.objects.size());
   for (ObjectId id = 0; id < scene.objects.size(); ++id) {
