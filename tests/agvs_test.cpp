@@ -111,7 +111,9 @@ TEST_F(Agvs, KnownAnswerSceneConvergesToTheExactSetsAndNeverPast) {
     }
     // The silhouette mutation casts a second sample behind a depth discontinuity.
     EXPECT_GE(sampler->stats().samples, rounds * 8192u);
-    if (strategy != SamplingStrategy::kAgvs) EXPECT_EQ(sampler->stats().samples, rounds * 8192u);
+    if (strategy != SamplingStrategy::kAgvs) {
+      EXPECT_EQ(sampler->stats().samples, rounds * 8192u);
+    }
     EXPECT_EQ(sampler->stats().entries, sampler->pvs().TotalEntries());
   }
 }
