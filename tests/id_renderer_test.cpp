@@ -45,7 +45,9 @@ TEST(IdRenderer, PixelsSeeTheNearFrontFaceWithItsSolidAngle) {
         if (v == 1) near += (*r)->PixelSolidAngle(x, y);
         far += v == 2;
         back += (v & kBackFace) != 0;
-        if (f != 0) EXPECT_EQ(v, kNothing) << "face " << f;
+        if (f != 0) {
+          EXPECT_EQ(v, kNothing) << "face " << f;
+        }
       }
     }
   }
