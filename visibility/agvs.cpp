@@ -8,6 +8,7 @@
 #include <limits>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <unordered_map>
 
 #include <absl/strings/str_cat.h>
@@ -20,6 +21,7 @@
 #include "visibility/kdtree.h"
 #include "visibility/parallel.h"
 #include "visibility/pvs_file.h"
+#include "visibility/silhouette.h"
 
 namespace vistream::visibility {
 
@@ -30,7 +32,6 @@ using scenes::Rng;
 
 constexpr uint32_t kChunk = 512;  // samples per chunk: one distribution, one random stream
 constexpr ObjectId kNoObject = std::numeric_limits<ObjectId>::max();
-constexpr int kSilhouetteSteps = 6;  // bisection steps of the silhouette search
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kSurfaceOffset = 1e-3;  // metres a ray leaves a surface point before it counts
 constexpr uint32_t kMaxMutationCount = 63;
@@ -108,24 +109,23 @@ class MutationBuffer {
       slot = static_cast<uint32_t>(pool_.size());
       pool_.push_back(c);
     }
-    buckets_[c.mutations].push_back(slot);
+    buckets_[c.mutations].push_back(slot);  // the count lives in the bucket from now on
     lowest_ = std::min<size_t>(lowest_, c.mutations);
     ++size_;
   }
-  // Precondition: size() > 0. A least-mutated candidate (random among equals), as it was
-  // before this mutation; its count goes up by one.
-  Candidate Take(Rng& rng) {
+  // Precondition: size() > 0. The slot of a least-mutated candidate (random among equals);
+  // its count goes up by one. The slot stays valid until the next Add or Forget.
+  uint32_t Take(Rng& rng) {
     while (buckets_[lowest_].empty()) ++lowest_;
     std::vector<uint32_t>& bucket = buckets_[lowest_];
     const size_t i = rng.Below(bucket.size());
     const uint32_t slot = bucket[i];
     bucket[i] = bucket.back();
     bucket.pop_back();
-    Candidate c = pool_[slot];
-    pool_[slot].mutations = std::min(c.mutations + 1, kMaxMutationCount);
-    buckets_[pool_[slot].mutations].push_back(slot);
-    return c;
+    buckets_[std::min<size_t>(lowest_ + 1, kMaxMutationCount)].push_back(slot);
+    return slot;
   }
+  const Candidate& At(uint32_t slot) const { return pool_[slot]; }
   // Drops every candidate whose end lies on `object`.
   void Forget(ObjectId object) {
     for (std::vector<uint32_t>& bucket : buckets_) {
@@ -137,10 +137,11 @@ class MutationBuffer {
       });
     }
   }
+  // f(candidate, times mutated).
   template <typename F>
   void ForEach(F&& f) const {
-    for (const std::vector<uint32_t>& bucket : buckets_) {
-      for (uint32_t slot : bucket) f(pool_[slot]);
+    for (uint32_t b = 0; b < buckets_.size(); ++b) {
+      for (uint32_t slot : buckets_[b]) f(pool_[slot], b);
     }
   }
 
@@ -170,14 +171,14 @@ struct NewEntry {
 
 struct ChunkPlan {
   Distribution dist;
-  std::vector<Candidate> candidates;  // mutation chunks: one per sample
+  std::vector<uint32_t> candidates;  // mutation chunks: one per sample, a slot of the buffer
 };
 
 struct ChunkResult {
   std::vector<Sample> samples;
   std::vector<uint16_t> c_fwd, c_rev;  // per sample: new entries its ends found
   std::vector<NewEntry> entries;
-  uint64_t embree_rays = 0, discovery_rays = 0, discarded = 0;
+  uint64_t embree_rays = 0, silhouette_searches = 0, discarded = 0;
   uint64_t contribution = 0;
   uint64_t estimator_rays = 0, estimator_hits = 0;
 };
@@ -236,24 +237,29 @@ bool BoxMeetsShaft(const Aabb& a, const Aabb& b, const Aabb& c) {
 // --- The sampler's state beyond the header. ---
 
 struct GlobalSampler::Impl {
-  // A triangle as the samplers read it: a corner, two edges, and the cumulative surface area of
-  // the object's triangles up to this one (to draw uniform surface points). Float: drawing
-  // samples and searching silhouettes are heuristics; visibility itself is Embree's.
-  struct Tri {
-    glm::vec3 a, e1, e2;
-    float cdf;
-  };
   struct Object {
     std::vector<glm::vec3> verts;  // frame-relative (for Embree and edits)
     std::vector<uint32_t> indices;
-    std::vector<Tri> tris;         // from verts and indices
+    // From verts and indices, as the silhouette search reads them. Float: drawing samples and
+    // searching silhouettes are heuristics; visibility itself is Embree's.
+    std::vector<EdgeTriangle> tris;
+    FanTriangles fan;  // the same, for the silhouette search
     double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
     bool alive = true;
   };
   std::vector<Object> objects;
-  std::vector<ObjectId> sampleable;  // alive objects with surface area
+  // Surface points are drawn from a uniform alive object with surface area, then uniformly on
+  // its surface: as one choice of a triangle, from Walker's alias table over every triangle of
+  // those objects (one or two cache misses a point, where a search per object took several).
+  struct SurfaceEntry {
+    EdgeTriangle tri;
+    float keep;      // the chance to keep this triangle rather than take its alias
+    uint32_t alias;  // index into `surface`
+    ObjectId object;
+  };
+  std::vector<SurfaceEntry> surface;
   glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
   Aabb view_space;                   // frame-relative
   double cell_radius = 0.0;
@@ -312,13 +318,45 @@ struct GlobalSampler::Impl {
     rtcCommitScene(rtc);
     dirty = false;
   }
-  void RebuildSampleable() {
-    sampleable.clear();
+  // Vose's construction of the alias table.
+  void RebuildSurface() {
+    surface.clear();
+    std::vector<double> weight;
+    size_t sampleable = 0;
     for (ObjectId id = 0; id < objects.size(); ++id) {
-      if (objects[id].alive && objects[id].area > 0.0) {
-        sampleable.push_back(id);
+      const Object& o = objects[id];
+      if (!o.alive || !(o.area > 0.0)) continue;
+      ++sampleable;
+      const size_t first = weight.size();
+      double sum = 0.0;
+      for (const EdgeTriangle& t : o.tris) {
+        surface.push_back({t, 1.0f, static_cast<uint32_t>(surface.size()), id});
+        weight.push_back(glm::length(glm::cross(glm::dvec3(t.e1), glm::dvec3(t.e2))));
+        sum += weight.back();
+      }
+      for (size_t i = first; i < weight.size(); ++i) weight[i] /= sum;
+    }
+    // Scaled so that the mean weight is 1: each object's triangles sum to n / objects.
+    const double scale = static_cast<double>(surface.size()) / static_cast<double>(std::max<size_t>(sampleable, 1));
+    std::vector<uint32_t> small, large;
+    for (uint32_t i = 0; i < surface.size(); ++i) {
+      weight[i] *= scale;
+      (weight[i] < 1.0 ? small : large).push_back(i);
+    }
+    while (!small.empty() && !large.empty()) {
+      const uint32_t s = small.back(), l = large.back();
+      small.pop_back();
+      surface[s].keep = static_cast<float>(weight[s]);
+      surface[s].alias = l;
+      weight[l] -= 1.0 - weight[s];
+      if (weight[l] < 1.0) {
+        large.pop_back();
+        small.push_back(l);
       }
     }
+    // What is left holds weight 1 up to rounding: always kept.
+    for (uint32_t i : small) surface[i].keep = 1.0f;
+    for (uint32_t i : large) surface[i].keep = 1.0f;
   }
 
   static void BuildTris(Object* o) {
@@ -327,9 +365,10 @@ struct GlobalSampler::Impl {
     for (size_t t = 0; t + 2 < o->indices.size(); t += 3) {
       const glm::vec3 a = o->verts[o->indices[t]], b = o->verts[o->indices[t + 1]], c = o->verts[o->indices[t + 2]];
       sum += 0.5 * glm::length(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a)));
-      o->tris.push_back({a, b - a, c - a, static_cast<float>(sum)});
+      o->tris.push_back({a, b - a, c - a});
     }
     o->area = sum;
+    o->fan = FanTriangles(o->tris);
   }
 
   // Fills `o` from scene-local positions; false if a position is not finite or an index is
@@ -351,40 +390,6 @@ struct GlobalSampler::Impl {
     o->radius = BoxRadius(o->bounds);
     o->alive = true;
     return true;
-  }
-
-  // Whether the ray from `from` through `through` (beyond `from`) meets object `id`.
-  bool RayHitsObject(const glm::dvec3& from, const glm::dvec3& through, ObjectId id) const {
-    const Object& o = objects[id];
-    const glm::dvec3 d = through - from;
-    // Slab test against the object's box first.
-    double t0 = 0.0, t1 = kInf;
-    for (int k = 0; k < 3; ++k) {
-      if (d[k] == 0.0) {
-        if (from[k] < o.bounds.min[k] || from[k] > o.bounds.max[k]) return false;
-        continue;
-      }
-      double a = (o.bounds.min[k] - from[k]) / d[k], b = (o.bounds.max[k] - from[k]) / d[k];
-      if (a > b) std::swap(a, b);
-      t0 = std::max(t0, a);
-      t1 = std::min(t1, b);
-      if (t0 > t1) return false;
-    }
-    const glm::vec3 df(d), fromf(from);
-    for (const Tri& tri : o.tris) {
-      const glm::vec3 p = glm::cross(df, tri.e2);
-      const float det = glm::dot(tri.e1, p);
-      if (det == 0.0f) continue;
-      const float inv = 1.0f / det;
-      const glm::vec3 sv = fromf - tri.a;
-      const float u = glm::dot(sv, p) * inv;
-      if (u < 0.0f || u > 1.0f) continue;
-      const glm::vec3 q = glm::cross(sv, tri.e1);
-      const float v = glm::dot(df, q) * inv;
-      if (v < 0.0f || u + v > 1.0f) continue;
-      if (glm::dot(tri.e2, q) * inv > 1e-6f) return true;
-    }
-    return false;
   }
 };
 
@@ -408,7 +413,7 @@ class Worker {
     for (size_t i = 0; i < rays; ++i) {
       const glm::dvec3 p = lo + glm::dvec3(rng.Uniform() * ext.x, rng.Uniform() * ext.y, rng.Uniform() * ext.z);
       glm::dvec3 dir;
-      if (i % 2 == 0 || s_.sampleable.empty()) {
+      if (i % 2 == 0 || s_.surface.empty()) {
         dir = UniformDirection(rng);
       } else {
         glm::dvec3 n;
@@ -453,7 +458,7 @@ class Worker {
           break;
         }
         case Distribution::kObjectDirection: {
-          if (s_.sampleable.empty()) break;
+          if (s_.surface.empty()) break;
           glm::dvec3 n;
           ObjectId o;
           const glm::dvec3 p = SurfacePoint(rng, &o, &n);
@@ -475,7 +480,7 @@ class Worker {
           break;
         }
         case Distribution::kTwoPoint: {
-          if (s_.sampleable.empty()) break;
+          if (s_.surface.empty()) break;
           CellId cell;
           const glm::dvec3 v = ViewSpacePoint(rng, &cell);
           glm::dvec3 n;
@@ -485,7 +490,8 @@ class Worker {
           break;
         }
         case Distribution::kTwoPointMutation: {
-          const Candidate& c = plan.candidates[i];
+          if (i + 2 < kChunk) __builtin_prefetch(&s_.buffer.At(plan.candidates[i + 2]));
+          const Candidate& c = s_.buffer.At(plan.candidates[i]);
           const double len = glm::length(c.to - c.from);  // positive: see add_candidate in RunBatch
           const glm::dvec3 u = (c.to - c.from) / len;
           glm::dvec3 b1, b2;
@@ -497,7 +503,8 @@ class Worker {
           break;
         }
         case Distribution::kSilhouetteMutation: {
-          const Candidate& c = plan.candidates[i];
+          Prefetch(plan, i);
+          const Candidate& c = s_.buffer.At(plan.candidates[i]);
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
           const Sample smp = EmitSegment(c.from, to, plan.dist);
           if (!smp.valid || smp.fwd == kNoObject) break;
@@ -515,6 +522,23 @@ class Worker {
   }
 
  private:
+  // The candidates and their objects are scattered in memory: fetch them a few samples ahead
+  // (the candidate three ahead, its object two ahead, the object's first triangles one ahead).
+  void Prefetch(const ChunkPlan& plan, uint32_t i) const {
+    if (i + 3 < kChunk) __builtin_prefetch(&s_.buffer.At(plan.candidates[i + 3]));
+    if (i + 2 < kChunk) {
+      const ObjectId o = s_.buffer.At(plan.candidates[i + 2]).object;
+      if (o < s_.objects.size()) __builtin_prefetch(&s_.objects[o]);
+    }
+    if (i + 1 < kChunk) {
+      const ObjectId o = s_.buffer.At(plan.candidates[i + 1]).object;
+      if (o < s_.objects.size()) {
+        const auto blocks = s_.objects[o].fan.blocks();
+        for (size_t b = 0; b < std::min<size_t>(blocks.size(), 4); ++b) __builtin_prefetch(&blocks[b]);
+      }
+    }
+  }
+
   struct Hit {
     double t = kInf;
     ObjectId object = kNoObject;
@@ -530,16 +554,15 @@ class Worker {
     return lo + glm::dvec3(rng.Uniform() * ext.x, rng.Uniform() * ext.y, rng.Uniform() * ext.z);
   }
 
+  // Precondition: the alias table is not empty.
   glm::dvec3 SurfacePoint(Rng& rng, ObjectId* id, glm::dvec3* normal) {
-    *id = s_.sampleable[rng.Below(s_.sampleable.size())];
-    const Impl::Object& o = s_.objects[*id];
-    const float x = static_cast<float>(rng.Uniform() * o.area);
-    const size_t t = std::min<size_t>(
-        std::upper_bound(o.tris.begin(), o.tris.end(), x, [](float v, const Impl::Tri& tri) { return v < tri.cdf; }) -
-            o.tris.begin(),
-        o.tris.size() - 1);
-    const Impl::Tri& tri = o.tris[t];
-    const glm::dvec3 a(tri.a), e1(tri.e1), e2(tri.e2);
+    // One uniform picks the column and, with its fraction, whether to keep it.
+    const double x = rng.Uniform() * static_cast<double>(s_.surface.size());
+    const size_t column = std::min(static_cast<size_t>(x), s_.surface.size() - 1);
+    const Impl::SurfaceEntry* e = &s_.surface[column];
+    if (x - static_cast<double>(column) >= e->keep) e = &s_.surface[e->alias];
+    *id = e->object;
+    const glm::dvec3 a(e->tri.a), e1(e->tri.e1), e2(e->tri.e2);
     double u = rng.Uniform(), v = rng.Uniform();
     if (u + v > 1.0) {
       u = 1.0 - u;
@@ -619,31 +642,13 @@ class Worker {
     const double phi = 2.0 * std::numbers::pi * rng.Uniform();
     const glm::dvec3 d = std::cos(phi) * b1 + std::sin(phi) * b2;
     const glm::dvec3 far = to + radius * d;
-    if (!s_.objects[object].alive) return far;
-    auto hits = [&](double lambda) {
-      ++out_->discovery_rays;
-      return s_.RayHitsObject(from, to + lambda * radius * d, object);
-    };
-    // The far end first: when even it meets the object there is no silhouette within reach.
-    if (hits(1.0)) return far;
-    double lo = 0.0, hi = 1.0;
-    if (!hits(0.0)) {
-      // The candidate's own ray misses (it grazed or came from a reverse search): look for
-      // the object on the other side.
-      if (!hits(-1.0)) return far;
-      lo = -1.0;
-      hi = 0.0;
-      for (int k = 0; k < kSilhouetteSteps; ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (hits(mid) ? lo : hi) = mid;
-      }
-      return to + hi * radius * d;
-    }
-    for (int k = 0; k < kSilhouetteSteps; ++k) {
-      const double mid = 0.5 * (lo + hi);
-      (hits(mid) ? lo : hi) = mid;
-    }
-    return to + hi * radius * d;
+    if (!s_.objects[object].alive || !(radius > 0.0)) return far;
+    ++out_->silhouette_searches;
+    const std::optional<double> lambda = SilhouetteLambda({from, to, d, radius}, s_.objects[object].fan, &fan_);
+    if (!lambda) return far;
+    // Just past the silhouette, on the side of the rays that miss, by as much as the paper's
+    // quaternary search of depth 3 leaves (a 64th of the radius), at random.
+    return to + (*lambda + (1.0 - rng.Uniform()) / 64.0) * radius * d;
   }
 
   // Walks the viewcells the sample's free segment pierces and records what is new in them.
@@ -747,6 +752,7 @@ class Worker {
   const AgvsOptions& options_;
   ChunkResult* out_ = nullptr;
   std::vector<uint64_t>* cell_counts_ = nullptr;  // this thread's samples per cell, if counted
+  std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
 
  public:
   void CountCellsInto(std::vector<uint64_t>* counts) { cell_counts_ = counts; }
@@ -825,7 +831,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   if (const RTCError err = rtcGetDeviceError(m.device); err != RTC_ERROR_NONE) {
     return absl::InternalError(absl::StrCat("Embree: building the scene failed (error ", err, ")"));
   }
-  m.RebuildSampleable();
+  m.RebuildSurface();
   m.RebuildTree();
   s->pvs_ = GlobalPvs(grid.CellCount(), scene.objects.size());
   m.cell_samples.assign(grid.CellCount(), 0);
@@ -908,6 +914,7 @@ void GlobalSampler::RunBatch() {
       if (d == Distribution::kTwoPointMutation || d == Distribution::kSilhouetteMutation) {
         plan.candidates.reserve(kChunk);
         for (uint32_t i = 0; i < kChunk; ++i) plan.candidates.push_back(m.buffer.Take(take_rng));
+        // The buffer is not changed again until the chunks have been cast.
       }
       plans.push_back(std::move(plan));
     }
@@ -1000,7 +1007,7 @@ void GlobalSampler::RunBatch() {
       }
     }
     contribution[k] += r.contribution;
-    cost[k] += r.embree_rays + r.discovery_rays;
+    cost[k] += r.embree_rays + r.silhouette_searches;  // a search costs about a ray
     drawn[k] += r.samples.size();
     stats_.samples += r.samples.size();
     stats_.rays += r.embree_rays;
@@ -1184,7 +1191,7 @@ absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
     }
   }
   m.buffer.Forget(id);
-  m.RebuildSampleable();
+  m.RebuildSurface();
   m.RebuildTree();
   m.Commit();
   return absl::OkStatus();
@@ -1221,7 +1228,7 @@ absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh&
   pvs_.ResizeObjects(m.objects.size());
   m.object_hits.push_back(0);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
-  m.RebuildSampleable();
+  m.RebuildSurface();
   m.RebuildTree();
   m.Commit();
   return id;
@@ -1244,7 +1251,7 @@ absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& of
   o.alive = true;
   if (!o.indices.empty()) m.Attach(id);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
-  m.RebuildSampleable();
+  m.RebuildSurface();
   m.RebuildTree();
   m.Commit();
   return absl::OkStatus();
@@ -1290,13 +1297,13 @@ std::string GlobalSampler::SaveState() const {
   for (uint64_t n : m.cell_samples) w.PutVarint(n);
   for (uint64_t n : m.object_hits) w.PutVarint(n);
   w.PutVarint(m.buffer.size());
-  m.buffer.ForEach([&](const Candidate& c) {
+  m.buffer.ForEach([&](const Candidate& c, uint32_t mutations) {
     w.Put(c.from);
     w.Put(c.to);
     w.Put(c.r_from);
     w.Put(c.r_to);
     w.Put(c.object);
-    w.Put(c.mutations);
+    w.Put(mutations);
   });
   EncodeSets(pvs_, &w);
   return std::move(w.bytes());

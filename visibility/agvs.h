@@ -78,7 +78,7 @@ struct AgvsOptions {
 
 struct DistributionStats {
   uint64_t samples = 0;
-  uint64_t rays = 0;          // Embree rays and object-local discovery rays
+  uint64_t rays = 0;          // cost in rays: Embree rays, and one per silhouette search
   uint64_t contribution = 0;  // new (cell, object) entries found, against the batch's start
   double probability = 0.0;   // share of the last batch
 };

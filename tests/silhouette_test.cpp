@@ -1,0 +1,158 @@
+#include "visibility/silhouette.h"
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+
+#include "scenes/mesh.h"
+#include "scenes/random.h"
+
+namespace vistream::visibility {
+namespace {
+
+std::vector<EdgeTriangle> Triangles(const scenes::Mesh& m) {
+  std::vector<EdgeTriangle> t;
+  for (size_t i = 0; i + 2 < m.indices.size(); i += 3) {
+    const glm::vec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]], c = m.positions[m.indices[i + 2]];
+    t.push_back({a, b - a, c - a});
+  }
+  return t;
+}
+
+// The oracle: whether the ray from `from` through `through` meets a triangle beyond a millionth
+// of the way (Moeller-Trumbore in double, one triangle after another).
+bool RayMeets(const glm::dvec3& from, const glm::dvec3& through, const std::vector<EdgeTriangle>& tris) {
+  const glm::dvec3 d = through - from;
+  for (const EdgeTriangle& t : tris) {
+    const glm::dvec3 e1(t.e1), e2(t.e2), p = glm::cross(d, e2);
+    const double det = glm::dot(e1, p);
+    if (det == 0.0) continue;
+    const glm::dvec3 sv = from - glm::dvec3(t.a);
+    const double u = glm::dot(sv, p) / det;
+    if (u < 0.0 || u > 1.0) continue;
+    const glm::dvec3 q = glm::cross(sv, e1);
+    const double v = glm::dot(d, q) / det;
+    if (v < 0.0 || u + v > 1.0) continue;
+    if (glm::dot(e2, q) / det > 1e-6) return true;
+  }
+  return false;
+}
+
+glm::dvec3 At(const DiscoveryFan& f, double lambda) { return f.to + lambda * f.radius * f.d; }
+
+// The fan with `towards` made normal to the segment.
+DiscoveryFan Fan(const glm::dvec3& from, const glm::dvec3& to, const glm::dvec3& towards, double radius) {
+  const glm::dvec3 s = glm::normalize(to - from);
+  return {from, to, glm::normalize(towards - glm::dot(towards, s) * s), radius};
+}
+
+TEST(Silhouette, BoxSeenHeadOnHasItsEdgeWhereTheAnglesSay) {
+  // A 1 m cube 10 m away; the fan sweeps sideways through the middle of its front face: rays
+  // through (10, 0.5 + 2λ, 0.5) enter the front face for |2λ| <= 0.5 and nothing else.
+  scenes::Mesh m;
+  const std::vector<glm::dvec2> square = {{10, 0}, {11, 0}, {11, 1}, {10, 1}};
+  scenes::AppendConvexPrism(square, 0.0, 1.0, &m);
+  const FanTriangles tris(Triangles(m));
+  const DiscoveryFan fan{{0.0, 0.5, 0.5}, {10.0, 0.5, 0.5}, {0.0, 1.0, 0.0}, 2.0};
+  std::vector<std::pair<double, double>> scratch;
+  const std::optional<double> lambda = SilhouetteLambda(fan, tris, &scratch);
+  ASSERT_TRUE(lambda.has_value());
+  EXPECT_NEAR(*lambda, 0.25, 1e-5);  // single precision: micrometres
+  // Swept the other way, the other edge.
+  const DiscoveryFan back{fan.from, fan.to, {0.0, -1.0, 0.0}, 2.0};
+  ASSERT_TRUE(SilhouetteLambda(back, tris, &scratch).has_value());
+  EXPECT_NEAR(*SilhouetteLambda(back, tris, &scratch), 0.25, 1e-5);  // single precision: micrometres
+  // A radius too small to get past the edge: no silhouette within reach.
+  const DiscoveryFan small{fan.from, fan.to, fan.d, 0.2};
+  EXPECT_FALSE(SilhouetteLambda(small, tris, &scratch).has_value());
+  // Aimed past the cube, with the cube on the negative side: the edge from there (the ray
+  // through y = 1 at x = 10, which by similar triangles is λ = -0.25 again).
+  const DiscoveryFan past = Fan(fan.from, {10.0, 1.5, 0.5}, {0.0, 1.0, 0.0}, 2.0);
+  ASSERT_TRUE(SilhouetteLambda(past, tris, &scratch).has_value());
+  EXPECT_NEAR(*SilhouetteLambda(past, tris, &scratch), -0.25, 1e-5);
+  // Nothing on either side: none.
+  const DiscoveryFan away = Fan(fan.from, {10.0, 5.0, 0.5}, {0.0, 1.0, 0.0}, 1.0);
+  EXPECT_FALSE(SilhouetteLambda(away, tris, &scratch).has_value());
+}
+
+// Random buildings (rows of prisms, some stacked) against the brute-force oracle: every λ the
+// intervals hold is a meeting ray and every other one a missing ray, away from the interval
+// ends; the silhouette has meeting rays just below it and missing rays just above.
+TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
+  scenes::Rng rng(42);
+  std::vector<std::pair<double, double>> scratch, hits;
+  int found = 0, checked = 0;
+  for (int scene = 0; scene < 60; ++scene) {
+    scenes::Mesh m;
+    const int parts = 1 + static_cast<int>(rng.Below(4));
+    for (int p = 0; p < parts; ++p) {
+      const double x = rng.Uniform(30, 60), y = rng.Uniform(-20, 20), w = rng.Uniform(3, 15), dp = rng.Uniform(3, 15);
+      const double z0 = rng.Below(3) == 0 ? rng.Uniform(2, 10) : 0.0;
+      std::vector<glm::dvec2> f;
+      const int corners = 3 + static_cast<int>(rng.Below(5));
+      for (int k = 0; k < corners; ++k) {
+        const double a = 2 * std::numbers::pi * k / corners;
+        f.push_back({x + w * std::cos(a), y + dp * std::sin(a)});
+      }
+      scenes::AppendConvexPrism(f, z0, z0 + rng.Uniform(5, 40), &m);
+    }
+    const std::vector<EdgeTriangle> raw = Triangles(m);
+    const FanTriangles tris(raw);
+    for (int q = 0; q < 40; ++q) {
+      DiscoveryFan fan;
+      fan.from = {rng.Uniform(-20, 20), rng.Uniform(-20, 20), rng.Uniform(0.5, 3)};
+      const EdgeTriangle& t = raw[rng.Below(raw.size())];
+      const double u = rng.Uniform(0, 0.5), v = rng.Uniform(0, 0.5);
+      fan.to = glm::dvec3(t.a) + u * glm::dvec3(t.e1) + v * glm::dvec3(t.e2);
+      const glm::dvec3 s = glm::normalize(fan.to - fan.from);
+      const glm::dvec3 b1 = glm::normalize(glm::cross(s, glm::dvec3(0, 0, 1))), b2 = glm::cross(s, b1);
+      const double phi = rng.Uniform(0, 2 * std::numbers::pi);
+      fan.d = std::cos(phi) * b1 + std::sin(phi) * b2;
+      fan.radius = rng.Uniform(2, 30);
+
+      hits.clear();
+      FanHits(fan, tris, &hits);
+      constexpr double kTol = 1e-4;
+      for (int k = 0; k <= 400; ++k) {
+        const double lambda = -1.0 + k / 200.0;
+        bool inside = false, near_end = false;
+        for (const auto& [lo, hi] : hits) {
+          inside |= lo <= lambda && lambda <= hi;
+          near_end |= std::abs(lambda - lo) < kTol || std::abs(lambda - hi) < kTol;
+        }
+        if (near_end) continue;
+        ++checked;
+        ASSERT_EQ(inside, RayMeets(fan.from, At(fan, lambda), raw)) << "scene " << scene << " fan " << q << " λ " << lambda;
+      }
+
+      const std::optional<double> sil = SilhouetteLambda(fan, tris, &scratch);
+      const bool meets0 = RayMeets(fan.from, At(fan, 0.0), raw);
+      if (!sil) {
+        // None: the far end is met, or nothing in [-1, 0] is.
+        bool any_below = false;
+        for (int k = 0; k <= 200; ++k) any_below |= RayMeets(fan.from, At(fan, -k / 200.0), raw);
+        EXPECT_TRUE(RayMeets(fan.from, At(fan, 1.0), raw) || !any_below) << "scene " << scene << " fan " << q;
+        continue;
+      }
+      ++found;
+      EXPECT_FALSE(RayMeets(fan.from, At(fan, 1.0), raw));
+      EXPECT_TRUE(RayMeets(fan.from, At(fan, *sil - 1e-3), raw)) << "scene " << scene << " fan " << q;
+      EXPECT_FALSE(RayMeets(fan.from, At(fan, *sil + 1e-3), raw)) << "scene " << scene << " fan " << q;
+      if (meets0) {
+        EXPECT_GE(*sil, 0.0);
+      } else {
+        EXPECT_LT(*sil, 0.0);
+        for (double l = *sil + 1e-3; l <= 0.0; l += 1e-2) EXPECT_FALSE(RayMeets(fan.from, At(fan, l), raw));
+      }
+    }
+  }
+  // The random fans did find silhouettes, and the oracle compared many rays.
+  EXPECT_GT(found, 600);
+  EXPECT_GT(checked, 900000);
+}
+
+}  // namespace
+}  // namespace vistream::visibility
