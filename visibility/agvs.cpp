@@ -83,10 +83,10 @@ struct Sample {
 };
 
 struct Candidate {
+  ObjectId object = kNoObject;  // first: read ahead of the rest (see Worker::Prefetch)
+  uint32_t mutations = 0;
   glm::dvec3 from{0.0}, to{0.0};  // the segment's origin and the point where `object` was hit
   double r_from = 0.0, r_to = 0.0;  // radii of what lies at each end
-  ObjectId object = kNoObject;
-  uint32_t mutations = 0;
 };
 
 // The mutation candidates, by how often each was mutated: the least mutated is taken first,
@@ -490,7 +490,11 @@ class Worker {
           break;
         }
         case Distribution::kTwoPointMutation: {
-          if (i + 2 < kChunk) __builtin_prefetch(&s_.buffer.At(plan.candidates[i + 2]));
+          if (i + 2 < kChunk) {
+            const char* next = reinterpret_cast<const char*>(&s_.buffer.At(plan.candidates[i + 2]));
+            __builtin_prefetch(next);
+            __builtin_prefetch(next + sizeof(Candidate) - 1);
+          }
           const Candidate& c = s_.buffer.At(plan.candidates[i]);
           const double len = glm::length(c.to - c.from);  // positive: see add_candidate in RunBatch
           const glm::dvec3 u = (c.to - c.from) / len;
@@ -525,7 +529,11 @@ class Worker {
   // The candidates and their objects are scattered in memory: fetch them a few samples ahead
   // (the candidate three ahead, its object two ahead, the object's first triangles one ahead).
   void Prefetch(const ChunkPlan& plan, uint32_t i) const {
-    if (i + 3 < kChunk) __builtin_prefetch(&s_.buffer.At(plan.candidates[i + 3]));
+    if (i + 3 < kChunk) {
+      const char* c = reinterpret_cast<const char*>(&s_.buffer.At(plan.candidates[i + 3]));
+      __builtin_prefetch(c);
+      __builtin_prefetch(c + sizeof(Candidate) - 1);  // it may span two cache lines
+    }
     if (i + 2 < kChunk) {
       const ObjectId o = s_.buffer.At(plan.candidates[i + 2]).object;
       if (o < s_.objects.size()) __builtin_prefetch(&s_.objects[o]);
