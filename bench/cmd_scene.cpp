@@ -1,4 +1,4 @@
-// vistream scene generate | info
+// vistream scene generate | import-osm | info | map
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,6 +16,7 @@
 #include "scenes/catalog.h"
 #include "scenes/city_generator.h"
 #include "scenes/gltf_io.h"
+#include "scenes/osm_import.h"
 #include "scenes/progress.h"
 #include "visibility/kdtree.h"
 
@@ -59,6 +60,84 @@ int Generate(const GenerateArgs& a) {
   std::printf("generated %s: %zu objects, %zu triangles, %zu occluders in %.2f s; saved %s in %.2f s\n",
               scene->name.c_str(), scene->objects.size(), scene->TriangleCount(),
               scene->occluders.size(), generate_s, a.output.c_str(), SecondsSince(save_start));
+  return 0;
+}
+
+struct ImportArgs {
+  std::string input, output, bbox, name;
+  double storey_m = 3.0;
+  bool json = false;
+};
+
+int ImportOsm(const ImportArgs& a) {
+  if (a.json) scenes::Progress::SetQuiet(true);
+  scenes::OsmImportOptions options;
+  options.storey_m = a.storey_m;
+  options.name = a.name;
+  if (!a.bbox.empty()) {
+    absl::StatusOr<scenes::GeoBox> box = scenes::ParseGeoBox(a.bbox);
+    if (!box.ok()) return Fail(box.status());
+    options.bbox = *box;
+  }
+  scenes::OsmImportSummary sum;
+  absl::StatusOr<scenes::Scene> scene = scenes::ImportOsm(a.input, options, &sum, &CancelFlag());
+  if (!scene.ok()) return Fail(scene.status());
+  const auto save_start = std::chrono::steady_clock::now();
+  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
+  const double save_s = SecondsSince(save_start);
+  if (a.json) {
+    nlohmann::json skipped = nlohmann::json::object();
+    for (const auto& [reason, n] : sum.skipped) skipped[reason] = n;
+    const nlohmann::json j = {
+        {"input", a.input},
+        {"output", a.output},
+        {"scene", scene->name},
+        {"buildings", sum.buildings},
+        {"from_ways", sum.from_ways},
+        {"from_relations", sum.from_relations},
+        {"outer_rings", sum.outer_rings},
+        {"inner_rings", sum.inner_rings},
+        {"occluders", sum.occluders},
+        {"triangles", scene->TriangleCount()},
+        {"raised", sum.raised},
+        {"height_tagged", sum.height_tagged},
+        {"levels_tagged", sum.levels_tagged},
+        {"height_by_rule", sum.height_by_rule},
+        {"bad_height_tags", sum.bad_height_tags},
+        {"repaired", sum.Repaired()},
+        {"repaired_duplicate_points", sum.repaired_duplicate_points},
+        {"repaired_spikes", sum.repaired_spikes},
+        {"dropped_inner_rings", sum.dropped_inner_rings},
+        {"skipped", sum.Skipped()},
+        {"skipped_by_reason", skipped},
+        {"utm_zone", sum.utm_zone},
+        {"origin", {scene->origin.x, scene->origin.y, scene->origin.z}},
+        {"bounds_min", {scene->bounds.min.x, scene->bounds.min.y, scene->bounds.min.z}},
+        {"bounds_max", {scene->bounds.max.x, scene->bounds.max.y, scene->bounds.max.z}},
+        {"import_s", sum.seconds},
+        {"save_s", save_s},
+    };
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("imported %s: %llu buildings (%llu ways, %llu relations), %llu outer and %llu inner rings, %zu triangles, "
+              "%llu occluders in %.2f s; saved %s in %.2f s\n",
+              scene->name.c_str(), static_cast<unsigned long long>(sum.buildings),
+              static_cast<unsigned long long>(sum.from_ways), static_cast<unsigned long long>(sum.from_relations),
+              static_cast<unsigned long long>(sum.outer_rings), static_cast<unsigned long long>(sum.inner_rings),
+              scene->TriangleCount(), static_cast<unsigned long long>(sum.occluders), sum.seconds, a.output.c_str(),
+              save_s);
+  std::printf("heights: %llu tagged, %llu from levels, %llu by the building-type rule; %llu raised (no occluder); "
+              "%llu unreadable height tags\n",
+              static_cast<unsigned long long>(sum.height_tagged), static_cast<unsigned long long>(sum.levels_tagged),
+              static_cast<unsigned long long>(sum.height_by_rule), static_cast<unsigned long long>(sum.raised),
+              static_cast<unsigned long long>(sum.bad_height_tags));
+  std::printf("repaired: %llu (%llu duplicate points, %llu spikes, %llu inner rings dropped)\n",
+              static_cast<unsigned long long>(sum.Repaired()), static_cast<unsigned long long>(sum.repaired_duplicate_points),
+              static_cast<unsigned long long>(sum.repaired_spikes), static_cast<unsigned long long>(sum.dropped_inner_rings));
+  std::printf("skipped: %llu\n", static_cast<unsigned long long>(sum.Skipped()));
+  for (const auto& [reason, n] : sum.skipped) std::printf("  %-40s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
+  std::printf("origin: UTM %s (%.0f, %.0f) m\n", sum.utm_zone.c_str(), scene->origin.x, scene->origin.y);
   return 0;
 }
 
@@ -162,6 +241,16 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)");
   g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required();
   g->callback([gen, done] { done(Generate(*gen)); });
+
+  auto imp = std::make_shared<ImportArgs>();
+  CLI::App* o = scene->add_subcommand("import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene");
+  o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML) or .osm.pbf")->required();
+  o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required();
+  o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
+  o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(CLI::Range(1.0, 20.0));
+  o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)");
+  o->add_flag("--json", imp->json, "print the summary as one JSON object");
+  o->callback([imp, done] { done(ImportOsm(*imp)); });
 
   auto info = std::make_shared<InfoArgs>();
   CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");

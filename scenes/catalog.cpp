@@ -96,8 +96,8 @@ class Reader {
 
 SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
   SceneSource s;
-  if (r.Has("generator") == r.Has("gltf")) {
-    r.Fail(r.Key(""), "needs exactly one of 'generator' or 'gltf'");
+  if (int{r.Has("generator")} + int{r.Has("gltf")} + int{r.Has("osm")} != 1) {
+    r.Fail(r.Key(""), "needs exactly one of 'generator', 'gltf' or 'osm'");
   }
   if (r.Has("generator")) {
     s.kind = SceneSource::Kind::kGenerator;
@@ -113,11 +113,22 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
       r.Allow({"generator", "seed"});
     }
     s.seed = r.Unsigned("seed", 1);
-  } else {
+  } else if (r.Has("gltf")) {
     r.Allow({"gltf"});
     s.kind = SceneSource::Kind::kGltf;
     const fs::path p(r.String("gltf"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
+  } else {
+    r.Allow({"osm", "bbox", "storey_m"});
+    s.kind = SceneSource::Kind::kOsm;
+    const fs::path p(r.String("osm"));
+    s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
+    if (r.Has("bbox")) {
+      absl::StatusOr<GeoBox> box = ParseGeoBox(r.String("bbox"));
+      if (!box.ok()) r.Fail(r.Key("bbox"), std::string(box.status().message()));
+      s.bbox = *box;
+    }
+    s.storey_m = r.Number("storey_m", 1.0, 20.0, 3.0);
   }
   return s;
 }
@@ -251,6 +262,13 @@ std::vector<std::string> CatalogNames() {
 absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const std::atomic<bool>* cancel,
                                  std::vector<std::string>* warnings) {
   if (entry.source.kind == SceneSource::Kind::kGltf) return LoadGltf(entry.source.path, warnings);
+  if (entry.source.kind == SceneSource::Kind::kOsm) {
+    OsmImportOptions options;
+    options.bbox = entry.source.bbox;
+    options.storey_m = entry.source.storey_m;
+    options.name = entry.name;
+    return ImportOsm(entry.source.path, options, nullptr, cancel);
+  }
   GeneratorParams params;
   params.seed = entry.source.seed;
   params.width_m = entry.source.width_m;

@@ -14,18 +14,21 @@
 #include <absl/status/statusor.h>
 #include <glm/vec2.hpp>
 
+#include "scenes/osm_import.h"
 #include "scenes/scene.h"
 
 namespace vistream::scenes {
 
 struct SceneSource {
-  enum class Kind { kGenerator, kGltf };
+  enum class Kind { kGenerator, kGltf, kOsm };
   Kind kind = Kind::kGenerator;
   std::string generator;  // kGenerator: city1, city2, london
   uint64_t seed = 1;
   double width_m = 0.0;  // 0: generator default
   double depth_m = 0.0;
-  std::string path;  // kGltf: absolute, resolved against the catalog file's folder
+  std::string path;  // kGltf, kOsm: absolute, resolved against the catalog file's folder
+  std::optional<GeoBox> bbox;  // kOsm: keep only buildings inside
+  double storey_m = 3.0;       // kOsm
 };
 
 struct ViewcellSpec {

@@ -1,0 +1,204 @@
+#include "scenes/polygon.h"
+
+#include <cassert>
+#include <list>
+
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_2_algorithms.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <absl/strings/str_cat.h>
+#include <glm/geometric.hpp>
+
+namespace vistream::scenes {
+
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = K::Point_2;
+using Segment = K::Segment_2;
+
+struct FaceInfo {
+  int nesting = -1;  // 0 outside, 1 inside the outer ring, 2 inside a hole, ...
+};
+using Vb = CGAL::Triangulation_vertex_base_2<K>;
+using Fbb = CGAL::Triangulation_face_base_with_info_2<FaceInfo, K>;
+using Fb = CGAL::Constrained_triangulation_face_base_2<K, Fbb>;
+using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+// The rings are checked first, so constraints never cross: no constructions needed.
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<K, Tds, CGAL::No_constraint_intersection_requiring_constructions_tag>;
+
+Point P(const glm::dvec2& p) { return Point(p.x, p.y); }
+
+std::vector<Point> Points(const Ring& ring) {
+  std::vector<Point> out;
+  out.reserve(ring.size());
+  for (const glm::dvec2& p : ring) out.push_back(P(p));
+  return out;
+}
+
+// CGAL's nesting walk: faces reached from the infinite face without crossing a constraint are
+// at level 0, each crossing adds one.
+void MarkNesting(Cdt& cdt) {
+  std::list<Cdt::Edge> border;
+  auto flood = [&](Cdt::Face_handle start, int level) {
+    if (start->info().nesting != -1) return;
+    std::list<Cdt::Face_handle> queue{start};
+    while (!queue.empty()) {
+      Cdt::Face_handle f = queue.front();
+      queue.pop_front();
+      if (f->info().nesting != -1) continue;
+      f->info().nesting = level;
+      for (int i = 0; i < 3; ++i) {
+        Cdt::Face_handle n = f->neighbor(i);
+        if (n->info().nesting != -1) continue;
+        if (cdt.is_constrained(Cdt::Edge(f, i))) {
+          border.emplace_back(f, i);
+        } else {
+          queue.push_back(n);
+        }
+      }
+    }
+  };
+  flood(cdt.infinite_face(), 0);
+  while (!border.empty()) {
+    const Cdt::Edge e = border.front();
+    border.pop_front();
+    Cdt::Face_handle n = e.first->neighbor(e.second);
+    if (n->info().nesting == -1) flood(n, e.first->info().nesting + 1);
+  }
+}
+
+bool RingsMeet(const Ring& a, const Ring& b) {
+  for (size_t i = 0; i < a.size(); ++i) {
+    const Segment s(P(a[i]), P(a[(i + 1) % a.size()]));
+    for (size_t j = 0; j < b.size(); ++j) {
+      if (CGAL::do_intersect(s, Segment(P(b[j]), P(b[(j + 1) % b.size()])))) return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+RingRepairs CleanRing(Ring* ring) {
+  RingRepairs r;
+  Ring& v = *ring;
+  for (bool changed = true; changed && !v.empty();) {
+    changed = false;
+    Ring out;
+    out.reserve(v.size());
+    for (const glm::dvec2& p : v) {
+      if (!out.empty() && out.back() == p) {
+        ++r.duplicate_points;
+        changed = true;
+        continue;
+      }
+      out.push_back(p);
+    }
+    while (out.size() > 1 && out.back() == out.front()) {
+      out.pop_back();
+      ++r.duplicate_points;
+      changed = true;
+    }
+    // Spikes: a point whose neighbours coincide (the ring goes out and straight back).
+    for (size_t i = 0; out.size() >= 3 && i < out.size(); ++i) {
+      const size_t prev = (i + out.size() - 1) % out.size(), next = (i + 1) % out.size();
+      if (out[prev] == out[next]) {
+        out.erase(out.begin() + static_cast<std::ptrdiff_t>(i));
+        ++r.spikes;
+        changed = true;
+        break;  // the neighbours are now duplicates: the next pass merges them
+      }
+    }
+    v = std::move(out);
+  }
+  return r;
+}
+
+bool IsSimpleRing(const Ring& ring) {
+  if (ring.size() < 3) return false;
+  const std::vector<Point> pts = Points(ring);
+  if (CGAL::orientation_2(pts.begin(), pts.end(), K()) == CGAL::COLLINEAR) return false;
+  return CGAL::is_simple_2(pts.begin(), pts.end(), K());
+}
+
+bool RingInsideRing(const Ring& inner, const Ring& outer) {
+  if (RingsMeet(inner, outer)) return false;
+  const std::vector<Point> pts = Points(outer);
+  return CGAL::bounded_side_2(pts.begin(), pts.end(), P(inner[0]), K()) == CGAL::ON_BOUNDED_SIDE;
+}
+
+absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon) {
+  if (!IsSimpleRing(polygon.outer)) return absl::InvalidArgumentError("the outer ring is not a simple polygon");
+  for (size_t h = 0; h < polygon.holes.size(); ++h) {
+    const Ring& hole = polygon.holes[h];
+    if (!IsSimpleRing(hole)) return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not a simple polygon"));
+    if (!RingInsideRing(hole, polygon.outer)) {
+      return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not strictly inside the outer ring"));
+    }
+    for (size_t g = 0; g < h; ++g) {
+      const Ring& other = polygon.holes[g];
+      if (RingsMeet(hole, other) || RingInsideRing(hole, other) || RingInsideRing(other, hole)) {
+        return absl::InvalidArgumentError(absl::StrCat("inner rings ", g, " and ", h, " overlap"));
+      }
+    }
+  }
+  Cdt cdt;
+  try {
+    auto insert = [&](const Ring& ring) {
+      const std::vector<Point> pts = Points(ring);
+      cdt.insert_constraint(pts.begin(), pts.end(), /*close=*/true);
+    };
+    insert(polygon.outer);
+    for (const Ring& hole : polygon.holes) insert(hole);
+  } catch (const std::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("triangulation failed: ", e.what()));
+  }
+  MarkNesting(cdt);
+  std::vector<Triangle2> out;
+  for (Cdt::Face_handle f : cdt.finite_face_handles()) {
+    if (f->info().nesting % 2 != 1) continue;
+    Triangle2 t;
+    for (int i = 0; i < 3; ++i) t[i] = {f->vertex(i)->point().x(), f->vertex(i)->point().y()};
+    out.push_back(t);
+  }
+  return out;
+}
+
+void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles, double z0, double z1,
+                 Mesh* mesh) {
+  assert(z1 > z0);
+  auto vertex = [&](const glm::dvec2& p, double z, const glm::vec3& normal) {
+    mesh->positions.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(z));
+    mesh->normals.push_back(normal);
+    return static_cast<uint32_t>(mesh->positions.size() - 1);
+  };
+  // Walls: the solid lies left of every edge (outer counter-clockwise, holes clockwise), so the
+  // outward normal points right. One quad per edge, its own vertices, for flat shading.
+  auto walls = [&](const Ring& ring) {
+    for (size_t i = 0; i < ring.size(); ++i) {
+      const glm::dvec2& a = ring[i];
+      const glm::dvec2& b = ring[(i + 1) % ring.size()];
+      const glm::dvec2 d = b - a;
+      const double len = glm::length(d);
+      const glm::vec3 normal = len > 0.0 ? glm::vec3(static_cast<float>(d.y / len), static_cast<float>(-d.x / len), 0.f)
+                                         : glm::vec3(1.f, 0.f, 0.f);
+      const uint32_t a0 = vertex(a, z0, normal), b0 = vertex(b, z0, normal);
+      const uint32_t b1 = vertex(b, z1, normal), a1 = vertex(a, z1, normal);
+      mesh->indices.insert(mesh->indices.end(), {a0, b0, b1, a0, b1, a1});
+    }
+  };
+  walls(polygon.outer);
+  for (const Ring& hole : polygon.holes) walls(hole);
+  // Roof (normal up, counter-clockwise from above) and floor (normal down, reversed).
+  for (const Triangle2& t : triangles) {
+    const uint32_t r0 = vertex(t[0], z1, {0.f, 0.f, 1.f}), r1 = vertex(t[1], z1, {0.f, 0.f, 1.f}),
+                   r2 = vertex(t[2], z1, {0.f, 0.f, 1.f});
+    const uint32_t f0 = vertex(t[0], z0, {0.f, 0.f, -1.f}), f1 = vertex(t[1], z0, {0.f, 0.f, -1.f}),
+                   f2 = vertex(t[2], z0, {0.f, 0.f, -1.f});
+    mesh->indices.insert(mesh->indices.end(), {r0, r1, r2, f0, f2, f1});
+  }
+}
+
+}  // namespace vistream::scenes

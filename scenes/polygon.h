@@ -1,0 +1,52 @@
+#pragma once
+// Footprints with holes (a courtyard, the inner rings of a multipolygon): cleaning rings,
+// checking them, triangulating them (CGAL's constrained Delaunay triangulation) and building
+// the closed prism of a footprint.
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+#include <glm/vec2.hpp>
+
+#include "scenes/mesh.h"
+
+namespace vistream::scenes {
+
+using Ring = std::vector<glm::dvec2>;  // open: the first point is not repeated at the end
+
+struct PolygonWithHoles {
+  Ring outer;               // counter-clockwise
+  std::vector<Ring> holes;  // clockwise, inside `outer`, apart from each other
+};
+
+// What CleanRing changed.
+struct RingRepairs {
+  size_t duplicate_points = 0;  // consecutive equal points merged (the closing one included)
+  size_t spikes = 0;            // points where the ring turned straight back on itself
+};
+
+// Removes consecutive duplicates (and a repeated first point at the end) and zero-width spikes
+// (a, b, a), in place, until none is left.
+RingRepairs CleanRing(Ring* ring);
+
+// Whether the ring has at least 3 points, a non-zero area and no two edges meeting other than
+// neighbours at their shared point (exact predicates).
+bool IsSimpleRing(const Ring& ring);
+
+// Whether two simple rings neither cross nor touch, and `inner` lies inside `outer` (exact).
+bool RingInsideRing(const Ring& inner, const Ring& outer);
+
+using Triangle2 = std::array<glm::dvec2, 3>;
+
+// The footprint as counter-clockwise triangles covering exactly its area (holes left out).
+// Needs simple rings, holes inside the outer ring and apart; an error otherwise.
+absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon);
+
+// Appends the closed, flat-shaded prism of `polygon` from z0 to z1 > z0: walls along every ring
+// (outward, and into each courtyard), the roof and the floor from `triangles` (Triangulate's).
+void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles, double z0,
+                 double z1, Mesh* mesh);
+
+}  // namespace vistream::scenes
