@@ -63,6 +63,32 @@ TEST(Catalog, GltfSourceResolvesAgainstTheCatalogFolder) {
   EXPECT_NE(scene.status().message().find("/base/data/x.glb"), std::string::npos) << scene.status();
 }
 
+TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
+      R"({"name": "t", "source": {"osm": "../data/x.osm.pbf", "bbox": "7.4,43.7,7.5,43.8", "storey_m": 3.5},
+          "viewcell": {"size_m": 50, "height_m": 2}})",
+      "t.json", "/base/scenes");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->source.kind, SceneSource::Kind::kOsm);
+  EXPECT_EQ(e->source.path, "/base/data/x.osm.pbf");
+  ASSERT_TRUE(e->source.bbox.has_value());
+  EXPECT_DOUBLE_EQ(e->source.bbox->max_lat, 43.8);
+  EXPECT_DOUBLE_EQ(e->source.storey_m, 3.5);
+  absl::StatusOr<Scene> scene = BuildScene(*e);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_NE(scene.status().message().find("/base/data/x.osm.pbf: no such file"), std::string::npos) << scene.status();
+
+  const absl::Status bad_box = ParseError(
+      R"({"name": "t", "source": {"osm": "x.osm", "bbox": "7.4,43.7"}, "viewcell": {"size_m": 50, "height_m": 2}})");
+  EXPECT_NE(bad_box.message().find("key 'source.bbox'"), std::string::npos) << bad_box;
+  const absl::Status two = ParseError(
+      R"({"name": "t", "source": {"osm": "x.osm", "gltf": "x.glb"}, "viewcell": {"size_m": 50, "height_m": 2}})");
+  EXPECT_NE(two.message().find("exactly one of 'generator', 'gltf' or 'osm'"), std::string::npos) << two;
+  const absl::Status unknown = ParseError(
+      R"({"name": "t", "source": {"osm": "x.osm", "seed": 3}, "viewcell": {"size_m": 50, "height_m": 2}})");
+  EXPECT_NE(unknown.message().find("unknown key"), std::string::npos) << unknown;
+}
+
 TEST(Catalog, MalformedJsonGivesLineAndColumn) {
   const absl::Status s = ParseError("{\n  \"name\": \"t\",\n  \"source\": {,}\n}");
   ASSERT_FALSE(s.ok());

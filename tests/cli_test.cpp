@@ -298,4 +298,62 @@ TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {
   EXPECT_GT(j.at("pvs_entries_checked").get<double>(), 8 * 20.0);
 }
 
+// OpenStreetMap import, end to end: the summary's keys and what bad input says.
+TEST(Cli, ImportOsmWritesASceneAndSummarises) {
+  const std::string out = Tmp("courtyard.glb");
+  const RunResult r = Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/courtyard.osm -o " +
+                               out + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("buildings").get<int>(), 1);
+  EXPECT_EQ(j.at("inner_rings").get<int>(), 1);
+  EXPECT_EQ(j.at("repaired").get<int>(), 0);
+  EXPECT_EQ(j.at("skipped").get<int>(), 0);
+  EXPECT_EQ(j.at("utm_zone").get<std::string>(), "32n");
+  // The scene file reads back with its origin.
+  const RunResult info = Vistream("scene info " + out + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.out;
+  EXPECT_EQ(nlohmann::json::parse(info.out).at("objects").get<int>(), 1) << info.out;
+
+  const RunResult bad_box = Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR +
+                                     "/tests/osm/courtyard.osm -o " + out + " --bbox 7,43,7.5");
+  EXPECT_NE(bad_box.exit_code, 0);
+  EXPECT_NE(bad_box.out.find("needs four numbers"), std::string::npos) << bad_box.out;
+  const RunResult empty =
+      Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out);
+  EXPECT_NE(empty.exit_code, 0);
+  EXPECT_NE(empty.out.find("empty.osm: the file is empty"), std::string::npos) << empty.out;
+}
+
+// The whole pipeline on a real city: the Monaco extract (../shared/data/osm, ODbL), a viewcell
+// on Rue Grimaldi (the catalog's walk) with each backend, and the inclusion check.
+const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
+
+TEST(Cli, MonacoPvsWithEachBackend) {
+  if (!std::filesystem::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco pipeline is not tested";
+  std::map<std::string, int> objects;
+  for (const std::string backend : {"cpu", "gl", "exact"}) {
+    const RunResult r = Vistream("pvs --scene monaco --cell 115,43 --json --backend " + backend);
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    objects[backend] = j.at("pvs_objects").get<int>();
+    EXPECT_GT(j.at("total_objects").get<int>(), 20000);
+  }
+  EXPECT_EQ(objects["cpu"], objects["gl"]);
+  EXPECT_LE(objects["exact"], objects["cpu"]);
+  EXPECT_GT(objects["exact"], 10);
+  EXPECT_LT(objects["cpu"], 2000);  // a street in a city sees a small part of it
+}
+
+TEST(Cli, CheckConservativeFindsNoViolationOnMonaco) {
+  if (!std::filesystem::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco pipeline is not tested";
+  const RunResult r = Vistream("check-conservative --scene monaco --cells 8 --seconds 8 --neighbourhoods 10 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("cells").get<int>(), 8);
+  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
+  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), 8 * 20.0);
+  EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0);
+}
+
 }  // namespace

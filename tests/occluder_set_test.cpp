@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <vector>
 
+#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
+#include "scenes/osm_import.h"
+#include "scenes/progress.h"
 #include "tests/test_util.h"
 
 namespace vistream::visibility {
@@ -84,6 +87,27 @@ TEST(OccluderSet, BoundsMatchThePieces) {
                   w.y <= set.bounds(id).max.y);
     }
   }
+}
+
+// Terraced houses from OpenStreetMap (three houses sharing party walls through shared nodes):
+// their occluders touch along whole walls, so they fuse into one blocker.
+TEST(OccluderSet, ImportedTerraceTouchesAlongItsPartyWalls) {
+  scenes::Progress::SetQuiet(true);
+  const absl::StatusOr<scenes::Scene> scene =
+      scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/terrace.osm", {});
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_EQ(scene->objects.size(), 3u);
+  const OccluderSet set = OccluderSet::Build(*scene);
+  // A wall's worth of contact (a segment, not a corner) between each pair of neighbours.
+  double wall[3][3] = {};
+  for (const PieceContact& c : set.contacts()) {
+    const scenes::ObjectId a = set.pieces()[c.a].object, b = set.pieces()[c.b].object;
+    if (a == b) continue;
+    wall[a][b] = wall[b][a] = std::max(wall[a][b], glm::length(c.w1 - c.w0));
+  }
+  EXPECT_GT(wall[0][1], 15.0);  // the houses are 0.0002 degrees (22 m) deep
+  EXPECT_GT(wall[1][2], 15.0);
+  EXPECT_EQ(wall[0][2], 0.0);   // not neighbours
 }
 
 }  // namespace

@@ -357,7 +357,9 @@ TEST(OsmImport, MonacoHasItsBuildingsClosedAndInsideTheExtract) {
   EXPECT_EQ(sum.occluders, s.occluders.size());
 }
 
-TEST(OsmImport, MonacoCatalogWalkStaysInTheStreets) {
+// The catalog entry builds the same scene (its walk is checked with every shipped entry's in
+// catalog_test).
+TEST(OsmImport, MonacoCatalogEntryImportsTheExtract) {
   if (!fs::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco catalog entry is not tested";
   const absl::StatusOr<CatalogEntry> e = FindCatalogEntry("monaco");
   ASSERT_TRUE(e.ok()) << e.status();
@@ -366,12 +368,7 @@ TEST(OsmImport, MonacoCatalogWalkStaysInTheStreets) {
   const absl::StatusOr<Scene> s = BuildScene(*e);
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(s->name, "monaco");
-  ASSERT_EQ(e->walks.size(), 1u);
-  const std::vector<glm::dvec2>& w = e->walks[0].waypoints;
-  ASSERT_GE(w.size(), 10u);
-  for (size_t k = 0; k + 1 < w.size(); ++k) {
-    EXPECT_TRUE(testing::SegmentClearOfOccluders(*s, w[k], w[k + 1], 0.5)) << "leg " << k;
-  }
+  EXPECT_GE(s->objects.size(), 20000u);
 }
 
 }  // namespace
