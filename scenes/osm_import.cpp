@@ -406,19 +406,22 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
                                                    s.Skipped() > 0 ? absl::StrCat("; ", s.Skipped(), " skipped") : ""));
   }
 
-  // The projection: UTM in the zone of the centre of the buildings' nodes.
-  double lon0 = 180, lon1 = -180, lat0 = 90, lat1 = -90;
+  // The projection: UTM in the zone of the data's centre, the median longitude and latitude of
+  // the buildings' nodes (a stray node far away does not move it).
+  std::vector<double> lons, lats;
   for (const RawBuilding& b : raw) {
     for (const RawPolygon& p : b.polygons) {
       for (const osmium::Location& l : p.outer) {
-        lon0 = std::min(lon0, l.lon());
-        lon1 = std::max(lon1, l.lon());
-        lat0 = std::min(lat0, l.lat());
-        lat1 = std::max(lat1, l.lat());
+        lons.push_back(l.lon());
+        lats.push_back(l.lat());
       }
     }
   }
-  const double clat = 0.5 * (lat0 + lat1), clon = 0.5 * (lon0 + lon1);
+  auto median = [](std::vector<double>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  const double clat = median(lats), clon = median(lons);
   int zone;
   bool north;
   double ox, oy;
@@ -431,18 +434,30 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   s.utm_zone = GeographicLib::UTMUPS::EncodeZone(zone, north);
   ox = std::round(ox);
   oy = std::round(oy);
-  auto project = [&](const std::vector<osmium::Location>& ring) {
+  // None for a ring the centre's zone cannot take (GeographicLib refuses points far outside
+  // it) or that lies farther than kMaxOffsetM from the centre, where 1/256 m no longer fits
+  // in a float.
+  constexpr double kMaxOffsetM = 65536.0;
+  auto project = [&](const std::vector<osmium::Location>& ring) -> std::optional<Ring> {
     Ring out;
     out.reserve(ring.size());
     for (const osmium::Location& l : ring) {
       int z;
       bool n;
       double x, y;
-      GeographicLib::UTMUPS::Forward(l.lat(), l.lon(), z, n, x, y, zone);
-      out.emplace_back(Snap(x - ox), Snap(y - oy));
+      try {
+        GeographicLib::UTMUPS::Forward(l.lat(), l.lon(), z, n, x, y, zone);
+      } catch (const std::exception&) {
+        return std::nullopt;
+      }
+      x -= ox;
+      y -= oy;
+      if (!(std::abs(x) < kMaxOffsetM && std::abs(y) < kMaxOffsetM)) return std::nullopt;
+      out.emplace_back(Snap(x), Snap(y));
     }
     return out;
   };
+  const std::string too_far = "farther than 65 km from the data's centre";
 
   Scene scene;
   scene.name = !options.name.empty() ? options.name : fs::path(path).filename().string();
@@ -460,7 +475,12 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     std::string failure;
     for (const RawPolygon& rp : b.polygons) {
       PolygonWithHoles poly;
-      poly.outer = project(rp.outer);
+      std::optional<Ring> outer = project(rp.outer);
+      if (!outer) {
+        failure = too_far;
+        continue;
+      }
+      poly.outer = *std::move(outer);
       const RingRepairs fix = CleanRing(&poly.outer);
       s.repaired_duplicate_points += fix.duplicate_points;
       s.repaired_spikes += fix.spikes;
@@ -474,7 +494,12 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
       }
       if (SignedArea(poly.outer) < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
       for (const std::vector<osmium::Location>& rh : rp.holes) {
-        Ring hole = project(rh);
+        std::optional<Ring> projected = project(rh);
+        if (!projected) {
+          ++s.dropped_inner_rings;
+          continue;
+        }
+        Ring hole = *std::move(projected);
         const RingRepairs hf = CleanRing(&hole);
         s.repaired_duplicate_points += hf.duplicate_points;
         s.repaired_spikes += hf.spikes;

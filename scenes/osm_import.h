@@ -3,9 +3,10 @@
 //
 // Buildings are the closed ways and multipolygon relations tagged building=* (any value but
 // "no"), assembled by libosmium's area assembler (outer and inner rings). Positions go to UTM
-// (GeographicLib, the zone of the data's centre) and then to scene-local metres around that
-// centre, rounded to whole metres and kept as Scene::origin; coordinates snap to 1/256 m like
-// the generators' (exact in float, and shared nodes stay shared walls).
+// (GeographicLib, the zone of the data's centre: the median longitude and latitude of the
+// buildings' nodes) and then to scene-local metres around that centre, rounded to whole metres
+// and kept as Scene::origin; coordinates snap to 1/256 m like the generators' (exact in float,
+// and shared nodes stay shared walls). Buildings farther than 65 km from the centre are skipped.
 //
 // Heights, in this order:
 //   1. height, else building:height: a number with an optional unit (m, metres, ft, feet, ',

@@ -244,6 +244,17 @@ TEST(OsmImport, TerracedHousesShareTheirWallsExactly) {
   }
 }
 
+// A building far from the rest (found by the fuzzer: GeographicLib refuses points far outside
+// the centre's UTM zone) is skipped, and the rest is imported around its own centre.
+TEST(OsmImport, StrayBuildingFarAwayIsSkipped) {
+  OsmImportSummary sum;
+  const Scene s = Import(Data("far_away.osm"), &sum);
+  ASSERT_EQ(s.objects.size(), 3u);
+  EXPECT_EQ(sum.skipped["farther than 65 km from the data's centre"], 1u);
+  EXPECT_EQ(sum.utm_zone, "32n");
+  EXPECT_LT(glm::length(glm::dvec2(s.bounds.max)), 500.0);
+}
+
 TEST(OsmImport, BoxKeepsOnlyBuildingsWhollyInside) {
   OsmImportSummary sum;
   OsmImportOptions options;
