@@ -334,6 +334,12 @@ struct GlobalSampler::Impl {
         weight.push_back(glm::length(glm::cross(glm::dvec3(t.e1), glm::dvec3(t.e2))));
         sum += weight.back();
       }
+      if (!(sum > 0.0)) {  // area too small for the float edges to show
+        surface.resize(first);
+        weight.resize(first);
+        --sampleable;
+        continue;
+      }
       for (size_t i = first; i < weight.size(); ++i) weight[i] /= sum;
     }
     // Scaled so that the mean weight is 1: each object's triangles sum to n / objects.
@@ -638,9 +644,9 @@ class Worker {
     return Emit(smp);
   }
 
-  // The point near `to`, off `object`'s silhouette seen from `from`: along a random direction
-  // in the plane through `to` normal to the segment, bisect between a point whose ray from
-  // `from` meets the object and one whose ray misses it, and keep the missing one.
+  // The point near `to`, just off `object`'s silhouette seen from `from`, along a random
+  // direction in the plane through `to` normal to the segment (SilhouetteLambda: exact, where
+  // the paper searches with discovery rays); `to` + radius along it when there is none.
   glm::dvec3 Silhouette(const glm::dvec3& from, const glm::dvec3& to, double radius, ObjectId object, Rng& rng) {
     const glm::dvec3 seg = to - from;
     const double len = glm::length(seg);
