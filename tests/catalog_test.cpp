@@ -1,5 +1,7 @@
 #include "scenes/catalog.h"
 
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -144,14 +146,22 @@ TEST(Catalog, WrongTypesMissingKeysAndBadRangesAreErrors) {
 
 TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
   const std::vector<std::string> names = CatalogNames();
-  for (const char* required : {"default", "city1", "city2", "london"}) {
+  for (const char* required : {"default", "city1", "city2", "london", "monaco"}) {
     EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
   }
+  size_t built = 0;
   for (const std::string& name : names) {
     absl::StatusOr<CatalogEntry> e = FindCatalogEntry(name);
     ASSERT_TRUE(e.ok()) << e.status();
     EXPECT_EQ(e->name, name);
     EXPECT_FALSE(e->walks.empty()) << name << " has no walk path";
+    // Entries reading data from outside the repository (../shared/data) are built where that
+    // data is present; said so where it is not.
+    if (e->source.kind != SceneSource::Kind::kGenerator && !std::filesystem::exists(e->source.path)) {
+      std::printf("note: %s: %s is absent; its walk is not checked here\n", name.c_str(), e->source.path.c_str());
+      continue;
+    }
+    ++built;
     absl::StatusOr<Scene> scene = BuildScene(*e);
     ASSERT_TRUE(scene.ok()) << scene.status();
     for (const WalkPath& w : e->walks) {
@@ -161,6 +171,7 @@ TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
       }
     }
   }
+  EXPECT_GE(built, 4u);  // the generated ones at least
 }
 
 TEST(Catalog, UnknownNameListsTheKnownOnes) {
