@@ -50,16 +50,20 @@ glm::dvec3 UniformDirection(Rng& rng) {
   return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
 }
 
-// Two unit vectors completing unit `n` to an orthonormal basis.
+// Two unit vectors completing unit `n` to an orthonormal basis (Duff et al. 2017: no square
+// root, no branch on the direction).
 void Basis(const glm::dvec3& n, glm::dvec3* b1, glm::dvec3* b2) {
-  const glm::dvec3 a = std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
-  *b1 = glm::normalize(glm::cross(n, a));
-  *b2 = glm::cross(n, *b1);
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z), b = n.x * n.y * a;
+  *b1 = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+  *b2 = glm::dvec3(b, sign + n.y * n.y * a, -n.y);
 }
 
-double Gaussian(Rng& rng) {
-  const double u1 = 1.0 - rng.Uniform();  // (0, 1]
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * rng.Uniform());
+// Two independent standard normal numbers (Box-Muller: both of its outputs).
+std::pair<double, double> Gaussians(Rng& rng) {
+  const double r = std::sqrt(-2.0 * std::log(1.0 - rng.Uniform()));  // 1 - U in (0, 1]
+  const double phi = 2.0 * std::numbers::pi * rng.Uniform();
+  return {r * std::cos(phi), r * std::sin(phi)};
 }
 
 double BoxRadius(const Aabb& b) { return 0.5 * glm::length(b.Extent()); }
@@ -506,7 +510,8 @@ class Worker {
           const glm::dvec3 u = (c.to - c.from) / len;
           glm::dvec3 b1, b2;
           Basis(u, &b1, &b2);
-          const double g1 = Gaussian(rng), g2 = Gaussian(rng), g3 = Gaussian(rng), g4 = Gaussian(rng);
+          const auto [g1, g2] = Gaussians(rng);
+          const auto [g3, g4] = Gaussians(rng);
           const glm::dvec3 from = c.from + c.r_from * (g1 * b1 + g2 * b2);
           const glm::dvec3 to = c.to + c.r_to * (g3 * b1 + g4 * b2);
           EmitSegment(from, to, plan.dist);
@@ -624,8 +629,16 @@ class Worker {
   }
 
   void CastBoth(Sample* smp, double tnear) {
-    const Hit f = Cast(smp->origin, smp->dir, tnear), r = Cast(smp->origin, -smp->dir, tnear);
-    smp->valid = !f.back && !r.back;
+    const Hit f = Cast(smp->origin, smp->dir, tnear);
+    if (f.back) {
+      // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
+      smp->valid = false;
+      smp->t_fwd = f.t;
+      smp->fwd = f.object;
+      return;
+    }
+    const Hit r = Cast(smp->origin, -smp->dir, tnear);
+    smp->valid = !r.back;
     smp->t_fwd = f.t;
     smp->fwd = f.object;
     smp->t_rev = r.t;
