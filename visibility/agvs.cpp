@@ -443,6 +443,7 @@ class Worker {
   void Run(const ChunkPlan& plan, uint64_t seed, ChunkResult* out) {
     Rng rng(seed);
     out_ = out;
+    if (!plan.candidates.empty()) Gather(plan);
     for (uint32_t i = 0; i < kChunk; ++i) {
       switch (plan.dist) {
         case Distribution::kViewSpaceDirection: {
@@ -500,12 +501,7 @@ class Worker {
           break;
         }
         case Distribution::kTwoPointMutation: {
-          if (i + 2 < kChunk) {
-            const char* next = reinterpret_cast<const char*>(&s_.buffer.At(plan.candidates[i + 2]));
-            __builtin_prefetch(next);
-            __builtin_prefetch(next + sizeof(Candidate) - 1);
-          }
-          const Candidate& c = s_.buffer.At(plan.candidates[i]);
+          const Candidate& c = candidates_[i];
           const double len = glm::length(c.to - c.from);  // positive: see add_candidate in RunBatch
           const glm::dvec3 u = (c.to - c.from) / len;
           glm::dvec3 b1, b2;
@@ -518,8 +514,11 @@ class Worker {
           break;
         }
         case Distribution::kSilhouetteMutation: {
-          Prefetch(plan, i);
-          const Candidate& c = s_.buffer.At(plan.candidates[i]);
+          if (i + 1 < kChunk) {
+            // The next object's first triangles (their address was gathered with the candidates).
+            for (const FanTriangles::Block* b = fans_[i + 1].first; b != fans_[i + 1].second; ++b) __builtin_prefetch(b);
+          }
+          const Candidate& c = candidates_[i];
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
           const Sample smp = EmitSegment(c.from, to, plan.dist);
           if (!smp.valid || smp.fwd == kNoObject) break;
@@ -537,24 +536,22 @@ class Worker {
   }
 
  private:
-  // The candidates and their objects are scattered in memory: fetch them a few samples ahead
-  // (the candidate three ahead, its object two ahead, the object's first triangles one ahead).
-  void Prefetch(const ChunkPlan& plan, uint32_t i) const {
-    if (i + 3 < kChunk) {
-      const char* c = reinterpret_cast<const char*>(&s_.buffer.At(plan.candidates[i + 3]));
-      __builtin_prefetch(c);
-      __builtin_prefetch(c + sizeof(Candidate) - 1);  // it may span two cache lines
-    }
-    if (i + 2 < kChunk) {
-      const ObjectId o = s_.buffer.At(plan.candidates[i + 2]).object;
-      if (o < s_.objects.size()) __builtin_prefetch(&s_.objects[o]);
-    }
-    if (i + 1 < kChunk) {
-      const ObjectId o = s_.buffer.At(plan.candidates[i + 1]).object;
-      if (o < s_.objects.size()) {
-        const auto blocks = s_.objects[o].fan.blocks();
-        for (size_t b = 0; b < std::min<size_t>(blocks.size(), 4); ++b) __builtin_prefetch(&blocks[b]);
+  // The chunk's candidates, and where their objects' triangles are, copied in one loop before
+  // the samples: they lie scattered in memory, and a loop of independent loads waits for many
+  // cache misses at once where the samples would wait for each in turn.
+  void Gather(const ChunkPlan& plan) {
+    candidates_.resize(plan.candidates.size());
+    for (size_t i = 0; i < plan.candidates.size(); ++i) candidates_[i] = s_.buffer.At(plan.candidates[i]);
+    fans_.resize(plan.candidates.size());
+    for (size_t i = 0; i < plan.candidates.size(); ++i) {
+      const ObjectId o = candidates_[i].object;
+      if (o >= s_.objects.size()) {
+        fans_[i] = {nullptr, nullptr};
+        continue;
       }
+      const auto blocks = s_.objects[o].fan.blocks();
+      const auto shown = blocks.first(std::min<size_t>(blocks.size(), 4));
+      fans_[i] = {shown.data(), shown.data() + shown.size()};
     }
   }
 
@@ -780,6 +777,8 @@ class Worker {
   ChunkResult* out_ = nullptr;
   std::vector<uint64_t>* cell_counts_ = nullptr;  // this thread's samples per cell, if counted
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
+  std::vector<Candidate> candidates_;            // this chunk's, gathered
+  std::vector<std::pair<const FanTriangles::Block*, const FanTriangles::Block*>> fans_;  // their first blocks
 
  public:
   void CountCellsInto(std::vector<uint64_t>* counts) { cell_counts_ = counts; }
