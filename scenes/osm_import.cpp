@@ -1,5 +1,8 @@
 #include "scenes/osm_import.h"
 
+#include <absl/strings/str_cat.h>
+
+#include <GeographicLib/UTMUPS.hpp>
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -7,11 +10,6 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
-#include <unordered_map>
-#include <vector>
-
-#include <GeographicLib/UTMUPS.hpp>
-#include <absl/strings/str_cat.h>
 #include <osmium/area/assembler.hpp>
 #include <osmium/area/multipolygon_manager.hpp>
 #include <osmium/area/problem_reporter.hpp>
@@ -23,6 +21,8 @@
 #include <osmium/osm/area.hpp>
 #include <osmium/relations/manager_util.hpp>
 #include <osmium/visitor.hpp>
+#include <unordered_map>
+#include <vector>
 
 #include "scenes/polygon.h"
 #include "scenes/progress.h"
@@ -45,7 +45,8 @@ std::optional<double> Number(std::string_view t) {
   if (!t.empty() && t.front() == '+') t.remove_prefix(1);
   double v;
   const auto [end, err] = std::from_chars(t.data(), t.data() + t.size(), v);
-  if (t.empty() || err != std::errc() || end != t.data() + t.size() || !std::isfinite(v)) return std::nullopt;
+  if (t.empty() || err != std::errc() || end != t.data() + t.size() || !std::isfinite(v))
+    return std::nullopt;
   return v;
 }
 
@@ -66,11 +67,13 @@ class Reasons : public osmium::area::ProblemReporter {
   std::unordered_map<int64_t, std::string> why;
   std::unordered_map<int64_t, uint64_t> duplicate_nodes;
 
-  void report_duplicate_node(osmium::object_id_type, osmium::object_id_type, osmium::Location) override {
+  void report_duplicate_node(osmium::object_id_type, osmium::object_id_type,
+                             osmium::Location) override {
     ++duplicate_nodes[AreaId()];
   }
-  void report_intersection(osmium::object_id_type, osmium::Location, osmium::Location, osmium::object_id_type,
-                           osmium::Location, osmium::Location, osmium::Location) override {
+  void report_intersection(osmium::object_id_type, osmium::Location, osmium::Location,
+                           osmium::object_id_type, osmium::Location, osmium::Location,
+                           osmium::Location) override {
     Note("self-intersecting ring");
   }
   void report_duplicate_segment(const osmium::NodeRef&, const osmium::NodeRef&) override {
@@ -79,7 +82,9 @@ class Reasons : public osmium::area::ProblemReporter {
   void report_overlapping_segment(const osmium::NodeRef&, const osmium::NodeRef&) override {
     Note("overlapping segments");
   }
-  void report_ring_not_closed(const osmium::NodeRef&, const osmium::Way*) override { Note("ring not closed"); }
+  void report_ring_not_closed(const osmium::NodeRef&, const osmium::Way*) override {
+    Note("ring not closed");
+  }
   void report_way_in_multiple_rings(const osmium::Way&) override { Note("way in several rings"); }
   void report_invalid_location(osmium::object_id_type, osmium::object_id_type) override {
     Note("missing node locations");
@@ -125,7 +130,8 @@ struct RawBuilding {
   std::string name;
   bool from_relation = false;
   std::vector<RawPolygon> polygons;
-  std::string building, height, building_height, levels, roof_height, roof_levels, min_height, min_level;
+  std::string building, height, building_height, levels, roof_height, roof_levels, min_height,
+      min_level;
   uint64_t duplicate_nodes = 0;
 };
 
@@ -167,9 +173,11 @@ Heights BuildingHeights(const RawBuilding& b, double storey, OsmImportSummary* s
   } else if (!b.levels.empty()) {
     if (const std::optional<double> levels = ParseCount(b.levels)) {
       double roof = kRoofM;
-      if (const std::optional<double> r = b.roof_height.empty() ? std::nullopt : ParseLength(b.roof_height)) {
+      if (const std::optional<double> r =
+              b.roof_height.empty() ? std::nullopt : ParseLength(b.roof_height)) {
         roof = *r;
-      } else if (const std::optional<double> rl = b.roof_levels.empty() ? std::nullopt : ParseCount(b.roof_levels)) {
+      } else if (const std::optional<double> rl =
+                     b.roof_levels.empty() ? std::nullopt : ParseCount(b.roof_levels)) {
         roof = *rl * storey;
       }
       top = *levels * storey + roof;
@@ -219,39 +227,75 @@ absl::StatusOr<GeoBox> ParseGeoBox(std::string_view text) {
   std::vector<std::string_view> parts;
   for (size_t from = 0;;) {
     const size_t comma = text.find(',', from);
-    parts.push_back(text.substr(from, comma == std::string_view::npos ? std::string_view::npos : comma - from));
+    parts.push_back(
+        text.substr(from, comma == std::string_view::npos ? std::string_view::npos : comma - from));
     if (comma == std::string_view::npos) break;
     from = comma + 1;
   }
   if (parts.size() != 4) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": needs four numbers min_lon,min_lat,max_lon,max_lat"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, ": needs four numbers min_lon,min_lat,max_lon,max_lat"));
   }
   double v[4];
   for (int i = 0; i < 4; ++i) {
     const std::optional<double> x = Number(parts[i]);
-    if (!x) return absl::InvalidArgumentError(absl::StrCat(where, ": '", std::string(parts[i]), "' is not a number"));
+    if (!x)
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": '", std::string(parts[i]), "' is not a number"));
     v[i] = *x;
   }
   const GeoBox b{v[0], v[1], v[2], v[3]};
-  if (b.min_lon < -180 || b.max_lon > 180 || b.min_lat < -90 || b.max_lat > 90 || b.min_lon >= b.max_lon ||
-      b.min_lat >= b.max_lat) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(where, ": needs -180 <= min_lon < max_lon <= 180 and -90 <= min_lat < max_lat <= 90"));
+  if (b.min_lon < -180 || b.max_lon > 180 || b.min_lat < -90 || b.max_lat > 90 ||
+      b.min_lon >= b.max_lon || b.min_lat >= b.max_lat) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        where, ": needs -180 <= min_lon < max_lon <= 180 and -90 <= min_lat < max_lat <= 90"));
   }
   return b;
 }
 
 int DefaultLevels(std::string_view building) {
   static const std::pair<std::string_view, int> kTable[] = {
-      {"garage", 1},       {"garages", 1},    {"shed", 1},          {"hut", 1},        {"kiosk", 1},
-      {"carport", 1},      {"roof", 1},       {"service", 1},       {"toilets", 1},    {"cabin", 1},
-      {"container", 1},    {"greenhouse", 1}, {"bunker", 1},        {"transformer_tower", 2},
-      {"house", 2},        {"detached", 2},   {"semidetached_house", 2}, {"terrace", 2}, {"bungalow", 1},
-      {"farm", 2},         {"barn", 2},       {"retail", 2},        {"supermarket", 1}, {"industrial", 2},
-      {"warehouse", 2},    {"church", 5},     {"cathedral", 8},     {"chapel", 3},     {"apartments", 5},
-      {"residential", 4},  {"hotel", 6},      {"office", 6},        {"commercial", 4}, {"hospital", 5},
-      {"school", 3},       {"university", 4}, {"public", 3},        {"civic", 3},      {"government", 4},
-      {"train_station", 3}, {"stadium", 4},
+      {"garage", 1},
+      {"garages", 1},
+      {"shed", 1},
+      {"hut", 1},
+      {"kiosk", 1},
+      {"carport", 1},
+      {"roof", 1},
+      {"service", 1},
+      {"toilets", 1},
+      {"cabin", 1},
+      {"container", 1},
+      {"greenhouse", 1},
+      {"bunker", 1},
+      {"transformer_tower", 2},
+      {"house", 2},
+      {"detached", 2},
+      {"semidetached_house", 2},
+      {"terrace", 2},
+      {"bungalow", 1},
+      {"farm", 2},
+      {"barn", 2},
+      {"retail", 2},
+      {"supermarket", 1},
+      {"industrial", 2},
+      {"warehouse", 2},
+      {"church", 5},
+      {"cathedral", 8},
+      {"chapel", 3},
+      {"apartments", 5},
+      {"residential", 4},
+      {"hotel", 6},
+      {"office", 6},
+      {"commercial", 4},
+      {"hospital", 5},
+      {"school", 3},
+      {"university", 4},
+      {"public", 3},
+      {"civic", 3},
+      {"government", 4},
+      {"train_station", 3},
+      {"stadium", 4},
   };
   for (const auto& [key, levels] : kTable) {
     if (key == building) return levels;
@@ -277,18 +321,21 @@ std::optional<double> ParseLength(std::string_view text) {
       inches = *in;
     }
     const double m = *feet * 0.3048 + inches * 0.0254;
-    return std::isfinite(m) && m >= 0.0 && *feet >= 0.0 && inches >= 0.0 ? std::optional<double>(m) : std::nullopt;
+    return std::isfinite(m) && m >= 0.0 && *feet >= 0.0 && inches >= 0.0 ? std::optional<double>(m)
+                                                                         : std::nullopt;
   }
   // A number and an optional unit.
   size_t end = 0;
-  while (end < t.size() && (std::isdigit(static_cast<unsigned char>(t[end])) || t[end] == '.' || t[end] == '+')) {
+  while (end < t.size() &&
+         (std::isdigit(static_cast<unsigned char>(t[end])) || t[end] == '.' || t[end] == '+')) {
     ++end;
   }
   const std::optional<double> v = Number(std::string_view(t).substr(0, end));
   if (!v || *v < 0.0) return std::nullopt;
   const std::string_view unit = Strip(std::string_view(t).substr(end));
   double scale;
-  if (unit.empty() || unit == "m" || unit == "meter" || unit == "meters" || unit == "metre" || unit == "metres") {
+  if (unit.empty() || unit == "m" || unit == "meter" || unit == "meters" || unit == "metre" ||
+      unit == "metres") {
     scale = 1.0;
   } else if (unit == "ft" || unit == "feet" || unit == "foot") {
     scale = 0.3048;
@@ -304,17 +351,20 @@ std::optional<double> ParseLength(std::string_view text) {
   return *v * scale;
 }
 
-absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options, OsmImportSummary* summary,
-                                const std::atomic<bool>* cancel) {
+absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
+                                OsmImportSummary* summary, const std::atomic<bool>* cancel) {
   const auto start = std::chrono::steady_clock::now();
   OsmImportSummary local_summary;
   OsmImportSummary& s = summary != nullptr ? *summary : local_summary;
   s = OsmImportSummary{};
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-  if (fs::file_size(path, ec) == 0) return absl::InvalidArgumentError(absl::StrCat(path, ": the file is empty"));
+  if (!fs::is_regular_file(path, ec))
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  if (fs::file_size(path, ec) == 0)
+    return absl::InvalidArgumentError(absl::StrCat(path, ": the file is empty"));
   if (!(options.storey_m > 0.0) || !std::isfinite(options.storey_m)) {
-    return absl::InvalidArgumentError(absl::StrCat("storey height must be positive (", options.storey_m, ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("storey height must be positive (", options.storey_m, ")"));
   }
 
   // Read: relations first (for their member ways), then everything, assembling areas.
@@ -328,7 +378,8 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     osmium::TagsFilter filter{false};
     filter.add_rule(true, osmium::TagMatcher{"building"});
     osmium::area::MultipolygonManager<osmium::area::Assembler> manager{config, filter};
-    Progress progress(absl::StrCat("reading ", fs::path(path).filename().string()), fs::file_size(path, ec), cancel);
+    Progress progress(absl::StrCat("reading ", fs::path(path).filename().string()),
+                      fs::file_size(path, ec), cancel);
     uint64_t read_bytes = 0;
     osmium::relations::read_relations(file, manager);
     using Index = osmium::index::map::FlexMem<osmium::unsigned_object_id_type, osmium::Location>;
@@ -351,7 +402,8 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
       for (const osmium::OuterRing& outer : area.outer_rings()) {
         RawPolygon p;
         p.outer = RingLocations(outer);
-        for (const osmium::InnerRing& inner : area.inner_rings(outer)) p.holes.push_back(RingLocations(inner));
+        for (const osmium::InnerRing& inner : area.inner_rings(outer))
+          p.holes.push_back(RingLocations(inner));
         b.polygons.push_back(std::move(p));
       }
       const osmium::TagList& t = area.tags();
@@ -363,14 +415,16 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
       b.roof_levels = Tag(t, "roof:levels");
       b.min_height = Tag(t, "min_height");
       b.min_level = Tag(t, "building:min_level");
-      if (const auto it = reasons.duplicate_nodes.find(area_id); it != reasons.duplicate_nodes.end()) {
+      if (const auto it = reasons.duplicate_nodes.find(area_id);
+          it != reasons.duplicate_nodes.end()) {
         b.duplicate_nodes = it->second;
       }
       if (options.bbox) {
         const GeoBox& g = *options.bbox;
         for (const RawPolygon& p : b.polygons) {
           for (const osmium::Location& l : p.outer) {
-            if (l.lon() < g.min_lon || l.lon() > g.max_lon || l.lat() < g.min_lat || l.lat() > g.max_lat) {
+            if (l.lon() < g.min_lon || l.lon() > g.max_lon || l.lat() < g.min_lat ||
+                l.lat() > g.max_lat) {
               ++s.skipped["outside the bbox"];
               return;
             }
@@ -387,8 +441,9 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     osmium::io::Reader reader(file, osmium::osm_entity_bits::node | osmium::osm_entity_bits::way);
     while (osmium::memory::Buffer buffer = reader.read()) {
       if (cancel != nullptr && cancel->load()) return absl::CancelledError("OSM import cancelled");
-      osmium::apply(buffer, locations, census,
-                    manager.handler([&](osmium::memory::Buffer&& areas) { osmium::apply(areas, area_handler); }));
+      osmium::apply(buffer, locations, census, manager.handler([&](osmium::memory::Buffer&& areas) {
+        osmium::apply(areas, area_handler);
+      }));
       progress.SetDetail(absl::StrCat(raw.size(), " buildings"));
       progress.Advance(reader.offset() - read_bytes);
       read_bytes = reader.offset();
@@ -399,11 +454,13 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
       ++s.skipped["relation with members missing"];
     });
   } catch (const std::exception& e) {
-    return absl::DataLossError(absl::StrCat(path, ": not readable as OpenStreetMap data (", e.what(), ")"));
+    return absl::DataLossError(
+        absl::StrCat(path, ": not readable as OpenStreetMap data (", e.what(), ")"));
   }
   if (raw.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": no buildings (building=*) to import",
-                                                   s.Skipped() > 0 ? absl::StrCat("; ", s.Skipped(), " skipped") : ""));
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": no buildings (building=*) to import",
+                     s.Skipped() > 0 ? absl::StrCat("; ", s.Skipped(), " skipped") : ""));
   }
 
   // The projection: UTM in the zone of the data's centre, the median longitude and latitude of
@@ -553,7 +610,8 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   }
   progress.Finish();
   if (scene.objects.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": no building could be imported; ", s.Skipped(), " skipped"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": no building could be imported; ", s.Skipped(), " skipped"));
   }
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return scene;

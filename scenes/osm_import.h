@@ -24,14 +24,14 @@
 // that are not simple, have fewer than 3 points, lack node locations (an extract's edge) or
 // fail to assemble are skipped, each counted by reason in OsmImportSummary.
 
+#include <absl/status/statusor.h>
+
 #include <atomic>
 #include <cstdint>
 #include <map>
 #include <optional>
 #include <string>
 #include <string_view>
-
-#include <absl/status/statusor.h>
 
 #include "scenes/scene.h"
 
@@ -52,12 +52,12 @@ struct OsmImportOptions {
 };
 
 struct OsmImportSummary {
-  uint64_t buildings = 0;          // objects in the scene
+  uint64_t buildings = 0;  // objects in the scene
   uint64_t from_ways = 0, from_relations = 0;
   uint64_t outer_rings = 0, inner_rings = 0;
   uint64_t occluders = 0;
   uint64_t height_tagged = 0, levels_tagged = 0, height_by_rule = 0;
-  uint64_t raised = 0;             // base above the ground: no occluder
+  uint64_t raised = 0;  // base above the ground: no occluder
   // Repairs (the building was kept).
   uint64_t repaired_duplicate_points = 0, repaired_spikes = 0;
   uint64_t dropped_inner_rings = 0;  // not simple or not inside the outer ring after snapping
@@ -67,7 +67,9 @@ struct OsmImportSummary {
   std::string utm_zone;  // e.g. "32N"
   double seconds = 0.0;
 
-  uint64_t Repaired() const { return repaired_duplicate_points + repaired_spikes + dropped_inner_rings; }
+  uint64_t Repaired() const {
+    return repaired_duplicate_points + repaired_spikes + dropped_inner_rings;
+  }
   uint64_t Skipped() const;
 };
 
@@ -81,6 +83,7 @@ std::optional<double> ParseLength(std::string_view text);
 // Imports `path` (.osm, .osm.pbf, .pbf; by extension). Errors name the file and what is wrong
 // (missing, truncated, not OSM data, no buildings left).
 absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
-                                OsmImportSummary* summary = nullptr, const std::atomic<bool>* cancel = nullptr);
+                                OsmImportSummary* summary = nullptr,
+                                const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace vistream::scenes

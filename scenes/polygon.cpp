@@ -1,14 +1,14 @@
 #include "scenes/polygon.h"
 
-#include <cassert>
-#include <list>
-
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_2_algorithms.h>
 #include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <absl/strings/str_cat.h>
+
+#include <cassert>
 #include <glm/geometric.hpp>
+#include <list>
 
 namespace vistream::scenes {
 
@@ -26,7 +26,8 @@ using Fbb = CGAL::Triangulation_face_base_with_info_2<FaceInfo, K>;
 using Fb = CGAL::Constrained_triangulation_face_base_2<K, Fbb>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // The rings are checked first, so constraints never cross: no constructions needed.
-using Cdt = CGAL::Constrained_Delaunay_triangulation_2<K, Tds, CGAL::No_constraint_intersection_requiring_constructions_tag>;
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
+    K, Tds, CGAL::No_constraint_intersection_requiring_constructions_tag>;
 
 Point P(const glm::dvec2& p) { return Point(p.x, p.y); }
 
@@ -130,12 +131,15 @@ bool RingInsideRing(const Ring& inner, const Ring& outer) {
 }
 
 absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon) {
-  if (!IsSimpleRing(polygon.outer)) return absl::InvalidArgumentError("the outer ring is not a simple polygon");
+  if (!IsSimpleRing(polygon.outer))
+    return absl::InvalidArgumentError("the outer ring is not a simple polygon");
   for (size_t h = 0; h < polygon.holes.size(); ++h) {
     const Ring& hole = polygon.holes[h];
-    if (!IsSimpleRing(hole)) return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not a simple polygon"));
+    if (!IsSimpleRing(hole))
+      return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not a simple polygon"));
     if (!RingInsideRing(hole, polygon.outer)) {
-      return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not strictly inside the outer ring"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("inner ring ", h, " is not strictly inside the outer ring"));
     }
     for (size_t g = 0; g < h; ++g) {
       const Ring& other = polygon.holes[g];
@@ -166,11 +170,12 @@ absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polyg
   return out;
 }
 
-void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles, double z0, double z1,
-                 Mesh* mesh) {
+void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles,
+                 double z0, double z1, Mesh* mesh) {
   assert(z1 > z0);
   auto vertex = [&](const glm::dvec2& p, double z, const glm::vec3& normal) {
-    mesh->positions.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(z));
+    mesh->positions.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y),
+                                 static_cast<float>(z));
     mesh->normals.push_back(normal);
     return static_cast<uint32_t>(mesh->positions.size() - 1);
   };
@@ -182,8 +187,9 @@ void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& 
       const glm::dvec2& b = ring[(i + 1) % ring.size()];
       const glm::dvec2 d = b - a;
       const double len = glm::length(d);
-      const glm::vec3 normal = len > 0.0 ? glm::vec3(static_cast<float>(d.y / len), static_cast<float>(-d.x / len), 0.f)
-                                         : glm::vec3(1.f, 0.f, 0.f);
+      const glm::vec3 normal =
+          len > 0.0 ? glm::vec3(static_cast<float>(d.y / len), static_cast<float>(-d.x / len), 0.f)
+                    : glm::vec3(1.f, 0.f, 0.f);
       const uint32_t a0 = vertex(a, z0, normal), b0 = vertex(b, z0, normal);
       const uint32_t b1 = vertex(b, z1, normal), a1 = vertex(a, z1, normal);
       mesh->indices.insert(mesh->indices.end(), {a0, b0, b1, a0, b1, a1});

@@ -3,12 +3,12 @@
 // checking them, triangulating them (CGAL's constrained Delaunay triangulation) and building
 // the closed prism of a footprint.
 
+#include <absl/status/statusor.h>
+
 #include <array>
+#include <glm/vec2.hpp>
 #include <string>
 #include <vector>
-
-#include <absl/status/statusor.h>
-#include <glm/vec2.hpp>
 
 #include "scenes/mesh.h"
 
@@ -46,7 +46,7 @@ absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polyg
 
 // Appends the closed, flat-shaded prism of `polygon` from z0 to z1 > z0: walls along every ring
 // (outward, and into each courtyard), the roof and the floor from `triangles` (Triangulate's).
-void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles, double z0,
-                 double z1, Mesh* mesh);
+void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles,
+                 double z0, double z1, Mesh* mesh);
 
 }  // namespace vistream::scenes

@@ -1,17 +1,17 @@
 #include "scenes/osm_import.h"
 
+#include <gtest/gtest.h>
+
+#include <GeographicLib/UTMUPS.hpp>
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
-#include <map>
-#include <set>
-#include <tuple>
-
-#include <GeographicLib/UTMUPS.hpp>
 #include <glm/geometric.hpp>
-#include <gtest/gtest.h>
+#include <map>
 #include <osmium/io/pbf_output.hpp>
 #include <osmium/io/xml_input.hpp>
+#include <set>
+#include <tuple>
 
 #include "scenes/catalog.h"
 #include "scenes/mesh.h"
@@ -23,7 +23,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Data(const std::string& name) { return std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/" + name; }
+std::string Data(const std::string& name) {
+  return std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/" + name;
+}
 const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
 
 Scene Import(const std::string& path, OsmImportSummary* sum, const OsmImportOptions& options = {}) {
@@ -53,7 +55,8 @@ bool Closed(const Mesh& m) {
 double RoofArea(const Mesh& m, float z) {
   double area = 0.0;
   for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
-    const glm::dvec3 a(m.positions[m.indices[t]]), b(m.positions[m.indices[t + 1]]), c(m.positions[m.indices[t + 2]]);
+    const glm::dvec3 a(m.positions[m.indices[t]]), b(m.positions[m.indices[t + 1]]),
+        c(m.positions[m.indices[t + 2]]);
     if (a.z != z || b.z != z || c.z != z) continue;
     area += 0.5 * glm::cross(b - a, c - a).z;
   }
@@ -87,9 +90,12 @@ TEST(OsmImport, ParsesBoxesAndNamesWhatIsWrong) {
   ASSERT_TRUE(b.ok()) << b.status();
   EXPECT_DOUBLE_EQ(b->min_lon, 7.40);
   EXPECT_DOUBLE_EQ(b->max_lat, 43.75);
-  EXPECT_NE(ParseGeoBox("7.40,43.72,7.44").status().message().find("four numbers"), std::string::npos);
-  EXPECT_NE(ParseGeoBox("7.40,x,7.44,43.75").status().message().find("'x' is not a number"), std::string::npos);
-  EXPECT_NE(ParseGeoBox("7.44,43.72,7.40,43.75").status().message().find("min_lon < max_lon"), std::string::npos);
+  EXPECT_NE(ParseGeoBox("7.40,43.72,7.44").status().message().find("four numbers"),
+            std::string::npos);
+  EXPECT_NE(ParseGeoBox("7.40,x,7.44,43.75").status().message().find("'x' is not a number"),
+            std::string::npos);
+  EXPECT_NE(ParseGeoBox("7.44,43.72,7.40,43.75").status().message().find("min_lon < max_lon"),
+            std::string::npos);
   EXPECT_FALSE(ParseGeoBox("7,43,7,91").ok());
 }
 
@@ -157,7 +163,7 @@ TEST(OsmImport, MultipolygonWithTwoOutersIsOneBuilding) {
   ASSERT_NE(rel, nullptr);
   ASSERT_NE(house, nullptr);
   EXPECT_TRUE(Closed(rel->mesh));
-  EXPECT_EQ(rel->mesh.TriangleCount(), 24u);  // two boxes
+  EXPECT_EQ(rel->mesh.TriangleCount(), 24u);             // two boxes
   EXPECT_DOUBLE_EQ(rel->bounds.max.z, 2 * 3.0 + 1.0);    // 2 levels and the roof
   EXPECT_DOUBLE_EQ(house->bounds.max.z, 2 * 3.0 + 1.0);  // a house without tags: 2 storeys
   size_t rel_occluders = 0;
@@ -182,8 +188,8 @@ TEST(OsmImport, HeightsFromTagsLevelsAndTheRule) {
       {"way/33", 0, 15.5, true},
       {"way/34", 0, 4 * 3.0 + 1.0, true},
       {"way/35", 0, 3 * 3.0 + 1 * 3.0, true},
-      {"way/36", 0, 1 * 3.0 + 1.0, true},  // garage
-      {"way/37", 0, 4 * 3.0 + 1.0, true},  // "tall": unreadable, so the rule
+      {"way/36", 0, 1 * 3.0 + 1.0, true},   // garage
+      {"way/37", 0, 4 * 3.0 + 1.0, true},   // "tall": unreadable, so the rule
       {"way/38", 5, 10, false},             // min_height: raised, no occluder
       {"way/39", 6, 5 * 3.0 + 1.0, false},  // building:min_level 2
   };
@@ -270,7 +276,8 @@ TEST(OsmImport, BadFilesGiveClearErrors) {
   Progress::SetQuiet(true);
   const absl::StatusOr<Scene> empty = ImportOsm(Data("empty.osm"), {});
   ASSERT_FALSE(empty.ok());
-  EXPECT_NE(empty.status().message().find("empty.osm: the file is empty"), std::string::npos) << empty.status();
+  EXPECT_NE(empty.status().message().find("empty.osm: the file is empty"), std::string::npos)
+      << empty.status();
 
   const absl::StatusOr<Scene> missing = ImportOsm(Data("no-such-file.osm"), {});
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
@@ -280,11 +287,13 @@ TEST(OsmImport, BadFilesGiveClearErrors) {
   std::ofstream(garbage) << "this is not XML";
   const absl::StatusOr<Scene> bad = ImportOsm(garbage, {});
   ASSERT_FALSE(bad.ok());
-  EXPECT_NE(bad.status().message().find("garbage.osm: not readable as OpenStreetMap data"), std::string::npos)
+  EXPECT_NE(bad.status().message().find("garbage.osm: not readable as OpenStreetMap data"),
+            std::string::npos)
       << bad.status();
 
   const std::string nothing = dir + "/nothing.osm";
-  std::ofstream(nothing) << "<?xml version='1.0'?><osm version='0.6'><node id='1' lat='1' lon='1'/></osm>";
+  std::ofstream(nothing)
+      << "<?xml version='1.0'?><osm version='0.6'><node id='1' lat='1' lon='1'/></osm>";
   const absl::StatusOr<Scene> none = ImportOsm(nothing, {});
   ASSERT_FALSE(none.ok());
   EXPECT_NE(none.status().message().find("no buildings"), std::string::npos) << none.status();
@@ -320,7 +329,8 @@ TEST(OsmImport, PbfReadsLikeXmlAndTruncatedPbfIsAnError) {
     const absl::StatusOr<Scene> s = ImportOsm(cut, {});
     ASSERT_FALSE(s.ok()) << "kept " << keep << " of " << bytes.size() << " bytes";
     ++errors;
-    EXPECT_NE(s.status().message().find("cut.osm.pbf: not readable as OpenStreetMap data"), std::string::npos)
+    EXPECT_NE(s.status().message().find("cut.osm.pbf: not readable as OpenStreetMap data"),
+              std::string::npos)
         << s.status();
   }
   EXPECT_EQ(errors, 4);
@@ -328,7 +338,8 @@ TEST(OsmImport, PbfReadsLikeXmlAndTruncatedPbfIsAnError) {
 
 // The real extract: ../shared/data/osm/monaco.osm.pbf (OpenStreetMap, ODbL).
 TEST(OsmImport, MonacoHasItsBuildingsClosedAndInsideTheExtract) {
-  if (!fs::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco import is not tested";
+  if (!fs::exists(kMonaco))
+    GTEST_SKIP() << kMonaco << " is absent: the Monaco import is not tested";
   OsmImportSummary sum;
   const Scene s = Import(kMonaco, &sum);
   EXPECT_GE(s.objects.size(), 20000u);
@@ -362,16 +373,19 @@ TEST(OsmImport, MonacoHasItsBuildingsClosedAndInsideTheExtract) {
   // The summary accounts for what was left out (the extract has a few broken ways), by reasons
   // the importer names.
   EXPECT_GT(sum.Skipped(), 0u);
-  const std::set<std::string> known = {"self-intersecting ring", "way not closed", "way with fewer than 4 nodes",
-                                       "way with missing nodes", "relation with members missing"};
-  for (const auto& [reason, n] : sum.skipped) EXPECT_TRUE(known.count(reason)) << reason << ": " << n;
+  const std::set<std::string> known = {"self-intersecting ring", "way not closed",
+                                       "way with fewer than 4 nodes", "way with missing nodes",
+                                       "relation with members missing"};
+  for (const auto& [reason, n] : sum.skipped)
+    EXPECT_TRUE(known.count(reason)) << reason << ": " << n;
   EXPECT_EQ(sum.occluders, s.occluders.size());
 }
 
 // The catalog entry builds the same scene (its walk is checked with every shipped entry's in
 // catalog_test).
 TEST(OsmImport, MonacoCatalogEntryImportsTheExtract) {
-  if (!fs::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco catalog entry is not tested";
+  if (!fs::exists(kMonaco))
+    GTEST_SKIP() << kMonaco << " is absent: the Monaco catalog entry is not tested";
   const absl::StatusOr<CatalogEntry> e = FindCatalogEntry("monaco");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->source.kind, SceneSource::Kind::kOsm);

@@ -1,11 +1,11 @@
 #include "visibility/silhouette.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <numbers>
 #include <vector>
-
-#include <glm/geometric.hpp>
-#include <gtest/gtest.h>
 
 #include "scenes/mesh.h"
 #include "scenes/random.h"
@@ -16,7 +16,8 @@ namespace {
 std::vector<EdgeTriangle> Triangles(const scenes::Mesh& m) {
   std::vector<EdgeTriangle> t;
   for (size_t i = 0; i + 2 < m.indices.size(); i += 3) {
-    const glm::vec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]], c = m.positions[m.indices[i + 2]];
+    const glm::vec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
+                    c = m.positions[m.indices[i + 2]];
     t.push_back({a, b - a, c - a});
   }
   return t;
@@ -24,7 +25,8 @@ std::vector<EdgeTriangle> Triangles(const scenes::Mesh& m) {
 
 // The oracle: whether the ray from `from` through `through` meets a triangle beyond a millionth
 // of the way (Moeller-Trumbore in double, one triangle after another).
-bool RayMeets(const glm::dvec3& from, const glm::dvec3& through, const std::vector<EdgeTriangle>& tris) {
+bool RayMeets(const glm::dvec3& from, const glm::dvec3& through,
+              const std::vector<EdgeTriangle>& tris) {
   const glm::dvec3 d = through - from;
   for (const EdgeTriangle& t : tris) {
     const glm::dvec3 e1(t.e1), e2(t.e2), p = glm::cross(d, e2);
@@ -44,7 +46,8 @@ bool RayMeets(const glm::dvec3& from, const glm::dvec3& through, const std::vect
 glm::dvec3 At(const DiscoveryFan& f, double lambda) { return f.to + lambda * f.radius * f.d; }
 
 // The fan with `towards` made normal to the segment.
-DiscoveryFan Fan(const glm::dvec3& from, const glm::dvec3& to, const glm::dvec3& towards, double radius) {
+DiscoveryFan Fan(const glm::dvec3& from, const glm::dvec3& to, const glm::dvec3& towards,
+                 double radius) {
   const glm::dvec3 s = glm::normalize(to - from);
   return {from, to, glm::normalize(towards - glm::dot(towards, s) * s), radius};
 }
@@ -64,7 +67,8 @@ TEST(Silhouette, BoxSeenHeadOnHasItsEdgeWhereTheAnglesSay) {
   // Swept the other way, the other edge.
   const DiscoveryFan back{fan.from, fan.to, {0.0, -1.0, 0.0}, 2.0};
   ASSERT_TRUE(SilhouetteLambda(back, tris, &scratch).has_value());
-  EXPECT_NEAR(*SilhouetteLambda(back, tris, &scratch), 0.25, 1e-5);  // single precision: micrometres
+  EXPECT_NEAR(*SilhouetteLambda(back, tris, &scratch), 0.25,
+              1e-5);  // single precision: micrometres
   // A radius too small to get past the edge: no silhouette within reach.
   const DiscoveryFan small{fan.from, fan.to, fan.d, 0.2};
   EXPECT_FALSE(SilhouetteLambda(small, tris, &scratch).has_value());
@@ -89,7 +93,8 @@ TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
     scenes::Mesh m;
     const int parts = 1 + static_cast<int>(rng.Below(4));
     for (int p = 0; p < parts; ++p) {
-      const double x = rng.Uniform(30, 60), y = rng.Uniform(-20, 20), w = rng.Uniform(3, 15), dp = rng.Uniform(3, 15);
+      const double x = rng.Uniform(30, 60), y = rng.Uniform(-20, 20), w = rng.Uniform(3, 15),
+                   dp = rng.Uniform(3, 15);
       const double z0 = rng.Below(3) == 0 ? rng.Uniform(2, 10) : 0.0;
       std::vector<glm::dvec2> f;
       const int corners = 3 + static_cast<int>(rng.Below(5));
@@ -108,7 +113,8 @@ TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
       const double u = rng.Uniform(0, 0.5), v = rng.Uniform(0, 0.5);
       fan.to = glm::dvec3(t.a) + u * glm::dvec3(t.e1) + v * glm::dvec3(t.e2);
       const glm::dvec3 s = glm::normalize(fan.to - fan.from);
-      const glm::dvec3 b1 = glm::normalize(glm::cross(s, glm::dvec3(0, 0, 1))), b2 = glm::cross(s, b1);
+      const glm::dvec3 b1 = glm::normalize(glm::cross(s, glm::dvec3(0, 0, 1))),
+                       b2 = glm::cross(s, b1);
       const double phi = rng.Uniform(0, 2 * std::numbers::pi);
       fan.d = std::cos(phi) * b1 + std::sin(phi) * b2;
       fan.radius = rng.Uniform(2, 30);
@@ -125,7 +131,8 @@ TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
         }
         if (near_end) continue;
         ++checked;
-        ASSERT_EQ(inside, RayMeets(fan.from, At(fan, lambda), raw)) << "scene " << scene << " fan " << q << " λ " << lambda;
+        ASSERT_EQ(inside, RayMeets(fan.from, At(fan, lambda), raw))
+            << "scene " << scene << " fan " << q << " λ " << lambda;
       }
 
       const std::optional<double> sil = SilhouetteLambda(fan, tris, &scratch);
@@ -134,18 +141,22 @@ TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
         // None: the far end is met, or nothing in [-1, 0] is.
         bool any_below = false;
         for (int k = 0; k <= 200; ++k) any_below |= RayMeets(fan.from, At(fan, -k / 200.0), raw);
-        EXPECT_TRUE(RayMeets(fan.from, At(fan, 1.0), raw) || !any_below) << "scene " << scene << " fan " << q;
+        EXPECT_TRUE(RayMeets(fan.from, At(fan, 1.0), raw) || !any_below)
+            << "scene " << scene << " fan " << q;
         continue;
       }
       ++found;
       EXPECT_FALSE(RayMeets(fan.from, At(fan, 1.0), raw));
-      EXPECT_TRUE(RayMeets(fan.from, At(fan, *sil - 1e-3), raw)) << "scene " << scene << " fan " << q;
-      EXPECT_FALSE(RayMeets(fan.from, At(fan, *sil + 1e-3), raw)) << "scene " << scene << " fan " << q;
+      EXPECT_TRUE(RayMeets(fan.from, At(fan, *sil - 1e-3), raw))
+          << "scene " << scene << " fan " << q;
+      EXPECT_FALSE(RayMeets(fan.from, At(fan, *sil + 1e-3), raw))
+          << "scene " << scene << " fan " << q;
       if (meets0) {
         EXPECT_GE(*sil, 0.0);
       } else {
         EXPECT_LT(*sil, 0.0);
-        for (double l = *sil + 1e-3; l <= 0.0; l += 1e-2) EXPECT_FALSE(RayMeets(fan.from, At(fan, l), raw));
+        for (double l = *sil + 1e-3; l <= 0.0; l += 1e-2)
+          EXPECT_FALSE(RayMeets(fan.from, At(fan, l), raw));
       }
     }
   }

@@ -3,9 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <limits>
-
 #include <glm/geometric.hpp>
+#include <limits>
 
 namespace vistream::visibility {
 
@@ -74,7 +73,8 @@ FanTriangles::FanTriangles(std::span<const EdgeTriangle> triangles) : count_(tri
   }
 }
 
-void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles, std::vector<std::pair<double, double>>* out) {
+void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles,
+             std::vector<std::pair<double, double>>* out) {
   using Lanes = FanTriangles::Lanes;
   typedef int32_t Mask __attribute__((vector_size(16)));
   const glm::dvec3 seg = fan.to - fan.from;
@@ -90,7 +90,8 @@ void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles, std::vector
   const float inf = std::numeric_limits<float>::infinity();
   auto splat = [](float x) { return Lanes{x, x, x, x}; };
   auto select = [](Mask m, Lanes a, Lanes b) {
-    return reinterpret_cast<Lanes>((reinterpret_cast<Mask>(a) & m) | (reinterpret_cast<Mask>(b) & ~m));
+    return reinterpret_cast<Lanes>((reinterpret_cast<Mask>(a) & m) |
+                                   (reinterpret_cast<Mask>(b) & ~m));
   };
   const size_t first = out->size();
   out->resize(first + triangles.size());
@@ -98,9 +99,15 @@ void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles, std::vector
   size_t kept = 0, index = 0;
   for (const FanTriangles::Block& b : triangles.blocks()) {
     const Lanes rx = b.ax - splat(from.x), ry = b.ay - splat(from.y), rz = b.az - splat(from.z);
-    auto dot_r = [&](const glm::vec3& v) { return rx * splat(v.x) + ry * splat(v.y) + rz * splat(v.z); };
-    auto dot_e1 = [&](const glm::vec3& v) { return b.e1x * splat(v.x) + b.e1y * splat(v.y) + b.e1z * splat(v.z); };
-    auto dot_e2 = [&](const glm::vec3& v) { return b.e2x * splat(v.x) + b.e2y * splat(v.y) + b.e2z * splat(v.z); };
+    auto dot_r = [&](const glm::vec3& v) {
+      return rx * splat(v.x) + ry * splat(v.y) + rz * splat(v.z);
+    };
+    auto dot_e1 = [&](const glm::vec3& v) {
+      return b.e1x * splat(v.x) + b.e1y * splat(v.y) + b.e1z * splat(v.z);
+    };
+    auto dot_e2 = [&](const glm::vec3& v) {
+      return b.e2x * splat(v.x) + b.e2y * splat(v.y) + b.e2z * splat(v.z);
+    };
     const Lanes h0 = dot_r(n), h1 = h0 + dot_e1(n), h2 = h0 + dot_e2(n);
     const Lanes a0 = dot_r(s), a1 = a0 + dot_e1(s), a2 = a0 + dot_e2(s);
     const Lanes b0 = dot_r(d), b1 = b0 + dot_e1(d), b2 = b0 + dot_e2(d);
@@ -139,7 +146,8 @@ void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles, std::vector
       } else {
         continue;
       }
-      const double clo = std::max(-1.0, static_cast<double>(tlo)), chi = std::min(1.0, static_cast<double>(thi));
+      const double clo = std::max(-1.0, static_cast<double>(tlo)),
+                   chi = std::min(1.0, static_cast<double>(thi));
       w[kept] = {clo, chi};
       kept += clo <= chi;
     }
@@ -148,7 +156,8 @@ void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles, std::vector
 }
 
 std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanTriangles& triangles,
-                                       std::vector<std::pair<double, double>>* scratch, double gap) {
+                                       std::vector<std::pair<double, double>>* scratch,
+                                       double gap) {
   std::vector<std::pair<double, double>>& iv = *scratch;
   iv.clear();
   FanHits(fan, triangles, &iv);

@@ -8,12 +8,11 @@
 // itself, where the search only narrows it down after 8 to 12 rays.
 #pragma once
 
+#include <glm/vec3.hpp>
 #include <optional>
 #include <span>
 #include <utility>
 #include <vector>
-
-#include <glm/vec3.hpp>
 
 namespace vistream::visibility {
 
@@ -62,6 +61,7 @@ void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles,
 // closer than `gap` (λ units) count as one: triangles sharing an edge leave no gap.
 // `scratch` is reused between calls.
 std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanTriangles& triangles,
-                                       std::vector<std::pair<double, double>>* scratch, double gap = 1e-5);
+                                       std::vector<std::pair<double, double>>* scratch,
+                                       double gap = 1e-5);
 
 }  // namespace vistream::visibility
