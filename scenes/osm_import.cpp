@@ -45,8 +45,9 @@ std::optional<double> Number(std::string_view t) {
   if (!t.empty() && t.front() == '+') t.remove_prefix(1);
   double v;
   const auto [end, err] = std::from_chars(t.data(), t.data() + t.size(), v);
-  if (t.empty() || err != std::errc() || end != t.data() + t.size() || !std::isfinite(v))
+  if (t.empty() || err != std::errc() || end != t.data() + t.size() || !std::isfinite(v)) {
     return std::nullopt;
+  }
   return v;
 }
 
@@ -239,9 +240,10 @@ absl::StatusOr<GeoBox> ParseGeoBox(std::string_view text) {
   double v[4];
   for (int i = 0; i < 4; ++i) {
     const std::optional<double> x = Number(parts[i]);
-    if (!x)
+    if (!x) {
       return absl::InvalidArgumentError(
           absl::StrCat(where, ": '", std::string(parts[i]), "' is not a number"));
+    }
     v[i] = *x;
   }
   const GeoBox b{v[0], v[1], v[2], v[3]};
@@ -358,10 +360,12 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   OsmImportSummary& s = summary != nullptr ? *summary : local_summary;
   s = OsmImportSummary{};
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec))
+  if (!fs::is_regular_file(path, ec)) {
     return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-  if (fs::file_size(path, ec) == 0)
+  }
+  if (fs::file_size(path, ec) == 0) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": the file is empty"));
+  }
   if (!(options.storey_m > 0.0) || !std::isfinite(options.storey_m)) {
     return absl::InvalidArgumentError(
         absl::StrCat("storey height must be positive (", options.storey_m, ")"));

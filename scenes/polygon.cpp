@@ -131,12 +131,14 @@ bool RingInsideRing(const Ring& inner, const Ring& outer) {
 }
 
 absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon) {
-  if (!IsSimpleRing(polygon.outer))
+  if (!IsSimpleRing(polygon.outer)) {
     return absl::InvalidArgumentError("the outer ring is not a simple polygon");
+  }
   for (size_t h = 0; h < polygon.holes.size(); ++h) {
     const Ring& hole = polygon.holes[h];
-    if (!IsSimpleRing(hole))
+    if (!IsSimpleRing(hole)) {
       return absl::InvalidArgumentError(absl::StrCat("inner ring ", h, " is not a simple polygon"));
+    }
     if (!RingInsideRing(hole, polygon.outer)) {
       return absl::InvalidArgumentError(
           absl::StrCat("inner ring ", h, " is not strictly inside the outer ring"));

@@ -338,8 +338,9 @@ TEST(OsmImport, PbfReadsLikeXmlAndTruncatedPbfIsAnError) {
 
 // The real extract: ../shared/data/osm/monaco.osm.pbf (OpenStreetMap, ODbL).
 TEST(OsmImport, MonacoHasItsBuildingsClosedAndInsideTheExtract) {
-  if (!fs::exists(kMonaco))
+  if (!fs::exists(kMonaco)) {
     GTEST_SKIP() << kMonaco << " is absent: the Monaco import is not tested";
+  }
   OsmImportSummary sum;
   const Scene s = Import(kMonaco, &sum);
   EXPECT_GE(s.objects.size(), 20000u);
@@ -384,8 +385,9 @@ TEST(OsmImport, MonacoHasItsBuildingsClosedAndInsideTheExtract) {
 // The catalog entry builds the same scene (its walk is checked with every shipped entry's in
 // catalog_test).
 TEST(OsmImport, MonacoCatalogEntryImportsTheExtract) {
-  if (!fs::exists(kMonaco))
+  if (!fs::exists(kMonaco)) {
     GTEST_SKIP() << kMonaco << " is absent: the Monaco catalog entry is not tested";
+  }
   const absl::StatusOr<CatalogEntry> e = FindCatalogEntry("monaco");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->source.kind, SceneSource::Kind::kOsm);
