@@ -24,6 +24,14 @@ struct Mesh {
   Aabb Bounds() const;
 };
 
+// Appends one vertex (single-precision position at height z, its normal); returns its index.
+uint32_t AppendVertex(const glm::dvec2& p, double z, const glm::vec3& normal, Mesh* mesh);
+
+// Appends the walls of a ring from z0 to z1: one flat-shaded quad per edge, with its own four
+// vertices, facing right of the edge's direction (outward for a counter-clockwise outer ring,
+// into the courtyard for a clockwise hole).
+void AppendWalls(std::span<const glm::dvec2> ring, double z0, double z1, Mesh* mesh);
+
 // Appends a closed, flat-shaded prism: the convex footprint (counter-clockwise, xy metres,
 // at least 3 vertices) extruded from z0 to z1 > z0. Walls, roof and floor; 4n - 4 triangles.
 void AppendConvexPrism(std::span<const glm::dvec2> footprint, double z0, double z1, Mesh* mesh);

@@ -7,7 +7,6 @@
 #include <absl/strings/str_cat.h>
 
 #include <cassert>
-#include <glm/geometric.hpp>
 #include <list>
 
 namespace vistream::scenes {
@@ -172,39 +171,19 @@ absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polyg
   return out;
 }
 
-void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles,
-                 double z0, double z1, Mesh* mesh) {
+void AppendPrism(const PolygonWithHoles& polygon, const std::vector<Triangle2>& triangles, double z0,
+                 double z1, Mesh* mesh) {
   assert(z1 > z0);
-  auto vertex = [&](const glm::dvec2& p, double z, const glm::vec3& normal) {
-    mesh->positions.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y),
-                                 static_cast<float>(z));
-    mesh->normals.push_back(normal);
-    return static_cast<uint32_t>(mesh->positions.size() - 1);
-  };
-  // Walls: the solid lies left of every edge (outer counter-clockwise, holes clockwise), so the
-  // outward normal points right. One quad per edge, its own vertices, for flat shading.
-  auto walls = [&](const Ring& ring) {
-    for (size_t i = 0; i < ring.size(); ++i) {
-      const glm::dvec2& a = ring[i];
-      const glm::dvec2& b = ring[(i + 1) % ring.size()];
-      const glm::dvec2 d = b - a;
-      const double len = glm::length(d);
-      const glm::vec3 normal =
-          len > 0.0 ? glm::vec3(static_cast<float>(d.y / len), static_cast<float>(-d.x / len), 0.f)
-                    : glm::vec3(1.f, 0.f, 0.f);
-      const uint32_t a0 = vertex(a, z0, normal), b0 = vertex(b, z0, normal);
-      const uint32_t b1 = vertex(b, z1, normal), a1 = vertex(a, z1, normal);
-      mesh->indices.insert(mesh->indices.end(), {a0, b0, b1, a0, b1, a1});
-    }
-  };
-  walls(polygon.outer);
-  for (const Ring& hole : polygon.holes) walls(hole);
+  // The solid lies left of every edge (outer counter-clockwise, holes clockwise).
+  AppendWalls(polygon.outer, z0, z1, mesh);
+  for (const Ring& hole : polygon.holes) AppendWalls(hole, z0, z1, mesh);
   // Roof (normal up, counter-clockwise from above) and floor (normal down, reversed).
+  const glm::vec3 up(0.f, 0.f, 1.f), down(0.f, 0.f, -1.f);
   for (const Triangle2& t : triangles) {
-    const uint32_t r0 = vertex(t[0], z1, {0.f, 0.f, 1.f}), r1 = vertex(t[1], z1, {0.f, 0.f, 1.f}),
-                   r2 = vertex(t[2], z1, {0.f, 0.f, 1.f});
-    const uint32_t f0 = vertex(t[0], z0, {0.f, 0.f, -1.f}), f1 = vertex(t[1], z0, {0.f, 0.f, -1.f}),
-                   f2 = vertex(t[2], z0, {0.f, 0.f, -1.f});
+    const uint32_t r0 = AppendVertex(t[0], z1, up, mesh), r1 = AppendVertex(t[1], z1, up, mesh),
+                   r2 = AppendVertex(t[2], z1, up, mesh);
+    const uint32_t f0 = AppendVertex(t[0], z0, down, mesh), f1 = AppendVertex(t[1], z0, down, mesh),
+                   f2 = AppendVertex(t[2], z0, down, mesh);
     mesh->indices.insert(mesh->indices.end(), {r0, r1, r2, f0, f2, f1});
   }
 }

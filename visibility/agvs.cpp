@@ -87,7 +87,7 @@ struct Sample {
 };
 
 struct Candidate {
-  ObjectId object = kNoObject;  // first: read ahead of the rest (see Worker::Prefetch)
+  ObjectId object = kNoObject;  // first: read ahead of the rest (see Worker::Gather)
   uint32_t mutations = 0;
   glm::dvec3 from{0.0}, to{0.0};  // the segment's origin and the point where `object` was hit
   double r_from = 0.0, r_to = 0.0;  // radii of what lies at each end
