@@ -247,7 +247,7 @@ struct GlobalSampler::Impl {
     // From verts and indices, as the silhouette search reads them. Float: drawing samples and
     // searching silhouettes are heuristics; visibility itself is Embree's.
     std::vector<EdgeTriangle> tris;
-    FanTriangles fan;  // the same, for the silhouette search
+    FanSurface fan;  // the same, for the silhouette search
     double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
@@ -378,7 +378,7 @@ struct GlobalSampler::Impl {
       o->tris.push_back({a, b - a, c - a});
     }
     o->area = sum;
-    o->fan = FanTriangles(o->tris);
+    o->fan = FanSurface(o->verts, o->indices);
   }
 
   // Fills `o` from scene-local positions; false if a position is not finite or an index is
@@ -514,10 +514,8 @@ class Worker {
           break;
         }
         case Distribution::kSilhouetteMutation: {
-          if (i + 1 < kChunk) {
-            // The next object's first triangles (their address was gathered with the candidates).
-            for (const FanTriangles::Block* b = fans_[i + 1].first; b != fans_[i + 1].second; ++b) __builtin_prefetch(b);
-          }
+          // The next candidate's object's pieces (gathered with the candidates).
+          if (i + 1 < kChunk && fans_[i + 1] != nullptr) fans_[i + 1]->Prefetch();
           const Candidate& c = candidates_[i];
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
           const Sample smp = EmitSegment(c.from, to, plan.dist);
@@ -536,7 +534,7 @@ class Worker {
   }
 
  private:
-  // The chunk's candidates, and where their objects' triangles are, copied in one loop before
+  // The chunk's candidates, and where their objects' surfaces are, copied in one loop before
   // the samples: they lie scattered in memory, and a loop of independent loads waits for many
   // cache misses at once where the samples would wait for each in turn.
   void Gather(const ChunkPlan& plan) {
@@ -545,13 +543,8 @@ class Worker {
     fans_.resize(plan.candidates.size());
     for (size_t i = 0; i < plan.candidates.size(); ++i) {
       const ObjectId o = candidates_[i].object;
-      if (o >= s_.objects.size()) {
-        fans_[i] = {nullptr, nullptr};
-        continue;
-      }
-      const auto blocks = s_.objects[o].fan.blocks();
-      const auto shown = blocks.first(std::min<size_t>(blocks.size(), 4));
-      fans_[i] = {shown.data(), shown.data() + shown.size()};
+      fans_[i] = o < s_.objects.size() ? &s_.objects[o].fan : nullptr;
+      __builtin_prefetch(fans_[i]);  // where the surface's arrays are: read by Prefetch
     }
   }
 
@@ -778,7 +771,7 @@ class Worker {
   std::vector<uint64_t>* cell_counts_ = nullptr;  // this thread's samples per cell, if counted
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
-  std::vector<std::pair<const FanTriangles::Block*, const FanTriangles::Block*>> fans_;  // their first blocks
+  std::vector<const FanSurface*> fans_;            // their objects' surfaces
 
  public:
   void CountCellsInto(std::vector<uint64_t>* counts) { cell_counts_ = counts; }

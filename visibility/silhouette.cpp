@@ -1,33 +1,42 @@
 #include "visibility/silhouette.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
-#include <cstdint>
+#include <cstring>
 #include <glm/geometric.hpp>
 #include <limits>
+#include <numeric>
+#include <unordered_map>
 
 namespace vistream::visibility {
 
 namespace {
 
+using Lanes = FanSurface::Lanes;
+typedef int32_t Mask __attribute__((vector_size(16)));
+
+constexpr uint32_t kMaxPieceCorners = 64;  // more, and the piece's triangles are read instead
+
 // The cut of one triangle by the fan's plane, in plane coordinates: corners (alpha, beta) at
 // heights h above the plane.
-struct Corners {
-  float a[3], b[3], h[3];
+struct Cut {
+  double a[3], b[3], h[3];
 };
 
 // The general case: corners on the plane, and cuts that reach behind `from` (clipped at
-// alpha_min). False if nothing in front of `from` is left.
-bool CutInterval(const Corners& c, float alpha_min, float scale, float* lo, float* hi) {
-  float pa[2], pb[2];
+// alpha_min). False if nothing in front of `from` is left. In double: near `from` a cut's λ
+// is ill-conditioned (a small alpha divides).
+bool CutInterval(const Cut& c, double alpha_min, double scale, double* lo, double* hi) {
+  double pa[2], pb[2];
   int m = 0;
   for (int i = 0; i < 3 && m < 2; ++i) {
     const int j = i == 2 ? 0 : i + 1;
-    if (c.h[i] == 0.0f) {
+    if (c.h[i] == 0.0) {
       pa[m] = c.a[i];
       pb[m++] = c.b[i];
-    } else if ((c.h[i] < 0.0f && c.h[j] > 0.0f) || (c.h[i] > 0.0f && c.h[j] < 0.0f)) {
-      const float f = c.h[i] / (c.h[i] - c.h[j]);
+    } else if ((c.h[i] < 0.0 && c.h[j] > 0.0) || (c.h[i] > 0.0 && c.h[j] < 0.0)) {
+      const double f = c.h[i] / (c.h[i] - c.h[j]);
       pa[m] = c.a[i] + f * (c.a[j] - c.a[i]);
       pb[m++] = c.b[i] + f * (c.b[j] - c.b[i]);
     }
@@ -41,126 +50,354 @@ bool CutInterval(const Corners& c, float alpha_min, float scale, float* lo, floa
   for (int k = 0; k < 2; ++k) {
     if (pa[k] <= alpha_min) {
       const int o = 1 - k;
-      const float f = (alpha_min - pa[o]) / (pa[k] - pa[o]);
+      const double f = (alpha_min - pa[o]) / (pa[k] - pa[o]);
       pb[k] = pb[o] + f * (pb[k] - pb[o]);
       pa[k] = alpha_min;
     }
   }
   // Along the cut the projection onto the fan's segment is monotonic (alpha > 0 throughout).
-  const float l0 = pb[0] / pa[0] * scale, l1 = pb[1] / pa[1] * scale;
+  const double l0 = pb[0] / pa[0] * scale, l1 = pb[1] / pa[1] * scale;
   *lo = std::min(l0, l1);
   *hi = std::max(l0, l1);
   return true;
 }
 
-}  // namespace
+Lanes Splat(float x) { return Lanes{x, x, x, x}; }
 
-FanTriangles::FanTriangles(std::span<const EdgeTriangle> triangles) : count_(triangles.size()) {
-  blocks_.resize((triangles.size() + 3) / 4);
-  for (size_t i = 0; i < blocks_.size() * 4; ++i) {
-    const EdgeTriangle& t = triangles[std::min(i, triangles.size() - 1)];
-    Block& b = blocks_[i / 4];
-    const size_t l = i % 4;
-    b.ax[l] = t.a.x;
-    b.ay[l] = t.a.y;
-    b.az[l] = t.a.z;
-    b.e1x[l] = t.e1.x;
-    b.e1y[l] = t.e1.y;
-    b.e1z[l] = t.e1.z;
-    b.e2x[l] = t.e2.x;
-    b.e2y[l] = t.e2.y;
-    b.e2z[l] = t.e2.z;
-  }
+// The fan's plane: alpha along the segment, beta along d (metres, relative to `from`), h
+// normal to the plane; the ray through (alpha, beta, 0), alpha > 0, passes to + λ·radius·d with
+// λ = beta·len / (alpha·radius). Single precision, like the meshes, but for `from`, which is
+// `from` + `from_low` (its rounding error): corners relative to it are then as exact as their
+// distance to it allows, not as the distance from the frame's origin does.
+struct Frame {
+  glm::vec3 s, d, n, from, from_low;
+  float alpha_min, scale;
+  glm::dvec3 ds, dd, dn, dfrom;  // the same in double, for the general case
+  double dalpha_min, dscale;
+};
+
+// Appends the interval [lo, hi] clipped to [-1, 1], if anything is left.
+void Keep(double lo, double hi, std::vector<std::pair<double, double>>* out) {
+  const double clo = std::max(-1.0, lo), chi = std::min(1.0, hi);
+  if (clo <= chi) out->emplace_back(clo, chi);
 }
 
-void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles,
-             std::vector<std::pair<double, double>>* out) {
-  using Lanes = FanTriangles::Lanes;
-  typedef int32_t Mask __attribute__((vector_size(16)));
-  const glm::dvec3 seg = fan.to - fan.from;
-  const double len = glm::length(seg);
-  if (!(len > 0.0) || !(fan.radius > 0.0) || triangles.size() == 0) return;
-  // Coordinates in the fan's plane: alpha along the segment, beta along d (metres, relative
-  // to `from`), h normal to the plane; the ray through (alpha, beta, 0), alpha > 0, passes
-  // to + λ·radius·d with λ = beta·len / (alpha·radius). Single precision, like the triangles:
-  // the silhouette is a heuristic's, to a fraction of a millimetre.
-  const glm::vec3 s(seg / len), d(fan.d), n(glm::cross(seg / len, fan.d)), from(fan.from);
-  const float alpha_min = static_cast<float>(1e-6 * len);
-  const float scale = static_cast<float>(len / fan.radius);
+// One interval per triangle of `blocks` (the first `count` triangles) the plane cuts.
+void TriangleHits(const Frame& f, std::span<const FanSurface::Block> blocks, size_t count,
+                  std::vector<std::pair<double, double>>* out) {
   const float inf = std::numeric_limits<float>::infinity();
-  auto splat = [](float x) { return Lanes{x, x, x, x}; };
   auto select = [](Mask m, Lanes a, Lanes b) {
-    return reinterpret_cast<Lanes>((reinterpret_cast<Mask>(a) & m) |
-                                   (reinterpret_cast<Mask>(b) & ~m));
+    return reinterpret_cast<Lanes>((reinterpret_cast<Mask>(a) & m) | (reinterpret_cast<Mask>(b) & ~m));
   };
-  const size_t first = out->size();
-  out->resize(first + triangles.size());
-  std::pair<double, double>* w = out->data() + first;
-  size_t kept = 0, index = 0;
-  for (const FanTriangles::Block& b : triangles.blocks()) {
-    const Lanes rx = b.ax - splat(from.x), ry = b.ay - splat(from.y), rz = b.az - splat(from.z);
-    auto dot_r = [&](const glm::vec3& v) {
-      return rx * splat(v.x) + ry * splat(v.y) + rz * splat(v.z);
-    };
-    auto dot_e1 = [&](const glm::vec3& v) {
-      return b.e1x * splat(v.x) + b.e1y * splat(v.y) + b.e1z * splat(v.z);
-    };
-    auto dot_e2 = [&](const glm::vec3& v) {
-      return b.e2x * splat(v.x) + b.e2y * splat(v.y) + b.e2z * splat(v.z);
-    };
-    const Lanes h0 = dot_r(n), h1 = h0 + dot_e1(n), h2 = h0 + dot_e2(n);
-    const Lanes a0 = dot_r(s), a1 = a0 + dot_e1(s), a2 = a0 + dot_e2(s);
-    const Lanes b0 = dot_r(d), b1 = b0 + dot_e1(d), b2 = b0 + dot_e2(d);
-    const Lanes zero = splat(0.0f), amin = splat(alpha_min);
+  size_t index = 0;
+  for (const FanSurface::Block& b : blocks) {
+    const Lanes rx = (b.ax - Splat(f.from.x)) - Splat(f.from_low.x), ry = (b.ay - Splat(f.from.y)) - Splat(f.from_low.y),
+                rz = (b.az - Splat(f.from.z)) - Splat(f.from_low.z);
+    auto dot_r = [&](const glm::vec3& v) { return rx * Splat(v.x) + ry * Splat(v.y) + rz * Splat(v.z); };
+    auto dot_e1 = [&](const glm::vec3& v) { return b.e1x * Splat(v.x) + b.e1y * Splat(v.y) + b.e1z * Splat(v.z); };
+    auto dot_e2 = [&](const glm::vec3& v) { return b.e2x * Splat(v.x) + b.e2y * Splat(v.y) + b.e2z * Splat(v.z); };
+    const Lanes h0 = dot_r(f.n), h1 = h0 + dot_e1(f.n), h2 = h0 + dot_e2(f.n);
+    const Lanes a0 = dot_r(f.s), a1 = a0 + dot_e1(f.s), a2 = a0 + dot_e2(f.s);
+    const Lanes b0 = dot_r(f.d), b1 = b0 + dot_e1(f.d), b2 = b0 + dot_e2(f.d);
+    const Lanes zero = Splat(0.0f), amin = Splat(f.alpha_min);
     const Mask n0 = h0 < zero, n1 = h1 < zero, n2 = h2 < zero;
     // An edge (i, j) whose ends lie on either side crosses at alpha = (h_i a_j - h_j a_i) /
     // (h_i - h_j), likewise beta: its λ takes one division.
     const Mask c01 = n0 ^ n1, c12 = n1 ^ n2, c20 = n2 ^ n0;
-    const Lanes l01 = (h0 * b1 - h1 * b0) / (h0 * a1 - h1 * a0) * splat(scale);
-    const Lanes l12 = (h1 * b2 - h2 * b1) / (h1 * a2 - h2 * a1) * splat(scale);
-    const Lanes l20 = (h2 * b0 - h0 * b2) / (h2 * a0 - h0 * a2) * splat(scale);
-    const Lanes pinf = splat(inf), minf = splat(-inf);
+    const Lanes l01 = (h0 * b1 - h1 * b0) / (h0 * a1 - h1 * a0) * Splat(f.scale);
+    const Lanes l12 = (h1 * b2 - h2 * b1) / (h1 * a2 - h2 * a1) * Splat(f.scale);
+    const Lanes l20 = (h2 * b0 - h0 * b2) / (h2 * a0 - h0 * a2) * Splat(f.scale);
+    const Lanes pinf = Splat(inf), minf = Splat(-inf);
     Lanes lo = select(c01, l01, pinf), hi = select(c01, l01, minf);
     lo = select(c12 & (select(c12, l12, pinf) < lo), l12, lo);
     hi = select(c12 & (select(c12, l12, minf) > hi), l12, hi);
     lo = select(c20 & (select(c20, l20, pinf) < lo), l20, lo);
     hi = select(c20 & (select(c20, l20, minf) > hi), l20, hi);
     // Corners on the plane or behind `from` take the general path, one triangle at a time.
-    const Mask special =
-        (h0 == zero) | (h1 == zero) | (h2 == zero) | (a0 <= amin) | (a1 <= amin) | (a2 <= amin);
+    const Mask special = (h0 == zero) | (h1 == zero) | (h2 == zero) | (a0 <= amin) | (a1 <= amin) | (a2 <= amin);
     const Mask cut = c01 | c12 | c20;
     const Mask any = cut | special;
     if ((any[0] | any[1] | any[2] | any[3]) == 0) {
       index += 4;
       continue;
     }
-    for (int l = 0; l < 4 && index < triangles.size(); ++l, ++index) {
-      float tlo, thi;
+    for (int l = 0; l < 4 && index < count; ++l, ++index) {
+      double tlo, thi;
       if (special[l] != 0) {
-        if (h0[l] == 0.0f && h1[l] == 0.0f && h2[l] == 0.0f) continue;  // in the plane: grazed
-        const Corners c{{a0[l], a1[l], a2[l]}, {b0[l], b1[l], b2[l]}, {h0[l], h1[l], h2[l]}};
-        if (!CutInterval(c, alpha_min, scale, &tlo, &thi)) continue;
+        // The triangle exactly as the mesh has it, in double.
+        const glm::dvec3 a(b.ax[l], b.ay[l], b.az[l]), e1(b.e1x[l], b.e1y[l], b.e1z[l]), e2(b.e2x[l], b.e2y[l], b.e2z[l]);
+        Cut c;
+        const glm::dvec3 r[3] = {a - f.dfrom, a + e1 - f.dfrom, a + e2 - f.dfrom};
+        for (int k = 0; k < 3; ++k) {
+          c.h[k] = glm::dot(r[k], f.dn);
+          c.a[k] = glm::dot(r[k], f.ds);
+          c.b[k] = glm::dot(r[k], f.dd);
+        }
+        if (c.h[0] == 0.0 && c.h[1] == 0.0 && c.h[2] == 0.0) continue;  // in the plane: grazed
+        if (!CutInterval(c, f.dalpha_min, f.dscale, &tlo, &thi)) continue;
       } else if (cut[l] != 0) {
         tlo = lo[l];
         thi = hi[l];
       } else {
         continue;
       }
-      const double clo = std::max(-1.0, static_cast<double>(tlo)),
-                   chi = std::min(1.0, static_cast<double>(thi));
-      w[kept] = {clo, chi};
-      kept += clo <= chi;
+      Keep(tlo, thi, out);
     }
   }
-  out->resize(first + kept);
 }
 
-std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanTriangles& triangles,
-                                       std::vector<std::pair<double, double>>* scratch,
-                                       double gap) {
+// A piece's interval from its corners and edges; false if they cannot settle it (a corner in
+// the plane, or a crossing not in front of `from`), and its triangles must.
+bool PieceHit(const Frame& f, const FanSurface& surface, const FanSurface::Piece& p,
+              std::vector<std::pair<double, double>>* out) {
+  alignas(16) float h[kMaxPieceCorners], a[kMaxPieceCorners], b[kMaxPieceCorners];
+  const std::span<const FanSurface::Corners> blocks = surface.corners().subspan(p.corner_block, (p.corner_count + 3) / 4);
+  Mask on_plane = {0, 0, 0, 0};
+  for (size_t k = 0; k < blocks.size(); ++k) {
+    const FanSurface::Corners& c = blocks[k];
+    const Lanes rx = (c.x - Splat(f.from.x)) - Splat(f.from_low.x), ry = (c.y - Splat(f.from.y)) - Splat(f.from_low.y),
+                rz = (c.z - Splat(f.from.z)) - Splat(f.from_low.z);
+    const Lanes hk = rx * Splat(f.n.x) + ry * Splat(f.n.y) + rz * Splat(f.n.z);
+    const Lanes ak = rx * Splat(f.s.x) + ry * Splat(f.s.y) + rz * Splat(f.s.z);
+    const Lanes bk = rx * Splat(f.d.x) + ry * Splat(f.d.y) + rz * Splat(f.d.z);
+    on_plane |= hk == Splat(0.0f);  // padding repeats a corner: no false alarm
+    std::memcpy(h + 4 * k, &hk, sizeof hk);
+    std::memcpy(a + 4 * k, &ak, sizeof ak);
+    std::memcpy(b + 4 * k, &bk, sizeof bk);
+  }
+  if ((on_plane[0] | on_plane[1] | on_plane[2] | on_plane[3]) != 0) return false;
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (const auto& [i, j] : surface.edges().subspan(p.edge, p.edge_count)) {
+    if ((h[i] < 0.0f) == (h[j] < 0.0f)) continue;
+    const float den = h[i] * a[j] - h[j] * a[i];  // the crossing's alpha times h_i - h_j
+    if (!(den / (h[i] - h[j]) > f.alpha_min)) return false;
+    const float l = (h[i] * b[j] - h[j] * b[i]) / den * f.scale;
+    lo = std::min(lo, l);
+    hi = std::max(hi, l);
+  }
+  if (lo <= hi) Keep(lo, hi, out);
+  return true;
+}
+
+struct PositionHash {
+  size_t operator()(const std::array<uint32_t, 3>& k) const {
+    uint64_t x = (uint64_t{k[0]} << 32 | k[1]) * 0x9e3779b97f4a7c15ull ^ k[2];
+    x ^= x >> 29;
+    return static_cast<size_t>(x * 0xbf58476d1ce4e5b9ull);
+  }
+};
+
+uint32_t Find(std::vector<uint32_t>& parent, uint32_t x) {
+  while (parent[x] != x) x = parent[x] = parent[parent[x]];
+  return x;
+}
+
+}  // namespace
+
+FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uint32_t> indices)
+    : triangle_count_(indices.size() / 3) {
+  const size_t n = triangle_count_;
+  if (n == 0) return;
+  // Weld equal positions (-0 is 0).
+  std::unordered_map<std::array<uint32_t, 3>, uint32_t, PositionHash> ids;
+  std::vector<uint32_t> weld(positions.size());
+  std::vector<glm::vec3> welded;
+  for (size_t i = 0; i < positions.size(); ++i) {
+    std::array<uint32_t, 3> key;
+    for (int k = 0; k < 3; ++k) {
+      const float x = positions[i][k] + 0.0f;
+      std::memcpy(&key[k], &x, sizeof x);
+    }
+    const auto [it, added] = ids.try_emplace(key, static_cast<uint32_t>(welded.size()));
+    if (added) welded.push_back(positions[i]);
+    weld[i] = it->second;
+  }
+  std::vector<std::array<uint32_t, 3>> tri(n);
+  std::vector<bool> degenerate(n);
+  for (size_t t = 0; t < n; ++t) {
+    for (int k = 0; k < 3; ++k) tri[t][k] = weld[indices[3 * t + k]];
+    degenerate[t] = tri[t][0] == tri[t][1] || tri[t][1] == tri[t][2] || tri[t][2] == tri[t][0];
+  }
+  // Directed edges, sorted, to count each edge and its twin.
+  std::vector<uint64_t> directed;
+  directed.reserve(3 * n);
+  for (size_t t = 0; t < n; ++t) {
+    if (degenerate[t]) continue;
+    for (int k = 0; k < 3; ++k) directed.push_back(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3]);
+  }
+  std::sort(directed.begin(), directed.end());
+  auto count = [&](uint32_t from, uint32_t to) {
+    const uint64_t key = uint64_t{from} << 32 | to;
+    const auto [lo, hi] = std::equal_range(directed.begin(), directed.end(), key);
+    return hi - lo;
+  };
+  // Join triangles across edges that exactly two of them share, in opposite directions.
+  std::vector<uint32_t> parent(n);
+  std::iota(parent.begin(), parent.end(), 0u);
+  std::unordered_map<uint64_t, uint32_t> first_with;  // directed edge -> a triangle with it
+  for (size_t t = 0; t < n; ++t) {
+    if (degenerate[t]) continue;
+    for (int k = 0; k < 3; ++k) first_with.emplace(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3], t);
+  }
+  for (size_t t = 0; t < n; ++t) {
+    if (degenerate[t]) continue;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t u = tri[t][k], v = tri[t][(k + 1) % 3];
+      if (u > v || count(u, v) != 1 || count(v, u) != 1) continue;
+      parent[Find(parent, static_cast<uint32_t>(t))] = Find(parent, first_with.at(uint64_t{v} << 32 | u));
+    }
+  }
+  std::unordered_map<uint32_t, std::vector<uint32_t>> groups;
+  for (size_t t = 0; t < n; ++t) {
+    if (!degenerate[t]) groups[Find(parent, static_cast<uint32_t>(t))].push_back(static_cast<uint32_t>(t));
+  }
+  std::vector<uint32_t> roots;
+  for (const auto& [root, members] : groups) roots.push_back(root);
+  std::sort(roots.begin(), roots.end());  // a fixed order, whatever the hash does
+
+  auto triangle = [&](uint32_t t) {
+    const glm::vec3 a = positions[indices[3 * t]], b = positions[indices[3 * t + 1]], c = positions[indices[3 * t + 2]];
+    return EdgeTriangle{a, b - a, c - a};
+  };
+  auto append_blocks = [&](std::span<const uint32_t> members) {
+    const size_t first = blocks_.size();
+    blocks_.resize(first + (members.size() + 3) / 4);
+    for (size_t i = 0; i < (blocks_.size() - first) * 4; ++i) {
+      const EdgeTriangle t = triangle(members[std::min(i, members.size() - 1)]);
+      Block& b = blocks_[first + i / 4];
+      const size_t l = i % 4;
+      b.ax[l] = t.a.x, b.ay[l] = t.a.y, b.az[l] = t.a.z;
+      b.e1x[l] = t.e1.x, b.e1y[l] = t.e1.y, b.e1z[l] = t.e1.z;
+      b.e2x[l] = t.e2.x, b.e2y[l] = t.e2.y, b.e2z[l] = t.e2.z;
+    }
+    return static_cast<uint32_t>(first);
+  };
+
+  std::vector<uint32_t> loose;
+  for (size_t t = 0; t < n; ++t) {
+    if (degenerate[t]) loose.push_back(static_cast<uint32_t>(t));
+  }
+  for (uint32_t root : roots) {
+    const std::vector<uint32_t>& members = groups.at(root);
+    // Closed: every directed edge of the group once, and its twin once.
+    std::vector<uint64_t> own;
+    for (uint32_t t : members) {
+      for (int k = 0; k < 3; ++k) own.push_back(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3]);
+    }
+    std::sort(own.begin(), own.end());
+    bool closed = members.size() >= 4 && std::adjacent_find(own.begin(), own.end()) == own.end();
+    for (size_t e = 0; closed && e < own.size(); ++e) {
+      const uint64_t twin = own[e] << 32 | own[e] >> 32;
+      closed = std::binary_search(own.begin(), own.end(), twin);
+    }
+    std::vector<uint32_t> corner;  // welded ids
+    for (uint32_t t : members) corner.insert(corner.end(), tri[t].begin(), tri[t].end());
+    std::sort(corner.begin(), corner.end());
+    corner.erase(std::unique(corner.begin(), corner.end()), corner.end());
+    bool convex = closed && corner.size() <= kMaxPieceCorners;
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+    for (uint32_t c : corner) {
+      lo = glm::min(lo, glm::dvec3(welded[c]));
+      hi = glm::max(hi, glm::dvec3(welded[c]));
+    }
+    // A millionth of the piece's size and of its distance from the origin (float rounding).
+    const double tol = 1e-6 * (glm::length(hi - lo) + std::max(glm::length(lo), glm::length(hi)));
+    for (size_t m = 0; convex && m < members.size(); ++m) {
+      const glm::dvec3 a(welded[tri[members[m]][0]]), b(welded[tri[members[m]][1]]), c(welded[tri[members[m]][2]]);
+      const glm::dvec3 normal = glm::cross(b - a, c - a);
+      const double len = glm::length(normal);
+      if (!(len > 0.0)) continue;  // a sliver adds no plane
+      for (uint32_t v : corner) {
+        if (glm::dot(glm::dvec3(welded[v]) - a, normal) > tol * len) {
+          convex = false;
+          break;
+        }
+      }
+    }
+    if (!convex) {
+      loose.insert(loose.end(), members.begin(), members.end());
+      continue;
+    }
+    Piece p;
+    const glm::dvec3 centre = 0.5 * (lo + hi);
+    double radius = 0.0;
+    for (uint32_t c : corner) radius = std::max(radius, glm::length(glm::dvec3(welded[c]) - centre));
+    p.centre = glm::vec3(centre);
+    p.radius = static_cast<float>(radius * (1.0 + 1e-5) + tol);  // float rounding of the test
+    p.corner_block = static_cast<uint32_t>(corners_.size());
+    p.corner_count = static_cast<uint32_t>(corner.size());
+    corners_.resize(corners_.size() + (corner.size() + 3) / 4);
+    for (size_t i = 0; i < (corners_.size() - p.corner_block) * 4; ++i) {
+      const glm::vec3 v = welded[corner[std::min(i, corner.size() - 1)]];
+      Corners& c = corners_[p.corner_block + i / 4];
+      c.x[i % 4] = v.x, c.y[i % 4] = v.y, c.z[i % 4] = v.z;
+    }
+    auto local = [&](uint32_t id) {
+      return static_cast<uint8_t>(std::lower_bound(corner.begin(), corner.end(), id) - corner.begin());
+    };
+    p.edge = static_cast<uint32_t>(edges_.size());
+    for (uint64_t e : own) {
+      const uint32_t u = static_cast<uint32_t>(e >> 32), v = static_cast<uint32_t>(e);
+      if (u < v) edges_.emplace_back(local(u), local(v));  // each undirected edge once
+    }
+    p.edge_count = static_cast<uint32_t>(edges_.size()) - p.edge;
+    p.block = append_blocks(members);
+    p.triangle_count = static_cast<uint32_t>(members.size());
+    pieces_.push_back(p);
+  }
+  std::sort(loose.begin(), loose.end());
+  loose_count_ = static_cast<uint32_t>(loose.size());
+  loose_block_ = static_cast<uint32_t>(blocks_.size());
+  if (!loose.empty()) append_blocks(loose);
+}
+
+void FanSurface::Prefetch() const {
+  auto lines = [](const void* p, size_t bytes) {
+    const char* c = static_cast<const char*>(p);
+    for (size_t o = 0; o < bytes; o += 64) __builtin_prefetch(c + o);
+  };
+  lines(pieces_.data(), std::min<size_t>(pieces_.size() * sizeof(Piece), 256));
+  lines(corners_.data(), std::min<size_t>(corners_.size() * sizeof(Corners), 256));
+  lines(edges_.data(), std::min<size_t>(edges_.size() * sizeof(edges_[0]), 128));
+  if (loose_count_ > 0) lines(blocks_.data() + loose_block_, std::min<size_t>((loose_count_ + 3) / 4 * sizeof(Block), 576));
+}
+
+void FanHits(const DiscoveryFan& fan, const FanSurface& surface, std::vector<std::pair<double, double>>* out) {
+  const glm::dvec3 seg = fan.to - fan.from;
+  const double len = glm::length(seg);
+  if (!(len > 0.0) || !(fan.radius > 0.0) || surface.triangles() == 0) return;
+  Frame f;
+  f.ds = seg / len;
+  f.dd = fan.d;
+  f.dn = glm::cross(f.ds, fan.d);
+  f.dfrom = fan.from;
+  f.s = glm::vec3(f.ds);
+  f.d = glm::vec3(f.dd);
+  f.n = glm::vec3(f.dn);
+  f.from = glm::vec3(fan.from);
+  f.from_low = glm::vec3(fan.from - glm::dvec3(f.from));
+  f.dalpha_min = 1e-6 * len;
+  f.dscale = len / fan.radius;
+  f.alpha_min = static_cast<float>(f.dalpha_min);
+  f.scale = static_cast<float>(f.dscale);
+  for (const FanSurface::Piece& p : surface.piece_list()) {
+    // The plane misses the piece's sphere: nothing to read.
+    if (std::abs(glm::dot(p.centre - f.from, f.n)) > p.radius) continue;
+    if (!PieceHit(f, surface, p, out)) {
+      TriangleHits(f, surface.blocks().subspan(p.block, (p.triangle_count + 3) / 4), p.triangle_count, out);
+    }
+  }
+  if (surface.loose_count() > 0) {
+    TriangleHits(f, surface.blocks().subspan(surface.loose_block(), (surface.loose_count() + 3) / 4),
+                 surface.loose_count(), out);
+  }
+}
+
+std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanSurface& surface,
+                                       std::vector<std::pair<double, double>>* scratch, double gap) {
   std::vector<std::pair<double, double>>& iv = *scratch;
   iv.clear();
-  FanHits(fan, triangles, &iv);
+  FanHits(fan, surface, &iv);
   // Runs are unions of intervals closer than `gap`. Of the intervals that start at or below 0,
   // the one reaching highest lies in the last run that starts there: the run holding 0 if any
   // does, else the run with the largest meeting λ below 0. A few passes climb to its top.

@@ -6,8 +6,15 @@
 // plane, so which of them meet the object is a union of intervals of the segment's parameter,
 // one per triangle the plane cuts: one pass over the object's triangles finds the silhouette
 // itself, where the search only narrows it down after 8 to 12 rays.
+//
+// Most buildings are made of closed convex pieces (prisms), and the plane cuts a closed convex
+// piece in one convex polygon whose corners are where the plane crosses the piece's edges: the
+// rays that meet the piece are the one interval between the smallest and the largest λ of those
+// crossings. So a piece takes its corners and edges (a box: 8 and 12) where its triangles (12,
+// each cut on two of its three edges) took four times the work and memory.
 #pragma once
 
+#include <cstdint>
 #include <glm/vec3.hpp>
 #include <optional>
 #include <span>
@@ -21,23 +28,54 @@ struct EdgeTriangle {
   glm::vec3 a, e1, e2;
 };
 
-// An object's triangles as the search reads them: in blocks of four, coordinate by coordinate,
-// so that one pass handles four triangles at a time (SSE, or whatever vectors the target has).
-class FanTriangles {
+// An object's surface as the search reads it. Its triangles are grouped by welding equal
+// positions and joining triangles across edges that exactly two of them share, in opposite
+// directions; a group that is closed (every edge has its twin) and convex (every corner on or
+// behind every face's plane, to a millionth of its size) is a piece, read by corners and edges;
+// the other triangles are read one by one. Everything coordinate by coordinate in blocks of
+// four, so that one pass handles four corners or triangles at a time (SSE, or whatever vectors
+// the target has).
+class FanSurface {
  public:
-  FanTriangles() = default;
-  explicit FanTriangles(std::span<const EdgeTriangle> triangles);
-  size_t size() const { return count_; }
+  FanSurface() = default;
+  // `indices`: triangles (a multiple of three), each index < positions.size().
+  FanSurface(std::span<const glm::vec3> positions, std::span<const uint32_t> indices);
 
-  typedef float Lanes __attribute__((vector_size(16)));  // one coordinate of four triangles
-  struct Block {
+  size_t triangles() const { return triangle_count_; }
+  size_t pieces() const { return pieces_.size(); }  // closed convex pieces
+
+  typedef float Lanes __attribute__((vector_size(16)));  // one coordinate of four
+  struct Block {                                          // four triangles
     Lanes ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z;
   };
+  struct Corners {  // four corners of a piece
+    Lanes x, y, z;
+  };
+  struct Piece {
+    glm::vec3 centre;
+    float radius = 0.0f;  // of a sphere around the piece
+    uint32_t corner_block = 0, corner_count = 0;
+    uint32_t edge = 0, edge_count = 0;
+    // The piece's triangles, for fans its corners cannot settle (a corner in the plane, or a
+    // crossing not in front of the fan's point).
+    uint32_t block = 0, triangle_count = 0;
+  };
+  std::span<const Piece> piece_list() const { return pieces_; }
+  std::span<const Corners> corners() const { return corners_; }
+  std::span<const std::pair<uint8_t, uint8_t>> edges() const { return edges_; }
   std::span<const Block> blocks() const { return blocks_; }
+  uint32_t loose_block() const { return loose_block_; }  // the triangles in no piece start here
+  uint32_t loose_count() const { return loose_count_; }
+  // Asks the caches for the first lines of what a search reads.
+  void Prefetch() const;
 
  private:
-  std::vector<Block> blocks_;  // the last one padded with copies of the last triangle
-  size_t count_ = 0;
+  std::vector<Piece> pieces_;
+  std::vector<Corners> corners_;                     // each piece's, padded with its last one
+  std::vector<std::pair<uint8_t, uint8_t>> edges_;  // corner numbers within the piece
+  std::vector<Block> blocks_;  // each piece's triangles, then the loose ones; padded per group
+  uint32_t loose_block_ = 0, loose_count_ = 0;
+  size_t triangle_count_ = 0;
 };
 
 // The rays from `from` through to + λ·radius·d, λ in [-1, 1]: `d` is a unit vector normal to
@@ -47,20 +85,20 @@ struct DiscoveryFan {
   double radius = 0.0;
 };
 
-// The closed λ-intervals (within [-1, 1]) of the fan's rays that meet a triangle strictly in
-// front of `from` (beyond a millionth of the distance to `to`), in no particular order; one per
-// triangle the fan's plane cuts. Triangles lying in that plane are not counted (grazed).
-// Appends to `out`.
-void FanHits(const DiscoveryFan& fan, const FanTriangles& triangles,
+// Closed λ-intervals (within [-1, 1]) whose union is the set of the fan's rays that meet the
+// surface strictly in front of `from` (beyond a millionth of the distance to `to`), in no
+// particular order: one per piece, and one per loose triangle, the fan's plane cuts. Triangles
+// lying in that plane are not counted (grazed). Appends to `out`.
+void FanHits(const DiscoveryFan& fan, const FanSurface& surface,
              std::vector<std::pair<double, double>>* out);
 
 // The λ of the silhouette the search looks for, the border between rays that meet the
-// triangles and rays that miss them: if the ray through `to` (λ = 0) meets them, the upper end
+// surface and rays that miss it: if the ray through `to` (λ = 0) meets it, the upper end
 // of the run of meeting rays around it; else the largest λ < 0 of a meeting ray. None when the
-// ray at λ = 1 meets them (no silhouette within reach) or no ray in [-1, 0] does. Intervals
+// ray at λ = 1 meets it (no silhouette within reach) or no ray in [-1, 0] does. Intervals
 // closer than `gap` (λ units) count as one: triangles sharing an edge leave no gap.
 // `scratch` is reused between calls.
-std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanTriangles& triangles,
+std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanSurface& surface,
                                        std::vector<std::pair<double, double>>* scratch,
                                        double gap = 1e-5);
 
