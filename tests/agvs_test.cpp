@@ -331,6 +331,15 @@ TEST_F(Agvs, SampleFromBoxHitsFrontFacesItCanSee) {
     const scenes::Mesh& m = s.objects[h.object].mesh;
     const glm::dvec3 n(m.normals[m.indices[3 * h.triangle]]);
     EXPECT_LT(glm::dot(n, h.to - h.from), 0.0);
+    // The hit point lies on that triangle (not just on its quad): barycentric coordinates.
+    const glm::dvec3 a(m.positions[m.indices[3 * h.triangle]]), b(m.positions[m.indices[3 * h.triangle + 1]]),
+        c(m.positions[m.indices[3 * h.triangle + 2]]);
+    const glm::dvec3 e1 = b - a, e2 = c - a, w = h.to - a, nn = glm::cross(e1, e2);
+    const double u = glm::dot(glm::cross(w, e2), nn) / glm::dot(nn, nn), v = glm::dot(glm::cross(e1, w), nn) / glm::dot(nn, nn);
+    EXPECT_NEAR(glm::dot(w, glm::normalize(nn)), 0.0, 1e-3);
+    EXPECT_GT(u, -1e-4);
+    EXPECT_GT(v, -1e-4);
+    EXPECT_LT(u + v, 1.0 + 1e-4);
   }
   EXPECT_EQ(seen, (std::set<ObjectId>{kA, kW}));
   EXPECT_EQ(sampler->SampleFromBox(box, 2000, 3).size(), hits.size());

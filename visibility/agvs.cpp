@@ -248,6 +248,12 @@ struct GlobalSampler::Impl {
     // searching silhouettes are heuristics; visibility itself is Embree's.
     std::vector<EdgeTriangle> tris;
     FanSurface fan;  // the same, for the silhouette search
+    // Embree reads the triangles as quads: two triangles (p, q, r), (p, r, s) in a row (a wall,
+    // two triangles of a roof's fan) are the quad (q, r, s, p), which Embree splits into exactly
+    // those two; any other triangle is a quad with its last corner repeated. The first
+    // triangle of each quad, and whether it has a second.
+    std::vector<uint32_t> quad_first;
+    std::vector<bool> quad_pair;
     double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
@@ -300,8 +306,8 @@ struct GlobalSampler::Impl {
   }
 
   void Attach(ObjectId id) {
-    const Object& o = objects[id];
-    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    Object& o = objects[id];
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
     auto* v = static_cast<float*>(
         rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), o.verts.size()));
     for (size_t i = 0; i < o.verts.size(); ++i) {
@@ -309,9 +315,26 @@ struct GlobalSampler::Impl {
       v[3 * i + 1] = o.verts[i].y;
       v[3 * i + 2] = o.verts[i].z;
     }
-    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                              3 * sizeof(uint32_t), o.indices.size() / 3));
-    std::copy(o.indices.begin(), o.indices.end(), ix);
+    std::vector<uint32_t> quads;
+    o.quad_first.clear();
+    o.quad_pair.clear();
+    const size_t triangles = o.indices.size() / 3;
+    for (size_t t = 0; t < triangles;) {
+      const uint32_t* a = &o.indices[3 * t];
+      o.quad_first.push_back(static_cast<uint32_t>(t));
+      if (t + 1 < triangles && a[3] == a[0] && a[4] == a[2]) {
+        quads.insert(quads.end(), {a[1], a[2], a[5], a[0]});
+        o.quad_pair.push_back(true);
+        t += 2;
+      } else {
+        quads.insert(quads.end(), {a[0], a[1], a[2], a[2]});
+        o.quad_pair.push_back(false);
+        t += 1;
+      }
+    }
+    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                                                              4 * sizeof(uint32_t), quads.size() / 4));
+    std::copy(quads.begin(), quads.end(), ix);
     rtcCommitGeometry(g);
     rtcAttachGeometryByID(rtc, g, id);
     rtcReleaseGeometry(g);
@@ -435,7 +458,10 @@ class Worker {
       }
       const Hit h = Cast(p, dir, 0.0);
       if (h.object == kNoObject || h.back) continue;
-      hits.push_back({h.object, h.prim, s_.frame + p, s_.frame + p + h.t * dir});
+      // The quad's first triangle (q, r, p) where u + v <= 1, its second (s, p, r) beyond.
+      const Impl::Object& o = s_.objects[h.object];
+      const uint32_t triangle = o.quad_first[h.quad] + (o.quad_pair[h.quad] && h.second ? 1 : 0);
+      hits.push_back({h.object, triangle, s_.frame + p, s_.frame + p + h.t * dir});
     }
     return hits;
   }
@@ -551,7 +577,8 @@ class Worker {
   struct Hit {
     double t = kInf;
     ObjectId object = kNoObject;
-    uint32_t prim = 0;
+    uint32_t quad = 0;    // Embree's primitive
+    bool second = false;  // in the quad's second triangle
     bool back = false;
   };
 
@@ -611,7 +638,8 @@ class Worker {
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
     h.t = rh.ray.tfar;
     h.object = rh.hit.geomID;
-    h.prim = rh.hit.primID;
+    h.quad = rh.hit.primID;
+    h.second = rh.hit.u + rh.hit.v > 1.0f;
     // Embree's geometry normal is cross(v1 - v0, v2 - v0), as the meshes' outward normals are
     // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
     h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
