@@ -169,19 +169,26 @@ class MutationBuffer {
 struct NewEntry {
   CellId cell;
   ObjectId object;
-  uint32_t sample;  // index in its chunk's samples
-  double t;         // a point of the segment inside the cell
+  uint32_t witness;  // index in its chunk's witnesses, for cells that keep them; else kNoWitness
 };
+constexpr uint32_t kNoWitness = std::numeric_limits<uint32_t>::max();
 
 struct ChunkPlan {
   Distribution dist;
   std::vector<uint32_t> candidates;  // mutation chunks: one per sample, a slot of the buffer
 };
 
+// Valid samples per cell they pierce and per object they end on, one thread's.
+struct Counts {
+  std::vector<uint64_t> cells, objects;
+};
+
+// What a chunk found, in the order its samples were drawn: all the serial part applies.
 struct ChunkResult {
-  std::vector<Sample> samples;
-  std::vector<uint16_t> c_fwd, c_rev;  // per sample: new entries its ends found
   std::vector<NewEntry> entries;
+  std::vector<Witness> witnesses;
+  std::vector<Candidate> candidates;  // mutation candidates (AGVS), in order
+  uint64_t samples = 0;
   uint64_t embree_rays = 0, silhouette_searches = 0, discarded = 0;
   uint64_t contribution = 0;
   uint64_t estimator_rays = 0, estimator_hits = 0;
@@ -664,7 +671,7 @@ class Worker {
   }
 
   // The sample on the line from `a` to `b`, cast both ways from their midpoint.
-  const Sample& EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist) {
+  Sample EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist) {
     Sample smp;
     smp.dist = dist;
     const glm::dvec3 d = b - a;
@@ -672,7 +679,8 @@ class Worker {
     smp.origin = 0.5 * (a + b);
     smp.dir = len > 0.0 && std::isfinite(len) ? d / len : glm::dvec3(0, 0, 1);
     CastBoth(&smp, 0.0);
-    return Emit(smp);
+    Emit(smp);
+    return smp;
   }
 
   // The point near `to`, just off `object`'s silhouette seen from `from`, along a random
@@ -696,28 +704,30 @@ class Worker {
     return to + (*lambda + (1.0 - rng.Uniform()) / 64.0) * radius * d;
   }
 
-  // Walks the viewcells the sample's free segment pierces and records what is new in them.
-  const Sample& Emit(const Sample& smp) {
+  // Walks the viewcells the sample's free segment pierces and records what is new in them,
+  // how often its cells and objects were sampled, and (AGVS) its mutation candidates.
+  void Emit(const Sample& smp) {
     ChunkResult& out = *out_;
-    const uint32_t index = static_cast<uint32_t>(out.samples.size());
-    out.samples.push_back(smp);
-    out.c_fwd.push_back(0);
-    out.c_rev.push_back(0);
+    ++out.samples;
     if (!smp.valid) {
       ++out.discarded;
-      return out.samples.back();
+      return;
+    }
+    if (counts_ != nullptr) {
+      // Per-object sampling densities, for the object-space filter.
+      if (smp.rev != kNoObject && smp.dist != Distribution::kRef) ++counts_->objects[smp.rev];
+      if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
     }
     if (smp.dist == Distribution::kRef) {
-      if (cell_counts_ != nullptr) ++(*cell_counts_)[smp.origin_cell];
+      if (counts_ != nullptr) ++counts_->cells[smp.origin_cell];
       // A ref ray is a camera ray too: a uniform point and direction in a uniform cell.
       ++out.estimator_rays;
       if (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) {
         ++out.estimator_hits;
-        out.entries.push_back({smp.origin_cell, smp.fwd, index, 0.0});
-        out.c_fwd.back() = 1;
+        out.entries.push_back({smp.origin_cell, smp.fwd, WitnessOf(smp.origin_cell, smp, 0.0, smp.t_fwd)});
         ++out.contribution;
       }
-      return out.samples.back();
+      return;
     }
     if (smp.dist == Distribution::kViewSpaceDirection) {
       // The estimator's camera rays: each direction from a uniform point is one.
@@ -728,20 +738,66 @@ class Worker {
     uint32_t c_fwd = 0, c_rev = 0;
     VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
-      if (cell_counts_ != nullptr) ++(*cell_counts_)[cell];
+      if (counts_ != nullptr) ++counts_->cells[cell];
       if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
-        out.entries.push_back({cell, smp.fwd, index, t});
+        out.entries.push_back({cell, smp.fwd, WitnessOf(cell, smp, t, smp.t_fwd)});
         ++c_fwd;
       }
       if (smp.rev != kNoObject && !pvs_.Contains(cell, smp.rev)) {
-        out.entries.push_back({cell, smp.rev, index, t});
+        out.entries.push_back({cell, smp.rev, WitnessOf(cell, smp, t, -smp.t_rev)});
         ++c_rev;
       }
     });
-    out.c_fwd.back() = static_cast<uint16_t>(std::min<uint32_t>(c_fwd, 65535));
-    out.c_rev.back() = static_cast<uint16_t>(std::min<uint32_t>(c_rev, 65535));
     out.contribution += c_fwd + c_rev;
-    return out.samples.back();
+    if (options_.strategy != SamplingStrategy::kAgvs) return;
+    // Contributing ends become mutation candidates: the hit point, and the other end (a hit,
+    // or where the segment leaves the view space).
+    auto other_end = [&](bool fwd_end, glm::dvec3* p, double* r_end) {
+      const double t = fwd_end ? -smp.t_rev : smp.t_fwd;
+      const ObjectId o = fwd_end ? smp.rev : smp.fwd;
+      if (o != kNoObject) {
+        *p = smp.origin + t * smp.dir;
+        *r_end = s_.objects[o].radius;
+        return;
+      }
+      double last = 0.0;
+      bool any = false;
+      VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId, double tc) {
+        if (!any || (fwd_end ? tc < last : tc > last)) last = tc;
+        any = true;
+      });
+      *p = smp.origin + last * smp.dir;
+      *r_end = s_.cell_radius;
+    };
+    // A segment that only touches the view space at a surface point gives no direction.
+    auto add_candidate = [&](const Candidate& cand) {
+      const double len = glm::length(cand.to - cand.from);
+      if (len > 1e-6 && std::isfinite(len)) out.candidates.push_back(cand);
+    };
+    if (c_fwd > 0 && smp.fwd != kNoObject) {
+      Candidate cand;
+      other_end(true, &cand.from, &cand.r_from);
+      cand.to = smp.origin + smp.t_fwd * smp.dir;
+      cand.r_to = s_.objects[smp.fwd].radius;
+      cand.object = smp.fwd;
+      add_candidate(cand);
+    }
+    if (c_rev > 0 && smp.rev != kNoObject) {
+      Candidate cand;
+      other_end(false, &cand.from, &cand.r_from);
+      cand.to = smp.origin - smp.t_rev * smp.dir;
+      cand.r_to = s_.objects[smp.rev].radius;
+      cand.object = smp.rev;
+      add_candidate(cand);
+    }
+  }
+
+  // Where `cell`, if it keeps witnesses, would see the object at parameter t_obj: the ray from
+  // the sample's point at parameter t (inside the cell) to it.
+  uint32_t WitnessOf(CellId cell, const Sample& smp, double t, double t_obj) {
+    if (!s_.witness_cell[cell]) return kNoWitness;
+    out_->witnesses.push_back({s_.frame + smp.origin + t * smp.dir, s_.frame + smp.origin + t_obj * smp.dir});
+    return static_cast<uint32_t>(out_->witnesses.size() - 1);
   }
 
  public:
@@ -796,13 +852,13 @@ class Worker {
   const GlobalPvs& pvs_;
   const AgvsOptions& options_;
   ChunkResult* out_ = nullptr;
-  std::vector<uint64_t>* cell_counts_ = nullptr;  // this thread's samples per cell, if counted
+  Counts* counts_ = nullptr;                     // this thread's samples per cell and object, if counted
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
   std::vector<const FanSurface*> fans_;            // their objects' surfaces
 
  public:
-  void CountCellsInto(std::vector<uint64_t>* counts) { cell_counts_ = counts; }
+  void CountInto(Counts* counts) { counts_ = counts; }
 };
 
 }  // namespace
@@ -970,93 +1026,40 @@ void GlobalSampler::RunBatch() {
   // Draw and cast in parallel; the sets are only read.
   std::vector<ChunkResult> results(plans.size());
   std::mutex counts_mutex;
-  std::vector<std::unique_ptr<std::vector<uint64_t>>> counts;  // per thread
+  std::vector<std::unique_ptr<Counts>> counts;  // per thread
   ParallelFor(plans.size(), options_.threads, [&] {
     Worker worker(m, grid_, pvs_, options_);
     {
       const std::lock_guard lock(counts_mutex);
-      counts.push_back(std::make_unique<std::vector<uint64_t>>(grid_.CellCount(), 0));
-      worker.CountCellsInto(counts.back().get());
+      counts.push_back(std::make_unique<Counts>());
+      counts.back()->cells.assign(grid_.CellCount(), 0);
+      counts.back()->objects.assign(m.objects.size(), 0);
+      worker.CountInto(counts.back().get());
     }
-    return [&, worker](size_t c) mutable {
-      results[c].samples.reserve(kChunk);
-      worker.Run(plans[c], Mix(options_.seed, Mix(batch, c)), &results[c]);
-    };
+    return [&, worker](size_t c) mutable { worker.Run(plans[c], Mix(options_.seed, Mix(batch, c)), &results[c]); };
   });
 
   for (const auto& per_thread : counts) {
-    for (CellId c = 0; c < grid_.CellCount(); ++c) m.cell_samples[c] += (*per_thread)[c];
+    for (CellId c = 0; c < grid_.CellCount(); ++c) m.cell_samples[c] += per_thread->cells[c];
+    for (ObjectId o = 0; o < m.objects.size(); ++o) m.object_hits[o] += per_thread->objects[o];
   }
 
   // Apply in chunk order.
   std::array<uint64_t, kDistributionCount> contribution{}, cost{}, drawn{};
   uint64_t est_rays = 0, est_hits = 0;
-  Worker walker(m, grid_, pvs_, options_);
   for (size_t c = 0; c < plans.size(); ++c) {
     const ChunkResult& r = results[c];
     const auto k = static_cast<size_t>(plans[c].dist);
     for (const NewEntry& e : r.entries) {
       if (!pvs_.Insert(e.cell, e.object)) continue;
       ++stats_.entries;
-      if (m.witness_cell[e.cell]) {
-        const Sample& smp = r.samples[e.sample];
-        const double t_obj = e.object == smp.fwd ? smp.t_fwd : -smp.t_rev;
-        m.witnesses.emplace(uint64_t{e.cell} << 32 | e.object,
-                            Witness{m.frame + smp.origin + e.t * smp.dir, m.frame + smp.origin + t_obj * smp.dir});
-      }
+      if (e.witness != kNoWitness) m.witnesses.emplace(uint64_t{e.cell} << 32 | e.object, r.witnesses[e.witness]);
     }
-    for (size_t i = 0; i < r.samples.size(); ++i) {
-      const Sample& smp = r.samples[i];
-      if (!smp.valid) continue;
-      // Per-cell and per-object sampling densities, for the object-space filter.
-      if (smp.rev != kNoObject && smp.dist != Distribution::kRef) ++m.object_hits[smp.rev];
-      if (smp.fwd != kNoObject) ++m.object_hits[smp.fwd];
-      if (options_.strategy != SamplingStrategy::kAgvs) continue;
-      // Contributing ends become mutation candidates: the hit point, and the other end (a
-      // hit, or where the segment leaves the view space).
-      auto other_end = [&](bool fwd_end, glm::dvec3* p, double* r_end) {
-        const double t = fwd_end ? -smp.t_rev : smp.t_fwd;
-        const ObjectId o = fwd_end ? smp.rev : smp.fwd;
-        if (o != kNoObject) {
-          *p = smp.origin + t * smp.dir;
-          *r_end = m.objects[o].radius;
-          return;
-        }
-        double last = 0.0;
-        bool any = false;
-        walker.VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId, double tc) {
-          if (!any || (fwd_end ? tc < last : tc > last)) last = tc;
-          any = true;
-        });
-        *p = smp.origin + last * smp.dir;
-        *r_end = m.cell_radius;
-      };
-      // A segment that only touches the view space at a surface point gives no direction.
-      auto add_candidate = [&](const Candidate& cand) {
-        const double len = glm::length(cand.to - cand.from);
-        if (len > 1e-6 && std::isfinite(len)) m.buffer.Add(cand);
-      };
-      if (r.c_fwd[i] > 0 && smp.fwd != kNoObject) {
-        Candidate cand;
-        other_end(true, &cand.from, &cand.r_from);
-        cand.to = smp.origin + smp.t_fwd * smp.dir;
-        cand.r_to = m.objects[smp.fwd].radius;
-        cand.object = smp.fwd;
-        add_candidate(cand);
-      }
-      if (r.c_rev[i] > 0 && smp.rev != kNoObject) {
-        Candidate cand;
-        other_end(false, &cand.from, &cand.r_from);
-        cand.to = smp.origin - smp.t_rev * smp.dir;
-        cand.r_to = m.objects[smp.rev].radius;
-        cand.object = smp.rev;
-        add_candidate(cand);
-      }
-    }
+    for (const Candidate& cand : r.candidates) m.buffer.Add(cand);
     contribution[k] += r.contribution;
     cost[k] += r.embree_rays + r.silhouette_searches;  // a search costs about a ray
-    drawn[k] += r.samples.size();
-    stats_.samples += r.samples.size();
+    drawn[k] += r.samples;
+    stats_.samples += r.samples;
     stats_.rays += r.embree_rays;
     stats_.discarded_samples += r.discarded;
     est_rays += r.estimator_rays;
