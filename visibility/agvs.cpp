@@ -547,8 +547,8 @@ class Worker {
           break;
         }
         case Distribution::kSilhouetteMutation: {
-          // The next candidate's object's pieces (gathered with the candidates).
-          if (i + 1 < kChunk && fans_[i + 1] != nullptr) fans_[i + 1]->Prefetch();
+          // The next candidate's object's surface (where it lies was gathered with the candidates).
+          if (i + 1 < kChunk) FanSurface::Prefetch(fans_[i + 1]);
           const Candidate& c = candidates_[i];
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
           const Sample smp = EmitSegment(c.from, to, plan.dist);
@@ -576,8 +576,7 @@ class Worker {
     fans_.resize(plan.candidates.size());
     for (size_t i = 0; i < plan.candidates.size(); ++i) {
       const ObjectId o = candidates_[i].object;
-      fans_[i] = o < s_.objects.size() ? &s_.objects[o].fan : nullptr;
-      __builtin_prefetch(fans_[i]);  // where the surface's arrays are: read by Prefetch
+      fans_[i] = o < s_.objects.size() ? s_.objects[o].fan.hot() : FanSurface::Hot{};
     }
   }
 
@@ -855,7 +854,7 @@ class Worker {
   Counts* counts_ = nullptr;                     // this thread's samples per cell and object, if counted
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
-  std::vector<const FanSurface*> fans_;            // their objects' surfaces
+  std::vector<FanSurface::Hot> fans_;              // where their objects' surfaces lie
 
  public:
   void CountInto(Counts* counts) { counts_ = counts; }

@@ -351,15 +351,27 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
   if (!loose.empty()) append_blocks(loose);
 }
 
-void FanSurface::Prefetch() const {
-  auto lines = [](const void* p, size_t bytes) {
-    const char* c = static_cast<const char*>(p);
-    for (size_t o = 0; o < bytes; o += 64) __builtin_prefetch(c + o);
+FanSurface::Hot FanSurface::hot() const {
+  Hot h;
+  auto put = [&](int k, const void* p, size_t bytes, size_t most) {
+    h.at[k] = p;
+    h.bytes[k] = static_cast<uint32_t>(std::min(bytes, most));
   };
-  lines(pieces_.data(), std::min<size_t>(pieces_.size() * sizeof(Piece), 256));
-  lines(corners_.data(), std::min<size_t>(corners_.size() * sizeof(Corners), 256));
-  lines(edges_.data(), std::min<size_t>(edges_.size() * sizeof(edges_[0]), 128));
-  if (loose_count_ > 0) lines(blocks_.data() + loose_block_, std::min<size_t>((loose_count_ + 3) / 4 * sizeof(Block), 576));
+  put(0, pieces_.data(), pieces_.size() * sizeof(Piece), 192);
+  put(1, corners_.data(), corners_.size() * sizeof(Corners), 192);
+  if (pieces_.empty() || loose_count_ > 0) {
+    put(2, blocks_.data() + loose_block_, (loose_count_ + 3) / 4 * sizeof(Block), 576);
+  } else {
+    put(2, edges_.data(), edges_.size() * sizeof(edges_[0]), 128);
+  }
+  return h;
+}
+
+void FanSurface::Prefetch(const Hot& hot) {
+  for (int k = 0; k < 3; ++k) {
+    const char* c = static_cast<const char*>(hot.at[k]);
+    for (uint32_t o = 0; o < hot.bytes[k]; o += 64) __builtin_prefetch(c + o);
+  }
 }
 
 void FanHits(const DiscoveryFan& fan, const FanSurface& surface, std::vector<std::pair<double, double>>* out) {
