@@ -63,15 +63,16 @@ void BM_EmbreeCity1(benchmark::State& state) {
   rtcSetSceneBuildQuality(rtc, RTC_BUILD_QUALITY_HIGH);
   for (const scenes::Object& o : f.scene.objects) {
     if (o.mesh.indices.empty()) continue;
-    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);  // as the sampler reads them
     auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                           3 * sizeof(float), o.mesh.positions.size()));
     for (size_t i = 0; i < o.mesh.positions.size(); ++i) {
       for (int k = 0; k < 3; ++k) v[3 * i + k] = o.mesh.positions[i][k];
     }
-    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                              3 * sizeof(uint32_t), o.mesh.indices.size() / 3));
-    std::copy(o.mesh.indices.begin(), o.mesh.indices.end() - o.mesh.indices.size() % 3, ix);
+    const visibility::EmbreeQuads q = visibility::PairTriangles(o.mesh.indices);
+    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                                                              4 * sizeof(uint32_t), q.indices.size() / 4));
+    std::copy(q.indices.begin(), q.indices.end(), ix);
     rtcCommitGeometry(g);
     rtcAttachGeometry(rtc, g);
     rtcReleaseGeometry(g);

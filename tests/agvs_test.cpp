@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/building.h"
+#include "scenes/mesh.h"
 #include "scenes/progress.h"
 #include "scenes/random.h"
 #include "visibility/bytes.h"
@@ -85,6 +86,44 @@ class Agvs : public ::testing::Test {
  protected:
   void SetUp() override { scenes::Progress::SetQuiet(true); }
 };
+
+// The quads Embree reads are the mesh's triangles exactly: each quad's two triangles, as
+// Embree splits it (v0, v1, v3) and (v2, v3, v1), are the ones it names, corner for corner up
+// to rotation; a prism's walls pair up.
+TEST(PairTriangles, QuadsSplitBackIntoTheMeshTriangles) {
+  scenes::Mesh m;
+  scenes::AppendConvexPrism(std::vector<glm::dvec2>{{0, 0}, {4, 0}, {5, 3}, {2, 5}, {-1, 3}}, 0.0, 9.0, &m);
+  m.indices.insert(m.indices.end(), {0, 1, 2});  // a lone triangle at the end
+  const EmbreeQuads q = PairTriangles(m.indices);
+  const size_t triangles = m.indices.size() / 3;
+  ASSERT_EQ(q.indices.size(), 4 * q.first.size());
+  ASSERT_EQ(q.pair.size(), q.first.size());
+  auto same = [](std::array<uint32_t, 3> a, std::array<uint32_t, 3> b) {
+    for (int r = 0; r < 3; ++r) {
+      if (a == b) return true;
+      std::rotate(a.begin(), a.begin() + 1, a.end());
+    }
+    return false;
+  };
+  auto tri = [&](size_t t) { return std::array<uint32_t, 3>{m.indices[3 * t], m.indices[3 * t + 1], m.indices[3 * t + 2]}; };
+  size_t covered = 0, pairs = 0;
+  for (size_t k = 0; k < q.first.size(); ++k) {
+    const uint32_t* v = &q.indices[4 * k];
+    EXPECT_TRUE(same({v[0], v[1], v[3]}, tri(q.first[k]))) << "quad " << k;
+    if (q.pair[k]) {
+      EXPECT_TRUE(same({v[2], v[3], v[1]}, tri(q.first[k] + 1))) << "quad " << k;
+      ++pairs;
+    } else {
+      EXPECT_EQ(v[2], v[3]) << "quad " << k;  // a lone triangle: its second is empty
+    }
+    EXPECT_EQ(q.first[k], covered);
+    covered += q.pair[k] ? 2 : 1;
+  }
+  EXPECT_EQ(covered, triangles);
+  // The 5 walls pair up; the roof's and floor's fans take turns (roof, floor, roof, ...), so
+  // their triangles stay single, as does the lone one.
+  EXPECT_EQ(pairs, 5u);
+}
 
 TEST_F(Agvs, KnownAnswerSceneConvergesToTheExactSetsAndNeverPast) {
   const scenes::Scene s = WallScene();

@@ -245,6 +245,25 @@ bool BoxMeetsShaft(const Aabb& a, const Aabb& b, const Aabb& c) {
   return lo <= hi;
 }
 
+EmbreeQuads PairTriangles(std::span<const uint32_t> indices) {
+  EmbreeQuads q;
+  const size_t triangles = indices.size() / 3;
+  for (size_t t = 0; t < triangles;) {
+    const uint32_t* a = &indices[3 * t];
+    q.first.push_back(static_cast<uint32_t>(t));
+    if (t + 1 < triangles && a[3] == a[0] && a[4] == a[2]) {
+      q.indices.insert(q.indices.end(), {a[1], a[2], a[5], a[0]});
+      q.pair.push_back(true);
+      t += 2;
+    } else {
+      q.indices.insert(q.indices.end(), {a[0], a[1], a[2], a[2]});
+      q.pair.push_back(false);
+      t += 1;
+    }
+  }
+  return q;
+}
+
 // --- The sampler's state beyond the header. ---
 
 struct GlobalSampler::Impl {
@@ -255,10 +274,8 @@ struct GlobalSampler::Impl {
     // searching silhouettes are heuristics; visibility itself is Embree's.
     std::vector<EdgeTriangle> tris;
     FanSurface fan;  // the same, for the silhouette search
-    // Embree reads the triangles as quads: two triangles (p, q, r), (p, r, s) in a row (a wall,
-    // two triangles of a roof's fan) are the quad (q, r, s, p), which Embree splits into exactly
-    // those two; any other triangle is a quad with its last corner repeated. The first
-    // triangle of each quad, and whether it has a second.
+    // Embree reads the triangles as quads (PairTriangles): each quad's first triangle, and
+    // whether it has a second.
     std::vector<uint32_t> quad_first;
     std::vector<bool> quad_pair;
     double area = 0.0;
@@ -322,23 +339,10 @@ struct GlobalSampler::Impl {
       v[3 * i + 1] = o.verts[i].y;
       v[3 * i + 2] = o.verts[i].z;
     }
-    std::vector<uint32_t> quads;
-    o.quad_first.clear();
-    o.quad_pair.clear();
-    const size_t triangles = o.indices.size() / 3;
-    for (size_t t = 0; t < triangles;) {
-      const uint32_t* a = &o.indices[3 * t];
-      o.quad_first.push_back(static_cast<uint32_t>(t));
-      if (t + 1 < triangles && a[3] == a[0] && a[4] == a[2]) {
-        quads.insert(quads.end(), {a[1], a[2], a[5], a[0]});
-        o.quad_pair.push_back(true);
-        t += 2;
-      } else {
-        quads.insert(quads.end(), {a[0], a[1], a[2], a[2]});
-        o.quad_pair.push_back(false);
-        t += 1;
-      }
-    }
+    EmbreeQuads q = PairTriangles(o.indices);
+    o.quad_first = std::move(q.first);
+    o.quad_pair = std::move(q.pair);
+    const std::vector<uint32_t>& quads = q.indices;
     auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
                                                               4 * sizeof(uint32_t), quads.size() / 4));
     std::copy(quads.begin(), quads.end(), ix);

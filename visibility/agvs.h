@@ -197,4 +197,15 @@ class GlobalSampler {
 // that thing: whether box `blocker` meets hull(`cell` ∪ `target`), exactly.
 bool BoxMeetsShaft(const scenes::Aabb& cell, const scenes::Aabb& target, const scenes::Aabb& blocker);
 
+// Triangles (`indices`, three per triangle) as Embree quads: two triangles (p, q, r), (p, r, s)
+// in a row (a wall, two triangles of a roof's fan) are the quad (q, r, s, p), which Embree
+// splits into exactly those two; any other triangle is a quad with its last corner repeated.
+// Four indices per quad; `first` gets each quad's first triangle, `pair` whether it has a
+// second (hit where u + v > 1).
+struct EmbreeQuads {
+  std::vector<uint32_t> indices, first;
+  std::vector<bool> pair;
+};
+EmbreeQuads PairTriangles(std::span<const uint32_t> indices);
+
 }  // namespace vistream::visibility
