@@ -539,7 +539,7 @@ class Worker {
         }
         case Distribution::kTwoPointMutation: {
           const Candidate& c = candidates_[i];
-          const double len = glm::length(c.to - c.from);  // positive: see add_candidate in RunBatch
+          const double len = glm::length(c.to - c.from);  // positive: see add_candidate in Emit
           const glm::dvec3 u = (c.to - c.from) / len;
           glm::dvec3 b1, b2;
           Basis(u, &b1, &b2);
@@ -739,7 +739,12 @@ class Worker {
                             (smp.rev != kNoObject && !pvs_.Contains(smp.origin_cell, smp.rev));
     }
     uint32_t c_fwd = 0, c_rev = 0;
+    double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
+    bool walked = false;
     VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+      if (!walked) t_first = t;
+      t_last = t;
+      walked = true;
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
       if (counts_ != nullptr) ++counts_->cells[cell];
       if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
@@ -753,46 +758,27 @@ class Worker {
     });
     out.contribution += c_fwd + c_rev;
     if (options_.strategy != SamplingStrategy::kAgvs) return;
-    // Contributing ends become mutation candidates: the hit point, and the other end (a hit,
-    // or where the segment leaves the view space).
-    auto other_end = [&](bool fwd_end, glm::dvec3* p, double* r_end) {
-      const double t = fwd_end ? -smp.t_rev : smp.t_fwd;
-      const ObjectId o = fwd_end ? smp.rev : smp.fwd;
-      if (o != kNoObject) {
-        *p = smp.origin + t * smp.dir;
-        *r_end = s_.objects[o].radius;
-        return;
+    // Contributing ends become mutation candidates: from the other end (a hit, or where the
+    // segment leaves the view space) to the hit point.
+    auto add_candidate = [&](bool fwd_end) {
+      Candidate cand;
+      cand.object = fwd_end ? smp.fwd : smp.rev;
+      cand.to = smp.origin + (fwd_end ? smp.t_fwd : -smp.t_rev) * smp.dir;
+      cand.r_to = s_.objects[cand.object].radius;
+      const ObjectId other = fwd_end ? smp.rev : smp.fwd;
+      if (other != kNoObject) {
+        cand.from = smp.origin + (fwd_end ? -smp.t_rev : smp.t_fwd) * smp.dir;
+        cand.r_from = s_.objects[other].radius;
+      } else {
+        cand.from = smp.origin + (fwd_end ? t_first : t_last) * smp.dir;
+        cand.r_from = s_.cell_radius;
       }
-      double last = 0.0;
-      bool any = false;
-      VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId, double tc) {
-        if (!any || (fwd_end ? tc < last : tc > last)) last = tc;
-        any = true;
-      });
-      *p = smp.origin + last * smp.dir;
-      *r_end = s_.cell_radius;
-    };
-    // A segment that only touches the view space at a surface point gives no direction.
-    auto add_candidate = [&](const Candidate& cand) {
+      // A segment that only touches the view space at a surface point gives no direction.
       const double len = glm::length(cand.to - cand.from);
       if (len > 1e-6 && std::isfinite(len)) out.candidates.push_back(cand);
     };
-    if (c_fwd > 0 && smp.fwd != kNoObject) {
-      Candidate cand;
-      other_end(true, &cand.from, &cand.r_from);
-      cand.to = smp.origin + smp.t_fwd * smp.dir;
-      cand.r_to = s_.objects[smp.fwd].radius;
-      cand.object = smp.fwd;
-      add_candidate(cand);
-    }
-    if (c_rev > 0 && smp.rev != kNoObject) {
-      Candidate cand;
-      other_end(false, &cand.from, &cand.r_from);
-      cand.to = smp.origin - smp.t_rev * smp.dir;
-      cand.r_to = s_.objects[smp.rev].radius;
-      cand.object = smp.rev;
-      add_candidate(cand);
-    }
+    if (c_fwd > 0) add_candidate(true);
+    if (c_rev > 0) add_candidate(false);
   }
 
   // Where `cell`, if it keeps witnesses, would see the object at parameter t_obj: the ray from
