@@ -187,6 +187,9 @@ struct PositionHash {
   }
 };
 
+// A directed edge between welded corners.
+uint64_t EdgeKey(uint32_t from, uint32_t to) { return uint64_t{from} << 32 | to; }
+
 uint32_t Find(std::vector<uint32_t>& parent, uint32_t x) {
   while (parent[x] != x) x = parent[x] = parent[parent[x]];
   return x;
@@ -218,34 +221,31 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
     for (int k = 0; k < 3; ++k) tri[t][k] = weld[indices[3 * t + k]];
     degenerate[t] = tri[t][0] == tri[t][1] || tri[t][1] == tri[t][2] || tri[t][2] == tri[t][0];
   }
-  // Directed edges, sorted, to count each edge and its twin.
-  std::vector<uint64_t> directed;
+  // Directed edges with their triangles, sorted, to find each edge's triangles and its twin's.
+  std::vector<std::pair<uint64_t, uint32_t>> directed;
   directed.reserve(3 * n);
   for (size_t t = 0; t < n; ++t) {
     if (degenerate[t]) continue;
-    for (int k = 0; k < 3; ++k) directed.push_back(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3]);
+    for (int k = 0; k < 3; ++k) directed.emplace_back(EdgeKey(tri[t][k], tri[t][(k + 1) % 3]), static_cast<uint32_t>(t));
   }
   std::sort(directed.begin(), directed.end());
-  auto count = [&](uint32_t from, uint32_t to) {
-    const uint64_t key = uint64_t{from} << 32 | to;
-    const auto [lo, hi] = std::equal_range(directed.begin(), directed.end(), key);
-    return hi - lo;
+  auto with = [&](uint32_t from, uint32_t to) {
+    const auto key_less = [](const std::pair<uint64_t, uint32_t>& a, const std::pair<uint64_t, uint32_t>& b) {
+      return a.first < b.first;
+    };
+    return std::equal_range(directed.begin(), directed.end(), std::pair<uint64_t, uint32_t>{EdgeKey(from, to), 0},
+                            key_less);
   };
   // Join triangles across edges that exactly two of them share, in opposite directions.
   std::vector<uint32_t> parent(n);
   std::iota(parent.begin(), parent.end(), 0u);
-  std::unordered_map<uint64_t, uint32_t> first_with;  // directed edge -> a triangle with it
-  for (size_t t = 0; t < n; ++t) {
-    if (degenerate[t]) continue;
-    for (int k = 0; k < 3; ++k) first_with.emplace(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3], t);
-  }
-  for (size_t t = 0; t < n; ++t) {
-    if (degenerate[t]) continue;
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t u = tri[t][k], v = tri[t][(k + 1) % 3];
-      if (u > v || count(u, v) != 1 || count(v, u) != 1) continue;
-      parent[Find(parent, static_cast<uint32_t>(t))] = Find(parent, first_with.at(uint64_t{v} << 32 | u));
-    }
+  for (const auto& [key, t] : directed) {
+    const uint32_t u = static_cast<uint32_t>(key >> 32), v = static_cast<uint32_t>(key);
+    if (u > v) continue;  // each undirected edge once
+    const auto [lo, hi] = with(u, v);
+    const auto [tlo, thi] = with(v, u);
+    if (hi - lo != 1 || thi - tlo != 1) continue;
+    parent[Find(parent, t)] = Find(parent, tlo->second);
   }
   std::unordered_map<uint32_t, std::vector<uint32_t>> groups;
   for (size_t t = 0; t < n; ++t) {
@@ -282,7 +282,7 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
     // Closed: every directed edge of the group once, and its twin once.
     std::vector<uint64_t> own;
     for (uint32_t t : members) {
-      for (int k = 0; k < 3; ++k) own.push_back(uint64_t{tri[t][k]} << 32 | tri[t][(k + 1) % 3]);
+      for (int k = 0; k < 3; ++k) own.push_back(EdgeKey(tri[t][k], tri[t][(k + 1) % 3]));
     }
     std::sort(own.begin(), own.end());
     bool closed = members.size() >= 4 && std::adjacent_find(own.begin(), own.end()) == own.end();
