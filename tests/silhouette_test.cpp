@@ -88,8 +88,8 @@ TEST(Silhouette, BoxSeenHeadOnHasItsEdgeWhereTheAnglesSay) {
 // ends; the silhouette has meeting rays just below it and missing rays just above. Fans start
 // at street level in front of the buildings, or (`from_surface`) on their surface, where the
 // pieces' crossings reach behind the fan's point and their triangles must answer.
-void CheckAgainstRayCasting(const scenes::Mesh& m, bool from_surface, int fans, scenes::Rng& rng,
-                            int* found, int* checked) {
+void CheckFans(const scenes::Mesh& m, bool from_surface, int fans, scenes::Rng& rng, int* found,
+               int* checked) {
   const std::vector<EdgeTriangle> raw = Triangles(m);
   const FanSurface tris(m.positions, m.indices);
   ASSERT_EQ(tris.triangles(), raw.size());
@@ -154,6 +154,12 @@ void CheckAgainstRayCasting(const scenes::Mesh& m, bool from_surface, int fans, 
   }
 }
 
+// 30 fans from the street, then 10 from the surface.
+void CheckAgainstRayCasting(const scenes::Mesh& m, scenes::Rng& rng, int* found, int* checked) {
+  CheckFans(m, /*from_surface=*/false, 30, rng, found, checked);
+  CheckFans(m, /*from_surface=*/true, 10, rng, found, checked);
+}
+
 std::vector<glm::dvec2> ConvexFootprint(scenes::Rng& rng) {
   const double x = rng.Uniform(30, 60), y = rng.Uniform(-20, 20), w = rng.Uniform(3, 15), dp = rng.Uniform(3, 15);
   std::vector<glm::dvec2> f;
@@ -178,8 +184,7 @@ TEST(Silhouette, AgreesWithRayCastingOnRandomBuildings) {
     }
     EXPECT_EQ(FanSurface(m.positions, m.indices).pieces(), static_cast<size_t>(parts)) << "scene " << scene;
     SCOPED_TRACE(testing::Message() << "scene " << scene);
-    CheckAgainstRayCasting(m, /*from_surface=*/false, 30, rng, &found, &checked);
-    CheckAgainstRayCasting(m, /*from_surface=*/true, 10, rng, &found, &checked);
+    CheckAgainstRayCasting(m, rng, &found, &checked);
   }
   // The random fans did find silhouettes, and the oracle compared many rays.
   EXPECT_GT(found, 600);
@@ -203,8 +208,7 @@ TEST(Silhouette, TerraceHousesAreOnePieceEach) {
     }
     EXPECT_EQ(FanSurface(m.positions, m.indices).pieces(), static_cast<size_t>(houses));
     SCOPED_TRACE(testing::Message() << "terrace " << scene);
-    CheckAgainstRayCasting(m, false, 30, rng, &found, &checked);
-    CheckAgainstRayCasting(m, true, 10, rng, &found, &checked);
+    CheckAgainstRayCasting(m, rng, &found, &checked);
   }
   EXPECT_GT(found, 100);
 }
@@ -231,8 +235,7 @@ TEST(Silhouette, NonConvexBuildingsAreReadByTriangles) {
     EXPECT_EQ(surface.pieces(), 0u);
     EXPECT_EQ(surface.loose_count(), surface.triangles());
     SCOPED_TRACE(testing::Message() << "footprint " << scene);
-    CheckAgainstRayCasting(m, false, 30, rng, &found, &checked);
-    CheckAgainstRayCasting(m, true, 10, rng, &found, &checked);
+    CheckAgainstRayCasting(m, rng, &found, &checked);
   }
   EXPECT_GT(found, 200);
 }
