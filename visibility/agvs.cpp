@@ -43,11 +43,31 @@ uint64_t Mix(uint64_t a, uint64_t b) {
   return z ^ (z >> 31);
 }
 
+// A uniform point (u, v) of the open unit disk without its centre, and s = u² + v²: by
+// rejection from the square (a try is kept with chance π/4), which costs less than the sine
+// and cosine of an angle.
+struct DiskPoint {
+  double u, v, s;
+};
+DiskPoint UniformDiskPoint(Rng& rng) {
+  for (;;) {
+    const double u = 2.0 * rng.Uniform() - 1.0, v = 2.0 * rng.Uniform() - 1.0, s = u * u + v * v;
+    if (s < 1.0 && s > 0.0) return {u, v, s};
+  }
+}
+
+// A uniform direction of the plane: (cos φ, sin φ) for a uniform angle φ.
+std::pair<double, double> UniformCircle(Rng& rng) {
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double r = 1.0 / std::sqrt(p.s);
+  return {p.u * r, p.v * r};
+}
+
+// A uniform direction of space (Marsaglia 1972: z = 1 - 2s is uniform in (-1, 1)).
 glm::dvec3 UniformDirection(Rng& rng) {
-  const double phi = 2.0 * std::numbers::pi * rng.Uniform();
-  const double cos_t = 1.0 - 2.0 * rng.Uniform();
-  const double sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
-  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double w = 2.0 * std::sqrt(1.0 - p.s);
+  return {p.u * w, p.v * w, 1.0 - 2.0 * p.s};
 }
 
 // Two unit vectors completing unit `n` to an orthonormal basis (Duff et al. 2017: no square
@@ -59,11 +79,11 @@ void Basis(const glm::dvec3& n, glm::dvec3* b1, glm::dvec3* b2) {
   *b2 = glm::dvec3(b, sign + n.y * n.y * a, -n.y);
 }
 
-// Two independent standard normal numbers (Box-Muller: both of its outputs).
+// Two independent standard normal numbers (Marsaglia's polar method: both of its outputs).
 std::pair<double, double> Gaussians(Rng& rng) {
-  const double r = std::sqrt(-2.0 * std::log(1.0 - rng.Uniform()));  // 1 - U in (0, 1]
-  const double phi = 2.0 * std::numbers::pi * rng.Uniform();
-  return {r * std::cos(phi), r * std::sin(phi)};
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double f = std::sqrt(-2.0 * std::log(p.s) / p.s);
+  return {p.u * f, p.v * f};
 }
 
 double BoxRadius(const Aabb& b) { return 0.5 * glm::length(b.Extent()); }
@@ -512,12 +532,12 @@ class Worker {
           const glm::dvec3 p = SurfacePoint(rng, &o, &n);
           glm::dvec3 b1, b2;
           Basis(n, &b1, &b2);
-          const double phi = 2.0 * std::numbers::pi * rng.Uniform();
+          const auto [cos_phi, sin_phi] = UniformCircle(rng);
           const double cos_t = std::sqrt(rng.Uniform()), sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
           Sample smp;
           smp.dist = plan.dist;
           smp.origin = p;
-          smp.dir = sin_t * std::cos(phi) * b1 + sin_t * std::sin(phi) * b2 + cos_t * n;
+          smp.dir = sin_t * cos_phi * b1 + sin_t * sin_phi * b2 + cos_t * n;
           const Hit h = Cast(p, smp.dir, kSurfaceOffset);
           smp.valid = !h.back;
           smp.t_fwd = h.t;
@@ -695,8 +715,8 @@ class Worker {
     if (!(len > 0.0) || object >= s_.objects.size()) return to;
     glm::dvec3 b1, b2;
     Basis(seg / len, &b1, &b2);
-    const double phi = 2.0 * std::numbers::pi * rng.Uniform();
-    const glm::dvec3 d = std::cos(phi) * b1 + std::sin(phi) * b2;
+    const auto [cos_phi, sin_phi] = UniformCircle(rng);
+    const glm::dvec3 d = cos_phi * b1 + sin_phi * b2;
     const glm::dvec3 far = to + radius * d;
     if (!s_.objects[object].alive || !(radius > 0.0)) return far;
     ++out_->silhouette_searches;
