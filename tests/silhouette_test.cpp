@@ -213,6 +213,30 @@ TEST(Silhouette, TerraceHousesAreOnePieceEach) {
   EXPECT_GT(found, 100);
 }
 
+// A piece keeps the edges where two of its faces meet, not the diagonals that split a face
+// into triangles: an n-sided prism has 3n (its walls' diagonals and its roof's and floor's
+// fans are dropped), and each is still read as ray casting reads it.
+TEST(Silhouette, PiecesKeepOnlyTheEdgesBetweenFaces) {
+  scenes::Rng rng(11);
+  for (int sides = 3; sides <= 8; ++sides) {
+    std::vector<glm::dvec2> footprint;
+    for (int k = 0; k < sides; ++k) {
+      const double a = 2.0 * std::numbers::pi * k / sides;
+      footprint.emplace_back(40.0 + 8.0 * std::cos(a), 5.0 + 8.0 * std::sin(a));
+    }
+    scenes::Mesh m;
+    scenes::AppendConvexPrism(footprint, 0.0, 12.0, &m);
+    const FanSurface surface(m.positions, m.indices);
+    ASSERT_EQ(surface.pieces(), 1u) << sides << " sides";
+    EXPECT_EQ(surface.piece_list()[0].edge_count, static_cast<uint32_t>(3 * sides)) << sides << " sides";
+    EXPECT_GT(surface.triangles(), static_cast<size_t>(2 * sides));  // split faces: there were diagonals
+    int found = 0, checked = 0;
+    SCOPED_TRACE(testing::Message() << sides << " sides");
+    CheckAgainstRayCasting(m, rng, &found, &checked);
+    EXPECT_GT(found, 0);
+  }
+}
+
 // L-shaped and courtyard footprints are closed but not convex: their triangles are read one
 // by one, and agree with the oracle too.
 TEST(Silhouette, NonConvexBuildingsAreReadByTriangles) {

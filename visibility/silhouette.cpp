@@ -280,15 +280,20 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
   for (uint32_t root : roots) {
     const std::vector<uint32_t>& members = groups.at(root);
     // Closed: every directed edge of the group once, and its twin once.
-    std::vector<uint64_t> own;
+    std::vector<std::pair<uint64_t, uint32_t>> own;  // directed edges with their triangles
     for (uint32_t t : members) {
-      for (int k = 0; k < 3; ++k) own.push_back(EdgeKey(tri[t][k], tri[t][(k + 1) % 3]));
+      for (int k = 0; k < 3; ++k) own.emplace_back(EdgeKey(tri[t][k], tri[t][(k + 1) % 3]), t);
     }
     std::sort(own.begin(), own.end());
-    bool closed = members.size() >= 4 && std::adjacent_find(own.begin(), own.end()) == own.end();
+    const auto same_edge = [](const auto& a, const auto& b) { return a.first == b.first; };
+    const auto twin_of = [&](uint64_t key) {
+      const uint64_t twin = key << 32 | key >> 32;
+      return std::lower_bound(own.begin(), own.end(), std::pair<uint64_t, uint32_t>{twin, 0});
+    };
+    bool closed = members.size() >= 4 && std::adjacent_find(own.begin(), own.end(), same_edge) == own.end();
     for (size_t e = 0; closed && e < own.size(); ++e) {
-      const uint64_t twin = own[e] << 32 | own[e] >> 32;
-      closed = std::binary_search(own.begin(), own.end(), twin);
+      const auto twin = twin_of(own[e].first);
+      closed = twin != own.end() && twin->first == (own[e].first << 32 | own[e].first >> 32);
     }
     std::vector<uint32_t> corner;  // welded ids
     for (uint32_t t : members) corner.insert(corner.end(), tri[t].begin(), tri[t].end());
@@ -335,10 +340,29 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
     auto local = [&](uint32_t id) {
       return static_cast<uint8_t>(std::lower_bound(corner.begin(), corner.end(), id) - corner.begin());
     };
+    // tri[t]'s corner off edge (u, v).
+    const auto opposite = [&](uint32_t t, uint32_t u, uint32_t v) {
+      for (uint32_t c : tri[t]) {
+        if (c != u && c != v) return c;
+      }
+      return tri[t][0];
+    };
+    // The piece's edges, each once, but for those inside a face (between two triangles of one
+    // plane, as a quad's diagonal): the plane crosses a face in a segment whose ends lie on the
+    // face's border, so a crossing inside it is never the smallest or the largest λ.
     p.edge = static_cast<uint32_t>(edges_.size());
-    for (uint64_t e : own) {
+    for (const auto& [e, t] : own) {
       const uint32_t u = static_cast<uint32_t>(e >> 32), v = static_cast<uint32_t>(e);
-      if (u < v) edges_.emplace_back(local(u), local(v));  // each undirected edge once
+      if (u > v) continue;
+      const glm::dvec3 a(welded[u]), b(welded[v]), c(welded[opposite(t, u, v)]);
+      const glm::dvec3 normal = glm::cross(b - a, c - a);
+      const glm::dvec3 w(welded[opposite(twin_of(e)->second, u, v)]);
+      const double len = glm::length(normal);
+      // Slivers (no plane) keep their edges.
+      const bool inside_face = len > 0.0 && glm::length(glm::cross(b - a, w - a)) > 0.0 &&
+                               std::abs(glm::dot(w - a, normal)) <= tol * len;
+      if (inside_face) continue;
+      edges_.emplace_back(local(u), local(v));
     }
     p.edge_count = static_cast<uint32_t>(edges_.size()) - p.edge;
     p.block = append_blocks(members);
