@@ -286,14 +286,14 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
     }
     std::sort(own.begin(), own.end());
     const auto same_edge = [](const auto& a, const auto& b) { return a.first == b.first; };
+    const auto twin_key = [](uint64_t key) { return key << 32 | key >> 32; };
     const auto twin_of = [&](uint64_t key) {
-      const uint64_t twin = key << 32 | key >> 32;
-      return std::lower_bound(own.begin(), own.end(), std::pair<uint64_t, uint32_t>{twin, 0});
+      return std::lower_bound(own.begin(), own.end(), std::pair<uint64_t, uint32_t>{twin_key(key), 0});
     };
     bool closed = members.size() >= 4 && std::adjacent_find(own.begin(), own.end(), same_edge) == own.end();
     for (size_t e = 0; closed && e < own.size(); ++e) {
       const auto twin = twin_of(own[e].first);
-      closed = twin != own.end() && twin->first == (own[e].first << 32 | own[e].first >> 32);
+      closed = twin != own.end() && twin->first == twin_key(own[e].first);
     }
     std::vector<uint32_t> corner;  // welded ids
     for (uint32_t t : members) corner.insert(corner.end(), tri[t].begin(), tri[t].end());
