@@ -162,8 +162,6 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   hi_.clear();
   for (uint32_t id : gathered_) {
     const OccluderPiece& piece = pieces[id];
-    double lo, hi;
-    if (!pr.BlockingStrip(piece.height, &lo, &hi)) continue;
     const size_t begin = kept_points_.size();
     double p_min = INFINITY, p_max = -INFINITY;
     for (const glm::dvec2& w : piece.points) {
@@ -171,6 +169,11 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       kept_points_.push_back(p);
       p_min = std::min(p_min, p.x);
       p_max = std::max(p_max, p.x);
+    }
+    double lo, hi;
+    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) {
+      kept_points_.resize(begin);
+      continue;
     }
     if (p_min < lo || p_max > hi) {
       planar_.assign(kept_points_.begin() + static_cast<ptrdiff_t>(begin), kept_points_.end());
@@ -341,13 +344,19 @@ bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
     const OccluderPiece& piece = pieces[id];
     if (piece.height <= t_min) return false;
+    planar_.clear();
+    double p_min = INFINITY, p_max = -INFINITY;
+    for (const glm::dvec2& w : piece.points) {
+      planar_.push_back(pr.PlanarFromScene(w));
+      p_min = std::min(p_min, planar_.back().x);
+      p_max = std::max(p_max, planar_.back().x);
+    }
+    // The same pieces as the blockers: one on a face of the slab stops nothing.
     double lo, hi;
-    if (!pr.BlockingStrip(piece.height, &lo, &hi)) return false;
+    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) return false;
     // The ray's part where the piece rises above T.
     const double k = (q2 - q1) / (pr.x2 - pr.x1);
     const glm::dvec2 a(lo, q1 + k * (lo - pr.x1)), b(hi, q1 + k * (hi - pr.x1));
-    planar_.clear();
-    for (const glm::dvec2& w : piece.points) planar_.push_back(pr.PlanarFromScene(w));
     return SegmentMeetsPiece(a, b, planar_);
   });
   return !blocked;

@@ -63,14 +63,28 @@ struct PlanarProblem {
   }
   // The lowest point of T over the slab: prisms no taller block nothing.
   double CeilingMin() const { return std::min(alpha + beta * x1, alpha + beta * x2); }
-  // The part [lo, hi] of the slab where a prism of `height` rises above T; false when none.
+  // The part [lo, hi] of the slab where a prism of `height` reaches T; false when that part
+  // has no length (a prism that reaches T only at a face of the slab blocks nothing there).
   bool BlockingStrip(double height, double* lo, double* hi) const {
     *lo = x1;
     *hi = x2;
     if (beta > 0) *hi = std::min(*hi, (height - alpha) / beta);
     else if (beta < 0) *lo = std::max(*lo, (height - alpha) / beta);
     else if (height < alpha) return false;
-    return *lo <= *hi;
+    return *lo < *hi;
+  }
+  // Whether a piece whose points span [p_min, p_max] along p, standing to `height`, blocks a
+  // set of rays with an area, and the strip [lo, hi] it blocks in. A ray of RS runs in the
+  // open slab x1 < p < x2 and ends on the faces, so only a piece's interior there stops it:
+  // a piece (or what is left of it in the strip) that lies on a face of the slab, such as a
+  // wall of one of B's own objects on B's face, has no interior in the slab and stops no ray
+  // that ends on it; it must not become a zero-width blocker. A segment piece (a wall of zero
+  // thickness) across p blocks if it crosses the open strip; one along q (a single p) if it
+  // stands strictly inside the slab.
+  bool PieceStrip(double height, double p_min, double p_max, double* lo, double* hi) const {
+    if (!BlockingStrip(height, lo, hi)) return false;
+    if (p_min < p_max) return std::max(p_min, *lo) < std::min(p_max, *hi);
+    return p_min >= *lo && p_min <= *hi && p_min > x1 && p_min < x2;
   }
 };
 

@@ -70,6 +70,43 @@ std::vector<std::array<int, 3>> Triangulate(const std::vector<glm::dvec2>& poly)
   return tris;
 }
 
+// Clips a convex piece (counter-clockwise polygon, or a segment) to the closed box [lo, hi]
+// in xy; false when no part with an interior (a length, for a segment) is left. Points on a
+// clipping line get that line's coordinate exactly, so a clipped wall lies exactly on the
+// box's face.
+bool ClipToBox(const glm::dvec2& lo, const glm::dvec2& hi, std::vector<glm::dvec2>* points) {
+  auto& pts = *points;
+  bool inside = true;
+  for (const glm::dvec2& p : pts) inside &= p.x >= lo.x && p.y >= lo.y && p.x <= hi.x && p.y <= hi.y;
+  if (inside) return true;
+  // One half-plane at a time: coordinate `axis` on the side `sign` of `bound`.
+  std::vector<glm::dvec2> out;
+  auto clip = [&](int axis, double bound, double sign) {
+    out.clear();
+    const size_t n = pts.size();
+    const bool segment = n == 2;
+    for (size_t i = 0; i < n; ++i) {
+      const glm::dvec2 &a = pts[i], &b = pts[(i + 1) % n];
+      const bool ina = sign * (a[axis] - bound) >= 0, inb = sign * (b[axis] - bound) >= 0;
+      if (ina) out.push_back(a);
+      if (ina != inb && !(segment && i == 1)) {
+        const double t = (bound - a[axis]) / (b[axis] - a[axis]);
+        glm::dvec2 x = a + t * (b - a);
+        x[axis] = bound;
+        out.push_back(x);
+      }
+    }
+    pts.swap(out);
+  };
+  for (int axis = 0; axis < 2 && !pts.empty(); ++axis) {
+    clip(axis, lo[axis], 1.0);
+    if (!pts.empty()) clip(axis, hi[axis], -1.0);
+  }
+  pts = Distinct(pts);
+  if (pts.size() == 2) return true;
+  return pts.size() >= 3 && scenes::SignedArea(pts) > 0.0;
+}
+
 void Boxes(OccluderPiece* p) {
   p->box_min = glm::dvec2(INFINITY);
   p->box_max = glm::dvec2(-INFINITY);
@@ -151,11 +188,23 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     const scenes::Occluder25D& oc = scene.occluders[oi];
     if (!(oc.height > 0.0)) continue;
     std::vector<glm::dvec2> fp = Distinct(oc.footprint);
-    if (fp.empty()) continue;
+    // A point blocks no set of rays with an area: nothing to add.
+    if (fp.size() < 2) continue;
+    // The occluder lies inside its object's solid, so inside its box; the box is of the
+    // single-precision mesh, which rounding may leave a hair inside the double footprint.
+    // Clip to it, so a wall on a kd node's face is exactly on it and never reaches into the
+    // slab before the node (an object with no box keeps its occluders as they are).
+    const scenes::Aabb* box = nullptr;
+    if (oc.object < scene.objects.size() && !scene.objects[oc.object].bounds.Empty()) {
+      box = &scene.objects[oc.object].bounds;
+    }
+    const double height = box != nullptr ? std::min(oc.height, box->max.z) : oc.height;
+    if (!(height > 0.0)) continue;
     auto add = [&](std::vector<glm::dvec2> pts) {
+      if (box != nullptr && !ClipToBox(glm::dvec2(box->min), glm::dvec2(box->max), &pts)) return;
       OccluderPiece p;
       p.points = std::move(pts);
-      p.height = oc.height;
+      p.height = height;
       p.object = oc.object;
       Boxes(&p);
       set.pieces_.push_back(std::move(p));
@@ -171,8 +220,6 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
       for (const auto& t : tris) add({fp[t[0]], fp[t[1]], fp[t[2]]});
     } else {
       // Zero area or not simple: the boundary as segments, joined at their shared vertices.
-      // (A point is a segment of length zero.)
-      if (fp.size() == 1) fp.push_back(fp[0]);
       for (size_t i = 0; i < fp.size(); ++i) {
         if (fp.size() == 2 && i == 1) break;
         add({fp[i], fp[(i + 1) % fp.size()]});
