@@ -17,6 +17,7 @@
 #include "scenes/progress.h"
 #include "scenes/random.h"
 #include "visibility/bytes.h"
+#include "visibility/coincident_faces.h"
 #include "visibility/kdtree.h"
 #include "visibility/parallel.h"
 #include "visibility/pvs_file.h"
@@ -33,6 +34,9 @@ constexpr uint32_t kChunk = 512;  // samples per chunk: one distribution, one ra
 constexpr ObjectId kNoObject = std::numeric_limits<ObjectId>::max();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kSurfaceOffset = 1e-3;  // metres a ray leaves a surface point before it counts
+// Metres within which two faces coincide, and a hit lies on a coincident face: the float
+// meshes' rounding at 20 km is 1 mm.
+constexpr double kCoincidentTolerance = 1e-3;
 constexpr uint32_t kMaxMutationCount = 63;
 
 uint64_t Mix(uint64_t a, uint64_t b) {
@@ -334,13 +338,42 @@ struct GlobalSampler::Impl {
 
   KdTree tree;  // over the boxes of live objects, for the object-space filter
 
-  // Rebuilt after every edit, never lazily, so that const calls stay thread-safe.
-  void RebuildTree() {
+  // Faces that lie on a face of opposite orientation (party walls, a tier's floor on the roof
+  // below it), and per object whether it has one. A ray reaches such a face only from inside
+  // the solid behind its partner, but Embree may report the partner's front face: the ray's
+  // sample is discarded like one that hits a back face.
+  CoincidentFaces coincident;
+  std::vector<uint8_t> has_coincident;
+
+  // The surface table, the kd-tree and the coincident faces, rebuilt after every edit, never
+  // lazily, so that const calls stay thread-safe.
+  void Rebuild() {
+    RebuildSurface();
     std::vector<Aabb> boxes(objects.size());
+    std::vector<MeshView> meshes(objects.size());
     for (ObjectId o = 0; o < objects.size(); ++o) {
-      if (objects[o].alive) boxes[o] = objects[o].bounds;
+      if (!objects[o].alive) continue;
+      boxes[o] = objects[o].bounds;
+      meshes[o] = MeshView{objects[o].verts, objects[o].indices};
     }
     tree = KdTree::Build(boxes);
+    coincident = FindCoincidentFaces(meshes, kCoincidentTolerance);
+    has_coincident.assign(objects.size(), 0);
+    for (ObjectId o = 0; o < objects.size(); ++o) has_coincident[o] = !coincident.of_mesh[o].empty();
+  }
+
+  // Whether frame-relative point `p` on triangle `triangle` of `object` also lies on a face of
+  // opposite orientation lying on that triangle.
+  bool OnCoincidentFace(ObjectId object, uint32_t triangle, const glm::dvec3& p) const {
+    for (const CoincidentFaces::Entry& e : coincident.Partners(object, triangle)) {
+      const Object& o = objects[e.partner.mesh];
+      const uint32_t* t = &o.indices[3 * e.partner.triangle];
+      if (PointOnTriangle(p, glm::dvec3(o.verts[t[0]]), glm::dvec3(o.verts[t[1]]), glm::dvec3(o.verts[t[2]]),
+                          kCoincidentTolerance)) {
+        return true;
+      }
+    }
+    return false;
   }
 
   ~Impl() {
@@ -672,6 +705,11 @@ class Worker {
     // Embree's geometry normal is cross(v1 - v0, v2 - v0), as the meshes' outward normals are
     // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
     h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
+    if (options_.backface_rule && !h.back && s_.has_coincident[h.object]) {
+      const Impl::Object& o = s_.objects[h.object];
+      const uint32_t triangle = o.quad_first[h.quad] + (o.quad_pair[h.quad] && h.second ? 1 : 0);
+      h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
+    }
     return h;
   }
 
@@ -942,8 +980,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   if (const RTCError err = rtcGetDeviceError(m.device); err != RTC_ERROR_NONE) {
     return absl::InternalError(absl::StrCat("Embree: building the scene failed (error ", err, ")"));
   }
-  m.RebuildSurface();
-  m.RebuildTree();
+  m.Rebuild();
   s->pvs_ = GlobalPvs(grid.CellCount(), scene.objects.size());
   m.cell_samples.assign(grid.CellCount(), 0);
   m.object_hits.assign(scene.objects.size(), 0);
@@ -1249,8 +1286,7 @@ absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
     }
   }
   m.buffer.Forget(id);
-  m.RebuildSurface();
-  m.RebuildTree();
+  m.Rebuild();
   m.Commit();
   return absl::OkStatus();
 }
@@ -1286,8 +1322,7 @@ absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh&
   pvs_.ResizeObjects(m.objects.size());
   m.object_hits.push_back(0);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
-  m.RebuildSurface();
-  m.RebuildTree();
+  m.Rebuild();
   m.Commit();
   return id;
 }
@@ -1309,8 +1344,7 @@ absl::Status GlobalSampler::MoveObject(scenes::ObjectId id, const glm::dvec3& of
   o.alive = true;
   if (!o.indices.empty()) m.Attach(id);
   RemovePenumbra(m, grid_, &pvs_, &stats_, id);
-  m.RebuildSurface();
-  m.RebuildTree();
+  m.Rebuild();
   m.Commit();
   return absl::OkStatus();
 }
