@@ -236,7 +236,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   scene->require_subcommand(1);
 
   auto gen = std::make_shared<GenerateArgs>();
-  CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london)");
+  CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london, streets)");
   g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
   g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)");
   g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required();

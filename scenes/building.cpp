@@ -14,9 +14,10 @@ double Snap(double x) { return std::round(x * 256.0) / 256.0; }
 
 }  // namespace
 
-ObjectId AddBuilding(Scene* scene, std::string name, const std::vector<Prism>& input) {
+ObjectId AddBuilding(Scene* scene, std::string name, const std::vector<Prism>& input, bool snap) {
   std::vector<Prism> prisms = input;
   for (Prism& p : prisms) {
+    if (!snap) break;
     for (glm::dvec2& q : p.footprint) q = glm::dvec2(Snap(q.x), Snap(q.y));
     p.z0 = Snap(p.z0);
     p.z1 = Snap(p.z1);

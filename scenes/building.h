@@ -20,8 +20,10 @@ struct Prism {
 };
 
 // Adds one object made of `prisms` (closed, flat-shaded boxes) and one occluder per prism,
-// from the ground to the prism's top, all coordinates snapped to 1/256 m so that they are exact in float. Returns the id.
-ObjectId AddBuilding(Scene* scene, std::string name, const std::vector<Prism>& prisms);
+// from the ground to the prism's top. With `snap`, every coordinate is first snapped to
+// 1/256 m so that it is exact in float; without, the float mesh rounds the double occluders
+// (as imported data may). Returns the id.
+ObjectId AddBuilding(Scene* scene, std::string name, const std::vector<Prism>& prisms, bool snap = true);
 
 // The four corners, counter-clockwise, of the rectangle [u0,u1] x [v0,v1] in the frame with
 // origin `o` and orthonormal axes `u`, `v` (v = u rotated by +90 degrees).

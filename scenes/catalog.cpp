@@ -102,13 +102,18 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
   if (r.Has("generator")) {
     s.kind = SceneSource::Kind::kGenerator;
     s.generator = r.String("generator");
-    if (s.generator != "city1" && s.generator != "city2" && s.generator != "london") {
-      r.Fail(r.Key("generator"), absl::StrCat("unknown generator '", s.generator, "' (known: city1, city2, london)"));
+    if (s.generator != "city1" && s.generator != "city2" && s.generator != "london" && s.generator != "streets") {
+      r.Fail(r.Key("generator"),
+             absl::StrCat("unknown generator '", s.generator, "' (known: city1, city2, london, streets)"));
     }
     if (s.generator == "london") {
       r.Allow({"generator", "seed", "width_m", "depth_m"});
       s.width_m = r.Number("width_m", 200.0, 100000.0, 0.0);
       s.depth_m = r.Number("depth_m", 200.0, 100000.0, 0.0);
+    } else if (s.generator == "streets") {
+      r.Allow({"generator", "seed", "width_m", "depth_m"});
+      s.width_m = r.Number("width_m", 100.0, 5000.0, 0.0);
+      s.depth_m = r.Number("depth_m", 100.0, 5000.0, 0.0);
     } else {
       r.Allow({"generator", "seed"});
     }

@@ -22,7 +22,7 @@ namespace vistream::scenes {
 struct SceneSource {
   enum class Kind { kGenerator, kGltf, kOsm };
   Kind kind = Kind::kGenerator;
-  std::string generator;  // kGenerator: city1, city2, london
+  std::string generator;  // kGenerator: city1, city2, london, streets
   uint64_t seed = 1;
   double width_m = 0.0;  // 0: generator default
   double depth_m = 0.0;

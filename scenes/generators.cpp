@@ -29,8 +29,20 @@ absl::StatusOr<Scene> GenerateNamed(const std::string& name, const GeneratorPara
     if (cancel != nullptr && cancel->load()) return absl::CancelledError("generation cancelled");
     return scene;
   }
+  if (name == "streets") {
+    StreetsOptions o;
+    o.seed = params.seed;
+    if (params.width_m != 0.0) o.width_m = params.width_m;
+    if (params.depth_m != 0.0) o.depth_m = params.depth_m;
+    if (!(o.width_m >= 100.0 && o.width_m <= 5000.0 && o.depth_m >= 100.0 && o.depth_m <= 5000.0)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "generator 'streets': width and depth must be between 100 and 5000 m, got ", o.width_m, " x ",
+          o.depth_m));
+    }
+    return GenerateStreets(o);
+  }
   return absl::InvalidArgumentError(
-      absl::StrCat("unknown generator '", name, "' (known: city1, city2, london)"));
+      absl::StrCat("unknown generator '", name, "' (known: city1, city2, london, streets)"));
 }
 
 }  // namespace vistream::scenes

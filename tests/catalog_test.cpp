@@ -146,7 +146,7 @@ TEST(Catalog, WrongTypesMissingKeysAndBadRangesAreErrors) {
 
 TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
   const std::vector<std::string> names = CatalogNames();
-  for (const char* required : {"default", "city1", "city2", "london", "monaco"}) {
+  for (const char* required : {"default", "city1", "city2", "london", "monaco", "streets"}) {
     EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
   }
   size_t built = 0;
@@ -171,7 +171,7 @@ TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
       }
     }
   }
-  EXPECT_GE(built, 4u);  // the generated ones at least
+  EXPECT_GE(built, 5u);  // the generated ones at least
 }
 
 TEST(Catalog, UnknownNameListsTheKnownOnes) {

@@ -109,6 +109,106 @@ TEST(Generator, NamedGeneratorsCheckTheirParameters) {
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
 }
 
+// Signed overlap of convex footprints f and g along the worst separating axis (their edge
+// normals): positive when their interiors overlap by that much, zero when they only touch,
+// negative when apart.
+double ConvexOverlap(const std::vector<glm::dvec2>& f, const std::vector<glm::dvec2>& g) {
+  double worst = INFINITY;
+  for (const auto* poly : {&f, &g}) {
+    for (size_t k = 0; k < poly->size(); ++k) {
+      const glm::dvec2 e = (*poly)[(k + 1) % poly->size()] - (*poly)[k];
+      const glm::dvec2 n = glm::dvec2(-e.y, e.x) / glm::length(e);
+      double f0 = INFINITY, f1 = -INFINITY, g0 = INFINITY, g1 = -INFINITY;
+      for (const glm::dvec2& p : f) f0 = std::min(f0, glm::dot(n, p)), f1 = std::max(f1, glm::dot(n, p));
+      for (const glm::dvec2& p : g) g0 = std::min(g0, glm::dot(n, p)), g1 = std::max(g1, glm::dot(n, p));
+      worst = std::min(worst, std::min(f1, g1) - std::max(f0, g0));
+    }
+  }
+  return worst;
+}
+
+// Length of the part of edge [a, b] that lies on edge [c, d] (zero unless collinear).
+double SharedLength(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c, const glm::dvec2& d) {
+  const glm::dvec2 u = b - a;
+  const double len = glm::length(u);
+  auto off = [&](const glm::dvec2& p) { return std::abs(u.x * (p.y - a.y) - u.y * (p.x - a.x)) / len; };
+  if (off(c) > 1e-6 || off(d) > 1e-6) return 0.0;
+  const double t0 = glm::dot(c - a, u) / len, t1 = glm::dot(d - a, u) / len;
+  return std::max(0.0, std::min(len, std::max(t0, t1)) - std::max(0.0, std::min(t0, t1)));
+}
+
+TEST(Streets, HousesTouchAlongPartyWallsAndNeverOverlap) {
+  for (bool snap : {true, false}) {
+    StreetsOptions o;
+    o.seed = 12;
+    o.snap = snap;
+    const Scene s = GenerateStreets(o);
+    ASSERT_TRUE(ValidateScene(s, "streets").ok());
+    EXPECT_GT(s.objects.size(), 150u);
+    for (const Object& ob : s.objects) EXPECT_TRUE(Closed(ob.mesh)) << ob.name;
+    // The ground-floor footprints (an object's first occluder) of different buildings: none
+    // overlaps another, and many share walls.
+    std::map<ObjectId, const Occluder25D*> base;
+    for (const Occluder25D& oc : s.occluders) base.emplace(oc.object, &oc);
+    std::map<ObjectId, int> touching;
+    size_t party_walls = 0, skewed_walls = 0;
+    for (auto i = base.begin(); i != base.end(); ++i) {
+      const auto& f = i->second->footprint;
+      for (size_t k = 0; k < f.size(); ++k) {
+        const glm::dvec2 e = f[(k + 1) % f.size()] - f[k];
+        skewed_walls += std::abs(e.x) > 1e-3 && std::abs(e.y) > 1e-3;
+      }
+      for (auto j = std::next(i); j != base.end(); ++j) {
+        const auto& g = j->second->footprint;
+        // Snapping to 1/256 m moves a corner that lies inside a neighbour's turned wall (a shed
+        // against a house, an end house against a row) and the wall's own corners by up to
+        // 3 mm each: the corner may end up to 6 mm inside the wall.
+        ASSERT_LE(ConvexOverlap(f, g), 6e-3) << s.objects[i->first].name << " overlaps " << s.objects[j->first].name;
+        double shared = 0.0;
+        for (size_t a = 0; a < f.size(); ++a) {
+          for (size_t b = 0; b < g.size(); ++b) shared += SharedLength(f[a], f[(a + 1) % f.size()], g[b], g[(b + 1) % g.size()]);
+        }
+        if (shared > 1.0) {
+          ++party_walls;
+          ++touching[i->first];
+          ++touching[j->first];
+        }
+      }
+    }
+    EXPECT_GT(party_walls, 200u);
+    // End houses of closes touch both rows and the terrace behind them.
+    int most = 0;
+    for (const auto& [id, n] : touching) most = std::max(most, n);
+    EXPECT_GE(most, 3);
+    EXPECT_GT(skewed_walls, 100u) << "no block is turned off the axes";
+    // Sheds and kiosks lower than eye level (the viewcells' top is 2.5 m).
+    EXPECT_TRUE(std::any_of(s.objects.begin(), s.objects.end(), [](const Object& ob) { return ob.bounds.max.z < 2.5; }));
+    // Snapped: every coordinate on the 1/256 m grid; unsnapped: most are off it.
+    size_t on_grid = 0, coords = 0;
+    for (const Occluder25D& oc : s.occluders) {
+      for (const glm::dvec2& p : oc.footprint) {
+        coords += 2;
+        on_grid += (p.x * 256 == std::round(p.x * 256)) + (p.y * 256 == std::round(p.y * 256));
+      }
+    }
+    if (snap) {
+      EXPECT_EQ(on_grid, coords);
+    } else {
+      EXPECT_LT(on_grid, coords / 2);
+    }
+  }
+}
+
+TEST(Streets, SameSeedSameDistrictAndTheSizeIsChecked) {
+  const uint64_t a = testing::SceneHash(GenerateStreets({}));
+  EXPECT_EQ(a, testing::SceneHash(GenerateStreets({})));
+  EXPECT_NE(a, testing::SceneHash(GenerateStreets({.seed = 2})));
+  EXPECT_TRUE(GenerateNamed("streets", GeneratorParams{.seed = 3}).ok());
+  absl::StatusOr<Scene> tiny = GenerateNamed("streets", GeneratorParams{.width_m = 50});
+  ASSERT_FALSE(tiny.ok());
+  EXPECT_NE(tiny.status().message().find("between 100 and 5000"), std::string::npos) << tiny.status();
+}
+
 class London : public ::testing::Test {
  protected:
   static void SetUpTestSuite() { scene_ = new Scene(GenerateLondon(LondonOptions{})); }
