@@ -12,6 +12,7 @@
 #include "bench/agvs_common.h"
 #include "bench/cli_common.h"
 #include "bench/commands.h"
+#include "bench/pvs_backend.h"
 #include "scenes/progress.h"
 #include "visibility/epsilon_superset.h"
 #include "visibility/kdtree.h"
@@ -25,11 +26,13 @@ struct CheckArgs {
   std::string scene;
   size_t cells = 0;            // 0: every cell
   double seconds = 10.0;
+  uint64_t samples = 0;        // when set, instead of seconds: the same samples on every run
   size_t neighbourhoods = 20;  // ε-superset neighbourhoods
   size_t rays = 20000;         // rays per neighbourhood
   double cell_size = 0.0;
   uint64_t seed = 1;
   uint32_t res = 128;
+  std::string backend = "cpu";
   bool json = false;
 };
 
@@ -45,6 +48,8 @@ struct Violation {
 int Check(const CheckArgs& a) {
   if (a.json) scenes::Progress::SetQuiet(true);
   if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
+  absl::StatusOr<PvsBackend> backend = PvsBackend::Create(a.backend);
+  if (!backend.ok()) return Fail(backend.status());
   visibility::AgvsOptions options;
   options.seed = a.seed;
   absl::StatusOr<SampledScene> s = SampledScene::Load(a.scene, a.cell_size, options);
@@ -61,12 +66,17 @@ int Check(const CheckArgs& a) {
   }
   sampler.RecordWitnesses(cells);
   InstallCancelHandler();
-  sampler.Run({a.seconds, 0.0, 0}, &CancelFlag(), a.json ? "" : "agvs " + scene.name);
+  // A sample count replays exactly (the sampler's results depend on its seed alone); a time
+  // depends on the machine's load.
+  const visibility::RunLimits limits = a.samples > 0 ? visibility::RunLimits{0.0, 0.0, a.samples}
+                                                     : visibility::RunLimits{a.seconds, 0.0, 0};
+  sampler.Run(limits, &CancelFlag(), a.json ? "" : "agvs " + scene.name);
   if (CancelFlag().load()) return Fail(absl::CancelledError("cancelled"));
 
   // The dual-ray-space PVS of each checked cell.
   std::vector<Violation> violations;
   uint64_t pvs_checked = 0;
+  visibility::CellQueryStats drs_stats;  // summed over the checked cells
   {
     const visibility::KdTree tree = visibility::KdTree::Build(scene);
     const visibility::PvsComputer computer(scene, tree);
@@ -74,14 +84,17 @@ int Check(const CheckArgs& a) {
     q.max_res = a.res;
     std::vector<scenes::Aabb> boxes;
     for (visibility::CellId c : cells) boxes.push_back(s->grid.CellBox(c));
-    scenes::Progress progress("dual ray space", boxes.size(), &CancelFlag());
+    scenes::Progress progress("dual ray space (" + backend->name() + ")", boxes.size(), &CancelFlag());
     constexpr size_t kStep = 16;
     for (size_t first = 0; first < boxes.size(); first += kStep) {
       const size_t n = std::min(kStep, boxes.size() - first);
       const std::vector<visibility::PvsResult> r =
-          computer.ComputeBatch(std::span<const scenes::Aabb>(boxes.data() + first, n), q);
+          backend->ComputeBatch(computer, std::span<const scenes::Aabb>(boxes.data() + first, n), q);
       for (size_t k = 0; k < n; ++k) {
         const visibility::CellId cell = cells[first + k];
+        drs_stats.planar_tests += r[k].stats.planar_tests;
+        drs_stats.exact_tests += r[k].stats.exact_tests;
+        drs_stats.occluded += r[k].stats.occluded;
         for (scenes::ObjectId o : sampler.pvs().Objects(cell)) {
           ++pvs_checked;
           if (std::binary_search(r[k].objects.begin(), r[k].objects.end(), o)) continue;
@@ -143,9 +156,16 @@ int Check(const CheckArgs& a) {
     nlohmann::json j;
     j["scene"] = scene.name;
     j["cells"] = cells.size();
+    j["backend"] = backend->name();
+    j["cell_size"] = s->grid.cell_size();
     j["seconds"] = sampler.stats().seconds;
     j["samples"] = sampler.stats().samples;
     j["pvs_entries_checked"] = pvs_checked;
+    // What the dual ray space did for the checked cells: an exact backend's check means little
+    // if its exact test never ran.
+    j["planar_tests"] = drs_stats.planar_tests;
+    j["occluded_queries"] = drs_stats.occluded;
+    j["exact_tests"] = drs_stats.exact_tests;
     j["neighbourhoods"] = neighbourhoods;
     j["epsilon_hits_checked"] = eps_checked;
     j["violations"] = violations.size();
@@ -191,7 +211,13 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
       "check that the dual-ray-space PVS and the epsilon-superset contain everything sampling sees (exit 1 if not)");
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file")->required();
   c->add_option("--cells", args->cells, "viewcells to check, sampled (0: every cell)");
-  c->add_option("--seconds", args->seconds, "AGVS sampling time before checking")->check(CLI::PositiveNumber);
+  CLI::Option* seconds =
+      c->add_option("--seconds", args->seconds, "AGVS sampling time before checking")->check(CLI::PositiveNumber);
+  c->add_option("--samples", args->samples, "AGVS samples before checking, instead of --seconds (replays exactly)")
+      ->check(CLI::PositiveNumber)
+      ->excludes(seconds);
+  c->add_option("--backend", args->backend, "dual ray space backend: cpu | gl | exact")
+      ->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_option("--neighbourhoods", args->neighbourhoods, "street-level epsilon neighbourhoods to check (0: none)");
   c->add_option("--rays", args->rays, "sampled rays per neighbourhood");
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)");

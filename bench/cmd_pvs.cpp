@@ -8,8 +8,8 @@
 
 #include "bench/cli_common.h"
 #include "bench/commands.h"
+#include "bench/pvs_backend.h"
 #include "bench/top_view_map.h"
-#include "client/gl_planar_raster.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/pvs.h"
@@ -56,15 +56,9 @@ int Pvs(const PvsArgs& a) {
   visibility::CellQueryOptions options;
   options.max_res = a.res;
   options.min_res = std::min<uint32_t>(16, a.res);
-  options.exact = a.backend == "exact";
-  std::unique_ptr<gl::GlPlanarRaster> gl_raster;
-  if (a.backend == "gl") {
-    absl::StatusOr<std::unique_ptr<gl::GlPlanarRaster>> r = gl::GlPlanarRaster::Create();
-    if (!r.ok()) return Fail(r.status());
-    gl_raster = std::move(*r);
-  }
-  visibility::DualRaySpace engine(computer.occluders(), gl_raster.get());
-  const visibility::PvsResult pvs = computer.Compute(cell, options, &engine);
+  absl::StatusOr<PvsBackend> backend = PvsBackend::Create(a.backend);
+  if (!backend.ok()) return Fail(backend.status());
+  const visibility::PvsResult pvs = backend->ComputeBatch(computer, std::span(&cell, 1), options).front();
 
   if (!a.map.empty()) {
     TopViewMap map(scene->bounds, 2048, Rgb{250, 250, 250});

@@ -1,0 +1,38 @@
+#pragma once
+// The dual-ray-space backends by name, for every command that computes viewcell PVSs: cpu (the
+// CPU raster), gl (the same raster drawn by OpenGL through OSMesa), exact (the CPU raster, then
+// CGAL's exact union test wherever it leaves a gap: the reference overestimation is measured
+// by).
+
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+#include "client/gl_planar_raster.h"
+#include "visibility/pvs.h"
+
+namespace vistream::cli {
+
+class PvsBackend {
+ public:
+  // Errors: an unknown name; no OpenGL context for gl.
+  static absl::StatusOr<PvsBackend> Create(const std::string& name);
+
+  const std::string& name() const { return name_; }
+  // `options` with this backend's part set (the exact test on or off).
+  visibility::CellQueryOptions Options(visibility::CellQueryOptions options) const;
+  // The PVS of each cell, in order: cpu and exact on every core, gl on the calling thread (its
+  // context is current there).
+  std::vector<visibility::PvsResult> ComputeBatch(const visibility::PvsComputer& computer,
+                                                  std::span<const scenes::Aabb> cells,
+                                                  const visibility::CellQueryOptions& options) const;
+
+ private:
+  std::string name_;
+  std::unique_ptr<gl::GlPlanarRaster> gl_;
+};
+
+}  // namespace vistream::cli
