@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <ostream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -290,6 +291,10 @@ struct CheckCase {
   int expect_cells;
   double min_entries;  // the check must have checked something
 };
+
+void PrintTo(const CheckCase& c, std::ostream* os) {
+  *os << c.scene << ", " << c.cell_size << " m cells, " << c.backend << ", " << c.samples << " samples";
+}
 
 class CheckConservative : public ::testing::TestWithParam<CheckCase> {};
 

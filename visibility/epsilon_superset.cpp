@@ -431,6 +431,20 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
     prism.first_edge = static_cast<uint32_t>(s->edges_.size());
     prism.height = piece.height;
     prism.object = piece.object;
+    // The mesh stores these corners in float: a face of the object may lie that far inside
+    // the prism, and must not be hidden by its own occluder for it.
+    // (One running maximum, not std::max of an initializer list: GCC 12 at -O2 folds
+    // double(float(x)) - x to zero inside such a list in a loop.)
+    double round_off = 0.0;
+    auto note = [&round_off](double x) {
+      round_off = std::max(round_off, std::fabs(static_cast<double>(static_cast<float>(x)) - x));
+    };
+    note(piece.height);
+    for (const glm::dvec2& p : piece.points) {
+      note(p.x);
+      note(p.y);
+    }
+    prism.shrink = kShrinkM + 2.0 * round_off;
     const size_t n = piece.points.size();
     for (size_t k = 0; k < n; ++k) {
       const glm::dvec2 a = piece.points[k], b = piece.points[(k + 1) % n];
@@ -519,12 +533,12 @@ bool EpsilonSuperset::Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3&
     ok &= f1 != 0.0 || f0 >= 0.0;
   };
   const double z = q.z + e.z;
-  clip(z - kShrinkM, d.z);
-  clip(p.height - kShrinkM - z, -d.z);
+  clip(z - p.shrink, d.z);
+  clip(p.height - p.shrink - z, -d.z);
   const Edge* edge = edges_.data() + p.first_edge;
   for (uint32_t k = 0; k < p.edge_count; ++k) {
     const Edge& g = edge[k];
-    clip(g.nx * ((q.x - g.ax) + e.x) + g.ny * ((q.y - g.ay) + e.y) - kShrinkM, g.nx * d.x + g.ny * d.y);
+    clip(g.nx * ((q.x - g.ax) + e.x) + g.ny * ((q.y - g.ay) + e.y) - p.shrink, g.nx * d.x + g.ny * d.y);
   }
   *t_in = t0;
   return ok && t0 < t1;

@@ -7,7 +7,9 @@
 // hidden when one convex occluder is crossed by every segment from a corner of the box to a
 // vertex of the occludee. Each occluder is a convex prism (a convex piece of an occluder
 // footprint, from the ground to its height), and the segment must pass through its interior
-// shrunk by kShrinkM: grazing an edge or touching a face never hides anything. The first
+// shrunk by kShrinkM, and by twice the distance rounding to float moves its corners (the
+// meshes are single precision, the occluders double, so an occludee's face may lie microns
+// inside its own occluder): grazing an edge or touching a face never hides anything. The first
 // segment gathers every prism it crosses with one Embree all-hits traversal; the others are
 // tested against that candidate list only, nearest candidate first.
 //
@@ -109,6 +111,7 @@ class EpsilonSuperset {
   struct Prism {
     uint32_t first_edge = 0, edge_count = 0;
     double height = 0.0;
+    double shrink = 0.0;  // metres: kShrinkM and the float rounding of the corners
     ObjectId object = 0;
   };
   struct Embree;
@@ -117,7 +120,7 @@ class EpsilonSuperset {
 
   explicit EpsilonSuperset(const scenes::Scene& scene);
 
-  // Whether segment q + e + t·d (t in [0, 1]) passes through prism `i` shrunk by kShrinkM,
+  // Whether segment q + e + t·d (t in [0, 1]) passes through prism `i` shrunk by its shrink,
   // over a positive length; *t_in is where it enters.
   bool Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3& e, const glm::dvec3& d, double* t_in) const;
 
