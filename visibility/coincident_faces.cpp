@@ -33,6 +33,10 @@ struct Record {
 
 constexpr double kBin = 1.0 / 16.0;   // plane offset bins, metres (far wider than the tolerance)
 constexpr double kSquare = 32.0;      // squares within a plane, metres
+// Radians two coincident faces' normals may be from opposite: a short wall whose corners
+// rounding moved by millimetres turns by that much; the corners' distance to the other plane
+// is the finer test.
+constexpr double kAngle = 0.01;
 
 // Every point of `f` within `tol` of the plane of `g`.
 bool OnPlaneOf(const Face& f, const Face& g, double tol) {
@@ -75,7 +79,7 @@ bool Coincide(const Face& f, const Face& g, int axis, double tol) {
   for (int k = 0; k < 3; ++k) {
     if (f.lo[k] > g.hi[k] + tol || g.lo[k] > f.hi[k] + tol) return false;
   }
-  return glm::dot(f.n, g.n) < -std::cos(1e-3) && OnPlaneOf(f, g, tol) && OnPlaneOf(g, f, tol) &&
+  return glm::dot(f.n, g.n) < -std::cos(kAngle) && OnPlaneOf(f, g, tol) && OnPlaneOf(g, f, tol) &&
          OverlapInPlane(f, g, axis, tol);
 }
 
@@ -115,7 +119,7 @@ CoincidentFaces FindCoincidentFaces(std::span<const MeshView> meshes, double tol
     }
   }
 
-  // File each face under its dominant axis (and any axis within 1e-3 of it, so that two
+  // File each face under its dominant axis (and any axis within kAngle of it, so that two
   // faces of one plane always share one), its plane offset bin and the squares it covers.
   std::vector<Record> records;
   for (uint32_t id = 0; id < faces.size(); ++id) {
@@ -123,7 +127,7 @@ CoincidentFaces FindCoincidentFaces(std::span<const MeshView> meshes, double tol
     const glm::dvec3 a = glm::abs(f.n);
     const double top = std::max({a.x, a.y, a.z});
     for (int axis = 0; axis < 3; ++axis) {
-      if (a[axis] < top - 1e-3) continue;
+      if (a[axis] < top - kAngle) continue;
       const int orient = f.n[axis] > 0 ? 1 : -1;
       // The offset of the plane along `axis` where it crosses the face: the same for both
       // orientations once signed alike.

@@ -44,7 +44,7 @@ struct CoincidentFaces {
 };
 
 // Finds the coincident pairs: planes within `tolerance` metres of each other (every corner of
-// each triangle within it of the other's plane, normals opposite within 1e-3 radians) and
+// each triangle within it of the other's plane, normals opposite within 0.01 radians) and
 // triangles whose overlap in that plane is wider than `tolerance`. Degenerate triangles have
 // no partner. Expected O(n log n) in the triangle count: triangles are bucketed by plane.
 CoincidentFaces FindCoincidentFaces(std::span<const MeshView> meshes, double tolerance = 1e-3);
