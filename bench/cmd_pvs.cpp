@@ -85,6 +85,11 @@ int Pvs(const PvsArgs& a) {
     j["backend"] = a.backend;
     j["res"] = a.res;
     j["pvs_objects"] = pvs.objects.size();
+    // The set itself, so that it can be compared object by object: ids, and the names.
+    j["objects"] = pvs.objects;
+    nlohmann::json names = nlohmann::json::array();
+    for (scenes::ObjectId id : pvs.objects) names.push_back(scene->objects[id].name);
+    j["object_names"] = names;
     j["pvs_triangles"] = pvs.triangles;
     j["total_objects"] = scene->objects.size();
     j["total_triangles"] = scene->TriangleCount();
