@@ -3,6 +3,7 @@
 // dual-ray-space PVS, and every triangle a ray from a neighbourhood hits must be in its
 // ε-superset. Each violation is reported with the ray that saw it.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include <CLI/CLI.hpp>
@@ -48,6 +49,10 @@ struct Violation {
 int Check(const CheckArgs& a) {
   if (a.json) scenes::Progress::SetQuiet(true);
   if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
+  // 0 (the default) takes the catalog's size; anything else must be a size.
+  if (!(a.cell_size >= 0.0 && std::isfinite(a.cell_size))) {
+    return Fail(absl::InvalidArgumentError("--cell-size must be a positive number of metres"));
+  }
   absl::StatusOr<PvsBackend> backend = PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   visibility::AgvsOptions options;
@@ -220,7 +225,8 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_option("--neighbourhoods", args->neighbourhoods, "street-level epsilon neighbourhoods to check (0: none)");
   c->add_option("--rays", args->rays, "sampled rays per neighbourhood");
-  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)");
+  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
+      ->check(CLI::PositiveNumber);
   c->add_option("--res", args->res, "dual ray space raster resolution")->check(CLI::IsMember({16u, 32u, 64u, 128u, 256u}));
   c->add_option("--seed", args->seed, "random seed (sampling, cells, neighbourhoods)");
   c->add_flag("--json", args->json, "print the result as JSON");

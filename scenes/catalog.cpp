@@ -232,6 +232,9 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
 }
 
 absl::StatusOr<CatalogEntry> LoadCatalogEntry(const std::string& path) {
+  // A directory opens as a stream on Linux and then throws on its first read.
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return absl::InvalidArgumentError(absl::StrCat(path, ": is a directory, not a catalog file"));
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open catalog file"));
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -528,6 +528,11 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, co
 }
 
 absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings) {
+  // A directory opens as a stream on Linux and then throws on its first read.
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": is a directory, not a glTF file"));
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open file"));
   in.seekg(0, std::ios::end);

@@ -333,7 +333,9 @@ TEST_P(CheckConservative, FindsNoViolation) {
   EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0);
   // Something was hidden, so a false occlusion could have shown; the exact backend's own test ran.
   EXPECT_GT(j.at("occluded_queries").get<double>(), 100.0);
-  if (std::string(c.backend) == "exact") EXPECT_GT(j.at("exact_tests").get<int>(), 10);
+  if (std::string(c.backend) == "exact") {
+    EXPECT_GT(j.at("exact_tests").get<int>(), 10);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -351,8 +353,8 @@ INSTANTIATE_TEST_SUITE_P(
                       CheckCase{"streets", 4, "exact", 800, "3000000", 800, 20000},
                       CheckCase{"streets", 8, "exact", 0, "3000000", 1080, 35000},
                       CheckCase{"streets", 16, "gl", 40, "3000000", 40, 1500}),
-    [](const ::testing::TestParamInfo<CheckCase>& info) {
-      return std::string(info.param.scene) + "_" + std::to_string(info.param.cell_size) + "m_" + info.param.backend;
+    [](const ::testing::TestParamInfo<CheckCase>& test) {
+      return std::string(test.param.scene) + "_" + std::to_string(test.param.cell_size) + "m_" + test.param.backend;
     });
 
 TEST(Cli, CheckConservativeReplaysASampleCountExactly) {
@@ -371,6 +373,27 @@ TEST(Cli, CheckConservativeReplaysASampleCountExactly) {
   const RunResult bad = Vistream("check-conservative --scene streets --backend vulkan");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.out.find("--backend"), std::string::npos) << bad.out;
+}
+
+TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
+  // A directory is not a scene (it opens as a stream, then throws on reading).
+  const std::string dir = Tmp("a-folder.glb");
+  std::filesystem::create_directories(dir);
+  for (const std::string& scene : {dir, Tmp("")}) {
+    const RunResult r = Vistream("check-conservative --scene " + scene + " --samples 1000");
+    EXPECT_EQ(r.exit_code, 1) << r.out;
+    EXPECT_NE(r.out.find("is a directory"), std::string::npos) << r.out;
+  }
+  const RunResult nan = Vistream("check-conservative --scene streets --cell-size nan --samples 1000");
+  EXPECT_EQ(nan.exit_code, 1) << nan.out;
+  EXPECT_NE(nan.out.find("--cell-size"), std::string::npos) << nan.out;
+  // Viewcells so small that their sets would not fit in any memory (london at 1 m: 162 M cells
+  // of 146,325 bits), or that the grid would pass 2^31 cells: said, not an abort.
+  for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.005"}) {
+    const RunResult tiny = Vistream(std::string("check-conservative --samples 1000 ") + args);
+    EXPECT_EQ(tiny.exit_code, 1) << args << ": " << tiny.out;
+    EXPECT_NE(tiny.out.find("larger"), std::string::npos) << args << ": " << tiny.out;
+  }
 }
 
 TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {

@@ -1,6 +1,7 @@
 #include "visibility/agvs.h"
 
 #include <embree3/rtcore.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -954,6 +955,17 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   if (grid.CellCount() == 0) return absl::InvalidArgumentError("global sampling over an empty viewcell grid");
   if (scene.TriangleCount() == 0) return absl::InvalidArgumentError("global sampling over a scene without triangles");
   if (options.batch_samples == 0) return absl::InvalidArgumentError("global sampling: batch_samples must be positive");
+  // The sets are one bit per cell and object: refuse what this machine cannot hold rather
+  // than die allocating it (a viewcell of a centimetre over a town).
+  const double set_bytes = static_cast<double>(grid.CellCount()) * 8.0 *
+                           static_cast<double>((scene.objects.size() + 63) / 64);
+  const double memory = static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+  if (memory > 0 && set_bytes > 0.5 * memory) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "global sampling: the sets of %d x %d viewcells and %d objects take %.1f GiB, over half of this "
+        "machine's %.1f GiB: choose larger viewcells",
+        grid.nx(), grid.ny(), scene.objects.size(), set_bytes / (1 << 30), memory / (1 << 30)));
+  }
   std::unique_ptr<GlobalSampler> s(new GlobalSampler(grid, options));
   Impl& m = *s->impl_;
   // The frame's origin is the grid's corner, a multiple of the cell size: moving the scene by
