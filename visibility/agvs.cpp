@@ -305,6 +305,11 @@ struct GlobalSampler::Impl {
     // whether it has a second.
     std::vector<uint32_t> quad_first;
     std::vector<bool> quad_pair;
+    // The triangle Embree hit: the quad's first (q, r, p) where u + v <= 1, its second
+    // (s, p, r) beyond.
+    uint32_t TriangleOf(uint32_t quad, bool second) const {
+      return quad_first[quad] + (quad_pair[quad] && second ? 1 : 0);
+    }
     double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
@@ -525,9 +530,7 @@ class Worker {
       }
       const Hit h = Cast(p, dir, 0.0);
       if (h.object == kNoObject || h.back) continue;
-      // The quad's first triangle (q, r, p) where u + v <= 1, its second (s, p, r) beyond.
-      const Impl::Object& o = s_.objects[h.object];
-      const uint32_t triangle = o.quad_first[h.quad] + (o.quad_pair[h.quad] && h.second ? 1 : 0);
+      const uint32_t triangle = s_.objects[h.object].TriangleOf(h.quad, h.second);
       hits.push_back({h.object, triangle, s_.frame + p, s_.frame + p + h.t * dir});
     }
     return hits;
@@ -710,8 +713,7 @@ class Worker {
     // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
     h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
     if (options_.backface_rule && !h.back && s_.has_coincident[h.object]) {
-      const Impl::Object& o = s_.objects[h.object];
-      const uint32_t triangle = o.quad_first[h.quad] + (o.quad_pair[h.quad] && h.second ? 1 : 0);
+      const uint32_t triangle = s_.objects[h.object].TriangleOf(h.quad, h.second);
       h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
     }
     return h;
