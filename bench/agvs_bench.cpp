@@ -23,7 +23,6 @@ struct City1 {
 
 const City1& Fixture() {
   static const City1* f = [] {
-    scenes::Progress::SetQuiet(true);
     auto* x = new City1{*scenes::GenerateNamed("city1", scenes::GeneratorParams{}), {}};
     x->grid = *visibility::ViewcellGrid::Create(x->scene.bounds, 50.0, 0.5, 2.0);
     return x;

@@ -14,7 +14,6 @@ namespace {
 
 const scenes::Scene& London() {
   static const scenes::Scene* scene = [] {
-    scenes::Progress::SetQuiet(true);
     return new scenes::Scene(scenes::GenerateLondon(scenes::LondonOptions{}));
   }();
   return *scene;
@@ -26,7 +25,6 @@ void BM_GenerateCity1(benchmark::State& state) {
 BENCHMARK(BM_GenerateCity1)->Unit(benchmark::kMillisecond);
 
 void BM_GenerateLondon(benchmark::State& state) {
-  scenes::Progress::SetQuiet(true);
   for (auto _ : state) benchmark::DoNotOptimize(scenes::GenerateLondon(scenes::LondonOptions{}));
   state.counters["triangles"] = static_cast<double>(London().TriangleCount());
 }

@@ -19,7 +19,6 @@ struct LondonPvs {
 
 const LondonPvs& Fixture() {
   static const LondonPvs* f = [] {
-    scenes::Progress::SetQuiet(true);
     auto* x = new LondonPvs;
     x->scene = scenes::GenerateLondon(scenes::LondonOptions{});
     x->tree = visibility::KdTree::Build(x->scene);

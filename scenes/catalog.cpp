@@ -1,6 +1,7 @@
 #include "scenes/catalog.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -246,28 +247,29 @@ std::string CatalogDir() {
   return std::string(VISTREAM_SOURCE_DIR) + "/scenes";
 }
 
-absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path) {
+absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, const std::string& catalog_dir) {
   const std::string s(name_or_path);
   if (s.ends_with(".json") || s.find('/') != std::string::npos) return LoadCatalogEntry(s);
-  const std::string path = CatalogDir() + "/" + s + ".json";
-  if (!fs::exists(path)) {
-    return absl::NotFoundError(absl::StrCat("no scene '", s, "' in the catalog ", CatalogDir(),
-                                            " (known: ", absl::StrJoin(CatalogNames(), ", "), ")"));
+  const std::string dir = catalog_dir.empty() ? CatalogDir() : catalog_dir;
+  const std::string path = dir + "/" + s + ".json";
+  if (s.empty() || !fs::exists(path)) {
+    return absl::NotFoundError(absl::StrCat("no scene '", s, "' in the catalog ", dir,
+                                            " (known: ", absl::StrJoin(CatalogNames(dir), ", "), ")"));
   }
   return LoadCatalogEntry(path);
 }
 
-std::vector<std::string> CatalogNames() {
+std::vector<std::string> CatalogNames(const std::string& catalog_dir) {
   std::vector<std::string> names;
   std::error_code ec;
-  for (const auto& e : fs::directory_iterator(CatalogDir(), ec)) {
+  for (const auto& e : fs::directory_iterator(catalog_dir.empty() ? CatalogDir() : catalog_dir, ec)) {
     if (e.path().extension() == ".json") names.push_back(e.path().stem().string());
   }
   std::sort(names.begin(), names.end());
   return names;
 }
 
-absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const std::atomic<bool>* cancel,
+absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& run,
                                  std::vector<std::string>* warnings) {
   if (entry.source.kind == SceneSource::Kind::kGltf) return LoadGltf(entry.source.path, warnings);
   if (entry.source.kind == SceneSource::Kind::kOsm) {
@@ -275,16 +277,50 @@ absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const std::atomic<bo
     options.bbox = entry.source.bbox;
     options.storey_m = entry.source.storey_m;
     options.name = entry.name;
-    return ImportOsm(entry.source.path, options, nullptr, cancel);
+    return ImportOsm(entry.source.path, options, nullptr, run);
   }
   GeneratorParams params;
   params.seed = entry.source.seed;
   params.width_m = entry.source.width_m;
   params.depth_m = entry.source.depth_m;
-  absl::StatusOr<Scene> scene = GenerateNamed(entry.source.generator, params, cancel);
+  absl::StatusOr<Scene> scene = GenerateNamed(entry.source.generator, params, run);
   if (!scene.ok()) return absl::Status(scene.status().code(), absl::StrCat(entry.file, ": ", scene.status().message()));
   scene->name = entry.name;
   return scene;
+}
+
+bool IsGltfPath(std::string_view path) {
+  const std::string ext = fs::path(path).extension().string();
+  return ext == ".glb" || ext == ".gltf";
+}
+
+absl::StatusOr<LoadedScene> LoadScene(std::string_view name_or_path, const LoadOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  LoadedScene out;
+  if (IsGltfPath(name_or_path)) {
+    absl::StatusOr<Scene> scene = LoadGltf(std::string(name_or_path), &out.warnings);
+    if (!scene.ok()) return scene.status();
+    out.scene = *std::move(scene);
+  } else {
+    absl::StatusOr<CatalogEntry> entry = FindCatalogEntry(name_or_path, options.catalog_dir);
+    if (!entry.ok()) return entry.status();
+    absl::StatusOr<Scene> scene = BuildScene(*entry, options.run, &out.warnings);
+    if (!scene.ok()) return scene.status();
+    out.scene = *std::move(scene);
+    out.viewcell = entry->viewcell;
+    out.entry = *std::move(entry);
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return out;
+}
+
+ViewcellSpec ViewcellSpecFor(std::string_view name_or_path, double cell_size, const std::string& catalog_dir) {
+  ViewcellSpec spec;
+  if (!IsGltfPath(name_or_path)) {
+    if (auto entry = FindCatalogEntry(name_or_path, catalog_dir); entry.ok()) spec = entry->viewcell;
+  }
+  if (cell_size > 0.0) spec.size_m = cell_size;
+  return spec;
 }
 
 }  // namespace vistream::scenes

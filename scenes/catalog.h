@@ -73,15 +73,43 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
                                                const std::string& base_dir);
 absl::StatusOr<CatalogEntry> LoadCatalogEntry(const std::string& path);
 
-// The catalog folder: $VISTREAM_SCENES if set, else the source tree's scenes/.
+// The default catalog folder: $VISTREAM_SCENES if set, else the source tree's scenes/.
 std::string CatalogDir();
-// `name_or_path`: a catalog name (london) or a path to a .json file.
-absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path);
-// Names of every entry in CatalogDir(), sorted.
-std::vector<std::string> CatalogNames();
+// `name_or_path`: a catalog name (london), looked up in `catalog_dir` (empty: CatalogDir()), or
+// a path to a .json file. Errors: NOT_FOUND naming the folder and its entries.
+absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, const std::string& catalog_dir = "");
+// Names of every entry in `catalog_dir` (empty: CatalogDir()), sorted.
+std::vector<std::string> CatalogNames(const std::string& catalog_dir = "");
 
 // Generates or loads the entry's scene. Generated scenes take the entry's name.
-absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const std::atomic<bool>* cancel = nullptr,
+absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& run = {},
                                  std::vector<std::string>* warnings = nullptr);
+
+// Whether `path` names a glTF file (.glb or .gltf) rather than a catalog name or entry.
+bool IsGltfPath(std::string_view path);
+
+struct LoadOptions {
+  std::string catalog_dir;  // where catalog names are looked up; empty: CatalogDir()
+  RunControl run;           // progress and cancel for generating or importing
+};
+
+// A scene ready to use: the scene and its viewcell band, and the catalog entry it came from.
+struct LoadedScene {
+  Scene scene;
+  ViewcellSpec viewcell;                // the entry's; for glTF files the defaults
+  std::optional<CatalogEntry> entry;    // none for glTF files
+  std::vector<std::string> warnings;    // what loading a glTF file skipped, for the caller to show
+  double seconds = 0.0;                 // wall time spent loading
+};
+
+// The one call that turns a user's scene argument into a scene: a .glb/.gltf file, a catalog
+// name (looked up in options.catalog_dir) or a catalog .json path. Errors name the argument:
+// NOT_FOUND for an unknown name or missing file, INVALID_ARGUMENT for a malformed one,
+// CANCELLED when options.run's flag was raised.
+absl::StatusOr<LoadedScene> LoadScene(std::string_view name_or_path, const LoadOptions& options = {});
+
+// The viewcell band for `name_or_path` (the catalog entry's; defaults for glTF files or names
+// that do not resolve), with the edge replaced by `cell_size` when that is positive.
+ViewcellSpec ViewcellSpecFor(std::string_view name_or_path, double cell_size, const std::string& catalog_dir = "");
 
 }  // namespace vistream::scenes

@@ -8,6 +8,7 @@
 
 #include <absl/status/statusor.h>
 
+#include "scenes/progress.h"
 #include "scenes/scene.h"
 
 namespace vistream::scenes {
@@ -28,7 +29,7 @@ struct LondonOptions {
   // UTM zone 30U, so that large coordinates are exercised everywhere.
   glm::dvec3 origin{699000.0, 5710000.0, 0.0};
 };
-Scene GenerateLondon(const LondonOptions& options, const std::atomic<bool>* cancel = nullptr);
+Scene GenerateLondon(const LondonOptions& options, const RunControl& run = {});
 
 // A small district of terraced streets, the hard case of from-region visibility: rows of
 // houses sharing party walls, corner houses touching two rows, dead-end closes whose end house
@@ -56,6 +57,6 @@ struct GeneratorParams {
 // Generates `name` (city1, city2, london, streets). Unknown names and parameters a generator does not
 // take give InvalidArgument. Cancellation gives Cancelled.
 absl::StatusOr<Scene> GenerateNamed(const std::string& name, const GeneratorParams& params,
-                                    const std::atomic<bool>* cancel = nullptr);
+                                    const RunControl& run = {});
 
 }  // namespace vistream::scenes

@@ -5,7 +5,7 @@
 namespace vistream::scenes {
 
 absl::StatusOr<Scene> GenerateNamed(const std::string& name, const GeneratorParams& params,
-                                    const std::atomic<bool>* cancel) {
+                                    const RunControl& run) {
   if (name == "city1" || name == "city2") {
     if (params.width_m != 0.0 || params.depth_m != 0.0) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -25,8 +25,8 @@ absl::StatusOr<Scene> GenerateNamed(const std::string& name, const GeneratorPara
           "generator 'london': width and depth must be between 200 and 100000 m, got ",
           o.width_m, " x ", o.depth_m));
     }
-    Scene scene = GenerateLondon(o, cancel);
-    if (cancel != nullptr && cancel->load()) return absl::CancelledError("generation cancelled");
+    Scene scene = GenerateLondon(o, run);
+    if (run.Cancelled()) return absl::CancelledError("generation cancelled");
     return scene;
   }
   if (name == "streets") {

@@ -295,7 +295,7 @@ struct BlockSide {
 
 }  // namespace
 
-Scene GenerateLondon(const LondonOptions& options, const std::atomic<bool>* cancel) {
+Scene GenerateLondon(const LondonOptions& options, const RunControl& run) {
   Rng rng(options.seed ^ 0x6c6f6e646f6eULL);
   Scene scene;
   scene.name = "london";
@@ -303,7 +303,7 @@ Scene GenerateLondon(const LondonOptions& options, const std::atomic<bool>* canc
   CityPlan plan(options, rng);
   const std::vector<Landmark> landmarks = PlaceLandmarks(plan, rng, &scene);
 
-  Progress progress("generating london", plan.districts().size(), cancel);
+  Progress progress(run, "generating london", plan.districts().size());
   int district_index = 0;
   for (const District& d : plan.districts()) {
     if (progress.Cancelled()) return scene;

@@ -354,7 +354,7 @@ std::optional<double> ParseLength(std::string_view text) {
 }
 
 absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
-                                OsmImportSummary* summary, const std::atomic<bool>* cancel) {
+                                OsmImportSummary* summary, const RunControl& run) {
   const auto start = std::chrono::steady_clock::now();
   OsmImportSummary local_summary;
   OsmImportSummary& s = summary != nullptr ? *summary : local_summary;
@@ -382,8 +382,7 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     osmium::TagsFilter filter{false};
     filter.add_rule(true, osmium::TagMatcher{"building"});
     osmium::area::MultipolygonManager<osmium::area::Assembler> manager{config, filter};
-    Progress progress(absl::StrCat("reading ", fs::path(path).filename().string()),
-                      fs::file_size(path, ec), cancel);
+    Progress progress(run, absl::StrCat("reading ", fs::path(path).filename().string()), fs::file_size(path, ec));
     uint64_t read_bytes = 0;
     osmium::relations::read_relations(file, manager);
     using Index = osmium::index::map::FlexMem<osmium::unsigned_object_id_type, osmium::Location>;
@@ -444,7 +443,7 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     area_handler.f = &on_area;
     osmium::io::Reader reader(file, osmium::osm_entity_bits::node | osmium::osm_entity_bits::way);
     while (osmium::memory::Buffer buffer = reader.read()) {
-      if (cancel != nullptr && cancel->load()) return absl::CancelledError("OSM import cancelled");
+      if (run.Cancelled()) return absl::CancelledError("OSM import cancelled");
       osmium::apply(buffer, locations, census, manager.handler([&](osmium::memory::Buffer&& areas) {
         osmium::apply(areas, area_handler);
       }));
@@ -524,9 +523,9 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   scene.name = !options.name.empty() ? options.name : fs::path(path).filename().string();
   if (options.name.empty()) scene.name = scene.name.substr(0, scene.name.find('.'));
   scene.origin = glm::dvec3(ox, oy, 0.0);
-  Progress progress("building meshes", raw.size(), cancel);
+  Progress progress(run, "building meshes", raw.size());
   for (size_t i = 0; i < raw.size(); ++i) {
-    if (cancel != nullptr && cancel->load()) return absl::CancelledError("OSM import cancelled");
+    if (run.Cancelled()) return absl::CancelledError("OSM import cancelled");
     progress.Advance();
     const RawBuilding& b = raw[i];
     s.repaired_duplicate_points += b.duplicate_nodes;

@@ -33,6 +33,7 @@
 #include <string>
 #include <string_view>
 
+#include "scenes/progress.h"
 #include "scenes/scene.h"
 
 namespace vistream::scenes {
@@ -84,6 +85,6 @@ std::optional<double> ParseLength(std::string_view text);
 // (missing, truncated, not OSM data, no buildings left).
 absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
                                 OsmImportSummary* summary = nullptr,
-                                const std::atomic<bool>* cancel = nullptr);
+                                const RunControl& run = {});
 
 }  // namespace vistream::scenes

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <fstream>
 #include <set>
 
 #include <glm/geometric.hpp>
@@ -84,7 +85,6 @@ std::set<ObjectId> SetOf(const GlobalSampler& s, CellId c) {
 
 class Agvs : public ::testing::Test {
  protected:
-  void SetUp() override { scenes::Progress::SetQuiet(true); }
 };
 
 // The quads Embree reads are the mesh's triangles exactly: each quad's two triangles, as
@@ -185,7 +185,7 @@ TEST_F(Agvs, PixelErrorTargetStopsSamplingWhenTheSetsAreComplete) {
   sampler->RunBatch();
   const double first = sampler->stats().estimated_pixel_error;
   EXPECT_GT(first, 1.0);
-  sampler->Run({.pixel_error = 1.0}, nullptr, "");
+  sampler->Run({.pixel_error = 1.0});
   const AgvsStats& st = sampler->stats();
   EXPECT_TRUE(st.estimate_settled);
   EXPECT_LE(st.estimated_pixel_error, 1.0);
@@ -530,6 +530,39 @@ TEST(PvsFile, RoundTrips) {
   EXPECT_TRUE(g->Matches(grid));
   const ViewcellGrid other = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 25, 0.5, 2);
   EXPECT_FALSE(g->Matches(other));
+}
+
+TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {
+  const ViewcellGrid grid = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 50, 0.5, 2);
+  scenes::Scene scene;
+  scene.name = "t";
+  scene.objects.resize(300);
+  const PvsFile made = MakePvsFile(scene, grid, SomeFile().sets, {"dual-ray-space cpu", 0, 2.5, 0.0});
+  EXPECT_TRUE(made.Matches(grid));
+  EXPECT_EQ(made.strategy, "dual-ray-space cpu");
+  EXPECT_TRUE(CheckPvsFileMatches(made, grid, 300, "f.pvs").ok());
+  const absl::Status objects = CheckPvsFileMatches(made, grid, 301, "f.pvs");
+  EXPECT_EQ(objects.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(objects.message().find("300 objects"), std::string::npos) << objects;
+  const ViewcellGrid other = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 25, 0.5, 2);
+  const absl::Status cells = CheckPvsFileMatches(made, other, 300, "f.pvs");
+  EXPECT_EQ(cells.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(cells.message().find("f.pvs"), std::string::npos) << cells;
+  EXPECT_NE(cells.message().find("6 x 4 cells of 25 m"), std::string::npos) << cells;
+
+  const std::string path = ::testing::TempDir() + "/load.pvs";
+  {
+    std::ofstream out(path, std::ios::binary);
+    out << EncodePvsFile(made);
+  }
+  const absl::StatusOr<PvsFile> loaded = LoadPvsFile(path, grid, 300);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->sets, made.sets);
+  EXPECT_EQ(LoadPvsFile(path, other, 300).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LoadPvsFile(path + ".missing", grid, 300).status().code(), absl::StatusCode::kNotFound);
+  const absl::Status dir = LoadPvsFile(::testing::TempDir(), grid, 300).status();
+  EXPECT_EQ(dir.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(dir.message().find("directory"), std::string::npos) << dir;
 }
 
 TEST(PvsFile, EveryTruncationAndCorruptionIsAClearError) {

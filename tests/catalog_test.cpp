@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "scenes/city_generator.h"
+#include "scenes/progress.h"
 #include "tests/test_util.h"
 
 namespace vistream::scenes {
@@ -179,6 +181,101 @@ TEST(Catalog, UnknownNameListsTheKnownOnes) {
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.status().code(), absl::StatusCode::kNotFound);
   EXPECT_NE(e.status().message().find("london"), std::string::npos) << e.status();
+}
+
+TEST(Catalog, LoadSceneTakesNamesPathsAndAnotherCatalogFolder) {
+  // A folder of its own with one entry: found there by name, and not in the default catalog.
+  const std::string dir = ::testing::TempDir() + "/catalog_elsewhere";
+  std::filesystem::create_directories(dir);
+  std::FILE* f = std::fopen((dir + "/tiny.json").c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  std::fputs(R"({"name": "tiny", "source": {"generator": "city1"}, "viewcell": {"size_m": 40, "height_m": 3}})", f);
+  std::fclose(f);
+  LoadOptions there;
+  there.catalog_dir = dir;
+  absl::StatusOr<LoadedScene> s = LoadScene("tiny", there);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(s->scene.name, "tiny");
+  EXPECT_EQ(s->viewcell.size_m, 40);
+  EXPECT_EQ(s->viewcell.height_m, 3);
+  ASSERT_TRUE(s->entry.has_value());
+  EXPECT_EQ(s->entry->file, dir + "/tiny.json");
+  EXPECT_GT(s->scene.objects.size(), 2000u);
+  EXPECT_EQ(ViewcellSpecFor("tiny", 0, dir).size_m, 40);
+  EXPECT_EQ(ViewcellSpecFor("tiny", 25, dir).size_m, 25);
+  EXPECT_EQ(ViewcellSpecFor(dir + "/tiny.json", 0).size_m, 40);  // a path needs no folder
+
+  const absl::Status unknown = LoadScene("tiny").status();  // not in the default catalog
+  EXPECT_EQ(unknown.code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(unknown.message().find("'tiny'"), std::string::npos) << unknown;
+  const absl::Status elsewhere = LoadScene("london", there).status();
+  EXPECT_EQ(elsewhere.code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(elsewhere.message().find(dir), std::string::npos) << elsewhere;
+  EXPECT_NE(elsewhere.message().find("tiny"), std::string::npos) << elsewhere;  // what it has
+  EXPECT_EQ(LoadScene("").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_FALSE(LoadScene(dir + "/missing.glb").ok());
+  EXPECT_TRUE(IsGltfPath("a/b.glb"));
+  EXPECT_TRUE(IsGltfPath("b.gltf"));
+  EXPECT_FALSE(IsGltfPath("london"));
+  EXPECT_FALSE(IsGltfPath("x.json"));
+}
+
+// Records what a computation reports, as a caller's sink would receive it.
+class RecordingSink : public ProgressSink {
+ public:
+  void Start(std::string_view label, uint64_t total) override {
+    labels.emplace_back(label);
+    totals.push_back(total);
+  }
+  void Update(std::string_view, uint64_t done, uint64_t total, double, std::string_view) override {
+    EXPECT_LE(done, total);
+    if (!dones.empty()) {
+      EXPECT_GE(done, dones.back());
+    }
+    dones.push_back(done);
+  }
+  void End(std::string_view, double seconds, bool completed) override {
+    EXPECT_GE(seconds, 0.0);
+    ends.push_back(completed);
+  }
+  std::vector<std::string> labels;
+  std::vector<uint64_t> totals, dones;
+  std::vector<bool> ends;
+};
+
+TEST(Progress, ReportsToTheCallersSinkAndSaysWhenStoppedEarly) {
+  RecordingSink sink;
+  LoadOptions reported;
+  reported.run.progress = &sink;
+  absl::StatusOr<LoadedScene> s = LoadScene("streets", reported);
+  ASSERT_TRUE(s.ok()) << s.status();
+  // The streets generator reports nothing; a tracked task reports start, steps and end.
+  {
+    Progress p({.progress = &sink}, "work", 10000);
+    for (int i = 0; i < 10000; ++i) p.Advance();
+    p.Finish();
+  }
+  ASSERT_EQ(sink.labels.back(), "work");
+  EXPECT_EQ(sink.totals.back(), 10000u);
+  EXPECT_LE(sink.dones.size(), 1002u);  // at most once a thousandth, and once at the end
+  EXPECT_EQ(sink.dones.back(), 10000u);
+  ASSERT_FALSE(sink.ends.empty());
+  EXPECT_TRUE(sink.ends.back());
+
+  // Cancelled: london's generator stops and its task ends as stopped, not done.
+  std::atomic<bool> cancel{true};
+  RecordingSink stopped;
+  LondonOptions small;
+  small.width_m = small.depth_m = 2000;
+  (void)GenerateLondon(small, {.progress = &stopped, .cancel = &cancel});
+  ASSERT_EQ(stopped.labels.size(), 1u);
+  EXPECT_EQ(stopped.labels[0], "generating london");
+  ASSERT_EQ(stopped.ends.size(), 1u);
+  EXPECT_FALSE(stopped.ends[0]);
+
+  // No sink: nothing reported, nothing printed, the work still done.
+  LondonOptions tiny = small;
+  EXPECT_GT(GenerateLondon(tiny, {}).objects.size(), 100u);
 }
 
 }  // namespace

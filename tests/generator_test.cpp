@@ -104,7 +104,7 @@ TEST(Generator, NamedGeneratorsCheckTheirParameters) {
   EXPECT_FALSE(GenerateNamed("city1", p).ok());   // fixed size
   EXPECT_FALSE(GenerateNamed("london", p).ok());  // below 200 m
   std::atomic<bool> cancel{true};
-  absl::StatusOr<Scene> cancelled = GenerateNamed("london", GeneratorParams{}, &cancel);
+  absl::StatusOr<Scene> cancelled = GenerateNamed("london", GeneratorParams{}, {.cancel = &cancel});
   ASSERT_FALSE(cancelled.ok());
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
 }

@@ -1,4 +1,4 @@
-#include "client/gl_planar_raster.h"
+#include "gl/gl_planar_raster.h"
 
 #include <gtest/gtest.h>
 
@@ -62,7 +62,6 @@ class GlRaster : public ::testing::Test {
 GlPlanarRaster* GlRaster::raster_ = nullptr;
 
 scenes::Scene SmallLondon(double size_m, uint64_t seed) {
-  scenes::Progress::SetQuiet(true);
   scenes::LondonOptions o;
   o.width_m = o.depth_m = size_m;
   o.seed = seed;

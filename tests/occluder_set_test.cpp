@@ -92,7 +92,6 @@ TEST(OccluderSet, BoundsMatchThePieces) {
 // Terraced houses from OpenStreetMap (three houses sharing party walls through shared nodes):
 // their occluders touch along whole walls, so they fuse into one blocker.
 TEST(OccluderSet, ImportedTerraceTouchesAlongItsPartyWalls) {
-  scenes::Progress::SetQuiet(true);
   const absl::StatusOr<scenes::Scene> scene =
       scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/terrace.osm", {});
   ASSERT_TRUE(scene.ok()) << scene.status();

@@ -29,7 +29,6 @@ std::string Data(const std::string& name) {
 const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
 
 Scene Import(const std::string& path, OsmImportSummary* sum, const OsmImportOptions& options = {}) {
-  Progress::SetQuiet(true);
   absl::StatusOr<Scene> s = ImportOsm(path, options, sum);
   EXPECT_TRUE(s.ok()) << s.status();
   return s.ok() ? *std::move(s) : Scene{};
@@ -273,7 +272,6 @@ TEST(OsmImport, BoxKeepsOnlyBuildingsWhollyInside) {
 }
 
 TEST(OsmImport, BadFilesGiveClearErrors) {
-  Progress::SetQuiet(true);
   const absl::StatusOr<Scene> empty = ImportOsm(Data("empty.osm"), {});
   ASSERT_FALSE(empty.ok());
   EXPECT_NE(empty.status().message().find("empty.osm: the file is empty"), std::string::npos)
@@ -391,7 +389,6 @@ TEST(OsmImport, MonacoCatalogEntryImportsTheExtract) {
   const absl::StatusOr<CatalogEntry> e = FindCatalogEntry("monaco");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->source.kind, SceneSource::Kind::kOsm);
-  Progress::SetQuiet(true);
   const absl::StatusOr<Scene> s = BuildScene(*e);
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(s->name, "monaco");

@@ -22,7 +22,6 @@ bool SegmentFree(const glm::dvec3& p, const glm::dvec3& q, const scenes::Scene& 
 class Pvs : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    scenes::Progress::SetQuiet(true);
     scenes::LondonOptions o;
     o.width_m = o.depth_m = 900;
     o.seed = 11;

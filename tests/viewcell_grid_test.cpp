@@ -34,6 +34,19 @@ TEST(ViewcellGrid, CellsTileTheGroundAtEyeLevel) {
   EXPECT_FALSE(g.CellAt({NAN, 0}).has_value());
 }
 
+TEST(ViewcellGrid, ACatalogBandMakesTheSameGrid) {
+  const scenes::ViewcellSpec spec{.size_m = 50, .height_m = 2.0, .base_m = 0.5};
+  absl::StatusOr<ViewcellGrid> g = ViewcellGrid::Create(kBounds, spec);
+  ASSERT_TRUE(g.ok()) << g.status();
+  const ViewcellGrid h = Grid();
+  EXPECT_EQ(g->nx(), h.nx());
+  EXPECT_EQ(g->ny(), h.ny());
+  EXPECT_EQ(g->corner(), h.corner());
+  EXPECT_EQ(g->base_z(), 0.5);
+  EXPECT_EQ(g->height(), 2.0);
+  EXPECT_FALSE(ViewcellGrid::Create(kBounds, scenes::ViewcellSpec{.size_m = -1}).ok());
+}
+
 TEST(ViewcellGrid, NeighboursAtCornersEdgesAndInside) {
   const ViewcellGrid g = Grid();
   EXPECT_EQ(g.Neighbours(g.Id({0, 0})).size(), 3u);

@@ -37,6 +37,7 @@
 #include <glm/vec3.hpp>
 
 #include "scenes/mesh.h"
+#include "scenes/progress.h"
 #include "scenes/scene.h"
 #include "visibility/global_pvs.h"
 #include "visibility/viewcell_grid.h"
@@ -138,10 +139,10 @@ class GlobalSampler {
 
   // One batch of options().batch_samples samples.
   void RunBatch();
-  // Batches until a limit is met (at least one limit must be set) or `cancel` is set. Shows a
-  // progress bar with samples/s and the estimated pixel error unless `progress_label` is empty.
-  void Run(const RunLimits& limits, const std::atomic<bool>* cancel = nullptr,
-           const std::string& progress_label = "agvs");
+  // Batches until a limit is met (at least one limit must be set) or run's cancel flag is set.
+  // Reports progress to run's sink as task `label`, with samples/s and the estimated pixel
+  // error as its detail.
+  void Run(const RunLimits& limits, const scenes::RunControl& run = {}, const std::string& label = "agvs");
 
   const GlobalPvs& pvs() const { return pvs_; }
   const AgvsStats& stats() const { return stats_; }

@@ -1,6 +1,9 @@
 #include "visibility/pvs_file.h"
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include <absl/strings/str_cat.h>
 
@@ -14,6 +17,55 @@ constexpr uint32_t kVersion = 1;
 constexpr uint64_t kMaxObjects = uint64_t{1} << 32;
 constexpr uint64_t kMaxCells = uint64_t{1} << 31;
 }  // namespace
+
+PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, GlobalPvs sets,
+                    const PvsProvenance& provenance) {
+  PvsFile f;
+  f.scene = scene.name;
+  f.cell_size = grid.cell_size();
+  f.base_z = grid.base_z();
+  f.height = grid.height();
+  f.corner_x = grid.corner().x;
+  f.corner_y = grid.corner().y;
+  f.nx = grid.nx();
+  f.ny = grid.ny();
+  f.strategy = provenance.strategy;
+  f.samples = provenance.samples;
+  f.seconds = provenance.seconds;
+  f.estimated_pixel_error = provenance.estimated_pixel_error;
+  f.sets = std::move(sets);
+  return f;
+}
+
+absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, size_t object_count,
+                                 const std::string& where) {
+  if (!file.Matches(grid)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        where, ": made for another scene or viewcell grid (the file: scene '", file.scene, "', ", file.nx, " x ", file.ny, " cells of ",
+        file.cell_size, " m at z ", file.base_z, "..", file.base_z + file.height, "; this scene's grid: ", grid.nx(),
+        " x ", grid.ny(), " cells of ", grid.cell_size(), " m at z ", grid.base_z(), "..",
+        grid.base_z() + grid.height(), ")"));
+  }
+  if (file.sets.object_count() != object_count) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": made for another scene ('", file.scene, "', ",
+                                                   file.sets.object_count(), " objects; this scene has ",
+                                                   object_count, ")"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, size_t object_count) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) return absl::InvalidArgumentError(path + ": is a directory, not a PVS file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open PVS file '", path, "'"));
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) return absl::DataLossError(absl::StrCat("cannot read PVS file '", path, "'"));
+  absl::StatusOr<PvsFile> f = DecodePvsFile(bytes, path);
+  if (!f.ok()) return f.status();
+  if (absl::Status st = CheckPvsFileMatches(*f, grid, object_count, path); !st.ok()) return st;
+  return f;
+}
 
 bool PvsFile::Matches(const ViewcellGrid& grid) const {
   return nx == grid.nx() && ny == grid.ny() && cell_size == grid.cell_size() && base_z == grid.base_z() &&

@@ -15,6 +15,7 @@
 
 #include <absl/status/statusor.h>
 
+#include "scenes/scene.h"
 #include "visibility/global_pvs.h"
 #include "visibility/viewcell_grid.h"
 
@@ -37,6 +38,29 @@ struct PvsFile {
 
 std::string EncodePvsFile(const PvsFile& file);
 absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where);
+
+// Where a file's sets came from: the sampling strategy or the dual-ray-space backend, and
+// what it took (0 where it does not apply).
+struct PvsProvenance {
+  std::string strategy;
+  uint64_t samples = 0;
+  double seconds = 0.0;
+  double estimated_pixel_error = 0.0;
+};
+
+// The file for `sets` (one set per cell of `grid`, ids of `scene`'s objects).
+PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, GlobalPvs sets,
+                    const PvsProvenance& provenance);
+
+// OK when `file` was made for `grid` (the same cells, exactly) and a scene with `object_count`
+// objects; else INVALID_ARGUMENT naming `where`, the file's scene and what differs.
+absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, size_t object_count,
+                                 const std::string& where);
+
+// Reads `path`, decodes it strictly and checks it against `grid` and `object_count`: the one
+// call that serves a precomputed file. Errors: NOT_FOUND (cannot open), DATA_LOSS / INVALID_ARGUMENT
+// from decoding, INVALID_ARGUMENT for a file made for another scene or grid; each names `path`.
+absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, size_t object_count);
 
 // The per-cell lists of `sets` as ascending varint gaps, and back (shared with the sampler's
 // saved state).

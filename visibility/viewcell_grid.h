@@ -13,6 +13,7 @@
 #include <glm/vec2.hpp>
 
 #include "scenes/aabb.h"
+#include "scenes/catalog.h"
 
 namespace vistream::visibility {
 
@@ -29,6 +30,11 @@ class ViewcellGrid {
   // or a grid of more than 2^31 cells.
   static absl::StatusOr<ViewcellGrid> Create(const scenes::Aabb& bounds, double cell_size,
                                              double base_z, double height);
+  // The grid of a scene's viewcell band (a catalog entry's `viewcell`) over `bounds` (the
+  // scene's). Errors as above.
+  static absl::StatusOr<ViewcellGrid> Create(const scenes::Aabb& bounds, const scenes::ViewcellSpec& spec) {
+    return Create(bounds, spec.size_m, spec.base_m, spec.height_m);
+  }
 
   int nx() const { return nx_; }
   int ny() const { return ny_; }

@@ -12,7 +12,6 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
-  vistream::scenes::Progress::SetQuiet(true);
   const std::string path = "/tmp/vistream-osm-fuzz-" + std::to_string(getpid()) +
                            ((data[0] & 1) != 0 ? ".osm.pbf" : ".osm");
   if (FILE* f = std::fopen(path.c_str(), "wb")) {

@@ -12,7 +12,7 @@
 
 #include "scenes/aabb.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 struct Rgb {
   uint8_t r = 0, g = 0, b = 0;
@@ -48,4 +48,4 @@ class TopViewMap {
 // A perceptually ordered colour ramp for t in [0, 1] (dark blue, teal, yellow).
 Rgb Ramp(double t);
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

@@ -1,19 +1,19 @@
-#include "bench/agvs_common.h"
+#include "tools/agvs_common.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "bench/cli_common.h"
-#include "bench/top_view_map.h"
+#include "tools/cli_common.h"
+#include "tools/top_view_map.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 absl::StatusOr<SampledScene> SampledScene::Load(const std::string& scene_arg, double cell_size,
                                                 const visibility::AgvsOptions& options) {
-  const scenes::ViewcellSpec spec = ViewcellSpecFor(scene_arg, cell_size);
+  const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(scene_arg, cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(scene_arg);
   if (!scene.ok()) return scene.status();
-  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
   if (!grid.ok()) return grid.status();
   absl::StatusOr<std::unique_ptr<visibility::GlobalSampler>> sampler =
       visibility::GlobalSampler::Create(*scene, *grid, options);
@@ -33,21 +33,10 @@ absl::StatusOr<visibility::FilterOptions> FilterFromName(const std::string& name
 }
 
 visibility::PvsFile MakePvsFile(const SampledScene& s, const visibility::GlobalPvs& sets) {
-  visibility::PvsFile f;
-  f.scene = s.scene.name;
-  f.cell_size = s.grid.cell_size();
-  f.base_z = s.grid.base_z();
-  f.height = s.grid.height();
-  f.corner_x = s.grid.corner().x;
-  f.corner_y = s.grid.corner().y;
-  f.nx = s.grid.nx();
-  f.ny = s.grid.ny();
-  f.strategy = visibility::StrategyName(s.sampler->options().strategy);
-  f.samples = s.sampler->stats().samples;
-  f.seconds = s.sampler->stats().seconds;
-  f.estimated_pixel_error = s.sampler->stats().estimated_pixel_error;
-  f.sets = sets;
-  return f;
+  const visibility::AgvsStats& st = s.sampler->stats();
+  return visibility::MakePvsFile(s.scene, s.grid, sets,
+                                 {visibility::StrategyName(s.sampler->options().strategy), st.samples, st.seconds,
+                                  st.estimated_pixel_error});
 }
 
 double MeanTriangles(const scenes::Scene& scene, const visibility::GlobalPvs& sets) {
@@ -90,4 +79,4 @@ HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::Viewcell
   return h;
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

@@ -1,4 +1,4 @@
-#include "client/id_renderer.h"
+#include "gl/id_renderer.h"
 
 #include <cmath>
 #include <string>

@@ -6,16 +6,16 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/pvs_backend.h"
-#include "bench/top_view_map.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "gl/pvs_backend.h"
+#include "tools/top_view_map.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/pvs.h"
 #include "visibility/viewcell_grid.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -27,18 +27,18 @@ struct PvsArgs {
 };
 
 int Pvs(const PvsArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   int ci = 0, cj = 0;
   char tail = 0;
   if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
     return Fail(absl::InvalidArgumentError("--cell '" + a.cell + "': expected I,J (two integers)"));
   }
   // Viewcell size and band: the option, else the catalog entry's, else 100 m at eye level.
-  const scenes::ViewcellSpec spec = ViewcellSpecFor(a.scene, a.cell_size);
+  const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   double load_s = 0.0;
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
   if (!grid.ok()) return Fail(grid.status());
   const visibility::CellCoord coord{ci, cj};
   if (!grid->Valid(coord)) {
@@ -56,7 +56,7 @@ int Pvs(const PvsArgs& a) {
   visibility::CellQueryOptions options;
   options.max_res = a.res;
   options.min_res = std::min<uint32_t>(16, a.res);
-  absl::StatusOr<PvsBackend> backend = PvsBackend::Create(a.backend);
+  absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   const visibility::PvsResult pvs = backend->ComputeBatch(computer, std::span(&cell, 1), options).front();
 
@@ -138,4 +138,4 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   c->callback([args, done] { done(Pvs(*args)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

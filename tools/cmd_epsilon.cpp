@@ -7,13 +7,13 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/top_view_map.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "tools/top_view_map.h"
 #include "scenes/progress.h"
 #include "visibility/epsilon_superset.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -24,7 +24,7 @@ struct EpsilonArgs {
 };
 
 int Epsilon(const EpsilonArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   double x = 0, y = 0, z = 0;
   char tail = 0;
   if (std::sscanf(a.at.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) ||
@@ -136,4 +136,4 @@ void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done) {
   c->callback([args, done] { done(Epsilon(*args)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "client/gl_context.h"
+#include "gl/gl_context.h"
 #include "glm/vec3.hpp"
 #include "scenes/scene.h"
 

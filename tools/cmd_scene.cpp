@@ -10,9 +10,9 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/top_view_map.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "tools/top_view_map.h"
 #include "scenes/catalog.h"
 #include "scenes/city_generator.h"
 #include "scenes/gltf_io.h"
@@ -20,7 +20,7 @@
 #include "scenes/progress.h"
 #include "visibility/kdtree.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -39,12 +39,12 @@ int Generate(const GenerateArgs& a) {
       return Fail(absl::InvalidArgumentError(
           entry->file + ": this scene is loaded from a file, not generated; use 'vistream scene info'"));
     }
-    scene = scenes::BuildScene(*entry, &CancelFlag());
+    scene = scenes::BuildScene(*entry, ToolRun());
   } else if (entry.status().code() == absl::StatusCode::kNotFound) {
     // Not in the catalog: a bare generator name.
     scenes::GeneratorParams params;
     params.seed = a.seed.value_or(1);
-    scene = scenes::GenerateNamed(a.name, params, &CancelFlag());
+    scene = scenes::GenerateNamed(a.name, params, ToolRun());
     if (!scene.ok()) {
       return Fail(absl::Status(scene.status().code(),
                                std::string(scene.status().message()) + "; catalog: " +
@@ -70,7 +70,7 @@ struct ImportArgs {
 };
 
 int ImportOsm(const ImportArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   scenes::OsmImportOptions options;
   options.storey_m = a.storey_m;
   options.name = a.name;
@@ -80,7 +80,7 @@ int ImportOsm(const ImportArgs& a) {
     options.bbox = *box;
   }
   scenes::OsmImportSummary sum;
-  absl::StatusOr<scenes::Scene> scene = scenes::ImportOsm(a.input, options, &sum, &CancelFlag());
+  absl::StatusOr<scenes::Scene> scene = scenes::ImportOsm(a.input, options, &sum, ToolRun());
   if (!scene.ok()) return Fail(scene.status());
   const auto save_start = std::chrono::steady_clock::now();
   if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
@@ -148,7 +148,7 @@ struct InfoArgs {
 };
 
 int Info(const InfoArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   double load_s = 0.0;
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file, &load_s);
   if (!scene.ok()) return Fail(scene.status());
@@ -267,4 +267,4 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   m->callback([map, done] { done(Map(*map)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

@@ -9,15 +9,15 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/epsilon_superset.h"
 #include "visibility/pvs.h"
 #include "visibility/viewcell_grid.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -63,7 +63,7 @@ double Median(std::vector<double> v) {
 std::string Paper(double v) { return v < 0 ? "-" : absl::StrFormat("%.0f", v); }
 
 int BenchEpsilon(const BenchEpsilonArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   std::vector<visibility::EpsilonOptions> options;
   for (const std::string& name : a.opts) {
     absl::StatusOr<visibility::EpsilonOptions> o = visibility::EpsilonOptions::FromName(name);
@@ -108,7 +108,7 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
 
   std::vector<Column> columns(options.size());
   for (size_t c = 0; c < options.size(); ++c) columns[c].opt = a.opts[c];
-  scenes::Progress progress("epsilon", boxes.size() * options.size(), &CancelFlag());
+  scenes::Progress progress(ToolRun(), "epsilon", boxes.size() * options.size());
   // Columns alternate per neighbourhood, so that a noisy stretch of the run hits all alike.
   for (size_t k = 0; k < boxes.size(); ++k) {
     std::vector<uint32_t> reference;
@@ -275,4 +275,4 @@ void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done) {
   c->callback([args, done] { done(BenchEpsilon(*args)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

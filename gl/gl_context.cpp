@@ -1,4 +1,4 @@
-#include "client/gl_context.h"
+#include "gl/gl_context.h"
 
 #include <vector>
 

@@ -1,4 +1,4 @@
-#include "bench/top_view_map.h"
+#include "tools/top_view_map.h"
 
 #include <png.h>
 
@@ -9,7 +9,7 @@
 
 #include <absl/strings/str_cat.h>
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 static_assert(sizeof(Rgb) == 3, "pixels are written to libpng as packed RGB");
 
@@ -114,4 +114,4 @@ Rgb Ramp(double t) {
   return {mix(0), mix(1), mix(2)};
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

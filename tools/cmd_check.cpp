@@ -10,16 +10,16 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/agvs_common.h"
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/pvs_backend.h"
+#include "tools/agvs_common.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "gl/pvs_backend.h"
 #include "scenes/progress.h"
 #include "visibility/epsilon_superset.h"
 #include "visibility/kdtree.h"
 #include "visibility/pvs.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -47,13 +47,13 @@ struct Violation {
 };
 
 int Check(const CheckArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
   // 0 (the default) takes the catalog's size; anything else must be a size.
   if (!(a.cell_size >= 0.0 && std::isfinite(a.cell_size))) {
     return Fail(absl::InvalidArgumentError("--cell-size must be a positive number of metres"));
   }
-  absl::StatusOr<PvsBackend> backend = PvsBackend::Create(a.backend);
+  absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   visibility::AgvsOptions options;
   options.seed = a.seed;
@@ -75,7 +75,7 @@ int Check(const CheckArgs& a) {
   // depends on the machine's load.
   const visibility::RunLimits limits = a.samples > 0 ? visibility::RunLimits{0.0, 0.0, a.samples}
                                                      : visibility::RunLimits{a.seconds, 0.0, 0};
-  sampler.Run(limits, &CancelFlag(), a.json ? "" : "agvs " + scene.name);
+  sampler.Run(limits, ToolRun(), "agvs " + scene.name);
   if (CancelFlag().load()) return Fail(absl::CancelledError("cancelled"));
 
   // The dual-ray-space PVS of each checked cell.
@@ -89,7 +89,7 @@ int Check(const CheckArgs& a) {
     q.max_res = a.res;
     std::vector<scenes::Aabb> boxes;
     for (visibility::CellId c : cells) boxes.push_back(s->grid.CellBox(c));
-    scenes::Progress progress("dual ray space (" + backend->name() + ")", boxes.size(), &CancelFlag());
+    scenes::Progress progress(ToolRun(), "dual ray space (" + backend->name() + ")", boxes.size());
     constexpr size_t kStep = 16;
     for (size_t first = 0; first < boxes.size(); first += kStep) {
       const size_t n = std::min(kStep, boxes.size() - first);
@@ -129,7 +129,7 @@ int Check(const CheckArgs& a) {
         visibility::SampleNeighbourhoods(scene, a.neighbourhoods, size, s->grid.base_z(), a.seed);
     neighbourhoods = boxes.size();
     const visibility::EpsilonOptions all = *visibility::EpsilonOptions::FromName("all");
-    scenes::Progress progress("epsilon superset", boxes.size(), &CancelFlag());
+    scenes::Progress progress(ToolRun(), "epsilon superset", boxes.size());
     for (size_t b = 0; b < boxes.size(); ++b) {
       const visibility::EpsilonResult r = (*eps)->Compute(boxes[b], all);
       for (const visibility::BoxHit& h : sampler.SampleFromBox(boxes[b], a.rays, a.seed + b)) {
@@ -233,4 +233,4 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
   c->callback([args, done] { done(Check(*args)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

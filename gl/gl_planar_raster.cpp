@@ -1,4 +1,4 @@
-#include "client/gl_planar_raster.h"
+#include "gl/gl_planar_raster.h"
 
 #include <algorithm>
 #include <array>

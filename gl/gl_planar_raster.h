@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "client/gl_context.h"
+#include "gl/gl_context.h"
 #include "visibility/conservative_raster.h"
 
 namespace vistream::gl {

@@ -11,15 +11,15 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "client/gl_planar_raster.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "gl/pvs_backend.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/pvs.h"
 #include "visibility/viewcell_grid.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -66,7 +66,7 @@ double Median(std::vector<double> v) {
 }
 
 int Table1(const Table1Args& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   for (uint32_t r : a.res) {
     if (r < 1 || r > 256 || (r & (r - 1)) != 0) {
       return Fail(absl::InvalidArgumentError(absl::StrFormat("--res %u: expected a power of two, 1 to 256", r)));
@@ -79,14 +79,13 @@ int Table1(const Table1Args& a) {
   const visibility::KdTree tree = visibility::KdTree::Build(*scene);
   const visibility::PvsComputer computer(*scene, tree);
 
-  std::unique_ptr<gl::GlPlanarRaster> gl_raster;
-  if (std::find(a.backends.begin(), a.backends.end(), "gl") != a.backends.end()) {
-    absl::StatusOr<std::unique_ptr<gl::GlPlanarRaster>> r = gl::GlPlanarRaster::Create();
-    if (!r.ok()) return Fail(r.status());
-    gl_raster = std::move(*r);
+  std::map<std::string, gl::PvsBackend> backends;
+  for (const std::string& name : a.backends) {
+    absl::StatusOr<gl::PvsBackend> b = gl::PvsBackend::Create(name);
+    if (!b.ok()) return Fail(b.status());
+    backends.emplace(name, std::move(*b));
   }
-  visibility::DualRaySpace cpu_engine(computer.occluders());
-  visibility::DualRaySpace gl_engine(computer.occluders(), gl_raster.get());
+  const absl::StatusOr<gl::PvsBackend> exact = gl::PvsBackend::Create("exact");
 
   // The ground area of an object, the unit in which occluded area is counted.
   auto area = [&](scenes::ObjectId id) {
@@ -110,8 +109,7 @@ int Table1(const Table1Args& a) {
   }
   std::vector<Row> rows;
   nlohmann::json exact_json = nlohmann::json::array();
-  scenes::Progress progress("table1", a.sizes.size() * a.cells * (1 + a.res.size() * a.backends.size()),
-                            &CancelFlag());
+  scenes::Progress progress(ToolRun(), "table1", a.sizes.size() * a.cells * (1 + a.res.size() * a.backends.size()));
   for (double size : a.sizes) {
     absl::StatusOr<visibility::ViewcellGrid> grid =
         visibility::ViewcellGrid::Create(scene->bounds, size, spec.base_m, 2.0);
@@ -124,8 +122,7 @@ int Table1(const Table1Args& a) {
     std::vector<std::vector<scenes::ObjectId>> exact_pvs;
     double exact_ms = 0, exact_objects = 0;
     for (const scenes::Aabb& cell : cells) {
-      const visibility::PvsResult r =
-          computer.Compute(cell, visibility::CellQueryOptions{.max_res = 256, .exact = true}, &cpu_engine);
+      const visibility::PvsResult r = exact->Compute(computer, cell, visibility::CellQueryOptions{.max_res = 256});
       exact_occluded.push_back(occluded_area(r.objects));
       exact_pvs.push_back(r.objects);
       exact_ms += r.ms;
@@ -144,8 +141,7 @@ int Table1(const Table1Args& a) {
         std::vector<double> ms;
         double p_e = 0, p_c = 0;
         for (size_t k = 0; k < cells.size(); ++k) {
-          visibility::DualRaySpace* engine = backend == "gl" ? &gl_engine : &cpu_engine;
-          const visibility::PvsResult r = computer.Compute(cells[k], options, engine);
+          const visibility::PvsResult r = backends.at(backend).Compute(computer, cells[k], options);
           // The exact set must lie inside every conservative one: a self-check, not a figure.
           if (!std::includes(r.objects.begin(), r.objects.end(), exact_pvs[k].begin(), exact_pvs[k].end())) {
             return Fail(absl::InternalError(absl::StrFormat(
@@ -258,4 +254,4 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   AddBenchAgvsCommand(bench, done);
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

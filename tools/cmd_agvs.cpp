@@ -9,15 +9,15 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/agvs_common.h"
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/top_view_map.h"
+#include "tools/agvs_common.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "tools/top_view_map.h"
 #include "scenes/progress.h"
 #include "visibility/agvs.h"
 #include "visibility/pvs_file.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -55,7 +55,7 @@ nlohmann::json StatsJson(const visibility::GlobalSampler& s) {
 }
 
 int Agvs(const AgvsArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   if (a.scene.empty()) return Fail(absl::InvalidArgumentError("--scene is required"));
   if (a.seconds <= 0 && a.pixel_error <= 0 && a.samples == 0) {
     return Fail(absl::InvalidArgumentError("give --seconds, --pixel-error or --samples: when to stop sampling"));
@@ -83,7 +83,7 @@ int Agvs(const AgvsArgs& a) {
     }
   }
   InstallCancelHandler();
-  sampler.Run({a.seconds, a.pixel_error, a.samples}, &CancelFlag(), a.json ? "" : "agvs " + s->scene.name);
+  sampler.Run({a.seconds, a.pixel_error, a.samples}, ToolRun(), "agvs " + s->scene.name);
   const bool cancelled = CancelFlag().load();
 
   if (!a.state.empty()) {
@@ -140,7 +140,7 @@ struct HeatmapArgs {
 };
 
 int Heatmap(const HeatmapArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   if (a.pvs.empty() == (a.seconds <= 0)) {
     return Fail(absl::InvalidArgumentError("give either --pvs FILE (from agvs -o) or --seconds T to sample first"));
   }
@@ -152,18 +152,12 @@ int Heatmap(const HeatmapArgs& a) {
   if (!s.ok()) return Fail(s.status());
   visibility::GlobalPvs sets;
   if (!a.pvs.empty()) {
-    absl::StatusOr<std::string> bytes = ReadFile(a.pvs);
-    if (!bytes.ok()) return Fail(bytes.status());
-    absl::StatusOr<visibility::PvsFile> f = visibility::DecodePvsFile(*bytes, a.pvs);
+    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(a.pvs, s->grid, s->scene.objects.size());
     if (!f.ok()) return Fail(f.status());
-    if (!f->Matches(s->grid) || f->sets.object_count() != s->scene.objects.size()) {
-      return Fail(absl::InvalidArgumentError(a.pvs + ": made for another scene or viewcell grid (scene '" + f->scene +
-                                             "')"));
-    }
     sets = std::move(f->sets);
   } else {
     InstallCancelHandler();
-    s->sampler->Run({a.seconds, 0.0, 0}, &CancelFlag(), a.json ? "" : "agvs " + s->scene.name);
+    s->sampler->Run({a.seconds, 0.0, 0}, ToolRun(), "agvs " + s->scene.name);
     sets = s->sampler->FilteredAll(*filter);
   }
   const HeatmapStats h = WriteHeatmap(s->scene, s->grid, sets, a.out);
@@ -221,4 +215,4 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
   hm->callback([h, done] { done(Heatmap(*h)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

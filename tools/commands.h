@@ -6,7 +6,7 @@
 
 #include <CLI/CLI.hpp>
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 void AddSceneCommands(CLI::App& app, std::function<void(int)> done);
 void AddPvsCommand(CLI::App& app, std::function<void(int)> done);
@@ -19,4 +19,4 @@ void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);
 // `bench agvs`, likewise.
 void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done);
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

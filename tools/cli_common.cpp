@@ -1,4 +1,4 @@
-#include "bench/cli_common.h"
+#include "tools/cli_common.h"
 
 #include <chrono>
 #include <cerrno>
@@ -8,9 +8,9 @@
 #include <filesystem>
 
 #include "scenes/catalog.h"
-#include "scenes/gltf_io.h"
+#include "tools/terminal_progress.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 std::atomic<bool>& CancelFlag() {
   static std::atomic<bool> flag{false};
@@ -23,35 +23,16 @@ void InstallCancelHandler() {
   });
 }
 
+scenes::RunControl ToolRun() { return {&ToolProgress(), &CancelFlag()}; }
+
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds) {
-  const auto start = std::chrono::steady_clock::now();
-  absl::StatusOr<scenes::Scene> scene;
-  const std::string ext = std::filesystem::path(arg).extension().string();
-  if (ext == ".glb" || ext == ".gltf") {
-    std::vector<std::string> warnings;
-    scene = scenes::LoadGltf(arg, &warnings);
-    for (const std::string& w : warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
-  } else {
-    absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(arg);
-    if (!entry.ok()) return entry.status();
-    scene = scenes::BuildScene(*entry, &CancelFlag());
-  }
-  if (seconds != nullptr) *seconds = SecondsSince(start);
-  return scene;
-}
-
-scenes::ViewcellSpec ViewcellSpecFor(const std::string& scene_arg, double cell_size) {
-  scenes::ViewcellSpec spec;
-  const std::string ext = std::filesystem::path(scene_arg).extension().string();
-  if (ext != ".glb" && ext != ".gltf") {
-    if (auto entry = scenes::FindCatalogEntry(scene_arg); entry.ok()) spec = entry->viewcell;
-  }
-  if (cell_size > 0.0) spec.size_m = cell_size;
-  return spec;
-}
-
-absl::StatusOr<visibility::ViewcellGrid> GridFor(const scenes::Scene& scene, const scenes::ViewcellSpec& spec) {
-  return visibility::ViewcellGrid::Create(scene.bounds, spec.size_m, spec.base_m, spec.height_m);
+  scenes::LoadOptions options;
+  options.run = ToolRun();
+  absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(arg, options);
+  if (!loaded.ok()) return loaded.status();
+  for (const std::string& w : loaded->warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
+  if (seconds != nullptr) *seconds = loaded->seconds;
+  return std::move(loaded->scene);
 }
 
 absl::StatusOr<std::string> ReadFile(const std::string& path) {
@@ -84,4 +65,4 @@ int Fail(const absl::Status& status) {
   return status.code() == absl::StatusCode::kCancelled ? 130 : 1;
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

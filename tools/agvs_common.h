@@ -13,7 +13,7 @@
 #include "visibility/pvs_file.h"
 #include "visibility/viewcell_grid.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 struct SampledScene {
   scenes::Scene scene;
@@ -46,4 +46,4 @@ struct HeatmapStats {
 HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
                           const visibility::GlobalPvs& sets, const std::string& png);
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

@@ -1,21 +1,21 @@
 // vistream: scene preparation, visibility tools, benchmarks and reports.
 #include <CLI/CLI.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"vistream: visibility streaming for city walkthroughs", "vistream"};
   app.require_subcommand(1);
   int exit_code = 0;
   auto done = [&exit_code](int code) { exit_code = code; };
-  vistream::cli::AddSceneCommands(app, done);
-  vistream::cli::AddPvsCommand(app, done);
-  vistream::cli::AddEpsilonCommand(app, done);
-  vistream::cli::AddAgvsCommand(app, done);
-  vistream::cli::AddCheckCommand(app, done);
-  vistream::cli::AddBenchCommands(app, done);
-  vistream::cli::InstallCancelHandler();
+  vistream::tools::AddSceneCommands(app, done);
+  vistream::tools::AddPvsCommand(app, done);
+  vistream::tools::AddEpsilonCommand(app, done);
+  vistream::tools::AddAgvsCommand(app, done);
+  vistream::tools::AddCheckCommand(app, done);
+  vistream::tools::AddBenchCommands(app, done);
+  vistream::tools::InstallCancelHandler();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

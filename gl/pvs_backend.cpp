@@ -1,6 +1,6 @@
-#include "bench/pvs_backend.h"
+#include "gl/pvs_backend.h"
 
-namespace vistream::cli {
+namespace vistream::gl {
 
 absl::StatusOr<PvsBackend> PvsBackend::Create(const std::string& name) {
   PvsBackend b;
@@ -20,6 +20,12 @@ visibility::CellQueryOptions PvsBackend::Options(visibility::CellQueryOptions op
   return options;
 }
 
+visibility::PvsResult PvsBackend::Compute(const visibility::PvsComputer& computer, const scenes::Aabb& cell,
+                                          const visibility::CellQueryOptions& options) const {
+  visibility::DualRaySpace engine(computer.occluders(), gl_.get());
+  return computer.Compute(cell, Options(options), &engine);
+}
+
 std::vector<visibility::PvsResult> PvsBackend::ComputeBatch(const visibility::PvsComputer& computer,
                                                             std::span<const scenes::Aabb> cells,
                                                             const visibility::CellQueryOptions& options) const {
@@ -30,4 +36,4 @@ std::vector<visibility::PvsResult> PvsBackend::ComputeBatch(const visibility::Pv
   return out;
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::gl

@@ -11,10 +11,10 @@
 
 #include <absl/status/statusor.h>
 
-#include "client/gl_planar_raster.h"
+#include "gl/gl_planar_raster.h"
 #include "visibility/pvs.h"
 
-namespace vistream::cli {
+namespace vistream::gl {
 
 class PvsBackend {
  public:
@@ -24,6 +24,9 @@ class PvsBackend {
   const std::string& name() const { return name_; }
   // `options` with this backend's part set (the exact test on or off).
   visibility::CellQueryOptions Options(visibility::CellQueryOptions options) const;
+  // The PVS of one cell, on the calling thread (timed in the result's ms).
+  visibility::PvsResult Compute(const visibility::PvsComputer& computer, const scenes::Aabb& cell,
+                                const visibility::CellQueryOptions& options) const;
   // The PVS of each cell, in order: cpu and exact on every core, gl on the calling thread (its
   // context is current there).
   std::vector<visibility::PvsResult> ComputeBatch(const visibility::PvsComputer& computer,
@@ -35,4 +38,4 @@ class PvsBackend {
   std::unique_ptr<gl::GlPlanarRaster> gl_;
 };
 
-}  // namespace vistream::cli
+}  // namespace vistream::gl

@@ -15,15 +15,15 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
-#include "bench/cli_common.h"
-#include "bench/commands.h"
-#include "bench/top_view_map.h"
-#include "client/id_renderer.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "tools/top_view_map.h"
+#include "gl/id_renderer.h"
 #include "scenes/progress.h"
 #include "scenes/random.h"
 #include "visibility/agvs.h"
 
-namespace vistream::cli {
+namespace vistream::tools {
 
 namespace {
 
@@ -156,12 +156,12 @@ absl::Status WritePlot(const std::vector<Track>& tracks, double seconds, const s
 }
 
 int BenchAgvs(const BenchAgvsArgs& a) {
-  if (a.json) scenes::Progress::SetQuiet(true);
+  if (a.json) ToolProgress().set_quiet(true);
   if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
-  const scenes::ViewcellSpec spec = ViewcellSpecFor(a.scene, a.cell_size);
+  const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid = GridFor(*scene, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
   if (!grid.ok()) return Fail(grid.status());
 
   // The measured side first: views from uniform points of uniform cells, as the estimator's
@@ -172,7 +172,7 @@ int BenchAgvs(const BenchAgvsArgs& a) {
     absl::StatusOr<std::unique_ptr<gl::IdRenderer>> renderer = gl::IdRenderer::Create(*scene, a.res);
     if (!renderer.ok()) return Fail(renderer.status());
     scenes::Rng rng(scenes::Rng(a.seed).Next() ^ 0x51ed27);
-    scenes::Progress progress("rendering views", static_cast<uint64_t>(a.views), &CancelFlag());
+    scenes::Progress progress(ToolRun(), "rendering views", static_cast<uint64_t>(a.views));
     InstallCancelHandler();
     for (int tries = 0; static_cast<int>(views.size()) < a.views && tries < 50 * a.views; ++tries) {
       View v;
@@ -222,7 +222,7 @@ int BenchAgvs(const BenchAgvsArgs& a) {
 
   const double cells = static_cast<double>(grid->CellCount());
   {
-    scenes::Progress progress("sampling " + scene->name + " (agvs, sgvs, ref in turn)", 1000, &CancelFlag());
+    scenes::Progress progress(ToolRun(), "sampling " + scene->name + " (agvs, sgvs, ref in turn)", 1000);
     uint64_t shown = 0;
     for (;;) {
       Track* next = nullptr;
@@ -356,4 +356,4 @@ void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
   c->callback([args, done] { done(BenchAgvs(*args)); });
 }
 
-}  // namespace vistream::cli
+}  // namespace vistream::tools

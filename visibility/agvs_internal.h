@@ -1,0 +1,442 @@
+#pragma once
+// What the parts of the global sampler share (agvs.cpp, agvs_sampling.cpp, agvs_edit.cpp,
+// agvs_state.cpp): the sampler's state (GlobalSampler::Impl) and the helpers it is written
+// with. Internal: included by those files only.
+
+#include <embree3/rtcore.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <unordered_map>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+#include <glm/geometric.hpp>
+
+#include "scenes/progress.h"
+#include "scenes/random.h"
+#include "visibility/bytes.h"
+#include "visibility/coincident_faces.h"
+#include "visibility/kdtree.h"
+#include "visibility/parallel.h"
+#include "visibility/pvs_file.h"
+#include "visibility/silhouette.h"
+
+namespace vistream::visibility {
+
+namespace agvs_detail {
+
+using scenes::ObjectId;
+using scenes::Rng;
+
+constexpr uint32_t kChunk = 512;  // samples per chunk: one distribution, one random stream
+constexpr ObjectId kNoObject = std::numeric_limits<ObjectId>::max();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kSurfaceOffset = 1e-3;  // metres a ray leaves a surface point before it counts
+// Metres within which two faces of opposite orientation coincide, and a hit lies on such a
+// face: walls that touch in the source data come a few millimetres apart after rounding to
+// float or to a grid (1 mm at 20 km; up to 6 mm where a turned wall's corners snap to 1/256
+// m). A ray through a crack narrower than this is discarded, which only makes the sampled
+// sets smaller.
+constexpr double kCoincidentTolerance = 0.01;
+constexpr uint32_t kMaxMutationCount = 63;
+
+inline uint64_t Mix(uint64_t a, uint64_t b) {
+  uint64_t z = a * 0x9e3779b97f4a7c15ULL + b + 0x632be59bd9b4e019ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+// A uniform point (u, v) of the open unit disk without its centre, and s = u² + v²: by
+// rejection from the square (a try is kept with chance π/4), which costs less than the sine
+// and cosine of an angle.
+struct DiskPoint {
+  double u, v, s;
+};
+inline DiskPoint UniformDiskPoint(Rng& rng) {
+  for (;;) {
+    const double u = 2.0 * rng.Uniform() - 1.0, v = 2.0 * rng.Uniform() - 1.0, s = u * u + v * v;
+    if (s < 1.0 && s > 0.0) return {u, v, s};
+  }
+}
+
+// A uniform direction of the plane: (cos φ, sin φ) for a uniform angle φ.
+inline std::pair<double, double> UniformCircle(Rng& rng) {
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double r = 1.0 / std::sqrt(p.s);
+  return {p.u * r, p.v * r};
+}
+
+// A uniform direction of space (Marsaglia 1972: z = 1 - 2s is uniform in (-1, 1)).
+inline glm::dvec3 UniformDirection(Rng& rng) {
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double w = 2.0 * std::sqrt(1.0 - p.s);
+  return {p.u * w, p.v * w, 1.0 - 2.0 * p.s};
+}
+
+// Two unit vectors completing unit `n` to an orthonormal basis (Duff et al. 2017: no square
+// root, no branch on the direction).
+inline void Basis(const glm::dvec3& n, glm::dvec3* b1, glm::dvec3* b2) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z), b = n.x * n.y * a;
+  *b1 = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+  *b2 = glm::dvec3(b, sign + n.y * n.y * a, -n.y);
+}
+
+// Two independent standard normal numbers (Marsaglia's polar method: both of its outputs).
+inline std::pair<double, double> Gaussians(Rng& rng) {
+  const DiskPoint p = UniformDiskPoint(rng);
+  const double f = std::sqrt(-2.0 * std::log(p.s) / p.s);
+  return {p.u * f, p.v * f};
+}
+
+inline double BoxRadius(const Aabb& b) { return 0.5 * glm::length(b.Extent()); }
+
+inline double BoxDistance(const Aabb& a, const Aabb& b) {
+  double s = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double gap = std::max({0.0, a.min[k] - b.max[k], b.min[k] - a.max[k]});
+    s += gap * gap;
+  }
+  return std::sqrt(s);
+}
+
+struct Sample {
+  glm::dvec3 origin{0.0}, dir{0.0};  // frame-relative; dir is unit length
+  double t_fwd = kInf, t_rev = kInf;  // distances to the hits along +dir and -dir
+  ObjectId fwd = kNoObject, rev = kNoObject;
+  Distribution dist = Distribution::kViewSpaceDirection;
+  bool valid = false;
+  CellId origin_cell = 0;  // view space-direction and ref samples
+};
+
+struct Candidate {
+  ObjectId object = kNoObject;  // first: read ahead of the rest (see Worker::Gather)
+  uint32_t mutations = 0;
+  glm::dvec3 from{0.0}, to{0.0};  // the segment's origin and the point where `object` was hit
+  double r_from = 0.0, r_to = 0.0;  // radii of what lies at each end
+};
+
+// The mutation candidates, by how often each was mutated: the least mutated is taken first,
+// the most mutated dropped first when full.
+class MutationBuffer {
+ public:
+  explicit MutationBuffer(size_t capacity) : capacity_(capacity), buckets_(kMaxMutationCount + 1) {}
+
+  size_t size() const { return size_; }
+  void Add(Candidate c) {
+    if (capacity_ == 0) return;
+    if (size_ == capacity_) DropMostMutated();
+    c.mutations = std::min(c.mutations, kMaxMutationCount);
+    uint32_t slot;
+    if (!free_.empty()) {
+      slot = free_.back();
+      free_.pop_back();
+      pool_[slot] = c;
+    } else {
+      slot = static_cast<uint32_t>(pool_.size());
+      pool_.push_back(c);
+    }
+    buckets_[c.mutations].push_back(slot);  // the count lives in the bucket from now on
+    lowest_ = std::min<size_t>(lowest_, c.mutations);
+    ++size_;
+  }
+  // Precondition: size() > 0. The slot of a least-mutated candidate (random among equals);
+  // its count goes up by one. The slot stays valid until the next Add or Forget.
+  uint32_t Take(Rng& rng) {
+    while (buckets_[lowest_].empty()) ++lowest_;
+    std::vector<uint32_t>& bucket = buckets_[lowest_];
+    const size_t i = rng.Below(bucket.size());
+    const uint32_t slot = bucket[i];
+    bucket[i] = bucket.back();
+    bucket.pop_back();
+    buckets_[std::min<size_t>(lowest_ + 1, kMaxMutationCount)].push_back(slot);
+    return slot;
+  }
+  const Candidate& At(uint32_t slot) const { return pool_[slot]; }
+  // Drops every candidate whose end lies on `object`.
+  void Forget(ObjectId object) {
+    for (std::vector<uint32_t>& bucket : buckets_) {
+      std::erase_if(bucket, [&](uint32_t slot) {
+        if (pool_[slot].object != object) return false;
+        free_.push_back(slot);
+        --size_;
+        return true;
+      });
+    }
+  }
+  // f(candidate, times mutated).
+  template <typename F>
+  void ForEach(F&& f) const {
+    for (uint32_t b = 0; b < buckets_.size(); ++b) {
+      for (uint32_t slot : buckets_[b]) f(pool_[slot], b);
+    }
+  }
+
+ private:
+  void DropMostMutated() {
+    for (size_t b = buckets_.size(); b-- > 0;) {
+      if (buckets_[b].empty()) continue;
+      free_.push_back(buckets_[b].back());
+      buckets_[b].pop_back();
+      --size_;
+      return;
+    }
+  }
+  size_t capacity_;
+  size_t size_ = 0, lowest_ = 0;
+  std::vector<Candidate> pool_;
+  std::vector<uint32_t> free_;
+  std::vector<std::vector<uint32_t>> buckets_;
+};
+
+struct NewEntry {
+  CellId cell;
+  ObjectId object;
+  uint32_t witness;  // index in its chunk's witnesses, for cells that keep them; else kNoWitness
+};
+constexpr uint32_t kNoWitness = std::numeric_limits<uint32_t>::max();
+
+struct ChunkPlan {
+  Distribution dist;
+  std::vector<uint32_t> candidates;  // mutation chunks: one per sample, a slot of the buffer
+};
+
+// Valid samples per cell they pierce and per object they end on, one thread's.
+struct Counts {
+  std::vector<uint64_t> cells, objects;
+};
+
+// What a chunk found, in the order its samples were drawn: all the serial part applies.
+struct ChunkResult {
+  std::vector<NewEntry> entries;
+  std::vector<Witness> witnesses;
+  std::vector<Candidate> candidates;  // mutation candidates (AGVS), in order
+  uint64_t samples = 0;
+  uint64_t embree_rays = 0, silhouette_searches = 0, discarded = 0;
+  uint64_t contribution = 0;
+  uint64_t estimator_rays = 0, estimator_hits = 0;
+};
+
+}  // namespace agvs_detail
+
+// The sampler's parts read these as if they were their own.
+using namespace agvs_detail;  // NOLINT(google-build-using-namespace): internal header
+
+struct GlobalSampler::Impl {
+  struct Object {
+    std::vector<glm::vec3> verts;  // frame-relative (for Embree and edits)
+    std::vector<uint32_t> indices;
+    // From verts and indices, as the silhouette search reads them. Float: drawing samples and
+    // searching silhouettes are heuristics; visibility itself is Embree's.
+    std::vector<EdgeTriangle> tris;
+    FanSurface fan;  // the same, for the silhouette search
+    // Embree reads the triangles as quads (PairTriangles): each quad's first triangle, and
+    // whether it has a second.
+    std::vector<uint32_t> quad_first;
+    std::vector<bool> quad_pair;
+    // The triangle Embree hit: the quad's first (q, r, p) where u + v <= 1, its second
+    // (s, p, r) beyond.
+    uint32_t TriangleOf(uint32_t quad, bool second) const {
+      return quad_first[quad] + (quad_pair[quad] && second ? 1 : 0);
+    }
+    double area = 0.0;
+    Aabb bounds;                   // frame-relative, from verts
+    double radius = 0.0;
+    bool alive = true;
+  };
+  std::vector<Object> objects;
+  // Surface points are drawn from a uniform alive object with surface area, then uniformly on
+  // its surface: as one choice of a triangle, from Walker's alias table over every triangle of
+  // those objects (one or two cache misses a point, where a search per object took several).
+  struct SurfaceEntry {
+    EdgeTriangle tri;
+    float keep;      // the chance to keep this triangle rather than take its alias
+    uint32_t alias;  // index into `surface`
+    ObjectId object;
+  };
+  std::vector<SurfaceEntry> surface;
+  glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
+  Aabb view_space;                   // frame-relative
+  double cell_radius = 0.0;
+
+  RTCDevice device = nullptr;
+  RTCScene rtc = nullptr;
+  bool dirty = false;  // edits not yet committed
+
+  MutationBuffer buffer{0};
+  std::array<double, kDistributionCount> ema_contribution{}, ema_cost{};
+  std::array<double, kDistributionCount> probability{};
+  std::vector<std::pair<uint64_t, uint64_t>> estimator_window;  // per batch: rays, new-entry rays
+  double estimate_target_pixels = 1.0;  // the error the estimator's window is sized to tell
+  std::vector<uint64_t> cell_samples;  // valid samples that pierced each cell
+  std::vector<uint64_t> object_hits;   // valid sample ends on each object
+
+  std::vector<bool> witness_cell;
+  std::unordered_map<uint64_t, Witness> witnesses;  // key: cell << 32 | object
+
+  KdTree tree;  // over the boxes of live objects, for the object-space filter
+
+  // Faces that lie on a face of opposite orientation (party walls, a tier's floor on the roof
+  // below it), and per object whether it has one. A ray reaches such a face only from inside
+  // the solid behind its partner, but Embree may report the partner's front face: the ray's
+  // sample is discarded like one that hits a back face.
+  CoincidentFaces coincident;
+  std::vector<uint8_t> has_coincident;
+
+  // The surface table, the kd-tree and the coincident faces, rebuilt after every edit, never
+  // lazily, so that const calls stay thread-safe.
+  void Rebuild() {
+    RebuildSurface();
+    std::vector<Aabb> boxes(objects.size());
+    std::vector<MeshView> meshes(objects.size());
+    for (ObjectId o = 0; o < objects.size(); ++o) {
+      if (!objects[o].alive) continue;
+      boxes[o] = objects[o].bounds;
+      meshes[o] = MeshView{objects[o].verts, objects[o].indices};
+    }
+    tree = KdTree::Build(boxes);
+    coincident = FindCoincidentFaces(meshes, kCoincidentTolerance);
+    has_coincident.assign(objects.size(), 0);
+    for (ObjectId o = 0; o < objects.size(); ++o) has_coincident[o] = !coincident.of_mesh[o].empty();
+  }
+
+  // Whether frame-relative point `p` on triangle `triangle` of `object` also lies on a face of
+  // opposite orientation lying on that triangle.
+  bool OnCoincidentFace(ObjectId object, uint32_t triangle, const glm::dvec3& p) const {
+    for (const CoincidentFaces::Entry& e : coincident.Partners(object, triangle)) {
+      const Object& o = objects[e.partner.mesh];
+      const uint32_t* t = &o.indices[3 * e.partner.triangle];
+      if (PointOnTriangle(p, glm::dvec3(o.verts[t[0]]), glm::dvec3(o.verts[t[1]]), glm::dvec3(o.verts[t[2]]),
+                          kCoincidentTolerance)) {
+        return true;
+      }
+    }
+    return false;
+  }
+
+  ~Impl() {
+    if (rtc != nullptr) rtcReleaseScene(rtc);
+    if (device != nullptr) rtcReleaseDevice(device);
+  }
+
+  void Attach(ObjectId id) {
+    Object& o = objects[id];
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
+    auto* v = static_cast<float*>(
+        rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), o.verts.size()));
+    for (size_t i = 0; i < o.verts.size(); ++i) {
+      v[3 * i] = o.verts[i].x;
+      v[3 * i + 1] = o.verts[i].y;
+      v[3 * i + 2] = o.verts[i].z;
+    }
+    EmbreeQuads q = PairTriangles(o.indices);
+    o.quad_first = std::move(q.first);
+    o.quad_pair = std::move(q.pair);
+    const std::vector<uint32_t>& quads = q.indices;
+    auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                                                              4 * sizeof(uint32_t), quads.size() / 4));
+    std::copy(quads.begin(), quads.end(), ix);
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(rtc, g, id);
+    rtcReleaseGeometry(g);
+    dirty = true;
+  }
+  void Commit() {
+    if (!dirty) return;
+    rtcCommitScene(rtc);
+    dirty = false;
+  }
+  // Vose's construction of the alias table.
+  void RebuildSurface() {
+    surface.clear();
+    std::vector<double> weight;
+    size_t sampleable = 0;
+    for (ObjectId id = 0; id < objects.size(); ++id) {
+      const Object& o = objects[id];
+      if (!o.alive || !(o.area > 0.0)) continue;
+      ++sampleable;
+      const size_t first = weight.size();
+      double sum = 0.0;
+      for (const EdgeTriangle& t : o.tris) {
+        surface.push_back({t, 1.0f, static_cast<uint32_t>(surface.size()), id});
+        weight.push_back(glm::length(glm::cross(glm::dvec3(t.e1), glm::dvec3(t.e2))));
+        sum += weight.back();
+      }
+      if (!(sum > 0.0)) {  // area too small for the float edges to show
+        surface.resize(first);
+        weight.resize(first);
+        --sampleable;
+        continue;
+      }
+      for (size_t i = first; i < weight.size(); ++i) weight[i] /= sum;
+    }
+    // Scaled so that the mean weight is 1: each object's triangles sum to n / objects.
+    const double scale = static_cast<double>(surface.size()) / static_cast<double>(std::max<size_t>(sampleable, 1));
+    std::vector<uint32_t> small, large;
+    for (uint32_t i = 0; i < surface.size(); ++i) {
+      weight[i] *= scale;
+      (weight[i] < 1.0 ? small : large).push_back(i);
+    }
+    while (!small.empty() && !large.empty()) {
+      const uint32_t s = small.back(), l = large.back();
+      small.pop_back();
+      surface[s].keep = static_cast<float>(weight[s]);
+      surface[s].alias = l;
+      weight[l] -= 1.0 - weight[s];
+      if (weight[l] < 1.0) {
+        large.pop_back();
+        small.push_back(l);
+      }
+    }
+    // What is left holds weight 1 up to rounding: always kept.
+    for (uint32_t i : small) surface[i].keep = 1.0f;
+    for (uint32_t i : large) surface[i].keep = 1.0f;
+  }
+
+  static void BuildTris(Object* o) {
+    o->tris.clear();
+    double sum = 0.0;
+    for (size_t t = 0; t + 2 < o->indices.size(); t += 3) {
+      const glm::vec3 a = o->verts[o->indices[t]], b = o->verts[o->indices[t + 1]], c = o->verts[o->indices[t + 2]];
+      sum += 0.5 * glm::length(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a)));
+      o->tris.push_back({a, b - a, c - a});
+    }
+    o->area = sum;
+    o->fan = FanSurface(o->verts, o->indices);
+  }
+
+  // Fills `o` from scene-local positions; false if a position is not finite or an index is
+  // out of range.
+  bool MakeObject(const scenes::Mesh& mesh, Object* o) const {
+    o->verts.clear();
+    o->bounds = Aabb{};
+    for (const glm::vec3& p : mesh.positions) {
+      const glm::dvec3 q = glm::dvec3(p) - frame;
+      if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) return false;
+      o->verts.emplace_back(q);
+      o->bounds.Extend(glm::dvec3(o->verts.back()));
+    }
+    for (uint32_t i : mesh.indices) {
+      if (i >= mesh.positions.size()) return false;
+    }
+    o->indices.assign(mesh.indices.begin(), mesh.indices.end() - mesh.indices.size() % 3);
+    BuildTris(o);
+    o->radius = BoxRadius(o->bounds);
+    o->alive = true;
+    return true;
+  }
+};
+
+namespace agvs_detail {
+// Updates the pixel-error estimate from the sampler's window of camera rays (agvs.cpp).
+void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats);
+}  // namespace agvs_detail
+
+}  // namespace vistream::visibility
