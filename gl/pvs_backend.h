@@ -16,6 +16,15 @@
 
 namespace vistream::gl {
 
+// The dual ray space's options for a finest raster of `res`² (a power of two, at most 256):
+// refinement from 16² (or `res`, if smaller). What `vistream pvs --res` and the server use.
+inline visibility::CellQueryOptions QueryOptionsFor(uint32_t res) {
+  visibility::CellQueryOptions options;
+  options.max_res = res;
+  options.min_res = res < 16 ? res : 16;
+  return options;
+}
+
 class PvsBackend {
  public:
   // Errors: an unknown name; no OpenGL context for gl.

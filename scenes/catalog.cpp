@@ -218,10 +218,11 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
     e.description = r.String("description", "");
     e.source = ReadSource(r.Object("source"), base_dir);
     const Reader v = r.Object("viewcell");
-    v.Allow({"size_m", "height_m", "base_m"});
+    v.Allow({"size_m", "height_m", "base_m", "epsilon_m"});
     e.viewcell.size_m = v.Number("size_m", 0.0, 100000.0, {}, true);
     e.viewcell.height_m = v.Number("height_m", 0.0, 10000.0, {}, true);
     e.viewcell.base_m = v.Number("base_m", -1000.0, 10000.0, 0.5);
+    e.viewcell.epsilon_m = v.Number("epsilon_m", 0.0, 1000.0, 4.0, true);
     e.walks = ReadWalks(r);
     e.simulation = ReadSimulation(r);
     return e;

@@ -35,6 +35,8 @@ struct ViewcellSpec {
   double size_m = 100.0;   // edge of the square cell
   double height_m = 2.0;   // height of the eye-level band
   double base_m = 0.5;     // bottom of the band above the ground
+  // Edge of the neighbourhood a server computes an ε-mask for once a client lingers in it.
+  double epsilon_m = 4.0;
 };
 
 struct WalkPath {

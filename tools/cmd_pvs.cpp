@@ -53,9 +53,7 @@ int Pvs(const PvsArgs& a) {
   t0 = std::chrono::steady_clock::now();
   const visibility::PvsComputer computer(*scene, tree);
   const double occluders_ms = 1000.0 * SecondsSince(t0);
-  visibility::CellQueryOptions options;
-  options.max_res = a.res;
-  options.min_res = std::min<uint32_t>(16, a.res);
+  const visibility::CellQueryOptions options = gl::QueryOptionsFor(a.res);
   absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   const visibility::PvsResult pvs = backend->ComputeBatch(computer, std::span(&cell, 1), options).front();

@@ -1,0 +1,128 @@
+#include "server/served_scene.h"
+
+#include <thread>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+
+#include "visibility/parallel.h"
+
+namespace vistream::server {
+
+namespace {
+
+void SetVec(const glm::dvec3& v, vistream::v1::Vec3* out) {
+  out->set_x(v.x);
+  out->set_y(v.y);
+  out->set_z(v.z);
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSceneOptions& options,
+                                                                 const scenes::RunControl& run) {
+  if (options.res < 1 || options.res > 256 || (options.res & (options.res - 1)) != 0) {
+    return absl::InvalidArgumentError(absl::StrCat("--res ", options.res, ": expected a power of two, 1 to 256"));
+  }
+  std::unique_ptr<ServedScene> s(new ServedScene());
+  scenes::LoadOptions load;
+  load.catalog_dir = options.catalog_dir;
+  load.run = run;
+  absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(options.scene, load);
+  if (!loaded.ok()) return loaded.status();
+  s->scene_ = std::move(loaded->scene);
+  s->load_seconds_ = loaded->seconds;
+  s->viewcell_ = loaded->viewcell;
+  if (options.cell_size > 0.0) s->viewcell_.size_m = options.cell_size;
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(s->scene_.bounds, s->viewcell_);
+  if (!grid.ok()) return grid.status();
+  s->grid_ = std::make_unique<visibility::ViewcellGrid>(*grid);
+  const size_t objects = s->scene_.objects.size();
+
+  unsigned threads = options.threads != 0 ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  if (!options.pvs_file.empty()) {
+    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(options.pvs_file, *s->grid_, objects);
+    if (!f.ok()) return f.status();
+    s->file_ = std::make_unique<visibility::PvsFile>(std::move(*f));
+    s->pvs_source_ = absl::StrCat("PVS file ", options.pvs_file, " (", s->file_->strategy, ")");
+  } else {
+    s->tree_ = std::make_unique<visibility::KdTree>(visibility::KdTree::Build(s->scene_));
+    s->computer_ = std::make_unique<visibility::PvsComputer>(s->scene_, *s->tree_);
+    s->query_ = gl::QueryOptionsFor(options.res);
+    if (options.backend == "gl") threads = 1;  // one OpenGL context, current on its one worker
+    if (options.backend != "gl") {
+      for (unsigned w = 0; w < threads; ++w) {
+        absl::StatusOr<gl::PvsBackend> b = gl::PvsBackend::Create(options.backend);
+        if (!b.ok()) return b.status();
+        s->backends_.push_back(std::make_unique<gl::PvsBackend>(std::move(*b)));
+      }
+    }
+    s->pvs_source_ = absl::StrFormat("dual ray space (%s, %u^2)", options.backend, options.res);
+  }
+
+  // Geometry, encoded once for every session.
+  s->geometry_.resize(objects);
+  visibility::ParallelFor(objects, 0, [&] {
+    return [&](size_t i) { s->geometry_[i] = scenes::EncodeMesh(s->scene_.objects[i].mesh); };
+  });
+  absl::StatusOr<std::unique_ptr<visibility::EpsilonSuperset>> eps = visibility::EpsilonSuperset::Create(s->scene_);
+  if (!eps.ok()) return eps.status();
+  s->epsilon_ = std::move(*eps);
+
+  vistream::v1::SceneInfo& info = s->scene_info_;
+  info.set_name(s->scene_.name);
+  SetVec(s->scene_.origin, info.mutable_origin());
+  SetVec(s->scene_.bounds.min, info.mutable_bounds_min());
+  SetVec(s->scene_.bounds.max, info.mutable_bounds_max());
+  info.set_object_count(static_cast<uint32_t>(objects));
+  info.set_triangle_count(s->scene_.TriangleCount());
+  vistream::v1::ViewcellGrid* g = info.mutable_grid();
+  g->set_cell_size_m(s->grid_->cell_size());
+  g->set_x0_m(s->grid_->corner().x);
+  g->set_y0_m(s->grid_->corner().y);
+  g->set_nx(s->grid_->nx());
+  g->set_ny(s->grid_->ny());
+  g->set_base_z_m(s->grid_->base_z());
+  g->set_height_m(s->grid_->height());
+
+  s->masks_ = std::make_unique<TaskQueue>();
+  ServedScene* self = s.get();
+  std::function<void(unsigned)> init;
+  if (!options.pvs_file.empty()) {
+    threads = 1;  // lookups
+  } else if (options.backend == "gl") {
+    // The context must be created on the thread that draws.
+    init = [self](unsigned) {
+      absl::StatusOr<gl::PvsBackend> b = gl::PvsBackend::Create("gl");
+      if (b.ok()) self->backends_.push_back(std::make_unique<gl::PvsBackend>(std::move(*b)));
+    };
+  }
+  s->scheduler_ = std::make_unique<PvsScheduler>(
+      [self](CellId cell, unsigned worker) {
+        CellPvs out;
+        out.cell = cell;
+        if (self->file_ != nullptr) {
+          out.objects = self->file_->sets.Objects(cell);
+          return out;
+        }
+        if (worker >= self->backends_.size()) {
+          // No backend on this worker (the OpenGL context failed): the CPU raster instead.
+          out.objects = self->computer_->Compute(self->grid_->CellBox(cell), self->query_).objects;
+          return out;
+        }
+        const visibility::PvsResult r = self->backends_[worker]->Compute(*self->computer_, self->grid_->CellBox(cell),
+                                                                          self->query_);
+        out.objects = r.objects;
+        out.compute_s = r.ms / 1000.0;
+        return out;
+      },
+      threads, options.cache_bytes, init);
+  if (options.backend == "gl" && options.pvs_file.empty()) {
+    // Fail at start-up, not on the first request, when there is no OpenGL.
+    absl::StatusOr<gl::PvsBackend> probe = gl::PvsBackend::Create("gl");
+    if (!probe.ok()) return probe.status();
+  }
+  return s;
+}
+
+}  // namespace vistream::server

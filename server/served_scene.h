@@ -1,0 +1,78 @@
+#pragma once
+// What every session of a server reads: the scene, its viewcell grid, its geometry encoded once
+// for the wire, the ε-superset engine, and the scheduler that computes (or looks up) viewcell
+// PVSs. Built once at start-up; read-only afterwards except for the scheduler's cache.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+#include "gl/pvs_backend.h"
+#include "proto/walkthrough.pb.h"
+#include "scenes/catalog.h"
+#include "scenes/geometry_codec.h"
+#include "scenes/progress.h"
+#include "server/pvs_scheduler.h"
+#include "server/task_queue.h"
+#include "visibility/epsilon_superset.h"
+#include "visibility/kdtree.h"
+#include "visibility/pvs.h"
+#include "visibility/pvs_file.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::server {
+
+struct ServedSceneOptions {
+  std::string scene;        // catalog name, catalog .json or glTF file
+  std::string catalog_dir;  // empty: scenes::CatalogDir()
+  double cell_size = 0.0;   // metres; 0: the catalog entry's
+  uint32_t res = 128;       // the dual ray space's finest raster
+  std::string backend = "cpu";  // cpu | gl | exact (see gl::PvsBackend)
+  std::string pvs_file;     // serve these sets instead of computing them
+  unsigned threads = 0;     // PVS workers; 0: one per core (gl: always one)
+  size_t cache_bytes = size_t{256} << 20;
+};
+
+class ServedScene {
+ public:
+  // Loads and prepares everything. Errors name what failed: the scene (NOT_FOUND, ...), the
+  // grid, the PVS file (another scene's or grid's: INVALID_ARGUMENT), the backend.
+  static absl::StatusOr<std::unique_ptr<ServedScene>> Create(const ServedSceneOptions& options,
+                                                             const scenes::RunControl& run = {});
+
+  const scenes::Scene& scene() const { return scene_; }
+  const visibility::ViewcellGrid& grid() const { return *grid_; }
+  const scenes::ViewcellSpec& viewcell() const { return viewcell_; }
+  const vistream::v1::SceneInfo& scene_info() const { return scene_info_; }
+  const scenes::EncodedMesh& geometry(uint32_t object) const { return geometry_[object]; }
+  const visibility::EpsilonSuperset* epsilon() const { return epsilon_.get(); }
+  PvsScheduler& scheduler() { return *scheduler_; }
+  // Where ε-masks are computed.
+  TaskQueue& masks() { return *masks_; }
+  // "dual ray space (cpu, 128^2)" or "PVS file F (agvs)".
+  const std::string& pvs_source() const { return pvs_source_; }
+  double load_seconds() const { return load_seconds_; }
+
+ private:
+  ServedScene() = default;
+
+  scenes::Scene scene_;
+  scenes::ViewcellSpec viewcell_;
+  std::unique_ptr<visibility::ViewcellGrid> grid_;
+  std::unique_ptr<visibility::KdTree> tree_;
+  std::unique_ptr<visibility::PvsComputer> computer_;
+  std::vector<std::unique_ptr<gl::PvsBackend>> backends_;  // one per worker
+  visibility::CellQueryOptions query_;
+  std::unique_ptr<visibility::PvsFile> file_;
+  std::vector<scenes::EncodedMesh> geometry_;
+  std::unique_ptr<visibility::EpsilonSuperset> epsilon_;
+  vistream::v1::SceneInfo scene_info_;
+  std::string pvs_source_;
+  double load_seconds_ = 0.0;
+  std::unique_ptr<TaskQueue> masks_;
+  std::unique_ptr<PvsScheduler> scheduler_;  // last: its workers read the members above
+};
+
+}  // namespace vistream::server

@@ -1,0 +1,149 @@
+// vistream-server: serves one scene to walkthrough clients over gRPC (DESIGN.md, "Server and
+// client"). Prints one line on stdout when it is ready; logs one line per session event on
+// stderr. SIGTERM or SIGINT drains the sessions and exits 0.
+
+#include <pthread.h>
+#include <signal.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+
+#include "server/event_log.h"
+#include "server/served_scene.h"
+#include "server/service.h"
+
+namespace {
+
+using vistream::server::EventLog;
+
+// Load progress as log lines, one per 10% of a task.
+class LogProgress : public vistream::scenes::ProgressSink {
+ public:
+  explicit LogProgress(EventLog* log) : log_(log) {}
+  void Start(std::string_view, uint64_t) override { last_decile_ = -1; }
+  void Update(std::string_view label, uint64_t done, uint64_t total, double seconds, std::string_view) override {
+    const int decile = static_cast<int>(10 * done / (total == 0 ? 1 : total));
+    if (decile == last_decile_ || done == total) return;
+    last_decile_ = decile;
+    log_->Write(0, "progress", {{"task", label}, {"percent", decile * 10}, {"seconds", seconds}});
+  }
+  void End(std::string_view label, double seconds, bool completed) override {
+    log_->Write(0, completed ? "done" : "stopped", {{"task", label}, {"seconds", seconds}});
+  }
+
+ private:
+  EventLog* log_;
+  int last_decile_ = -1;
+};
+
+struct Stop {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::atomic<bool> requested{false};
+  int signal = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  vistream::server::ServedSceneOptions scene_options;
+  vistream::server::ServerOptions server_options;
+  bool json_log = false;
+  double cache_mb = 256;
+  double grace_s = 5;
+  CLI::App app{"vistream-server: streams the visible part of a city to walkthrough clients over gRPC"};
+  app.add_option("--scene", scene_options.scene, "catalog name, catalog .json or .glb/.gltf file")->required();
+  app.add_option("--catalog", scene_options.catalog_dir, "folder of catalog entries (default: the source tree's scenes/)");
+  app.add_option("--listen", server_options.listen, "address to listen on, host:port (port 0: any free one)")
+      ->capture_default_str();
+  app.add_option("--threads", scene_options.threads, "PVS worker threads (0: one per core)")->capture_default_str();
+  app.add_option("--cell-size", scene_options.cell_size, "viewcell edge in metres (default: the catalog entry's)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--res", scene_options.res, "finest dual-ray-space raster (power of two, 1 to 256)")
+      ->capture_default_str();
+  app.add_option("--backend", scene_options.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
+      ->capture_default_str();
+  app.add_option("--pvs-file", scene_options.pvs_file, "serve the PVSs of this file (vistream agvs -o) instead of computing them");
+  app.add_option("--max-sessions", server_options.max_sessions, "sessions at once; more are refused")
+      ->capture_default_str();
+  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--max-pose-rate", server_options.limits.max_pose_rate_hz, "poses per second a session may send")
+      ->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_flag("--json-log", json_log, "log JSON lines instead of text");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;
+  }
+  scene_options.cache_bytes = static_cast<size_t>(cache_mb * (1 << 20));
+
+  // Signals go to one thread, which asks main to stop: the gRPC threads never see them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  Stop stop;
+  std::thread([&stop, signals] {
+    for (;;) {
+      int sig = 0;
+      if (sigwait(&signals, &sig) != 0) continue;
+      if (stop.requested.exchange(true)) std::_Exit(1);  // a second signal: stop at once
+      {
+        std::lock_guard lock(stop.mu);
+        stop.signal = sig;
+      }
+      stop.cv.notify_all();
+    }
+  }).detach();
+
+  EventLog log(stderr, json_log);
+  LogProgress progress(&log);
+  log.Write(0, "loading", {{"scene", scene_options.scene}});
+  absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
+      vistream::server::ServedScene::Create(scene_options, {&progress, &stop.requested});
+  if (!scene.ok()) {
+    if (stop.requested) return 0;
+    std::fprintf(stderr, "vistream-server: error: %s\n", std::string(scene.status().message()).c_str());
+    return 1;
+  }
+  vistream::server::ServedScene& s = **scene;
+  const vistream::scenes::ViewcellSpec& band = s.viewcell();
+  server_options.limits.epsilon_size_m = band.epsilon_m;
+  log.Write(0, "scene", {{"name", s.scene().name},
+                         {"objects", static_cast<uint64_t>(s.scene().objects.size())},
+                         {"triangles", static_cast<uint64_t>(s.scene().TriangleCount())},
+                         {"cells", static_cast<uint64_t>(s.grid().CellCount())},
+                         {"pvs_source", s.pvs_source()},
+                         {"load_s", s.load_seconds()}});
+  absl::StatusOr<std::unique_ptr<vistream::server::WalkthroughServer>> server =
+      vistream::server::WalkthroughServer::Start(&s, server_options, &log);
+  if (!server.ok()) {
+    std::fprintf(stderr, "vistream-server: error: %s\n", std::string(server.status().message()).c_str());
+    return 1;
+  }
+  std::printf("vistream-server: ready on %s: scene %s, %zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s\n",
+              (*server)->address().c_str(), s.scene().name.c_str(), s.grid().CellCount(), s.grid().cell_size(),
+              s.grid().nx(), s.grid().ny(), s.scene().objects.size(), s.pvs_source().c_str());
+  std::fflush(stdout);
+  log.Write(0, "ready", {{"address", (*server)->address()}});
+
+  {
+    std::unique_lock lock(stop.mu);
+    stop.cv.wait(lock, [&] { return stop.requested.load(); });
+  }
+  log.Write(0, "draining", {{"signal", stop.signal == SIGTERM ? "SIGTERM" : "SIGINT"},
+                            {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
+  (*server)->Shutdown(grace_s);
+  log.Write(0, "stopped", {});
+  return 0;
+}

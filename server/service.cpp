@@ -1,0 +1,301 @@
+#include "server/service.h"
+
+#include <chrono>
+
+#include <absl/strings/str_cat.h>
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+
+namespace vistream::server {
+
+namespace {
+
+namespace v1 = vistream::v1;
+
+double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+grpc::Status ToGrpc(const absl::Status& s) {
+  return grpc::Status(static_cast<grpc::StatusCode>(s.code()), std::string(s.message()));
+}
+
+class SessionReactor;
+
+}  // namespace
+
+// Lets worker threads wake a session's reactor, and outlives it: the reactor detaches itself
+// in OnDone, after which a wake does nothing.
+class SessionLink {
+ public:
+  void Attach(SessionReactor* r) {
+    std::lock_guard lock(mu_);
+    reactor_ = r;
+  }
+  void Detach() {
+    std::lock_guard lock(mu_);
+    reactor_ = nullptr;
+  }
+  void Pump();
+  void End(const grpc::Status& status);
+
+ private:
+  std::mutex mu_;
+  SessionReactor* reactor_ = nullptr;
+};
+
+namespace {
+
+class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage> {
+ public:
+  SessionReactor(WalkthroughService* service, std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link)
+      : service_(service), session_(std::move(session)), link_(std::move(link)) {
+    link_->Attach(this);
+    StartRead(&in_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {  // the client closed its side, or the call was cancelled
+      EndWith(grpc::Status::OK);
+      return;
+    }
+    const absl::Status st = session_->OnMessage(in_, SteadySeconds());
+    if (!st.ok()) {
+      EndWith(ToGrpc(st));
+      return;
+    }
+    StartRead(&in_);
+    Pump();
+  }
+
+  void OnWriteDone(bool ok) override {
+    {
+      std::lock_guard lock(mu_);
+      writing_ = false;
+      if (!ok && !finish_requested_) {  // the client is gone
+        finish_requested_ = true;
+        status_ = grpc::Status(grpc::StatusCode::UNAVAILABLE, "the client stopped receiving");
+      }
+    }
+    Pump();
+  }
+
+  void OnCancel() override { EndWith(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client")); }
+
+  void OnDone() override {
+    link_->Detach();
+    session_->End();
+    service_->Remove(session_->id(), status_);
+    delete this;
+  }
+
+  // Starts the next write if none is in flight; finishes the call when asked to and idle.
+  void Pump() {
+    std::lock_guard lock(mu_);
+    if (finished_ || writing_) return;
+    if (!finish_requested_) {
+      if (absl::Status f = session_->failure(); !f.ok()) {
+        finish_requested_ = true;
+        status_ = ToGrpc(f);
+      }
+    }
+    if (finish_requested_) {
+      finished_ = true;
+      Finish(status_);
+      return;
+    }
+    std::optional<v1::ServerMessage> next = session_->NextMessage();
+    if (!next.has_value()) return;
+    out_ = std::move(*next);
+    writing_ = true;
+    StartWrite(&out_);
+  }
+
+  void EndWith(const grpc::Status& status) {
+    {
+      std::lock_guard lock(mu_);
+      if (finish_requested_) return;
+      finish_requested_ = true;
+      status_ = status;
+    }
+    Pump();
+  }
+
+ private:
+  WalkthroughService* service_;
+  std::shared_ptr<Session> session_;
+  std::shared_ptr<SessionLink> link_;
+  v1::ClientMessage in_;
+  v1::ServerMessage out_;
+  std::mutex mu_;
+  bool writing_ = false;
+  bool finish_requested_ = false;
+  bool finished_ = false;
+  grpc::Status status_;
+};
+
+// Ends a session that may not start (too many, draining) with `status`.
+class RefusedReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage> {
+ public:
+  explicit RefusedReactor(const grpc::Status& status) { Finish(status); }
+  void OnDone() override { delete this; }
+};
+
+}  // namespace
+
+void SessionLink::Pump() {
+  std::lock_guard lock(mu_);
+  if (reactor_ != nullptr) reactor_->Pump();
+}
+
+void SessionLink::End(const grpc::Status& status) {
+  std::lock_guard lock(mu_);
+  if (reactor_ != nullptr) reactor_->EndWith(status);
+}
+
+WalkthroughService::WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log)
+    : scene_(scene), options_(options), log_(log), start_s_(SteadySeconds()) {}
+
+grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage>* WalkthroughService::Session(
+    grpc::CallbackServerContext* context) {
+  std::lock_guard lock(mu_);
+  if (draining_) {
+    return new RefusedReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+  }
+  if (sessions_.size() >= options_.max_sessions) {
+    if (log_ != nullptr) log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", "too many sessions"}});
+    return new RefusedReactor(grpc::Status(
+        grpc::StatusCode::RESOURCE_EXHAUSTED,
+        absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
+  }
+  const uint64_t id = next_id_++;
+  ++sessions_total_;
+  auto link = std::make_shared<SessionLink>();
+  std::shared_ptr<server::Session> session =
+      Session::Create(id, scene_, options_.limits, log_, [link] { link->Pump(); });
+  sessions_[id] = Entry{session, link, context->peer()};
+  if (log_ != nullptr) log_->Write(id, "session_start", {{"peer", context->peer()}});
+  return new SessionReactor(this, session, link);
+}
+
+void WalkthroughService::Remove(uint64_t id, const grpc::Status& status) {
+  v1::SessionStats stats;
+  {
+    std::lock_guard lock(mu_);
+    auto it = sessions_.find(id);
+    if (it == sessions_.end()) return;
+    stats = it->second.session->Stats();
+    bytes_sent_ended_ += stats.bytes_sent();
+    sessions_.erase(it);
+  }
+  if (log_ != nullptr) {
+    log_->Write(id, "session_end",
+                {{"status", grpc::StatusCode(status.error_code()) == grpc::StatusCode::OK ? "OK" : "error"},
+                 {"code", static_cast<int>(status.error_code())},
+                 {"message", status.error_message()},
+                 {"seconds", stats.seconds()},
+                 {"crossings", stats.crossings()},
+                 {"objects_sent", stats.objects_sent()},
+                 {"bytes_sent", stats.bytes_sent()}});
+  }
+}
+
+grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerContext* context,
+                                                       const v1::StatsRequest*, v1::ServerStats* response) {
+  *response = Stats();
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+void WalkthroughService::Drain() {
+  std::map<uint64_t, Entry> open;
+  {
+    std::lock_guard lock(mu_);
+    draining_ = true;
+    open = sessions_;
+  }
+  for (auto& [id, e] : open) e.link->End(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+}
+
+size_t WalkthroughService::active_sessions() const {
+  std::lock_guard lock(mu_);
+  return sessions_.size();
+}
+
+v1::ServerStats WalkthroughService::Stats() const {
+  v1::ServerStats s;
+  s.set_scene(scene_->scene().name);
+  s.set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
+  s.set_pvs_source(scene_->pvs_source());
+  s.set_uptime_s(SteadySeconds() - start_s_);
+  const SchedulerStats sched = scene_->scheduler().stats();
+  s.set_pvs_computed(sched.computed);
+  s.set_pvs_cache_hits(sched.cache_hits);
+  s.set_pvs_dropped(sched.dropped);
+  s.set_cache_bytes(sched.cache_bytes);
+  s.set_pvs_compute_s(sched.compute_s);
+  std::lock_guard lock(mu_);
+  s.set_sessions_active(sessions_.size());
+  s.set_sessions_total(sessions_total_);
+  uint64_t bytes = bytes_sent_ended_;
+  for (const auto& [id, e] : sessions_) {
+    v1::SessionStats* ss = s.add_sessions();
+    *ss = e.session->Stats();
+    ss->set_peer(e.peer);
+    bytes += ss->bytes_sent();
+  }
+  s.set_bytes_sent(bytes);
+  return s;
+}
+
+absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(ServedScene* scene,
+                                                                            const ServerOptions& options,
+                                                                            EventLog* log) {
+  std::unique_ptr<WalkthroughServer> s(new WalkthroughServer());
+  s->service_ = std::make_unique<WalkthroughService>(scene, options, log);
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
+  builder.RegisterService(s->service_.get());
+  size_t max_receive = options.max_receive_bytes;
+  if (max_receive == 0) max_receive = (size_t{1} << 20) + 5 * scene->scene().objects.size();
+  builder.SetMaxReceiveMessageSize(static_cast<int>(std::min<size_t>(max_receive, 1u << 30)));
+  // Keepalive: ping an idle client every 20 s, drop it after 10 s without an answer; accept
+  // client pings no more often than every 10 s (clients must keep their interval above it).
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 20000);
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 10000);
+  s->server_ = builder.BuildAndStart();
+  if (s->server_ == nullptr || s->port_ == 0) {
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen,
+                                               " (address in use, or not host:port?)"));
+  }
+  const std::string host = options.listen.substr(0, options.listen.rfind(':'));
+  s->address_ = absl::StrCat(host, ":", s->port_);
+  if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService(); health != nullptr) {
+    health->SetServingStatus(true);
+    health->SetServingStatus("vistream.v1.Walkthrough", true);
+  }
+  return s;
+}
+
+void WalkthroughServer::Shutdown(double grace_s) {
+  if (shut_down_) return;
+  shut_down_ = true;
+  if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService(); health != nullptr) {
+    health->SetServingStatus(false);
+  }
+  service_->Drain();
+  server_->Shutdown(std::chrono::system_clock::now() +
+                    std::chrono::milliseconds(static_cast<int64_t>(grace_s * 1000)));
+  server_->Wait();
+}
+
+WalkthroughServer::~WalkthroughServer() {
+  if (server_ != nullptr) Shutdown(1.0);
+}
+
+}  // namespace vistream::server

@@ -1,0 +1,461 @@
+#include "server/session.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+
+namespace vistream::server {
+
+namespace {
+
+namespace v1 = vistream::v1;
+
+double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
+  for (auto [name, x] : {std::pair{"x", v.x()}, {"y", v.y()}, {"z", v.z()}}) {
+    if (!std::isfinite(x)) {
+      return absl::InvalidArgumentError(absl::StrCat("pose ", pose, ": ", what, ".", name, " is ", x,
+                                                     " (positions and velocities must be finite)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+glm::dvec3 ToVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+}  // namespace
+
+std::shared_ptr<Session> Session::Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
+                                         std::function<void()> wake) {
+  return std::shared_ptr<Session>(new Session(id, scene, limits, log, std::move(wake)));
+}
+
+Session::Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
+                 std::function<void()> wake)
+    : id_(id), scene_(scene), limits_(limits), log_(log), wake_(std::move(wake)), start_s_(SteadySeconds()) {
+  stats_.set_session_id(id);
+  stats_.set_cell_id(-1);
+  pose_tokens_ = 2.0 * limits_.max_pose_rate_hz;
+}
+
+Session::~Session() { End(); }
+
+void Session::End() {
+  {
+    std::lock_guard lock(mu_);
+    if (ended_) return;
+    ended_ = true;
+  }
+  scene_->scheduler().CancelAll(id_);
+}
+
+absl::Status Session::failure() const {
+  std::lock_guard lock(mu_);
+  return failure_;
+}
+
+absl::Status Session::OnMessage(const v1::ClientMessage& message, double now) {
+  switch (message.body_case()) {
+    case v1::ClientMessage::kHello: {
+      std::lock_guard lock(mu_);
+      return OnHello(message.hello());
+    }
+    case v1::ClientMessage::kPose:
+      return OnPose(message.pose(), now);
+    case v1::ClientMessage::kCredit: {
+      std::lock_guard lock(mu_);
+      if (!hello_) return absl::FailedPreconditionError("Credit before Hello: a session starts with Hello");
+      // Clamped: a client may grant "everything" without overflowing the count.
+      constexpr int64_t kMaxCredit = int64_t{1} << 52;
+      credit_ = std::min(kMaxCredit, credit_ + static_cast<int64_t>(std::min<uint64_t>(message.credit().bytes(), kMaxCredit)));
+      return absl::OkStatus();
+    }
+    case v1::ClientMessage::BODY_NOT_SET:
+      break;
+  }
+  return absl::InvalidArgumentError("empty ClientMessage: expected hello, pose or credit");
+}
+
+absl::Status Session::OnHello(const v1::Hello& hello) {
+  if (hello_) return absl::FailedPreconditionError("second Hello: a session says Hello exactly once");
+  if (hello.protocol_version() != v1::PROTOCOL_VERSION_CURRENT) {
+    return absl::FailedPreconditionError(absl::StrCat("protocol version ", hello.protocol_version(),
+                                                      " is not supported: this server speaks version ",
+                                                      static_cast<int>(v1::PROTOCOL_VERSION_CURRENT)));
+  }
+  const scenes::Scene& scene = scene_->scene();
+  if (hello.scene() != scene.name) {
+    return absl::NotFoundError(
+        absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene.name, "'"));
+  }
+  for (int k = 0; k < hello.held_objects_size(); ++k) {
+    const uint32_t o = hello.held_objects(k);
+    if (o >= scene.objects.size()) {
+      return absl::InvalidArgumentError(absl::StrCat("Hello.held_objects[", k, "] = ", o, ": the scene has ",
+                                                     scene.objects.size(), " objects"));
+    }
+    if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
+  }
+  hello_ = true;
+  memory_budget_ = hello.memory_budget_bytes();
+  v1::ServerMessage info;
+  *info.mutable_scene_info() = scene_->scene_info();
+  QueueControl(std::move(info));
+  if (log_ != nullptr) {
+    log_->Write(id_, "hello", {{"held_objects", hello.held_objects_size()},
+                               {"memory_budget_bytes", static_cast<uint64_t>(memory_budget_)}});
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Session::OnPose(const v1::Pose& pose, double now) {
+  std::vector<CellId> left;
+  {
+    std::lock_guard lock(mu_);
+    ++poses_;
+    if (!hello_) return absl::FailedPreconditionError("Pose before Hello: a session starts with Hello");
+    if (absl::Status st = CheckFinite(pose.position(), "position", poses_); !st.ok()) return st;
+    if (absl::Status st = CheckFinite(pose.velocity(), "velocity", poses_); !st.ok()) return st;
+    if (!std::isfinite(pose.yaw_rad()) || !std::isfinite(pose.pitch_rad()) || !std::isfinite(pose.client_time_s())) {
+      return absl::InvalidArgumentError(absl::StrCat("pose ", poses_, ": yaw, pitch and client_time_s must be finite"));
+    }
+    // A token bucket: bursts up to two seconds' worth, then the sustained rate.
+    if (last_pose_s_ > 0.0) {
+      pose_tokens_ = std::min(2.0 * limits_.max_pose_rate_hz,
+                              pose_tokens_ + (now - last_pose_s_) * limits_.max_pose_rate_hz);
+    }
+    last_pose_s_ = now;
+    pose_tokens_ -= 1.0;
+    if (pose_tokens_ < 0.0) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "pose %d: more than %.0f poses per second (the session's limit)", poses_, limits_.max_pose_rate_hz));
+    }
+    const glm::dvec3 p = ToVec(pose.position());
+    const std::optional<CellId> cell = scene_->grid().CellAt(glm::dvec2(p));
+    if (!cell.has_value()) {
+      const scenes::Aabb b = scene_->grid().Bounds();
+      return absl::OutOfRangeError(absl::StrFormat(
+          "pose %d: position (%.2f, %.2f) is outside the viewcell grid [%.1f, %.1f] x [%.1f, %.1f] m", poses_, p.x,
+          p.y, b.min.x, b.max.x, b.min.y, b.max.y));
+    }
+    position_ = p;
+    velocity_ = ToVec(pose.velocity());
+    if (!current_.has_value() || *current_ != *cell) {
+      const std::optional<CellId> from = current_;
+      const std::vector<CellId> before = wanted_;
+      current_ = *cell;
+      stats_.set_cell_id(*cell);
+      if (from.has_value()) {
+        stats_.set_crossings(stats_.crossings() + 1);
+        if (log_ != nullptr) {
+          const visibility::CellCoord a = scene_->grid().Coord(*from), b = scene_->grid().Coord(*cell);
+          log_->Write(id_, "crossing", {{"from", absl::StrCat(a.i, ",", a.j)}, {"to", absl::StrCat(b.i, ",", b.j)}});
+        }
+      }
+      SetWanted(now);
+      for (CellId c : before) {
+        if (std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end()) left.push_back(c);
+      }
+      EvictLeft(left);
+      anchor_ = p;
+      anchor_s_ = now;
+      mask_requested_ = false;
+    }
+    MaybeRequestMask(now);
+  }
+  for (CellId c : left) scene_->scheduler().Cancel(id_, c);
+  return absl::OkStatus();
+}
+
+double Session::Deadline(CellId cell, double now) const {
+  if (current_.has_value() && cell == *current_) return now;
+  // The time the client needs to reach the cell at its speed (walking pace at least).
+  const scenes::Aabb box = scene_->grid().CellBox(cell);
+  const double dx = std::max({0.0, box.min.x - position_.x, position_.x - box.max.x});
+  const double dy = std::max({0.0, box.min.y - position_.y, position_.y - box.max.y});
+  const double speed = std::max(1.0, std::hypot(velocity_.x, velocity_.y));
+  // Along the velocity a cell is reached sooner than across it: weigh the distance by how
+  // far the cell lies off the direction of travel.
+  const glm::dvec2 to(0.5 * (box.min.x + box.max.x) - position_.x, 0.5 * (box.min.y + box.max.y) - position_.y);
+  const double len = std::hypot(to.x, to.y);
+  double ahead = 0.0;
+  if (len > 0.0 && std::hypot(velocity_.x, velocity_.y) > 0.1) {
+    ahead = (to.x * velocity_.x + to.y * velocity_.y) / (len * std::hypot(velocity_.x, velocity_.y));
+  }
+  return now + std::hypot(dx, dy) / speed * (1.5 - 0.5 * ahead);
+}
+
+void Session::SetWanted(double now) {
+  const visibility::ViewcellGrid& grid = scene_->grid();
+  std::vector<std::pair<double, CellId>> order;
+  order.emplace_back(now, *current_);
+  for (CellId n : grid.Neighbours(*current_)) order.emplace_back(Deadline(n, now), n);
+  std::sort(order.begin() + 1, order.end());
+  wanted_.clear();
+  for (const auto& [deadline, c] : order) wanted_.push_back(c);
+  // Forget what no longer matters: requests, PVSs, their queued lists and geometry.
+  for (auto it = received_.begin(); it != received_.end();) {
+    it = std::find(wanted_.begin(), wanted_.end(), it->first) == wanted_.end() ? received_.erase(it) : std::next(it);
+  }
+  for (auto it = requested_.begin(); it != requested_.end();) {
+    it = std::find(wanted_.begin(), wanted_.end(), *it) == wanted_.end() ? requested_.erase(it) : std::next(it);
+  }
+  for (auto it = emitted_.begin(); it != emitted_.end();) {
+    it = std::find(wanted_.begin(), wanted_.end(), *it) == wanted_.end() ? emitted_.erase(it) : std::next(it);
+  }
+  for (auto it = pending_geometry_.begin(); it != pending_geometry_.end();) {
+    it = std::find(wanted_.begin(), wanted_.end(), it->first) == wanted_.end() ? pending_geometry_.erase(it)
+                                                                                : std::next(it);
+  }
+  for (auto it = control_.begin(); it != control_.end();) {
+    if (it->cell.has_value() && std::find(wanted_.begin(), wanted_.end(), *it->cell) == wanted_.end()) {
+      control_bytes_ -= it->bytes;
+      it = control_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  // Ask for what is missing, in order: the scheduler serves the earliest deadline first, and
+  // a cell asked for again gets its new deadline (re-prioritised as the client turns).
+  for (const auto& [deadline, c] : order) {
+    if (received_.count(c) == 0) RequestCell(c, deadline);
+  }
+  EmitReady();
+  // Geometry of wanted cells that was skipped for the memory budget gets another chance.
+  for (CellId c : wanted_) {
+    auto it = received_.find(c);
+    if (it == received_.end() || emitted_.count(c) == 0) continue;
+    std::deque<uint32_t>& q = pending_geometry_[c];
+    const std::unordered_set<uint32_t> queued(q.begin(), q.end());
+    for (uint32_t o : it->second->objects) {
+      if (sent_.count(o) == 0 && queued.count(o) == 0) q.push_back(o);
+    }
+  }
+}
+
+void Session::RequestCell(CellId cell, double deadline) {
+  requested_.insert(cell);
+  std::weak_ptr<Session> weak = weak_from_this();
+  CellPvsPtr cached = scene_->scheduler().Request(id_, cell, deadline, [weak](const CellPvsPtr& pvs) {
+    std::shared_ptr<Session> s = weak.lock();
+    if (s == nullptr) return;
+    {
+      std::lock_guard lock(s->mu_);
+      if (s->ended_) return;
+      s->OnCellReady(pvs, false);
+    }
+    if (s->wake_) s->wake_();
+  });
+  if (cached != nullptr) OnCellReady(cached, true);
+}
+
+void Session::OnCellReady(const CellPvsPtr& pvs, bool from_cache) {
+  if (requested_.erase(pvs->cell) == 0) return;  // no longer wanted
+  received_[pvs->cell] = pvs;
+  if (log_ != nullptr) {
+    const visibility::CellCoord c = scene_->grid().Coord(pvs->cell);
+    log_->Write(id_, "pvs", {{"cell", absl::StrCat(c.i, ",", c.j)},
+                             {"source", from_cache ? "cache" : "computed"},
+                             {"ms", pvs->compute_s * 1000.0},
+                             {"objects", static_cast<uint64_t>(pvs->objects.size())}});
+  }
+  EmitReady();
+}
+
+void Session::EmitReady() {
+  if (!current_.has_value()) return;
+  // The current cell goes first; its neighbours wait for it.
+  if (emitted_.count(*current_) == 0) {
+    if (received_.count(*current_) == 0) return;
+    Emit(*current_);
+  }
+  for (CellId c : wanted_) {
+    if (emitted_.count(c) == 0 && received_.count(c) > 0) Emit(c);
+  }
+}
+
+void Session::Emit(CellId cell) {
+  const CellPvsPtr& pvs = received_.at(cell);
+  v1::ServerMessage m;
+  v1::ViewcellPvs* list = m.mutable_pvs();
+  list->set_cell_id(cell);
+  list->mutable_object_ids()->Add(pvs->objects.begin(), pvs->objects.end());
+  list->set_compute_s(pvs->compute_s);
+  QueueControl(std::move(m));
+  control_.back().cell = cell;
+  emitted_.insert(cell);
+  std::deque<uint32_t>& q = pending_geometry_[cell];
+  for (uint32_t o : pvs->objects) {
+    if (sent_.count(o) == 0) q.push_back(o);
+  }
+  stats_.set_pvs_sent(stats_.pvs_sent() + 1);
+}
+
+void Session::EvictLeft(const std::vector<CellId>& left) {
+  // What the cells left behind held, less what the current and adjacent PVSs still need. The
+  // PVSs of left cells were dropped by SetWanted; look them up in the shared cache.
+  std::set<uint32_t> keep;
+  for (const auto& [c, pvs] : received_) keep.insert(pvs->objects.begin(), pvs->objects.end());
+  std::vector<uint32_t> evict;
+  for (CellId c : left) {
+    CellPvsPtr pvs = scene_->scheduler().Cached(c);
+    if (pvs == nullptr) continue;
+    for (uint32_t o : pvs->objects) {
+      if (sent_.count(o) > 0 && keep.count(o) == 0) {
+        evict.push_back(o);
+        keep.insert(o);  // once
+      }
+    }
+  }
+  if (evict.empty()) return;
+  std::sort(evict.begin(), evict.end());
+  for (uint32_t o : evict) {
+    sent_.erase(o);
+    held_bytes_ -= scene_->geometry(o).RawBytes();
+  }
+  v1::ServerMessage m;
+  m.mutable_evict()->mutable_object_ids()->Add(evict.begin(), evict.end());
+  QueueControl(std::move(m));
+  stats_.set_evicted_objects(stats_.evicted_objects() + evict.size());
+  if (log_ != nullptr) log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(evict.size())}});
+}
+
+void Session::MaybeRequestMask(double now) {
+  const visibility::EpsilonSuperset* eps = scene_->epsilon();
+  if (eps == nullptr || !current_.has_value()) return;
+  const double half = 0.5 * limits_.epsilon_size_m;
+  if (std::abs(position_.x - anchor_.x) > half || std::abs(position_.y - anchor_.y) > half) {
+    anchor_ = position_;
+    anchor_s_ = now;
+    mask_requested_ = false;
+    return;
+  }
+  if (mask_requested_ || now - anchor_s_ < limits_.epsilon_dwell_s) return;
+  auto it = received_.find(*current_);
+  if (it == received_.end()) return;
+  mask_requested_ = true;
+  // The box around where the client lingers, its floor kept above the ground: a box that
+  // touches z = 0 reaches under every occluder and so culls nothing.
+  scenes::Aabb box;
+  box.min = glm::dvec3(anchor_.x - half, anchor_.y - half, std::max(0.1, anchor_.z - half));
+  box.max = glm::dvec3(anchor_.x + half, anchor_.y + half, box.min.z + limits_.epsilon_size_m);
+  const uint64_t generation = ++mask_generation_;
+  std::weak_ptr<Session> weak = weak_from_this();
+  CellPvsPtr pvs = it->second;
+  const CellId cell = *current_;
+  scene_->masks().Post([weak, box, pvs, generation, cell, eps] {
+    if (weak.expired()) return;
+    const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
+    v1::ServerMessage m;
+    v1::EpsilonMask* mask = m.mutable_epsilon_mask();
+    mask->mutable_box_min()->set_x(box.min.x);
+    mask->mutable_box_min()->set_y(box.min.y);
+    mask->mutable_box_min()->set_z(box.min.z);
+    mask->mutable_box_max()->set_x(box.max.x);
+    mask->mutable_box_max()->set_y(box.max.y);
+    mask->mutable_box_max()->set_z(box.max.z);
+    size_t t = 0;
+    for (scenes::ObjectId o : r.objects) {
+      v1::ObjectTriangles* ot = mask->add_objects();
+      ot->set_object_id(o);
+      const uint32_t base = eps->TriangleId(o, 0);
+      const size_t n = eps->scene().objects[o].mesh.TriangleCount();
+      std::string bits((n + 7) / 8, '\0');
+      while (t < r.triangles.size() && eps->ObjectOfTriangle(r.triangles[t]) < o) ++t;
+      for (; t < r.triangles.size() && eps->ObjectOfTriangle(r.triangles[t]) == o; ++t) {
+        const uint32_t k = r.triangles[t] - base;
+        bits[k / 8] = static_cast<char>(bits[k / 8] | (1 << (k % 8)));
+      }
+      ot->set_visible(std::move(bits));
+    }
+    std::shared_ptr<Session> s = weak.lock();
+    if (s == nullptr) return;
+    {
+      std::lock_guard lock(s->mu_);
+      // Stale if the client moved on while it was computed.
+      if (s->ended_ || generation != s->mask_generation_ || !s->current_.has_value() || *s->current_ != cell) return;
+      s->QueueControl(std::move(m));
+      s->stats_.set_epsilon_masks(s->stats_.epsilon_masks() + 1);
+    }
+    if (s->wake_) s->wake_();
+  });
+}
+
+void Session::QueueControl(v1::ServerMessage message) {
+  const size_t bytes = message.ByteSizeLong();
+  control_.push_back(Control{std::move(message), bytes, std::nullopt});
+  control_bytes_ += bytes;
+  if (control_bytes_ > limits_.max_queued_bytes && failure_.ok()) {
+    failure_ = absl::ResourceExhaustedError(absl::StrCat(
+        control_bytes_, " bytes are queued for a client that does not read them (the limit is ",
+        limits_.max_queued_bytes, ")"));
+  }
+}
+
+std::optional<v1::ServerMessage> Session::NextMessage() {
+  std::lock_guard lock(mu_);
+  if (ended_ || !failure_.ok()) return std::nullopt;
+  if (!control_.empty()) {
+    Control c = std::move(control_.front());
+    control_.pop_front();
+    control_bytes_ -= c.bytes;
+    stats_.set_bytes_sent(stats_.bytes_sent() + c.bytes);
+    return std::move(c.message);
+  }
+  if (credit_ <= 0 || !current_.has_value()) return std::nullopt;
+  // Geometry: the current cell's first, then the others in the order they will be reached.
+  for (CellId c : wanted_) {
+    auto it = pending_geometry_.find(c);
+    if (it == pending_geometry_.end()) continue;
+    std::deque<uint32_t>& q = it->second;
+    while (!q.empty()) {
+      const uint32_t o = q.front();
+      q.pop_front();
+      if (sent_.count(o) > 0) continue;
+      const scenes::EncodedMesh& g = scene_->geometry(o);
+      if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) continue;  // next crossing retries
+      v1::ServerMessage m;
+      v1::ObjectGeometry* geo = m.mutable_geometry();
+      geo->set_object_id(o);
+      geo->set_vertex_count(g.vertex_count);
+      geo->set_index_count(g.index_count);
+      geo->set_vertices(g.vertices);
+      geo->set_indices(g.indices);
+      const scenes::Aabb& b = scene_->scene().objects[o].bounds;
+      geo->mutable_bounds_min()->set_x(b.min.x);
+      geo->mutable_bounds_min()->set_y(b.min.y);
+      geo->mutable_bounds_min()->set_z(b.min.z);
+      geo->mutable_bounds_max()->set_x(b.max.x);
+      geo->mutable_bounds_max()->set_y(b.max.y);
+      geo->mutable_bounds_max()->set_z(b.max.z);
+      sent_.insert(o);
+      held_bytes_ += g.RawBytes();
+      const size_t bytes = m.ByteSizeLong();
+      credit_ -= static_cast<int64_t>(g.EncodedBytes());
+      stats_.set_objects_sent(stats_.objects_sent() + 1);
+      stats_.set_geometry_bytes_sent(stats_.geometry_bytes_sent() + g.EncodedBytes());
+      stats_.set_bytes_sent(stats_.bytes_sent() + bytes);
+      return m;
+    }
+  }
+  return std::nullopt;
+}
+
+v1::SessionStats Session::Stats() const {
+  std::lock_guard lock(mu_);
+  v1::SessionStats s = stats_;
+  size_t pending = 0;
+  for (const auto& [c, q] : pending_geometry_) pending += q.size();
+  s.set_queued_bytes(control_bytes_ + pending * sizeof(uint32_t));
+  s.set_held_bytes(held_bytes_);
+  s.set_seconds(SteadySeconds() - start_s_);
+  return s;
+}
+
+}  // namespace vistream::server

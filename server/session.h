@@ -1,0 +1,124 @@
+#pragma once
+// One walkthrough session's protocol, apart from the transport: what a client message does,
+// and which message goes out next. The gRPC reactor (service.cpp) feeds it client messages and
+// writes what NextMessage() gives, one at a time; the fuzz target and tests drive it directly.
+//
+// Order of what goes out (DESIGN.md, "Server and client"): SceneInfo after Hello; after the
+// first pose the PVS of the client's cell, its geometry, then the eight neighbours' PVSs and
+// geometry, in the order the client will reach them (its velocity); on each crossing the up to
+// five newly adjacent cells likewise, with Evict hints for geometry that left the current and
+// adjacent PVSs. Control messages (PVS lists, Evict, ε-masks) go before geometry; geometry of
+// the current cell before any neighbour's, and only while the client's credit is positive.
+
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+#include <absl/status/status.h>
+#include <glm/vec3.hpp>
+
+#include "proto/walkthrough.pb.h"
+#include "server/event_log.h"
+#include "server/served_scene.h"
+
+namespace vistream::server {
+
+// Per-session limits; a session that breaks one ends with RESOURCE_EXHAUSTED.
+struct SessionLimits {
+  double max_pose_rate_hz = 120.0;             // sustained poses per second (bursts to twice that)
+  size_t max_queued_bytes = size_t{8} << 20;   // bytes waiting to be written to the client
+  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog)
+  double epsilon_dwell_s = 0.5;                // time inside it before a mask is computed
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  // `wake` is called, without the session's lock, whenever a message becomes ready from a
+  // worker thread (a PVS arrived); the transport then calls NextMessage(). `log` may be null.
+  static std::shared_ptr<Session> Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
+                                         std::function<void()> wake);
+  ~Session();
+
+  uint64_t id() const { return id_; }
+
+  // Handles one client message at `now` (seconds on the steady clock). A status other than OK
+  // ends the session with it (the status names the message and what is wrong).
+  absl::Status OnMessage(const vistream::v1::ClientMessage& message, double now);
+  // The next message to write now, if any (credit and order allowed). Pops it.
+  std::optional<vistream::v1::ServerMessage> NextMessage();
+  // Non-OK when the session must end for something that happened off the read path.
+  absl::Status failure() const;
+  // Stops every request this session has with the scheduler; no more wake() calls.
+  void End();
+
+  vistream::v1::SessionStats Stats() const;
+
+ private:
+  Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log, std::function<void()> wake);
+
+  absl::Status OnHello(const vistream::v1::Hello& hello);
+  absl::Status OnPose(const vistream::v1::Pose& pose, double now);
+  // Makes `current_` and its neighbours the wanted cells, in the order they will be reached.
+  void SetWanted(double now);
+  void RequestCell(CellId cell, double deadline);
+  void OnCellReady(const CellPvsPtr& pvs, bool from_cache);  // lock held
+  void EmitReady();                                          // lock held
+  void Emit(CellId cell);                                    // lock held
+  void EvictLeft(const std::vector<CellId>& left);           // lock held
+  void MaybeRequestMask(double now);                         // lock held
+  void QueueControl(vistream::v1::ServerMessage message);    // lock held
+  double Deadline(CellId cell, double now) const;
+
+  const uint64_t id_;
+  ServedScene* const scene_;
+  const SessionLimits limits_;
+  EventLog* const log_;
+  std::function<void()> wake_;
+  const double start_s_;
+
+  mutable std::mutex mu_;
+  bool ended_ = false;
+  bool hello_ = false;
+  absl::Status failure_;
+  uint64_t memory_budget_ = 0;  // 0: unlimited
+  std::optional<CellId> current_;
+  glm::dvec3 position_{0.0}, velocity_{0.0};
+  double last_pose_s_ = 0.0;
+  double pose_tokens_ = 0.0;
+  uint64_t poses_ = 0;
+
+  std::vector<CellId> wanted_;                 // current first, then by deadline
+  std::map<CellId, CellPvsPtr> received_;      // PVSs of wanted cells that arrived
+  std::set<CellId> requested_;                 // asked of the scheduler, not arrived
+  std::set<CellId> emitted_;                   // PVS message queued or sent
+  std::map<CellId, std::deque<uint32_t>> pending_geometry_;  // per wanted cell, not yet sent
+  std::unordered_set<uint32_t> sent_;          // geometry the client holds (sent or held on resume)
+  uint64_t held_bytes_ = 0;                    // decoded bytes of sent_
+  int64_t credit_ = 0;
+
+  struct Control {
+    vistream::v1::ServerMessage message;
+    size_t bytes;
+    std::optional<CellId> cell;  // a PVS list: dropped if the cell stops being wanted
+  };
+  std::deque<Control> control_;
+  size_t control_bytes_ = 0;
+
+  // ε-mask: the neighbourhood the client lingers in, and what was sent for it.
+  glm::dvec3 anchor_{0.0};
+  double anchor_s_ = 0.0;
+  bool mask_requested_ = false;
+  uint64_t mask_generation_ = 0;
+
+  vistream::v1::SessionStats stats_;
+};
+
+}  // namespace vistream::server
