@@ -1,7 +1,7 @@
 #pragma once
 // Lossless mesh encoding for the wire: meshoptimizer's vertex codec over 24-byte vertices
-// (float position, float normal; scene-local metres) and its index codec over the triangle
-// list, in the mesh's own order, so the decoded mesh is bit-identical to the scene's.
+// (float position, float normal; scene-local metres) and its index sequence codec over the
+// triangle list, in the mesh's own order and corner order, so the decoded mesh is bit-identical to the scene's.
 // Decoding is safe for untrusted bytes: every malformed input is an error, never a crash.
 
 #include <cstddef>
@@ -19,7 +19,7 @@ struct EncodedMesh {
   uint32_t vertex_count = 0;
   uint32_t index_count = 0;  // a multiple of 3
   std::string vertices;      // meshopt_encodeVertexBuffer, 24-byte vertices: position, normal
-  std::string indices;       // meshopt_encodeIndexBuffer
+  std::string indices;       // meshopt_encodeIndexSequence
 
   // Bytes on the wire, and bytes of the same mesh unencoded (24 per vertex, 4 per index).
   size_t EncodedBytes() const { return vertices.size() + indices.size(); }

@@ -2,13 +2,12 @@
 // client"). Prints one line on stdout when it is ready; logs one line per session event on
 // stderr. SIGTERM or SIGINT drains the sessions and exits 0.
 
-#include <pthread.h>
 #include <signal.h>
 
 #include <atomic>
-#include <condition_variable>
+#include <chrono>
+#include <csignal>
 #include <cstdio>
-#include <mutex>
 #include <thread>
 
 #include <CLI/CLI.hpp>
@@ -42,12 +41,8 @@ class LogProgress : public vistream::scenes::ProgressSink {
   int last_decile_ = -1;
 };
 
-struct Stop {
-  std::mutex mu;
-  std::condition_variable cv;
-  std::atomic<bool> requested{false};
-  int signal = 0;
-};
+std::atomic<bool> g_stop{false};
+volatile std::sig_atomic_t g_signal = 0;
 
 }  // namespace
 
@@ -86,33 +81,23 @@ int main(int argc, char** argv) {
   }
   scene_options.cache_bytes = static_cast<size_t>(cache_mb * (1 << 20));
 
-  // Signals go to one thread, which asks main to stop: the gRPC threads never see them.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  Stop stop;
-  std::thread([&stop, signals] {
-    for (;;) {
-      int sig = 0;
-      if (sigwait(&signals, &sig) != 0) continue;
-      if (stop.requested.exchange(true)) std::_Exit(1);  // a second signal: stop at once
-      {
-        std::lock_guard lock(stop.mu);
-        stop.signal = sig;
-      }
-      stop.cv.notify_all();
-    }
-  }).detach();
+  // SIGTERM and SIGINT only raise a flag (whichever thread takes them); main polls it.
+  struct sigaction action {};
+  action.sa_handler = [](int sig) {
+    if (g_stop.exchange(true)) std::_Exit(1);  // a second signal: stop at once
+    g_signal = sig;
+  };
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
 
   EventLog log(stderr, json_log);
   LogProgress progress(&log);
   log.Write(0, "loading", {{"scene", scene_options.scene}});
   absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
-      vistream::server::ServedScene::Create(scene_options, {&progress, &stop.requested});
+      vistream::server::ServedScene::Create(scene_options, {&progress, &g_stop});
   if (!scene.ok()) {
-    if (stop.requested) return 0;
+    if (g_stop) return 0;
     std::fprintf(stderr, "vistream-server: error: %s\n", std::string(scene.status().message()).c_str());
     return 1;
   }
@@ -137,11 +122,8 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}});
 
-  {
-    std::unique_lock lock(stop.mu);
-    stop.cv.wait(lock, [&] { return stop.requested.load(); });
-  }
-  log.Write(0, "draining", {{"signal", stop.signal == SIGTERM ? "SIGTERM" : "SIGINT"},
+  while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(grace_s);
   log.Write(0, "stopped", {});

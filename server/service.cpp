@@ -46,7 +46,7 @@ class SessionLink {
 
 namespace {
 
-class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage> {
+class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   SessionReactor(WalkthroughService* service, std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link)
       : service_(service), session_(std::move(session)), link_(std::move(link)) {
@@ -59,7 +59,19 @@ class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::Ser
       EndWith(grpc::Status::OK);
       return;
     }
-    const absl::Status st = session_->OnMessage(in_, SteadySeconds());
+    ++reads_;
+    v1::ClientMessage message;
+    std::vector<grpc::Slice> slices;
+    std::string bytes;
+    if (in_.Dump(&slices).ok()) {
+      for (const grpc::Slice& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+    }
+    if (!message.ParseFromString(bytes)) {
+      EndWith(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                           absl::StrCat("message ", reads_, " (", bytes.size(), " bytes) is not a ClientMessage")));
+      return;
+    }
+    const absl::Status st = session_->OnMessage(message, SteadySeconds());
     if (!st.ok()) {
       EndWith(ToGrpc(st));
       return;
@@ -106,7 +118,8 @@ class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::Ser
     }
     std::optional<v1::ServerMessage> next = session_->NextMessage();
     if (!next.has_value()) return;
-    out_ = std::move(*next);
+    grpc::Slice slice(next->SerializeAsString());
+    out_ = grpc::ByteBuffer(&slice, 1);
     writing_ = true;
     StartWrite(&out_);
   }
@@ -125,8 +138,8 @@ class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::Ser
   WalkthroughService* service_;
   std::shared_ptr<Session> session_;
   std::shared_ptr<SessionLink> link_;
-  v1::ClientMessage in_;
-  v1::ServerMessage out_;
+  grpc::ByteBuffer in_, out_;
+  uint64_t reads_ = 0;
   std::mutex mu_;
   bool writing_ = false;
   bool finish_requested_ = false;
@@ -135,7 +148,7 @@ class SessionReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::Ser
 };
 
 // Ends a session that may not start (too many, draining) with `status`.
-class RefusedReactor : public grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage> {
+class RefusedReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   explicit RefusedReactor(const grpc::Status& status) { Finish(status); }
   void OnDone() override { delete this; }
@@ -156,7 +169,7 @@ void SessionLink::End(const grpc::Status& status) {
 WalkthroughService::WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log)
     : scene_(scene), options_(options), log_(log), start_s_(SteadySeconds()) {}
 
-grpc::ServerBidiReactor<v1::ClientMessage, v1::ServerMessage>* WalkthroughService::Session(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService::Session(
     grpc::CallbackServerContext* context) {
   std::lock_guard lock(mu_);
   if (draining_) {

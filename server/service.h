@@ -31,12 +31,15 @@ struct ServerOptions {
 
 class SessionLink;
 
-class WalkthroughService final : public vistream::v1::Walkthrough::CallbackService {
+// Session is served raw (bytes in, bytes out) so that bytes that are no ClientMessage end the
+// session with INVALID_ARGUMENT naming them, rather than looking like a closed stream.
+class WalkthroughService final
+    : public vistream::v1::Walkthrough::WithRawCallbackMethod_Session<
+          vistream::v1::Walkthrough::WithCallbackMethod_GetStats<vistream::v1::Walkthrough::Service>> {
  public:
   WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log);
 
-  grpc::ServerBidiReactor<vistream::v1::ClientMessage, vistream::v1::ServerMessage>* Session(
-      grpc::CallbackServerContext* context) override;
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context, const vistream::v1::StatsRequest* request,
                                      vistream::v1::ServerStats* response) override;
 

@@ -1,0 +1,540 @@
+// End-to-end tests of the walkthrough server: a real server on loopback (in this process, or
+// the vistream-server executable), scripted clients that walk paths and record what arrives.
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <set>
+#include <thread>
+
+#include <grpcpp/generic/generic_stub.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "gl/pvs_backend.h"
+#include "scenes/geometry_codec.h"
+#include "server/service.h"
+#include "tests/walk_client.h"
+
+namespace vistream::server {
+namespace {
+
+namespace v1 = vistream::v1;
+using testing::Received;
+using testing::WalkClient;
+
+constexpr double kWait = 120.0;  // seconds any one wait may take on a loaded 2-core machine
+
+// city1 with 50 m viewcells (28 x 20), shared by every test: it takes a few seconds to prepare.
+ServedScene& City1() {
+  static ServedScene* scene = [] {
+    ServedSceneOptions o;
+    o.scene = "city1";
+    o.threads = 2;
+    absl::StatusOr<std::unique_ptr<ServedScene>> s = ServedScene::Create(o);
+    EXPECT_TRUE(s.ok()) << s.status();
+    return s->release();
+  }();
+  return *scene;
+}
+
+std::unique_ptr<WalkthroughServer> StartServer(ServerOptions options = {}) {
+  options.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> s = WalkthroughServer::Start(&City1(), options, nullptr);
+  EXPECT_TRUE(s.ok()) << s.status();
+  return std::move(*s);
+}
+
+// The eye at the centre of cell (i, j).
+glm::dvec3 Centre(int i, int j) {
+  const visibility::ViewcellGrid& g = City1().grid();
+  const scenes::Aabb b = g.CellBox(visibility::CellCoord{i, j});
+  return {0.5 * (b.min.x + b.max.x), 0.5 * (b.min.y + b.max.y), g.base_z() + 1.2};
+}
+
+CellId Cell(int i, int j) { return City1().grid().Id({i, j}); }
+
+std::set<CellId> Around(CellId c) {
+  std::set<CellId> s{c};
+  for (CellId n : City1().grid().Neighbours(c)) s.insert(n);
+  return s;
+}
+
+bool AllComplete(const Received& r, const std::set<CellId>& cells) {
+  return std::all_of(cells.begin(), cells.end(), [&](CellId c) { return r.CellComplete(c); });
+}
+
+// The PVS `vistream pvs` computes for the cell (same backend, same options).
+std::vector<uint32_t> ExpectedPvs(CellId cell) {
+  static const visibility::KdTree tree = visibility::KdTree::Build(City1().scene());
+  static const visibility::PvsComputer computer(City1().scene(), tree);
+  static const absl::StatusOr<gl::PvsBackend> cpu = gl::PvsBackend::Create("cpu");
+  return cpu->Compute(computer, City1().grid().CellBox(cell), gl::QueryOptionsFor(128)).objects;
+}
+
+std::unique_ptr<WalkClient> Connect(WalkthroughServer& server, bool read = true) {
+  auto c = std::make_unique<WalkClient>(server.address());
+  c->Start(WalkClient::HelloFor("city1"), read);
+  c->SendCredit(uint64_t{1} << 40);
+  return c;
+}
+
+TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  const CellId here = Cell(14, 10);
+  ASSERT_TRUE(client->SendPose(Centre(14, 10), {1.4, 0, 0}));
+  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(here)); }, kWait));
+  const Received r = client->Snapshot();
+  ASSERT_TRUE(r.scene_info);
+  EXPECT_EQ(r.order.front().first, 'S');
+  EXPECT_EQ(r.info.object_count(), City1().scene().objects.size());
+  EXPECT_EQ(r.info.grid().nx(), 28);
+  ASSERT_EQ(r.pvs_order.size(), 9u);
+  EXPECT_EQ(r.pvs_order.front(), here);
+  EXPECT_EQ(std::set<CellId>(r.pvs_order.begin(), r.pvs_order.end()), Around(here));
+  // The current cell's geometry before any other.
+  const std::vector<uint32_t>& current = r.pvs.at(here);
+  bool other_seen = false;
+  for (const auto& [kind, id] : r.order) {
+    if (kind != 'G') continue;
+    const bool in_current = std::binary_search(current.begin(), current.end(), id);
+    EXPECT_FALSE(in_current && other_seen) << "object " << id << " of the current cell came after another cell's";
+    other_seen |= !in_current;
+  }
+  // Every PVS is the one `vistream pvs` computes; every mesh decodes to the scene's, bit for bit.
+  for (const auto& [cell, objects] : r.pvs) EXPECT_EQ(objects, ExpectedPvs(cell)) << "cell " << cell;
+  EXPECT_EQ(r.duplicates, 0u);
+  for (const auto& [id, g] : r.geometry) {
+    absl::StatusOr<scenes::Mesh> m = scenes::DecodeMesh(g.vertex_count(), g.index_count(), g.vertices(),
+                                                        g.indices(), "object " + std::to_string(id));
+    ASSERT_TRUE(m.ok()) << m.status();
+    const scenes::Mesh& want = City1().scene().objects[id].mesh;
+    ASSERT_EQ(m->positions.size(), want.positions.size());
+    EXPECT_EQ(0, std::memcmp(m->positions.data(), want.positions.data(), want.positions.size() * sizeof(glm::vec3)));
+    EXPECT_EQ(0, std::memcmp(m->normals.data(), want.normals.data(), want.normals.size() * sizeof(glm::vec3)));
+    EXPECT_EQ(m->indices, want.indices);
+  }
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  ASSERT_TRUE(client->SendPose(Centre(10, 10), {1.4, 0, 0}));
+  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(10, 10))); }, kWait));
+  struct Step {
+    int i, j;
+    size_t new_cells;
+  };
+  for (const Step s : {Step{11, 10, 3}, Step{12, 10, 3}, Step{13, 11, 5}, Step{13, 12, 3}, Step{12, 13, 5}}) {
+    const size_t before = client->Snapshot().pvs_order.size();
+    // Only cells it already has around it: the one it walks into was received before.
+    EXPECT_TRUE(client->Snapshot().CellComplete(Cell(s.i, s.j))) << s.i << "," << s.j;
+    ASSERT_TRUE(client->SendPose(Centre(s.i, s.j), {1.4, 0, 0}));
+    ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(s.i, s.j))); }, kWait));
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));  // nothing more may follow
+    const Received r = client->Snapshot();
+    EXPECT_EQ(r.pvs_order.size() - before, s.new_cells) << "crossing into " << s.i << "," << s.j;
+    for (size_t k = before; k < r.pvs_order.size(); ++k) EXPECT_EQ(Around(Cell(s.i, s.j)).count(r.pvs_order[k]), 1u);
+  }
+  const Received r = client->Snapshot();
+  EXPECT_EQ(r.duplicates, 0u);
+  EXPECT_FALSE(r.evicted.empty());  // walking five cells leaves buildings behind
+  // What was evicted is in none of the PVSs around the client now.
+  std::set<uint32_t> needed;
+  for (CellId c : Around(Cell(12, 13))) needed.insert(r.pvs.at(c).begin(), r.pvs.at(c).end());
+  for (uint32_t o : r.evicted) {
+    if (r.held.count(o) == 0) {
+      EXPECT_EQ(needed.count(o), 0u) << "object " << o << " evicted but needed";
+    }
+  }
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, CellsArriveBeforeAWalkerAt54KmhEntersThem) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  glm::dvec3 p = Centre(6, 8);
+  const glm::dvec3 v(15.0, 0.0, 0.0);
+  ASSERT_TRUE(client->SendPose(p, v));
+  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(6, 8))); }, kWait));
+  // Real time, 20 poses a second, across four cells.
+  std::optional<CellId> last;
+  int entered = 0;
+  for (int k = 0; k < 4 * 50 / 15 * 20; ++k) {
+    p += v * 0.05;
+    const CellId c = *City1().grid().CellAt(glm::dvec2(p));
+    if (c != last) {
+      EXPECT_TRUE(client->Snapshot().CellComplete(c)) << "entered cell " << c << " before its PVS and geometry";
+      last = c;
+      ++entered;
+    }
+    ASSERT_TRUE(client->SendPose(p, v));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_GE(entered, 4);
+  EXPECT_EQ(client->Snapshot().duplicates, 0u);
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, ResumingWithHeldObjectsSendsOnlyWhatIsMissing) {
+  auto server = StartServer();
+  const CellId here = Cell(20, 5);
+  std::set<uint32_t> held;
+  {
+    auto first = Connect(*server);
+    ASSERT_TRUE(first->SendPose(Centre(20, 5)));
+    ASSERT_TRUE(first->WaitFor([&](const Received& r) { return r.CellComplete(here); }, kWait));
+    held = first->Snapshot().held;
+    first->Cancel();  // a dropped connection
+  }
+  ASSERT_FALSE(held.empty());
+  auto second = std::make_unique<WalkClient>(server->address());
+  second->Start(WalkClient::HelloFor("city1", std::vector<uint32_t>(held.begin(), held.end())));
+  second->SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(second->SendPose(Centre(20, 5)));
+  ASSERT_TRUE(second->WaitFor([&](const Received& r) { return AllComplete(r, Around(here)); }, kWait));
+  const Received r = second->Snapshot();
+  for (const auto& [id, g] : r.geometry) EXPECT_EQ(held.count(id), 0u) << "object " << id << " was held and resent";
+  EXPECT_TRUE(second->Finish().ok());
+}
+
+// One bad input: what the session sends, and the status it must end with.
+struct BadInput {
+  const char* name;
+  std::function<void(WalkClient&)> act;
+  grpc::StatusCode code;
+  const char* message;  // part of the status message
+};
+
+v1::ClientMessage PoseAt(double x, double y, double vx = 0) {
+  v1::ClientMessage m;
+  m.mutable_pose()->mutable_position()->set_x(x);
+  m.mutable_pose()->mutable_position()->set_y(y);
+  m.mutable_pose()->mutable_position()->set_z(1.7);
+  m.mutable_pose()->mutable_velocity()->set_x(vx);
+  return m;
+}
+
+void Hello(WalkClient& w, const v1::Hello& h) { w.Start(h); }
+
+std::vector<BadInput> BadInputs() {
+  const glm::dvec3 c = Centre(3, 3);
+  return {
+      {"nan_pose", [c](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(NAN, c.y)); },
+       grpc::StatusCode::INVALID_ARGUMENT, "position.x is nan"},
+      {"infinite_velocity",
+       [c](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(c.x, c.y, INFINITY)); },
+       grpc::StatusCode::INVALID_ARGUMENT, "velocity.x is inf"},
+      {"pose_outside_grid",
+       [](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(1e7, 0)); },
+       grpc::StatusCode::OUT_OF_RANGE, "outside the viewcell grid"},
+      {"unknown_scene", [](WalkClient& w) { Hello(w, WalkClient::HelloFor("atlantis")); },
+       grpc::StatusCode::NOT_FOUND, "'atlantis' is not served here"},
+      {"wrong_protocol_version",
+       [](WalkClient& w) {
+         v1::Hello h = WalkClient::HelloFor("city1");
+         h.set_protocol_version(7);
+         Hello(w, h);
+       },
+       grpc::StatusCode::FAILED_PRECONDITION, "protocol version 7 is not supported: this server speaks version 1"},
+      {"second_hello",
+       [](WalkClient& w) {
+         Hello(w, WalkClient::HelloFor("city1"));
+         v1::ClientMessage m;
+         *m.mutable_hello() = WalkClient::HelloFor("city1");
+         w.Send(m);
+       },
+       grpc::StatusCode::FAILED_PRECONDITION, "second Hello"},
+      {"pose_before_hello",
+       [c](WalkClient& w) {
+         w.StartRaw(PoseAt(c.x, c.y));
+       },
+       grpc::StatusCode::FAILED_PRECONDITION, "Pose before Hello"},
+      {"empty_message", [](WalkClient& w) { w.StartRaw(v1::ClientMessage()); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "empty ClientMessage"},
+      {"held_object_out_of_range",
+       [](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1", {5, 999999})); },
+       grpc::StatusCode::INVALID_ARGUMENT, "held_objects[1] = 999999"},
+      {"oversized_message",
+       [](WalkClient& w) {
+         v1::Hello h = WalkClient::HelloFor("city1");
+         h.set_scene(std::string(4 << 20, 'x'));
+         Hello(w, h);
+       },
+       grpc::StatusCode::RESOURCE_EXHAUSTED, ""},
+  };
+}
+
+class ServerBadInput : public ::testing::TestWithParam<size_t> {};
+
+TEST_P(ServerBadInput, EndsOnlyItsSessionWithAStatusNamingIt) {
+  auto server = StartServer();
+  // A well-behaved session, already walking.
+  auto good = Connect(*server);
+  ASSERT_TRUE(good->SendPose(Centre(5, 5)));
+  ASSERT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
+
+  const BadInput bad = BadInputs()[GetParam()];
+  WalkClient w(server->address());
+  bad.act(w);
+  const grpc::Status st = w.AwaitEnd(kWait);
+  EXPECT_EQ(st.error_code(), bad.code) << bad.name << ": " << st.error_message();
+  EXPECT_NE(st.error_message().find(bad.message), std::string::npos) << bad.name << ": " << st.error_message();
+
+  // The good session goes on: it crosses and gets the new cells.
+  ASSERT_TRUE(good->SendPose(Centre(6, 5)));
+  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(6, 5))); }, kWait));
+  EXPECT_TRUE(good->Finish().ok());
+}
+
+INSTANTIATE_TEST_SUITE_P(Each, ServerBadInput, ::testing::Range(size_t{0}, BadInputs().size()),
+                         [](const ::testing::TestParamInfo<size_t>& p) { return BadInputs()[p.param].name; });
+
+TEST(Server, GarbageBytesEndTheSessionWithAStatus) {
+  auto server = StartServer();
+  auto channel = grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::ClientContext ctx;
+  grpc::CompletionQueue cq;
+  auto call = stub.PrepareCall(&ctx, "/vistream.v1.Walkthrough/Session", &cq);
+  void* tag;
+  bool ok;
+  call->StartCall(reinterpret_cast<void*>(1));
+  ASSERT_TRUE(cq.Next(&tag, &ok) && ok);
+  const std::string junk = "\xff\xff\xff\xff garbage that is no ClientMessage";
+  grpc::Slice slice(junk);
+  grpc::ByteBuffer buffer(&slice, 1);
+  call->Write(buffer, reinterpret_cast<void*>(2));
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  grpc::Status st;
+  call->Finish(&st, reinterpret_cast<void*>(3));
+  while (cq.Next(&tag, &ok) && tag != reinterpret_cast<void*>(3)) {
+  }
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+  EXPECT_NE(st.error_message().find("message 1 (" + std::to_string(junk.size()) + " bytes) is not a ClientMessage"), std::string::npos)
+      << st.error_message();
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+  // And the server still serves.
+  auto good = Connect(*server);
+  ASSERT_TRUE(good->SendPose(Centre(5, 5)));
+  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
+  EXPECT_TRUE(good->Finish().ok());
+}
+
+TEST(Server, TooManySessionsAndTooManyPosesAreRefused) {
+  ServerOptions o;
+  o.max_sessions = 2;
+  o.limits.max_pose_rate_hz = 20;
+  auto server = StartServer(o);
+  auto a = Connect(*server);
+  auto b = Connect(*server);
+  ASSERT_TRUE(a->SendPose(Centre(5, 5)));
+  ASSERT_TRUE(b->SendPose(Centre(6, 5)));
+  ASSERT_TRUE(a->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
+  ASSERT_TRUE(b->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
+  WalkClient third(server->address());
+  third.Start(WalkClient::HelloFor("city1"));
+  const grpc::Status refused = third.AwaitEnd(kWait);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("at most 2"), std::string::npos) << refused.error_message();
+  // 100 poses at once: over twice the sustained 20 per second.
+  for (int k = 0; k < 100; ++k) b->SendPose(Centre(6, 5));
+  const grpc::Status flood = b->AwaitEnd(kWait);
+  EXPECT_EQ(flood.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << flood.error_message();
+  EXPECT_NE(flood.error_message().find("poses per second"), std::string::npos) << flood.error_message();
+  // a was not touched.
+  ASSERT_TRUE(a->SendPose(Centre(5, 6)));
+  EXPECT_TRUE(a->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(5, 6))); }, kWait));
+  EXPECT_TRUE(a->Finish().ok());
+}
+
+TEST(Server, AClientThatStopsReadingCostsBoundedMemory) {
+  ServerOptions o;
+  o.limits.max_queued_bytes = 1 << 20;
+  auto server = StartServer(o);
+  auto stalled = Connect(*server, /*read=*/false);
+  glm::dvec3 p = Centre(3, 3);
+  uint64_t max_queued = 0, sent = 0, crossings = 0;
+  const auto start = std::chrono::steady_clock::now();
+  v1::Walkthrough::Stub stats_stub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+    p.x += 2.0;  // it keeps walking: crossings pile up work for it
+    if (p.x > Centre(25, 3).x) p.x = Centre(3, 3).x;
+    stalled->SendPose(p, {20, 0, 0});
+    grpc::ClientContext ctx;
+    v1::ServerStats s;
+    ASSERT_TRUE(stats_stub.GetStats(&ctx, v1::StatsRequest(), &s).ok());
+    for (const v1::SessionStats& ss : s.sessions()) {
+      max_queued = std::max(max_queued, ss.queued_bytes());
+      sent = ss.objects_sent();
+      crossings = ss.crossings();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_LE(max_queued, o.limits.max_queued_bytes);
+  std::printf("stalled client: %llu crossings, %llu objects written, at most %llu bytes queued (bound %zu)\n",
+              static_cast<unsigned long long>(crossings), static_cast<unsigned long long>(sent),
+              static_cast<unsigned long long>(max_queued), o.limits.max_queued_bytes);
+  stalled->Cancel();
+  auto good = Connect(*server);
+  ASSERT_TRUE(good->SendPose(Centre(9, 9)));
+  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(9, 9)); }, kWait));
+  EXPECT_TRUE(good->Finish().ok());
+}
+
+TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
+  ServerOptions o;
+  o.max_sessions = 128;
+  auto server = StartServer(o);
+  constexpr int kSessions = 100;
+  std::vector<std::thread> threads;
+  std::atomic<int> completed{0};
+  std::mutex failures_mu;
+  std::vector<std::string> failures;
+  for (int s = 0; s < kSessions; ++s) {
+    threads.emplace_back([&, s] {
+      std::mt19937 rng(s);
+      auto client = Connect(*server);
+      int i = 2 + static_cast<int>(rng() % 24), j = 2 + static_cast<int>(rng() % 16);
+      for (int step = 0; step < 4; ++step) {
+        if (step > 0) {
+          i = std::clamp(i + static_cast<int>(rng() % 3) - 1, 1, 26);
+          j = std::clamp(j + static_cast<int>(rng() % 3) - 1, 1, 18);
+        }
+        client->SendPose(Centre(i, j), {1.4, 0, 0});
+        const std::set<CellId> need = Around(Cell(i, j));
+        if (!client->WaitFor([&](const Received& r) { return AllComplete(r, need); }, 300.0)) {
+          std::lock_guard lock(failures_mu);
+          failures.push_back("session " + std::to_string(s) + " step " + std::to_string(step));
+          return;
+        }
+      }
+      if (client->Finish().ok()) ++completed;
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  EXPECT_TRUE(failures.empty()) << failures.size() << " sessions missed a PVS, first: " << failures.front();
+  EXPECT_EQ(completed.load(), kSessions);
+}
+
+TEST(Server, StatsHealthAndReflectionAnswer) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  ASSERT_TRUE(client->SendPose(Centre(8, 8)));
+  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return r.CellComplete(Cell(8, 8)); }, kWait));
+  auto channel = grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials());
+  v1::Walkthrough::Stub stub(channel);
+  grpc::ClientContext ctx;
+  v1::ServerStats s;
+  ASSERT_TRUE(stub.GetStats(&ctx, v1::StatsRequest(), &s).ok());
+  EXPECT_EQ(s.scene(), "city1");
+  EXPECT_EQ(s.protocol_version(), 1u);
+  EXPECT_EQ(s.sessions_active(), 1u);
+  ASSERT_EQ(s.sessions_size(), 1);
+  EXPECT_EQ(s.sessions(0).cell_id(), Cell(8, 8));
+  EXPECT_GT(s.sessions(0).objects_sent(), 0u);
+  EXPECT_NE(s.pvs_source().find("dual ray space"), std::string::npos);
+
+  // grpc.health.v1.Health/Check{service: "vistream.v1.Walkthrough"}: SERVING is field 1 = 1.
+  grpc::GenericStub generic(channel);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext hctx;
+  const std::string service = "vistream.v1.Walkthrough";
+  grpc::Slice check(std::string("\x0a") + static_cast<char>(service.size()) + service);
+  auto call = generic.PrepareUnaryCall(&hctx, "/grpc.health.v1.Health/Check", grpc::ByteBuffer(&check, 1), &cq);
+  call->StartCall();
+  grpc::ByteBuffer reply;
+  grpc::Status hst;
+  call->Finish(&reply, &hst, reinterpret_cast<void*>(1));
+  void* tag;
+  bool ok;
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  ASSERT_TRUE(hst.ok()) << hst.error_message();
+  std::vector<grpc::Slice> slices;
+  ASSERT_TRUE(reply.Dump(&slices).ok());
+  std::string bytes;
+  for (const grpc::Slice& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+  EXPECT_EQ(bytes, std::string("\x08\x01", 2));
+
+  // Reflection lists the service: ServerReflectionRequest{list_services: ""} is field 7.
+  grpc::ClientContext rctx;
+  auto refl = generic.PrepareCall(&rctx, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &cq);
+  refl->StartCall(reinterpret_cast<void*>(2));
+  ASSERT_TRUE(cq.Next(&tag, &ok) && ok);
+  grpc::Slice req(std::string("\x3a\x00", 2));
+  refl->Write(grpc::ByteBuffer(&req, 1), reinterpret_cast<void*>(3));
+  ASSERT_TRUE(cq.Next(&tag, &ok) && ok);
+  grpc::ByteBuffer resp;
+  refl->Read(&resp, reinterpret_cast<void*>(4));
+  ASSERT_TRUE(cq.Next(&tag, &ok) && ok);
+  slices.clear();
+  ASSERT_TRUE(resp.Dump(&slices).ok());
+  bytes.clear();
+  for (const grpc::Slice& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+  EXPECT_NE(bytes.find("vistream.v1.Walkthrough"), std::string::npos);
+  rctx.TryCancel();
+  grpc::Status rst;
+  refl->Finish(&rst, reinterpret_cast<void*>(5));
+  while (cq.Next(&tag, &ok) && tag != reinterpret_cast<void*>(5)) {
+  }
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+// The executable: started on a free port, stopped with SIGTERM while sessions are open.
+TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
+  int out[2];
+  ASSERT_EQ(pipe(out), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(out[1], STDOUT_FILENO);
+    close(out[0]);
+    execl(VISTREAM_SERVER_BIN, VISTREAM_SERVER_BIN, "--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(out[1]);
+  std::FILE* f = fdopen(out[0], "r");
+  char line[1024] = {};
+  ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing";
+  const std::string ready(line);
+  const size_t at = ready.find("ready on ");
+  ASSERT_NE(at, std::string::npos) << ready;
+  const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
+  EXPECT_NE(ready.find("560 viewcells"), std::string::npos) << ready;
+  EXPECT_NE(ready.find("2128 objects"), std::string::npos) << ready;
+  std::vector<std::unique_ptr<WalkClient>> clients;
+  for (int k = 0; k < 2; ++k) {
+    clients.push_back(std::make_unique<WalkClient>(address));
+    clients.back()->Start(WalkClient::HelloFor("city1"));
+    clients.back()->SendCredit(uint64_t{1} << 40);
+    clients.back()->SendPose(Centre(4 + k, 4));
+    ASSERT_TRUE(clients.back()->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
+  }
+  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  for (auto& c : clients) {
+    const grpc::Status st = c->AwaitEnd(kWait);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAVAILABLE) << st.error_message();
+    EXPECT_NE(st.error_message().find("shutting down"), std::string::npos) << st.error_message();
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  EXPECT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  std::fclose(f);
+}
+
+}  // namespace
+}  // namespace vistream::server
