@@ -19,14 +19,14 @@
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
 #include "server/service.h"
-#include "tests/walk_client.h"
+#include "client/session_stream.h"
 
 namespace vistream::server {
 namespace {
 
 namespace v1 = vistream::v1;
-using testing::Received;
-using testing::WalkClient;
+using client::SessionRecord;
+using client::SessionStream;
 
 constexpr double kWait = 120.0;  // seconds any one wait may take on a loaded 2-core machine
 
@@ -65,7 +65,7 @@ std::set<CellId> Around(CellId c) {
   return s;
 }
 
-bool AllComplete(const Received& r, const std::set<CellId>& cells) {
+bool AllComplete(const SessionRecord& r, const std::set<CellId>& cells) {
   return std::all_of(cells.begin(), cells.end(), [&](CellId c) { return r.CellComplete(c); });
 }
 
@@ -77,9 +77,9 @@ std::vector<uint32_t> ExpectedPvs(CellId cell) {
   return cpu->Compute(computer, City1().grid().CellBox(cell), gl::QueryOptionsFor(128)).objects;
 }
 
-std::unique_ptr<WalkClient> Connect(WalkthroughServer& server, bool read = true) {
-  auto c = std::make_unique<WalkClient>(server.address());
-  c->Start(WalkClient::HelloFor("city1"), read);
+std::unique_ptr<SessionStream> Connect(WalkthroughServer& server, bool read = true) {
+  auto c = std::make_unique<SessionStream>(server.address());
+  c->Start(SessionStream::HelloFor("city1"), read);
   c->SendCredit(uint64_t{1} << 40);
   return c;
 }
@@ -89,8 +89,8 @@ TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
   auto client = Connect(*server);
   const CellId here = Cell(14, 10);
   ASSERT_TRUE(client->SendPose(Centre(14, 10), {1.4, 0, 0}));
-  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(here)); }, kWait));
-  const Received r = client->Snapshot();
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(here)); }, kWait));
+  const SessionRecord r = client->Snapshot();
   ASSERT_TRUE(r.scene_info);
   EXPECT_EQ(r.order.front().first, 'S');
   EXPECT_EQ(r.info.object_count(), City1().scene().objects.size());
@@ -127,7 +127,7 @@ TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
   auto server = StartServer();
   auto client = Connect(*server);
   ASSERT_TRUE(client->SendPose(Centre(10, 10), {1.4, 0, 0}));
-  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(10, 10))); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(10, 10))); }, kWait));
   struct Step {
     int i, j;
     size_t new_cells;
@@ -137,13 +137,13 @@ TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
     // Only cells it already has around it: the one it walks into was received before.
     EXPECT_TRUE(client->Snapshot().CellComplete(Cell(s.i, s.j))) << s.i << "," << s.j;
     ASSERT_TRUE(client->SendPose(Centre(s.i, s.j), {1.4, 0, 0}));
-    ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(s.i, s.j))); }, kWait));
+    ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(s.i, s.j))); }, kWait));
     std::this_thread::sleep_for(std::chrono::milliseconds(200));  // nothing more may follow
-    const Received r = client->Snapshot();
+    const SessionRecord r = client->Snapshot();
     EXPECT_EQ(r.pvs_order.size() - before, s.new_cells) << "crossing into " << s.i << "," << s.j;
     for (size_t k = before; k < r.pvs_order.size(); ++k) EXPECT_EQ(Around(Cell(s.i, s.j)).count(r.pvs_order[k]), 1u);
   }
-  const Received r = client->Snapshot();
+  const SessionRecord r = client->Snapshot();
   EXPECT_EQ(r.duplicates, 0u);
   EXPECT_FALSE(r.evicted.empty());  // walking five cells leaves buildings behind
   // What was evicted is in none of the PVSs around the client now.
@@ -163,7 +163,7 @@ TEST(Server, CellsArriveBeforeAWalkerAt54KmhEntersThem) {
   glm::dvec3 p = Centre(6, 8);
   const glm::dvec3 v(15.0, 0.0, 0.0);
   ASSERT_TRUE(client->SendPose(p, v));
-  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(6, 8))); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(6, 8))); }, kWait));
   // Real time, 20 poses a second, across four cells.
   std::optional<CellId> last;
   int entered = 0;
@@ -190,17 +190,17 @@ TEST(Server, ResumingWithHeldObjectsSendsOnlyWhatIsMissing) {
   {
     auto first = Connect(*server);
     ASSERT_TRUE(first->SendPose(Centre(20, 5)));
-    ASSERT_TRUE(first->WaitFor([&](const Received& r) { return r.CellComplete(here); }, kWait));
+    ASSERT_TRUE(first->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
     held = first->Snapshot().held;
     first->Cancel();  // a dropped connection
   }
   ASSERT_FALSE(held.empty());
-  auto second = std::make_unique<WalkClient>(server->address());
-  second->Start(WalkClient::HelloFor("city1", std::vector<uint32_t>(held.begin(), held.end())));
+  auto second = std::make_unique<SessionStream>(server->address());
+  second->Start(SessionStream::HelloFor("city1", std::vector<uint32_t>(held.begin(), held.end())));
   second->SendCredit(uint64_t{1} << 40);
   ASSERT_TRUE(second->SendPose(Centre(20, 5)));
-  ASSERT_TRUE(second->WaitFor([&](const Received& r) { return AllComplete(r, Around(here)); }, kWait));
-  const Received r = second->Snapshot();
+  ASSERT_TRUE(second->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(here)); }, kWait));
+  const SessionRecord r = second->Snapshot();
   for (const auto& [id, g] : r.geometry) EXPECT_EQ(held.count(id), 0u) << "object " << id << " was held and resent";
   EXPECT_TRUE(second->Finish().ok());
 }
@@ -208,7 +208,7 @@ TEST(Server, ResumingWithHeldObjectsSendsOnlyWhatIsMissing) {
 // One bad input: what the session sends, and the status it must end with.
 struct BadInput {
   const char* name;
-  std::function<void(WalkClient&)> act;
+  std::function<void(SessionStream&)> act;
   grpc::StatusCode code;
   const char* message;  // part of the status message
 };
@@ -222,49 +222,49 @@ v1::ClientMessage PoseAt(double x, double y, double vx = 0) {
   return m;
 }
 
-void Hello(WalkClient& w, const v1::Hello& h) { w.Start(h); }
+void Hello(SessionStream& w, const v1::Hello& h) { w.Start(h); }
 
 std::vector<BadInput> BadInputs() {
   const glm::dvec3 c = Centre(3, 3);
   return {
-      {"nan_pose", [c](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(NAN, c.y)); },
+      {"nan_pose", [c](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1")); w.Send(PoseAt(NAN, c.y)); },
        grpc::StatusCode::INVALID_ARGUMENT, "position.x is nan"},
       {"infinite_velocity",
-       [c](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(c.x, c.y, INFINITY)); },
+       [c](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1")); w.Send(PoseAt(c.x, c.y, INFINITY)); },
        grpc::StatusCode::INVALID_ARGUMENT, "velocity.x is inf"},
       {"pose_outside_grid",
-       [](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1")); w.Send(PoseAt(1e7, 0)); },
+       [](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1")); w.Send(PoseAt(1e7, 0)); },
        grpc::StatusCode::OUT_OF_RANGE, "outside the viewcell grid"},
-      {"unknown_scene", [](WalkClient& w) { Hello(w, WalkClient::HelloFor("atlantis")); },
+      {"unknown_scene", [](SessionStream& w) { Hello(w, SessionStream::HelloFor("atlantis")); },
        grpc::StatusCode::NOT_FOUND, "'atlantis' is not served here"},
       {"wrong_protocol_version",
-       [](WalkClient& w) {
-         v1::Hello h = WalkClient::HelloFor("city1");
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1");
          h.set_protocol_version(7);
          Hello(w, h);
        },
        grpc::StatusCode::FAILED_PRECONDITION, "protocol version 7 is not supported: this server speaks version 1"},
       {"second_hello",
-       [](WalkClient& w) {
-         Hello(w, WalkClient::HelloFor("city1"));
+       [](SessionStream& w) {
+         Hello(w, SessionStream::HelloFor("city1"));
          v1::ClientMessage m;
-         *m.mutable_hello() = WalkClient::HelloFor("city1");
+         *m.mutable_hello() = SessionStream::HelloFor("city1");
          w.Send(m);
        },
        grpc::StatusCode::FAILED_PRECONDITION, "second Hello"},
       {"pose_before_hello",
-       [c](WalkClient& w) {
+       [c](SessionStream& w) {
          w.StartRaw(PoseAt(c.x, c.y));
        },
        grpc::StatusCode::FAILED_PRECONDITION, "Pose before Hello"},
-      {"empty_message", [](WalkClient& w) { w.StartRaw(v1::ClientMessage()); }, grpc::StatusCode::INVALID_ARGUMENT,
+      {"empty_message", [](SessionStream& w) { w.StartRaw(v1::ClientMessage()); }, grpc::StatusCode::INVALID_ARGUMENT,
        "empty ClientMessage"},
       {"held_object_out_of_range",
-       [](WalkClient& w) { Hello(w, WalkClient::HelloFor("city1", {5, 999999})); },
+       [](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1", {5, 999999})); },
        grpc::StatusCode::INVALID_ARGUMENT, "held_objects[1] = 999999"},
       {"oversized_message",
-       [](WalkClient& w) {
-         v1::Hello h = WalkClient::HelloFor("city1");
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1");
          h.set_scene(std::string(4 << 20, 'x'));
          Hello(w, h);
        },
@@ -279,10 +279,10 @@ TEST_P(ServerBadInput, EndsOnlyItsSessionWithAStatusNamingIt) {
   // A well-behaved session, already walking.
   auto good = Connect(*server);
   ASSERT_TRUE(good->SendPose(Centre(5, 5)));
-  ASSERT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
+  ASSERT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
 
   const BadInput bad = BadInputs()[GetParam()];
-  WalkClient w(server->address());
+  SessionStream w(server->address());
   bad.act(w);
   const grpc::Status st = w.AwaitEnd(kWait);
   EXPECT_EQ(st.error_code(), bad.code) << bad.name << ": " << st.error_message();
@@ -290,7 +290,7 @@ TEST_P(ServerBadInput, EndsOnlyItsSessionWithAStatusNamingIt) {
 
   // The good session goes on: it crosses and gets the new cells.
   ASSERT_TRUE(good->SendPose(Centre(6, 5)));
-  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(6, 5))); }, kWait));
+  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(6, 5))); }, kWait));
   EXPECT_TRUE(good->Finish().ok());
 }
 
@@ -326,7 +326,7 @@ TEST(Server, GarbageBytesEndTheSessionWithAStatus) {
   // And the server still serves.
   auto good = Connect(*server);
   ASSERT_TRUE(good->SendPose(Centre(5, 5)));
-  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
+  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
   EXPECT_TRUE(good->Finish().ok());
 }
 
@@ -339,10 +339,10 @@ TEST(Server, TooManySessionsAndTooManyPosesAreRefused) {
   auto b = Connect(*server);
   ASSERT_TRUE(a->SendPose(Centre(5, 5)));
   ASSERT_TRUE(b->SendPose(Centre(6, 5)));
-  ASSERT_TRUE(a->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
-  ASSERT_TRUE(b->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
-  WalkClient third(server->address());
-  third.Start(WalkClient::HelloFor("city1"));
+  ASSERT_TRUE(a->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  ASSERT_TRUE(b->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  SessionStream third(server->address());
+  third.Start(SessionStream::HelloFor("city1"));
   const grpc::Status refused = third.AwaitEnd(kWait);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
   EXPECT_NE(refused.error_message().find("at most 2"), std::string::npos) << refused.error_message();
@@ -353,7 +353,7 @@ TEST(Server, TooManySessionsAndTooManyPosesAreRefused) {
   EXPECT_NE(flood.error_message().find("poses per second"), std::string::npos) << flood.error_message();
   // a was not touched.
   ASSERT_TRUE(a->SendPose(Centre(5, 6)));
-  EXPECT_TRUE(a->WaitFor([&](const Received& r) { return AllComplete(r, Around(Cell(5, 6))); }, kWait));
+  EXPECT_TRUE(a->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(5, 6))); }, kWait));
   EXPECT_TRUE(a->Finish().ok());
 }
 
@@ -387,7 +387,7 @@ TEST(Server, AClientThatStopsReadingCostsBoundedMemory) {
   stalled->Cancel();
   auto good = Connect(*server);
   ASSERT_TRUE(good->SendPose(Centre(9, 9)));
-  EXPECT_TRUE(good->WaitFor([&](const Received& r) { return r.CellComplete(Cell(9, 9)); }, kWait));
+  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(9, 9)); }, kWait));
   EXPECT_TRUE(good->Finish().ok());
 }
 
@@ -412,7 +412,7 @@ TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
         }
         client->SendPose(Centre(i, j), {1.4, 0, 0});
         const std::set<CellId> need = Around(Cell(i, j));
-        if (!client->WaitFor([&](const Received& r) { return AllComplete(r, need); }, 300.0)) {
+        if (!client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, need); }, 300.0)) {
           std::lock_guard lock(failures_mu);
           failures.push_back("session " + std::to_string(s) + " step " + std::to_string(step));
           return;
@@ -430,7 +430,7 @@ TEST(Server, StatsHealthAndReflectionAnswer) {
   auto server = StartServer();
   auto client = Connect(*server);
   ASSERT_TRUE(client->SendPose(Centre(8, 8)));
-  ASSERT_TRUE(client->WaitFor([&](const Received& r) { return r.CellComplete(Cell(8, 8)); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(8, 8)); }, kWait));
   auto channel = grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials());
   v1::Walkthrough::Stub stub(channel);
   grpc::ClientContext ctx;
@@ -515,13 +515,13 @@ TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
   const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
   EXPECT_NE(ready.find("560 viewcells"), std::string::npos) << ready;
   EXPECT_NE(ready.find("2128 objects"), std::string::npos) << ready;
-  std::vector<std::unique_ptr<WalkClient>> clients;
+  std::vector<std::unique_ptr<SessionStream>> clients;
   for (int k = 0; k < 2; ++k) {
-    clients.push_back(std::make_unique<WalkClient>(address));
-    clients.back()->Start(WalkClient::HelloFor("city1"));
+    clients.push_back(std::make_unique<SessionStream>(address));
+    clients.back()->Start(SessionStream::HelloFor("city1"));
     clients.back()->SendCredit(uint64_t{1} << 40);
     clients.back()->SendPose(Centre(4 + k, 4));
-    ASSERT_TRUE(clients.back()->WaitFor([](const Received& r) { return r.scene_info; }, kWait));
+    ASSERT_TRUE(clients.back()->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
   }
   ASSERT_EQ(kill(pid, SIGTERM), 0);
   for (auto& c : clients) {

@@ -1,10 +1,11 @@
-#include "tests/walk_client.h"
+#include "client/session_stream.h"
 
-namespace vistream::testing {
+
+namespace vistream::client {
 
 namespace v1 = vistream::v1;
 
-bool Received::CellComplete(uint32_t cell) const {
+bool SessionRecord::CellComplete(uint32_t cell) const {
   auto it = pvs.find(cell);
   if (it == pvs.end()) return false;
   for (uint32_t o : it->second) {
@@ -13,11 +14,29 @@ bool Received::CellComplete(uint32_t cell) const {
   return true;
 }
 
-WalkClient::WalkClient(const std::string& address)
-    : channel_(grpc::CreateChannel(address, grpc::InsecureChannelCredentials())),
-      stub_(v1::Walkthrough::NewStub(channel_)) {}
+namespace {
+double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 30000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
+  args.SetMaxReceiveMessageSize(64 << 20);
+  // One connection per session: sessions of one process do not share a transport's window.
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
+}  // namespace
 
-WalkClient::~WalkClient() {
+void SessionRecord::NoteCompletion(uint32_t cell, double now) {
+  if (complete_s.count(cell) == 0) complete_s[cell] = now;
+}
+
+SessionStream::SessionStream(const std::string& address)
+    : channel_(MakeChannel(address)), stub_(v1::Walkthrough::NewStub(channel_)) {}
+
+SessionStream::~SessionStream() {
   if (stream_ != nullptr && !finished_) {
     context_.TryCancel();
   }
@@ -25,7 +44,7 @@ WalkClient::~WalkClient() {
   if (stream_ != nullptr && !finished_) (void)stream_->Finish();
 }
 
-v1::Hello WalkClient::HelloFor(const std::string& scene, std::vector<uint32_t> held) {
+v1::Hello SessionStream::HelloFor(const std::string& scene, std::vector<uint32_t> held) {
   v1::Hello h;
   h.set_scene(scene);
   h.set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
@@ -33,7 +52,7 @@ v1::Hello WalkClient::HelloFor(const std::string& scene, std::vector<uint32_t> h
   return h;
 }
 
-void WalkClient::Start(const v1::Hello& hello, bool read) {
+void SessionStream::Start(const v1::Hello& hello, bool read) {
   stream_ = stub_->Session(&context_);
   {
     std::lock_guard lock(mu_);
@@ -45,15 +64,15 @@ void WalkClient::Start(const v1::Hello& hello, bool read) {
   if (read) reader_ = std::thread([this] { ReadLoop(); });
 }
 
-void WalkClient::StartRaw(const v1::ClientMessage& first) {
+void SessionStream::StartRaw(const v1::ClientMessage& first) {
   stream_ = stub_->Session(&context_);
   stream_->Write(first);
   reader_ = std::thread([this] { ReadLoop(); });
 }
 
-bool WalkClient::Send(const v1::ClientMessage& m) { return stream_->Write(m); }
+bool SessionStream::Send(const v1::ClientMessage& m) { return stream_->Write(m); }
 
-bool WalkClient::SendPose(const glm::dvec3& position, const glm::dvec3& velocity) {
+bool SessionStream::SendPose(const glm::dvec3& position, const glm::dvec3& velocity) {
   v1::ClientMessage m;
   v1::Pose* p = m.mutable_pose();
   p->mutable_position()->set_x(position.x);
@@ -66,34 +85,54 @@ bool WalkClient::SendPose(const glm::dvec3& position, const glm::dvec3& velocity
   return Send(m);
 }
 
-bool WalkClient::SendCredit(uint64_t bytes) {
+bool SessionStream::SendCredit(uint64_t bytes) {
   v1::ClientMessage m;
   m.mutable_credit()->set_bytes(bytes);
   return Send(m);
 }
 
-void WalkClient::ReadLoop() {
+void SessionStream::ReadLoop() {
   v1::ServerMessage m;
   while (stream_->Read(&m)) {
+    const double now = SteadySeconds();
     std::lock_guard lock(mu_);
-    Received& r = received_;
+    SessionRecord& r = received_;
     switch (m.body_case()) {
       case v1::ServerMessage::kSceneInfo:
         r.scene_info = true;
         r.info = m.scene_info();
         r.order.emplace_back('S', 0);
         break;
-      case v1::ServerMessage::kPvs:
-        r.pvs[m.pvs().cell_id()].assign(m.pvs().object_ids().begin(), m.pvs().object_ids().end());
-        r.pvs_order.push_back(m.pvs().cell_id());
-        r.order.emplace_back('P', m.pvs().cell_id());
+      case v1::ServerMessage::kPvs: {
+        const uint32_t cell = m.pvs().cell_id();
+        r.pvs[cell].assign(m.pvs().object_ids().begin(), m.pvs().object_ids().end());
+        r.pvs_order.push_back(cell);
+        r.order.emplace_back('P', cell);
+        uint32_t missing = 0;
+        for (uint32_t o : r.pvs[cell]) {
+          if (r.held.count(o) == 0) {
+            ++missing;
+            r.waiting_[o].push_back(cell);
+          }
+        }
+        r.missing_[cell] = missing;
+        if (missing == 0) r.NoteCompletion(cell, now);
         break;
+      }
       case v1::ServerMessage::kGeometry: {
         const uint32_t id = m.geometry().object_id();
         if (!r.held.insert(id).second) ++r.duplicates;
         r.geometry_bytes += m.geometry().vertices().size() + m.geometry().indices().size();
-        r.geometry[id] = m.geometry();
+        r.raw_geometry_bytes += uint64_t{m.geometry().vertex_count()} * 24 + uint64_t{m.geometry().index_count()} * 4;
+        if (keep_geometry_) r.geometry[id] = m.geometry();
         r.order.emplace_back('G', id);
+        if (auto it = r.waiting_.find(id); it != r.waiting_.end()) {
+          for (uint32_t cell : it->second) {
+            auto mi = r.missing_.find(cell);
+            if (mi != r.missing_.end() && mi->second > 0 && --mi->second == 0) r.NoteCompletion(cell, now);
+          }
+          r.waiting_.erase(it);
+        }
         break;
       }
       case v1::ServerMessage::kEvict:
@@ -117,19 +156,19 @@ void WalkClient::ReadLoop() {
   cv_.notify_all();
 }
 
-bool WalkClient::WaitFor(const std::function<bool(const Received&)>& done, double timeout_s) {
+bool SessionStream::WaitFor(const std::function<bool(const SessionRecord&)>& done, double timeout_s) {
   std::unique_lock lock(mu_);
   return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
                       [&] { return done(received_) || received_.ended; }) &&
          done(received_);
 }
 
-Received WalkClient::Snapshot() const {
+SessionRecord SessionStream::Snapshot() const {
   std::lock_guard lock(mu_);
   return received_;
 }
 
-grpc::Status WalkClient::Finish() {
+grpc::Status SessionStream::Finish() {
   if (finished_) return status_;
   stream_->WritesDone();
   if (reader_.joinable()) reader_.join();
@@ -138,7 +177,7 @@ grpc::Status WalkClient::Finish() {
   return status_;
 }
 
-grpc::Status WalkClient::AwaitEnd(double timeout_s) {
+grpc::Status SessionStream::AwaitEnd(double timeout_s) {
   if (finished_) return status_;
   {
     std::unique_lock lock(mu_);
@@ -153,4 +192,4 @@ grpc::Status WalkClient::AwaitEnd(double timeout_s) {
   return status_;
 }
 
-}  // namespace vistream::testing
+}  // namespace vistream::client

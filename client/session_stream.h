@@ -1,6 +1,8 @@
 #pragma once
-// A scripted walkthrough client for the server's end-to-end tests: opens a session, sends
-// Hello, poses and credit, and records everything the server sends, with arrival times.
+// One walkthrough session seen from the client side: opens the stream, sends Hello, poses and
+// credit, and records on its own thread everything the server sends, with arrival times.
+// Used by the server's end-to-end tests and `vistream bench server`; the thin client's network
+// thread builds on it.
 
 #include <atomic>
 #include <chrono>
@@ -19,9 +21,9 @@
 
 #include "proto/walkthrough.grpc.pb.h"
 
-namespace vistream::testing {
+namespace vistream::client {
 
-struct Received {
+struct SessionRecord {
   bool scene_info = false;
   vistream::v1::SceneInfo info;
   // Every message kind in arrival order: 'S' scene info, 'P' PVS, 'G' geometry, 'E' evict,
@@ -35,32 +37,45 @@ struct Received {
   uint64_t geometry_bytes = 0;
   std::vector<vistream::v1::EpsilonMask> masks;
   std::vector<uint32_t> evicted;
+  uint64_t raw_geometry_bytes = 0;  // what the geometry received would be unencoded
   bool ended = false;
+  // Seconds (steady clock) when each cell's PVS and every object in it had first arrived.
+  std::map<uint32_t, double> complete_s;
 
   // Whether the cell's PVS and the geometry of every object in it have arrived.
   bool CellComplete(uint32_t cell) const;
+
+ private:
+  friend class SessionStream;
+  void NoteCompletion(uint32_t cell, double now);
+  std::map<uint32_t, uint32_t> missing_;                  // per cell with a PVS: objects not held
+  std::map<uint32_t, std::vector<uint32_t>> waiting_;     // per object: cells missing it
 };
 
-class WalkClient {
+class SessionStream {
  public:
-  explicit WalkClient(const std::string& address);
-  ~WalkClient();
+  explicit SessionStream(const std::string& address);
+  ~SessionStream();
 
   // Opens the session and sends `hello`; with `read` false nothing is read (a stalled client).
+  // Keepalive pings every 30 s (the server accepts them every 10 s or more).
   void Start(const vistream::v1::Hello& hello, bool read = true);
   // Opens the session with `first` as its first message, whatever it is (bad-input tests).
   void StartRaw(const vistream::v1::ClientMessage& first);
   // A Hello for `scene` with the current protocol version.
   static vistream::v1::Hello HelloFor(const std::string& scene, std::vector<uint32_t> held = {});
 
+  // Whether to keep every ObjectGeometry message (tests decode them); off, only counts are kept.
+  void set_keep_geometry(bool keep) { keep_geometry_ = keep; }
+
   bool Send(const vistream::v1::ClientMessage& m);
   bool SendPose(const glm::dvec3& position, const glm::dvec3& velocity = glm::dvec3(0.0));
   bool SendCredit(uint64_t bytes);
 
   // Waits up to `timeout_s` for `done(received)` to hold; false on timeout or end.
-  bool WaitFor(const std::function<bool(const Received&)>& done, double timeout_s);
+  bool WaitFor(const std::function<bool(const SessionRecord&)>& done, double timeout_s);
   // A copy of what has arrived so far.
-  Received Snapshot() const;
+  SessionRecord Snapshot() const;
   // Closes the client side and returns the session's status.
   grpc::Status Finish();
   // Waits for the server to end the session (without closing our side first).
@@ -77,10 +92,11 @@ class WalkClient {
   std::thread reader_;
   mutable std::mutex mu_;
   std::condition_variable cv_;
-  Received received_;
+  SessionRecord received_;
   double time_s_ = 0.0;
   bool finished_ = false;
+  bool keep_geometry_ = true;
   grpc::Status status_;
 };
 
-}  // namespace vistream::testing
+}  // namespace vistream::client
