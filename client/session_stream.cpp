@@ -1,5 +1,7 @@
 #include "client/session_stream.h"
 
+#include <algorithm>
+
 
 namespace vistream::client {
 
@@ -29,8 +31,13 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
 }
 }  // namespace
 
-void SessionRecord::NoteCompletion(uint32_t cell, double now) {
-  if (complete_s.count(cell) == 0) complete_s[cell] = now;
+void SessionRecord::NoteCompletion(uint32_t cell, double now) { complete_s[cell].push_back(now); }
+
+double SessionRecord::CompletedAfter(uint32_t cell, double t) const {
+  auto it = complete_s.find(cell);
+  if (it == complete_s.end()) return -1.0;
+  auto at = std::lower_bound(it->second.begin(), it->second.end(), t);
+  return at == it->second.end() ? -1.0 : *at;
 }
 
 SessionStream::SessionStream(const std::string& address)

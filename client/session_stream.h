@@ -39,8 +39,11 @@ struct SessionRecord {
   std::vector<uint32_t> evicted;
   uint64_t raw_geometry_bytes = 0;  // what the geometry received would be unencoded
   bool ended = false;
-  // Seconds (steady clock) when each cell's PVS and every object in it had first arrived.
-  std::map<uint32_t, double> complete_s;
+  // Seconds (steady clock) at which each cell became complete, in order: its PVS list and every
+  // object in it had arrived (a PVS list sent again starts the cell over).
+  std::map<uint32_t, std::vector<double>> complete_s;
+  // The first time at or after `t` that `cell` became complete; negative if it has not.
+  double CompletedAfter(uint32_t cell, double t) const;
 
   // Whether the cell's PVS and the geometry of every object in it have arrived.
   bool CellComplete(uint32_t cell) const;

@@ -36,7 +36,8 @@ struct SessionLimits {
   double max_pose_rate_hz = 120.0;             // sustained poses per second (bursts to twice that)
   size_t max_queued_bytes = size_t{8} << 20;   // bytes waiting to be written to the client
   double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog)
-  double epsilon_dwell_s = 0.5;                // time inside it before a mask is computed
+  double epsilon_dwell_s = 2.0;                // time inside it before a mask is computed (a walker
+                                               // at 1 m/s leaves the box sooner)
 };
 
 class Session : public std::enable_shared_from_this<Session> {

@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <random>
 #include <set>
 #include <thread>
@@ -19,6 +21,7 @@
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
 #include "server/service.h"
+#include "visibility/pvs_file.h"
 #include "client/session_stream.h"
 
 namespace vistream::server {
@@ -489,6 +492,87 @@ TEST(Server, StatsHealthAndReflectionAnswer) {
   cq.Shutdown();
   while (cq.Next(&tag, &ok)) {
   }
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, ServesAPvsFileInsteadOfComputing) {
+  // A file whose sets no computation would give: cell c sees objects c, c + 1 and c + 2.
+  const visibility::ViewcellGrid& grid = City1().grid();
+  const size_t objects = City1().scene().objects.size();
+  visibility::GlobalPvs sets(grid.CellCount(), objects);
+  for (CellId c = 0; c < grid.CellCount(); ++c) {
+    sets.Assign(c, std::vector<scenes::ObjectId>{static_cast<uint32_t>(c % objects),
+                                                 static_cast<uint32_t>((c + 1) % objects),
+                                                 static_cast<uint32_t>((c + 2) % objects)});
+  }
+  visibility::PvsProvenance provenance;
+  provenance.strategy = "test";
+  const std::string path = ::testing::TempDir() + "/served.pvs";
+  {
+    std::ofstream out(path, std::ios::binary);
+    out << visibility::EncodePvsFile(visibility::MakePvsFile(City1().scene(), grid, sets, provenance));
+  }
+  ServedSceneOptions o;
+  o.scene = "city1";
+  o.pvs_file = path;
+  absl::StatusOr<std::unique_ptr<ServedScene>> scene = ServedScene::Create(o);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ((*scene)->pvs_source(), "PVS file " + path + " (test)");
+  ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(scene->get(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  auto client = Connect(**server);
+  ASSERT_TRUE(client->SendPose(Centre(7, 7)));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(7, 7))); }, kWait));
+  const SessionRecord r = client->Snapshot();
+  for (const auto& [cell, ids] : r.pvs) EXPECT_EQ(ids, sets.Objects(cell)) << "cell " << cell;
+  EXPECT_TRUE(client->Finish().ok());
+
+  // A file made for another grid is refused at start-up, naming it.
+  o.cell_size = 25.0;
+  const absl::Status other = ServedScene::Create(o).status();
+  EXPECT_EQ(other.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(other.message().find(path), std::string::npos) << other;
+}
+
+TEST(Server, AClientThatLingersGetsAnEpsilonMaskOfItsBox) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  const glm::dvec3 p = Centre(12, 9);
+  const CellId here = Cell(12, 9);
+  ASSERT_TRUE(client->SendPose(p));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
+  // Standing still (a little sway) for longer than the dwell.
+  for (int k = 0; k < 40; ++k) {
+    client->SendPose(p + glm::dvec3(0.1 * std::sin(k), 0.1 * std::cos(k), 0.0));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(client->WaitFor([](const SessionRecord& r) { return !r.masks.empty(); }, kWait));
+  const SessionRecord r = client->Snapshot();
+  const v1::EpsilonMask& m = r.masks.front();
+  EXPECT_LE(m.box_min().x(), p.x);
+  EXPECT_GE(m.box_max().x(), p.x);
+  EXPECT_LE(m.box_min().y(), p.y);
+  EXPECT_GE(m.box_max().y(), p.y);
+  EXPECT_GE(m.box_min().z(), 0.1);  // above the ground
+  EXPECT_NEAR(m.box_max().x() - m.box_min().x(), 4.0, 1e-9);
+  const std::vector<uint32_t>& pvs = r.pvs.at(here);
+  uint64_t visible = 0, total = 0;
+  for (uint32_t o : pvs) total += City1().scene().objects[o].mesh.TriangleCount();
+  for (const v1::ObjectTriangles& ot : m.objects()) {
+    EXPECT_TRUE(std::binary_search(pvs.begin(), pvs.end(), ot.object_id())) << ot.object_id();
+    const size_t n = City1().scene().objects[ot.object_id()].mesh.TriangleCount();
+    EXPECT_EQ(ot.visible().size(), (n + 7) / 8);
+    uint64_t bits = 0;
+    for (unsigned char b : ot.visible()) bits += static_cast<uint64_t>(__builtin_popcount(b));
+    EXPECT_GT(bits, 0u);
+    visible += bits;
+  }
+  EXPECT_GT(visible, 0u);
+  EXPECT_LT(visible, total);
+  std::printf("mask: %llu of the PVS's %llu triangles\n", static_cast<unsigned long long>(visible),
+              static_cast<unsigned long long>(total));
   EXPECT_TRUE(client->Finish().ok());
 }
 

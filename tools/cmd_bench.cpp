@@ -252,6 +252,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   c->callback([args, done] { done(Table1(*args)); });
   AddBenchEpsilonCommand(bench, done);
   AddBenchAgvsCommand(bench, done);
+  AddBenchServerCommand(bench, done);
 }
 
 }  // namespace vistream::tools

@@ -18,5 +18,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done);
 void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);
 // `bench agvs`, likewise.
 void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done);
+// `bench server`, likewise.
+void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done);
 
 }  // namespace vistream::tools

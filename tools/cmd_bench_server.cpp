@@ -1,0 +1,446 @@
+// vistream bench server: N simulated clients walk random street-level paths in real time
+// through a real vistream-server on loopback, and report what a deployment cares about: cells
+// entered before their PVS and geometry arrived (late), crossing latency, PVS computations and
+// cache hits, bytes per crossing with and without meshoptimizer, and the server's RSS.
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <random>
+#include <set>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "client/session_stream.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::tools {
+
+namespace {
+
+namespace v1 = vistream::v1;
+
+struct BenchServerArgs {
+  std::string scene = "london";
+  size_t sessions = 10;
+  double speed_kmh = 6.0;
+  double seconds = 120.0;
+  double cell_size = 100.0;
+  uint32_t res = 128;
+  unsigned threads = 0;
+  uint64_t seed = 1;
+  std::string log;
+  bool json = false;
+};
+
+double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double k = p * static_cast<double>(v.size() - 1);
+  const size_t lo = static_cast<size_t>(std::floor(k)), hi = std::min(v.size() - 1, lo + 1);
+  return v[lo] + (k - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+// Where a pedestrian may be: the ground outside every building's box, on a raster.
+class Streets {
+ public:
+  Streets(const scenes::Scene& scene, const scenes::Aabb& area, double step) : area_(area), step_(step) {
+    nx_ = static_cast<int>(std::ceil((area.max.x - area.min.x) / step));
+    ny_ = static_cast<int>(std::ceil((area.max.y - area.min.y) / step));
+    blocked_.assign(static_cast<size_t>(nx_) * ny_, false);
+    for (const scenes::Object& o : scene.objects) {
+      const int i0 = std::max(0, static_cast<int>((o.bounds.min.x - area.min.x) / step));
+      const int i1 = std::min(nx_ - 1, static_cast<int>((o.bounds.max.x - area.min.x) / step));
+      const int j0 = std::max(0, static_cast<int>((o.bounds.min.y - area.min.y) / step));
+      const int j1 = std::min(ny_ - 1, static_cast<int>((o.bounds.max.y - area.min.y) / step));
+      for (int j = j0; j <= j1; ++j) {
+        for (int i = i0; i <= i1; ++i) blocked_[static_cast<size_t>(j) * nx_ + i] = true;
+      }
+    }
+  }
+  bool Free(const glm::dvec2& p) const {
+    const int i = static_cast<int>(std::floor((p.x - area_.min.x) / step_));
+    const int j = static_cast<int>(std::floor((p.y - area_.min.y) / step_));
+    // Keep a cell's width from the edge of the area.
+    if (i < 1 || j < 1 || i >= nx_ - 1 || j >= ny_ - 1) return false;
+    return !blocked_[static_cast<size_t>(j) * nx_ + i];
+  }
+  glm::dvec2 RandomFree(std::mt19937_64& rng) const {
+    std::uniform_real_distribution<double> ux(area_.min.x, area_.max.x), uy(area_.min.y, area_.max.y);
+    for (int k = 0; k < 100000; ++k) {
+      const glm::dvec2 p(ux(rng), uy(rng));
+      if (Free(p)) return p;
+    }
+    return {0.5 * (area_.min.x + area_.max.x), 0.5 * (area_.min.y + area_.max.y)};
+  }
+
+ private:
+  scenes::Aabb area_;
+  double step_;
+  int nx_ = 0, ny_ = 0;
+  std::vector<bool> blocked_;
+};
+
+// A walker that keeps to the streets: straight on until a building is ahead, then a new
+// heading; now and then a turn at random.
+class Walker {
+ public:
+  Walker(const Streets& streets, uint64_t seed, double speed) : streets_(streets), rng_(seed), speed_(speed) {
+    p_ = streets.RandomFree(rng_);
+    NewHeading();
+  }
+  void Step(double dt) {
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    if (u(rng_) < dt / 30.0) NewHeading();  // a turn every half minute on average
+    for (int tries = 0; tries < 16; ++tries) {
+      const glm::dvec2 next = p_ + heading_ * speed_ * dt;
+      const glm::dvec2 probe = p_ + heading_ * std::max(4.0, speed_ * dt);
+      if (streets_.Free(next) && streets_.Free(probe)) {
+        p_ = next;
+        return;
+      }
+      NewHeading();
+    }
+  }
+  glm::dvec2 position() const { return p_; }
+  glm::dvec2 velocity() const { return heading_ * speed_; }
+
+ private:
+  void NewHeading() {
+    std::uniform_real_distribution<double> a(0.0, 2.0 * M_PI);
+    const double t = a(rng_);
+    heading_ = {std::cos(t), std::sin(t)};
+  }
+  const Streets& streets_;
+  std::mt19937_64 rng_;
+  double speed_;
+  glm::dvec2 p_, heading_{1.0, 0.0};
+};
+
+struct SessionResult {
+  bool started = false;
+  std::string error;
+  double startup_s = 0.0;
+  uint64_t cells_entered = 0, late_cells = 0, crossings = 0, incomplete_crossings = 0;
+  std::vector<double> crossing_ms;
+  uint64_t geometry_bytes = 0, raw_geometry_bytes = 0;  // after start-up
+};
+
+std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibility::CellId c) {
+  std::set<visibility::CellId> s{c};
+  for (visibility::CellId n : grid.Neighbours(c)) s.insert(n);
+  return s;
+}
+
+bool AllComplete(const client::SessionRecord& r, const std::set<visibility::CellId>& cells) {
+  return std::all_of(cells.begin(), cells.end(), [&](visibility::CellId c) { return r.CellComplete(c); });
+}
+
+SessionResult RunSession(const std::string& address, const std::string& scene_name, const Streets& streets,
+                         const visibility::ViewcellGrid& grid, uint64_t seed, double speed, double seconds,
+                         const std::atomic<bool>& cancel) {
+  SessionResult out;
+  client::SessionStream s(address);
+  s.set_keep_geometry(false);
+  s.Start(client::SessionStream::HelloFor(scene_name));
+  s.SendCredit(uint64_t{1} << 50);
+  Walker walker(streets, seed, speed);
+  const double eye = grid.base_z() + 1.2;
+  auto pose = [&] {
+    const glm::dvec2 p = walker.position(), v = walker.velocity();
+    s.SendPose({p.x, p.y, eye}, {v.x, v.y, 0.0});
+  };
+  pose();
+  visibility::CellId cell = *grid.CellAt(walker.position());
+  const double t0 = SteadySeconds();
+  if (!s.WaitFor([&](const client::SessionRecord& r) { return AllComplete(r, Around(grid, cell)); }, 300.0)) {
+    out.error = s.Snapshot().ended ? "the server ended the session" : "start-up took over 300 s";
+    return out;
+  }
+  out.started = true;
+  out.startup_s = SteadySeconds() - t0;
+  const client::SessionRecord at_start = s.Snapshot();
+  // A crossing ends when each newly adjacent cell that was not complete when the client
+  // crossed has become complete.
+  struct Crossing {
+    double t;
+    std::vector<visibility::CellId> pending;
+  };
+  std::vector<Crossing> crossings;
+  auto finished = [](const client::SessionRecord& r, const Crossing& c, double* end) {
+    *end = c.t;
+    for (visibility::CellId p : c.pending) {
+      const double done = r.CompletedAfter(p, c.t);
+      if (done < 0.0) return false;
+      *end = std::max(*end, done);
+    }
+    return true;
+  };
+  constexpr double kDt = 0.1;  // poses at 10 Hz
+  const double start = SteadySeconds();
+  double next = start;
+  while (SteadySeconds() - start < seconds && !cancel.load()) {
+    next += kDt;
+    std::this_thread::sleep_for(std::chrono::duration<double>(std::max(0.0, next - SteadySeconds())));
+    walker.Step(kDt);
+    const std::optional<visibility::CellId> now_cell = grid.CellAt(walker.position());
+    if (now_cell.has_value() && *now_cell != cell) {
+      ++out.cells_entered;
+      const double t = SteadySeconds();
+      const client::SessionRecord r = s.Snapshot();
+      if (!r.CellComplete(*now_cell)) ++out.late_cells;
+      Crossing c{t, {}};
+      const std::set<visibility::CellId> before = Around(grid, cell);
+      for (visibility::CellId n : Around(grid, *now_cell)) {
+        if (before.count(n) == 0 && !r.CellComplete(n)) c.pending.push_back(n);
+      }
+      crossings.push_back(c);
+      cell = *now_cell;
+    }
+    pose();
+  }
+  // The last crossing's cells are still wanted: give them time. Earlier ones the walker may
+  // have left before they completed (abandoned: counted apart).
+  if (!crossings.empty()) {
+    double unused;
+    s.WaitFor([&](const client::SessionRecord& r) { return finished(r, crossings.back(), &unused); }, 60.0);
+  }
+  const client::SessionRecord end = s.Snapshot();
+  for (const Crossing& c : crossings) {
+    ++out.crossings;
+    double done = 0.0;
+    if (!finished(end, c, &done)) {
+      ++out.incomplete_crossings;
+      continue;
+    }
+    out.crossing_ms.push_back(1000.0 * (done - c.t));
+  }
+  out.geometry_bytes = end.geometry_bytes - at_start.geometry_bytes;
+  out.raw_geometry_bytes = end.raw_geometry_bytes - at_start.raw_geometry_bytes;
+  const grpc::Status st = s.Finish();
+  if (!st.ok()) out.error = st.error_message();
+  return out;
+}
+
+uint64_t RssKiB(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  std::string key;
+  while (in >> key) {
+    if (key == "VmRSS:") {
+      uint64_t kib = 0;
+      in >> kib;
+      return kib;
+    }
+    in.ignore(1 << 20, '\n');
+  }
+  return 0;
+}
+
+int BenchServer(const BenchServerArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  InstallCancelHandler();
+  // The server: the vistream-server beside this executable, on a free loopback port.
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe");
+  const std::string server_bin = (self.parent_path() / "vistream-server").string();
+  if (!std::filesystem::exists(server_bin)) return Fail(absl::NotFoundError("no vistream-server beside " + self.string()));
+  const std::string log = a.log.empty() ? "/dev/null" : a.log;
+  int out[2];
+  if (pipe(out) != 0) return Fail(absl::InternalError("pipe failed"));
+  const pid_t pid = fork();
+  if (pid < 0) return Fail(absl::InternalError("fork failed"));
+  if (pid == 0) {
+    dup2(out[1], STDOUT_FILENO);
+    std::FILE* err = std::fopen(log.c_str(), "w");
+    if (err != nullptr) dup2(fileno(err), STDERR_FILENO);
+    close(out[0]);
+    std::vector<std::string> args = {server_bin, "--scene", a.scene, "--listen", "127.0.0.1:0",
+                                     "--cell-size", absl::StrFormat("%g", a.cell_size), "--res", std::to_string(a.res),
+                                     "--threads", std::to_string(a.threads),
+                                     "--max-sessions", std::to_string(a.sessions + 8)};
+    std::vector<char*> argv;
+    for (std::string& s : args) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    execv(server_bin.c_str(), argv.data());
+    _exit(127);
+  }
+  close(out[1]);
+  auto stop_server = [&] {
+    kill(pid, SIGTERM);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  };
+
+  // Meanwhile the same scene here, for the walkers' streets and the grid.
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
+  if (!scene.ok()) {
+    stop_server();
+    return Fail(scene.status());
+  }
+  scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  if (!grid.ok()) {
+    stop_server();
+    return Fail(grid.status());
+  }
+  std::FILE* f = fdopen(out[0], "r");
+  char line[2048] = {};
+  if (std::fgets(line, sizeof(line), f) == nullptr) {
+    const int code = stop_server();
+    return Fail(absl::UnavailableError(absl::StrFormat("vistream-server exited (%d) before it was ready%s", code,
+                                                       a.log.empty() ? " (run with --log FILE to see why)" : "")));
+  }
+  const std::string ready(line);
+  const size_t at = ready.find("ready on ");
+  const size_t colon = at == std::string::npos ? at : ready.find(':', ready.find(':', at + 9) + 1);
+  if (at == std::string::npos || colon == std::string::npos) {
+    stop_server();
+    return Fail(absl::InternalError("unexpected line from vistream-server: " + ready));
+  }
+  const std::string address = ready.substr(at + 9, colon - at - 9);
+  if (!a.json) std::fprintf(stderr, "%s", ready.c_str());
+
+  const Streets streets(*scene, grid->Bounds(), 3.0);
+  std::atomic<bool> sampling{true};
+  std::atomic<uint64_t> max_rss{0};
+  std::thread rss([&] {
+    while (sampling) {
+      max_rss = std::max<uint64_t>(max_rss, RssKiB(pid));
+      std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    }
+  });
+  std::vector<SessionResult> results(a.sessions);
+  {
+    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h", a.sessions, a.speed_kmh),
+                              a.sessions);
+    std::mutex mu;
+    std::vector<std::jthread> threads;
+    for (size_t k = 0; k < a.sessions; ++k) {
+      threads.emplace_back([&, k] {
+        results[k] = RunSession(address, scene->name, streets, *grid, a.seed * 1000003 + k, a.speed_kmh / 3.6,
+                                a.seconds, CancelFlag());
+        std::lock_guard lock(mu);
+        progress.Advance();
+      });
+    }
+    threads.clear();
+    progress.Finish();
+  }
+  v1::ServerStats stats;
+  {
+    v1::Walkthrough::Stub stub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+    grpc::ClientContext ctx;
+    (void)stub.GetStats(&ctx, v1::StatsRequest(), &stats);
+  }
+  sampling = false;
+  rss.join();
+  const int server_exit = stop_server();
+  std::fclose(f);
+  if (CancelFlag().load()) return Fail(absl::CancelledError("interrupted"));
+
+  uint64_t late = 0, entered = 0, crossings = 0, incomplete = 0, started = 0, without_late = 0, bytes = 0, raw = 0;
+  std::vector<double> crossing_ms, startup_s;
+  std::string first_error;
+  for (const SessionResult& r : results) {
+    if (!r.error.empty() && first_error.empty()) first_error = r.error;
+    if (!r.started) continue;
+    ++started;
+    startup_s.push_back(r.startup_s);
+    late += r.late_cells;
+    entered += r.cells_entered;
+    crossings += r.crossings;
+    incomplete += r.incomplete_crossings;
+    if (r.late_cells == 0 && r.error.empty()) ++without_late;
+    crossing_ms.insert(crossing_ms.end(), r.crossing_ms.begin(), r.crossing_ms.end());
+    bytes += r.geometry_bytes;
+    raw += r.raw_geometry_bytes;
+  }
+  const double hits = static_cast<double>(stats.pvs_cache_hits());
+  const double computed = static_cast<double>(stats.pvs_computed());
+  nlohmann::json j;
+  j["scene"] = scene->name;
+  j["sessions"] = a.sessions;
+  j["sessions_started"] = started;
+  j["sessions_without_late_cells"] = without_late;
+  j["speed_kmh"] = a.speed_kmh;
+  j["seconds"] = a.seconds;
+  j["cell_size"] = grid->cell_size();
+  j["res"] = a.res;
+  j["cells_entered"] = entered;
+  j["late_cells"] = late;
+  j["crossings"] = crossings;
+  j["incomplete_crossings"] = incomplete;
+  j["crossing_p50_ms"] = Percentile(crossing_ms, 0.5);
+  j["crossing_p99_ms"] = Percentile(crossing_ms, 0.99);
+  j["startup_p50_s"] = Percentile(startup_s, 0.5);
+  j["pvs_computations"] = stats.pvs_computed();
+  j["cache_hits"] = stats.pvs_cache_hits();
+  j["cache_hit_rate"] = hits + computed > 0 ? hits / (hits + computed) : 0.0;
+  j["bytes_per_crossing"] = crossings > 0 ? static_cast<double>(bytes) / static_cast<double>(crossings) : 0.0;
+  j["bytes_per_crossing_raw"] = crossings > 0 ? static_cast<double>(raw) / static_cast<double>(crossings) : 0.0;
+  j["encoded_fraction"] = raw > 0 ? static_cast<double>(bytes) / static_cast<double>(raw) : 0.0;
+  j["rss_mb"] = static_cast<double>(max_rss.load()) / 1024.0;
+  j["server_exit_code"] = server_exit;
+  if (!first_error.empty()) j["first_error"] = first_error;
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2\n", scene->name.c_str(), a.sessions,
+                a.speed_kmh, a.seconds, grid->cell_size(), a.res);
+    std::printf("  sessions started %llu, without a late cell %llu; cells entered %llu, late %llu\n",
+                static_cast<unsigned long long>(started), static_cast<unsigned long long>(without_late),
+                static_cast<unsigned long long>(entered), static_cast<unsigned long long>(late));
+    std::printf("  crossings %llu (%llu left before complete); latency p50 %.0f ms, p99 %.0f ms; start-up p50 %.1f s\n",
+                static_cast<unsigned long long>(crossings), static_cast<unsigned long long>(incomplete),
+                Percentile(crossing_ms, 0.5), Percentile(crossing_ms, 0.99), Percentile(startup_s, 0.5));
+    std::printf("  PVS computations %llu, cache hits %llu (%.1f%%)\n", static_cast<unsigned long long>(computed),
+                static_cast<unsigned long long>(hits), 100.0 * j["cache_hit_rate"].get<double>());
+    std::printf("  bytes per crossing %.0f encoded, %.0f raw (%.3f); server RSS %.0f MiB\n",
+                j["bytes_per_crossing"].get<double>(), j["bytes_per_crossing_raw"].get<double>(),
+                j["encoded_fraction"].get<double>(), j["rss_mb"].get<double>());
+    if (!first_error.empty()) std::printf("  first session error: %s\n", first_error.c_str());
+  }
+  if (server_exit != 0) return Fail(absl::InternalError(absl::StrFormat("vistream-server exited %d", server_exit)));
+  return started == a.sessions ? 0 : Fail(absl::UnavailableError("sessions failed to start: " + first_error));
+}
+
+}  // namespace
+
+void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
+  auto args = std::make_shared<BenchServerArgs>();
+  CLI::App* c = bench->add_subcommand("server", "simulated clients walking a city through a real vistream-server");
+  c->add_option("--scene", args->scene, "catalog name, .json or glTF")->capture_default_str();
+  c->add_option("--sessions", args->sessions, "simulated clients at once")->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(CLI::Range(0.1, 500.0))
+      ->capture_default_str();
+  c->add_option("--seconds", args->seconds, "how long each client walks, after its start-up")
+      ->check(CLI::Range(1.0, 86400.0))->capture_default_str();
+  c->add_option("--cell-size", args->cell_size, "viewcell edge, metres")->check(CLI::Range(1.0, 10000.0))
+      ->capture_default_str();
+  c->add_option("--res", args->res, "finest dual-ray-space raster")->capture_default_str();
+  c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->capture_default_str();
+  c->add_option("--seed", args->seed, "walkers' seed")->capture_default_str();
+  c->add_option("--log", args->log, "write the server's log here");
+  c->add_flag("--json", args->json, "print one JSON object");
+  c->callback([args, done] { done(BenchServer(*args)); });
+}
+
+}  // namespace vistream::tools
