@@ -144,6 +144,14 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
           "pose %d: position (%.2f, %.2f) is outside the viewcell grid [%.1f, %.1f] x [%.1f, %.1f] m", poses_, p.x,
           p.y, b.min.x, b.max.x, b.min.y, b.max.y));
     }
+    // The PVSs hold for eyes inside the viewcells' band only (a client above the roofs sees
+    // what no viewcell's PVS holds).
+    const visibility::ViewcellGrid& grid = scene_->grid();
+    if (!(p.z >= grid.base_z() && p.z <= grid.base_z() + grid.height())) {
+      return absl::OutOfRangeError(absl::StrFormat(
+          "pose %d: eye height %.2f m is outside the viewcells' band [%.2f, %.2f] m", poses_, p.z, grid.base_z(),
+          grid.base_z() + grid.height()));
+    }
     position_ = p;
     velocity_ = ToVec(pose.velocity());
     if (!current_.has_value() || *current_ != *cell) {

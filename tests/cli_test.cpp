@@ -14,6 +14,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "visibility/pvs_file.h"
+
 namespace {
 
 struct RunResult {
@@ -109,6 +111,37 @@ TEST(Cli, PvsReportsTheSetOfAViewcell) {
   EXPECT_EQ(static_cast<int>(ids.size()), objects);
   EXPECT_TRUE(std::is_sorted(ids.begin(), ids.end()));
   EXPECT_EQ(j.at("object_names").size(), ids.size());
+}
+
+// `pvs --all` writes every viewcell's set as a PVS file (what vistream-server --pvs-file serves),
+// each set the one `pvs --cell` computes.
+TEST(Cli, PvsAllWritesEveryViewcellAsAPvsFile) {
+  const std::string file = Tmp("city1_all.pvs");
+  const RunResult all = Vistream("pvs --scene city1 --all -o " + file + " --json");
+  ASSERT_EQ(all.exit_code, 0) << all.out;
+  const nlohmann::json j = nlohmann::json::parse(all.out);
+  EXPECT_EQ(j.at("cells"), 560);
+  std::ifstream in(file, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const absl::StatusOr<vistream::visibility::PvsFile> f = vistream::visibility::DecodePvsFile(bytes, file);
+  ASSERT_TRUE(f.ok()) << f.status();
+  EXPECT_EQ(f->strategy, "dual-ray-space cpu 128^2");
+  for (const char* cell : {"3,4", "14,10", "27,19"}) {
+    const RunResult one = Vistream(std::string("pvs --scene city1 --json --cell ") + cell);
+    ASSERT_EQ(one.exit_code, 0) << one.out;
+    const nlohmann::json k = nlohmann::json::parse(one.out);
+    const int id = k.at("cell")[1].get<int>() * f->nx + k.at("cell")[0].get<int>();
+    EXPECT_EQ(k.at("objects").get<std::vector<uint32_t>>(), f->sets.Objects(static_cast<uint32_t>(id))) << cell;
+  }
+  // A heatmap reads it back.
+  EXPECT_EQ(Vistream("agvs heatmap --scene city1 --pvs " + file + " -o " + Tmp("all.png")).exit_code, 0);
+  const RunResult neither = Vistream("pvs --scene city1");
+  EXPECT_EQ(neither.exit_code, 1);
+  EXPECT_NE(neither.out.find("--cell I,J"), std::string::npos) << neither.out;
+  const RunResult no_out = Vistream("pvs --scene city1 --all");
+  EXPECT_EQ(no_out.exit_code, 1);
+  EXPECT_NE(no_out.out.find("-o FILE"), std::string::npos) << no_out.out;
+  EXPECT_NE(Vistream("pvs --scene city1 --all --cell 1,1 -o " + file).exit_code, 0);
 }
 
 // A viewcell smaller than the catalog's, among the buildings: city1-255 stands in plain view

@@ -520,5 +520,23 @@ TEST(EpsilonSuperset, City1CullsMostTrianglesFromTheStreets) {
   }
 }
 
+TEST(EpsilonSuperset, ABoxFarAwayOrNotFiniteHidesNothing) {
+  // What a server may be handed by a client: rays from there would overflow Embree's floats.
+  const scenes::Scene scene = *scenes::GenerateNamed("city1", scenes::GeneratorParams{});
+  const std::unique_ptr<EpsilonSuperset> eps = *EpsilonSuperset::Create(scene);
+  const std::vector<ObjectId> some = {0, 5, 17};
+  size_t triangles = 0;
+  for (ObjectId o : some) triangles += scene.objects[o].mesh.TriangleCount();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const Aabb& box : {Aabb{glm::dvec3(0, 0, 1e300), glm::dvec3(4, 4, 1e300)},
+                          Aabb{glm::dvec3(-inf, 0, 1), glm::dvec3(0, 4, 5)},
+                          Aabb{glm::dvec3(std::nan(""), 0, 1), glm::dvec3(4, 4, 5)},
+                          Aabb{glm::dvec3(5e6, 0, 1), glm::dvec3(5e6 + 4, 4, 5)}}) {
+    const EpsilonResult r = eps->Compute(box, EpsilonOptions{}, some);
+    EXPECT_EQ(r.objects, some);
+    EXPECT_EQ(r.triangles.size(), triangles);
+  }
+}
+
 }  // namespace
 }  // namespace vistream::visibility

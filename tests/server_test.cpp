@@ -238,6 +238,14 @@ std::vector<BadInput> BadInputs() {
       {"pose_outside_grid",
        [](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1")); w.Send(PoseAt(1e7, 0)); },
        grpc::StatusCode::OUT_OF_RANGE, "outside the viewcell grid"},
+      {"eye_above_the_band",
+       [c](SessionStream& w) {
+         Hello(w, SessionStream::HelloFor("city1"));
+         v1::ClientMessage m = PoseAt(c.x, c.y);
+         m.mutable_pose()->mutable_position()->set_z(1e300);
+         w.Send(m);
+       },
+       grpc::StatusCode::OUT_OF_RANGE, "outside the viewcells' band [0.50, 2.50] m"},
       {"unknown_scene", [](SessionStream& w) { Hello(w, SessionStream::HelloFor("atlantis")); },
        grpc::StatusCode::NOT_FOUND, "'atlantis' is not served here"},
       {"wrong_protocol_version",

@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
 #include "tools/cli_common.h"
@@ -13,6 +14,7 @@
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "visibility/pvs.h"
+#include "visibility/pvs_file.h"
 #include "visibility/viewcell_grid.h"
 
 namespace vistream::tools {
@@ -20,14 +22,78 @@ namespace vistream::tools {
 namespace {
 
 struct PvsArgs {
-  std::string scene, cell, backend = "cpu", map;
+  std::string scene, cell, backend = "cpu", map, out;
+  bool all = false;
   double cell_size = 0.0;
   uint32_t res = 128;
   bool json = false;
 };
 
+// Every viewcell of the grid, written as a PVS file the server can serve (--pvs-file).
+int PvsAll(const PvsArgs& a) {
+  if (a.out.empty()) return Fail(absl::InvalidArgumentError("--all writes a PVS file: give -o FILE"));
+  InstallCancelHandler();
+  const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
+  if (!scene.ok()) return Fail(scene.status());
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  if (!grid.ok()) return Fail(grid.status());
+  const auto t0 = std::chrono::steady_clock::now();
+  const visibility::KdTree tree = visibility::KdTree::Build(*scene);
+  const visibility::PvsComputer computer(*scene, tree);
+  absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
+  if (!backend.ok()) return Fail(backend.status());
+  const visibility::CellQueryOptions options = gl::QueryOptionsFor(a.res);
+  visibility::GlobalPvs sets(grid->CellCount(), scene->objects.size());
+  double objects = 0;
+  {
+    scenes::Progress progress(ToolRun(), "pvs of every viewcell (" + a.backend + ")", grid->CellCount());
+    constexpr size_t kChunk = 64;
+    for (size_t first = 0; first < grid->CellCount(); first += kChunk) {
+      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted; nothing written"));
+      std::vector<scenes::Aabb> cells;
+      for (size_t c = first; c < std::min(grid->CellCount(), first + kChunk); ++c) {
+        cells.push_back(grid->CellBox(static_cast<visibility::CellId>(c)));
+      }
+      const std::vector<visibility::PvsResult> r = backend->ComputeBatch(computer, cells, options);
+      for (size_t k = 0; k < r.size(); ++k) {
+        sets.Assign(static_cast<visibility::CellId>(first + k), r[k].objects);
+        objects += static_cast<double>(r[k].objects.size());
+      }
+      progress.Advance(cells.size());
+    }
+    progress.Finish();
+  }
+  visibility::PvsProvenance provenance;
+  provenance.strategy = absl::StrFormat("dual-ray-space %s %u^2", a.backend, a.res);
+  provenance.seconds = SecondsSince(t0);
+  if (absl::Status st = WriteFile(a.out, visibility::EncodePvsFile(visibility::MakePvsFile(*scene, *grid, sets, provenance)));
+      !st.ok()) {
+    return Fail(st);
+  }
+  const double mean = objects / static_cast<double>(grid->CellCount());
+  if (a.json) {
+    nlohmann::json j;
+    j["scene"] = scene->name;
+    j["cells"] = grid->CellCount();
+    j["cell_size"] = grid->cell_size();
+    j["backend"] = a.backend;
+    j["res"] = a.res;
+    j["mean_pvs_objects"] = mean;
+    j["seconds"] = provenance.seconds;
+    j["pvs_file"] = a.out;
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    std::printf("%s: %zu viewcells of %g m, %.1f objects per PVS on average, %.1f s; wrote %s\n", scene->name.c_str(),
+                grid->CellCount(), grid->cell_size(), mean, provenance.seconds, a.out.c_str());
+  }
+  return 0;
+}
+
 int Pvs(const PvsArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
+  if (a.all) return PvsAll(a);
+  if (a.cell.empty()) return Fail(absl::InvalidArgumentError("give --cell I,J (one viewcell) or --all -o FILE"));
   int ci = 0, cj = 0;
   char tail = 0;
   if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
@@ -123,9 +189,12 @@ int Pvs(const PvsArgs& a) {
 
 void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   auto args = std::make_shared<PvsArgs>();
-  CLI::App* c = app.add_subcommand("pvs", "potentially visible set of one viewcell (dual ray space)");
+  CLI::App* c = app.add_subcommand("pvs", "potentially visible set of one viewcell, or of all (dual ray space)");
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->required();
-  c->add_option("--cell", args->cell, "viewcell grid coordinates I,J")->required();
+  CLI::Option* cell = c->add_option("--cell", args->cell, "viewcell grid coordinates I,J");
+  c->add_flag("--all", args->all, "every viewcell of the grid, written to -o as a PVS file (vistream-server --pvs-file)")
+      ->excludes(cell);
+  c->add_option("-o,--out", args->out, "with --all: the PVS file to write");
   c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
       ->check(CLI::PositiveNumber);
   c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two); exact: the raster tried before the exact test")

@@ -553,6 +553,27 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
 EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& options,
                                        std::span<const ObjectId> objects) const {
   const auto start = std::chrono::steady_clock::now();
+  // Embree works in floats relative to the frame: a box that is not finite, inverted, or so
+  // far away that its rays would overflow hides nothing (everything is kept: conservative).
+  constexpr double kFarM = 1e6;
+  bool usable = true;
+  for (int k = 0; k < 3; ++k) {
+    usable &= std::isfinite(box.min[k]) && std::isfinite(box.max[k]) && box.min[k] <= box.max[k] &&
+              std::abs(box.min[k] - frame_[k]) < kFarM && std::abs(box.max[k] - frame_[k]) < kFarM;
+  }
+  if (!usable) {
+    EpsilonResult all;
+    for (ObjectId id : objects) {
+      const uint32_t n = static_cast<uint32_t>(scene_.objects[id].mesh.TriangleCount());
+      for (uint32_t t = 0; t < n; ++t) all.triangles.push_back(TriangleId(id, t));
+      if (n > 0) all.objects.push_back(id);
+    }
+    std::sort(all.triangles.begin(), all.triangles.end());
+    std::sort(all.objects.begin(), all.objects.end());
+    all.stats.total_triangles = all.stats.visible_triangles = all.triangles.size();
+    all.stats.ms = Ms(start);
+    return all;
+  }
   Query query(*this, options, box);
   EpsilonStats& st = query.stats;
 
