@@ -112,6 +112,14 @@ TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
   }
   // Every PVS is the one `vistream pvs` computes; every mesh decodes to the scene's, bit for bit.
   for (const auto& [cell, objects] : r.pvs) EXPECT_EQ(objects, ExpectedPvs(cell)) << "cell " << cell;
+  // And the current cell's, as the command prints it.
+  std::FILE* pipe = popen(VISTREAM_BIN " pvs --scene city1 --cell 14,10 --json", "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string json;
+  char buf[4096];
+  while (size_t n = std::fread(buf, 1, sizeof(buf), pipe)) json.append(buf, n);
+  ASSERT_EQ(pclose(pipe), 0) << json;
+  EXPECT_EQ(nlohmann::json::parse(json).at("objects").get<std::vector<uint32_t>>(), r.pvs.at(here));
   EXPECT_EQ(r.duplicates, 0u);
   for (const auto& [id, g] : r.geometry) {
     absl::StatusOr<scenes::Mesh> m = scenes::DecodeMesh(g.vertex_count(), g.index_count(), g.vertices(),
@@ -184,6 +192,59 @@ TEST(Server, CellsArriveBeforeAWalkerAt54KmhEntersThem) {
   EXPECT_GE(entered, 4);
   EXPECT_EQ(client->Snapshot().duplicates, 0u);
   EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, GeometryFlowsOnlyWithinTheGrantedCredit) {
+  auto server = StartServer();
+  SessionStream client(server->address());
+  client.Start(SessionStream::HelloFor("city1"));
+  ASSERT_TRUE(client.SendPose(Centre(9, 6)));
+  ASSERT_TRUE(client.WaitFor([](const SessionRecord& r) { return r.pvs.size() == 9; }, kWait));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_TRUE(client.Snapshot().geometry.empty()) << "geometry before any Credit";
+  ASSERT_TRUE(client.SendCredit(1));  // positive: one message, then the credit is spent
+  ASSERT_TRUE(client.WaitFor([](const SessionRecord& r) { return r.geometry.size() == 1; }, kWait));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(client.Snapshot().geometry.size(), 1u);
+  const uint64_t spent = client.Snapshot().geometry_bytes;
+  ASSERT_TRUE(client.SendCredit(spent + 20000));  // pays the debt, then about 20 kB more
+  ASSERT_TRUE(client.WaitFor([](const SessionRecord& r) { return r.geometry.size() > 1; }, kWait));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const SessionRecord r = client.Snapshot();
+  EXPECT_LT(r.geometry.size(), 200u);
+  // Everything granted is used, and what is sent overshoots the grant by one message at most.
+  uint64_t largest = 0;
+  for (const auto& [id, g] : r.geometry) largest = std::max<uint64_t>(largest, g.vertices().size() + g.indices().size());
+  EXPECT_GE(r.geometry_bytes, spent + 20001);  // the first message (credit 1 - spent), then 20001
+  EXPECT_LE(r.geometry_bytes, spent + 20001 + largest);
+  EXPECT_TRUE(client.Finish().ok());
+}
+
+TEST(Server, TheClientsMemoryBudgetIsNeverExceeded) {
+  auto server = StartServer();
+  constexpr uint64_t kBudget = 400 << 10;  // decoded bytes: less than one cell's PVS
+  v1::Hello hello = SessionStream::HelloFor("city1");
+  hello.set_memory_budget_bytes(kBudget);
+  SessionStream client(server->address());
+  client.Start(hello);
+  client.SendCredit(uint64_t{1} << 40);
+  uint64_t most = 0;
+  auto held_bytes = [](const SessionRecord& r) {
+    uint64_t b = 0;
+    for (uint32_t o : r.held) {
+      const scenes::Mesh& m = City1().scene().objects[o].mesh;
+      b += m.positions.size() * 24 + m.indices.size() * 4;
+    }
+    return b;
+  };
+  for (int i = 4; i < 12; ++i) {
+    ASSERT_TRUE(client.SendPose(Centre(i, 8), {1.4, 0, 0}));
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    most = std::max(most, held_bytes(client.Snapshot()));
+  }
+  EXPECT_LE(most, kBudget);
+  EXPECT_GT(most, kBudget / 2);  // it did fill the budget
+  EXPECT_TRUE(client.Finish().ok());
 }
 
 TEST(Server, ResumingWithHeldObjectsSendsOnlyWhatIsMissing) {
@@ -598,6 +659,16 @@ TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
     _exit(127);
   }
   close(out[1]);
+  struct Reap {  // never leave the server running, whatever fails below
+    pid_t pid;
+    bool waited = false;
+    ~Reap() {
+      if (!waited) {
+        kill(pid, SIGKILL);
+        waitpid(pid, nullptr, 0);
+      }
+    }
+  } reap{pid};
   std::FILE* f = fdopen(out[0], "r");
   char line[1024] = {};
   ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing";
@@ -623,6 +694,7 @@ TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
   }
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  reap.waited = true;
   EXPECT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
   std::fclose(f);
