@@ -10,6 +10,7 @@
 #include <GL/glext.h>
 
 #include "absl/status/status.h"
+#include "gl/shader.h"
 
 namespace vistream::gl {
 
@@ -63,21 +64,6 @@ void main() {
 }
 )";
 
-absl::StatusOr<GLuint> Compile(GLenum type, const char* source) {
-  const GLuint shader = glCreateShader(type);
-  glShaderSource(shader, 1, &source, nullptr);
-  glCompileShader(shader);
-  GLint ok = 0;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    std::array<char, 4096> log{};
-    glGetShaderInfoLog(shader, log.size(), nullptr, log.data());
-    glDeleteShader(shader);
-    return absl::InternalError(std::string("planar raster shader does not compile: ") + log.data());
-  }
-  return shader;
-}
-
 // The square [lo, hi]^2 clipped to {s_p g_p <= m_p} and {s_q g_q <= m_q}: convex, possibly empty.
 void ClipSquare(const visibility::BlockerCoeff* const half_planes[2], const double signs[2], const double margins[2],
                 double lo, double hi, std::vector<std::array<double, 2>>* poly, std::vector<std::array<double, 2>>* tmp) {
@@ -112,19 +98,9 @@ absl::StatusOr<std::unique_ptr<GlPlanarRaster>> GlPlanarRaster::Create() {
 }
 
 absl::Status GlPlanarRaster::Init() {
-  absl::StatusOr<GLuint> vs = Compile(GL_VERTEX_SHADER, kVertexShader);
-  if (!vs.ok()) return vs.status();
-  absl::StatusOr<GLuint> fs = Compile(GL_FRAGMENT_SHADER, kFragmentShader);
-  if (!fs.ok()) return fs.status();
-  program_ = glCreateProgram();
-  glAttachShader(program_, *vs);
-  glAttachShader(program_, *fs);
-  glLinkProgram(program_);
-  glDeleteShader(*vs);
-  glDeleteShader(*fs);
-  GLint ok = 0;
-  glGetProgramiv(program_, GL_LINK_STATUS, &ok);
-  if (!ok) return absl::InternalError("planar raster program does not link");
+  absl::StatusOr<GLuint> program = LinkProgram(kVertexShader, kFragmentShader, "planar raster");
+  if (!program.ok()) return program.status();
+  program_ = *program;
 
   glGenTextures(1, &texture_);
   glBindTexture(GL_TEXTURE_2D, texture_);

@@ -8,6 +8,7 @@
 #include <GL/glext.h>
 
 #include "absl/status/status.h"
+#include "gl/shader.h"
 #include "absl/strings/str_cat.h"
 #include "glm/geometric.hpp"
 
@@ -39,21 +40,6 @@ struct Vertex {
   uint32_t id;
 };
 
-absl::StatusOr<GLuint> Compile(GLenum type, const char* source) {
-  const GLuint shader = glCreateShader(type);
-  glShaderSource(shader, 1, &source, nullptr);
-  glCompileShader(shader);
-  GLint ok = 0;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char log[4096] = {};
-    glGetShaderInfoLog(shader, sizeof(log), nullptr, log);
-    glDeleteShader(shader);
-    return absl::InternalError(std::string("id renderer shader does not compile: ") + log);
-  }
-  return shader;
-}
-
 // The solid angle of the part [0, u] x [0, v] of a cube face at distance 1, signed.
 double CornerAngle(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
 
@@ -84,19 +70,9 @@ absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Sce
 }
 
 absl::Status IdRenderer::Init(const scenes::Scene& scene) {
-  absl::StatusOr<GLuint> vs = Compile(GL_VERTEX_SHADER, kVertexShader);
-  if (!vs.ok()) return vs.status();
-  absl::StatusOr<GLuint> fs = Compile(GL_FRAGMENT_SHADER, kFragmentShader);
-  if (!fs.ok()) return fs.status();
-  program_ = glCreateProgram();
-  glAttachShader(program_, *vs);
-  glAttachShader(program_, *fs);
-  glLinkProgram(program_);
-  glDeleteShader(*vs);
-  glDeleteShader(*fs);
-  GLint linked = 0;
-  glGetProgramiv(program_, GL_LINK_STATUS, &linked);
-  if (!linked) return absl::InternalError("id renderer program does not link");
+  absl::StatusOr<GLuint> program = LinkProgram(kVertexShader, kFragmentShader, "id renderer");
+  if (!program.ok()) return program.status();
+  program_ = *program;
 
   std::vector<Vertex> vertices;
   std::vector<uint32_t> indices;

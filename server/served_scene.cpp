@@ -5,19 +5,10 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
+#include "server/wire.h"
 #include "visibility/parallel.h"
 
 namespace vistream::server {
-
-namespace {
-
-void SetVec(const glm::dvec3& v, vistream::v1::Vec3* out) {
-  out->set_x(v.x);
-  out->set_y(v.y);
-  out->set_z(v.z);
-}
-
-}  // namespace
 
 absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSceneOptions& options,
                                                                  const scenes::RunControl& run) {

@@ -7,6 +7,8 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
+#include "server/wire.h"
+
 namespace vistream::server {
 
 namespace {
@@ -26,8 +28,6 @@ absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
   }
   return absl::OkStatus();
 }
-
-glm::dvec3 ToVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 }  // namespace
 
@@ -362,12 +362,8 @@ void Session::MaybeRequestMask(double now) {
     const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
     v1::ServerMessage m;
     v1::EpsilonMask* mask = m.mutable_epsilon_mask();
-    mask->mutable_box_min()->set_x(box.min.x);
-    mask->mutable_box_min()->set_y(box.min.y);
-    mask->mutable_box_min()->set_z(box.min.z);
-    mask->mutable_box_max()->set_x(box.max.x);
-    mask->mutable_box_max()->set_y(box.max.y);
-    mask->mutable_box_max()->set_z(box.max.z);
+    SetVec(box.min, mask->mutable_box_min());
+    SetVec(box.max, mask->mutable_box_max());
     size_t t = 0;
     for (scenes::ObjectId o : r.objects) {
       v1::ObjectTriangles* ot = mask->add_objects();
@@ -436,12 +432,8 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       geo->set_vertices(g.vertices);
       geo->set_indices(g.indices);
       const scenes::Aabb& b = scene_->scene().objects[o].bounds;
-      geo->mutable_bounds_min()->set_x(b.min.x);
-      geo->mutable_bounds_min()->set_y(b.min.y);
-      geo->mutable_bounds_min()->set_z(b.min.z);
-      geo->mutable_bounds_max()->set_x(b.max.x);
-      geo->mutable_bounds_max()->set_y(b.max.y);
-      geo->mutable_bounds_max()->set_z(b.max.z);
+      SetVec(b.min, geo->mutable_bounds_min());
+      SetVec(b.max, geo->mutable_bounds_max());
       sent_.insert(o);
       held_bytes_ += g.RawBytes();
       const size_t bytes = m.ByteSizeLong();
