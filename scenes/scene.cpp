@@ -1,5 +1,7 @@
 #include "scenes/scene.h"
 
+#include <cstring>
+
 #include <algorithm>
 #include <cmath>
 
@@ -109,6 +111,57 @@ void NormalizeOccluders(Scene* scene) {
     while (fp.size() > 3 && fp.front() == fp.back()) fp.pop_back();
     if (SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
   }
+}
+
+namespace {
+// Folds bytes into a running 64-bit state, eight at a time (splitmix64's finaliser as the mix).
+class Digest {
+ public:
+  void Add(const void* data, size_t size) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (; size >= 8; size -= 8, p += 8) {
+      uint64_t w;
+      std::memcpy(&w, p, 8);
+      Mix(w);
+    }
+    uint64_t tail = size;
+    for (size_t k = 0; k < size; ++k) tail = tail << 8 | p[k];
+    Mix(tail);
+  }
+  template <typename T>
+  void Add(const T& v) {
+    Add(&v, sizeof(T));
+  }
+  uint64_t value() const { return h_ == 0 ? 1 : h_; }
+
+ private:
+  void Mix(uint64_t w) {
+    uint64_t z = (h_ ^ w) + 0x9e3779b97f4a7c15ULL;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    h_ = z ^ (z >> 31);
+  }
+  uint64_t h_ = 0x76697374726561ULL;  // "vistrea"
+};
+}  // namespace
+
+uint64_t SceneFingerprint(const Scene& scene) {
+  Digest d;
+  d.Add(uint64_t{scene.objects.size()});
+  for (const Object& o : scene.objects) {
+    d.Add(uint64_t{o.mesh.positions.size()});
+    d.Add(o.mesh.positions.data(), o.mesh.positions.size() * sizeof(glm::vec3));
+    d.Add(uint64_t{o.mesh.indices.size()});
+    d.Add(o.mesh.indices.data(), o.mesh.indices.size() * sizeof(uint32_t));
+  }
+  d.Add(uint64_t{scene.occluders.size()});
+  for (const Occluder25D& oc : scene.occluders) {
+    d.Add(oc.object);
+    d.Add(oc.height);
+    d.Add(uint64_t{oc.footprint.size()});
+    d.Add(oc.footprint.data(), oc.footprint.size() * sizeof(glm::dvec2));
+  }
+  return d.value();
 }
 
 }  // namespace vistream::scenes

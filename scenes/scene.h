@@ -53,6 +53,11 @@ struct Scene {
 // objects. `where` names the source (a file path) in the message.
 absl::Status ValidateScene(const Scene& scene, const std::string& where);
 
+// A 64-bit digest of what visibility depends on: every object's mesh (positions, indices) and
+// every occluder (object, footprint, height), in order. Two scenes that differ anywhere in
+// those differ here (but for a 2^-64 chance); the name and origin do not count. Never 0.
+uint64_t SceneFingerprint(const Scene& scene);
+
 // Makes every occluder footprint counter-clockwise and drops repeated closing vertices.
 // Degenerate footprints (zero area, repeated vertices) are kept: visibility must cope.
 void NormalizeOccluders(Scene* scene);

@@ -32,7 +32,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
 
   unsigned threads = options.threads != 0 ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   if (!options.pvs_file.empty()) {
-    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(options.pvs_file, *s->grid_, objects);
+    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(options.pvs_file, *s->grid_, s->scene_);
     if (!f.ok()) return f.status();
     s->file_ = std::make_unique<visibility::PvsFile>(std::move(*f));
     s->pvs_source_ = absl::StrCat("PVS file ", options.pvs_file, " (", s->file_->strategy, ")");

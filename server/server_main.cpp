@@ -6,9 +6,14 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
 #include <thread>
+
+#include <grpc/support/log.h>
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
@@ -43,6 +48,34 @@ class LogProgress : public vistream::scenes::ProgressSink {
 
 std::atomic<bool> g_stop{false};
 volatile std::sig_atomic_t g_signal = 0;
+std::atomic<int64_t> g_first_signal_ns{0};
+EventLog* g_log = nullptr;
+
+int64_t MonotonicNs() {  // async-signal-safe
+  timespec t{};
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return int64_t{t.tv_sec} * 1000000000 + t.tv_nsec;
+}
+
+// gRPC's own log lines go into the server's log.
+void GrpcLog(gpr_log_func_args* args) {
+  if (g_log == nullptr || args == nullptr || args->message == nullptr) return;
+  g_log->Write(0, "grpc", {{"severity", gpr_log_severity_string(args->severity)}, {"message", args->message}});
+}
+
+// A finite number in [lo, hi] (CLI11's own checks let NaN through).
+CLI::Validator Finite(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < lo || v > hi) {
+          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
+        }
+        return "";
+      },
+      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
+}
 
 }  // namespace
 
@@ -59,18 +92,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--threads", scene_options.threads, "PVS worker threads (0: one per core)")->capture_default_str();
   app.add_option("--cell-size", scene_options.cell_size, "viewcell edge in metres (default: the catalog entry's)")
-      ->check(CLI::PositiveNumber);
+      ->check(Finite(0.01, 1e6));
   app.add_option("--res", scene_options.res, "finest dual-ray-space raster (power of two, 1 to 256)")
       ->capture_default_str();
   app.add_option("--backend", scene_options.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
       ->capture_default_str();
-  app.add_option("--pvs-file", scene_options.pvs_file, "serve the PVSs of this file (vistream agvs -o) instead of computing them");
+  app.add_option("--pvs-file", scene_options.pvs_file,
+                 "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them");
   app.add_option("--max-sessions", server_options.max_sessions, "sessions at once; more are refused")
-      ->capture_default_str();
-  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(CLI::PositiveNumber)->capture_default_str();
+      ->check(CLI::Range(1, 100000))->capture_default_str();
+  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(Finite(1, 1 << 20))->capture_default_str();
   app.add_option("--max-pose-rate", server_options.limits.max_pose_rate_hz, "poses per second a session may send")
-      ->check(CLI::PositiveNumber)->capture_default_str();
-  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(CLI::NonNegativeNumber)
+      ->check(Finite(0.1, 100000))->capture_default_str();
+  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(Finite(0, 3600))
       ->capture_default_str();
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
   try {
@@ -84,7 +118,13 @@ int main(int argc, char** argv) {
   // SIGTERM and SIGINT only raise a flag (whichever thread takes them); main polls it.
   struct sigaction action {};
   action.sa_handler = [](int sig) {
-    if (g_stop.exchange(true)) std::_Exit(1);  // a second signal: stop at once
+    // A second signal a second or more after the first stops at once (exit 1): a drain that
+    // hangs can be cut short, while one signal delivered twice (by a wrapper) does not count.
+    if (g_stop.exchange(true)) {
+      if (MonotonicNs() - g_first_signal_ns.load() > 1000000000) std::_Exit(1);
+      return;
+    }
+    g_first_signal_ns = MonotonicNs();
     g_signal = sig;
   };
   sigemptyset(&action.sa_mask);
@@ -92,8 +132,11 @@ int main(int argc, char** argv) {
   sigaction(SIGTERM, &action, nullptr);
 
   EventLog log(stderr, json_log);
+  g_log = &log;
+  gpr_set_log_function(GrpcLog);
   LogProgress progress(&log);
   log.Write(0, "loading", {{"scene", scene_options.scene}});
+  const auto load_start = std::chrono::steady_clock::now();
   absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
       vistream::server::ServedScene::Create(scene_options, {&progress, &g_stop});
   if (!scene.ok()) {
@@ -101,10 +144,15 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "vistream-server: error: %s\n", std::string(scene.status().message()).c_str());
     return 1;
   }
+  if (g_stop) {  // stopped while preparing: nothing to drain
+    log.Write(0, "stopped", {});
+    return 0;
+  }
   vistream::server::ServedScene& s = **scene;
   const vistream::scenes::ViewcellSpec& band = s.viewcell();
   server_options.limits.epsilon_size_m = band.epsilon_m;
   log.Write(0, "scene", {{"name", s.scene().name},
+                         {"prepare_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()},
                          {"objects", static_cast<uint64_t>(s.scene().objects.size())},
                          {"triangles", static_cast<uint64_t>(s.scene().TriangleCount())},
                          {"cells", static_cast<uint64_t>(s.grid().CellCount())},
@@ -127,5 +175,6 @@ int main(int argc, char** argv) {
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(grace_s);
   log.Write(0, "stopped", {});
+  g_log = nullptr;
   return 0;
 }

@@ -1,6 +1,8 @@
 #include "server/service.h"
 
 #include <chrono>
+#include <cstdlib>
+#include <thread>
 
 #include <absl/strings/str_cat.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
@@ -265,6 +267,18 @@ v1::ServerStats WalkthroughService::Stats() const {
 absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(ServedScene* scene,
                                                                             const ServerOptions& options,
                                                                             EventLog* log) {
+  // host:port with a port number in [0, 65535] (0: any free one); gRPC would take a port
+  // modulo 2^16, or none at all, without a word.
+  const size_t colon = options.listen.rfind(':');
+  const std::string port = colon == std::string::npos ? "" : options.listen.substr(colon + 1);
+  char* end = nullptr;
+  const long number = port.empty() ? -1 : std::strtol(port.c_str(), &end, 10);
+  if (colon == std::string::npos || colon == 0 || port.empty() || *end != '\0' || number < 0 || number > 65535) {
+    return absl::InvalidArgumentError(absl::StrCat("--listen '", options.listen,
+                                                   "': expected HOST:PORT with a port from 0 to 65535 "
+                                                   "(0: any free port), e.g. 127.0.0.1:50051"));
+  }
+  if (options.max_sessions == 0) return absl::InvalidArgumentError("--max-sessions must be at least 1");
   std::unique_ptr<WalkthroughServer> s(new WalkthroughServer());
   s->service_ = std::make_unique<WalkthroughService>(scene, options, log);
   grpc::EnableDefaultHealthCheckService(true);
@@ -281,10 +295,12 @@ absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(Serv
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 10000);
+  // A port in use is an error, not shared with another server (gRPC allows SO_REUSEPORT).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen,
-                                               " (address in use, or not host:port?)"));
+                                               ": the port is in use or the host is not an address of this machine"));
   }
   const std::string host = options.listen.substr(0, options.listen.rfind(':'));
   s->address_ = absl::StrCat(host, ":", s->port_);
@@ -302,8 +318,14 @@ void WalkthroughServer::Shutdown(double grace_s) {
     health->SetServingStatus(false);
   }
   service_->Drain();
+  // Sessions end as soon as what is being written goes out; give them the grace to, then stop.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<int64_t>(grace_s * 1000));
+  while (service_->active_sessions() > 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
   server_->Shutdown(std::chrono::system_clock::now() +
-                    std::chrono::milliseconds(static_cast<int64_t>(grace_s * 1000)));
+                    std::chrono::duration_cast<std::chrono::milliseconds>(
+                        std::max(std::chrono::steady_clock::duration::zero(), deadline - std::chrono::steady_clock::now())));
   server_->Wait();
 }
 

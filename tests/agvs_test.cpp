@@ -540,12 +540,15 @@ TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {
   const PvsFile made = MakePvsFile(scene, grid, SomeFile().sets, {"dual-ray-space cpu", 0, 2.5, 0.0});
   EXPECT_TRUE(made.Matches(grid));
   EXPECT_EQ(made.strategy, "dual-ray-space cpu");
-  EXPECT_TRUE(CheckPvsFileMatches(made, grid, 300, "f.pvs").ok());
-  const absl::Status objects = CheckPvsFileMatches(made, grid, 301, "f.pvs");
+  EXPECT_NE(made.scene_fingerprint, 0u);
+  EXPECT_TRUE(CheckPvsFileMatches(made, grid, scene, "f.pvs").ok());
+  scenes::Scene more = scene;
+  more.objects.resize(301);
+  const absl::Status objects = CheckPvsFileMatches(made, grid, more, "f.pvs");
   EXPECT_EQ(objects.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(objects.message().find("300 objects"), std::string::npos) << objects;
   const ViewcellGrid other = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 25, 0.5, 2);
-  const absl::Status cells = CheckPvsFileMatches(made, other, 300, "f.pvs");
+  const absl::Status cells = CheckPvsFileMatches(made, other, scene, "f.pvs");
   EXPECT_EQ(cells.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(cells.message().find("f.pvs"), std::string::npos) << cells;
   EXPECT_NE(cells.message().find("6 x 4 cells of 25 m"), std::string::npos) << cells;
@@ -555,14 +558,26 @@ TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {
     std::ofstream out(path, std::ios::binary);
     out << EncodePvsFile(made);
   }
-  const absl::StatusOr<PvsFile> loaded = LoadPvsFile(path, grid, 300);
+  const absl::StatusOr<PvsFile> loaded = LoadPvsFile(path, grid, scene);
   ASSERT_TRUE(loaded.ok()) << loaded.status();
   EXPECT_EQ(loaded->sets, made.sets);
-  EXPECT_EQ(LoadPvsFile(path, other, 300).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LoadPvsFile(path + ".missing", grid, 300).status().code(), absl::StatusCode::kNotFound);
-  const absl::Status dir = LoadPvsFile(::testing::TempDir(), grid, 300).status();
+  EXPECT_EQ(loaded->scene_fingerprint, made.scene_fingerprint);
+  EXPECT_EQ(LoadPvsFile(path, other, scene).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LoadPvsFile(path + ".missing", grid, scene).status().code(), absl::StatusCode::kNotFound);
+  const absl::Status dir = LoadPvsFile(::testing::TempDir(), grid, scene).status();
   EXPECT_EQ(dir.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(dir.message().find("directory"), std::string::npos) << dir;
+
+  // Same name, same object count, same grid, other geometry (another seed): refused.
+  scenes::Scene moved = scene;
+  moved.objects[7].mesh.positions.push_back(glm::vec3(1.0f, 2.0f, 3.0f));
+  const absl::Status geometry = CheckPvsFileMatches(made, grid, moved, "f.pvs");
+  EXPECT_EQ(geometry.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(geometry.message().find("other geometry"), std::string::npos) << geometry;
+  // A version 1 file (no fingerprint) is still read, and checked by its counts alone.
+  PvsFile old = made;
+  old.scene_fingerprint = 0;
+  EXPECT_TRUE(CheckPvsFileMatches(old, grid, moved, "old.pvs").ok());
 }
 
 TEST(PvsFile, EveryTruncationAndCorruptionIsAClearError) {

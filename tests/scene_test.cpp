@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/building.h"
+#include "scenes/city_generator.h"
 
 namespace vistream::scenes {
 namespace {
@@ -87,6 +88,27 @@ TEST(NormalizeOccluders, MakesFootprintsCounterClockwiseAndKeepsDegenerateOnes) 
   EXPECT_GT(SignedArea(s.occluders[0].footprint), 0.0);
   EXPECT_EQ(s.occluders[1].footprint.size(), 3u);  // the repeated closing vertex is dropped
   EXPECT_TRUE(ValidateScene(s, "f").ok());
+}
+
+TEST(SceneFingerprint, SameSceneSameDigestAnyChangeAnother) {
+  const Scene a = *GenerateNamed("city1", GeneratorParams{});
+  Scene b = *GenerateNamed("city1", GeneratorParams{});
+  EXPECT_EQ(SceneFingerprint(a), SceneFingerprint(b));
+  b.name = "elsewhere";
+  b.origin = glm::dvec3(500000, 5000000, 0);
+  EXPECT_EQ(SceneFingerprint(a), SceneFingerprint(b));  // only what visibility reads counts
+  GeneratorParams other;
+  other.seed = 5;
+  const Scene c = *GenerateNamed("city1", other);
+  ASSERT_EQ(c.objects.size(), a.objects.size());
+  EXPECT_NE(SceneFingerprint(a), SceneFingerprint(c));
+  Scene d = a;
+  d.objects[100].mesh.positions[3].z += 0.001f;
+  EXPECT_NE(SceneFingerprint(a), SceneFingerprint(d));
+  Scene e = a;
+  e.occluders[5].height += 0.5;
+  EXPECT_NE(SceneFingerprint(a), SceneFingerprint(e));
+  EXPECT_NE(SceneFingerprint(Scene{}), 0u);
 }
 
 }  // namespace

@@ -152,7 +152,7 @@ int Heatmap(const HeatmapArgs& a) {
   if (!s.ok()) return Fail(s.status());
   visibility::GlobalPvs sets;
   if (!a.pvs.empty()) {
-    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(a.pvs, s->grid, s->scene.objects.size());
+    absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(a.pvs, s->grid, s->scene);
     if (!f.ok()) return Fail(f.status());
     sets = std::move(f->sets);
   } else {

@@ -13,7 +13,7 @@ namespace vistream::visibility {
 
 namespace {
 constexpr char kMagic[8] = {'V', 'S', 'P', 'V', 'S', '0', '0', '1'};
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;  // 1: without the scene fingerprint (still read)
 constexpr uint64_t kMaxObjects = uint64_t{1} << 32;
 constexpr uint64_t kMaxCells = uint64_t{1} << 31;
 }  // namespace
@@ -22,6 +22,7 @@ PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, Global
                     const PvsProvenance& provenance) {
   PvsFile f;
   f.scene = scene.name;
+  f.scene_fingerprint = scenes::SceneFingerprint(scene);
   f.cell_size = grid.cell_size();
   f.base_z = grid.base_z();
   f.height = grid.height();
@@ -37,8 +38,9 @@ PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, Global
   return f;
 }
 
-absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, size_t object_count,
+absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, const scenes::Scene& scene,
                                  const std::string& where) {
+  const size_t object_count = scene.objects.size();
   if (!file.Matches(grid)) {
     return absl::InvalidArgumentError(absl::StrCat(
         where, ": made for another scene or viewcell grid (the file: scene '", file.scene, "', ", file.nx, " x ", file.ny, " cells of ",
@@ -51,10 +53,15 @@ absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, 
                                                    file.sets.object_count(), " objects; this scene has ",
                                                    object_count, ")"));
   }
+  if (file.scene_fingerprint != 0 && file.scene_fingerprint != scenes::SceneFingerprint(scene)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        where, ": made for another scene ('", file.scene, "' with other geometry or occluders than this '", scene.name,
+        "', though with as many objects): its sets would hide what this scene shows"));
+  }
   return absl::OkStatus();
 }
 
-absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, size_t object_count) {
+absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, const scenes::Scene& scene) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) return absl::InvalidArgumentError(path + ": is a directory, not a PVS file");
   std::ifstream in(path, std::ios::binary);
@@ -63,7 +70,7 @@ absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid&
   if (in.bad()) return absl::DataLossError(absl::StrCat("cannot read PVS file '", path, "'"));
   absl::StatusOr<PvsFile> f = DecodePvsFile(bytes, path);
   if (!f.ok()) return f.status();
-  if (absl::Status st = CheckPvsFileMatches(*f, grid, object_count, path); !st.ok()) return st;
+  if (absl::Status st = CheckPvsFileMatches(*f, grid, scene, path); !st.ok()) return st;
   return f;
 }
 
@@ -115,6 +122,7 @@ std::string EncodePvsFile(const PvsFile& f) {
   w.Put<uint32_t>(kVersion);
   w.PutString(f.scene);
   w.Put<uint64_t>(f.sets.object_count());
+  w.Put<uint64_t>(f.scene_fingerprint);
   w.Put(f.cell_size);
   w.Put(f.base_z);
   w.Put(f.height);
@@ -142,11 +150,14 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
   }
   uint32_t version = 0;
   if (absl::Status st = r.Get(&version, "the version"); !st.ok()) return st;
-  if (version != kVersion) return r.Error(absl::StrCat("version ", version, " is not supported (only ", kVersion, ")"));
+  if (version != 1 && version != kVersion) {
+    return r.Error(absl::StrCat("version ", version, " is not supported (1 or ", kVersion, ")"));
+  }
   uint64_t objects = 0;
   absl::Status st = r.GetString(&f.scene, "the scene name", 4096);
   if (st.ok()) st = r.Get(&objects, "the object count");
   if (st.ok() && objects > kMaxObjects) st = r.Error(absl::StrCat("object count ", objects, " is too large"));
+  if (st.ok() && version >= 2) st = r.Get(&f.scene_fingerprint, "the scene fingerprint");
   if (st.ok()) st = r.Get(&f.cell_size, "the cell size");
   if (st.ok()) st = r.Get(&f.base_z, "the base z");
   if (st.ok()) st = r.Get(&f.height, "the height");

@@ -3,8 +3,8 @@
 // serves them. Written by `vistream agvs -o`; decoding is strict (the bytes may come from
 // anywhere) and every error names the source and the byte offset.
 //
-// Layout, little-endian: "VSPVS001", u32 version (1), scene name (varint length + bytes),
-// u64 object count, grid (f64 cell size, base z, height, corner x, corner y; i32 nx, ny),
+// Layout, little-endian: "VSPVS001", u32 version (2), scene name (varint length + bytes),
+// u64 object count, u64 scene fingerprint (scenes::SceneFingerprint; version 2 only), grid (f64 cell size, base z, height, corner x, corner y; i32 nx, ny),
 // provenance (strategy name, u64 samples, f64 seconds, f64 estimated pixel error), then per
 // cell in id order: varint count, then the ascending ids as varint gaps (first id, then each
 // id minus the previous one minus one). Nothing may follow.
@@ -23,6 +23,7 @@ namespace vistream::visibility {
 
 struct PvsFile {
   std::string scene;
+  uint64_t scene_fingerprint = 0;  // 0: unknown (a version 1 file)
   double cell_size = 0.0, base_z = 0.0, height = 0.0;
   double corner_x = 0.0, corner_y = 0.0;
   int32_t nx = 0, ny = 0;
@@ -52,15 +53,16 @@ struct PvsProvenance {
 PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, GlobalPvs sets,
                     const PvsProvenance& provenance);
 
-// OK when `file` was made for `grid` (the same cells, exactly) and a scene with `object_count`
-// objects; else INVALID_ARGUMENT naming `where`, the file's scene and what differs.
-absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, size_t object_count,
+// OK when `file` was made for `grid` (the same cells, exactly) and for `scene` (the same
+// object count and, when the file records one, the same fingerprint: the same geometry and
+// occluders); else INVALID_ARGUMENT naming `where`, the file's scene and what differs.
+absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, const scenes::Scene& scene,
                                  const std::string& where);
 
-// Reads `path`, decodes it strictly and checks it against `grid` and `object_count`: the one
-// call that serves a precomputed file. Errors: NOT_FOUND (cannot open), DATA_LOSS / INVALID_ARGUMENT
+// Reads `path`, decodes it strictly and checks it against `grid` and `scene`: the one call
+// that serves a precomputed file. Errors: NOT_FOUND (cannot open), DATA_LOSS / INVALID_ARGUMENT
 // from decoding, INVALID_ARGUMENT for a file made for another scene or grid; each names `path`.
-absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, size_t object_count);
+absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, const scenes::Scene& scene);
 
 // The per-cell lists of `sets` as ascending varint gaps, and back (shared with the sampler's
 // saved state).
