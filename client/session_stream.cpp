@@ -170,6 +170,11 @@ bool SessionStream::WaitFor(const std::function<bool(const SessionRecord&)>& don
          done(received_);
 }
 
+bool SessionStream::Ended() const {
+  std::lock_guard lock(mu_);
+  return received_.ended;
+}
+
 SessionRecord SessionStream::Snapshot() const {
   std::lock_guard lock(mu_);
   return received_;

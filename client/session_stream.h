@@ -79,6 +79,8 @@ class SessionStream {
   bool WaitFor(const std::function<bool(const SessionRecord&)>& done, double timeout_s);
   // A copy of what has arrived so far.
   SessionRecord Snapshot() const;
+  // Whether the server has ended the stream (or it broke).
+  bool Ended() const;
   // Closes the client side and returns the session's status.
   grpc::Status Finish();
   // Waits for the server to end the session (without closing our side first).

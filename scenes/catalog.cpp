@@ -252,6 +252,10 @@ absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, con
   const std::string s(name_or_path);
   if (s.ends_with(".json") || s.find('/') != std::string::npos) return LoadCatalogEntry(s);
   const std::string dir = catalog_dir.empty() ? CatalogDir() : catalog_dir;
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return absl::NotFoundError(absl::StrCat("no scene '", s, "': the catalog folder ", dir, " does not exist"));
+  }
   const std::string path = dir + "/" + s + ".json";
   if (s.empty() || !fs::exists(path)) {
     return absl::NotFoundError(absl::StrCat("no scene '", s, "' in the catalog ", dir,

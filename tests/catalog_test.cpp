@@ -213,6 +213,12 @@ TEST(Catalog, LoadSceneTakesNamesPathsAndAnotherCatalogFolder) {
   EXPECT_NE(elsewhere.message().find(dir), std::string::npos) << elsewhere;
   EXPECT_NE(elsewhere.message().find("tiny"), std::string::npos) << elsewhere;  // what it has
   EXPECT_EQ(LoadScene("").status().code(), absl::StatusCode::kNotFound);
+  LoadOptions nowhere;
+  nowhere.catalog_dir = dir + "/missing";
+  const absl::Status no_folder = LoadScene("tiny", nowhere).status();
+  EXPECT_EQ(no_folder.code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(no_folder.message().find("catalog folder " + dir + "/missing does not exist"), std::string::npos)
+      << no_folder;
   EXPECT_FALSE(LoadScene(dir + "/missing.glb").ok());
   EXPECT_TRUE(IsGltfPath("a/b.glb"));
   EXPECT_TRUE(IsGltfPath("b.gltf"));

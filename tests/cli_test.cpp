@@ -142,6 +142,12 @@ TEST(Cli, PvsAllWritesEveryViewcellAsAPvsFile) {
   EXPECT_EQ(no_out.exit_code, 1);
   EXPECT_NE(no_out.out.find("-o FILE"), std::string::npos) << no_out.out;
   EXPECT_NE(Vistream("pvs --scene city1 --all --cell 1,1 -o " + file).exit_code, 0);
+  const RunResult unwritable = Vistream("pvs --scene city1 --all -o /nonexistent/dir/x.pvs");
+  EXPECT_EQ(unwritable.exit_code, 1);
+  EXPECT_NE(unwritable.out.find("not a writable folder"), std::string::npos) << unwritable.out;
+  const RunResult stray = Vistream("pvs --scene city1 --cell 1,1 -o " + file);
+  EXPECT_EQ(stray.exit_code, 1);
+  EXPECT_NE(stray.out.find("-o writes the PVS file of --all"), std::string::npos) << stray.out;
 }
 
 // A viewcell smaller than the catalog's, among the buildings: city1-255 stands in plain view

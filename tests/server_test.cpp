@@ -498,6 +498,21 @@ TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
   EXPECT_EQ(completed.load(), kSessions);
 }
 
+TEST(Server, APortInUseOrABadAddressIsRefused) {
+  auto first = StartServer();
+  ServerOptions o;
+  o.listen = "127.0.0.1:" + std::to_string(first->port());
+  const absl::Status taken = WalkthroughServer::Start(&City1(), o, nullptr).status();
+  EXPECT_EQ(taken.code(), absl::StatusCode::kUnavailable) << taken;
+  EXPECT_NE(taken.message().find("in use"), std::string::npos) << taken;
+  for (const char* bad : {"127.0.0.1:99999", "127.0.0.1", "garbage", ":50051", "127.0.0.1:-1", "127.0.0.1:80x"}) {
+    o.listen = bad;
+    const absl::Status st = WalkthroughServer::Start(&City1(), o, nullptr).status();
+    EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument) << bad << ": " << st;
+    EXPECT_NE(st.message().find(bad), std::string::npos) << st;
+  }
+}
+
 TEST(Server, StatsHealthAndReflectionAnswer) {
   auto server = StartServer();
   auto client = Connect(*server);

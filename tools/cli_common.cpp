@@ -1,11 +1,15 @@
 #include "tools/cli_common.h"
 
-#include <chrono>
 #include <cerrno>
+#include <chrono>
+#include <cmath>
 #include <csignal>
-#include <cstring>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
+
+#include <absl/strings/str_format.h>
 
 #include "scenes/catalog.h"
 #include "tools/terminal_progress.h"
@@ -33,6 +37,19 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
   for (const std::string& w : loaded->warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
   if (seconds != nullptr) *seconds = loaded->seconds;
   return std::move(loaded->scene);
+}
+
+CLI::Validator FiniteRange(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < lo || v > hi) {
+          return "'" + text + "' is not a number from " + absl::StrFormat("%g to %g", lo, hi);
+        }
+        return "";
+      },
+      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
 }
 
 absl::StatusOr<std::string> ReadFile(const std::string& path) {

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <string>
 
+#include <CLI/CLI.hpp>
 #include <absl/status/statusor.h>
 
 #include "scenes/catalog.h"
@@ -24,6 +25,9 @@ scenes::RunControl ToolRun();
 
 // scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings.
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
+
+// A CLI11 check: a finite number in [lo, hi] (CLI11's Range and PositiveNumber let NaN through).
+CLI::Validator FiniteRange(double lo, double hi);
 
 // The whole file, or an error naming it.
 absl::StatusOr<std::string> ReadFile(const std::string& path);

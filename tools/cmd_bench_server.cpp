@@ -4,6 +4,7 @@
 // cache hits, bytes per crossing with and without meshoptimizer, and the server's RSS.
 
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -38,7 +39,7 @@ struct BenchServerArgs {
   size_t sessions = 10;
   double speed_kmh = 6.0;
   double seconds = 120.0;
-  double cell_size = 100.0;
+  double cell_size = 0.0;  // 0: the catalog entry's
   uint32_t res = 128;
   unsigned threads = 0;
   uint64_t seed = 1;
@@ -170,8 +171,13 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
   pose();
   visibility::CellId cell = *grid.CellAt(walker.position());
   const double t0 = SteadySeconds();
-  if (!s.WaitFor([&](const client::SessionRecord& r) { return AllComplete(r, Around(grid, cell)); }, 300.0)) {
-    out.error = s.Snapshot().ended ? "the server ended the session" : "start-up took over 300 s";
+  // Start-up: the nine cells around the client, in slices so that ^C is heard.
+  bool ready = false;
+  while (!ready && !cancel.load() && !s.Ended() && SteadySeconds() - t0 < 300.0) {
+    ready = s.WaitFor([&](const client::SessionRecord& r) { return AllComplete(r, Around(grid, cell)); }, 0.5);
+  }
+  if (!ready) {
+    out.error = s.Ended() ? "the server ended the session" : cancel.load() ? "interrupted" : "start-up took over 300 s";
     return out;
   }
   out.started = true;
@@ -197,6 +203,10 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
   const double start = SteadySeconds();
   double next = start;
   while (SteadySeconds() - start < seconds && !cancel.load()) {
+    if (s.Ended()) {
+      out.error = "the server ended the session while the client walked";
+      break;
+    }
     next += kDt;
     std::this_thread::sleep_for(std::chrono::duration<double>(std::max(0.0, next - SteadySeconds())));
     walker.Step(kDt);
@@ -218,7 +228,7 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
   }
   // The last crossing's cells are still wanted: give them time. Earlier ones the walker may
   // have left before they completed (abandoned: counted apart).
-  if (!crossings.empty()) {
+  if (!crossings.empty() && out.error.empty() && !cancel.load()) {
     double unused;
     s.WaitFor([&](const client::SessionRecord& r) { return finished(r, crossings.back(), &unused); }, 60.0);
   }
@@ -235,7 +245,7 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
   out.geometry_bytes = end.geometry_bytes - at_start.geometry_bytes;
   out.raw_geometry_bytes = end.raw_geometry_bytes - at_start.raw_geometry_bytes;
   const grpc::Status st = s.Finish();
-  if (!st.ok()) out.error = st.error_message();
+  if (!st.ok() && out.error.empty()) out.error = st.error_message();
   return out;
 }
 
@@ -261,17 +271,21 @@ int BenchServer(const BenchServerArgs& a) {
   const std::string server_bin = (self.parent_path() / "vistream-server").string();
   if (!std::filesystem::exists(server_bin)) return Fail(absl::NotFoundError("no vistream-server beside " + self.string()));
   const std::string log = a.log.empty() ? "/dev/null" : a.log;
+  // Cells of the catalog entry's size unless --cell-size says otherwise, on both sides.
+  const scenes::ViewcellSpec grid_spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   int out[2];
   if (pipe(out) != 0) return Fail(absl::InternalError("pipe failed"));
   const pid_t pid = fork();
   if (pid < 0) return Fail(absl::InternalError("fork failed"));
   if (pid == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGTERM);  // the server goes when the bench does, however it ends
     dup2(out[1], STDOUT_FILENO);
     std::FILE* err = std::fopen(log.c_str(), "w");
     if (err != nullptr) dup2(fileno(err), STDERR_FILENO);
     close(out[0]);
     std::vector<std::string> args = {server_bin, "--scene", a.scene, "--listen", "127.0.0.1:0",
-                                     "--cell-size", absl::StrFormat("%g", a.cell_size), "--res", std::to_string(a.res),
+                                     "--cell-size", absl::StrFormat("%.17g", grid_spec.size_m),
+                                     "--res", std::to_string(a.res),
                                      "--threads", std::to_string(a.threads),
                                      "--max-sessions", std::to_string(a.sessions + 8)};
     std::vector<char*> argv;
@@ -294,8 +308,7 @@ int BenchServer(const BenchServerArgs& a) {
     stop_server();
     return Fail(scene.status());
   }
-  scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, grid_spec);
   if (!grid.ok()) {
     stop_server();
     return Fail(grid.status());
@@ -328,26 +341,39 @@ int BenchServer(const BenchServerArgs& a) {
   });
   std::vector<SessionResult> results(a.sessions);
   {
-    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h", a.sessions, a.speed_kmh),
-                              a.sessions);
-    std::mutex mu;
+    // Progress in seconds of the walk (start-up first, whose length depends on the server).
+    const uint64_t total = static_cast<uint64_t>(std::ceil(a.seconds));
+    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h", a.sessions, a.speed_kmh), total);
+    std::atomic<size_t> finished{0};
     std::vector<std::jthread> threads;
     for (size_t k = 0; k < a.sessions; ++k) {
       threads.emplace_back([&, k] {
         results[k] = RunSession(address, scene->name, streets, *grid, a.seed * 1000003 + k, a.speed_kmh / 3.6,
                                 a.seconds, CancelFlag());
-        std::lock_guard lock(mu);
-        progress.Advance();
+        ++finished;
       });
+    }
+    const double t0 = SteadySeconds();
+    uint64_t shown = 0;
+    while (finished.load() < a.sessions) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(250));
+      progress.SetDetail(absl::StrFormat("%zu of %zu sessions done", finished.load(), a.sessions));
+      const uint64_t now = std::min<uint64_t>(total, static_cast<uint64_t>(SteadySeconds() - t0));
+      if (now > shown) {
+        progress.Advance(now - shown);
+        shown = now;
+      }
     }
     threads.clear();
     progress.Finish();
   }
   v1::ServerStats stats;
+  grpc::Status stats_status;
   {
     v1::Walkthrough::Stub stub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
     grpc::ClientContext ctx;
-    (void)stub.GetStats(&ctx, v1::StatsRequest(), &stats);
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    stats_status = stub.GetStats(&ctx, v1::StatsRequest(), &stats);
   }
   sampling = false;
   rss.join();
@@ -417,8 +443,13 @@ int BenchServer(const BenchServerArgs& a) {
                 j["encoded_fraction"].get<double>(), j["rss_mb"].get<double>());
     if (!first_error.empty()) std::printf("  first session error: %s\n", first_error.c_str());
   }
+  // A run whose server or sessions failed measured something else: say so and fail.
   if (server_exit != 0) return Fail(absl::InternalError(absl::StrFormat("vistream-server exited %d", server_exit)));
-  return started == a.sessions ? 0 : Fail(absl::UnavailableError("sessions failed to start: " + first_error));
+  if (!stats_status.ok()) {
+    return Fail(absl::UnavailableError("the server's statistics are missing: " + stats_status.error_message()));
+  }
+  if (!first_error.empty()) return Fail(absl::UnavailableError("a session failed: " + first_error));
+  return 0;
 }
 
 }  // namespace
@@ -429,12 +460,12 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--scene", args->scene, "catalog name, .json or glTF")->capture_default_str();
   c->add_option("--sessions", args->sessions, "simulated clients at once")->check(CLI::Range(1, 1000))
       ->capture_default_str();
-  c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(CLI::Range(0.1, 500.0))
+  c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(FiniteRange(0.1, 500.0))
       ->capture_default_str();
   c->add_option("--seconds", args->seconds, "how long each client walks, after its start-up")
-      ->check(CLI::Range(1.0, 86400.0))->capture_default_str();
-  c->add_option("--cell-size", args->cell_size, "viewcell edge, metres")->check(CLI::Range(1.0, 10000.0))
-      ->capture_default_str();
+      ->check(FiniteRange(1.0, 86400.0))->capture_default_str();
+  c->add_option("--cell-size", args->cell_size, "viewcell edge, metres (default: the catalog entry's)")
+      ->check(FiniteRange(1.0, 10000.0));
   c->add_option("--res", args->res, "finest dual-ray-space raster")->capture_default_str();
   c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->capture_default_str();
   c->add_option("--seed", args->seed, "walkers' seed")->capture_default_str();

@@ -3,6 +3,8 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
@@ -32,6 +34,19 @@ struct PvsArgs {
 // Every viewcell of the grid, written as a PVS file the server can serve (--pvs-file).
 int PvsAll(const PvsArgs& a) {
   if (a.out.empty()) return Fail(absl::InvalidArgumentError("--all writes a PVS file: give -o FILE"));
+  if (!a.map.empty()) return Fail(absl::InvalidArgumentError("--map draws one viewcell: not with --all"));
+  // Find out now, not after minutes of work, whether the file can be written.
+  {
+    const std::filesystem::path parent = std::filesystem::absolute(a.out).parent_path();
+    std::error_code ec;
+    if (!std::filesystem::is_directory(parent, ec) || access(parent.c_str(), W_OK) != 0) {
+      return Fail(absl::PermissionDeniedError("cannot write '" + a.out + "': " + parent.string() +
+                                              " is not a writable folder"));
+    }
+    if (std::filesystem::is_directory(a.out, ec)) {
+      return Fail(absl::InvalidArgumentError("-o " + a.out + " is a directory, not a file"));
+    }
+  }
   InstallCancelHandler();
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
@@ -94,6 +109,7 @@ int Pvs(const PvsArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
   if (a.all) return PvsAll(a);
   if (a.cell.empty()) return Fail(absl::InvalidArgumentError("give --cell I,J (one viewcell) or --all -o FILE"));
+  if (!a.out.empty()) return Fail(absl::InvalidArgumentError("-o writes the PVS file of --all; one viewcell prints"));
   int ci = 0, cj = 0;
   char tail = 0;
   if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
