@@ -463,6 +463,19 @@ TEST(Server, AClientThatStopsReadingCostsBoundedMemory) {
   EXPECT_TRUE(good->Finish().ok());
 }
 
+TEST(Server, QueuedBytesOverTheLimitEndTheSession) {
+  ServerOptions o;
+  o.limits.max_queued_bytes = 64;  // less than SceneInfo: the limit trips at once
+  auto server = StartServer(o);
+  SessionStream client(server->address());
+  client.Start(SessionStream::HelloFor("city1"));
+  const grpc::Status st = client.AwaitEnd(kWait);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << st.error_message();
+  EXPECT_NE(st.error_message().find("queued for a client that does not read them (the limit is 64)"),
+            std::string::npos)
+      << st.error_message();
+}
+
 TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
   ServerOptions o;
   o.max_sessions = 128;
