@@ -47,6 +47,14 @@ struct SessionRecord {
 
   // Whether the cell's PVS and the geometry of every object in it have arrived.
   bool CellComplete(uint32_t cell) const;
+  // Whether every one of `cells` (a container of cell ids) is complete.
+  template <typename Cells>
+  bool AllComplete(const Cells& cells) const {
+    for (uint32_t c : cells) {
+      if (!CellComplete(c)) return false;
+    }
+    return true;
+  }
 
  private:
   friend class SessionStream;

@@ -157,6 +157,7 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
     if (!current_.has_value() || *current_ != *cell) {
       const std::optional<CellId> from = current_;
       const std::vector<CellId> before = wanted_;
+      const std::map<CellId, CellPvsPtr> had = received_;  // SetWanted drops the cells left behind
       current_ = *cell;
       stats_.set_cell_id(*cell);
       if (from.has_value()) {
@@ -170,7 +171,7 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       for (CellId c : before) {
         if (std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end()) left.push_back(c);
       }
-      EvictLeft(left);
+      EvictLeft(had);
       anchor_ = p;
       anchor_s_ = now;
       mask_requested_ = false;
@@ -208,27 +209,16 @@ void Session::SetWanted(double now) {
   wanted_.clear();
   for (const auto& [deadline, c] : order) wanted_.push_back(c);
   // Forget what no longer matters: requests, PVSs, their queued lists and geometry.
-  for (auto it = received_.begin(); it != received_.end();) {
-    it = std::find(wanted_.begin(), wanted_.end(), it->first) == wanted_.end() ? received_.erase(it) : std::next(it);
-  }
-  for (auto it = requested_.begin(); it != requested_.end();) {
-    it = std::find(wanted_.begin(), wanted_.end(), *it) == wanted_.end() ? requested_.erase(it) : std::next(it);
-  }
-  for (auto it = emitted_.begin(); it != emitted_.end();) {
-    it = std::find(wanted_.begin(), wanted_.end(), *it) == wanted_.end() ? emitted_.erase(it) : std::next(it);
-  }
-  for (auto it = pending_geometry_.begin(); it != pending_geometry_.end();) {
-    it = std::find(wanted_.begin(), wanted_.end(), it->first) == wanted_.end() ? pending_geometry_.erase(it)
-                                                                                : std::next(it);
-  }
-  for (auto it = control_.begin(); it != control_.end();) {
-    if (it->cell.has_value() && std::find(wanted_.begin(), wanted_.end(), *it->cell) == wanted_.end()) {
-      control_bytes_ -= it->bytes;
-      it = control_.erase(it);
-    } else {
-      ++it;
-    }
-  }
+  auto unwanted = [&](CellId c) { return std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end(); };
+  std::erase_if(received_, [&](const auto& entry) { return unwanted(entry.first); });
+  std::erase_if(requested_, unwanted);
+  std::erase_if(emitted_, unwanted);
+  std::erase_if(pending_geometry_, [&](const auto& entry) { return unwanted(entry.first); });
+  std::erase_if(control_, [&](const Control& c) {
+    if (!c.cell.has_value() || !unwanted(*c.cell)) return false;
+    control_bytes_ -= c.bytes;
+    return true;
+  });
   // Ask for what is missing, in order: the scheduler serves the earliest deadline first, and
   // a cell asked for again gets its new deadline (re-prioritised as the client turns).
   for (const auto& [deadline, c] : order) {
@@ -305,15 +295,13 @@ void Session::Emit(CellId cell) {
   stats_.set_pvs_sent(stats_.pvs_sent() + 1);
 }
 
-void Session::EvictLeft(const std::vector<CellId>& left) {
-  // What the cells left behind held, less what the current and adjacent PVSs still need. The
-  // PVSs of left cells were dropped by SetWanted; look them up in the shared cache.
+void Session::EvictLeft(const std::map<CellId, CellPvsPtr>& had) {
+  // What the cells left behind held, less what the current and adjacent PVSs still need.
   std::set<uint32_t> keep;
   for (const auto& [c, pvs] : received_) keep.insert(pvs->objects.begin(), pvs->objects.end());
   std::vector<uint32_t> evict;
-  for (CellId c : left) {
-    CellPvsPtr pvs = scene_->scheduler().Cached(c);
-    if (pvs == nullptr) continue;
+  for (const auto& [c, pvs] : had) {
+    if (received_.count(c) > 0) continue;  // still wanted
     for (uint32_t o : pvs->objects) {
       if (sent_.count(o) > 0 && keep.count(o) == 0) {
         evict.push_back(o);

@@ -73,7 +73,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void OnCellReady(const CellPvsPtr& pvs, bool from_cache);  // lock held
   void EmitReady();                                          // lock held
   void Emit(CellId cell);                                    // lock held
-  void EvictLeft(const std::vector<CellId>& left);           // lock held
+  // Evicts the geometry of the PVSs in `had` (received before a crossing) that no wanted cell's
+  // PVS holds.
+  void EvictLeft(const std::map<CellId, CellPvsPtr>& had);   // lock held
   void MaybeRequestMask(double now);                         // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
   double Deadline(CellId cell, double now) const;

@@ -68,10 +68,6 @@ std::set<CellId> Around(CellId c) {
   return s;
 }
 
-bool AllComplete(const SessionRecord& r, const std::set<CellId>& cells) {
-  return std::all_of(cells.begin(), cells.end(), [&](CellId c) { return r.CellComplete(c); });
-}
-
 // The PVS `vistream pvs` computes for the cell (same backend, same options).
 std::vector<uint32_t> ExpectedPvs(CellId cell) {
   static const visibility::KdTree tree = visibility::KdTree::Build(City1().scene());
@@ -92,7 +88,7 @@ TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
   auto client = Connect(*server);
   const CellId here = Cell(14, 10);
   ASSERT_TRUE(client->SendPose(Centre(14, 10), {1.4, 0, 0}));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(here)); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(here)); }, kWait));
   const SessionRecord r = client->Snapshot();
   ASSERT_TRUE(r.scene_info);
   EXPECT_EQ(r.order.front().first, 'S');
@@ -138,7 +134,7 @@ TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
   auto server = StartServer();
   auto client = Connect(*server);
   ASSERT_TRUE(client->SendPose(Centre(10, 10), {1.4, 0, 0}));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(10, 10))); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(10, 10))); }, kWait));
   struct Step {
     int i, j;
     size_t new_cells;
@@ -148,7 +144,7 @@ TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
     // Only cells it already has around it: the one it walks into was received before.
     EXPECT_TRUE(client->Snapshot().CellComplete(Cell(s.i, s.j))) << s.i << "," << s.j;
     ASSERT_TRUE(client->SendPose(Centre(s.i, s.j), {1.4, 0, 0}));
-    ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(s.i, s.j))); }, kWait));
+    ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(s.i, s.j))); }, kWait));
     std::this_thread::sleep_for(std::chrono::milliseconds(200));  // nothing more may follow
     const SessionRecord r = client->Snapshot();
     EXPECT_EQ(r.pvs_order.size() - before, s.new_cells) << "crossing into " << s.i << "," << s.j;
@@ -174,7 +170,7 @@ TEST(Server, CellsArriveBeforeAWalkerAt54KmhEntersThem) {
   glm::dvec3 p = Centre(6, 8);
   const glm::dvec3 v(15.0, 0.0, 0.0);
   ASSERT_TRUE(client->SendPose(p, v));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(6, 8))); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(6, 8))); }, kWait));
   // Real time, 20 poses a second, across four cells.
   std::optional<CellId> last;
   int entered = 0;
@@ -263,7 +259,7 @@ TEST(Server, ResumingWithHeldObjectsSendsOnlyWhatIsMissing) {
   second->Start(SessionStream::HelloFor("city1", std::vector<uint32_t>(held.begin(), held.end())));
   second->SendCredit(uint64_t{1} << 40);
   ASSERT_TRUE(second->SendPose(Centre(20, 5)));
-  ASSERT_TRUE(second->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(here)); }, kWait));
+  ASSERT_TRUE(second->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(here)); }, kWait));
   const SessionRecord r = second->Snapshot();
   for (const auto& [id, g] : r.geometry) EXPECT_EQ(held.count(id), 0u) << "object " << id << " was held and resent";
   EXPECT_TRUE(second->Finish().ok());
@@ -362,7 +358,7 @@ TEST_P(ServerBadInput, EndsOnlyItsSessionWithAStatusNamingIt) {
 
   // The good session goes on: it crosses and gets the new cells.
   ASSERT_TRUE(good->SendPose(Centre(6, 5)));
-  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(6, 5))); }, kWait));
+  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(6, 5))); }, kWait));
   EXPECT_TRUE(good->Finish().ok());
 }
 
@@ -425,7 +421,7 @@ TEST(Server, TooManySessionsAndTooManyPosesAreRefused) {
   EXPECT_NE(flood.error_message().find("poses per second"), std::string::npos) << flood.error_message();
   // a was not touched.
   ASSERT_TRUE(a->SendPose(Centre(5, 6)));
-  EXPECT_TRUE(a->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(5, 6))); }, kWait));
+  EXPECT_TRUE(a->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(5, 6))); }, kWait));
   EXPECT_TRUE(a->Finish().ok());
 }
 
@@ -497,7 +493,7 @@ TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
         }
         client->SendPose(Centre(i, j), {1.4, 0, 0});
         const std::set<CellId> need = Around(Cell(i, j));
-        if (!client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, need); }, 300.0)) {
+        if (!client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(need); }, 300.0)) {
           std::lock_guard lock(failures_mu);
           failures.push_back("session " + std::to_string(s) + " step " + std::to_string(step));
           return;
@@ -621,7 +617,7 @@ TEST(Server, ServesAPvsFileInsteadOfComputing) {
   ASSERT_TRUE(server.ok()) << server.status();
   auto client = Connect(**server);
   ASSERT_TRUE(client->SendPose(Centre(7, 7)));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return AllComplete(r, Around(Cell(7, 7))); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(Cell(7, 7))); }, kWait));
   const SessionRecord r = client->Snapshot();
   for (const auto& [cell, ids] : r.pvs) EXPECT_EQ(ids, sets.Objects(cell)) << "cell " << cell;
   EXPECT_TRUE(client->Finish().ok());

@@ -150,10 +150,6 @@ std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibi
   return s;
 }
 
-bool AllComplete(const client::SessionRecord& r, const std::set<visibility::CellId>& cells) {
-  return std::all_of(cells.begin(), cells.end(), [&](visibility::CellId c) { return r.CellComplete(c); });
-}
-
 SessionResult RunSession(const std::string& address, const std::string& scene_name, const Streets& streets,
                          const visibility::ViewcellGrid& grid, uint64_t seed, double speed, double seconds,
                          const std::atomic<bool>& cancel) {
@@ -174,7 +170,7 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
   // Start-up: the nine cells around the client, in slices so that ^C is heard.
   bool ready = false;
   while (!ready && !cancel.load() && !s.Ended() && SteadySeconds() - t0 < 300.0) {
-    ready = s.WaitFor([&](const client::SessionRecord& r) { return AllComplete(r, Around(grid, cell)); }, 0.5);
+    ready = s.WaitFor([&](const client::SessionRecord& r) { return r.AllComplete(Around(grid, cell)); }, 0.5);
   }
   if (!ready) {
     out.error = s.Ended() ? "the server ended the session" : cancel.load() ? "interrupted" : "start-up took over 300 s";
@@ -217,9 +213,17 @@ SessionResult RunSession(const std::string& address, const std::string& scene_na
       const client::SessionRecord r = s.Snapshot();
       if (!r.CellComplete(*now_cell)) ++out.late_cells;
       Crossing c{t, {}};
-      const std::set<visibility::CellId> before = Around(grid, cell);
-      for (visibility::CellId n : Around(grid, *now_cell)) {
-        if (before.count(n) == 0 && !r.CellComplete(n)) c.pending.push_back(n);
+      // Newly adjacent cells; after a jump past a neighbour (tiny cells, high speed), those of
+      // the new neighbourhood that were not in the old one.
+      std::vector<visibility::CellId> fresh = grid.NewlyAdjacent(cell, *now_cell);
+      if (fresh.empty()) {
+        const std::set<visibility::CellId> before = Around(grid, cell);
+        for (visibility::CellId n : Around(grid, *now_cell)) {
+          if (before.count(n) == 0) fresh.push_back(n);
+        }
+      }
+      for (visibility::CellId n : fresh) {
+        if (!r.CellComplete(n)) c.pending.push_back(n);
       }
       crossings.push_back(c);
       cell = *now_cell;
