@@ -59,8 +59,14 @@ v1::Hello SessionStream::HelloFor(const std::string& scene, std::vector<uint32_t
   return h;
 }
 
-void SessionStream::Start(const v1::Hello& hello, bool read) {
+void SessionStream::OpenStream() {
+  channel_->WaitForConnected(std::chrono::system_clock::now() +
+                             std::chrono::milliseconds(static_cast<int64_t>(kConnectTimeoutS * 1000)));
   stream_ = stub_->Session(&context_);
+}
+
+void SessionStream::Start(const v1::Hello& hello, bool read) {
+  OpenStream();
   {
     std::lock_guard lock(mu_);
     for (uint32_t o : hello.held_objects()) received_.held.insert(o);
@@ -72,7 +78,7 @@ void SessionStream::Start(const v1::Hello& hello, bool read) {
 }
 
 void SessionStream::StartRaw(const v1::ClientMessage& first) {
-  stream_ = stub_->Session(&context_);
+  OpenStream();
   stream_->Write(first);
   reader_ = std::thread([this] { ReadLoop(); });
 }

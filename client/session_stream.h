@@ -69,7 +69,11 @@ class SessionStream {
   ~SessionStream();
 
   // Opens the session and sends `hello`; with `read` false nothing is read (a stalled client).
-  // Keepalive pings every 30 s (the server accepts them every 10 s or more).
+  // Keepalive pings every 30 s (the server accepts them every 10 s or more). A connection
+  // attempt that fails (a busy listen queue refuses some of many simultaneous connects) is
+  // retried with gRPC's back-off for up to kConnectTimeoutS; past that the stream ends
+  // UNAVAILABLE.
+  static constexpr double kConnectTimeoutS = 10.0;
   void Start(const vistream::v1::Hello& hello, bool read = true);
   // Opens the session with `first` as its first message, whatever it is (bad-input tests).
   void StartRaw(const vistream::v1::ClientMessage& first);
@@ -96,6 +100,7 @@ class SessionStream {
   void Cancel() { context_.TryCancel(); }
 
  private:
+  void OpenStream();
   void ReadLoop();
 
   std::shared_ptr<grpc::Channel> channel_;

@@ -495,7 +495,11 @@ TEST(Server, HundredSessionsWalkingRandomPathsEachGetEveryPvsTheyNeed) {
         const std::set<CellId> need = Around(Cell(i, j));
         if (!client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(need); }, 300.0)) {
           std::lock_guard lock(failures_mu);
-          failures.push_back("session " + std::to_string(s) + " step " + std::to_string(step));
+          const grpc::Status end = client->Ended() ? client->AwaitEnd(kWait) : grpc::Status::OK;
+          failures.push_back("session " + std::to_string(s) + " step " + std::to_string(step) +
+                             (client->Ended() ? " ended: " + end.error_message() + " (code " +
+                                                    std::to_string(end.error_code()) + ")"
+                                              : " timed out"));
           return;
         }
       }
