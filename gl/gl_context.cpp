@@ -3,13 +3,18 @@
 #include <vector>
 
 #include <GL/osmesa.h>
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
 
 namespace vistream::gl {
 
 struct GlContext::Impl {
   OSMesaContext context = nullptr;
+  GLFWwindow* window = nullptr;  // a window context instead
+  GlFunctions functions;
   // OSMesa wants a colour buffer to make a context current; drawing goes to framebuffer
   // objects, so one pixel is enough.
   std::vector<unsigned char> pixel = std::vector<unsigned char>(4);
@@ -18,7 +23,66 @@ struct GlContext::Impl {
 GlContext::GlContext(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 GlContext::~GlContext() {
-  if (impl_ != nullptr && impl_->context != nullptr) OSMesaDestroyContext(impl_->context);
+  if (impl_ == nullptr) return;
+  if (impl_->context != nullptr) OSMesaDestroyContext(impl_->context);
+  if (impl_->window != nullptr) {
+    glfwDestroyWindow(impl_->window);
+    glfwTerminate();
+  }
+}
+
+namespace {
+std::string& GlfwError() {
+  static thread_local std::string error;
+  return error;
+}
+void OnGlfwError(int /*code*/, const char* description) { GlfwError() = description; }
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateWindowed(int width, int height,
+                                                                     const std::string& title) {
+  glfwSetErrorCallback(OnGlfwError);
+  if (!glfwInit()) {
+    return absl::UnavailableError(absl::StrCat("cannot open a window: ", GlfwError(),
+                                               " (run with --headless, or under a display, e.g. xvfb-run)"));
+  }
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+  glfwWindowHint(GLFW_SAMPLES, 0);
+  GLFWwindow* window = glfwCreateWindow(width, height, title.c_str(), nullptr, nullptr);
+  if (window == nullptr) {
+    const std::string why = GlfwError();
+    glfwTerminate();
+    return absl::UnavailableError(absl::StrCat("cannot open an OpenGL 3.3 core window: ", why));
+  }
+  glfwMakeContextCurrent(window);
+  glfwSwapInterval(1);
+  auto impl = std::make_unique<Impl>();
+  impl->window = window;
+  absl::StatusOr<GlFunctions> f =
+      GlFunctions::Load([](const char* name) { return reinterpret_cast<void*>(glfwGetProcAddress(name)); });
+  if (!f.ok()) {
+    glfwDestroyWindow(window);
+    glfwTerminate();
+    return f.status();
+  }
+  impl->functions = *f;
+  return std::unique_ptr<GlContext>(new GlContext(std::move(impl)));
+}
+
+const GlFunctions& GlContext::functions() const { return impl_->functions; }
+
+void* GlContext::window() const { return impl_->window; }
+
+void GlContext::SwapBuffers() {
+  if (impl_->window != nullptr) glfwSwapBuffers(impl_->window);
+}
+
+void GlContext::FramebufferSize(int* width, int* height) const {
+  *width = *height = 0;
+  if (impl_->window != nullptr) glfwGetFramebufferSize(impl_->window, width, height);
 }
 
 absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateOffscreen() {
@@ -30,6 +94,7 @@ absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateOffscreen() {
   if (impl->context == nullptr) {
     return absl::UnavailableError("OSMesa could not create an OpenGL 4.5 core context");
   }
+  impl->functions = GlFunctions::Linked();
   auto context = std::unique_ptr<GlContext>(new GlContext(std::move(impl)));
   if (absl::Status s = context->MakeCurrent(); !s.ok()) return s;
   return context;
@@ -38,6 +103,10 @@ absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateOffscreen() {
 void* GlContext::ProcAddress(const char* name) { return reinterpret_cast<void*>(OSMesaGetProcAddress(name)); }
 
 absl::Status GlContext::MakeCurrent() {
+  if (impl_->window != nullptr) {
+    glfwMakeContextCurrent(impl_->window);
+    return absl::OkStatus();
+  }
   if (!OSMesaMakeCurrent(impl_->context, impl_->pixel.data(), GL_UNSIGNED_BYTE, 1, 1)) {
     return absl::InternalError("OSMesaMakeCurrent failed");
   }

@@ -29,8 +29,11 @@ void main() {
 
 constexpr const char* kFragmentShader = R"(#version 450
 flat in uint id;
+uniform bool use_mask;
+uniform usamplerBuffer mask;  // one flag per triangle of the scene
 layout(location = 0) out uint seen;
 void main() {
+  if (use_mask && texelFetch(mask, gl_PrimitiveID).r == 0u) discard;
   seen = gl_FrontFacing ? id + 1u : 0x80000000u;
 }
 )";
@@ -54,6 +57,13 @@ IdRenderer::~IdRenderer() {
   glDeleteFramebuffers(1, &fbo_);
   glDeleteTextures(1, &ids_);
   glDeleteRenderbuffers(1, &depth_);
+  glDeleteBuffers(1, &mask_buffer_);
+  glDeleteTextures(1, &mask_texture_);
+  if (view_fbo_ != 0) {
+    glDeleteFramebuffers(1, &view_fbo_);
+    glDeleteTextures(1, &view_ids_);
+    glDeleteRenderbuffers(1, &view_depth_);
+  }
 }
 
 absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Scene& scene, int size) {
@@ -78,7 +88,9 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene) {
   std::vector<uint32_t> indices;
   vertices.reserve(scene.VertexCount());
   indices.reserve(3 * scene.TriangleCount());
+  first_triangle_.assign(scene.objects.size(), 0);
   for (const scenes::Object& o : scene.objects) {
+    if (o.id < first_triangle_.size()) first_triangle_[o.id] = indices.size() / 3;
     const auto base = static_cast<uint32_t>(vertices.size());
     for (const glm::vec3& p : o.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
     for (uint32_t i : o.mesh.indices) indices.push_back(base + i);
@@ -99,6 +111,12 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene) {
   glEnableVertexAttribArray(1);
   glVertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(Vertex), reinterpret_cast<const void*>(3 * sizeof(float)));
   glBindVertexArray(0);
+
+  loc_view_projection_ = glGetUniformLocation(program_, "view_projection");
+  loc_use_mask_ = glGetUniformLocation(program_, "use_mask");
+  loc_mask_ = glGetUniformLocation(program_, "mask");
+  glGenBuffers(1, &mask_buffer_);
+  glGenTextures(1, &mask_texture_);
 
   glGenTextures(1, &ids_);
   glBindTexture(GL_TEXTURE_2D, ids_);
@@ -146,7 +164,7 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
   glDisable(GL_CULL_FACE);
   glUseProgram(program_);
   glBindVertexArray(vao_);
-  const GLint loc = glGetUniformLocation(program_, "view_projection");
+  glUniform1i(loc_use_mask_, 0);
   std::array<std::vector<uint32_t>, 6> faces;
   for (int f = 0; f < 6; ++f) {
     const glm::dvec3 fw = forward[f];
@@ -169,17 +187,7 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
       m[4 * c + 2] = c == 3 ? kNear : 0.0;   // z
       m[4 * c + 3] = -view[2][c];            // w
     }
-    float mf[16];
-    for (int k = 0; k < 16; ++k) mf[k] = static_cast<float>(m[k]);
-    glUniformMatrix4fv(loc, 1, GL_FALSE, mf);
-    const GLuint zero[4] = {0, 0, 0, 0};
-    glClearBufferuiv(GL_COLOR, 0, zero);
-    const GLfloat far_depth = 0.0f;
-    glClearBufferfv(GL_DEPTH, 0, &far_depth);
-    glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(index_count_), GL_UNSIGNED_INT, nullptr);
-    faces[f].resize(static_cast<size_t>(size_) * size_);
-    glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    glReadPixels(0, 0, size_, size_, GL_RED_INTEGER, GL_UNSIGNED_INT, faces[f].data());
+    DrawAndRead(m, size_, size_, &faces[f]);
   }
   clip_control(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
@@ -187,6 +195,109 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
     return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while drawing"));
   }
   return faces;
+}
+
+void IdRenderer::DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out) {
+  float mf[16];
+  for (int k = 0; k < 16; ++k) mf[k] = static_cast<float>(m[k]);
+  glUniformMatrix4fv(loc_view_projection_, 1, GL_FALSE, mf);
+  const GLuint zero[4] = {0, 0, 0, 0};
+  glClearBufferuiv(GL_COLOR, 0, zero);
+  const GLfloat far_depth = 0.0f;
+  glClearBufferfv(GL_DEPTH, 0, &far_depth);
+  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(index_count_), GL_UNSIGNED_INT, nullptr);
+  out->resize(static_cast<size_t>(w) * h);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  glReadPixels(0, 0, w, h, GL_RED_INTEGER, GL_UNSIGNED_INT, out->data());
+}
+
+absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
+                                                             const glm::dvec3& up, double fov_y_rad, int width,
+                                                             int height, const std::vector<uint8_t>* triangles) {
+  if (width < 1 || height < 1 || width > 8192 || height > 8192) {
+    return absl::InvalidArgumentError(absl::StrCat("id renderer: view size ", width, "x", height));
+  }
+  if (triangles != nullptr && triangles->size() != triangle_count()) {
+    return absl::InvalidArgumentError(absl::StrCat("id renderer: ", triangles->size(), " triangle flags for a scene of ",
+                                                   triangle_count(), " triangles"));
+  }
+  if (!(fov_y_rad > 0.0 && fov_y_rad < 3.1)) {
+    return absl::InvalidArgumentError(absl::StrCat("id renderer: field of view ", fov_y_rad, " rad"));
+  }
+  if (absl::Status s = context_->MakeCurrent(); !s.ok()) return s;
+  if (view_width_ != width || view_height_ != height) {
+    if (view_fbo_ != 0) {
+      glDeleteFramebuffers(1, &view_fbo_);
+      glDeleteTextures(1, &view_ids_);
+      glDeleteRenderbuffers(1, &view_depth_);
+    }
+    glGenTextures(1, &view_ids_);
+    glBindTexture(GL_TEXTURE_2D, view_ids_);
+    glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32UI, width, height);
+    glGenRenderbuffers(1, &view_depth_);
+    glBindRenderbuffer(GL_RENDERBUFFER, view_depth_);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
+    glGenFramebuffers(1, &view_fbo_);
+    glBindFramebuffer(GL_FRAMEBUFFER, view_fbo_);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, view_ids_, 0);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, view_depth_);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      glBindFramebuffer(GL_FRAMEBUFFER, 0);
+      view_width_ = view_height_ = 0;
+      return absl::InternalError("id renderer: view framebuffer is incomplete");
+    }
+    view_width_ = width;
+    view_height_ = height;
+  }
+  constexpr double kNear = 0.01;  // metres
+  glBindFramebuffer(GL_FRAMEBUFFER, view_fbo_);
+  glViewport(0, 0, width, height);
+  const auto clip_control = reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_);
+  clip_control(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_GREATER);
+  glDisable(GL_CULL_FACE);
+  glUseProgram(program_);
+  glBindVertexArray(vao_);
+  if (triangles != nullptr) {
+    glBindBuffer(GL_TEXTURE_BUFFER, mask_buffer_);
+    glBufferData(GL_TEXTURE_BUFFER, static_cast<GLsizeiptr>(triangles->size()), triangles->data(), GL_STREAM_DRAW);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_BUFFER, mask_texture_);
+    glTexBuffer(GL_TEXTURE_BUFFER, GL_R8UI, mask_buffer_);
+    glUniform1i(loc_mask_, 0);
+  }
+  glUniform1i(loc_use_mask_, triangles != nullptr ? 1 : 0);
+  // Column-major: view rows s, u, -f with the eye's translation, then the pinhole's focal
+  // scaling and reversed infinite depth (clip z = near, clip w = -view z).
+  const glm::dvec3 f = glm::normalize(forward);
+  const glm::dvec3 s = glm::normalize(glm::cross(f, up));
+  const glm::dvec3 u = glm::cross(s, f);
+  const double fy = 1.0 / std::tan(0.5 * fov_y_rad), fx = fy * height / width;
+  const glm::dvec3 rows[3] = {s, u, -f};
+  double view[3][4];
+  for (int r = 0; r < 3; ++r) {
+    view[r][0] = rows[r].x;
+    view[r][1] = rows[r].y;
+    view[r][2] = rows[r].z;
+    view[r][3] = -glm::dot(rows[r], eye);
+  }
+  double m[16] = {};
+  for (int c = 0; c < 4; ++c) {
+    m[4 * c + 0] = fx * view[0][c];
+    m[4 * c + 1] = fy * view[1][c];
+    m[4 * c + 2] = c == 3 ? kNear : 0.0;
+    m[4 * c + 3] = -view[2][c];
+  }
+  std::vector<uint32_t> out;
+  DrawAndRead(m, width, height, &out);
+  glUniform1i(loc_use_mask_, 0);
+  clip_control(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while drawing a view"));
+  }
+  return out;
 }
 
 }  // namespace vistream::gl

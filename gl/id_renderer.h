@@ -36,6 +36,18 @@ class IdRenderer {
   // The six faces (+x, -x, +y, -y, +z, -z) seen from `eye` (scene-local metres), each size²
   // values, row by row: kNothing, object id + 1, or kBackFace set.
   absl::StatusOr<std::array<std::vector<uint32_t>, 6>> RenderCube(const glm::dvec3& eye);
+  // What each pixel of a pinhole view sees (row by row, bottom row first; values as above):
+  // the eye at `eye` looking along unit `forward` with `up` (scene-local, z up), vertical field
+  // of view `fov_y_rad`, `width` x `height` pixels. With `triangles`, only the triangles whose
+  // flag is non-zero are drawn (one byte per triangle of the scene, in the order of
+  // FirstTriangle): the client's drawn set against the full scene. Errors: sizes outside
+  // 1..8192, a flag array of the wrong length, GL failing.
+  absl::StatusOr<std::vector<uint32_t>> RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
+                                                   const glm::dvec3& up, double fov_y_rad, int width, int height,
+                                                   const std::vector<uint8_t>* triangles);
+  // The index of object `id`'s first triangle among the scene's triangles.
+  uint64_t FirstTriangle(uint32_t id) const { return first_triangle_[id]; }
+  uint64_t triangle_count() const { return index_count_ / 3; }
   // The solid angle of pixel (x, y) of any face; the 6 size² weights sum to 4 pi.
   double PixelSolidAngle(int x, int y) const { return weights_[static_cast<size_t>(y) * size_ + x]; }
 
@@ -47,6 +59,14 @@ class IdRenderer {
   int size_ = 0;
   unsigned program_ = 0, vao_ = 0, vbo_ = 0, ibo_ = 0, fbo_ = 0, ids_ = 0, depth_ = 0;
   size_t index_count_ = 0;
+  std::vector<uint64_t> first_triangle_;
+  int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1;
+  unsigned mask_buffer_ = 0, mask_texture_ = 0;
+  unsigned view_fbo_ = 0, view_ids_ = 0, view_depth_ = 0;
+  int view_width_ = 0, view_height_ = 0;
+  // Draws the scene with `m` (column-major, reversed infinite depth) into the bound
+  // framebuffer of `w` x `h` and reads it back.
+  void DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out);
   void* clip_control_ = nullptr;  // glClipControl
   std::vector<double> weights_;
 };

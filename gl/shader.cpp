@@ -9,16 +9,16 @@ namespace vistream::gl {
 
 namespace {
 
-absl::StatusOr<GLuint> Compile(GLenum type, const char* source, const char* what) {
-  const GLuint shader = glCreateShader(type);
-  glShaderSource(shader, 1, &source, nullptr);
-  glCompileShader(shader);
+absl::StatusOr<GLuint> Compile(const GlFunctions& gl, GLenum type, const char* source, const char* what) {
+  const GLuint shader = gl.CreateShader(type);
+  gl.ShaderSource(shader, 1, &source, nullptr);
+  gl.CompileShader(shader);
   GLint ok = 0;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  gl.GetShaderiv(shader, GL_COMPILE_STATUS, &ok);
   if (!ok) {
     std::array<char, 4096> log{};
-    glGetShaderInfoLog(shader, log.size(), nullptr, log.data());
-    glDeleteShader(shader);
+    gl.GetShaderInfoLog(shader, log.size(), nullptr, log.data());
+    gl.DeleteShader(shader);
     return absl::InternalError(absl::StrCat(what, " ", type == GL_VERTEX_SHADER ? "vertex" : "fragment",
                                             " shader does not compile: ", log.data()));
   }
@@ -27,26 +27,26 @@ absl::StatusOr<GLuint> Compile(GLenum type, const char* source, const char* what
 
 }  // namespace
 
-absl::StatusOr<GLuint> LinkProgram(const char* vertex, const char* fragment, const char* what) {
-  absl::StatusOr<GLuint> vs = Compile(GL_VERTEX_SHADER, vertex, what);
+absl::StatusOr<GLuint> LinkProgram(const GlFunctions& gl, const char* vertex, const char* fragment, const char* what) {
+  absl::StatusOr<GLuint> vs = Compile(gl, GL_VERTEX_SHADER, vertex, what);
   if (!vs.ok()) return vs.status();
-  absl::StatusOr<GLuint> fs = Compile(GL_FRAGMENT_SHADER, fragment, what);
+  absl::StatusOr<GLuint> fs = Compile(gl, GL_FRAGMENT_SHADER, fragment, what);
   if (!fs.ok()) {
-    glDeleteShader(*vs);
+    gl.DeleteShader(*vs);
     return fs.status();
   }
-  const GLuint program = glCreateProgram();
-  glAttachShader(program, *vs);
-  glAttachShader(program, *fs);
-  glLinkProgram(program);
-  glDeleteShader(*vs);
-  glDeleteShader(*fs);
+  const GLuint program = gl.CreateProgram();
+  gl.AttachShader(program, *vs);
+  gl.AttachShader(program, *fs);
+  gl.LinkProgram(program);
+  gl.DeleteShader(*vs);
+  gl.DeleteShader(*fs);
   GLint ok = 0;
-  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  gl.GetProgramiv(program, GL_LINK_STATUS, &ok);
   if (!ok) {
     std::array<char, 4096> log{};
-    glGetProgramInfoLog(program, log.size(), nullptr, log.data());
-    glDeleteProgram(program);
+    gl.GetProgramInfoLog(program, log.size(), nullptr, log.data());
+    gl.DeleteProgram(program);
     return absl::InternalError(absl::StrCat(what, " program does not link: ", log.data()));
   }
   return program;

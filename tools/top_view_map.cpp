@@ -1,13 +1,15 @@
 #include "tools/top_view_map.h"
 
-#include <png.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <memory>
 
+#include <cstring>
+
 #include <absl/strings/str_cat.h>
+
+#include "client/png_image.h"
 
 namespace vistream::tools {
 
@@ -79,28 +81,12 @@ void TopViewMap::StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour) 
 }
 
 absl::Status TopViewMap::WritePng(const std::string& path) const {
-  std::unique_ptr<FILE, int (*)(FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
-  if (!file) return absl::UnavailableError(absl::StrCat(path, ": cannot open for writing"));
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-  png_infop info = png ? png_create_info_struct(png) : nullptr;
-  if (png == nullptr || info == nullptr) {
-    png_destroy_write_struct(&png, &info);
-    return absl::InternalError("libpng: out of memory");
-  }
-  if (setjmp(png_jmpbuf(png))) {
-    png_destroy_write_struct(&png, &info);
-    return absl::DataLossError(absl::StrCat(path, ": writing the PNG failed"));
-  }
-  png_init_io(png, file.get());
-  png_set_IHDR(png, info, static_cast<png_uint_32>(width_), static_cast<png_uint_32>(height_), 8,
-               PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-  png_write_info(png, info);
-  for (int y = 0; y < height_; ++y) {
-    png_write_row(png, reinterpret_cast<png_const_bytep>(pixels_.data() + static_cast<size_t>(y) * width_));
-  }
-  png_write_end(png, nullptr);
-  png_destroy_write_struct(&png, &info);
-  return absl::OkStatus();
+  client::RgbImage image;
+  image.width = width_;
+  image.height = height_;
+  image.rgb.resize(pixels_.size() * 3);
+  std::memcpy(image.rgb.data(), pixels_.data(), image.rgb.size());
+  return client::WritePng(path, image);
 }
 
 Rgb Ramp(double t) {

@@ -1,0 +1,148 @@
+// vistream-client: the thin walkthrough client (DESIGN.md, "Server and client"). Connects to a
+// vistream-server, reports its pose, draws only what the server streamed. A window (GLFW) by
+// default; --headless follows a walk of the scene catalog off-screen (OSMesa) and prints a
+// summary. Exit codes: 0 done, 1 a run-time error (named on stderr), 2 bad options, 130
+// stopped by ^C (the summary of what was walked is still printed).
+#include <signal.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/numbers.h>
+#include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
+
+#include "client/walkthrough.h"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void OnSignal(int) { g_stop.store(true); }
+
+// A finite number in [lo, hi] (CLI11's own checks let NaN through).
+CLI::Validator Finite(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) -> std::string {
+        double v = 0.0;
+        if (!absl::SimpleAtod(text, &v) || !std::isfinite(v) || v < lo || v > hi) {
+          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
+        }
+        return "";
+      },
+      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
+}
+
+bool ParseSize(const std::string& text, int* width, int* height) {
+  const std::vector<std::string> parts = absl::StrSplit(text, 'x');
+  return parts.size() == 2 && absl::SimpleAtoi(parts[0], width) && absl::SimpleAtoi(parts[1], height) &&
+         *width >= 16 && *height >= 16 && *width <= 8192 && *height <= 8192;
+}
+
+bool ParsePose(const std::string& text, vistream::client::FixedPose* pose) {
+  const std::vector<std::string> parts = absl::StrSplit(text, ',');
+  double v[5];
+  if (parts.size() != 5) return false;
+  for (int k = 0; k < 5; ++k) {
+    if (!absl::SimpleAtod(parts[k], &v[k]) || !std::isfinite(v[k])) return false;
+  }
+  pose->eye = {v[0], v[1], v[2]};
+  pose->yaw_rad = v[3] * M_PI / 180.0;
+  pose->pitch_rad = v[4] * M_PI / 180.0;
+  return std::abs(v[4]) < 89.0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using vistream::client::WalkthroughOptions;
+  WalkthroughOptions o;
+  std::string size = "1280x720", pose;
+  bool json = false, no_masks = false;
+  double memory_mb = -1.0, triangle_budget = -1.0, upload_mb = 4.0;
+  CLI::App app("vistream-client: walk through a city streamed by vistream-server");
+  app.add_option("--server", o.server, "host:port of vistream-server")->capture_default_str();
+  app.add_flag("--headless", o.headless, "draw off-screen (OSMesa) along a walk instead of opening a window");
+  app.add_option("--path", o.path, "walk of the scene's catalog entry to follow (headless: default its first)");
+  app.add_option("--speed", o.speed_kmh, "walking speed in km/h (default: the walk's)")->check(Finite(0.01, 10000));
+  app.add_option("--seconds", o.seconds, "stop after this many seconds of the walk (default: all of it)")
+      ->check(Finite(0.01, 1e7));
+  app.add_option("--size", size, "frame size in pixels, WIDTHxHEIGHT")->capture_default_str();
+  app.add_option("--screenshots", o.screenshots_dir, "write PNG screenshots into this folder");
+  app.add_option("--every", o.every_s, "seconds of the walk between screenshots and between --verify checks")
+      ->check(Finite(0.01, 1e7))
+      ->capture_default_str();
+  app.add_flag("--verify", o.verify,
+               "load the full scene locally and count pixels where the drawn set differs from it (tests)");
+  app.add_flag("--json", json, "print the summary as JSON");
+  app.add_option("--frame-log", o.frame_log, "write one CSV line per frame to this file");
+  app.add_option("--catalog", o.catalog_dir, "scene catalog folder (walks and client budgets)");
+  app.add_option("--memory-mb", memory_mb, "memory budget for held geometry, MiB (default: the catalog's)")
+      ->check(Finite(0.0, 1e9));
+  app.add_option("--triangle-budget", triangle_budget, "triangles a frame may draw (default: the catalog's)")
+      ->check(Finite(0.0, 1e12));
+  app.add_option("--upload-mb", upload_mb, "GPU uploads a frame, MiB")->check(Finite(0.01, 1e6))->capture_default_str();
+  app.add_option("--max-fps", o.max_fps, "frame-rate cap; 0 draws as fast as it can")
+      ->check(Finite(0.0, 1e4))
+      ->capture_default_str();
+  app.add_flag("--no-masks", no_masks, "draw the viewcell PVS whole, ignoring ε-masks (a baseline)");
+  app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
+  app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "vistream-client: error: %s\n", e.what());
+    return 2;
+  }
+  if (!ParseSize(size, &o.width, &o.height)) {
+    std::fprintf(stderr, "vistream-client: error: --size '%s': expected WIDTHxHEIGHT from 16x16 to 8192x8192, e.g. 1280x720\n",
+                 size.c_str());
+    return 2;
+  }
+  if (!pose.empty()) {
+    vistream::client::FixedPose p;
+    if (!ParsePose(pose, &p)) {
+      std::fprintf(stderr, "vistream-client: error: --pose '%s': expected X,Y,Z,YAW,PITCH (metres, degrees; pitch within +-89)\n",
+                   pose.c_str());
+      return 2;
+    }
+    o.pose = p;
+  }
+  if (o.frames > 0 && !o.pose.has_value()) {
+    std::fprintf(stderr, "vistream-client: error: --frames needs --pose\n");
+    return 2;
+  }
+  if (!o.path.empty() && o.pose.has_value()) {
+    std::fprintf(stderr, "vistream-client: error: --path and --pose exclude each other\n");
+    return 2;
+  }
+  if (memory_mb >= 0.0) o.memory_budget_bytes = static_cast<uint64_t>(memory_mb * 1048576.0);
+  if (triangle_budget >= 0.0) o.triangle_budget = static_cast<uint64_t>(triangle_budget);
+  o.upload_budget_bytes = static_cast<uint64_t>(upload_mb * 1048576.0);
+  o.use_masks = !no_masks;
+  o.cancel = &g_stop;
+  o.log = [](const std::string& line) { std::fprintf(stderr, "vistream-client: %s\n", line.c_str()); };
+  struct sigaction sa {};
+  sa.sa_handler = OnSignal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
+  absl::StatusOr<vistream::client::WalkthroughSummary> summary = vistream::client::RunWalkthrough(o);
+  if (!summary.ok()) {
+    std::fprintf(stderr, "vistream-client: error: %s\n", std::string(summary.status().message()).c_str());
+    return 1;
+  }
+  if (json) {
+    std::printf("%s\n", vistream::client::SummaryJson(*summary).c_str());
+  } else {
+    std::printf("%s", vistream::client::SummaryText(*summary).c_str());
+  }
+  return summary->cancelled ? 130 : 0;
+}

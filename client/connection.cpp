@@ -1,0 +1,316 @@
+#include "client/connection.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+
+#include "scenes/geometry_codec.h"
+
+namespace vistream::client {
+
+namespace v1 = vistream::v1;
+
+namespace {
+
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 30000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
+  args.SetMaxReceiveMessageSize(64 << 20);
+  // Reconnect quickly after a restart: the session loop does its own back-off on top.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
+
+std::chrono::system_clock::time_point After(double seconds) {
+  return std::chrono::system_clock::now() + std::chrono::microseconds(static_cast<int64_t>(seconds * 1e6));
+}
+
+void SetVec(const glm::dvec3& v, v1::Vec3* out) {
+  out->set_x(v.x);
+  out->set_y(v.y);
+  out->set_z(v.z);
+}
+
+// Statuses after which reconnecting cannot help: the server refused this client's input.
+bool Final(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::INVALID_ARGUMENT:
+    case grpc::StatusCode::NOT_FOUND:
+    case grpc::StatusCode::FAILED_PRECONDITION:
+    case grpc::StatusCode::OUT_OF_RANGE:
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+    case grpc::StatusCode::PERMISSION_DENIED:
+    case grpc::StatusCode::UNAUTHENTICATED:
+    case grpc::StatusCode::UNIMPLEMENTED:
+    case grpc::StatusCode::DATA_LOSS:
+      return true;
+    default:
+      return false;
+  }
+}
+
+absl::Status ToAbsl(const grpc::Status& s) {
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
+}
+
+}  // namespace
+
+absl::StatusOr<v1::ServerStats> Probe(const std::string& address, double timeout_s) {
+  auto stub = v1::Walkthrough::NewStub(MakeChannel(address));
+  grpc::ClientContext context;
+  context.set_deadline(After(timeout_s));
+  context.set_wait_for_ready(true);  // ride out a refused first connect; the deadline bounds it
+  v1::ServerStats stats;
+  const grpc::Status st = stub->GetStats(&context, v1::StatsRequest(), &stats);
+  if (!st.ok()) {
+    if (st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED || st.error_code() == grpc::StatusCode::UNAVAILABLE) {
+      return absl::UnavailableError(absl::StrFormat("no vistream server answers at %s (waited %.0f s)", address,
+                                                    timeout_s));
+    }
+    return absl::UnavailableError(
+        absl::StrCat("the server at ", address, " does not answer as a vistream server: ", st.error_message()));
+  }
+  if (stats.protocol_version() != static_cast<uint32_t>(v1::PROTOCOL_VERSION_CURRENT)) {
+    return absl::FailedPreconditionError(absl::StrCat("the server at ", address, " speaks protocol version ",
+                                                      stats.protocol_version(), "; this client speaks version ",
+                                                      static_cast<int>(v1::PROTOCOL_VERSION_CURRENT)));
+  }
+  return stats;
+}
+
+Connection::Connection(ConnectionOptions options)
+    : options_(std::move(options)), channel_(MakeChannel(options_.address)),
+      stub_(v1::Walkthrough::NewStub(channel_)) {}
+
+Connection::~Connection() { (void)Stop(); }
+
+void Connection::Start() {
+  if (thread_.joinable()) return;
+  thread_ = std::thread([this] { Run(); });
+}
+
+void Connection::SetPose(const glm::dvec3& position, const glm::dvec3& velocity, double yaw_rad, double pitch_rad,
+                         double client_time_s) {
+  std::lock_guard lock(mu_);
+  pose_.set_client_time_s(client_time_s);
+  SetVec(position, pose_.mutable_position());
+  SetVec(velocity, pose_.mutable_velocity());
+  pose_.set_yaw_rad(static_cast<float>(yaw_rad));
+  pose_.set_pitch_rad(static_cast<float>(pitch_rad));
+  have_pose_ = true;
+}
+
+std::vector<Event> Connection::Take() {
+  std::vector<Event> out;
+  std::lock_guard lock(mu_);
+  out.swap(inbox_);
+  return out;
+}
+
+void Connection::Forget(const std::vector<uint32_t>& ids) {
+  std::lock_guard lock(mu_);
+  for (uint32_t id : ids) held_.erase(id);
+}
+
+absl::Status Connection::Stop() {
+  {
+    std::lock_guard lock(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+  std::lock_guard lock(mu_);
+  return final_status_;
+}
+
+void Connection::DropForTest() {
+  std::lock_guard lock(mu_);
+  if (context_ != nullptr) context_->TryCancel();
+}
+
+ConnectionStats Connection::stats() const {
+  std::lock_guard lock(mu_);
+  return stats_;
+}
+
+void Connection::Push(Event e) {
+  std::lock_guard lock(mu_);
+  inbox_.push_back(std::move(e));
+}
+
+void Connection::Run() {
+  double backoff = 0.25;
+  bool first = true;
+  for (;;) {
+    {
+      std::lock_guard lock(mu_);
+      if (stop_) break;
+      if (!first) ++stats_.reconnects;
+    }
+    first = false;
+    const auto began = std::chrono::steady_clock::now();
+    const grpc::Status st = RunSession();
+    std::unique_lock lock(mu_);
+    if (stop_) {
+      // Our own close: OK, or whatever the server said last.
+      if (final_status_.ok() && st.error_code() != grpc::StatusCode::CANCELLED) final_status_ = ToAbsl(st);
+      break;
+    }
+    if (Final(st.error_code())) {
+      final_status_ = ToAbsl(st);
+      inbox_.push_back(SessionEnded{final_status_});
+      break;
+    }
+    // A dropped connection: try again after a back-off that resets once a session has lasted.
+    if (std::chrono::steady_clock::now() - began > std::chrono::seconds(5)) backoff = 0.25;
+    cv_.wait_for(lock, std::chrono::duration<double>(backoff), [&] { return stop_; });
+    backoff = std::min(options_.max_backoff_s, 2.0 * backoff);
+  }
+  connected_ = false;
+}
+
+grpc::Status Connection::RunSession() {
+  channel_->WaitForConnected(After(options_.connect_timeout_s));
+  grpc::ClientContext context;
+  auto stream = stub_->Session(&context);
+  v1::ClientMessage hello;
+  {
+    std::lock_guard lock(mu_);
+    context_ = &context;
+    reader_done_ = false;
+    consumed_since_grant_ = 0;
+    v1::Hello* h = hello.mutable_hello();
+    h->set_scene(options_.scene);
+    h->set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
+    h->set_memory_budget_bytes(options_.memory_budget_bytes);
+    h->set_triangle_budget(options_.triangle_budget);
+    h->mutable_held_objects()->Add(held_.begin(), held_.end());
+  }
+  connected_ = true;
+  v1::ClientMessage credit;
+  credit.mutable_credit()->set_bytes(options_.credit_window_bytes);
+  bool writing = stream->Write(hello) && stream->Write(credit);
+  std::thread reader([&] { ReadLoop(stream.get()); });
+
+  const auto period = std::chrono::duration<double>(1.0 / std::max(0.1, options_.pose_rate_hz));
+  auto next_pose = std::chrono::steady_clock::now();
+  bool stopping = false;
+  while (writing) {
+    v1::ClientMessage pose, grant;
+    {
+      std::unique_lock lock(mu_);
+      cv_.wait_until(lock, next_pose, [&] {
+        return stop_ || reader_done_ || consumed_since_grant_ >= options_.credit_window_bytes / 2;
+      });
+      if (reader_done_) break;
+      if (stop_) {
+        stopping = true;
+        break;
+      }
+      if (consumed_since_grant_ >= options_.credit_window_bytes / 2) {
+        grant.mutable_credit()->set_bytes(consumed_since_grant_);
+        consumed_since_grant_ = 0;
+      }
+      if (std::chrono::steady_clock::now() >= next_pose) {
+        next_pose += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+        if (next_pose < std::chrono::steady_clock::now()) next_pose = std::chrono::steady_clock::now();
+        if (have_pose_) {
+          *pose.mutable_pose() = pose_;
+          ++stats_.poses_sent;
+        }
+      }
+    }
+    if (grant.has_credit()) writing = stream->Write(grant);
+    if (writing && pose.has_pose()) writing = stream->Write(pose);
+  }
+  if (stopping) {
+    stream->WritesDone();
+    // A server that does not end the session soon after we closed our side is cut off.
+    std::unique_lock lock(mu_);
+    if (!cv_.wait_for(lock, std::chrono::seconds(5), [&] { return reader_done_; })) context.TryCancel();
+  } else if (!writing) {
+    context.TryCancel();  // the stream broke under a write: the reader ends with it
+  }
+  reader.join();
+  const grpc::Status st = stream->Finish();
+  {
+    std::lock_guard lock(mu_);
+    context_ = nullptr;
+  }
+  connected_ = false;
+  return st;
+}
+
+void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::ServerMessage>* stream) {
+  v1::ServerMessage m;
+  while (stream->Read(&m)) {
+    const size_t bytes = m.ByteSizeLong();
+    std::optional<Event> event;
+    switch (m.body_case()) {
+      case v1::ServerMessage::kSceneInfo:
+        event = m.scene_info();
+        break;
+      case v1::ServerMessage::kPvs:
+        event = std::move(*m.mutable_pvs());
+        break;
+      case v1::ServerMessage::kEpsilonMask:
+        event = std::move(*m.mutable_epsilon_mask());
+        break;
+      case v1::ServerMessage::kEvict: {
+        std::lock_guard lock(mu_);
+        for (uint32_t o : m.evict().object_ids()) held_.erase(o);
+        event = m.evict();
+        break;
+      }
+      case v1::ServerMessage::kGeometry: {
+        const v1::ObjectGeometry& g = m.geometry();
+        absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeMesh(g.vertex_count(), g.index_count(), g.vertices(),
+                                                               g.indices(), absl::StrCat("object ", g.object_id()));
+        if (!mesh.ok()) {
+          // The server sent bytes that are no mesh: nothing later can be trusted.
+          std::lock_guard lock(mu_);
+          final_status_ = absl::DataLossError(absl::StrCat("the server sent a malformed geometry message: ",
+                                                           mesh.status().message()));
+          inbox_.push_back(SessionEnded{final_status_});
+          stop_ = true;
+          if (context_ != nullptr) context_->TryCancel();
+          break;
+        }
+        ReceivedObject o;
+        o.id = g.object_id();
+        o.mesh = std::move(*mesh);
+        o.bounds_min = {g.bounds_min().x(), g.bounds_min().y(), g.bounds_min().z()};
+        o.bounds_max = {g.bounds_max().x(), g.bounds_max().y(), g.bounds_max().z()};
+        o.raw_bytes = uint64_t{g.vertex_count()} * 24 + uint64_t{g.index_count()} * 4;
+        const uint64_t encoded = g.vertices().size() + g.indices().size();
+        std::lock_guard lock(mu_);
+        if (!held_.insert(o.id).second) ++stats_.duplicates;
+        ++stats_.objects_received;
+        stats_.geometry_bytes += encoded;
+        consumed_since_grant_ += encoded;
+        event = std::move(o);
+        break;
+      }
+      case v1::ServerMessage::BODY_NOT_SET:
+        break;
+    }
+    {
+      std::lock_guard lock(mu_);
+      stats_.bytes_received += bytes;
+      if (event.has_value()) inbox_.push_back(std::move(*event));
+    }
+    cv_.notify_all();
+  }
+  {
+    std::lock_guard lock(mu_);
+    reader_done_ = true;
+  }
+  cv_.notify_all();
+}
+
+}  // namespace vistream::client

@@ -1,0 +1,126 @@
+#pragma once
+// The thin client's network side (DESIGN.md "Server and client"): one thread that keeps a
+// walkthrough session open, reconnecting with back-off after a dropped connection and telling
+// the server on resume what it holds (Hello.held_objects); it sends the latest pose at a steady
+// rate with its velocity, grants byte credit as geometry arrives, and decodes what the server
+// sends (meshoptimizer geometry, PVS lists, ε-masks, eviction hints) into events. The render
+// loop takes the events with Take(), which never waits on the network: the lock it shares
+// with the network thread is held only to append or swap a vector.
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <thread>
+#include <variant>
+#include <vector>
+
+#include <absl/status/status.h>
+#include <absl/status/statusor.h>
+#include <glm/vec3.hpp>
+#include <grpcpp/grpcpp.h>
+
+#include "proto/walkthrough.grpc.pb.h"
+#include "scenes/mesh.h"
+
+namespace vistream::client {
+
+struct ConnectionOptions {
+  std::string address;                 // host:port of vistream-server
+  std::string scene;                   // Hello.scene: the name the server serves
+  uint64_t memory_budget_bytes = 0;    // Hello: decoded bytes the client may hold; 0 unlimited
+  uint64_t triangle_budget = 0;        // Hello: triangles per frame; 0 unlimited
+  double pose_rate_hz = 10.0;          // poses sent per second (the server allows 120)
+  uint64_t credit_window_bytes = uint64_t{8} << 20;  // encoded geometry in flight at most
+  double connect_timeout_s = 10.0;     // per attempt
+  double max_backoff_s = 4.0;          // reconnect back-off doubles from 0.25 s up to this
+};
+
+// One decoded object: scene-local metres (z up), triangle list as the server sent it.
+struct ReceivedObject {
+  uint32_t id = 0;
+  scenes::Mesh mesh;
+  glm::dvec3 bounds_min{0.0}, bounds_max{0.0};
+  uint64_t raw_bytes = 0;  // vertex_count * 24 + index_count * 4: the server's accounting
+};
+
+struct SessionEnded {
+  absl::Status status;  // why the session ended for good (not a dropped connection)
+};
+
+// What the network thread hands the render loop, in arrival order.
+using Event = std::variant<vistream::v1::SceneInfo, vistream::v1::ViewcellPvs, ReceivedObject, vistream::v1::Evict,
+                           vistream::v1::EpsilonMask, SessionEnded>;
+
+struct ConnectionStats {
+  uint64_t bytes_received = 0;   // serialized ServerMessage bytes
+  uint64_t geometry_bytes = 0;   // encoded geometry
+  uint64_t objects_received = 0;
+  uint64_t duplicates = 0;       // geometry received for an object already held
+  uint64_t reconnects = 0;       // sessions opened after the first
+  uint64_t poses_sent = 0;
+};
+
+// Checks that `address` answers as a vistream server of this protocol version and returns the
+// scene it serves. Errors (naming the address): UNAVAILABLE when nothing answers within
+// `timeout_s`, FAILED_PRECONDITION when it speaks another protocol version.
+absl::StatusOr<vistream::v1::ServerStats> Probe(const std::string& address, double timeout_s);
+
+class Connection {
+ public:
+  explicit Connection(ConnectionOptions options);
+  ~Connection();  // closes the session and joins the thread
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+
+  // Starts the network thread; the session opens at once, the first pose goes out when
+  // SetPose is first called.
+  void Start();
+  // The pose to report next (scene-local metres, m/s, radians); returns at once.
+  void SetPose(const glm::dvec3& position, const glm::dvec3& velocity, double yaw_rad, double pitch_rad,
+               double client_time_s);
+  // Everything that arrived since the last call, in order; never waits on the network.
+  std::vector<Event> Take();
+  // Objects the render side dropped on its own (over its memory budget): not held any more,
+  // so a resumed session does not claim them.
+  void Forget(const std::vector<uint32_t>& ids);
+  // Ends the session (WritesDone) and stops reconnecting; returns the final status.
+  absl::Status Stop();
+  // Drops the current connection as a network failure would (tests): the thread reconnects.
+  void DropForTest();
+
+  ConnectionStats stats() const;
+  bool connected() const { return connected_.load(); }
+
+ private:
+  void Run();
+  // One session from connect to end; returns its status.
+  grpc::Status RunSession();
+  void ReadLoop(grpc::ClientReaderWriter<vistream::v1::ClientMessage, vistream::v1::ServerMessage>* stream);
+  void Push(Event e);
+
+  ConnectionOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<vistream::v1::Walkthrough::Stub> stub_;
+  std::thread thread_;
+
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::vector<Event> inbox_;
+  bool stop_ = false;
+  bool have_pose_ = false;
+  vistream::v1::Pose pose_;
+  std::set<uint32_t> held_;            // received and not evicted: Hello.held_objects on resume
+  uint64_t consumed_since_grant_ = 0;  // encoded geometry bytes since the last Credit
+  bool reader_done_ = false;
+  grpc::ClientContext* context_ = nullptr;  // of the session in progress, for Stop/Drop
+  ConnectionStats stats_;
+  absl::Status final_status_;
+  std::atomic<bool> connected_{false};
+};
+
+}  // namespace vistream::client

@@ -1,0 +1,155 @@
+#include "client/object_store.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace vistream::client {
+
+namespace v1 = vistream::v1;
+
+GridInfo GridInfo::From(const v1::ViewcellGrid& g) {
+  GridInfo out;
+  out.cell_size = g.cell_size_m();
+  out.x0 = g.x0_m();
+  out.y0 = g.y0_m();
+  out.base_z = g.base_z_m();
+  out.height = g.height_m();
+  out.nx = g.nx();
+  out.ny = g.ny();
+  return out;
+}
+
+std::optional<uint32_t> GridInfo::CellAt(double x, double y) const {
+  if (!(cell_size > 0.0) || !std::isfinite(x) || !std::isfinite(y)) return std::nullopt;
+  const double fi = std::floor((x - x0) / cell_size), fj = std::floor((y - y0) / cell_size);
+  if (fi < 0 || fj < 0 || fi >= nx || fj >= ny) return std::nullopt;
+  return static_cast<uint32_t>(fj) * static_cast<uint32_t>(nx) + static_cast<uint32_t>(fi);
+}
+
+std::vector<uint32_t> GridInfo::Neighbourhood(uint32_t cell) const {
+  std::vector<uint32_t> out;
+  const int i = static_cast<int>(cell % static_cast<uint32_t>(nx)), j = static_cast<int>(cell / static_cast<uint32_t>(nx));
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const int a = i + di, b = j + dj;
+      if (a >= 0 && b >= 0 && a < nx && b < ny) out.push_back(static_cast<uint32_t>(b * nx + a));
+    }
+  }
+  return out;
+}
+
+std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optional<uint32_t> current_cell) {
+  for (Event& e : events) {
+    if (auto* info = std::get_if<v1::SceneInfo>(&e)) {
+      scene_info_ = std::move(*info);
+      grid_ = GridInfo::From(scene_info_->grid());
+    } else if (auto* pvs = std::get_if<v1::ViewcellPvs>(&e)) {
+      pvs_[pvs->cell_id()].assign(pvs->object_ids().begin(), pvs->object_ids().end());
+    } else if (auto* object = std::get_if<ReceivedObject>(&e)) {
+      const uint32_t id = object->id;
+      if (objects_.count(id) > 0) Remove(id);  // a resent object replaces the old copy
+      held_bytes_ += object->raw_bytes;
+      objects_[id] = StoredObject{std::move(*object), 0};
+      added_.push_back(id);
+    } else if (auto* evict = std::get_if<v1::Evict>(&e)) {
+      for (uint32_t id : evict->object_ids()) {
+        if (objects_.count(id) == 0) continue;
+        Remove(id);
+        ++evicted_by_server_;
+      }
+    } else if (auto* m = std::get_if<v1::EpsilonMask>(&e)) {
+      EpsilonMaskSet set;
+      set.box_min = {m->box_min().x(), m->box_min().y(), m->box_min().z()};
+      set.box_max = {m->box_max().x(), m->box_max().y(), m->box_max().z()};
+      set.generation = ++mask_generation_;
+      for (const v1::ObjectTriangles& t : m->objects()) {
+        set.visible[t.object_id()].assign(t.visible().begin(), t.visible().end());
+      }
+      mask_ = std::move(set);
+    } else if (auto* ended = std::get_if<SessionEnded>(&e)) {
+      failure_ = std::string(ended->status.message());
+    }
+  }
+  max_held_bytes_ = std::max(max_held_bytes_, held_bytes_);
+  if (current_cell.has_value() && scene_info_.has_value()) {
+    // Lists of cells two or more cells beyond the adjacent ones: the server, which follows
+    // the client a pose behind, has stopped wanting them and sends them again when it does.
+    const auto nx = static_cast<uint32_t>(grid_.nx);
+    const int ci = static_cast<int>(*current_cell % nx), cj = static_cast<int>(*current_cell / nx);
+    std::erase_if(pvs_, [&](const auto& entry) {
+      const int i = static_cast<int>(entry.first % nx), j = static_cast<int>(entry.first / nx);
+      return std::max(std::abs(i - ci), std::abs(j - cj)) >= 3;
+    });
+  }
+  return EnforceBudget(current_cell);
+}
+
+std::vector<uint32_t> ObjectStore::EnforceBudget(std::optional<uint32_t> current_cell) {
+  std::vector<uint32_t> dropped;
+  if (budget_ == 0 || held_bytes_ <= budget_) return dropped;
+  // Rank: 0 outside the current and adjacent PVSs, 1 adjacent only; the current cell's PVS
+  // is never dropped. Within a rank, least recently drawn first.
+  std::set<uint32_t> current, adjacent;
+  if (current_cell.has_value()) {
+    if (const std::vector<uint32_t>* p = Pvs(*current_cell)) current.insert(p->begin(), p->end());
+    for (uint32_t c : grid_.Neighbourhood(*current_cell)) {
+      if (const std::vector<uint32_t>* p = Pvs(c)) adjacent.insert(p->begin(), p->end());
+    }
+  }
+  std::vector<std::tuple<int, uint64_t, uint32_t>> order;
+  for (const auto& [id, o] : objects_) {
+    if (current.count(id) > 0) continue;
+    order.emplace_back(adjacent.count(id) > 0 ? 1 : 0, o.last_drawn_frame, id);
+  }
+  std::sort(order.begin(), order.end());
+  for (const auto& [rank, frame, id] : order) {
+    if (held_bytes_ <= budget_) break;
+    Remove(id);
+    ++evicted_by_budget_;
+    dropped.push_back(id);
+  }
+  return dropped;
+}
+
+void ObjectStore::Remove(uint32_t id) {
+  auto it = objects_.find(id);
+  if (it == objects_.end()) return;
+  held_bytes_ -= it->second.data.raw_bytes;
+  objects_.erase(it);
+  removed_.push_back(id);
+}
+
+const StoredObject* ObjectStore::Find(uint32_t id) const {
+  auto it = objects_.find(id);
+  return it == objects_.end() ? nullptr : &it->second;
+}
+
+StoredObject* ObjectStore::Find(uint32_t id) {
+  auto it = objects_.find(id);
+  return it == objects_.end() ? nullptr : &it->second;
+}
+
+const std::vector<uint32_t>* ObjectStore::Pvs(uint32_t cell) const {
+  auto it = pvs_.find(cell);
+  return it == pvs_.end() ? nullptr : &it->second;
+}
+
+bool ObjectStore::CellComplete(uint32_t cell) const {
+  const std::vector<uint32_t>* p = Pvs(cell);
+  if (p == nullptr) return false;
+  return std::all_of(p->begin(), p->end(), [&](uint32_t id) { return objects_.count(id) > 0; });
+}
+
+std::vector<uint32_t> ObjectStore::TakeAdded() {
+  std::vector<uint32_t> out;
+  out.swap(added_);
+  return out;
+}
+
+std::vector<uint32_t> ObjectStore::TakeRemoved() {
+  std::vector<uint32_t> out;
+  out.swap(removed_);
+  return out;
+}
+
+}  // namespace vistream::client

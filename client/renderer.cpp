@@ -1,0 +1,324 @@
+#include "client/renderer.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/type_ptr.hpp>
+
+#include "gl/shader.h"
+
+namespace vistream::client {
+
+namespace {
+
+constexpr const char* kVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 position;
+uniform mat4 view_projection;
+out vec3 world;
+void main() {
+  world = position;
+  gl_Position = view_projection * vec4(position, 1.0);
+}
+)";
+
+// Flat shading: the face normal from the screen-space derivatives of the world position, so
+// every triangle is lit as one face whatever normals its mesh carries.
+constexpr const char* kFragmentShader = R"(#version 330 core
+in vec3 world;
+uniform vec3 colour;
+uniform vec3 sun;
+out vec4 fragment;
+void main() {
+  vec3 n = normalize(cross(dFdx(world), dFdy(world)));
+  float direct = max(dot(n, sun), 0.0);
+  float sky = 0.5 + 0.5 * n.z;
+  fragment = vec4(colour * (0.30 + 0.15 * sky + 0.60 * direct), 1.0);
+}
+)";
+
+constexpr float kSky[3] = {0.62f, 0.77f, 0.92f};
+constexpr float kGround[3] = {0.40f, 0.43f, 0.38f};
+
+// A stone or brick tone per object, stable across runs.
+glm::vec3 ObjectColour(uint32_t id) {
+  uint32_t h = id * 2654435761u;
+  h ^= h >> 15;
+  const float a = static_cast<float>(h & 0xff) / 255.0f, b = static_cast<float>((h >> 8) & 0xff) / 255.0f;
+  const float light = 0.72f + 0.22f * a;
+  return {light, light * (0.86f + 0.10f * b), light * (0.74f + 0.14f * b)};
+}
+
+}  // namespace
+
+glm::dvec3 Camera::Forward() const {
+  return {std::cos(pitch_rad) * std::cos(yaw_rad), std::cos(pitch_rad) * std::sin(yaw_rad), std::sin(pitch_rad)};
+}
+
+glm::dvec3 Camera::Up() const {
+  const glm::dvec3 right = glm::normalize(glm::cross(Forward(), glm::dvec3(0, 0, 1)));
+  return glm::cross(right, Forward());
+}
+
+glm::dmat4 Camera::ViewProjection() const {
+  const glm::dmat4 view = glm::lookAt(eye, eye + Forward(), Up());
+  const glm::dmat4 projection =
+      glm::perspective(fov_y_rad, static_cast<double>(width) / static_cast<double>(height), near_m, far_m);
+  return projection * view;
+}
+
+bool Camera::MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const {
+  const glm::dvec3 f = Forward(), u = Up(), r = glm::normalize(glm::cross(f, u));
+  const double ty = std::tan(0.5 * fov_y_rad), tx = ty * static_cast<double>(width) / static_cast<double>(height);
+  // Inward normals of the four side planes through the eye, and the eye plane facing forward.
+  const glm::dvec3 normals[5] = {f * tx + r, f * tx - r, f * ty + u, f * ty - u, f};
+  for (const glm::dvec3& n : normals) {
+    // The box corner farthest along n, relative to the eye.
+    const glm::dvec3 p(n.x >= 0 ? box_max.x : box_min.x, n.y >= 0 ? box_max.y : box_min.y,
+                       n.z >= 0 ? box_max.z : box_min.z);
+    if (glm::dot(n, p - eye) < 0.0) return false;
+  }
+  return true;
+}
+
+absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* context, int width, int height,
+                                                           bool offscreen) {
+  if (width < 1 || height < 1 || width > 8192 || height > 8192) {
+    return absl::InvalidArgumentError(absl::StrCat("renderer: frame size ", width, "x", height,
+                                                   " is outside 1x1 .. 8192x8192"));
+  }
+  auto r = std::unique_ptr<Renderer>(new Renderer(context, context->functions()));
+  r->width_ = width;
+  r->height_ = height;
+  if (absl::Status s = r->Init(offscreen); !s.ok()) return s;
+  return r;
+}
+
+absl::Status Renderer::Init(bool offscreen) {
+  offscreen_ = offscreen;
+  absl::StatusOr<GLuint> program = gl::LinkProgram(gl_, kVertexShader, kFragmentShader, "client renderer");
+  if (!program.ok()) return program.status();
+  program_ = *program;
+  loc_view_projection_ = gl_.GetUniformLocation(program_, "view_projection");
+  loc_colour_ = gl_.GetUniformLocation(program_, "colour");
+  loc_sun_ = gl_.GetUniformLocation(program_, "sun");
+  gl_.GenVertexArrays(1, &ground_vao_);
+  gl_.GenBuffers(1, &ground_vbo_);
+  if (offscreen_) {
+    if (absl::Status s = MakeFramebuffer(); !s.ok()) return s;
+  }
+  if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("renderer: GL error ", err, " while setting up"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Renderer::MakeFramebuffer() {
+  if (fbo_ != 0) {
+    gl_.DeleteFramebuffers(1, &fbo_);
+    gl_.DeleteRenderbuffers(1, &colour_rb_);
+    gl_.DeleteRenderbuffers(1, &depth_rb_);
+  }
+  gl_.GenRenderbuffers(1, &colour_rb_);
+  gl_.BindRenderbuffer(GL_RENDERBUFFER, colour_rb_);
+  gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width_, height_);
+  gl_.GenRenderbuffers(1, &depth_rb_);
+  gl_.BindRenderbuffer(GL_RENDERBUFFER, depth_rb_);
+  gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width_, height_);
+  gl_.GenFramebuffers(1, &fbo_);
+  gl_.BindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  gl_.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colour_rb_);
+  gl_.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_rb_);
+  const GLenum complete = gl_.CheckFramebufferStatus(GL_FRAMEBUFFER);
+  if (complete != GL_FRAMEBUFFER_COMPLETE) return absl::InternalError("renderer: framebuffer is incomplete");
+  return absl::OkStatus();
+}
+
+absl::Status Renderer::Resize(int width, int height) {
+  if (width < 1 || height < 1) return absl::OkStatus();  // a minimised window: keep the last size
+  width_ = width;
+  height_ = height;
+  return offscreen_ ? MakeFramebuffer() : absl::OkStatus();
+}
+
+Renderer::~Renderer() {
+  if (context_ == nullptr || !context_->MakeCurrent().ok()) return;
+  for (auto& [id, g] : gpu_) Free(g);
+  gl_.DeleteProgram(program_);
+  gl_.DeleteVertexArrays(1, &ground_vao_);
+  gl_.DeleteBuffers(1, &ground_vbo_);
+  if (fbo_ != 0) {
+    gl_.DeleteFramebuffers(1, &fbo_);
+    gl_.DeleteRenderbuffers(1, &colour_rb_);
+    gl_.DeleteRenderbuffers(1, &depth_rb_);
+  }
+}
+
+void Renderer::Free(Gpu& g) {
+  gl_.DeleteVertexArrays(1, &g.vao);
+  gl_.DeleteBuffers(1, &g.vbo);
+  gl_.DeleteBuffers(1, &g.ibo);
+  if (g.masked_ibo != 0) gl_.DeleteBuffers(1, &g.masked_ibo);
+}
+
+void Renderer::Upload(uint32_t id, const StoredObject& o) {
+  Gpu g;
+  const scenes::Mesh& mesh = o.data.mesh;
+  gl_.GenVertexArrays(1, &g.vao);
+  gl_.BindVertexArray(g.vao);
+  gl_.GenBuffers(1, &g.vbo);
+  gl_.BindBuffer(GL_ARRAY_BUFFER, g.vbo);
+  gl_.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.positions.size() * sizeof(glm::vec3)),
+                 mesh.positions.data(), GL_STATIC_DRAW);
+  gl_.GenBuffers(1, &g.ibo);
+  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ibo);
+  gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.indices.size() * sizeof(uint32_t)),
+                 mesh.indices.data(), GL_STATIC_DRAW);
+  gl_.EnableVertexAttribArray(0);
+  gl_.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+  gl_.BindVertexArray(0);
+  g.index_count = static_cast<uint32_t>(mesh.indices.size());
+  gpu_[id] = g;
+}
+
+uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes) {
+  for (uint32_t id : store.TakeRemoved()) {
+    auto it = gpu_.find(id);
+    if (it != gpu_.end()) {
+      Free(it->second);
+      gpu_.erase(it);
+    }
+    pending_.erase(id);
+  }
+  for (uint32_t id : store.TakeAdded()) pending_.insert(id);
+  uint64_t uploaded = 0;
+  bool any = false;
+  auto take = [&](uint32_t id) {
+    if (any && uploaded >= budget_bytes) return false;
+    if (pending_.erase(id) == 0) return true;
+    const StoredObject* o = store.Find(id);
+    if (o == nullptr) return true;  // dropped again before it went up
+    Upload(id, *o);
+    uploaded += o->data.mesh.positions.size() * sizeof(glm::vec3) + o->data.mesh.indices.size() * sizeof(uint32_t);
+    any = true;
+    return true;
+  };
+  for (uint32_t id : first) {
+    if (pending_.count(id) > 0 && !take(id)) return uploaded;
+  }
+  while (!pending_.empty()) {
+    if (!take(*pending_.begin())) break;
+  }
+  return uploaded;
+}
+
+void Renderer::BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits, uint64_t generation) {
+  std::vector<uint32_t> indices;
+  const std::vector<uint32_t>& all = o.data.mesh.indices;
+  const size_t triangles = all.size() / 3;
+  for (size_t t = 0; t < triangles; ++t) {
+    if (t / 8 < bits.size() && (bits[t / 8] >> (t % 8) & 1u) != 0) {
+      indices.insert(indices.end(), all.begin() + static_cast<std::ptrdiff_t>(3 * t),
+                     all.begin() + static_cast<std::ptrdiff_t>(3 * t + 3));
+    }
+  }
+  if (g.masked_ibo == 0) gl_.GenBuffers(1, &g.masked_ibo);
+  gl_.BindVertexArray(0);
+  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.masked_ibo);
+  gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(indices.size() * sizeof(uint32_t)),
+                 indices.data(), GL_STATIC_DRAW);
+  g.masked_count = static_cast<uint32_t>(indices.size());
+  g.mask_generation = generation;
+}
+
+FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
+                          const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn) {
+  FrameStats stats;
+  stats.mask_used = mask != nullptr;
+  gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
+  gl_.Viewport(0, 0, width_, height_);
+  gl_.ClearColor(kSky[0], kSky[1], kSky[2], 1.0f);
+  gl_.Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  gl_.Enable(GL_DEPTH_TEST);
+  gl_.DepthFunc(GL_LESS);
+  // Both sides drawn: an imported mesh's winding is not trusted.
+  gl_.Disable(GL_CULL_FACE);
+  gl_.UseProgram(program_);
+  const glm::mat4 vp(camera.ViewProjection());
+  gl_.UniformMatrix4fv(loc_view_projection_, 1, GL_FALSE, glm::value_ptr(vp));
+  const glm::vec3 sun = glm::normalize(glm::vec3(0.62f, 0.45f, 0.64f));
+  gl_.Uniform3f(loc_sun_, sun.x, sun.y, sun.z);
+
+  // The ground: a square around the eye reaching past the far plane's reach on the ground.
+  if (store.has_scene_info()) {
+    const float r = static_cast<float>(camera.far_m);
+    const auto ex = static_cast<float>(camera.eye.x), ey = static_cast<float>(camera.eye.y);
+    const float quad[] = {ex - r, ey - r, 0, ex + r, ey - r, 0, ex + r, ey + r, 0,
+                          ex - r, ey - r, 0, ex + r, ey + r, 0, ex - r, ey + r, 0};
+    gl_.BindVertexArray(ground_vao_);
+    gl_.BindBuffer(GL_ARRAY_BUFFER, ground_vbo_);
+    gl_.BufferData(GL_ARRAY_BUFFER, sizeof(quad), quad, GL_STREAM_DRAW);
+    gl_.EnableVertexAttribArray(0);
+    gl_.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 3 * sizeof(float), nullptr);
+    gl_.Uniform3f(loc_colour_, kGround[0] / 0.9f, kGround[1] / 0.9f, kGround[2] / 0.9f);
+    gl_.DrawArrays(GL_TRIANGLES, 0, 6);
+  }
+
+  for (uint32_t id : objects) {
+    auto it = gpu_.find(id);
+    if (it == gpu_.end()) continue;
+    StoredObject* o = store.Find(id);
+    if (o == nullptr) continue;
+    if (!camera.MayOverlap(o->data.bounds_min, o->data.bounds_max)) continue;
+    Gpu& g = it->second;
+    bool masked = false;
+    uint32_t count = g.index_count;
+    if (mask != nullptr) {
+      auto bits = mask->visible.find(id);
+      if (bits == mask->visible.end()) continue;  // no triangle of it can be seen from the box
+      if (g.mask_generation != mask->generation) BuildMask(g, *o, bits->second, mask->generation);
+      masked = true;
+      count = g.masked_count;
+    }
+    if (count == 0) continue;
+    gl_.BindVertexArray(g.vao);
+    if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.masked_ibo);
+    const glm::vec3 c = ObjectColour(id);
+    gl_.Uniform3f(loc_colour_, c.x, c.y, c.z);
+    gl_.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(count), GL_UNSIGNED_INT, nullptr);
+    if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ibo);  // the VAO keeps its own list
+    o->last_drawn_frame = frame;
+    ++stats.objects_drawn;
+    stats.triangles_drawn += count / 3;
+    if (drawn != nullptr) drawn->push_back({id, masked});
+  }
+  gl_.BindVertexArray(0);
+  return stats;
+}
+
+void Renderer::Finish() { gl_.Finish(); }
+
+absl::StatusOr<std::vector<uint8_t>> Renderer::ReadRgb() {
+  gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
+  std::vector<uint8_t> rgba(static_cast<size_t>(width_) * height_ * 4);
+  gl_.PixelStorei(GL_PACK_ALIGNMENT, 1);
+  gl_.ReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+  if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("renderer: GL error ", err, " while reading the frame"));
+  }
+  std::vector<uint8_t> rgb(static_cast<size_t>(width_) * height_ * 3);
+  for (int y = 0; y < height_; ++y) {
+    const uint8_t* src = rgba.data() + static_cast<size_t>(height_ - 1 - y) * width_ * 4;
+    uint8_t* dst = rgb.data() + static_cast<size_t>(y) * width_ * 3;
+    for (int x = 0; x < width_; ++x) {
+      dst[3 * x] = src[4 * x];
+      dst[3 * x + 1] = src[4 * x + 1];
+      dst[3 * x + 2] = src[4 * x + 2];
+    }
+  }
+  return rgb;
+}
+
+}  // namespace vistream::client

@@ -1,0 +1,115 @@
+#pragma once
+// The client's renderer (OpenGL 3.3 core, GLM): draws a viewcell's PVS from the object store,
+// narrowed by the ε-mask while the eye is inside its box, with view-frustum culling; flat
+// per-face shading under a sun, a ground plane and a sky colour. Each object goes to the GPU
+// once (its own buffers), within a per-frame upload budget so that a burst of arrivals never
+// makes a frame hitch. The same renderer serves the window and the off-screen front ends: GL
+// calls go through the context's function table (gl/gl_functions.h).
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <set>
+#include <unordered_map>
+#include <vector>
+
+#include <absl/status/statusor.h>
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+#include "client/object_store.h"
+#include "gl/gl_context.h"
+
+namespace vistream::client {
+
+// A pinhole camera in scene-local metres, z up. yaw: counter-clockwise from +x; pitch: up
+// from the horizontal (radians).
+struct Camera {
+  glm::dvec3 eye{0.0};
+  double yaw_rad = 0.0, pitch_rad = 0.0;
+  double fov_y_rad = 1.0471975511965976;  // 60 degrees
+  int width = 1280, height = 720;
+  double near_m = 0.25;
+  double far_m = 20000.0;
+
+  glm::dvec3 Forward() const;
+  glm::dvec3 Up() const;
+  // World to clip, OpenGL conventions (depth -1..1).
+  glm::dmat4 ViewProjection() const;
+  // Whether any part of the box may be inside the view frustum (its side planes and the near
+  // plane; the far plane is beyond the scene). Conservative: false only when the box is wholly
+  // outside one plane.
+  bool MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const;
+};
+
+// What a frame drew: an object whole, or only its ε-mask triangles.
+struct DrawnObject {
+  uint32_t id = 0;
+  bool masked = false;
+};
+
+struct FrameStats {
+  uint32_t objects_drawn = 0;
+  uint64_t triangles_drawn = 0;
+  bool mask_used = false;
+};
+
+class Renderer {
+ public:
+  // `context` must stay current while the renderer is used. With `offscreen` the renderer draws
+  // into its own `width` x `height` framebuffer (read back with ReadRgb); otherwise into the
+  // window's. Errors: GL failing (shaders, framebuffer).
+  static absl::StatusOr<std::unique_ptr<Renderer>> Create(gl::GlContext* context, int width, int height,
+                                                          bool offscreen);
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  // Frees the buffers of objects the store dropped and uploads objects it gained: those in
+  // `first` before any other, at most `budget_bytes` of vertex and index data a call (at least
+  // one object, so that an object larger than the budget still goes up). Returns bytes uploaded.
+  uint64_t Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes);
+  bool Uploaded(uint32_t id) const { return gpu_.count(id) > 0; }
+  size_t pending_uploads() const { return pending_.size(); }
+
+  // Draws `objects` (ids; those not uploaded are skipped) as seen by `camera`; with `mask`, only
+  // the masked triangles of masked objects (objects the mask lists no triangle of are not
+  // drawn). `drawn`, if given, receives what was drawn. `frame` stamps the objects' last use.
+  FrameStats Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
+                  const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn);
+  // Waits until the frame is drawn (for frame timing).
+  void Finish();
+  // The last frame as RGB bytes, top row first (width x height x 3). Errors: GL failing.
+  absl::StatusOr<std::vector<uint8_t>> ReadRgb();
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  // Resizes the off-screen framebuffer or the window viewport.
+  absl::Status Resize(int width, int height);
+
+ private:
+  struct Gpu {
+    unsigned vao = 0, vbo = 0, ibo = 0;
+    uint32_t index_count = 0;
+    unsigned masked_ibo = 0;
+    uint32_t masked_count = 0;
+    uint64_t mask_generation = 0;  // of masked_ibo; 0: none built
+  };
+  Renderer(gl::GlContext* context, const gl::GlFunctions& gl) : context_(context), gl_(gl) {}
+  absl::Status Init(bool offscreen);
+  absl::Status MakeFramebuffer();
+  void Free(Gpu& g);
+  void Upload(uint32_t id, const StoredObject& o);
+  void BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits, uint64_t generation);
+
+  gl::GlContext* context_;
+  gl::GlFunctions gl_;
+  int width_ = 0, height_ = 0;
+  bool offscreen_ = false;
+  unsigned program_ = 0, fbo_ = 0, colour_rb_ = 0, depth_rb_ = 0, ground_vao_ = 0, ground_vbo_ = 0;
+  int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1;
+  std::unordered_map<uint32_t, Gpu> gpu_;
+  std::set<uint32_t> pending_;
+};
+
+}  // namespace vistream::client

@@ -1,0 +1,58 @@
+#include "client/walk.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <absl/strings/str_cat.h>
+#include <glm/geometric.hpp>
+
+namespace vistream::client {
+
+absl::StatusOr<Walk> Walk::Create(const scenes::WalkPath& path, double speed_mps) {
+  if (!(speed_mps > 0.0) || !std::isfinite(speed_mps)) {
+    return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': speed ", speed_mps, " m/s is not positive"));
+  }
+  Walk w;
+  w.speed_ = speed_mps;
+  w.eye_height_ = path.eye_height_m;
+  for (const glm::dvec2& p : path.waypoints) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
+      return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': a waypoint is not finite"));
+    }
+    if (!w.points_.empty() && glm::distance(w.points_.back(), p) < 1e-9) continue;
+    w.cumulative_.push_back(w.points_.empty() ? 0.0 : w.cumulative_.back() + glm::distance(w.points_.back(), p));
+    w.points_.push_back(p);
+  }
+  if (w.points_.size() < 2) {
+    return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "' has fewer than two distinct waypoints"));
+  }
+  return w;
+}
+
+glm::dvec2 Walk::PointAt(double s) const {
+  s = std::clamp(s, 0.0, length_m());
+  const size_t k = static_cast<size_t>(std::upper_bound(cumulative_.begin(), cumulative_.end(), s) - cumulative_.begin());
+  if (k >= points_.size()) return points_.back();
+  const double a = cumulative_[k - 1], b = cumulative_[k];
+  return glm::mix(points_[k - 1], points_[k], (s - a) / (b - a));
+}
+
+WalkPose Walk::At(double t) const {
+  constexpr double kLookAhead = 8.0;  // metres
+  const double s = std::clamp(t * speed_, 0.0, length_m());
+  WalkPose pose;
+  const glm::dvec2 p = PointAt(s);
+  pose.eye = {p.x, p.y, eye_height_};
+  // Look at the path ahead (behind, at the very end).
+  glm::dvec2 d = PointAt(s + kLookAhead) - p;
+  if (glm::length(d) < 1e-6) d = p - PointAt(s - kLookAhead);
+  pose.yaw_rad = std::atan2(d.y, d.x);
+  if (s < length_m()) {
+    const glm::dvec2 step = PointAt(s + 0.5) - p;
+    const double len = glm::length(step);
+    if (len > 0.0) pose.velocity = glm::dvec3(step / len * speed_, 0.0);
+  }
+  return pose;
+}
+
+}  // namespace vistream::client

@@ -1,0 +1,585 @@
+#include "client/walkthrough.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <set>
+#include <thread>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+#include <absl/strings/str_join.h>
+#include <nlohmann/json.hpp>
+
+#include "client/connection.h"
+#include "client/object_store.h"
+#include "client/png_image.h"
+#include "client/renderer.h"
+#include "client/walk.h"
+#include "client/window_input.h"
+#include "gl/gl_context.h"
+#include "gl/id_renderer.h"
+#include "scenes/catalog.h"
+
+namespace vistream::client {
+
+namespace v1 = vistream::v1;
+
+namespace {
+
+double Now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double at = q * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<size_t>(std::floor(at));
+  const size_t hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (v[hi] - v[lo]) * (at - static_cast<double>(lo));
+}
+
+// What one step of the loop found: the eye's cell and whether its PVS is ready to draw.
+struct Pumped {
+  std::optional<uint32_t> cell;
+  const std::vector<uint32_t>* pvs = nullptr;
+  bool complete = false;
+};
+
+class Loop {
+ public:
+  Loop(const WalkthroughOptions& o, WalkthroughSummary* sum) : opt_(o), sum_(sum) {}
+  absl::Status Run();
+
+ private:
+  absl::Status Prepare();
+  absl::Status Startup();
+  absl::Status Walkthrough();
+  // Takes the network's events into the store and uploads within `upload_budget`.
+  absl::StatusOr<Pumped> Pump(const glm::dvec3& eye, uint64_t upload_budget);
+  absl::Status Screenshot(double t);
+  absl::Status Verify(const std::vector<DrawnObject>& drawn);
+  void Log(const std::string& line) const {
+    if (opt_.log) opt_.log(line);
+  }
+  bool Cancelled() const { return opt_.cancel != nullptr && opt_.cancel->load(); }
+  void SendPose(const glm::dvec3& velocity, double since_start);
+
+  const WalkthroughOptions& opt_;
+  WalkthroughSummary* sum_;
+  std::optional<scenes::CatalogEntry> entry_;
+  std::optional<Walk> walk_;
+  double walk_limit_s_ = 0.0;
+  uint64_t memory_budget_ = 0, triangle_budget_ = 0;
+  std::optional<scenes::Scene> full_scene_;
+  std::unique_ptr<gl::IdRenderer> ids_;
+  std::unique_ptr<gl::GlContext> context_;
+  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<WindowInput> input_;
+  std::unique_ptr<Connection> connection_;
+  std::unique_ptr<ObjectStore> store_;
+  Camera camera_;
+  bool have_start_ = false;  // camera_ holds a start pose
+  std::FILE* frame_log_ = nullptr;
+  double session_start_ = 0.0;
+  uint64_t masks_seen_ = 0;
+};
+
+absl::Status Loop::Prepare() {
+  absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s);
+  if (!stats.ok()) return stats.status();
+  sum_->scene = stats->scene();
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
+  if (entry.ok()) entry_ = std::move(*entry);
+
+  const bool follow = !opt_.pose.has_value() && (opt_.headless || !opt_.path.empty());
+  if (follow) {
+    if (!entry_.has_value()) {
+      return absl::NotFoundError(absl::StrCat("the server's scene '", sum_->scene,
+                                              "' has no entry in the scene catalog (", entry.status().message(),
+                                              "): there is no walk to follow; give --pose instead"));
+    }
+    const scenes::WalkPath* path = nullptr;
+    std::vector<std::string> names;
+    for (const scenes::WalkPath& w : entry_->walks) {
+      names.push_back(w.name);
+      if (w.name == opt_.path || (opt_.path.empty() && path == nullptr)) path = &w;
+    }
+    if (path == nullptr) {
+      return absl::NotFoundError(opt_.path.empty()
+                                     ? absl::StrCat("scene '", sum_->scene, "' (", entry_->file, ") has no walks")
+                                     : absl::StrCat("scene '", sum_->scene, "' has no walk '", opt_.path,
+                                                    "'; its walks: ", absl::StrJoin(names, ", ")));
+    }
+    const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
+    absl::StatusOr<Walk> walk = Walk::Create(*path, speed);
+    if (!walk.ok()) return walk.status();
+    walk_ = std::move(*walk);
+    walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
+    sum_->path = path->name;
+    sum_->speed_kmh = speed * 3.6;
+    const WalkPose start = walk_->At(0.0);
+    camera_.eye = start.eye;
+    camera_.yaw_rad = start.yaw_rad;
+    have_start_ = true;
+  } else if (opt_.pose.has_value()) {
+    camera_.eye = opt_.pose->eye;
+    camera_.yaw_rad = opt_.pose->yaw_rad;
+    camera_.pitch_rad = opt_.pose->pitch_rad;
+    have_start_ = true;
+  } else if (entry_.has_value() && !entry_->walks.empty()) {
+    // The window without a walk: start where the first walk starts, then the keys move.
+    absl::StatusOr<Walk> walk = Walk::Create(entry_->walks.front(), entry_->walks.front().speed_mps);
+    if (walk.ok()) {
+      camera_.eye = walk->At(0.0).eye;
+      camera_.yaw_rad = walk->At(0.0).yaw_rad;
+      have_start_ = true;
+    }
+  }
+
+  const std::optional<scenes::ClientSpec>& client = entry_.has_value() ? entry_->simulation.client : std::nullopt;
+  memory_budget_ = opt_.memory_budget_bytes.value_or(
+      client.has_value() && client->memory_mb.has_value() ? static_cast<uint64_t>(*client->memory_mb * 1048576.0) : 0);
+  triangle_budget_ =
+      opt_.triangle_budget.value_or(client.has_value() ? client->triangle_budget.value_or(0) : uint64_t{0});
+  sum_->memory_budget_bytes = memory_budget_;
+  sum_->triangle_budget = triangle_budget_;
+
+  if (opt_.verify) {
+    Log(absl::StrCat("loading the full scene '", sum_->scene, "' locally for --verify"));
+    absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(sum_->scene, {opt_.catalog_dir, {}});
+    if (!loaded.ok()) {
+      return absl::Status(loaded.status().code(),
+                          absl::StrCat("--verify needs the scene locally: ", loaded.status().message()));
+    }
+    full_scene_ = std::move(loaded->scene);
+    absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1);
+    if (!ids.ok()) return ids.status();
+    ids_ = std::move(*ids);
+    sum_->verified = true;
+  }
+
+  absl::StatusOr<std::unique_ptr<gl::GlContext>> context =
+      opt_.headless ? gl::GlContext::CreateOffscreen()
+                    : gl::GlContext::CreateWindowed(opt_.width, opt_.height, absl::StrCat("vistream: ", sum_->scene));
+  if (!context.ok()) return context.status();
+  context_ = std::move(*context);
+  int width = opt_.width, height = opt_.height;
+  if (!opt_.headless) {
+    context_->FramebufferSize(&width, &height);
+    input_ = std::make_unique<WindowInput>(context_->window());
+  }
+  absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(context_.get(), width, height, opt_.headless);
+  if (!renderer.ok()) return renderer.status();
+  renderer_ = std::move(*renderer);
+  camera_.width = width;
+  camera_.height = height;
+  sum_->width = width;
+  sum_->height = height;
+
+  if (!opt_.frame_log.empty()) {
+    frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
+    if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
+    std::fprintf(frame_log_, "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked\n");
+  }
+  if (!opt_.screenshots_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(opt_.screenshots_dir, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(opt_.screenshots_dir, ": cannot create: ", ec.message()));
+  }
+
+  ConnectionOptions co;
+  co.address = opt_.server;
+  co.scene = sum_->scene;
+  co.memory_budget_bytes = memory_budget_;
+  co.triangle_budget = triangle_budget_;
+  co.connect_timeout_s = opt_.connect_timeout_s;
+  connection_ = std::make_unique<Connection>(co);
+  store_ = std::make_unique<ObjectStore>(memory_budget_);
+  return absl::OkStatus();
+}
+
+void Loop::SendPose(const glm::dvec3& velocity, double since_start) {
+  connection_->SetPose(camera_.eye, velocity, camera_.yaw_rad, camera_.pitch_rad, since_start);
+}
+
+absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget) {
+  std::vector<Event> events = connection_->Take();
+  for (const Event& e : events) {
+    if (std::holds_alternative<v1::EpsilonMask>(e)) ++masks_seen_;
+  }
+  Pumped p;
+  if (store_->has_scene_info()) p.cell = store_->grid().CellAt(eye.x, eye.y);
+  const bool had_info = store_->has_scene_info();
+  const std::vector<uint32_t> dropped = store_->Apply(std::move(events), p.cell);
+  if (!dropped.empty()) connection_->Forget(dropped);
+  if (store_->failure().has_value()) {
+    return absl::UnavailableError(absl::StrCat("the server at ", opt_.server, " ended the session: ", *store_->failure()));
+  }
+  if (!had_info && store_->has_scene_info()) {
+    const v1::SceneInfo& info = store_->scene_info();
+    sum_->scene_objects = info.object_count();
+    sum_->scene_triangles = info.triangle_count();
+    if (full_scene_.has_value() && (full_scene_->objects.size() != info.object_count() ||
+                                    full_scene_->TriangleCount() != info.triangle_count())) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "--verify: the local scene '", sum_->scene, "' has ", full_scene_->objects.size(), " objects and ",
+          full_scene_->TriangleCount(), " triangles; the server's has ", info.object_count(), " and ",
+          info.triangle_count()));
+    }
+    // The far plane beyond the whole scene seen from anywhere in it.
+    const glm::dvec3 lo(info.bounds_min().x(), info.bounds_min().y(), info.bounds_min().z());
+    const glm::dvec3 hi(info.bounds_max().x(), info.bounds_max().y(), info.bounds_max().z());
+    camera_.far_m = std::max(1000.0, 2.0 * glm::length(hi - lo));
+    if (!have_start_) {
+      const GridInfo& g = store_->grid();
+      camera_.eye = {g.x0 + 0.5 * g.nx * g.cell_size, g.y0 + 0.5 * g.ny * g.cell_size, g.base_z + 0.6 * g.height};
+      have_start_ = true;
+    }
+    p.cell = store_->grid().CellAt(eye.x, eye.y);
+  }
+  if (p.cell.has_value()) p.pvs = store_->Pvs(*p.cell);
+  static const std::vector<uint32_t> kNone;
+  renderer_->Sync(*store_, p.pvs != nullptr ? *p.pvs : kNone, upload_budget);
+  p.complete = p.pvs != nullptr && std::all_of(p.pvs->begin(), p.pvs->end(),
+                                               [&](uint32_t id) { return renderer_->Uploaded(id); });
+  return p;
+}
+
+absl::Status Loop::Startup() {
+  session_start_ = Now();
+  connection_->Start();
+  Log(absl::StrCat("connected to ", opt_.server, " (scene ", sum_->scene, "); waiting for the first viewcell"));
+  for (;;) {
+    if (have_start_) SendPose(glm::dvec3(0.0), Now() - session_start_);
+    absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
+    if (!p.ok()) return p.status();
+    if (p->complete) break;
+    if (store_->has_scene_info() && !p->cell.has_value()) {
+      return absl::OutOfRangeError(absl::StrFormat("the eye (%.1f, %.1f) is outside the scene's viewcell grid",
+                                                   camera_.eye.x, camera_.eye.y));
+    }
+    if (Cancelled()) return absl::CancelledError("stopped while waiting for the first viewcell");
+    if (Now() - session_start_ > opt_.startup_timeout_s) {
+      return absl::DeadlineExceededError(absl::StrFormat(
+          "the server at %s did not send the first viewcell's PVS and geometry within %.0f s", opt_.server,
+          opt_.startup_timeout_s));
+    }
+    if (input_ != nullptr) {
+      std::vector<uint32_t> none;
+      renderer_->Draw(*store_, camera_, none, nullptr, 0, nullptr);
+      context_->SwapBuffers();
+      input_->Poll();
+      if (input_->ShouldClose()) return absl::CancelledError("the window was closed while loading");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  sum_->startup_s = Now() - session_start_;
+  Log(absl::StrFormat("first viewcell complete after %.1f s", sum_->startup_s));
+  return absl::OkStatus();
+}
+
+absl::Status Loop::Screenshot(double t) {
+  absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
+  if (!rgb.ok()) return rgb.status();
+  const std::string path = (std::filesystem::path(opt_.screenshots_dir) /
+                            absl::StrFormat("frame-%06d-t%07.1fs.png", static_cast<int>(sum_->frames), t))
+                               .string();
+  if (absl::Status s = WritePng(path, {renderer_->width(), renderer_->height(), std::move(*rgb)}); !s.ok()) return s;
+  sum_->screenshots.push_back(path);
+  return absl::OkStatus();
+}
+
+absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn) {
+  std::vector<uint8_t> flags(ids_->triangle_count(), 0);
+  const std::optional<EpsilonMaskSet>& mask = store_->mask();
+  for (const DrawnObject& d : drawn) {
+    if (d.id >= full_scene_->objects.size()) continue;
+    const uint64_t first = ids_->FirstTriangle(d.id);
+    const size_t n = full_scene_->objects[d.id].mesh.TriangleCount();
+    const std::vector<uint8_t>* bits = nullptr;
+    if (d.masked && mask.has_value()) {
+      auto it = mask->visible.find(d.id);
+      if (it != mask->visible.end()) bits = &it->second;
+    }
+    for (size_t t = 0; t < n; ++t) {
+      flags[first + t] = bits == nullptr ? 1 : (t / 8 < bits->size() && ((*bits)[t / 8] >> (t % 8) & 1u) != 0);
+    }
+  }
+  const glm::dvec3 forward = camera_.Forward(), up = camera_.Up();
+  absl::StatusOr<std::vector<uint32_t>> full =
+      ids_->RenderView(camera_.eye, forward, up, camera_.fov_y_rad, camera_.width, camera_.height, nullptr);
+  if (!full.ok()) return full.status();
+  absl::StatusOr<std::vector<uint32_t>> part =
+      ids_->RenderView(camera_.eye, forward, up, camera_.fov_y_rad, camera_.width, camera_.height, &flags);
+  if (!part.ok()) return part.status();
+  uint64_t differ = 0;
+  for (size_t k = 0; k < full->size(); ++k) differ += (*full)[k] != (*part)[k] ? 1 : 0;
+  sum_->pixel_error += differ;
+  sum_->checked_pixels += full->size();
+  ++sum_->checked_frames;
+  if (differ > 0) {
+    Log(absl::StrFormat("verify: %d pixels differ at (%.1f, %.1f)", differ, camera_.eye.x, camera_.eye.y));
+  }
+  return context_->MakeCurrent();
+}
+
+absl::Status Loop::Walkthrough() {
+  const double t0 = Now();
+  double paused = 0.0, next_shot = 0.0, next_check = 0.0, prev_end = Now(), last_title = 0.0;
+  int next_progress = 1;
+  std::vector<double> frame_ms;
+  uint64_t triangles = 0, objects = 0;
+  std::set<uint32_t> cells;
+  glm::dvec3 prev_eye = camera_.eye;
+  const double free_speed = entry_.has_value() && !entry_->walks.empty() ? entry_->walks.front().speed_mps : 1.4;
+  std::vector<DrawnObject> drawn;
+  for (;;) {
+    const double begin = Now();
+    const double t = begin - t0 - paused;
+    bool last = false;
+    glm::dvec3 velocity(0.0);
+    if (walk_.has_value()) {
+      const double at = std::min(t, walk_limit_s_);
+      last = t >= walk_limit_s_;
+      const WalkPose pose = walk_->At(at);
+      camera_.eye = pose.eye;
+      camera_.yaw_rad = pose.yaw_rad;
+      velocity = last ? glm::dvec3(0.0) : pose.velocity;
+    } else if (opt_.pose.has_value()) {
+      const uint64_t frames = opt_.frames > 0 ? opt_.frames : (opt_.headless ? 1 : ~uint64_t{0});
+      last = sum_->frames + 1 >= frames;
+    } else if (input_ != nullptr) {
+      const double dt = std::min(0.1, begin - prev_end + 1e-3);
+      glm::dvec3 eye = camera_.eye;
+      input_->Update(dt, free_speed, &eye, &camera_.yaw_rad, &camera_.pitch_rad);
+      // The PVSs hold inside the grid: the eye stays in it.
+      const GridInfo& g = store_->grid();
+      eye.x = std::clamp(eye.x, g.x0 + 0.01, g.x0 + g.nx * g.cell_size - 0.01);
+      eye.y = std::clamp(eye.y, g.y0 + 0.01, g.y0 + g.ny * g.cell_size - 0.01);
+      velocity = (eye - camera_.eye) / dt;
+      camera_.eye = eye;
+    }
+    SendPose(velocity, begin - session_start_);
+    absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
+    if (!p.ok()) return p.status();
+    std::vector<uint32_t> everything;
+    const std::vector<uint32_t>* set = p->pvs;
+    if (!p->complete) {
+      // A stall: draw what is held.
+      for (const auto& [id, o] : store_->objects()) everything.push_back(id);
+      set = &everything;
+    }
+    const std::optional<EpsilonMaskSet>& mask = store_->mask();
+    const EpsilonMaskSet* use_mask =
+        opt_.use_masks && p->complete && mask.has_value() && mask->Contains(camera_.eye) ? &*mask : nullptr;
+    const bool check = ids_ != nullptr && (t >= next_check || last);
+    drawn.clear();
+    const FrameStats fs = renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr);
+    renderer_->Finish();
+    const double end = Now();
+    ++sum_->frames;
+    frame_ms.push_back((end - begin) * 1000.0);
+    if (!p->complete) {
+      ++sum_->stalls;
+      sum_->stall_s += end - prev_end;
+    }
+    prev_end = end;
+    triangles += fs.triangles_drawn;
+    objects += fs.objects_drawn;
+    sum_->max_triangles_drawn = std::max(sum_->max_triangles_drawn, fs.triangles_drawn);
+    if (memory_budget_ != 0 && store_->held_bytes() > memory_budget_) ++sum_->frames_over_memory_budget;
+    if (triangle_budget_ != 0 && fs.triangles_drawn > triangle_budget_) ++sum_->frames_over_triangle_budget;
+    if (fs.mask_used) ++sum_->frames_masked;
+    if (p->cell.has_value()) cells.insert(*p->cell);
+    sum_->distance_m += glm::length(camera_.eye - prev_eye);
+    prev_eye = camera_.eye;
+
+    const double pause_begin = Now();
+    if (!opt_.screenshots_dir.empty() && (t >= next_shot || last)) {
+      if (absl::Status s = Screenshot(t); !s.ok()) return s;
+      while (next_shot <= t) next_shot += opt_.every_s;
+    }
+    if (check) {
+      if (absl::Status s = Verify(drawn); !s.ok()) return s;
+      while (next_check <= t) next_check += opt_.every_s;
+    }
+    if (frame_log_ != nullptr) {
+      std::fprintf(frame_log_, "%llu,%.3f,%.2f,%.2f,%lld,%d,%u,%llu,%.3f,%llu,%d\n",
+                   static_cast<unsigned long long>(sum_->frames), t, camera_.eye.x, camera_.eye.y,
+                   p->cell.has_value() ? static_cast<long long>(*p->cell) : -1LL, p->complete ? 0 : 1,
+                   fs.objects_drawn, static_cast<unsigned long long>(fs.triangles_drawn), frame_ms.back(),
+                   static_cast<unsigned long long>(store_->held_bytes()), fs.mask_used ? 1 : 0);
+    }
+    if (walk_.has_value() && t >= next_progress * 0.1 * walk_limit_s_ && next_progress <= 9) {
+      Log(absl::StrFormat("walk %d%%: %.0f of %.0f s, %d frames, %d stalls, %.1f MB held", next_progress * 10,
+                          t, walk_limit_s_, sum_->frames, sum_->stalls, store_->held_bytes() / 1e6));
+      ++next_progress;
+    }
+    if (input_ != nullptr) {
+      context_->SwapBuffers();
+      input_->Poll();
+      if (end - last_title > 0.5) {
+        const double fps = 1000.0 / std::max(1e-3, frame_ms.back());
+        std::string cell = "-";
+        if (p->cell.has_value()) {
+          const GridInfo& g = store_->grid();
+          cell = absl::StrCat(*p->cell % static_cast<uint32_t>(g.nx), ",", *p->cell / static_cast<uint32_t>(g.nx));
+        }
+        input_->SetTitle(absl::StrFormat(
+            "vistream %s | %.0f fps | cell %s | PVS %d | held %d objects, %.1f MB | drawn %d tris | stalls %d",
+            sum_->scene, fps, cell, p->pvs != nullptr ? p->pvs->size() : 0, store_->objects().size(),
+            store_->held_bytes() / 1e6, fs.triangles_drawn, sum_->stalls));
+        last_title = end;
+      }
+      if (input_->ShouldClose()) last = true;
+    }
+    paused += Now() - pause_begin;
+    if (last) break;
+    if (Cancelled()) {
+      sum_->cancelled = true;
+      break;
+    }
+    if (opt_.max_fps > 0.0) {
+      const double wait = begin + 1.0 / opt_.max_fps - Now();
+      if (wait > 0.0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+    }
+  }
+  const double walked = Now() - t0 - paused;
+  sum_->walk_s = walked;
+  sum_->fps = walked > 0.0 ? static_cast<double>(sum_->frames) / walked : 0.0;
+  sum_->frame_ms_p50 = Percentile(frame_ms, 0.5);
+  sum_->frame_ms_p99 = Percentile(frame_ms, 0.99);
+  sum_->frame_ms_max = frame_ms.empty() ? 0.0 : *std::max_element(frame_ms.begin(), frame_ms.end());
+  if (sum_->frames > 0) {
+    sum_->mean_triangles_drawn = static_cast<double>(triangles) / static_cast<double>(sum_->frames);
+    sum_->mean_objects_drawn = static_cast<double>(objects) / static_cast<double>(sum_->frames);
+  }
+  sum_->cells_visited = cells.size();
+  return absl::OkStatus();
+}
+
+absl::Status Loop::Run() {
+  absl::Status s = Prepare();
+  if (s.ok()) s = Startup();
+  if (s.ok()) {
+    s = Walkthrough();
+  } else if (s.code() == absl::StatusCode::kCancelled) {
+    sum_->cancelled = true;
+    s = absl::OkStatus();
+  }
+  if (connection_ != nullptr) {
+    const absl::Status end = connection_->Stop();
+    const ConnectionStats c = connection_->stats();
+    sum_->bytes_received = c.bytes_received;
+    sum_->geometry_bytes = c.geometry_bytes;
+    sum_->objects_received = c.objects_received;
+    sum_->duplicates = c.duplicates;
+    sum_->reconnects = c.reconnects;
+    if (s.ok() && !end.ok() && end.code() != absl::StatusCode::kUnavailable) s = end;
+  }
+  if (store_ != nullptr) {
+    sum_->max_held_bytes = store_->max_held_bytes();
+    sum_->evicted_by_server = store_->evicted_by_server();
+    sum_->evicted_by_budget = store_->evicted_by_budget();
+  }
+  sum_->masks_received = masks_seen_;
+  if (frame_log_ != nullptr) std::fclose(frame_log_);
+  // GL objects go with their context, the id renderer's first (it makes its own).
+  renderer_.reset();
+  ids_.reset();
+  context_.reset();
+  return s;
+}
+
+}  // namespace
+
+absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& options) {
+  WalkthroughSummary summary;
+  summary.server = options.server;
+  Loop loop(options, &summary);
+  if (absl::Status s = loop.Run(); !s.ok()) return s;
+  return summary;
+}
+
+std::string SummaryJson(const WalkthroughSummary& s) {
+  nlohmann::ordered_json j;
+  j["server"] = s.server;
+  j["scene"] = s.scene;
+  j["path"] = s.path;
+  j["speed_kmh"] = s.speed_kmh;
+  j["size"] = absl::StrCat(s.width, "x", s.height);
+  j["frames"] = s.frames;
+  j["stalls"] = s.stalls;
+  j["stall_s"] = s.stall_s;
+  j["bytes_received"] = s.bytes_received;
+  j["geometry_bytes"] = s.geometry_bytes;
+  j["objects_received"] = s.objects_received;
+  j["duplicates"] = s.duplicates;
+  j["reconnects"] = s.reconnects;
+  j["mean_triangles_drawn"] = s.mean_triangles_drawn;
+  j["max_triangles_drawn"] = s.max_triangles_drawn;
+  j["mean_objects_drawn"] = s.mean_objects_drawn;
+  j["scene_triangles"] = s.scene_triangles;
+  j["scene_objects"] = s.scene_objects;
+  j["max_held_bytes"] = s.max_held_bytes;
+  j["memory_budget_bytes"] = s.memory_budget_bytes;
+  j["frames_over_memory_budget"] = s.frames_over_memory_budget;
+  j["triangle_budget"] = s.triangle_budget;
+  j["frames_over_triangle_budget"] = s.frames_over_triangle_budget;
+  j["evicted_by_server"] = s.evicted_by_server;
+  j["evicted_by_budget"] = s.evicted_by_budget;
+  j["fps"] = s.fps;
+  j["frame_ms_p50"] = s.frame_ms_p50;
+  j["frame_ms_p99"] = s.frame_ms_p99;
+  j["frame_ms_max"] = s.frame_ms_max;
+  // null when nothing was checked: no check is not a check that found nothing.
+  j["pixel_error"] = s.verified ? nlohmann::ordered_json(s.pixel_error) : nlohmann::ordered_json(nullptr);
+  j["checked_frames"] = s.checked_frames;
+  j["checked_pixels"] = s.checked_pixels;
+  j["masks_received"] = s.masks_received;
+  j["frames_masked"] = s.frames_masked;
+  j["cells_visited"] = s.cells_visited;
+  j["startup_s"] = s.startup_s;
+  j["walk_s"] = s.walk_s;
+  j["distance_m"] = s.distance_m;
+  j["screenshots"] = s.screenshots;
+  j["cancelled"] = s.cancelled;
+  return j.dump(2);
+}
+
+std::string SummaryText(const WalkthroughSummary& s) {
+  std::string out = absl::StrFormat(
+      "walkthrough of %s%s: %d frames in %.1f s (%.1f fps; frame time p50 %.1f ms, p99 %.1f ms), %.0f m walked, "
+      "%d viewcells\n",
+      s.scene, s.path.empty() ? "" : absl::StrCat(" along '", s.path, "'"), s.frames, s.walk_s, s.fps,
+      s.frame_ms_p50, s.frame_ms_p99, s.distance_m, s.cells_visited);
+  absl::StrAppendFormat(&out, "  stalls: %d (%.2f s); first viewcell after %.1f s\n", s.stalls, s.stall_s,
+                        s.startup_s);
+  absl::StrAppendFormat(&out,
+                        "  received %.1f MB (%d objects, %d twice, %d reconnects); held at most %.1f MB%s\n",
+                        s.bytes_received / 1e6, s.objects_received, s.duplicates, s.reconnects,
+                        s.max_held_bytes / 1e6,
+                        s.memory_budget_bytes > 0 ? absl::StrFormat(" of a %.1f MB budget", s.memory_budget_bytes / 1e6)
+                                                  : std::string());
+  absl::StrAppendFormat(&out, "  drawn: %.0f triangles a frame on average (%.3f%% of the scene's %d), %d frames masked\n",
+                        s.mean_triangles_drawn,
+                        s.scene_triangles > 0 ? 100.0 * s.mean_triangles_drawn / s.scene_triangles : 0.0,
+                        s.scene_triangles, s.frames_masked);
+  if (s.verified) {
+    absl::StrAppendFormat(&out, "  pixel error: %d of %d pixels in %d checked frames\n", s.pixel_error,
+                          s.checked_pixels, s.checked_frames);
+  } else {
+    out += "  pixel error: not checked (--verify checks it)\n";
+  }
+  if (!s.screenshots.empty()) {
+    absl::StrAppendFormat(&out, "  %d screenshots in %s\n", s.screenshots.size(),
+                          std::filesystem::path(s.screenshots.front()).parent_path().string());
+  }
+  if (s.cancelled) out += "  stopped early\n";
+  return out;
+}
+
+}  // namespace vistream::client

@@ -1,0 +1,83 @@
+#pragma once
+// The thin client's main loop (DESIGN.md "Server and client"), shared by its two front ends:
+// a GLFW window (WASD and mouse, or following a walk) and a headless OSMesa run that follows a
+// walk from the scene catalog. Each frame takes what the network thread decoded, uploads within
+// a budget, and draws the current viewcell's PVS (narrowed by the ε-mask inside its box); it
+// never waits for the server. A stall is a frame drawn inside a viewcell whose PVS geometry
+// has not fully arrived (list, objects, and their upload).
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+#include <glm/vec3.hpp>
+
+namespace vistream::client {
+
+struct FixedPose {
+  glm::dvec3 eye{0.0};  // scene-local metres
+  double yaw_rad = 0.0, pitch_rad = 0.0;
+};
+
+struct WalkthroughOptions {
+  std::string server = "127.0.0.1:50051";
+  bool headless = false;
+  std::string path;           // a walk of the scene's catalog entry; empty: the first (headless)
+  double speed_kmh = 0.0;     // 0: the walk's own speed
+  double seconds = 0.0;       // stop after this much of the walk; 0: the whole walk
+  int width = 1280, height = 720;
+  std::string screenshots_dir;  // PNGs every `every_s` seconds of the walk, and of the last frame
+  double every_s = 10.0;        // between screenshots and between --verify checks
+  bool verify = false;          // compare drawn set and full scene in the object-id buffer
+  std::string frame_log;        // a CSV line per frame
+  std::string catalog_dir;      // empty: the built-in catalog
+  std::optional<uint64_t> memory_budget_bytes;  // none: the catalog's client.memory_mb, else unlimited
+  std::optional<uint64_t> triangle_budget;      // none: the catalog's client.triangle_budget
+  uint64_t upload_budget_bytes = uint64_t{4} << 20;  // GPU uploads per frame
+  double max_fps = 60.0;        // 0: as fast as it draws
+  bool use_masks = true;        // false: draw the viewcell PVS whole (a baseline)
+  std::optional<FixedPose> pose;  // stand here instead of walking (screenshots of a pose)
+  uint64_t frames = 0;          // with a pose: stop after this many frames; 0: 1 headless
+  double startup_timeout_s = 300.0;
+  double connect_timeout_s = 10.0;
+  const std::atomic<bool>* cancel = nullptr;  // set: the loop ends after the frame
+  std::function<void(const std::string&)> log;  // progress lines; may be empty
+};
+
+struct WalkthroughSummary {
+  std::string server, scene, path;
+  double speed_kmh = 0.0;
+  int width = 0, height = 0;
+  uint64_t frames = 0, stalls = 0;
+  double stall_s = 0.0;
+  uint64_t bytes_received = 0, geometry_bytes = 0, objects_received = 0, duplicates = 0, reconnects = 0;
+  double mean_triangles_drawn = 0.0, mean_objects_drawn = 0.0;
+  uint64_t max_triangles_drawn = 0;
+  uint64_t scene_triangles = 0, scene_objects = 0;
+  uint64_t max_held_bytes = 0, memory_budget_bytes = 0, frames_over_memory_budget = 0;
+  uint64_t triangle_budget = 0, frames_over_triangle_budget = 0;
+  uint64_t evicted_by_server = 0, evicted_by_budget = 0;
+  double fps = 0.0, frame_ms_p50 = 0.0, frame_ms_p99 = 0.0, frame_ms_max = 0.0;
+  bool verified = false;
+  uint64_t pixel_error = 0, checked_frames = 0, checked_pixels = 0;
+  uint64_t masks_received = 0, frames_masked = 0, cells_visited = 0;
+  double startup_s = 0.0, walk_s = 0.0, distance_m = 0.0;
+  std::vector<std::string> screenshots;
+  bool cancelled = false;
+};
+
+// Runs one walkthrough against the server at options.server. Errors name what failed: an
+// unreachable server or another protocol version (UNAVAILABLE, FAILED_PRECONDITION), a walk the
+// catalog does not have (NOT_FOUND, listing the walks), no window (UNAVAILABLE), the server
+// ending the session for good (its status), the first viewcell not arriving in time.
+absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& options);
+
+// The summary as JSON (one object) and as lines for people.
+std::string SummaryJson(const WalkthroughSummary& s);
+std::string SummaryText(const WalkthroughSummary& s);
+
+}  // namespace vistream::client

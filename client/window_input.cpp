@@ -1,0 +1,73 @@
+#include "client/window_input.h"
+
+#include <algorithm>
+#include <cmath>
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+namespace vistream::client {
+
+namespace {
+GLFWwindow* W(void* w) { return static_cast<GLFWwindow*>(w); }
+}  // namespace
+
+WindowInput::WindowInput(void* window) : window_(window) {}
+
+void WindowInput::Poll() { glfwPollEvents(); }
+
+bool WindowInput::ShouldClose() const { return glfwWindowShouldClose(W(window_)) != 0; }
+
+void WindowInput::SetTitle(const std::string& title) { glfwSetWindowTitle(W(window_), title.c_str()); }
+
+bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad) {
+  GLFWwindow* w = W(window_);
+  auto down = [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; };
+  bool moved = false;
+  // Esc frees the mouse, or closes the window when the mouse is free; Q closes.
+  const bool escape = down(GLFW_KEY_ESCAPE);
+  if (escape && !escape_was_down_) {
+    if (captured_) {
+      captured_ = false;
+      glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_NORMAL);
+    } else {
+      glfwSetWindowShouldClose(w, GLFW_TRUE);
+    }
+  }
+  escape_was_down_ = escape;
+  if (down(GLFW_KEY_Q)) glfwSetWindowShouldClose(w, GLFW_TRUE);
+  if (!captured_ && glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+    captured_ = true;
+    glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_DISABLED);
+    glfwGetCursorPos(w, &last_x_, &last_y_);
+  }
+  if (captured_) {
+    double x = 0.0, y = 0.0;
+    glfwGetCursorPos(w, &x, &y);
+    constexpr double kRadPerPixel = 0.0025;
+    if (x != last_x_ || y != last_y_) {
+      *yaw_rad -= (x - last_x_) * kRadPerPixel;
+      *pitch_rad = std::clamp(*pitch_rad - (y - last_y_) * kRadPerPixel, -1.5, 1.5);
+      moved = true;
+    }
+    last_x_ = x;
+    last_y_ = y;
+  }
+  constexpr double kTurnRadPerS = 1.5;
+  if (down(GLFW_KEY_LEFT)) *yaw_rad += kTurnRadPerS * dt, moved = true;
+  if (down(GLFW_KEY_RIGHT)) *yaw_rad -= kTurnRadPerS * dt, moved = true;
+  const double speed = speed_mps * (down(GLFW_KEY_LEFT_SHIFT) || down(GLFW_KEY_RIGHT_SHIFT) ? 5.0 : 1.0);
+  const glm::dvec3 forward(std::cos(*yaw_rad), std::sin(*yaw_rad), 0.0), right(forward.y, -forward.x, 0.0);
+  glm::dvec3 step(0.0);
+  if (down(GLFW_KEY_W) || down(GLFW_KEY_UP)) step += forward;
+  if (down(GLFW_KEY_S) || down(GLFW_KEY_DOWN)) step -= forward;
+  if (down(GLFW_KEY_D)) step += right;
+  if (down(GLFW_KEY_A)) step -= right;
+  if (step != glm::dvec3(0.0)) {
+    *eye += step / std::sqrt(step.x * step.x + step.y * step.y) * speed * dt;
+    moved = true;
+  }
+  return moved;
+}
+
+}  // namespace vistream::client
