@@ -50,11 +50,40 @@ case "$cmd" in
     install_packages
     configure_and_build
     shift
-    # The main job on the default scene from the catalog. Later stages extend this to the
-    # full server + client walkthrough.
-    mkdir -p "$BUILD_DIR/scenes"
-    "$BUILD_DIR/bin/vistream" scene generate default -o "$BUILD_DIR/scenes/default.glb" "$@"
-    "$BUILD_DIR/bin/vistream" scene info "$BUILD_DIR/scenes/default.glb"
+    # The main job: a walkthrough. A server on the default scene (a free loopback port), the
+    # headless client along the default walk (at 60 km/h unless --speed is given, checking
+    # its frames against the full scene), then the server is stopped.
+    out="$BUILD_DIR/walkthrough"
+    mkdir -p "$out/screenshots"
+    rm -f "$out"/screenshots/*.png
+    "$BUILD_DIR/bin/vistream-server" --scene default --listen 127.0.0.1:0 >"$out/server.out" 2>"$out/server.log" &
+    server=$!
+    stop_server() { kill -TERM "$server" 2>/dev/null && wait "$server" 2>/dev/null || true; }
+    trap stop_server EXIT
+    trap 'exit 130' INT TERM
+    address=""
+    for _ in $(seq 1 600); do
+      address=$(sed -n 's/^vistream-server: ready on \([0-9.]*:[0-9]*\): .*/\1/p' "$out/server.out")
+      [ -n "$address" ] && break
+      if ! kill -0 "$server" 2>/dev/null; then
+        log "the server did not start; its log:"
+        cat "$out/server.log" >&2
+        exit 1
+      fi
+      sleep 0.5
+    done
+    [ -n "$address" ] || { log "the server was not ready after 300 s; log in $out/server.log"; exit 1; }
+    log "server ready on $address (log: $out/server.log)"
+    defaults=()
+    [[ " $* " == *" --speed "* ]] || defaults+=(--speed 60)
+    rc=0
+    "$BUILD_DIR/bin/vistream-client" --server "$address" --headless --verify --every 10 \
+      --screenshots "$out/screenshots" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" || rc=$?
+    stop_server
+    trap - EXIT
+    shots=$(find "$out/screenshots" -name '*.png' | wc -l)
+    log "screenshots: $shots PNGs in $out/screenshots; per-frame log: $out/frames.csv"
+    exit "$rc"
     ;;
   test)
     install_packages

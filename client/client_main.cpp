@@ -80,6 +80,9 @@ int main(int argc, char** argv) {
                "load the full scene locally and count pixels where the drawn set differs from it (tests)");
   app.add_flag("--json", json, "print the summary as JSON");
   app.add_option("--frame-log", o.frame_log, "write one CSV line per frame to this file");
+  app.add_option("--connect-timeout", o.connect_timeout_s, "seconds to wait for the server to answer")
+      ->check(Finite(0.1, 3600))
+      ->capture_default_str();
   app.add_option("--catalog", o.catalog_dir, "scene catalog folder (walks and client budgets)");
   app.add_option("--memory-mb", memory_mb, "memory budget for held geometry, MiB (default: the catalog's)")
       ->check(Finite(0.0, 1e9));

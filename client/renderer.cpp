@@ -30,8 +30,13 @@ constexpr const char* kFragmentShader = R"(#version 330 core
 in vec3 world;
 uniform vec3 colour;
 uniform vec3 sun;
+uniform float lit;
 out vec4 fragment;
 void main() {
+  if (lit == 0.0) {
+    fragment = vec4(colour, 1.0);
+    return;
+  }
   vec3 n = normalize(cross(dFdx(world), dFdy(world)));
   float direct = max(dot(n, sun), 0.0);
   float sky = 0.5 + 0.5 * n.z;
@@ -51,7 +56,15 @@ glm::vec3 ObjectColour(uint32_t id) {
   return {light, light * (0.86f + 0.10f * b), light * (0.74f + 0.14f * b)};
 }
 
+std::array<uint8_t, 3> ToRgb(const float c[3]) {
+  return {static_cast<uint8_t>(std::lround(c[0] * 255.0f)), static_cast<uint8_t>(std::lround(c[1] * 255.0f)),
+          static_cast<uint8_t>(std::lround(c[2] * 255.0f))};
+}
+
 }  // namespace
+
+std::array<uint8_t, 3> Renderer::SkyRgb() { return ToRgb(kSky); }
+std::array<uint8_t, 3> Renderer::GroundRgb() { return ToRgb(kGround); }
 
 glm::dvec3 Camera::Forward() const {
   return {std::cos(pitch_rad) * std::cos(yaw_rad), std::cos(pitch_rad) * std::sin(yaw_rad), std::sin(pitch_rad)};
@@ -104,6 +117,7 @@ absl::Status Renderer::Init(bool offscreen) {
   loc_view_projection_ = gl_.GetUniformLocation(program_, "view_projection");
   loc_colour_ = gl_.GetUniformLocation(program_, "colour");
   loc_sun_ = gl_.GetUniformLocation(program_, "sun");
+  loc_lit_ = gl_.GetUniformLocation(program_, "lit");
   gl_.GenVertexArrays(1, &ground_vao_);
   gl_.GenBuffers(1, &ground_vbo_);
   if (offscreen_) {
@@ -250,6 +264,7 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
   gl_.UniformMatrix4fv(loc_view_projection_, 1, GL_FALSE, glm::value_ptr(vp));
   const glm::vec3 sun = glm::normalize(glm::vec3(0.62f, 0.45f, 0.64f));
   gl_.Uniform3f(loc_sun_, sun.x, sun.y, sun.z);
+  gl_.Uniform1f(loc_lit_, 1.0f);
 
   // The ground: a square around the eye reaching past the far plane's reach on the ground.
   if (store.has_scene_info()) {
@@ -262,8 +277,10 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     gl_.BufferData(GL_ARRAY_BUFFER, sizeof(quad), quad, GL_STREAM_DRAW);
     gl_.EnableVertexAttribArray(0);
     gl_.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 3 * sizeof(float), nullptr);
-    gl_.Uniform3f(loc_colour_, kGround[0] / 0.9f, kGround[1] / 0.9f, kGround[2] / 0.9f);
+    gl_.Uniform3f(loc_colour_, kGround[0], kGround[1], kGround[2]);
+    gl_.Uniform1f(loc_lit_, 0.0f);
     gl_.DrawArrays(GL_TRIANGLES, 0, 6);
+    gl_.Uniform1f(loc_lit_, 1.0f);
   }
 
   for (uint32_t id : objects) {

@@ -6,6 +6,7 @@
 // makes a frame hitch. The same renderer serves the window and the off-screen front ends: GL
 // calls go through the context's function table (gl/gl_functions.h).
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -82,6 +83,10 @@ class Renderer {
   // The last frame as RGB bytes, top row first (width x height x 3). Errors: GL failing.
   absl::StatusOr<std::vector<uint8_t>> ReadRgb();
 
+  // The colours of sky and ground pixels in ReadRgb (neither is lit).
+  static std::array<uint8_t, 3> SkyRgb();
+  static std::array<uint8_t, 3> GroundRgb();
+
   int width() const { return width_; }
   int height() const { return height_; }
   // Resizes the off-screen framebuffer or the window viewport.
@@ -107,7 +112,7 @@ class Renderer {
   int width_ = 0, height_ = 0;
   bool offscreen_ = false;
   unsigned program_ = 0, fbo_ = 0, colour_rb_ = 0, depth_rb_ = 0, ground_vao_ = 0, ground_vbo_ = 0;
-  int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1;
+  int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1, loc_lit_ = -1;
   std::unordered_map<uint32_t, Gpu> gpu_;
   std::set<uint32_t> pending_;
 };

@@ -252,11 +252,25 @@ absl::Status Loop::Startup() {
   session_start_ = Now();
   connection_->Start();
   Log(absl::StrCat("connected to ", opt_.server, " (scene ", sum_->scene, "); waiting for the first viewcell"));
+  uint64_t objects_seen = 0;
+  double last_arrival = Now();
   for (;;) {
     if (have_start_) SendPose(glm::dvec3(0.0), Now() - session_start_);
     absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
     if (!p.ok()) return p.status();
     if (p->complete) break;
+    if (const uint64_t n = connection_->stats().objects_received; n != objects_seen) {
+      objects_seen = n;
+      last_arrival = Now();
+    }
+    // The list is here but its geometry stopped coming: the server keeps the memory budget
+    // (geometry needs no computing). Walk on; frames in such cells count as stalls.
+    if (p->pvs != nullptr && memory_budget_ != 0 && Now() - last_arrival > 3.0) {
+      Log(absl::StrFormat("the first viewcell's PVS (%d objects) does not fit the %.1f MB memory budget: walking "
+                          "on with %d of them",
+                          p->pvs->size(), memory_budget_ / 1e6, store_->objects().size()));
+      break;
+    }
     if (store_->has_scene_info() && !p->cell.has_value()) {
       return absl::OutOfRangeError(absl::StrFormat("the eye (%.1f, %.1f) is outside the scene's viewcell grid",
                                                    camera_.eye.x, camera_.eye.y));

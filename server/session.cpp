@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <limits>
+#include <unordered_map>
 
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
@@ -175,6 +178,8 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       anchor_ = p;
       anchor_s_ = now;
       mask_requested_ = false;
+    } else if (Turned()) {
+      SetWanted(now);  // the cells ahead are others now: re-rank requests and geometry
     }
     MaybeRequestMask(now);
   }
@@ -189,19 +194,40 @@ double Session::Deadline(CellId cell, double now) const {
   const double dx = std::max({0.0, box.min.x - position_.x, position_.x - box.max.x});
   const double dy = std::max({0.0, box.min.y - position_.y, position_.y - box.max.y});
   const double speed = std::max(1.0, std::hypot(velocity_.x, velocity_.y));
-  // Along the velocity a cell is reached sooner than across it: weigh the distance by how
-  // far the cell lies off the direction of travel.
-  const glm::dvec2 to(0.5 * (box.min.x + box.max.x) - position_.x, 0.5 * (box.min.y + box.max.y) - position_.y);
-  const double len = std::hypot(to.x, to.y);
-  double ahead = 0.0;
-  if (len > 0.0 && std::hypot(velocity_.x, velocity_.y) > 0.1) {
-    ahead = (to.x * velocity_.x + to.y * velocity_.y) / (len * std::hypot(velocity_.x, velocity_.y));
+  const double reach = std::hypot(dx, dy) / speed;
+  if (std::hypot(velocity_.x, velocity_.y) < 0.1) return now + reach;
+  // Moving: a cell on the line of travel is reached when the line enters it (slab test in xy).
+  double enter = 0.0, leave = std::numeric_limits<double>::infinity();
+  bool hit = true;
+  const double p[2] = {position_.x, position_.y}, v[2] = {velocity_.x, velocity_.y};
+  const double lo[2] = {box.min.x, box.min.y}, hi[2] = {box.max.x, box.max.y};
+  for (int a = 0; a < 2 && hit; ++a) {
+    if (std::abs(v[a]) < 1e-9) {
+      hit = p[a] >= lo[a] && p[a] <= hi[a];
+      continue;
+    }
+    const double t0 = (lo[a] - p[a]) / v[a], t1 = (hi[a] - p[a]) / v[a];
+    enter = std::max(enter, std::min(t0, t1));
+    leave = std::min(leave, std::max(t0, t1));
   }
-  return now + std::hypot(dx, dy) / speed * (1.5 - 0.5 * ahead);
+  if (hit && enter <= leave) return now + enter;
+  // Off the line: reached only after a turn, so after the cells on it that are as near (a
+  // street running beside a cell edge does not put the cell across the edge first).
+  // A cell on the line is at most a diagonal (1.41 cells) away.
+  return now + 1.5 * (reach + scene_->grid().cell_size() / speed);
+}
+
+bool Session::Turned() const {
+  const double a = std::hypot(velocity_.x, velocity_.y), b = std::hypot(ranked_velocity_.x, ranked_velocity_.y);
+  if ((a < 0.1) != (b < 0.1)) return true;  // started or stopped
+  if (a < 0.1) return false;
+  constexpr double kCos30 = 0.8660254037844387;
+  return (velocity_.x * ranked_velocity_.x + velocity_.y * ranked_velocity_.y) / (a * b) < kCos30;
 }
 
 void Session::SetWanted(double now) {
   const visibility::ViewcellGrid& grid = scene_->grid();
+  ranked_velocity_ = velocity_;
   std::vector<std::pair<double, CellId>> order;
   order.emplace_back(now, *current_);
   for (CellId n : grid.Neighbours(*current_)) order.emplace_back(Deadline(n, now), n);
@@ -322,6 +348,50 @@ void Session::EvictLeft(const std::map<CellId, CellPvsPtr>& had) {
   if (log_ != nullptr) log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(evict.size())}});
 }
 
+std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
+  // Rank what the client holds by when it is needed (the position of its earliest wanted cell;
+  // the current cell is 0): objects of no wanted cell first, then latest needed first, and
+  // never one needed as soon as `rank` or sooner.
+  const size_t kNever = wanted_.size();
+  std::unordered_map<uint32_t, size_t> needed_at;  // object -> position of its first wanted cell
+  for (size_t k = 0; k < wanted_.size(); ++k) {
+    auto it = received_.find(wanted_[k]);
+    if (it == received_.end()) continue;
+    for (uint32_t o : it->second->objects) needed_at.emplace(o, k);  // keeps the earliest
+  }
+  std::vector<std::pair<size_t, uint32_t>> candidates;  // (need rank, object), latest need first
+  for (uint32_t o : sent_) {
+    auto it = needed_at.find(o);
+    const size_t at = it == needed_at.end() ? kNever : it->second;
+    if (at <= rank) continue;
+    candidates.emplace_back(at, o);
+  }
+  std::sort(candidates.begin(), candidates.end(), std::greater<>());
+  std::vector<uint32_t> evict;
+  size_t freed = 0;
+  for (const auto& [at, o] : candidates) {
+    if (held_bytes_ - freed + bytes <= memory_budget_) break;
+    evict.push_back(o);
+    freed += scene_->geometry(o).RawBytes();
+  }
+  if (evict.empty() || held_bytes_ - freed + bytes > memory_budget_) return std::nullopt;  // cannot fit
+  std::sort(evict.begin(), evict.end());
+  for (uint32_t o : evict) {
+    sent_.erase(o);
+    held_bytes_ -= scene_->geometry(o).RawBytes();
+  }
+  // Evicted objects of wanted cells come back when their cell is current (SetWanted re-queues).
+  v1::ServerMessage m;
+  m.mutable_evict()->mutable_object_ids()->Add(evict.begin(), evict.end());
+  const size_t size = m.ByteSizeLong();
+  stats_.set_evicted_objects(stats_.evicted_objects() + evict.size());
+  stats_.set_bytes_sent(stats_.bytes_sent() + size);
+  if (log_ != nullptr) {
+    log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(evict.size())}, {"reason", "memory budget"}});
+  }
+  return m;
+}
+
 void Session::MaybeRequestMask(double now) {
   const visibility::EpsilonSuperset* eps = scene_->epsilon();
   if (eps == nullptr || !current_.has_value()) return;
@@ -402,7 +472,8 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
   }
   if (credit_ <= 0 || !current_.has_value()) return std::nullopt;
   // Geometry: the current cell's first, then the others in the order they will be reached.
-  for (CellId c : wanted_) {
+  for (size_t rank = 0; rank < wanted_.size(); ++rank) {
+    const CellId c = wanted_[rank];
     auto it = pending_geometry_.find(c);
     if (it == pending_geometry_.end()) continue;
     std::deque<uint32_t>& q = it->second;
@@ -411,7 +482,16 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       q.pop_front();
       if (sent_.count(o) > 0) continue;
       const scenes::EncodedMesh& g = scene_->geometry(o);
-      if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) continue;  // next crossing retries
+      if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) {
+        // Room is made by evicting what the client needs later than this cell (the Evict goes
+        // first, the object right after it); without such objects it waits for the next
+        // crossing.
+        if (std::optional<v1::ServerMessage> evict = MakeRoom(g.RawBytes(), rank)) {
+          q.push_front(o);
+          return evict;
+        }
+        continue;
+      }
       v1::ServerMessage m;
       v1::ObjectGeometry* geo = m.mutable_geometry();
       geo->set_object_id(o);

@@ -94,6 +94,9 @@ class Session : public std::enable_shared_from_this<Session> {
   uint64_t memory_budget_ = 0;  // 0: unlimited
   std::optional<CellId> current_;
   glm::dvec3 position_{0.0}, velocity_{0.0};
+  glm::dvec3 ranked_velocity_{0.0};  // the velocity wanted_ was ordered for
+  // Whether the client turned (30 degrees or more), started or stopped since wanted_ was ordered.
+  bool Turned() const;
   double last_pose_s_ = 0.0;
   double pose_tokens_ = 0.0;
   uint64_t poses_ = 0;
@@ -107,6 +110,9 @@ class Session : public std::enable_shared_from_this<Session> {
   uint64_t held_bytes_ = 0;                    // decoded bytes of sent_
   int64_t credit_ = 0;
 
+  // An Evict of held objects needed later than wanted_[rank] (or not at all), freeing enough
+  // of the memory budget for `bytes` more; none when that cannot be done. Caller holds mu_.
+  std::optional<vistream::v1::ServerMessage> MakeRoom(size_t bytes, size_t rank);
   struct Control {
     vistream::v1::ServerMessage message;
     size_t bytes;
