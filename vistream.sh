@@ -14,6 +14,7 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libpng-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   libcgal-dev libgmp-dev libmpfr-dev libmeshoptimizer-dev libosmium2-dev libgeographiclib-dev
+  xvfb xauth
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <algorithm>
 #include <future>
 #include <map>
 #include <random>
@@ -252,6 +253,264 @@ TEST(ClientWalk, ASmallMemoryBudgetIsNeverExceededAndCausesNoStallWhereItHoldsTh
   EXPECT_GT(s->evicted_by_server, 0u);
   EXPECT_EQ(s->stalls, 0u) << StalledCells(o.frame_log);
   EXPECT_EQ(s->duplicates, 0u);
+}
+
+
+TEST(ClientWalk, AServerRestartMidPathLosesNothingAndDownloadsNothingTwice) {
+  auto first = StartServer();
+  ASSERT_NE(first, nullptr);
+  const int port = first->port();
+  WalkthroughOptions o = Headless(Address(*first));
+  o.speed_kmh = 36.0;
+  o.seconds = 16.0;
+  o.verify = true;
+  o.every_s = 1.0;
+  std::future<absl::StatusOr<WalkthroughSummary>> walk =
+      std::async(std::launch::async, [&] { return RunWalkthrough(o); });
+  std::this_thread::sleep_for(std::chrono::seconds(5));
+  first.reset();  // drains: every session ends UNAVAILABLE
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  auto second = StartServer(port);
+  ASSERT_NE(second, nullptr);
+  absl::StatusOr<WalkthroughSummary> s = walk.get();
+  ASSERT_TRUE(s.ok()) << s.status();
+  std::printf("%s", SummaryText(*s).c_str());
+  EXPECT_GE(s->reconnects, 1u);
+  EXPECT_EQ(s->duplicates, 0u) << "objects held before the restart were sent again";
+  EXPECT_EQ(s->stalls, 0u);
+  EXPECT_EQ(s->pixel_error, 0u);
+  EXPECT_GE(s->checked_frames, 12u);
+  EXPECT_GT(s->distance_m, 150.0);
+}
+
+// ---- the executables ----
+
+struct Ran {
+  int rc = -1;
+  std::string output;  // stdout and stderr
+};
+
+Ran RunCommand(const std::string& command) {
+  Ran r;
+  std::FILE* p = popen((command + " 2>&1").c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) r.output.append(buf, n);
+  const int status = pclose(p);
+  r.rc = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string Client() { return VISTREAM_CLIENT_BIN; }
+
+std::string LastPng(const std::string& dir) {
+  std::vector<std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) files.push_back(e.path().string());
+  std::sort(files.begin(), files.end());
+  return files.empty() ? std::string() : files.back();
+}
+
+TEST(ClientProcess, TheWindowUnderXvfbShowsWhatTheHeadlessClientShows) {
+  auto server = StartServer();
+  ASSERT_NE(server, nullptr);
+  ASSERT_EQ(RunCommand("command -v xvfb-run").rc, 0) << "xvfb-run is missing: ./vistream.sh installs it (xvfb)";
+  const std::string window = TempDir("window"), headless = TempDir("headless");
+  const std::string common = " --server " + Address(*server) +
+                             " --pose 509.4,215.9,1.7,80,0 --frames 15 --size 320x180 --json --screenshots ";
+  const Ran w = RunCommand("xvfb-run -a -s '-screen 0 1024x768x24' " + Client() + common + window);
+  ASSERT_EQ(w.rc, 0) << w.output;
+  EXPECT_NE(w.output.find("\"stalls\": 0"), std::string::npos) << w.output;
+  const Ran h = RunCommand(Client() + " --headless" + common + headless);
+  ASSERT_EQ(h.rc, 0) << h.output;
+  absl::StatusOr<RgbImage> a = ReadPng(LastPng(window)), b = ReadPng(LastPng(headless));
+  ASSERT_TRUE(a.ok()) << a.status();
+  ASSERT_TRUE(b.ok()) << b.status();
+  ASSERT_EQ(a->width, b->width);
+  ASSERT_EQ(a->height, b->height);
+  size_t differ = 0, building = 0;
+  const Rgb sky = FromArray(Renderer::SkyRgb()), ground = FromArray(Renderer::GroundRgb());
+  for (int y = 0; y < a->height; ++y) {
+    for (int x = 0; x < a->width; ++x) {
+      const Rgb p = At(*a, x, y), q = At(*b, x, y);
+      differ += std::abs(p.r - q.r) > 3 || std::abs(p.g - q.g) > 3 || std::abs(p.b - q.b) > 3 ? 1 : 0;
+      building += !Near(p, sky) && !Near(p, ground) ? 1 : 0;
+    }
+  }
+  EXPECT_LE(differ, static_cast<size_t>(a->width * a->height / 1000)) << differ << " pixels differ";
+  EXPECT_GT(building, static_cast<size_t>(a->width * a->height / 20)) << "the window shows no city";
+}
+
+// A server that speaks another protocol version.
+class FutureServer final : public v1::Walkthrough::Service {
+  grpc::Status GetStats(grpc::ServerContext*, const v1::StatsRequest*, v1::ServerStats* s) override {
+    s->set_scene("default");
+    s->set_protocol_version(2);
+    return grpc::Status::OK;
+  }
+};
+
+TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
+  auto server = StartServer();
+  ASSERT_NE(server, nullptr);
+  const std::string real = " --headless --server " + Address(*server);
+  // Nothing listens on a port that was just free.
+  int free_port = 0;
+  {
+    grpc::ServerBuilder b;
+    b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &free_port);
+    auto probe = b.BuildAndStart();
+    probe->Shutdown();
+  }
+  Ran r = RunCommand(Client() + " --headless --connect-timeout 1 --server 127.0.0.1:" + std::to_string(free_port));
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("no vistream server answers at 127.0.0.1:" + std::to_string(free_port)),
+            std::string::npos)
+      << r.output;
+
+  FutureServer future;
+  int future_port = 0;
+  grpc::ServerBuilder b;
+  b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &future_port);
+  b.RegisterService(&future);
+  std::unique_ptr<grpc::Server> other = b.BuildAndStart();
+  r = RunCommand(Client() + " --headless --server 127.0.0.1:" + std::to_string(future_port));
+  other->Shutdown();
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("speaks protocol version 2; this client speaks version 1"), std::string::npos) << r.output;
+
+  r = RunCommand(Client() + real + " --path nowhere");
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("has no walk 'nowhere'; its walks: avenue-and-back-streets"), std::string::npos)
+      << r.output;
+
+  for (const char* size : {"12x", "1280", "0x720", "1280x720x3", "-5x10", "axb", "99999x99999"}) {
+    r = RunCommand(Client() + real + " --size " + size);
+    EXPECT_EQ(r.rc, 2) << size << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string("--size '") + size + "'"), std::string::npos) << r.output;
+  }
+  r = RunCommand(Client() + real + " --speed nan");
+  EXPECT_EQ(r.rc, 2) << r.output;
+  EXPECT_NE(r.output.find("'nan' is not a number"), std::string::npos) << r.output;
+  r = RunCommand(Client() + real + " --pose 1,2");
+  EXPECT_EQ(r.rc, 2) << r.output;
+  EXPECT_NE(r.output.find("--pose '1,2'"), std::string::npos) << r.output;
+  // A pose outside the scene: the server ends the session, and the client says why.
+  r = RunCommand(Client() + real + " --pose 99999,0,1.7,0,0");
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("outside the viewcell grid"), std::string::npos) << r.output;
+}
+
+// ---- units ----
+
+TEST(ClientGrid, FindsTheCellTheServerFinds) {
+  const visibility::ViewcellGrid& grid = Default().grid();
+  const GridInfo g = GridInfo::From(Default().scene_info().grid());
+  std::mt19937 rng(5);
+  const scenes::Aabb b = grid.Bounds();
+  std::uniform_real_distribution<double> x(b.min.x - 50, b.max.x + 50), y(b.min.y - 50, b.max.y + 50);
+  for (int k = 0; k < 20000; ++k) {
+    // Every fourth point on a cell edge, where the two could disagree.
+    glm::dvec2 p(x(rng), y(rng));
+    if (k % 4 == 0) p.x = b.min.x + std::round((p.x - b.min.x) / grid.cell_size()) * grid.cell_size();
+    if (k % 8 == 0) p.y = b.min.y + std::round((p.y - b.min.y) / grid.cell_size()) * grid.cell_size();
+    ASSERT_EQ(g.CellAt(p.x, p.y), grid.CellAt(p)) << p.x << ", " << p.y;
+  }
+  for (uint32_t c : {0u, 5u, 21u, static_cast<uint32_t>(grid.CellCount() - 1)}) {
+    std::vector<uint32_t> want = grid.Neighbours(c);
+    want.push_back(c);
+    std::vector<uint32_t> got = g.Neighbourhood(c);
+    std::sort(want.begin(), want.end());
+    std::sort(got.begin(), got.end());
+    EXPECT_EQ(got, want) << "cell " << c;
+  }
+}
+
+TEST(ObjectStore, OverBudgetDropsWhatNoNearbyCellNeedsFirstAndNeverTheCurrentCell) {
+  v1::SceneInfo info;
+  v1::ViewcellGrid* grid = info.mutable_grid();
+  grid->set_cell_size_m(10);
+  grid->set_nx(5);
+  grid->set_ny(1);
+  grid->set_height_m(2);
+  auto object = [](uint32_t id, uint64_t bytes) {
+    ReceivedObject o;
+    o.id = id;
+    o.raw_bytes = bytes;
+    return o;
+  };
+  auto pvs = [](uint32_t cell, std::vector<uint32_t> ids) {
+    v1::ViewcellPvs p;
+    p.set_cell_id(cell);
+    p.mutable_object_ids()->Add(ids.begin(), ids.end());
+    return p;
+  };
+  ObjectStore store(1000);
+  std::vector<Event> events;
+  events.emplace_back(info);
+  events.emplace_back(pvs(0, {1, 2, 5}));  // current: cell 0
+  events.emplace_back(pvs(1, {3}));     // adjacent
+  events.emplace_back(object(1, 300));
+  events.emplace_back(object(2, 300));
+  events.emplace_back(object(3, 200));
+  events.emplace_back(object(4, 150));  // in no PVS near cell 0
+  EXPECT_TRUE(store.Apply(std::move(events), 0u).empty());
+  EXPECT_EQ(store.held_bytes(), 950u);
+  EXPECT_FALSE(store.CellComplete(0));
+  // 250 more for the current cell: 4 goes first (in no nearby PVS), then 3 (adjacent only).
+  events.clear();
+  events.emplace_back(object(5, 250));
+  EXPECT_EQ(store.Apply(std::move(events), 0u), (std::vector<uint32_t>{4, 3}));
+  EXPECT_EQ(store.held_bytes(), 850u);
+  EXPECT_TRUE(store.CellComplete(0));
+  EXPECT_EQ(store.evicted_by_budget(), 2u);
+  // Past the budget with the current cell alone: it is kept, over budget.
+  events.clear();
+  events.emplace_back(object(2, 900));  // a resent object replaces the old copy
+  store.Apply(std::move(events), 0u);
+  EXPECT_NE(store.Find(1), nullptr);
+  EXPECT_NE(store.Find(2), nullptr);
+  EXPECT_NE(store.Find(5), nullptr);
+  EXPECT_GT(store.held_bytes(), 1000u);
+  // Evict hints from the server drop exactly what they name.
+  events.clear();
+  v1::Evict evict;
+  evict.add_object_ids(1);
+  evict.add_object_ids(77);  // not held: ignored
+  events.emplace_back(evict);
+  store.Apply(std::move(events), 0u);
+  EXPECT_EQ(store.Find(1), nullptr);
+  EXPECT_EQ(store.evicted_by_server(), 1u);
+  EXPECT_FALSE(store.CellComplete(0));
+}
+
+TEST(Walk, FollowsTheWaypointsAtItsSpeedLookingAhead) {
+  scenes::WalkPath path;
+  path.name = "ell";
+  path.eye_height_m = 1.5;
+  path.waypoints = {{0, 0}, {100, 0}, {100, 0}, {100, 50}};
+  absl::StatusOr<Walk> w = Walk::Create(path, 2.0);
+  ASSERT_TRUE(w.ok()) << w.status();
+  EXPECT_DOUBLE_EQ(w->length_m(), 150.0);
+  EXPECT_DOUBLE_EQ(w->duration_s(), 75.0);
+  const WalkPose a = w->At(10.0);
+  EXPECT_NEAR(a.eye.x, 20.0, 1e-9);
+  EXPECT_NEAR(a.eye.y, 0.0, 1e-9);
+  EXPECT_NEAR(a.eye.z, 1.5, 1e-9);
+  EXPECT_NEAR(a.velocity.x, 2.0, 1e-9);
+  EXPECT_NEAR(a.yaw_rad, 0.0, 1e-9);
+  const WalkPose b = w->At(60.0);  // 120 m: on the second leg, heading +y
+  EXPECT_NEAR(b.eye.x, 100.0, 1e-9);
+  EXPECT_NEAR(b.eye.y, 20.0, 1e-9);
+  EXPECT_NEAR(b.yaw_rad, M_PI / 2, 1e-9);
+  EXPECT_NEAR(b.velocity.y, 2.0, 1e-9);
+  const WalkPose end = w->At(1000.0);
+  EXPECT_NEAR(end.eye.y, 50.0, 1e-9);
+  EXPECT_EQ(end.velocity, glm::dvec3(0.0));
+  path.waypoints = {{1, 1}, {1, 1}};
+  EXPECT_FALSE(Walk::Create(path, 1.0).ok());
+  path.waypoints = {{0, 0}, {1, 1}};
+  EXPECT_FALSE(Walk::Create(path, 0.0).ok());
+  EXPECT_FALSE(Walk::Create(path, std::nan("")).ok());
 }
 
 }  // namespace

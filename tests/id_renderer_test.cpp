@@ -1,5 +1,6 @@
 #include "gl/id_renderer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -71,6 +72,55 @@ TEST(IdRenderer, PixelsSeeTheNearFrontFaceWithItsSolidAngle) {
   for (uint32_t v : (*cube)[1]) seen_near += v == 1;
   EXPECT_GT(seen_far, 0);
   EXPECT_GT(seen_near, 0);
+}
+
+TEST(IdRenderer, AViewDrawsOnlyTheFlaggedTriangles) {
+  const scenes::Scene s = Boxes();
+  absl::StatusOr<std::unique_ptr<IdRenderer>> r = IdRenderer::Create(s, 1);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ((*r)->triangle_count(), s.TriangleCount());
+  const size_t first = s.objects[0].mesh.TriangleCount();
+  EXPECT_EQ((*r)->FirstTriangle(0), 0u);
+  EXPECT_EQ((*r)->FirstTriangle(1), first);
+  // Looking down +x from the origin with a 60-degree view: the near box fills the middle.
+  const glm::dvec3 eye(0.0), forward(1, 0, 0), up(0, 0, 1);
+  auto view = [&](const std::vector<uint8_t>* flags) {
+    absl::StatusOr<std::vector<uint32_t>> v = (*r)->RenderView(eye, forward, up, std::numbers::pi / 3, 64, 48, flags);
+    EXPECT_TRUE(v.ok()) << v.status();
+    return v.ok() ? *v : std::vector<uint32_t>();
+  };
+  const std::vector<uint32_t> full = view(nullptr);
+  ASSERT_EQ(full.size(), 64u * 48u);
+  EXPECT_EQ(full[24 * 64 + 32], 1u);  // the centre sees the near box
+  EXPECT_EQ(full[0], kNothing);       // a corner sees past it
+  EXPECT_EQ(std::count(full.begin(), full.end(), 2u), 0);
+  // Every triangle flagged: the same picture.
+  std::vector<uint8_t> flags(s.TriangleCount(), 1);
+  EXPECT_EQ(view(&flags), full);
+  // The near box left out: the far one shows through where it stood.
+  std::fill(flags.begin(), flags.begin() + static_cast<std::ptrdiff_t>(first), 0);
+  const std::vector<uint32_t> without = view(&flags);
+  EXPECT_EQ(std::count(without.begin(), without.end(), 1u), 0);
+  EXPECT_GT(std::count(without.begin(), without.end(), 2u), 0);
+  // One face of the near box left out: the eye sees into the box (back faces) there.
+  flags.assign(s.TriangleCount(), 1);
+  int dropped = 0;
+  for (size_t t = 0; t < first; ++t) {
+    const auto& m = s.objects[0].mesh;
+    if (m.positions[m.indices[3 * t]].x == 2.0f && m.positions[m.indices[3 * t + 1]].x == 2.0f &&
+        m.positions[m.indices[3 * t + 2]].x == 2.0f) {
+      flags[t] = 0;
+      ++dropped;
+    }
+  }
+  ASSERT_GT(dropped, 0);
+  const std::vector<uint32_t> open = view(&flags);
+  EXPECT_NE(open[24 * 64 + 32] & kBackFace, 0u);
+  // Bad arguments are errors, not crashes.
+  flags.resize(3);
+  EXPECT_FALSE((*r)->RenderView(eye, forward, up, 1.0, 64, 48, &flags).ok());
+  EXPECT_FALSE((*r)->RenderView(eye, forward, up, 1.0, 0, 48, nullptr).ok());
+  EXPECT_FALSE((*r)->RenderView(eye, forward, up, 0.0, 64, 48, nullptr).ok());
 }
 
 TEST(IdRenderer, RejectsBadSizes) {
