@@ -23,6 +23,7 @@
 #include "gl/gl_context.h"
 #include "gl/id_renderer.h"
 #include "scenes/catalog.h"
+#include "visibility/viewcell_grid.h"
 
 namespace vistream::client {
 
@@ -56,6 +57,7 @@ class Loop {
  private:
   absl::Status Prepare();
   absl::Status Startup();
+  absl::Status PreloadEverything();
   absl::Status Walkthrough();
   // Takes the network's events into the store and uploads within `upload_budget`.
   absl::StatusOr<Pumped> Pump(const glm::dvec3& eye, uint64_t upload_budget);
@@ -73,13 +75,16 @@ class Loop {
   std::optional<Walk> walk_;
   double walk_limit_s_ = 0.0;
   uint64_t memory_budget_ = 0, triangle_budget_ = 0;
-  std::optional<scenes::Scene> full_scene_;
+  std::optional<scenes::Scene> owned_scene_;
+  const scenes::Scene* full_scene_ = nullptr;
   std::unique_ptr<gl::IdRenderer> ids_;
   std::unique_ptr<gl::GlContext> context_;
   std::unique_ptr<Renderer> renderer_;
   std::unique_ptr<WindowInput> input_;
   std::unique_ptr<Connection> connection_;
   std::unique_ptr<ObjectStore> store_;
+  std::vector<Event> preload_;        // draw_everything: the whole scene, applied by the first Pump
+  std::vector<uint32_t> everything_;  // draw_everything: every object id
   Camera camera_;
   bool have_start_ = false;  // camera_ holds a start pose
   std::FILE* frame_log_ = nullptr;
@@ -147,14 +152,22 @@ absl::Status Loop::Prepare() {
   sum_->memory_budget_bytes = memory_budget_;
   sum_->triangle_budget = triangle_budget_;
 
-  if (opt_.verify) {
-    Log(absl::StrCat("loading the full scene '", sum_->scene, "' locally for --verify"));
-    absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(sum_->scene, {opt_.catalog_dir, {}});
-    if (!loaded.ok()) {
-      return absl::Status(loaded.status().code(),
-                          absl::StrCat("--verify needs the scene locally: ", loaded.status().message()));
+  if (opt_.verify || opt_.draw_everything) {
+    if (opt_.local_scene != nullptr) {
+      full_scene_ = opt_.local_scene;
+    } else {
+      Log(absl::StrCat("loading the full scene '", sum_->scene, "' locally"));
+      absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(sum_->scene, {opt_.catalog_dir, {}});
+      if (!loaded.ok()) {
+        return absl::Status(loaded.status().code(),
+                            absl::StrCat(opt_.verify ? "--verify" : "drawing everything",
+                                         " needs the scene locally: ", loaded.status().message()));
+      }
+      owned_scene_ = std::move(loaded->scene);
+      full_scene_ = &*owned_scene_;
     }
-    full_scene_ = std::move(loaded->scene);
+  }
+  if (opt_.verify) {
     absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1);
     if (!ids.ok()) return ids.status();
     ids_ = std::move(*ids);
@@ -196,17 +209,60 @@ absl::Status Loop::Prepare() {
   co.memory_budget_bytes = memory_budget_;
   co.triangle_budget = triangle_budget_;
   co.connect_timeout_s = opt_.connect_timeout_s;
-  connection_ = std::make_unique<Connection>(co);
   store_ = std::make_unique<ObjectStore>(memory_budget_);
+  if (opt_.draw_everything) return PreloadEverything();
+  connection_ = std::make_unique<Connection>(co);
+  return absl::OkStatus();
+}
+
+absl::Status Loop::PreloadEverything() {
+  const scenes::Scene& scene = *full_scene_;
+  const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(sum_->scene, 0.0, opt_.catalog_dir);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene.bounds, spec);
+  if (!grid.ok()) return grid.status();
+  std::vector<Event> events;
+  v1::SceneInfo info;
+  info.set_name(scene.name);
+  info.set_object_count(static_cast<uint32_t>(scene.objects.size()));
+  info.set_triangle_count(scene.TriangleCount());
+  auto set = [](const glm::dvec3& v, v1::Vec3* out) {
+    out->set_x(v.x);
+    out->set_y(v.y);
+    out->set_z(v.z);
+  };
+  set(scene.bounds.min, info.mutable_bounds_min());
+  set(scene.bounds.max, info.mutable_bounds_max());
+  v1::ViewcellGrid* g = info.mutable_grid();
+  g->set_cell_size_m(grid->cell_size());
+  g->set_x0_m(grid->corner().x);
+  g->set_y0_m(grid->corner().y);
+  g->set_nx(grid->nx());
+  g->set_ny(grid->ny());
+  g->set_base_z_m(grid->base_z());
+  g->set_height_m(grid->height());
+  events.emplace_back(std::move(info));
+  for (const scenes::Object& o : scene.objects) {
+    ReceivedObject r;
+    r.id = o.id;
+    r.mesh = o.mesh;
+    r.bounds_min = o.bounds.min;
+    r.bounds_max = o.bounds.max;
+    r.raw_bytes = uint64_t{o.mesh.positions.size()} * 24 + uint64_t{o.mesh.indices.size()} * 4;
+    events.emplace_back(std::move(r));
+    everything_.push_back(o.id);
+  }
+  preload_ = std::move(events);
   return absl::OkStatus();
 }
 
 void Loop::SendPose(const glm::dvec3& velocity, double since_start) {
+  if (connection_ == nullptr) return;
   connection_->SetPose(camera_.eye, velocity, camera_.yaw_rad, camera_.pitch_rad, since_start);
 }
 
 absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget) {
-  std::vector<Event> events = connection_->Take();
+  std::vector<Event> events = connection_ != nullptr ? connection_->Take() : std::move(preload_);
+  preload_.clear();
   for (const Event& e : events) {
     if (std::holds_alternative<v1::EpsilonMask>(e)) ++masks_seen_;
   }
@@ -222,7 +278,7 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
     const v1::SceneInfo& info = store_->scene_info();
     sum_->scene_objects = info.object_count();
     sum_->scene_triangles = info.triangle_count();
-    if (full_scene_.has_value() && (full_scene_->objects.size() != info.object_count() ||
+    if (full_scene_ != nullptr && (full_scene_->objects.size() != info.object_count() ||
                                     full_scene_->TriangleCount() != info.triangle_count())) {
       return absl::FailedPreconditionError(absl::StrCat(
           "--verify: the local scene '", sum_->scene, "' has ", full_scene_->objects.size(), " objects and ",
@@ -243,6 +299,10 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
   if (p.cell.has_value()) p.pvs = store_->Pvs(*p.cell);
   static const std::vector<uint32_t> kNone;
   renderer_->Sync(*store_, p.pvs != nullptr ? *p.pvs : kNone, upload_budget);
+  if (opt_.draw_everything) {
+    p.complete = renderer_->pending_uploads() == 0;
+    return p;
+  }
   p.complete = p.pvs != nullptr && std::all_of(p.pvs->begin(), p.pvs->end(),
                                                [&](uint32_t id) { return renderer_->Uploaded(id); });
   return p;
@@ -250,7 +310,7 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
 
 absl::Status Loop::Startup() {
   session_start_ = Now();
-  connection_->Start();
+  if (connection_ != nullptr) connection_->Start();
   Log(absl::StrCat("connected to ", opt_.server, " (scene ", sum_->scene, "); waiting for the first viewcell"));
   uint64_t objects_seen = 0;
   double last_arrival = Now();
@@ -259,7 +319,7 @@ absl::Status Loop::Startup() {
     absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
     if (!p.ok()) return p.status();
     if (p->complete) break;
-    if (const uint64_t n = connection_->stats().objects_received; n != objects_seen) {
+    if (const uint64_t n = connection_ != nullptr ? connection_->stats().objects_received : 0; n != objects_seen) {
       objects_seen = n;
       last_arrival = Now();
     }
@@ -380,7 +440,7 @@ absl::Status Loop::Walkthrough() {
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
     std::vector<uint32_t> everything;
-    const std::vector<uint32_t>* set = p->pvs;
+    const std::vector<uint32_t>* set = opt_.draw_everything ? &everything_ : p->pvs;
     if (!p->complete) {
       // A stall: draw what is held.
       for (const auto& [id, o] : store_->objects()) everything.push_back(id);

@@ -16,6 +16,8 @@
 #include <absl/status/statusor.h>
 #include <glm/vec3.hpp>
 
+#include "scenes/scene.h"
+
 namespace vistream::client {
 
 struct FixedPose {
@@ -40,6 +42,12 @@ struct WalkthroughOptions {
   uint64_t upload_budget_bytes = uint64_t{4} << 20;  // GPU uploads per frame
   double max_fps = 60.0;        // 0: as fast as it draws
   bool use_masks = true;        // false: draw the viewcell PVS whole (a baseline)
+  // A baseline: no server geometry; the whole scene (loaded locally, or local_scene) is
+  // uploaded before the walk and drawn every frame with frustum culling.
+  bool draw_everything = false;
+  // The full scene when the caller has it (tests, benchmarks) for --verify and
+  // draw_everything; otherwise it is loaded from the catalog. Not owned.
+  const scenes::Scene* local_scene = nullptr;
   std::optional<FixedPose> pose;  // stand here instead of walking (screenshots of a pose)
   uint64_t frames = 0;          // with a pose: stop after this many frames; 0: 1 headless
   double startup_timeout_s = 300.0;

@@ -253,6 +253,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   AddBenchEpsilonCommand(bench, done);
   AddBenchAgvsCommand(bench, done);
   AddBenchServerCommand(bench, done);
+  AddBenchClientCommand(bench, done);
 }
 
 }  // namespace vistream::tools

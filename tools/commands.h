@@ -20,5 +20,7 @@ void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);
 void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done);
 // `bench server`, likewise.
 void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done);
+// `bench client`, likewise.
+void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done);
 
 }  // namespace vistream::tools

@@ -1,0 +1,148 @@
+// vistream bench client: the headless client along a catalog walk through a real server on
+// loopback (in this process), measured three ways in one run: the viewcell PVS narrowed by
+// ε-masks (what the client does), the viewcell PVS whole, and the whole scene drawn every frame
+// (frustum culling only). Reports fps, frame-time median and p99, and triangles drawn a frame.
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <nlohmann/json.hpp>
+
+#include "client/walkthrough.h"
+#include "server/served_scene.h"
+#include "server/service.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+#include "tools/terminal_progress.h"
+
+namespace vistream::tools {
+
+namespace {
+
+struct BenchClientArgs {
+  std::string scene = "default";
+  std::string path;
+  std::string size = "1280x720";
+  double speed_kmh = 30.0;
+  double seconds = 60.0;
+  unsigned threads = 2;
+  bool json = false;
+};
+
+int BenchClient(const BenchClientArgs& a) {
+  int width = 0, height = 0;
+  if (std::sscanf(a.size.c_str(), "%dx%d", &width, &height) != 2 || width < 16 || height < 16 || width > 8192 ||
+      height > 8192) {
+    std::fprintf(stderr, "vistream: error: --size '%s': expected WIDTHxHEIGHT, e.g. 1280x720\n", a.size.c_str());
+    return 2;
+  }
+  TerminalProgress progress;
+  server::ServedSceneOptions so;
+  so.scene = a.scene;
+  so.threads = a.threads;
+  scenes::RunControl run;
+  run.progress = &progress;
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> served = server::ServedScene::Create(so, run);
+  if (!served.ok()) {
+    std::fprintf(stderr, "vistream: error: %s\n", std::string(served.status().message()).c_str());
+    return 1;
+  }
+  server::ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
+      server::WalkthroughServer::Start(served->get(), options, nullptr);
+  if (!server.ok()) {
+    std::fprintf(stderr, "vistream: error: %s\n", std::string(server.status().message()).c_str());
+    return 1;
+  }
+  struct Mode {
+    const char* name;
+    bool masks, everything;
+  };
+  const Mode modes[] = {{"pvs+eps", true, false}, {"pvs", false, false}, {"whole scene", false, true}};
+  nlohmann::ordered_json out;
+  out["scene"] = a.scene;
+  out["size"] = a.size;
+  std::vector<client::WalkthroughSummary> results;
+  for (const Mode& m : modes) {
+    client::WalkthroughOptions o;
+    o.server = "127.0.0.1:" + std::to_string((*server)->port());
+    o.headless = true;
+    o.path = a.path;
+    o.speed_kmh = a.speed_kmh;
+    o.seconds = a.seconds;
+    o.width = width;
+    o.height = height;
+    o.max_fps = 0.0;  // as fast as it draws: the measure
+    o.use_masks = m.masks;
+    o.draw_everything = m.everything;
+    o.local_scene = &(*served)->scene();
+    o.log = [&](const std::string& line) { std::fprintf(stderr, "  %s: %s\n", m.name, line.c_str()); };
+    std::fprintf(stderr, "bench client: %s ...\n", m.name);
+    absl::StatusOr<client::WalkthroughSummary> s = client::RunWalkthrough(o);
+    if (!s.ok()) {
+      std::fprintf(stderr, "vistream: error: %s: %s\n", m.name, std::string(s.status().message()).c_str());
+      return 1;
+    }
+    results.push_back(*s);
+    const double share = s->scene_triangles > 0 ? s->mean_triangles_drawn / static_cast<double>(s->scene_triangles) : 0;
+    out["modes"][m.name] = {{"frames", s->frames},
+                            {"fps", s->fps},
+                            {"fps_median", s->frame_ms_p50 > 0 ? 1000.0 / s->frame_ms_p50 : 0.0},
+                            {"frame_ms_p50", s->frame_ms_p50},
+                            {"frame_ms_p99", s->frame_ms_p99},
+                            {"p99_over_p50", s->frame_ms_p50 > 0 ? s->frame_ms_p99 / s->frame_ms_p50 : 0.0},
+                            {"mean_triangles_drawn", s->mean_triangles_drawn},
+                            {"triangle_share", share},
+                            {"stalls", s->stalls},
+                            {"frames_masked", s->frames_masked},
+                            {"bytes_received", s->bytes_received}};
+    if (!out.contains("path")) {
+      out["path"] = s->path;
+      out["speed_kmh"] = s->speed_kmh;
+      out["walk_s"] = s->walk_s;
+      out["scene_triangles"] = s->scene_triangles;
+    }
+  }
+  if (a.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::printf("bench client: %s along '%s' at %.0f km/h for %.0f s, %s, headless (OSMesa)\n", a.scene.c_str(),
+              results.front().path.c_str(), results.front().speed_kmh, results.front().walk_s, a.size.c_str());
+  std::printf("%-12s %8s %10s %10s %10s %9s %14s %9s %7s\n", "mode", "frames", "fps(p50)", "p50 ms", "p99 ms",
+              "p99/p50", "triangles", "% scene", "stalls");
+  for (size_t k = 0; k < results.size(); ++k) {
+    const client::WalkthroughSummary& s = results[k];
+    std::printf("%-12s %8llu %10.1f %10.2f %10.2f %9.2f %14.0f %8.3f%% %7llu\n", modes[k].name,
+                static_cast<unsigned long long>(s.frames), s.frame_ms_p50 > 0 ? 1000.0 / s.frame_ms_p50 : 0.0,
+                s.frame_ms_p50, s.frame_ms_p99, s.frame_ms_p50 > 0 ? s.frame_ms_p99 / s.frame_ms_p50 : 0.0,
+                s.mean_triangles_drawn,
+                s.scene_triangles > 0 ? 100.0 * s.mean_triangles_drawn / static_cast<double>(s.scene_triangles) : 0.0,
+                static_cast<unsigned long long>(s.stalls));
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
+  auto args = std::make_shared<BenchClientArgs>();
+  CLI::App* c = bench->add_subcommand("client", "the headless client along a walk: PVS+ε, PVS, whole scene");
+  c->add_option("--scene", args->scene, "catalog name")->capture_default_str();
+  c->add_option("--path", args->path, "walk of the catalog entry (default: its first)");
+  c->add_option("--size", args->size, "frame size, WIDTHxHEIGHT")->capture_default_str();
+  c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(FiniteRange(0.1, 1000.0))
+      ->capture_default_str();
+  c->add_option("--seconds", args->seconds, "seconds of the walk per mode (0: all of it)")
+      ->check(FiniteRange(0.0, 86400.0))->capture_default_str();
+  c->add_option("--threads", args->threads, "server PVS workers")->check(CLI::Range(1, 256))->capture_default_str();
+  c->add_flag("--json", args->json, "print one JSON object");
+  c->callback([args, done] { done(BenchClient(*args)); });
+}
+
+}  // namespace vistream::tools
