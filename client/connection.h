@@ -65,6 +65,10 @@ struct ConnectionStats {
   uint64_t poses_sent = 0;
 };
 
+// A channel to `address` as every client session uses it: keepalive every 30 s, 64 MiB
+// messages, quick reconnects (250 ms to 2 s), its own connection (no subchannel sharing).
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
+
 // Checks that `address` answers as a vistream server of this protocol version and returns the
 // scene it serves. Errors (naming the address): UNAVAILABLE when nothing answers within
 // `timeout_s`, FAILED_PRECONDITION when it speaks another protocol version.

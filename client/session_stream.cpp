@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "client/connection.h"
 
 namespace vistream::client {
 
@@ -19,15 +20,6 @@ bool SessionRecord::CellComplete(uint32_t cell) const {
 namespace {
 double SteadySeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
-  grpc::ChannelArguments args;
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 30000);
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
-  args.SetMaxReceiveMessageSize(64 << 20);
-  // One connection per session: sessions of one process do not share a transport's window.
-  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
 }
 }  // namespace
 

@@ -1,8 +1,8 @@
 #pragma once
 // One walkthrough session seen from the client side: opens the stream, sends Hello, poses and
 // credit, and records on its own thread everything the server sends, with arrival times.
-// Used by the server's end-to-end tests and `vistream bench server`; the thin client's network
-// thread builds on it.
+// Used by the server's end-to-end tests and `vistream bench server` to script sessions; the
+// thin client's own network thread is client/connection.h.
 
 #include <atomic>
 #include <chrono>
