@@ -43,6 +43,24 @@ struct Vertex {
   uint32_t id;
 };
 
+// An id target of `w` x `h`: 32-bit ids and float depth, in a new framebuffer. Whether it is
+// complete; unbinds it.
+bool MakeTarget(int w, int h, GLuint* ids, GLuint* depth, GLuint* fbo) {
+  glGenTextures(1, ids);
+  glBindTexture(GL_TEXTURE_2D, *ids);
+  glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32UI, w, h);
+  glGenRenderbuffers(1, depth);
+  glBindRenderbuffer(GL_RENDERBUFFER, *depth);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, w, h);
+  glGenFramebuffers(1, fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, *fbo);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, *ids, 0);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, *depth);
+  const bool complete = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  return complete;
+}
+
 // The solid angle of the part [0, u] x [0, v] of a cube face at distance 1, signed.
 double CornerAngle(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
 
@@ -118,19 +136,7 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene) {
   glGenBuffers(1, &mask_buffer_);
   glGenTextures(1, &mask_texture_);
 
-  glGenTextures(1, &ids_);
-  glBindTexture(GL_TEXTURE_2D, ids_);
-  glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32UI, size_, size_);
-  glGenRenderbuffers(1, &depth_);
-  glBindRenderbuffer(GL_RENDERBUFFER, depth_);
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, size_, size_);
-  glGenFramebuffers(1, &fbo_);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, ids_, 0);
-  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_);
-  const GLenum complete = glCheckFramebufferStatus(GL_FRAMEBUFFER);
-  glBindFramebuffer(GL_FRAMEBUFFER, 0);
-  if (complete != GL_FRAMEBUFFER_COMPLETE) {
+  if (!MakeTarget(size_, size_, &ids_, &depth_, &fbo_)) {
     return absl::InternalError("id renderer framebuffer is incomplete");
   }
   if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
@@ -231,18 +237,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
       glDeleteTextures(1, &view_ids_);
       glDeleteRenderbuffers(1, &view_depth_);
     }
-    glGenTextures(1, &view_ids_);
-    glBindTexture(GL_TEXTURE_2D, view_ids_);
-    glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32UI, width, height);
-    glGenRenderbuffers(1, &view_depth_);
-    glBindRenderbuffer(GL_RENDERBUFFER, view_depth_);
-    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
-    glGenFramebuffers(1, &view_fbo_);
-    glBindFramebuffer(GL_FRAMEBUFFER, view_fbo_);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, view_ids_, 0);
-    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, view_depth_);
-    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-      glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    if (!MakeTarget(width, height, &view_ids_, &view_depth_, &view_fbo_)) {
       view_width_ = view_height_ = 0;
       return absl::InternalError("id renderer: view framebuffer is incomplete");
     }

@@ -336,16 +336,22 @@ void Session::EvictLeft(const std::map<CellId, CellPvsPtr>& had) {
     }
   }
   if (evict.empty()) return;
-  std::sort(evict.begin(), evict.end());
-  for (uint32_t o : evict) {
+  QueueControl(Forget(std::move(evict), "left behind"));
+}
+
+v1::ServerMessage Session::Forget(std::vector<uint32_t> objects, const char* reason) {
+  std::sort(objects.begin(), objects.end());
+  for (uint32_t o : objects) {
     sent_.erase(o);
     held_bytes_ -= scene_->geometry(o).RawBytes();
   }
   v1::ServerMessage m;
-  m.mutable_evict()->mutable_object_ids()->Add(evict.begin(), evict.end());
-  QueueControl(std::move(m));
-  stats_.set_evicted_objects(stats_.evicted_objects() + evict.size());
-  if (log_ != nullptr) log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(evict.size())}});
+  m.mutable_evict()->mutable_object_ids()->Add(objects.begin(), objects.end());
+  stats_.set_evicted_objects(stats_.evicted_objects() + objects.size());
+  if (log_ != nullptr) {
+    log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(objects.size())}, {"reason", reason}});
+  }
+  return m;
 }
 
 std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
@@ -375,20 +381,9 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
     freed += scene_->geometry(o).RawBytes();
   }
   if (evict.empty() || held_bytes_ - freed + bytes > memory_budget_) return std::nullopt;  // cannot fit
-  std::sort(evict.begin(), evict.end());
-  for (uint32_t o : evict) {
-    sent_.erase(o);
-    held_bytes_ -= scene_->geometry(o).RawBytes();
-  }
-  // Evicted objects of wanted cells come back when their cell is current (SetWanted re-queues).
-  v1::ServerMessage m;
-  m.mutable_evict()->mutable_object_ids()->Add(evict.begin(), evict.end());
-  const size_t size = m.ByteSizeLong();
-  stats_.set_evicted_objects(stats_.evicted_objects() + evict.size());
-  stats_.set_bytes_sent(stats_.bytes_sent() + size);
-  if (log_ != nullptr) {
-    log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(evict.size())}, {"reason", "memory budget"}});
-  }
+  // Evicted objects of wanted cells are queued again at the next crossing or turn (SetWanted).
+  v1::ServerMessage m = Forget(std::move(evict), "memory budget");
+  stats_.set_bytes_sent(stats_.bytes_sent() + m.ByteSizeLong());
   return m;
 }
 

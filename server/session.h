@@ -113,6 +113,9 @@ class Session : public std::enable_shared_from_this<Session> {
   // An Evict of held objects needed later than wanted_[rank] (or not at all), freeing enough
   // of the memory budget for `bytes` more; none when that cannot be done. Caller holds mu_.
   std::optional<vistream::v1::ServerMessage> MakeRoom(size_t bytes, size_t rank);
+  // The client no longer holds `objects` (as the server counts): the Evict that tells it so,
+  // logged with `reason`. Caller holds mu_.
+  vistream::v1::ServerMessage Forget(std::vector<uint32_t> objects, const char* reason);
   struct Control {
     vistream::v1::ServerMessage message;
     size_t bytes;
