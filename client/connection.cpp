@@ -191,7 +191,6 @@ grpc::Status Connection::RunSession() {
     h->set_triangle_budget(options_.triangle_budget);
     h->mutable_held_objects()->Add(held_.begin(), held_.end());
   }
-  connected_ = true;
   v1::ClientMessage credit;
   credit.mutable_credit()->set_bytes(options_.credit_window_bytes);
   bool writing = stream->Write(hello) && stream->Write(credit);
@@ -249,6 +248,7 @@ grpc::Status Connection::RunSession() {
 void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::ServerMessage>* stream) {
   v1::ServerMessage m;
   while (stream->Read(&m)) {
+    connected_ = true;  // the server answered this session
     const size_t bytes = m.ByteSizeLong();
     std::optional<Event> event;
     switch (m.body_case()) {

@@ -98,6 +98,7 @@ class Connection {
   void DropForTest();
 
   ConnectionStats stats() const;
+  // Whether the current session has heard from the server (false while reconnecting).
   bool connected() const { return connected_.load(); }
 
  private:

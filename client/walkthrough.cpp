@@ -410,6 +410,7 @@ absl::Status Loop::Walkthrough() {
   glm::dvec3 prev_eye = camera_.eye;
   const double free_speed = entry_.has_value() && !entry_->walks.empty() ? entry_->walks.front().speed_mps : 1.4;
   std::vector<DrawnObject> drawn;
+  bool was_connected = true;
   for (;;) {
     const double begin = Now();
     const double t = begin - t0 - paused;
@@ -437,6 +438,11 @@ absl::Status Loop::Walkthrough() {
       camera_.eye = eye;
     }
     SendPose(velocity, begin - session_start_);
+    if (connection_ != nullptr && connection_->connected() != was_connected) {
+      was_connected = !was_connected;
+      Log(was_connected ? absl::StrFormat("reconnected to %s", opt_.server)
+                        : absl::StrFormat("lost the server at %s; reconnecting (drawing what is held)", opt_.server));
+    }
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
     std::vector<uint32_t> everything;
