@@ -61,7 +61,7 @@ case "$cmd" in
     server=$!
     stop_server() { kill -TERM "$server" 2>/dev/null && wait "$server" 2>/dev/null || true; }
     trap stop_server EXIT
-    trap 'exit 130' INT TERM
+    trap 'exit 130' INT TERM  # while waiting for the server
     address=""
     for _ in $(seq 1 600); do
       address=$(sed -n 's/^vistream-server: ready on \([0-9.]*:[0-9]*\): .*/\1/p' "$out/server.out")
@@ -77,13 +77,22 @@ case "$cmd" in
     log "server ready on $address (log: $out/server.log)"
     defaults=()
     [[ " $* " == *" --speed "* ]] || defaults+=(--speed 60)
-    rc=0
+    rm -f "$out/frames.csv"
     "$BUILD_DIR/bin/vistream-client" --server "$address" --headless --verify --every 10 \
-      --screenshots "$out/screenshots" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" || rc=$?
+      --screenshots "$out/screenshots" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" &
+    client=$!
+    # A signal to this script reaches the client (which stops after its frame and prints what
+    # it walked); the server is stopped on the way out.
+    trap 'kill -INT "$client" 2>/dev/null' INT TERM
+    rc=0
+    wait "$client" || rc=$?
+    while kill -0 "$client" 2>/dev/null; do wait "$client" || rc=$?; done
     stop_server
     trap - EXIT
-    shots=$(find "$out/screenshots" -name '*.png' | wc -l)
-    log "screenshots: $shots PNGs in $out/screenshots; per-frame log: $out/frames.csv"
+    if [ "$rc" -ne 2 ]; then
+      shots=$(find "$out/screenshots" -name '*.png' | wc -l)
+      log "screenshots: $shots PNGs in $out/screenshots; per-frame log: $out/frames.csv"
+    fi
     exit "$rc"
     ;;
   test)

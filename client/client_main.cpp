@@ -43,6 +43,16 @@ bool ParseSize(const std::string& text, int* width, int* height) {
          *width >= 16 && *height >= 16 && *width <= 8192 && *height <= 8192;
 }
 
+// HOST:PORT (IPv6 hosts in brackets) with a port from 1 to 65535.
+bool ValidAddress(const std::string& address) {
+  const size_t colon = address.rfind(':');
+  if (colon == std::string::npos || colon == 0) return false;
+  const std::string port = address.substr(colon + 1);
+  int p = 0;
+  return !port.empty() && port.find_first_not_of("0123456789") == std::string::npos && absl::SimpleAtoi(port, &p) &&
+         p >= 1 && p <= 65535;
+}
+
 bool ParsePose(const std::string& text, vistream::client::FixedPose* pose) {
   const std::vector<std::string> parts = absl::StrSplit(text, ',');
   double v[5];
@@ -83,6 +93,9 @@ int main(int argc, char** argv) {
   app.add_option("--connect-timeout", o.connect_timeout_s, "seconds to wait for the server to answer")
       ->check(Finite(0.1, 3600))
       ->capture_default_str();
+  app.add_option("--give-up", o.give_up_s, "seconds without the server before the run ends with an error; 0 never")
+      ->check(Finite(0.0, 1e7))
+      ->capture_default_str();
   app.add_option("--catalog", o.catalog_dir, "scene catalog folder (walks and client budgets)");
   app.add_option("--memory-mb", memory_mb, "memory budget for held geometry, MiB (default: the catalog's)")
       ->check(Finite(0.0, 1e9));
@@ -94,13 +107,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--no-masks", no_masks, "draw the viewcell PVS whole, ignoring ε-masks (a baseline)");
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
-  app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)");
+  app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
+      ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::fprintf(stderr, "vistream-client: error: %s\n", e.what());
+    return 2;
+  }
+  if (!ValidAddress(o.server)) {
+    std::fprintf(stderr, "vistream-client: error: --server '%s': expected HOST:PORT with a port from 1 to 65535\n",
+                 o.server.c_str());
     return 2;
   }
   if (!ParseSize(size, &o.width, &o.height)) {

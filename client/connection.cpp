@@ -60,10 +60,17 @@ absl::Status ToAbsl(const grpc::Status& s) {
 
 }  // namespace
 
-absl::StatusOr<v1::ServerStats> Probe(const std::string& address, double timeout_s) {
-  auto stub = v1::Walkthrough::NewStub(MakeChannel(address));
+absl::StatusOr<v1::ServerStats> Probe(const std::string& address, double timeout_s,
+                                      const std::atomic<bool>* cancel) {
+  std::shared_ptr<grpc::Channel> channel = MakeChannel(address);
+  // Wait for a connection in short steps, so that a cancel is heard at once.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!channel->WaitForConnected(After(0.2)) && std::chrono::steady_clock::now() < until) {
+    if (cancel != nullptr && cancel->load()) return absl::CancelledError("stopped while connecting");
+  }
+  auto stub = v1::Walkthrough::NewStub(channel);
   grpc::ClientContext context;
-  context.set_deadline(After(timeout_s));
+  context.set_deadline(After(std::max(1.0, std::chrono::duration<double>(until - std::chrono::steady_clock::now()).count())));
   context.set_wait_for_ready(true);  // ride out a refused first connect; the deadline bounds it
   v1::ServerStats stats;
   const grpc::Status st = stub->GetStats(&context, v1::StatsRequest(), &stats);
@@ -150,12 +157,14 @@ void Connection::Run() {
     {
       std::lock_guard lock(mu_);
       if (stop_) break;
-      if (!first) ++stats_.reconnects;
     }
+    const bool was_first = first;
     first = false;
     const auto began = std::chrono::steady_clock::now();
-    const grpc::Status st = RunSession();
+    bool answered = false;
+    const grpc::Status st = RunSession(&answered);
     std::unique_lock lock(mu_);
+    if (answered && !was_first) ++stats_.reconnects;
     if (stop_) {
       // Our own close: OK, or whatever the server said last.
       if (final_status_.ok() && st.error_code() != grpc::StatusCode::CANCELLED) final_status_ = ToAbsl(st);
@@ -174,8 +183,13 @@ void Connection::Run() {
   connected_ = false;
 }
 
-grpc::Status Connection::RunSession() {
-  channel_->WaitForConnected(After(options_.connect_timeout_s));
+grpc::Status Connection::RunSession(bool* answered) {
+  // Wait for a connection in short steps, so that Stop is heard at once.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(options_.connect_timeout_s);
+  while (!channel_->WaitForConnected(After(0.2)) && std::chrono::steady_clock::now() < until) {
+    std::lock_guard lock(mu_);
+    if (stop_) return grpc::Status(grpc::StatusCode::CANCELLED, "stopped");
+  }
   grpc::ClientContext context;
   auto stream = stub_->Session(&context);
   v1::ClientMessage hello;
@@ -236,6 +250,7 @@ grpc::Status Connection::RunSession() {
     context.TryCancel();  // the stream broke under a write: the reader ends with it
   }
   reader.join();
+  *answered = connected_.load();
   const grpc::Status st = stream->Finish();
   {
     std::lock_guard lock(mu_);

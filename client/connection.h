@@ -61,7 +61,7 @@ struct ConnectionStats {
   uint64_t geometry_bytes = 0;   // encoded geometry
   uint64_t objects_received = 0;
   uint64_t duplicates = 0;       // geometry received for an object already held
-  uint64_t reconnects = 0;       // sessions opened after the first
+  uint64_t reconnects = 0;       // sessions after the first that the server answered
   uint64_t poses_sent = 0;
 };
 
@@ -71,8 +71,10 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
 
 // Checks that `address` answers as a vistream server of this protocol version and returns the
 // scene it serves. Errors (naming the address): UNAVAILABLE when nothing answers within
-// `timeout_s`, FAILED_PRECONDITION when it speaks another protocol version.
-absl::StatusOr<vistream::v1::ServerStats> Probe(const std::string& address, double timeout_s);
+// `timeout_s`, FAILED_PRECONDITION when it speaks another protocol version, CANCELLED as soon
+// as `cancel` (may be null) is set.
+absl::StatusOr<vistream::v1::ServerStats> Probe(const std::string& address, double timeout_s,
+                                                const std::atomic<bool>* cancel = nullptr);
 
 class Connection {
  public:
@@ -103,8 +105,8 @@ class Connection {
 
  private:
   void Run();
-  // One session from connect to end; returns its status.
-  grpc::Status RunSession();
+  // One session from connect to end; returns its status, and whether the server answered.
+  grpc::Status RunSession(bool* answered);
   void ReadLoop(grpc::ClientReaderWriter<vistream::v1::ClientMessage, vistream::v1::ServerMessage>* stream);
   void Push(Event e);
 

@@ -93,7 +93,7 @@ class Loop {
 };
 
 absl::Status Loop::Prepare() {
-  absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s);
+  absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s, opt_.cancel);
   if (!stats.ok()) return stats.status();
   sum_->scene = stats->scene();
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
@@ -326,10 +326,11 @@ absl::Status Loop::Startup() {
     // The list is here but its geometry stopped coming: the server keeps the memory budget
     // (geometry needs no computing). Walk on; frames in such cells count as stalls.
     if (p->pvs != nullptr && memory_budget_ != 0 && Now() - last_arrival > 3.0) {
-      Log(absl::StrFormat("the first viewcell's PVS (%d objects) does not fit the %.1f MB memory budget: walking "
-                          "on with %d of them",
-                          p->pvs->size(), memory_budget_ / 1e6, store_->objects().size()));
-      break;
+      sum_->startup_s = Now() - session_start_;
+      Log(absl::StrFormat("the first viewcell's PVS (%d objects) does not fit the %.1f MiB memory budget: walking "
+                          "on with %d of them after %.1f s",
+                          p->pvs->size(), memory_budget_ / 1048576.0, store_->objects().size(), sum_->startup_s));
+      return absl::OkStatus();
     }
     if (store_->has_scene_info() && !p->cell.has_value()) {
       return absl::OutOfRangeError(absl::StrFormat("the eye (%.1f, %.1f) is outside the scene's viewcell grid",
@@ -411,21 +412,28 @@ absl::Status Loop::Walkthrough() {
   const double free_speed = entry_.has_value() && !entry_->walks.empty() ? entry_->walks.front().speed_mps : 1.4;
   std::vector<DrawnObject> drawn;
   bool was_connected = true;
+  double lost_at = 0.0;
+  std::optional<uint32_t> stalled_in;  // the cell a stall was last reported for
   for (;;) {
     const double begin = Now();
     const double t = begin - t0 - paused;
-    bool last = false;
+    bool last = opt_.seconds > 0.0 && t >= opt_.seconds;  // walks clamp to it below
+    const bool cancel = Cancelled();
+    if (cancel) {
+      sum_->cancelled = true;
+      last = true;  // this frame is the last: its screenshot and check are taken
+    }
     glm::dvec3 velocity(0.0);
     if (walk_.has_value()) {
       const double at = std::min(t, walk_limit_s_);
-      last = t >= walk_limit_s_;
+      last = last || t >= walk_limit_s_;
       const WalkPose pose = walk_->At(at);
       camera_.eye = pose.eye;
       camera_.yaw_rad = pose.yaw_rad;
       velocity = last ? glm::dvec3(0.0) : pose.velocity;
     } else if (opt_.pose.has_value()) {
       const uint64_t frames = opt_.frames > 0 ? opt_.frames : (opt_.headless ? 1 : ~uint64_t{0});
-      last = sum_->frames + 1 >= frames;
+      last = last || sum_->frames + 1 >= frames;
     } else if (input_ != nullptr) {
       const double dt = std::min(0.1, begin - prev_end + 1e-3);
       glm::dvec3 eye = camera_.eye;
@@ -440,8 +448,13 @@ absl::Status Loop::Walkthrough() {
     SendPose(velocity, begin - session_start_);
     if (connection_ != nullptr && connection_->connected() != was_connected) {
       was_connected = !was_connected;
+      lost_at = begin;
       Log(was_connected ? absl::StrFormat("reconnected to %s", opt_.server)
                         : absl::StrFormat("lost the server at %s; reconnecting (drawing what is held)", opt_.server));
+    }
+    if (!was_connected && opt_.give_up_s > 0.0 && begin - lost_at > opt_.give_up_s) {
+      return absl::UnavailableError(absl::StrFormat("lost the server at %s: no answer for %.0f s", opt_.server,
+                                                    opt_.give_up_s));
     }
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
@@ -463,6 +476,21 @@ absl::Status Loop::Walkthrough() {
     ++sum_->frames;
     frame_ms.push_back((end - begin) * 1000.0);
     if (!p->complete) {
+      if (p->cell != stalled_in && p->cell.has_value()) {
+        stalled_in = p->cell;
+        size_t missing = 0;
+        if (p->pvs != nullptr) {
+          for (uint32_t id : *p->pvs) missing += store_->Find(id) == nullptr ? 1 : 0;
+        }
+        const GridInfo& g = store_->grid();
+        Log(absl::StrFormat(
+            "stall in viewcell %d,%d at %.0f s: %s; holding %.1f MiB%s", *p->cell % static_cast<uint32_t>(g.nx),
+            *p->cell / static_cast<uint32_t>(g.nx), t,
+            p->pvs == nullptr ? std::string("its PVS list has not arrived")
+                              : absl::StrFormat("%d of its %d objects have not arrived", missing, p->pvs->size()),
+            store_->held_bytes() / 1048576.0,
+            memory_budget_ > 0 ? absl::StrFormat(" of a %.1f MiB budget", memory_budget_ / 1048576.0) : ""));
+      }
       ++sum_->stalls;
       sum_->stall_s += end - prev_end;
     }
@@ -518,10 +546,6 @@ absl::Status Loop::Walkthrough() {
     }
     paused += Now() - pause_begin;
     if (last) break;
-    if (Cancelled()) {
-      sum_->cancelled = true;
-      break;
-    }
     if (opt_.max_fps > 0.0) {
       const double wait = begin + 1.0 / opt_.max_fps - Now();
       if (wait > 0.0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
@@ -566,7 +590,12 @@ absl::Status Loop::Run() {
     sum_->evicted_by_budget = store_->evicted_by_budget();
   }
   sum_->masks_received = masks_seen_;
-  if (frame_log_ != nullptr) std::fclose(frame_log_);
+  if (frame_log_ != nullptr) {
+    const bool failed = std::ferror(frame_log_) != 0;
+    if ((std::fclose(frame_log_) != 0 || failed) && s.ok()) {
+      s = absl::DataLossError(absl::StrCat(opt_.frame_log, ": writing the frame log failed"));
+    }
+  }
   // GL objects go with their context, the id renderer's first (it makes its own).
   renderer_.reset();
   ids_.reset();
@@ -639,11 +668,12 @@ std::string SummaryText(const WalkthroughSummary& s) {
   absl::StrAppendFormat(&out, "  stalls: %d (%.2f s); first viewcell after %.1f s\n", s.stalls, s.stall_s,
                         s.startup_s);
   absl::StrAppendFormat(&out,
-                        "  received %.1f MB (%d objects, %d twice, %d reconnects); held at most %.1f MB%s\n",
+                        "  received %.1f MB (%d objects, %d twice, %d reconnects); held at most %.2f MiB%s\n",
                         s.bytes_received / 1e6, s.objects_received, s.duplicates, s.reconnects,
-                        s.max_held_bytes / 1e6,
-                        s.memory_budget_bytes > 0 ? absl::StrFormat(" of a %.1f MB budget", s.memory_budget_bytes / 1e6)
-                                                  : std::string());
+                        s.max_held_bytes / 1048576.0,
+                        s.memory_budget_bytes > 0
+                            ? absl::StrFormat(" of a %.2f MiB budget", s.memory_budget_bytes / 1048576.0)
+                            : std::string());
   absl::StrAppendFormat(&out, "  drawn: %.0f triangles a frame on average (%.3f%% of the scene's %d), %d frames masked\n",
                         s.mean_triangles_drawn,
                         s.scene_triangles > 0 ? 100.0 * s.mean_triangles_drawn / s.scene_triangles : 0.0,

@@ -52,6 +52,7 @@ struct WalkthroughOptions {
   uint64_t frames = 0;          // with a pose: stop after this many frames; 0: 1 headless
   double startup_timeout_s = 300.0;
   double connect_timeout_s = 10.0;
+  double give_up_s = 60.0;      // a server lost this long ends the run (error); 0: never
   const std::atomic<bool>* cancel = nullptr;  // set: the loop ends after the frame
   std::function<void(const std::string&)> log;  // progress lines; may be empty
 };

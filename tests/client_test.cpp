@@ -388,6 +388,14 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
     EXPECT_EQ(r.rc, 2) << size << ": " << r.output;
     EXPECT_NE(r.output.find(std::string("--size '") + size + "'"), std::string::npos) << r.output;
   }
+  for (const char* address : {"127.0.0.1:99999", "127.0.0.1", "127.0.0.1:", "127.0.0.1:80x"}) {
+    r = RunCommand(Client() + " --headless --server " + address);
+    EXPECT_EQ(r.rc, 2) << address << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string("--server '") + address + "'"), std::string::npos) << r.output;
+  }
+  r = RunCommand(Client() + " --headless --frame-log /dev/full --seconds 1 --server " + Address(*server));
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("/dev/full: writing the frame log failed"), std::string::npos) << r.output;
   r = RunCommand(Client() + real + " --speed nan");
   EXPECT_EQ(r.rc, 2) << r.output;
   EXPECT_NE(r.output.find("'nan' is not a number"), std::string::npos) << r.output;
