@@ -160,17 +160,7 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
   const glm::dvec3 forward[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   const glm::dvec3 up[6] = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 1, 0}, {0, 1, 0}};
   constexpr double kNear = 0.01;  // metres
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
-  glViewport(0, 0, size_, size_);
-  // Reversed depth: 1 at the near plane, 0 at infinity, in a float buffer.
-  const auto clip_control = reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_);
-  clip_control(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_GREATER);
-  glDisable(GL_CULL_FACE);
-  glUseProgram(program_);
-  glBindVertexArray(vao_);
-  glUniform1i(loc_use_mask_, 0);
+  BeginPass(fbo_, size_, size_);
   std::array<std::vector<uint32_t>, 6> faces;
   for (int f = 0; f < 6; ++f) {
     const glm::dvec3 fw = forward[f];
@@ -195,12 +185,31 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
     }
     DrawAndRead(m, size_, size_, &faces[f]);
   }
-  clip_control(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
+  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
+  return faces;
+}
+
+void IdRenderer::BeginPass(unsigned fbo, int w, int h) {
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+  glViewport(0, 0, w, h);
+  // Reversed depth: 1 at the near plane, 0 at infinity, in a float buffer.
+  reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_)(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_GREATER);
+  glDisable(GL_CULL_FACE);
+  glUseProgram(program_);
+  glBindVertexArray(vao_);
+  glUniform1i(loc_use_mask_, 0);
+}
+
+absl::Status IdRenderer::EndPass() {
+  glUniform1i(loc_use_mask_, 0);
+  reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_)(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
     return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while drawing"));
   }
-  return faces;
+  return absl::OkStatus();
 }
 
 void IdRenderer::DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out) {
@@ -245,15 +254,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
     view_height_ = height;
   }
   constexpr double kNear = 0.01;  // metres
-  glBindFramebuffer(GL_FRAMEBUFFER, view_fbo_);
-  glViewport(0, 0, width, height);
-  const auto clip_control = reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_);
-  clip_control(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_GREATER);
-  glDisable(GL_CULL_FACE);
-  glUseProgram(program_);
-  glBindVertexArray(vao_);
+  BeginPass(view_fbo_, width, height);
   if (triangles != nullptr) {
     glBindBuffer(GL_TEXTURE_BUFFER, mask_buffer_);
     glBufferData(GL_TEXTURE_BUFFER, static_cast<GLsizeiptr>(triangles->size()), triangles->data(), GL_STREAM_DRAW);
@@ -286,12 +287,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
   }
   std::vector<uint32_t> out;
   DrawAndRead(m, width, height, &out);
-  glUniform1i(loc_use_mask_, 0);
-  clip_control(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
-  glBindFramebuffer(GL_FRAMEBUFFER, 0);
-  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
-    return absl::InternalError(absl::StrCat("id renderer: GL error ", err, " while drawing a view"));
-  }
+  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
   return out;
 }
 

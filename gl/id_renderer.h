@@ -67,6 +67,10 @@ class IdRenderer {
   // Draws the scene with `m` (column-major, reversed infinite depth) into the bound
   // framebuffer of `w` x `h` and reads it back.
   void DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out);
+  // The GL state of a pass into `fbo` of `w` x `h` (reversed depth, the scene's program and
+  // buffers, no mask), and back to the defaults after it, with GL's error if any.
+  void BeginPass(unsigned fbo, int w, int h);
+  absl::Status EndPass();
   void* clip_control_ = nullptr;  // glClipControl
   std::vector<double> weights_;
 };
