@@ -406,6 +406,13 @@ void Session::MaybeRequestMask(double now) {
   scenes::Aabb box;
   box.min = glm::dvec3(anchor_.x - half, anchor_.y - half, std::max(0.1, anchor_.z - half));
   box.max = glm::dvec3(anchor_.x + half, anchor_.y + half, box.min.z + limits_.epsilon_size_m);
+  // Inside the current cell only: the mask narrows that cell's PVS, which holds for no eye
+  // beyond it (a client lingering by a cell edge would otherwise miss what the next cell sees).
+  const scenes::Aabb cell_box = scene_->grid().CellBox(*current_);
+  box.min.x = std::max(box.min.x, cell_box.min.x);
+  box.min.y = std::max(box.min.y, cell_box.min.y);
+  box.max.x = std::min(box.max.x, cell_box.max.x);
+  box.max.y = std::min(box.max.y, cell_box.max.y);
   const uint64_t generation = ++mask_generation_;
   std::weak_ptr<Session> weak = weak_from_this();
   CellPvsPtr pvs = it->second;

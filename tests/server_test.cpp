@@ -673,6 +673,27 @@ TEST(Server, AClientThatLingersGetsAnEpsilonMaskOfItsBox) {
   EXPECT_TRUE(client->Finish().ok());
 }
 
+TEST(Server, AnEpsilonMaskNeverReachesPastTheCellWhosePvsItNarrows) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  const CellId here = Cell(12, 9);
+  const scenes::Aabb cell = City1().grid().CellBox(here);
+  const glm::dvec3 p(cell.max.x - 0.5, cell.min.y + 0.5, Centre(12, 9).z);  // by a corner
+  ASSERT_TRUE(client->SendPose(p));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
+  for (int k = 0; k < 30; ++k) {
+    client->SendPose(p);
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(client->WaitFor([](const SessionRecord& r) { return !r.masks.empty(); }, kWait));
+  const v1::EpsilonMask m = client->Snapshot().masks.front();
+  EXPECT_LE(m.box_max().x(), cell.max.x);
+  EXPECT_GE(m.box_min().y(), cell.min.y);
+  EXPECT_NEAR(m.box_max().x() - m.box_min().x(), 2.5, 1e-9);  // 2 m to the left of the eye, 0.5 to the edge
+  EXPECT_NEAR(m.box_max().y() - m.box_min().y(), 2.5, 1e-9);
+  EXPECT_TRUE(client->Finish().ok());
+}
+
 // The executable: started on a free port, stopped with SIGTERM while sessions are open.
 TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
   int out[2];
