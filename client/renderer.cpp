@@ -233,7 +233,7 @@ void Renderer::BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_
   const std::vector<uint32_t>& all = o.data.mesh.indices;
   const size_t triangles = all.size() / 3;
   for (size_t t = 0; t < triangles; ++t) {
-    if (t / 8 < bits.size() && (bits[t / 8] >> (t % 8) & 1u) != 0) {
+    if (TriangleVisible(bits, t)) {
       indices.insert(indices.end(), all.begin() + static_cast<std::ptrdiff_t>(3 * t),
                      all.begin() + static_cast<std::ptrdiff_t>(3 * t + 3));
     }

@@ -380,7 +380,7 @@ absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn) {
       if (it != mask->visible.end()) bits = &it->second;
     }
     for (size_t t = 0; t < n; ++t) {
-      flags[first + t] = bits == nullptr ? 1 : (t / 8 < bits->size() && ((*bits)[t / 8] >> (t % 8) & 1u) != 0);
+      flags[first + t] = bits == nullptr || TriangleVisible(*bits, t) ? 1 : 0;
     }
   }
   const glm::dvec3 forward = camera_.Forward(), up = camera_.Up();

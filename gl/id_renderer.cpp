@@ -61,6 +61,30 @@ bool MakeTarget(int w, int h, GLuint* ids, GLuint* depth, GLuint* fbo) {
   return complete;
 }
 
+// Column-major world-to-clip of a pinhole at `eye` looking along `forward` with `up`: view rows
+// s, u, -f with the eye's translation, focal scales fx and fy, and reversed infinite depth
+// (clip z = near, clip w = -view z).
+void PinholeReversedInfinite(const glm::dvec3& eye, const glm::dvec3& forward, const glm::dvec3& up, double fx,
+                             double fy, double near, double m[16]) {
+  const glm::dvec3 f = glm::normalize(forward);
+  const glm::dvec3 s = glm::normalize(glm::cross(f, up));
+  const glm::dvec3 u = glm::cross(s, f);
+  const glm::dvec3 rows[3] = {s, u, -f};
+  double view[3][4];
+  for (int r = 0; r < 3; ++r) {
+    view[r][0] = rows[r].x;
+    view[r][1] = rows[r].y;
+    view[r][2] = rows[r].z;
+    view[r][3] = -glm::dot(rows[r], eye);
+  }
+  for (int c = 0; c < 4; ++c) {
+    m[4 * c + 0] = fx * view[0][c];
+    m[4 * c + 1] = fy * view[1][c];
+    m[4 * c + 2] = c == 3 ? near : 0.0;
+    m[4 * c + 3] = -view[2][c];
+  }
+}
+
 // The solid angle of the part [0, u] x [0, v] of a cube face at distance 1, signed.
 double CornerAngle(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
 
@@ -163,26 +187,8 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
   BeginPass(fbo_, size_, size_);
   std::array<std::vector<uint32_t>, 6> faces;
   for (int f = 0; f < 6; ++f) {
-    const glm::dvec3 fw = forward[f];
-    const glm::dvec3 s = glm::normalize(glm::cross(fw, up[f]));
-    const glm::dvec3 u = glm::cross(s, fw);
-    // Column-major: view rows s, u, -fw with the eye's translation, then a 90-degree
-    // perspective with reversed infinite depth (clip z = near, clip w = -view z).
-    double m[16] = {};
-    const glm::dvec3 rows[3] = {s, u, -fw};
-    double view[3][4];
-    for (int r = 0; r < 3; ++r) {
-      view[r][0] = rows[r].x;
-      view[r][1] = rows[r].y;
-      view[r][2] = rows[r].z;
-      view[r][3] = -glm::dot(rows[r], eye);
-    }
-    for (int c = 0; c < 4; ++c) {
-      m[4 * c + 0] = view[0][c];             // x
-      m[4 * c + 1] = view[1][c];             // y
-      m[4 * c + 2] = c == 3 ? kNear : 0.0;   // z
-      m[4 * c + 3] = -view[2][c];            // w
-    }
+    double m[16];
+    PinholeReversedInfinite(eye, forward[f], up[f], 1.0, 1.0, kNear, m);  // a 90-degree face
     DrawAndRead(m, size_, size_, &faces[f]);
   }
   if (absl::Status ended = EndPass(); !ended.ok()) return ended;
@@ -264,27 +270,9 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
     glUniform1i(loc_mask_, 0);
   }
   glUniform1i(loc_use_mask_, triangles != nullptr ? 1 : 0);
-  // Column-major: view rows s, u, -f with the eye's translation, then the pinhole's focal
-  // scaling and reversed infinite depth (clip z = near, clip w = -view z).
-  const glm::dvec3 f = glm::normalize(forward);
-  const glm::dvec3 s = glm::normalize(glm::cross(f, up));
-  const glm::dvec3 u = glm::cross(s, f);
   const double fy = 1.0 / std::tan(0.5 * fov_y_rad), fx = fy * height / width;
-  const glm::dvec3 rows[3] = {s, u, -f};
-  double view[3][4];
-  for (int r = 0; r < 3; ++r) {
-    view[r][0] = rows[r].x;
-    view[r][1] = rows[r].y;
-    view[r][2] = rows[r].z;
-    view[r][3] = -glm::dot(rows[r], eye);
-  }
-  double m[16] = {};
-  for (int c = 0; c < 4; ++c) {
-    m[4 * c + 0] = fx * view[0][c];
-    m[4 * c + 1] = fy * view[1][c];
-    m[4 * c + 2] = c == 3 ? kNear : 0.0;
-    m[4 * c + 3] = -view[2][c];
-  }
+  double m[16];
+  PinholeReversedInfinite(eye, forward, up, fx, fy, kNear, m);
   std::vector<uint32_t> out;
   DrawAndRead(m, width, height, &out);
   if (absl::Status ended = EndPass(); !ended.ok()) return ended;
