@@ -11,7 +11,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
   libosmesa6-dev libglfw3-dev libglm-dev libembree-dev libtbb-dev libtinygltf-dev
-  nlohmann-json3-dev libcli11-dev libpng-dev zlib1g-dev
+  nlohmann-json3-dev libcli11-dev libpng-dev zlib1g-dev libbz2-dev libdraco-dev
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   libcgal-dev libgmp-dev libmpfr-dev libmeshoptimizer-dev libosmium2-dev libgeographiclib-dev
   xvfb xauth
