@@ -423,6 +423,25 @@ TEST_F(Agvs, NothingIsSeenThroughPartyWallsOrFromInsideATerrace) {
   EXPECT_GT(street, 10u);
 }
 
+// The ground is solid: a cell standing on it never sees what lies beneath it (a slab under an
+// open square), while it does see the building beside it.
+TEST_F(Agvs, NothingBeneathTheGroundIsSeen) {
+  scenes::Scene s;
+  s.name = "basement";
+  scenes::AddBuilding(&s, "house", {scenes::Prism{Rect(0, 0, 10, 10), 0.0, 8.0}});
+  scenes::AddBuilding(&s, "slab below the square", {scenes::Prism{Rect(12, 0, 30, 20), -4.0, -1.0}});
+  absl::StatusOr<ViewcellGrid> g = ViewcellGrid::Create(Aabb{glm::dvec3(0, 0, -4), glm::dvec3(30, 20, 8)}, 2.0, 0.0, 2.0);
+  ASSERT_TRUE(g.ok());
+  auto sampler = Sampler(s, *g);
+  for (int round = 0; round < 30; ++round) sampler->RunBatch();
+  size_t see_house = 0;
+  for (CellId c = 0; c < g->CellCount(); ++c) {
+    EXPECT_FALSE(sampler->pvs().Contains(c, 1)) << "cell " << c << " sees the slab beneath the ground";
+    see_house += sampler->pvs().Contains(c, 0);
+  }
+  EXPECT_GT(see_house, g->CellCount() / 2);
+}
+
 TEST_F(Agvs, CreateRejectsEmptyScenes) {
   scenes::Scene empty;
   empty.bounds = Aabb{glm::dvec3(0), glm::dvec3(10)};

@@ -538,5 +538,67 @@ TEST(EpsilonSuperset, ABoxFarAwayOrNotFiniteHidesNothing) {
   }
 }
 
+// --- The ground is solid. ---
+
+// The part of a neighbourhood a viewer can stand in: on or above the ground.
+Aabb AboveGround(Aabb box) {
+  box.min.z = std::max(box.min.z, 0.0);
+  box.max.z = std::max(box.max.z, 0.0);
+  return box;
+}
+
+// Neighbourhoods whose floor lies on the ground or beneath it (a pedestrian's, at eye height),
+// every column: every triangle a sampled segment from above the ground sees is in the set, and
+// such boxes cull as much as boxes a little higher up.
+TEST(EpsilonSuperset, BoxesTouchingOrCrossingTheGroundStayConservative) {
+  size_t checked = 0, hidden = 0, total = 0;
+  for (uint64_t seed = 101; seed <= 110; ++seed) {
+    Rng rng(seed);
+    const Scene s = RandomCity(rng);
+    const auto eps = Make(s);
+    const std::vector<Tri> tris = Triangles(s, *eps);
+    for (int q = 0; q < 6; ++q) {
+      Aabb box = RandomNeighbourhood(rng);
+      const double size = box.max.z - box.min.z;
+      box.min.z = q % 2 == 0 ? 0.0 : -std::round(rng.Uniform(0.0, 2.0) * 1024.0) / 1024.0;
+      box.max.z = box.min.z + std::max(size, 0.5) + (q % 2 == 0 ? 0.0 : 2.0);
+      for (const char* column : kColumns) {
+        const EpsilonResult r = eps->Compute(box, Options(column));
+        total += tris.size();
+        hidden += tris.size() - r.triangles.size();
+        const std::string v = FirstViolation(s, tris, AboveGround(box), r.triangles, 24, rng, &checked);
+        ASSERT_EQ(v, "") << "seed " << seed << ", query " << q << ", --opt " << column << ": " << v;
+      }
+    }
+  }
+  EXPECT_GT(hidden, total / 4) << hidden << " of " << total;
+  EXPECT_GT(checked, 100000u);
+}
+
+// The case: city1, `--at 10,5,2 --size 4` (floor on the ground) culled nothing while
+// the same box a centimetre higher culled nearly all; a box reaching below the ground is the
+// box cut at the ground.
+TEST(EpsilonSuperset, ABoxOnTheGroundCullsLikeOneJustAboveIt) {
+  const Scene s = *scenes::GenerateNamed("city1", scenes::GeneratorParams{});
+  const auto eps = Make(s);
+  const Aabb on{glm::dvec3(8, 3, 0), glm::dvec3(12, 7, 4)};
+  const Aabb above{glm::dvec3(8, 3, 0.01), glm::dvec3(12, 7, 4.01)};
+  const EpsilonResult r_on = eps->Compute(on, Options("all"));
+  const EpsilonResult r_above = eps->Compute(above, Options("all"));
+  ASSERT_LT(r_above.triangles.size(), s.TriangleCount() / 4) << "the box above the ground culls most";
+  EXPECT_LE(r_on.triangles.size(), r_above.triangles.size() + r_above.triangles.size() / 10)
+      << r_on.triangles.size() << " visible from the box on the ground, " << r_above.triangles.size()
+      << " from 1 cm higher, of " << s.TriangleCount();
+  EXPECT_LE(r_on.stats.total_boxes - r_on.stats.occluded_boxes, r_above.stats.total_boxes - r_above.stats.occluded_boxes + 20);
+
+  const Aabb crossing{glm::dvec3(8, 3, -1), glm::dvec3(12, 7, 3)};
+  const Aabb cut{glm::dvec3(8, 3, 0), glm::dvec3(12, 7, 3)};
+  EXPECT_EQ(eps->Compute(crossing, Options("all")).triangles, eps->Compute(cut, Options("all")).triangles);
+  // Wholly beneath the ground: its footprint on the ground.
+  const Aabb below{glm::dvec3(8, 3, -3), glm::dvec3(12, 7, -1)};
+  const Aabb footprint{glm::dvec3(8, 3, 0), glm::dvec3(12, 7, 0)};
+  EXPECT_EQ(eps->Compute(below, Options("all")).triangles, eps->Compute(footprint, Options("all")).triangles);
+}
+
 }  // namespace
 }  // namespace vistream::visibility

@@ -186,5 +186,58 @@ TEST(PvsProperty, NothingCulledIsSeenWhateverTheCellSizeLeafSizeAndGrid) {
   EXPECT_GT(seen_free, 200u) << "the oracle never finds a free segment";
 }
 
+// Viewcells whose floor lies on the ground or beneath it: the dual ray space treats the ground
+// as solid (a footprint blocks the rays beneath its prism too), so such cells cull what the
+// same cells raised above the ground cull, and nothing culled is seen from above the ground.
+TEST(PvsProperty, CellsOnOrAcrossTheGroundCullOnlyWhatTheyCannotSee) {
+  size_t culled = 0, culled_raised = 0, checked_cells = 0;
+  for (uint64_t seed = 21; seed <= 26; ++seed) {
+    scenes::StreetsOptions so;
+    so.seed = seed;
+    so.width_m = so.depth_m = 200;
+    const scenes::Scene scene = scenes::GenerateStreets(so);
+    scenes::Rng rng(seed * 104729);
+    const KdTree tree = KdTree::Build(scene);
+    const PvsComputer computer(scene, tree);
+    for (int c = 0; c < 8; ++c) {
+      const double size = c % 2 == 0 ? 4.0 : 16.0;
+      const glm::dvec2 at(rng.Uniform(scene.bounds.min.x, scene.bounds.max.x),
+                          rng.Uniform(scene.bounds.min.y, scene.bounds.max.y));
+      const double floor = c % 4 < 2 ? 0.0 : -1.0;
+      const Aabb cell{glm::dvec3(at - 0.5 * size, floor), glm::dvec3(at + 0.5 * size, 2.5)};
+      const Aabb raised{glm::dvec3(at - 0.5 * size, 0.01), glm::dvec3(at + 0.5 * size, 2.5)};
+      const PvsResult pvs = computer.Compute(cell, {});
+      culled_raised += scene.objects.size() - computer.Compute(raised, {}).objects.size();
+      ++checked_cells;
+      std::vector<bool> in(scene.objects.size(), false);
+      for (ObjectId id : pvs.objects) in[id] = true;
+      for (const scenes::Object& o : scene.objects) {
+        if (in[o.id]) continue;
+        ++culled;
+        for (int k = 0; k < 16; ++k) {
+          const size_t t = rng.Below(o.mesh.TriangleCount());
+          const glm::dvec3 v0(o.mesh.positions[o.mesh.indices[3 * t]]), v1(o.mesh.positions[o.mesh.indices[3 * t + 1]]),
+              v2(o.mesh.positions[o.mesh.indices[3 * t + 2]]);
+          double r1 = rng.Uniform(), r2 = rng.Uniform();
+          if (r1 + r2 > 1) r1 = 1 - r1, r2 = 1 - r2;
+          const glm::dvec3 target = v0 + r1 * (v1 - v0) + r2 * (v2 - v0) +
+                                    0.01 * glm::dvec3(o.mesh.normals[o.mesh.indices[3 * t]]);
+          if (target.z <= 0.0) continue;  // a floor
+          // From the floor of the cell above the ground (the ground-level rays) half the time.
+          const glm::dvec3 from(rng.Uniform(cell.min.x, cell.max.x), rng.Uniform(cell.min.y, cell.max.y),
+                                k % 2 == 0 ? 0.0 : rng.Uniform(0.0, cell.max.z));
+          ASSERT_FALSE(SegmentFree(from, target, scene))
+              << "seed " << seed << ", " << size << " m cell at (" << at.x << ", " << at.y << ") from z " << floor
+              << ": " << o.name << " culled but seen along (" << from.x << ", " << from.y << ", " << from.z << ") - ("
+              << target.x << ", " << target.y << ", " << target.z << ")";
+        }
+      }
+    }
+  }
+  EXPECT_EQ(checked_cells, 48u);
+  EXPECT_GT(culled, 2000u) << "too little culled for the test to mean much";
+  EXPECT_GE(culled, culled_raised) << "a cell on the ground culled less than the same cell 1 cm up";
+}
+
 }  // namespace
 }  // namespace vistream::visibility

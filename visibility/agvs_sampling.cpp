@@ -202,7 +202,18 @@ class Worker {
       bad.back = true;  // discarded, as a ray Embree cannot take
       return bad;
     }
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
+    // The ground z = 0 is solid: a ray ends where it reaches it (no object seen), and a ray
+    // from beneath it is not a sample.
+    const double height = origin.z + s_.frame.z;
+    if (!(height >= 0.0)) {
+      Hit bad;
+      bad.back = true;  // discarded, like a ray that starts inside a solid
+      return bad;
+    }
+    // A millimetre past the ground, so that a building's floor, which lies on it, is still met
+    // (from inside: a back face, and the sample is discarded).
+    const double ground_t = dir.z < 0.0 ? height / -dir.z : kInf;
+    rh.ray.tfar = ground_t < kInf ? static_cast<float>(ground_t + 1e-3) : std::numeric_limits<float>::infinity();
     rh.ray.mask = ~0u;
     rh.ray.flags = 0;
     rh.ray.time = 0.0f;
@@ -211,7 +222,10 @@ class Worker {
     rtcIntersect1(s_.rtc, &ctx, &rh);
     ++out_->embree_rays;
     Hit h;
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+      h.t = ground_t;
+      return h;
+    }
     h.t = rh.ray.tfar;
     h.object = rh.hit.geomID;
     h.quad = rh.hit.primID;

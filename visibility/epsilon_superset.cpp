@@ -40,6 +40,12 @@ struct EpsilonSuperset::Embree {
 
 namespace {
 
+// How far beneath the ground a prism's box reaches for Embree (metres, scene-local): segments
+// end on or above the ground, or at an occludee's vertex below it (a basement); deeper than
+// this a crossing is not proposed, which keeps the occludee (conservative).
+constexpr double kBelowGroundM = -1000.0;
+
+
 double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -458,7 +464,7 @@ absl::StatusOr<std::unique_ptr<EpsilonSuperset>> EpsilonSuperset::Create(const s
       continue;
     }
     s->prisms_.push_back(prism);
-    s->prism_min_.emplace_back(piece.box_min, 0.0);
+    s->prism_min_.emplace_back(piece.box_min, kBelowGroundM);
     s->prism_max_.emplace_back(piece.box_max, piece.height);
   }
   s->object_prism_start_.assign(scene.objects.size() + 1, 0);
@@ -532,8 +538,10 @@ bool EpsilonSuperset::Crosses(uint32_t i, const glm::dvec3& q, const glm::dvec3&
     t1 = f1 < 0.0 ? std::min(t1, t) : t1;
     ok &= f1 != 0.0 || f0 >= 0.0;
   };
+  // No floor: the ground is solid, so a prism reaches down beneath it (a segment between
+  // points above the ground that runs along z = 0 through a footprint passes through the
+  // building or the ground, never under the building).
   const double z = q.z + e.z;
-  clip(z - p.shrink, d.z);
   clip(p.height - p.shrink - z, -d.z);
   const Edge* edge = edges_.data() + p.first_edge;
   for (uint32_t k = 0; k < p.edge_count; ++k) {
@@ -574,7 +582,12 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
     all.stats.ms = Ms(start);
     return all;
   }
-  Query query(*this, options, box);
+  // Viewpoints stand on or above the ground: the part of the box below it is left out (a box
+  // wholly below the ground becomes its footprint on the ground).
+  Aabb eye = box;
+  eye.min.z = std::max(eye.min.z, 0.0);
+  eye.max.z = std::max(eye.max.z, 0.0);
+  Query query(*this, options, eye);
   EpsilonStats& st = query.stats;
 
   // Stage 1: object boxes, nearest first, so that hidden objects stop being occluders

@@ -6,7 +6,8 @@
 // An occludee (an object's box, then each triangle of the objects whose box survived) is
 // hidden when one convex occluder is crossed by every segment from a corner of the box to a
 // vertex of the occludee. Each occluder is a convex prism (a convex piece of an occluder
-// footprint, from the ground to its height), and the segment must pass through its interior
+// footprint, up to its height and down beneath the ground: the ground z = 0 is solid, so a
+// segment along it through a footprint is blocked), and the segment must pass through its interior
 // shrunk by kShrinkM, and by twice the distance rounding to float moves its corners (the
 // meshes are single precision, the occluders double, so an occludee's face may lie microns
 // inside its own occluder): grazing an edge or touching a face never hides anything. The first
@@ -91,7 +92,9 @@ class EpsilonSuperset {
   EpsilonSuperset& operator=(const EpsilonSuperset&) = delete;
 
   // The superset for the neighbourhood `box` (scene-local metres; a zero-size box is a single
-  // viewpoint), over every object, on the calling thread. Thread-safe.
+  // viewpoint), over every object, on the calling thread. Thread-safe. Viewpoints stand on or
+  // above the ground: the part of `box` below z = 0 is left out (a box wholly below it counts
+  // as its footprint on the ground).
   EpsilonResult Compute(const Aabb& box, const EpsilonOptions& options) const;
   // The same over `objects` only, distinct ids (e.g. the viewcell's PVS: what it leaves out
   // stays out). Every prism still occludes.
