@@ -157,6 +157,25 @@ TEST_F(Agvs, KnownAnswerSceneConvergesToTheExactSetsAndNeverPast) {
   }
 }
 
+// Silhouettes searched with discovery rays (as for objects of thousands of triangles) instead
+// of exactly: the sets still converge to the exact ones and never pass them.
+TEST_F(Agvs, DiscoveryRaySilhouettesConvergeToTheExactSetsToo) {
+  const scenes::Scene s = WallScene();
+  const ViewcellGrid g = Grid();
+  AgvsOptions o;
+  o.discovery_triangles = 0;  // every object
+  auto sampler = Sampler(s, g, o);
+  for (int round = 0; round < 40; ++round) {
+    sampler->RunBatch();
+    for (CellId c = 0; c < g.CellCount(); ++c) {
+      for (ObjectId obj : SetOf(*sampler, c)) ASSERT_TRUE(Exact(g, c).count(obj)) << "cell " << c << " sees object " << obj;
+    }
+  }
+  for (CellId c = 0; c < g.CellCount(); ++c) EXPECT_EQ(SetOf(*sampler, c), Exact(g, c)) << "cell " << c;
+  const DistributionStats& mutation = sampler->stats().distributions[static_cast<int>(Distribution::kSilhouetteMutation)];
+  EXPECT_GT(mutation.samples, 0u);
+}
+
 TEST_F(Agvs, AdaptiveMixtureUsesEveryDistribution) {
   const scenes::Scene s = WallScene();
   const ViewcellGrid g = Grid();

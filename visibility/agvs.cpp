@@ -139,6 +139,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   m.view_space.max -= m.frame;
   m.cell_radius = BoxRadius(grid.CellBox(CellId{0}));
   m.buffer = MutationBuffer(options.mutation_buffer);
+  m.discovery_triangles = options.discovery_triangles;
   m.device = rtcNewDevice(nullptr);
   if (m.device == nullptr) {
     return absl::InternalError(absl::StrCat("Embree: cannot create a device (error ", rtcGetDeviceError(nullptr), ")"));

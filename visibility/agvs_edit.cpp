@@ -91,6 +91,7 @@ absl::Status GlobalSampler::DeleteObject(scenes::ObjectId id) {
     rtcDetachGeometry(m.rtc, id);
     m.dirty = true;
   }
+  Impl::ReleaseAlone(&m.objects[id]);
   m.objects[id].alive = false;
   for (CellId c = 0; c < pvs_.cell_count(); ++c) {
     if (pvs_.Contains(c, id)) {

@@ -250,6 +250,11 @@ struct GlobalSampler::Impl {
     Aabb bounds;                   // frame-relative, from verts
     double radius = 0.0;
     bool alive = true;
+    // An object of more than AgvsOptions::discovery_triangles triangles, alone in its own Embree scene: its
+    // silhouettes are searched with discovery rays (the paper's way, logarithmic in its size)
+    // rather than by reading every triangle the fan's plane cuts (which, for a ring of thin
+    // roof triangles, is most of them). Owned by Impl; null for the others.
+    RTCScene alone = nullptr;
   };
   std::vector<Object> objects;
   // Surface points are drawn from a uniform alive object with surface area, then uniformly on
@@ -266,6 +271,7 @@ struct GlobalSampler::Impl {
   Aabb view_space;                   // frame-relative
   double cell_radius = 0.0;
 
+  size_t discovery_triangles = 2048;  // AgvsOptions::discovery_triangles
   RTCDevice device = nullptr;
   RTCScene rtc = nullptr;
   bool dirty = false;  // edits not yet committed
@@ -322,6 +328,7 @@ struct GlobalSampler::Impl {
   }
 
   ~Impl() {
+    for (Object& o : objects) ReleaseAlone(&o);
     if (rtc != nullptr) rtcReleaseScene(rtc);
     if (device != nullptr) rtcReleaseDevice(device);
   }
@@ -345,8 +352,20 @@ struct GlobalSampler::Impl {
     std::copy(quads.begin(), quads.end(), ix);
     rtcCommitGeometry(g);
     rtcAttachGeometryByID(rtc, g, id);
+    ReleaseAlone(&o);
+    if (o.indices.size() / 3 > discovery_triangles) {
+      // Embree lets one geometry belong to several scenes.
+      o.alone = rtcNewScene(device);
+      rtcSetSceneFlags(o.alone, RTC_SCENE_FLAG_ROBUST);
+      rtcAttachGeometry(o.alone, g);
+      rtcCommitScene(o.alone);
+    }
     rtcReleaseGeometry(g);
     dirty = true;
+  }
+  static void ReleaseAlone(Object* o) {
+    if (o->alone != nullptr) rtcReleaseScene(o->alone);
+    o->alone = nullptr;
   }
   void Commit() {
     if (!dirty) return;

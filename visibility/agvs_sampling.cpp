@@ -1,5 +1,6 @@
 #include "visibility/agvs.h"
 #include "visibility/agvs_internal.h"
+#include "visibility/discovery_rays.h"
 
 // Drawing and casting samples: the worker each thread runs, a batch, sampling from a box.
 
@@ -284,7 +285,10 @@ class Worker {
     const glm::dvec3 far = to + radius * d;
     if (!s_.objects[object].alive || !(radius > 0.0)) return far;
     ++out_->silhouette_searches;
-    const std::optional<double> lambda = SilhouetteLambda({from, to, d, radius}, s_.objects[object].fan, &fan_);
+    const DiscoveryFan fan{from, to, d, radius};
+    const Impl::Object& o = s_.objects[object];
+    const std::optional<double> lambda = o.alone != nullptr ? DiscoveryLambda(fan, o.alone, &out_->embree_rays)
+                                                            : SilhouetteLambda(fan, o.fan, &fan_);
     if (!lambda) return far;
     // Just past the silhouette, on the side of the rays that miss, by as much as the paper's
     // quaternary search of depth 3 leaves (a 64th of the radius), at random.

@@ -195,6 +195,78 @@ uint32_t Find(std::vector<uint32_t>& parent, uint32_t x) {
   return x;
 }
 
+
+// A 30-bit Morton code of p in the box [lo, lo + ext): ten bits per axis, interleaved.
+uint32_t Morton(const glm::dvec3& p, const glm::dvec3& lo, const glm::dvec3& ext) {
+  auto spread = [](uint32_t v) {
+    v = (v | v << 16) & 0x030000FFu;
+    v = (v | v << 8) & 0x0300F00Fu;
+    v = (v | v << 4) & 0x030C30C3u;
+    v = (v | v << 2) & 0x09249249u;
+    return v;
+  };
+  uint32_t code = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double u = ext[k] > 0.0 ? (p[k] - lo[k]) / ext[k] : 0.0;
+    const uint32_t q = static_cast<uint32_t>(std::clamp(u * 1024.0, 0.0, 1023.0));
+    code |= spread(q) << k;
+  }
+  return code;
+}
+
+// The levels above `leaves`: each node a sphere around kTreeFanout nodes of the level below.
+FanSurface::SphereTree BuildSphereTree(std::vector<FanSurface::Sphere> leaves) {
+  FanSurface::SphereTree tree;
+  if (leaves.empty()) return tree;
+  tree.push_back(std::move(leaves));
+  while (tree.back().size() > FanSurface::kTreeFanout) {
+    const std::vector<FanSurface::Sphere>& below = tree.back();
+    std::vector<FanSurface::Sphere> level((below.size() + FanSurface::kTreeFanout - 1) / FanSurface::kTreeFanout);
+    for (size_t i = 0; i < level.size(); ++i) {
+      const size_t first = i * FanSurface::kTreeFanout, last = std::min(below.size(), first + FanSurface::kTreeFanout);
+      glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+      for (size_t c = first; c < last; ++c) {
+        lo = glm::min(lo, glm::dvec3(below[c].centre) - static_cast<double>(below[c].radius));
+        hi = glm::max(hi, glm::dvec3(below[c].centre) + static_cast<double>(below[c].radius));
+      }
+      const glm::dvec3 centre = 0.5 * (lo + hi);
+      double radius = 0.0;
+      for (size_t c = first; c < last; ++c) {
+        radius = std::max(radius, glm::length(glm::dvec3(below[c].centre) - centre) + below[c].radius);
+      }
+      // Rounding the centre to float moves it: the radius takes that and a millionth more.
+      const glm::vec3 fc(centre);
+      level[i].centre = fc;
+      level[i].radius = static_cast<float>((radius + glm::length(glm::dvec3(fc) - centre)) * (1.0 + 1e-6));
+    }
+    tree.push_back(std::move(level));
+  }
+  return tree;
+}
+
+
+// Calls leaf(i) for every leaf of `tree` whose sphere and whose ancestors' spheres `misses`
+// does not rule out.
+template <typename Misses, typename Leaf>
+void VisitSphereTree(const FanSurface::SphereTree& tree, const Misses& misses, const Leaf& leaf) {
+  if (tree.empty()) return;
+  std::array<std::pair<uint32_t, uint32_t>, 256> stack;  // (level, node); depth * fan-out at most
+  size_t top = 0;
+  const uint32_t root_level = static_cast<uint32_t>(tree.size() - 1);
+  for (uint32_t i = 0; i < tree[root_level].size(); ++i) stack[top++] = {root_level, i};
+  while (top > 0) {
+    const auto [level, node] = stack[--top];
+    if (misses(tree[level][node])) continue;
+    if (level == 0) {
+      leaf(node);
+      continue;
+    }
+    const uint32_t first = node * FanSurface::kTreeFanout;
+    const uint32_t last = std::min<uint32_t>(static_cast<uint32_t>(tree[level - 1].size()), first + FanSurface::kTreeFanout);
+    for (uint32_t c = last; c-- > first;) stack[top++] = {level - 1, c};
+  }
+}
+
 }  // namespace
 
 FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uint32_t> indices)
@@ -369,10 +441,62 @@ FanSurface::FanSurface(std::span<const glm::vec3> positions, std::span<const uin
     p.triangle_count = static_cast<uint32_t>(members.size());
     pieces_.push_back(p);
   }
-  std::sort(loose.begin(), loose.end());
+  // Morton order of the pieces' and loose triangles' centres over the object's box, so that
+  // neighbours in the lists are neighbours in space and the sphere trees stay tight.
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const glm::vec3& v : welded) {
+    lo = glm::min(lo, glm::dvec3(v));
+    hi = glm::max(hi, glm::dvec3(v));
+  }
+  const glm::dvec3 ext = hi - lo;
+  {
+    std::vector<std::pair<uint32_t, uint32_t>> order(pieces_.size());
+    for (uint32_t i = 0; i < pieces_.size(); ++i) order[i] = {Morton(glm::dvec3(pieces_[i].centre), lo, ext), i};
+    std::sort(order.begin(), order.end());
+    std::vector<Piece> sorted(pieces_.size());
+    std::vector<Sphere> leaves(pieces_.size());
+    for (size_t i = 0; i < order.size(); ++i) {
+      sorted[i] = pieces_[order[i].second];
+      leaves[i] = Sphere{sorted[i].centre, sorted[i].radius};
+    }
+    pieces_ = std::move(sorted);
+    piece_tree_ = BuildSphereTree(std::move(leaves));
+  }
+  auto centroid = [&](uint32_t t) {
+    return (glm::dvec3(positions[indices[3 * t]]) + glm::dvec3(positions[indices[3 * t + 1]]) +
+            glm::dvec3(positions[indices[3 * t + 2]])) / 3.0;
+  };
+  std::vector<std::pair<uint32_t, uint32_t>> order(loose.size());
+  for (size_t i = 0; i < loose.size(); ++i) order[i] = {Morton(centroid(loose[i]), lo, ext), loose[i]};
+  std::sort(order.begin(), order.end());
+  for (size_t i = 0; i < loose.size(); ++i) loose[i] = order[i].second;
   loose_count_ = static_cast<uint32_t>(loose.size());
   loose_block_ = static_cast<uint32_t>(blocks_.size());
   if (!loose.empty()) append_blocks(loose);
+  // One sphere per cluster of kClusterBlocks blocks, around its triangles' corners (in double,
+  // then widened by what rounding to float and the float test can lose, as for pieces).
+  std::vector<Sphere> clusters;
+  const size_t per_cluster = 4 * kClusterBlocks;
+  for (size_t first = 0; first < loose.size(); first += per_cluster) {
+    const size_t last = std::min(loose.size(), first + per_cluster);
+    glm::dvec3 clo(std::numeric_limits<double>::infinity()), chi(-clo);
+    for (size_t i = first; i < last; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        clo = glm::min(clo, glm::dvec3(positions[indices[3 * loose[i] + k]]));
+        chi = glm::max(chi, glm::dvec3(positions[indices[3 * loose[i] + k]]));
+      }
+    }
+    const glm::dvec3 centre = 0.5 * (clo + chi);
+    double radius = 0.0;
+    for (size_t i = first; i < last; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        radius = std::max(radius, glm::length(glm::dvec3(positions[indices[3 * loose[i] + k]]) - centre));
+      }
+    }
+    const double tol = 1e-6 * (glm::length(chi - clo) + std::max(glm::length(clo), glm::length(chi)));
+    clusters.push_back(Sphere{glm::vec3(centre), static_cast<float>(radius * (1.0 + 1e-5) + tol)});
+  }
+  loose_tree_ = BuildSphereTree(std::move(clusters));
 }
 
 FanSurface::Hot FanSurface::hot() const {
@@ -416,17 +540,23 @@ void FanHits(const DiscoveryFan& fan, const FanSurface& surface, std::vector<std
   f.dscale = len / fan.radius;
   f.alpha_min = static_cast<float>(f.dalpha_min);
   f.scale = static_cast<float>(f.dscale);
-  for (const FanSurface::Piece& p : surface.piece_list()) {
-    // The plane misses the piece's sphere: nothing to read.
-    if (std::abs(glm::dot(p.centre - f.from, f.n)) > p.radius) continue;
+  // The plane misses a sphere, or the sphere lies wholly behind `from`: nothing in it to read.
+  auto misses = [&f](const FanSurface::Sphere& s) {
+    const glm::vec3 r = s.centre - f.from;
+    return std::abs(glm::dot(r, f.n)) > s.radius || glm::dot(r, f.s) < -s.radius;
+  };
+  std::span<const FanSurface::Piece> pieces = surface.piece_list();
+  VisitSphereTree(surface.piece_tree(), misses, [&](uint32_t i) {
+    const FanSurface::Piece& p = pieces[i];
     if (!PieceHit(f, surface, p, out)) {
       TriangleHits(f, surface.blocks().subspan(p.block, (p.triangle_count + 3) / 4), p.triangle_count, out);
     }
-  }
-  if (surface.loose_count() > 0) {
-    TriangleHits(f, surface.blocks().subspan(surface.loose_block(), (surface.loose_count() + 3) / 4),
-                 surface.loose_count(), out);
-  }
+  });
+  const uint32_t per_cluster = 4 * FanSurface::kClusterBlocks;
+  VisitSphereTree(surface.loose_tree(), misses, [&](uint32_t c) {
+    const uint32_t first = c * per_cluster, count = std::min(per_cluster, surface.loose_count() - first);
+    TriangleHits(f, surface.blocks().subspan(surface.loose_block() + first / 4, (count + 3) / 4), count, out);
+  });
 }
 
 std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanSurface& surface,
@@ -436,21 +566,18 @@ std::optional<double> SilhouetteLambda(const DiscoveryFan& fan, const FanSurface
   FanHits(fan, surface, &iv);
   // Runs are unions of intervals closer than `gap`. Of the intervals that start at or below 0,
   // the one reaching highest lies in the last run that starts there: the run holding 0 if any
-  // does, else the run with the largest meeting λ below 0. A few passes climb to its top.
+  // does, else the run with the largest meeting λ below 0.
   double top = -std::numeric_limits<double>::infinity();
   for (const auto& [lo, hi] : iv) {
     if (hi >= 1.0) return std::nullopt;  // the far end is met: no silhouette within reach
     if (lo <= 0.0) top = std::max(top, hi);
   }
   if (!(top >= -1.0)) return std::nullopt;
-  for (bool grew = true; grew;) {
-    grew = false;
-    for (const auto& [lo, hi] : iv) {
-      if (lo <= top + gap && hi > top) {
-        top = hi;
-        grew = true;
-      }
-    }
+  // Climb in order of the intervals' starts: once one starts past top + gap, so do the rest.
+  std::sort(iv.begin(), iv.end());
+  for (const auto& [lo, hi] : iv) {
+    if (lo > top + gap) break;
+    top = std::max(top, hi);
   }
   return top;
 }

@@ -66,6 +66,22 @@ class FanSurface {
   std::span<const Block> blocks() const { return blocks_; }
   uint32_t loose_block() const { return loose_block_; }  // the triangles in no piece start here
   uint32_t loose_count() const { return loose_count_; }
+
+  // Bounding spheres over the pieces and over runs of kClusterBlocks blocks of loose
+  // triangles (both in Morton order of their centres), so that a search reads only what the
+  // fan's plane cuts: level 0 holds one sphere per leaf (a piece, or a cluster of loose
+  // triangles), level k + 1 one per kTreeFanout nodes of level k; the last level is the root's
+  // children. Large objects (a 50,000-node courtyard ring) then cost a search about what the
+  // plane cuts, not what the object holds.
+  struct Sphere {
+    glm::vec3 centre;
+    float radius = 0.0f;
+  };
+  static constexpr uint32_t kClusterBlocks = 8;
+  static constexpr uint32_t kTreeFanout = 8;
+  using SphereTree = std::vector<std::vector<Sphere>>;
+  const SphereTree& piece_tree() const { return piece_tree_; }
+  const SphereTree& loose_tree() const { return loose_tree_; }
   // Where a search reads first: taken ahead (one cache miss), so that Prefetch has no miss of
   // its own to wait for.
   struct Hot {
@@ -83,6 +99,7 @@ class FanSurface {
   std::vector<Block> blocks_;  // each piece's triangles, then the loose ones; padded per group
   uint32_t loose_block_ = 0, loose_count_ = 0;
   size_t triangle_count_ = 0;
+  SphereTree piece_tree_, loose_tree_;
 };
 
 // The rays from `from` through to + λ·radius·d, λ in [-1, 1]: `d` is a unit vector normal to
