@@ -72,7 +72,9 @@ std::string DracoGlb(const std::vector<SourceMesh>& meshes, int quantization_bit
 
 TEST(GltfDraco, DracoMeshDecodesToTheSourceTriangles) {
   const std::vector<SourceMesh> src = Source();
-  absl::StatusOr<Scene> s = LoadGltfFromMemory(DracoGlb(src, /*quantization_bits=*/0), true, "draco.glb");
+  const std::string glb = DracoGlb(src, /*quantization_bits=*/0);
+  MaybeWriteSeed("draco.glb", glb);
+  absl::StatusOr<Scene> s = LoadGltfFromMemory(glb, true, "draco.glb");
   ASSERT_TRUE(s.ok()) << s.status();
   ASSERT_EQ(s->objects.size(), src.size());
   for (size_t i = 0; i < src.size(); ++i) {

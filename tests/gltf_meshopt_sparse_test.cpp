@@ -73,7 +73,9 @@ std::string MeshoptGlb(const std::vector<SourceMesh>& meshes, size_t cut = 0, co
 
 TEST(GltfMeshopt, CompressedBuffersDecodeToTheSourceTriangles) {
   const std::vector<SourceMesh> src = Source();
-  absl::StatusOr<Scene> s = LoadGltfFromMemory(MeshoptGlb(src), true, "meshopt.glb");
+  const std::string glb = MeshoptGlb(src);
+  MaybeWriteSeed("meshopt.glb", glb);
+  absl::StatusOr<Scene> s = LoadGltfFromMemory(glb, true, "meshopt.glb");
   ASSERT_TRUE(s.ok()) << s.status();
   ASSERT_EQ(s->objects.size(), src.size());
   for (size_t i = 0; i < src.size(); ++i) {
@@ -142,7 +144,9 @@ std::string SparseGlb(const std::vector<float>& base, size_t count, const std::v
 TEST(GltfSparse, SparseValuesReplaceTheBaseValues) {
   // Base: a ground triangle (glTF y-up) of 2 m; vertex 2 moved by the sparse values.
   const std::vector<float> base = {0, 0, 0, 2, 0, 0, 0, 0, -2};
-  absl::StatusOr<Scene> s = LoadGltfFromMemory(SparseGlb(base, 3, {2}, {0, 0, -5}), true, "sparse.glb");
+  const std::string glb = SparseGlb(base, 3, {2}, {0, 0, -5});
+  MaybeWriteSeed("sparse.glb", glb);
+  absl::StatusOr<Scene> s = LoadGltfFromMemory(glb, true, "sparse.glb");
   ASSERT_TRUE(s.ok()) << s.status();
   const SourceMesh want{"sparse", {0, 0, 0, 2, 0, 0, 0, 0, -5}, {0, 1, 2}};
   ExpectSameTriangles(SourceTriangles(want), LoadedTriangles(*s, 0), 0.0);

@@ -3,6 +3,8 @@
 // written by hand (for extensions no writer here produces).
 #include <algorithm>
 #include <array>
+#include <cstdlib>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -136,6 +138,14 @@ inline json MinMax(const std::vector<float>& xyz) {
     hi[i % 3] = std::max<double>(hi[i % 3], xyz[i]);
   }
   return {{"min", lo}, {"max", hi}};
+}
+
+// Writes `bytes` as fuzz seed `name` when VISTREAM_GLTF_SEED_DIR is set, so the seeds in
+// tests/fuzz/corpus/gltf are remade by:
+//   VISTREAM_GLTF_SEED_DIR=tests/fuzz/corpus/gltf build/bin/scenes_test --gtest_filter='GltfDraco.*:GltfMeshopt.*:GltfSparse.*'
+inline void MaybeWriteSeed(const std::string& name, const std::string& bytes) {
+  const char* dir = std::getenv("VISTREAM_GLTF_SEED_DIR");
+  if (dir != nullptr) std::ofstream(std::string(dir) + "/" + name, std::ios::binary) << bytes;
 }
 
 }  // namespace vistream::scenes::gltf_test
