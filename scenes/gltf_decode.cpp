@@ -277,7 +277,7 @@ std::string_view PrepareCompressed(std::string_view bytes, bool binary, std::str
   }
   nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded() || !RewriteJson(&j)) return bytes;
-  std::string text = j.dump();
+  std::string text = j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   if (!binary) {
     *storage = std::move(text);
     return *storage;

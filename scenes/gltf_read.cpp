@@ -430,6 +430,8 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, co
     bytes = gltf_detail::PrepareCompressed(bytes, binary, &rewritten);
   } catch (const LoadError& e) {
     return absl::InvalidArgumentError(absl::StrCat(name, ": ", e.what));
+  } catch (const std::exception& e) {  // nlohmann::json, should hostile input get past its parser
+    return absl::InvalidArgumentError(absl::StrCat(name, ": not a valid glTF file: ", e.what()));
   }
   try {
     if (binary) {

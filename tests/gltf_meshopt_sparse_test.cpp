@@ -188,6 +188,10 @@ TEST(GltfExtensions, RequiredExtensionThatChangesGeometryIsRefusedNamingIt) {
                                       "not supported"),
             std::string::npos)
       << s.status();
+  // The same refusal for .gltf text.
+  absl::StatusOr<Scene> text = LoadGltfFromMemory(b.j.dump(), false, "instanced.gltf");
+  ASSERT_FALSE(text.ok());
+  EXPECT_NE(text.status().message().find("extension 'EXT_mesh_gpu_instancing'"), std::string::npos) << text.status();
   // The same file with the extension only used (optional) loads.
   b.j.erase("extensionsRequired");
   absl::StatusOr<Scene> optional = LoadGltfFromMemory(b.Bytes(), true, "optional.glb");
