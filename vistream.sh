@@ -35,6 +35,29 @@ install_packages() {
     "${missing[@]}"
 }
 
+# The Khronos glTF validator checks the .glb files vistream writes (ctest gltf_validator_test).
+# An npm library, pinned, installed into the build folder (ignored by git); node and npm come
+# from Debian only when they are missing, so an existing install (e.g. nodesource's) is kept.
+GLTF_VALIDATOR_VERSION=2.0.0-dev.3.10
+install_gltf_validator() {
+  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    log "installing Debian's nodejs and npm (for the glTF validator)"
+    local sudo=()
+    [ "$(id -u)" -ne 0 ] && sudo=(sudo)
+    "${sudo[@]}" apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends nodejs npm
+  fi
+  local dir="$BUILD_DIR/node"
+  local installed="$dir/node_modules/gltf-validator/package.json"
+  if [ -f "$installed" ] && grep -q "\"version\": *\"$GLTF_VALIDATOR_VERSION\"" "$installed"; then
+    return 0
+  fi
+  log "installing gltf-validator@$GLTF_VALIDATOR_VERSION (npm) into $dir"
+  mkdir -p "$dir"
+  npm install --prefix "$dir" --no-save --no-audit --no-fund --loglevel=error \
+    "gltf-validator@$GLTF_VALIDATOR_VERSION" >&2
+}
+
 configure_and_build() {
   local extra=()
   [ "${CI:-}" = "true" ] && extra+=(-DVISTREAM_WERROR=ON)
@@ -97,6 +120,7 @@ case "$cmd" in
     ;;
   test)
     install_packages
+    install_gltf_validator
     configure_and_build
     ctest --test-dir "$BUILD_DIR" --no-tests=error --output-on-failure --parallel "${VISTREAM_JOBS:-2}" \
       --timeout 900

@@ -21,6 +21,11 @@ namespace vistream::scenes {
 // one object per mesh node (its triangle primitives merged), strips and fans converted,
 // points and lines skipped with a warning, flat normals made where a mesh has none.
 // Without a vistream origin node the origin is the rounded centre of the ground footprint.
+// Decodes KHR_draco_mesh_compression (libdraco), EXT_meshopt_compression (meshoptimizer),
+// KHR_mesh_quantization and sparse accessors (glTF 2.0, 3.6.2.3); an unsupported extension in
+// extensionsRequired that changes geometry is an error naming it (appearance-only ones, such
+// as KHR_materials_*, are ignored). Errors name the extension and element (bufferView, mesh,
+// primitive, attribute) where compressed data does not decode.
 // Warnings are appended to `warnings` when given. Errors name the file and the element.
 absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings = nullptr);
 
@@ -32,7 +37,9 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary,
                                          std::vector<std::string>* warnings = nullptr);
 
 // Saves a validated scene; binary when `path` ends in .glb, otherwise .gltf with the buffer
-// beside it as PATH_STEM.bin.
+// beside it as PATH_STEM.bin. Each object is one node and mesh whose POSITION, NORMAL and
+// index accessors are its own ranges of three shared bufferViews (float vec3 y-up metres,
+// uint32 object-local indices), POSITION with the object's own min/max (glTF 2.0, 3.6.2.4).
 absl::Status SaveGltf(const Scene& scene, const std::string& path);
 
 }  // namespace vistream::scenes

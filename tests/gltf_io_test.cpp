@@ -97,6 +97,31 @@ TEST(GltfIo, FileIsYUpOnDisk) {
   EXPECT_DOUBLE_EQ(pos.minValues[2], -1.0);  // glTF z is minus vistream y
 }
 
+TEST(GltfIo, EachMeshHasItsOwnAccessorsAndBounds) {
+  // Viewers cull by an accessor's min/max: each object's POSITION accessor holds only its
+  // own vertices, and its bounds are its building's (SmallScene's boxes, glTF y-up, local).
+  const Scene scene = SmallScene();
+  const std::string path = TempDir() + "/bounds.glb";
+  ASSERT_TRUE(SaveGltf(scene, path).ok());
+  tinygltf::TinyGLTF reader;
+  tinygltf::Model model;
+  std::string err, warn;
+  ASSERT_TRUE(reader.LoadBinaryFromFile(&model, &err, &warn, path)) << err;
+  ASSERT_EQ(model.meshes.size(), 2u);
+  const std::vector<double> want_min[2] = {{0, 0, -8}, {30, 0, -25}};
+  const std::vector<double> want_max[2] = {{10, 12, 0}, {50, 80.5, -5}};
+  for (size_t m = 0; m < 2; ++m) {
+    const tinygltf::Primitive& prim = model.meshes[m].primitives[0];
+    const tinygltf::Accessor& pos = model.accessors[prim.attributes.at("POSITION")];
+    EXPECT_EQ(pos.count, scene.objects[m].mesh.positions.size()) << "mesh " << m;
+    EXPECT_EQ(model.accessors[prim.attributes.at("NORMAL")].count, pos.count) << "mesh " << m;
+    EXPECT_EQ(pos.minValues, want_min[m]) << "mesh " << m;
+    EXPECT_EQ(pos.maxValues, want_max[m]) << "mesh " << m;
+  }
+  EXPECT_NE(model.meshes[0].primitives[0].attributes.at("POSITION"),
+            model.meshes[1].primitives[0].attributes.at("POSITION"));
+}
+
 // --- A file written by another tool: tinygltf's own writer, not vistream's. ---
 
 struct ForeignBuilder {

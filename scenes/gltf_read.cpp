@@ -1,6 +1,9 @@
 #include "scenes/gltf_io.h"
 
-#include <charconv>
+#include "scenes/gltf_accessor.h"
+#include "scenes/gltf_decode.h"
+#include "scenes/gltf_frame.h"
+
 #include <cmath>
 #include <cstring>
 #include <algorithm>
@@ -23,19 +26,15 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// glTF y-up <-> vistream z-up. A rotation, so it maps normals the same way.
-glm::dvec3 ZupFromGltf(const glm::dvec3& p) { return {p.x, -p.z, p.y}; }
-glm::dvec3 GltfFromZup(const glm::dvec3& p) { return {p.x, p.z, -p.y}; }
-// The matrix of ZupFromGltf, and its inverse.
-const glm::dmat4 kZupFromGltf(1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1);
+using gltf_detail::AccessorReader;
+using gltf_detail::EndsWith;
+using gltf_detail::kZupFromGltf;
+using gltf_detail::LoadError;
+using gltf_detail::ZupFromGltf;
+
 const glm::dmat4 kGltfFromZup = glm::inverse(kZupFromGltf);
 
 constexpr int kMaxNodeDepth = 256;
-
-// Bad data found while walking the model; `what` names the element.
-struct LoadError {
-  std::string what;
-};
 
 glm::dmat4 LocalMatrix(const tinygltf::Node& node) {
   if (node.matrix.size() == 16) return glm::make_mat4(node.matrix.data());
@@ -53,88 +52,6 @@ glm::dmat4 LocalMatrix(const tinygltf::Node& node) {
   }
   return m;
 }
-
-// Typed, bounds-checked reading of accessor elements.
-class AccessorReader {
- public:
-  AccessorReader(const tinygltf::Model& model, int index, std::string what) : what_(std::move(what)) {
-    if (index < 0 || index >= static_cast<int>(model.accessors.size())) {
-      throw LoadError{absl::StrCat(what_, ": accessor ", index, " does not exist")};
-    }
-    acc_ = &model.accessors[index];
-    if (acc_->sparse.isSparse) throw LoadError{absl::StrCat(what_, ": sparse accessors are not supported")};
-    if (acc_->bufferView < 0 || acc_->bufferView >= static_cast<int>(model.bufferViews.size())) {
-      throw LoadError{absl::StrCat(what_, ": accessor ", index, " has no valid bufferView")};
-    }
-    const tinygltf::BufferView& view = model.bufferViews[acc_->bufferView];
-    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) {
-      throw LoadError{absl::StrCat(what_, ": bufferView ", acc_->bufferView, " has no valid buffer")};
-    }
-    const auto& data = model.buffers[view.buffer].data;
-    components_ = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc_->type));
-    component_size_ = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(acc_->componentType));
-    if (components_ <= 0 || component_size_ <= 0) {
-      throw LoadError{absl::StrCat(what_, ": accessor ", index, " has an invalid type")};
-    }
-    const int stride = acc_->ByteStride(view);
-    if (stride <= 0) throw LoadError{absl::StrCat(what_, ": accessor ", index, " has an invalid stride")};
-    stride_ = static_cast<size_t>(stride);
-    const size_t element = static_cast<size_t>(components_) * static_cast<size_t>(component_size_);
-    const size_t start = view.byteOffset + acc_->byteOffset;
-    // The last element must end inside the view, and the view inside the buffer.
-    const size_t need = acc_->count == 0 ? 0 : (acc_->count - 1) * stride_ + element;
-    if (view.byteOffset > data.size() || view.byteLength > data.size() - view.byteOffset ||
-        acc_->byteOffset > view.byteLength || need > view.byteLength - acc_->byteOffset) {
-      throw LoadError{absl::StrCat(what_, ": accessor ", index, " reads past the end of its buffer")};
-    }
-    base_ = data.data() + start;
-  }
-  size_t count() const { return acc_->count; }
-  int components() const { return components_; }
-  int type() const { return acc_->type; }
-  int component_type() const { return acc_->componentType; }
-
-  // Component c of element i, as double (normalized integers scaled as glTF says).
-  double Get(size_t i, int c) const {
-    const unsigned char* p = base_ + i * stride_ + static_cast<size_t>(c) * component_size_;
-    switch (acc_->componentType) {
-      case TINYGLTF_COMPONENT_TYPE_FLOAT: return Load<float>(p);
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return Load<uint32_t>(p);
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-        const double v = Load<uint16_t>(p);
-        return acc_->normalized ? v / 65535.0 : v;
-      }
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
-        const double v = Load<uint8_t>(p);
-        return acc_->normalized ? v / 255.0 : v;
-      }
-      case TINYGLTF_COMPONENT_TYPE_SHORT: {
-        const double v = Load<int16_t>(p);
-        return acc_->normalized ? std::max(v / 32767.0, -1.0) : v;
-      }
-      case TINYGLTF_COMPONENT_TYPE_BYTE: {
-        const double v = Load<int8_t>(p);
-        return acc_->normalized ? std::max(v / 127.0, -1.0) : v;
-      }
-      default: return NAN;
-    }
-  }
-  glm::dvec3 Vec3(size_t i) const { return {Get(i, 0), Get(i, 1), Get(i, 2)}; }
-
- private:
-  template <typename T>
-  static T Load(const unsigned char* p) {
-    T v;
-    std::memcpy(&v, p, sizeof(T));
-    return v;
-  }
-  std::string what_;
-  const tinygltf::Accessor* acc_ = nullptr;
-  const unsigned char* base_ = nullptr;
-  size_t stride_ = 0;
-  int components_ = 0;
-  int component_size_ = 0;
-};
 
 struct PendingObject {
   std::string name;
@@ -476,7 +393,7 @@ bool SkipImages(tinygltf::Image*, const int, std::string*, std::string*, int, in
 }
 
 absl::StatusOr<Scene> Convert(bool ok, const std::string& err, const std::string& warn,
-                              const tinygltf::Model& model, const std::string& name,
+                              tinygltf::Model* model, const std::string& name,
                               std::vector<std::string>* warnings) {
   if (!ok) {
     return absl::InvalidArgumentError(
@@ -484,17 +401,14 @@ absl::StatusOr<Scene> Convert(bool ok, const std::string& err, const std::string
   }
   if (warnings != nullptr && !warn.empty()) warnings->push_back(absl::StrCat(name, ": ", warn));
   try {
-    GltfImporter importer(model, name, warnings);
+    gltf_detail::DecodeCompressed(model);
+    GltfImporter importer(*model, name, warnings);
     Scene scene = importer.Import();
     if (absl::Status s = ValidateScene(scene, name); !s.ok()) return s;
     return scene;
   } catch (const LoadError& e) {
     return absl::InvalidArgumentError(absl::StrCat(name, ": ", e.what));
   }
-}
-
-bool EndsWith(std::string_view s, std::string_view suffix) {
-  return s.size() >= suffix.size() && s.substr(s.size() - suffix.size()) == suffix;
 }
 
 }  // namespace
@@ -511,6 +425,14 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, co
   tinygltf::Model model;
   std::string err, warn;
   bool ok = false;
+  std::string rewritten;
+  try {
+    bytes = gltf_detail::PrepareCompressed(bytes, binary, &rewritten);
+  } catch (const LoadError& e) {
+    return absl::InvalidArgumentError(absl::StrCat(name, ": ", e.what));
+  } catch (const std::exception& e) {  // nlohmann::json, should hostile input get past its parser
+    return absl::InvalidArgumentError(absl::StrCat(name, ": not a valid glTF file: ", e.what()));
+  }
   try {
     if (binary) {
       ok = loader.LoadBinaryFromMemory(&model, &err, &warn,
@@ -524,7 +446,7 @@ absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, co
     ok = false;
     err = e.what();
   }
-  return Convert(ok, err, warn, model, name, warnings);
+  return Convert(ok, err, warn, &model, name, warnings);
 }
 
 absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>* warnings) {
@@ -553,164 +475,6 @@ absl::StatusOr<Scene> LoadGltf(const std::string& path, std::vector<std::string>
   std::string base = fs::path(path).parent_path().string();
   if (base.empty()) base = ".";
   return LoadGltfFromMemory(bytes, binary, path, base, warnings);
-}
-
-namespace {
-
-// Appends raw bytes of `values` to `buffer`, 4-byte aligned; returns the byte offset.
-template <typename T>
-size_t AppendBytes(const std::vector<T>& values, std::vector<unsigned char>* buffer) {
-  while (buffer->size() % 4 != 0) buffer->push_back(0);
-  const size_t offset = buffer->size();
-  buffer->resize(offset + values.size() * sizeof(T));
-  if (!values.empty()) std::memcpy(buffer->data() + offset, values.data(), values.size() * sizeof(T));
-  return offset;
-}
-
-// The shortest decimal that reads back as the same float: min/max stay exact for float
-// readers and the JSON stays short (3017.408, not 3017.407958984375).
-double ShortFloat(double value) {
-  char buf[64];
-  const auto r = std::to_chars(buf, buf + sizeof(buf), static_cast<float>(value));
-  return std::strtod(std::string(buf, r.ptr).c_str(), nullptr);
-}
-
-}  // namespace
-
-absl::Status SaveGltf(const Scene& scene, const std::string& path) {
-  if (absl::Status s = ValidateScene(scene, path); !s.ok()) return s;
-  const bool binary = EndsWith(path, ".glb");
-  tinygltf::Model model;
-  model.asset.version = "2.0";
-  model.asset.generator = "vistream";
-  model.buffers.resize(1);
-  tinygltf::Buffer& buffer = model.buffers[0];
-
-  // Three interleaving-free streams, each one bufferView; objects are ranges of them.
-  std::vector<glm::vec3> positions, normals;
-  std::vector<uint32_t> indices;
-  positions.reserve(scene.VertexCount());
-  normals.reserve(scene.VertexCount());
-  indices.reserve(scene.TriangleCount() * 3);
-  if (scene.VertexCount() > std::numeric_limits<uint32_t>::max()) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": more than 2^32 vertices"));
-  }
-  uint32_t vertex_base = 0;
-  for (const Object& o : scene.objects) {
-    for (const glm::vec3& p : o.mesh.positions) positions.emplace_back(GltfFromZup(glm::dvec3(p)));
-    for (const glm::vec3& n : o.mesh.normals) normals.emplace_back(GltfFromZup(glm::dvec3(n)));
-    for (uint32_t i : o.mesh.indices) indices.push_back(vertex_base + i);
-    vertex_base += static_cast<uint32_t>(o.mesh.positions.size());
-  }
-  const size_t pos_off = AppendBytes(positions, &buffer.data);
-  const size_t nrm_off = AppendBytes(normals, &buffer.data);
-  const size_t idx_off = AppendBytes(indices, &buffer.data);
-  auto add_view = [&](size_t offset, size_t length, int target) {
-    tinygltf::BufferView v;
-    v.buffer = 0;
-    v.byteOffset = offset;
-    v.byteLength = length;
-    v.target = target;
-    model.bufferViews.push_back(v);
-  };
-  add_view(pos_off, positions.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
-  add_view(nrm_off, normals.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
-  add_view(idx_off, indices.size() * sizeof(uint32_t), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
-
-  // The origin node: its translation is the scene origin; objects are its children.
-  tinygltf::Node root;
-  root.name = scene.name.empty() ? "vistream" : scene.name;
-  const glm::dvec3 origin = GltfFromZup(scene.origin);
-  root.translation = {origin.x, origin.y, origin.z};
-  root.extras = tinygltf::Value(tinygltf::Value::Object{
-      {"vistream", tinygltf::Value(tinygltf::Value::Object{{"origin", tinygltf::Value(true)}})}});
-  model.nodes.push_back(root);
-
-  std::vector<std::vector<const Occluder25D*>> occluders(scene.objects.size());
-  for (const Occluder25D& oc : scene.occluders) occluders[oc.object].push_back(&oc);
-
-  auto add_accessor = [&](int view, size_t offset, size_t count, int ctype, int type) {
-    tinygltf::Accessor a;
-    a.bufferView = view;
-    a.byteOffset = offset;
-    a.count = count;
-    a.componentType = ctype;
-    a.type = type;
-    model.accessors.push_back(a);
-    return static_cast<int>(model.accessors.size() - 1);
-  };
-  // One POSITION and one NORMAL accessor for the whole scene; each object is a primitive
-  // whose indices pick its vertices. Far fewer accessors keeps the JSON, and loading, small.
-  const int pa = add_accessor(0, 0, positions.size(), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
-  glm::dvec3 lo(INFINITY), hi(-INFINITY);  // POSITION needs min and max (glTF 2.0, 3.6.2.4)
-  for (const glm::vec3& p : positions) {
-    lo = glm::min(lo, glm::dvec3(p));
-    hi = glm::max(hi, glm::dvec3(p));
-  }
-  model.accessors[pa].minValues = {ShortFloat(lo.x), ShortFloat(lo.y), ShortFloat(lo.z)};
-  model.accessors[pa].maxValues = {ShortFloat(hi.x), ShortFloat(hi.y), ShortFloat(hi.z)};
-  const int na = add_accessor(1, 0, normals.size(), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3);
-
-  size_t index_base = 0;
-  for (const Object& o : scene.objects) {
-    const size_t ni = o.mesh.indices.size();
-    const int ia = add_accessor(2, index_base * sizeof(uint32_t), ni, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
-                                TINYGLTF_TYPE_SCALAR);
-    index_base += ni;
-
-    tinygltf::Primitive prim;
-    prim.attributes["POSITION"] = pa;
-    prim.attributes["NORMAL"] = na;
-    prim.indices = ia;
-    prim.mode = TINYGLTF_MODE_TRIANGLES;
-    tinygltf::Mesh mesh;
-    mesh.primitives.push_back(prim);
-    model.meshes.push_back(std::move(mesh));
-
-    tinygltf::Node node;
-    node.name = o.name;
-    node.mesh = static_cast<int>(model.meshes.size() - 1);
-    if (!occluders[o.id].empty()) {
-      tinygltf::Value::Array list;
-      for (const Occluder25D* oc : occluders[o.id]) {
-        tinygltf::Value::Array fp;
-        for (const glm::dvec2& p : oc->footprint) {
-          fp.emplace_back(p.x);
-          fp.emplace_back(p.y);
-        }
-        list.emplace_back(tinygltf::Value::Object{{"footprint", tinygltf::Value(std::move(fp))},
-                                                  {"height", tinygltf::Value(oc->height)}});
-      }
-      node.extras = tinygltf::Value(tinygltf::Value::Object{
-          {"vistream", tinygltf::Value(tinygltf::Value::Object{{"occluders", tinygltf::Value(std::move(list))}})}});
-    }
-    model.nodes.push_back(std::move(node));
-    model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));
-  }
-  tinygltf::Scene s;
-  s.name = scene.name;
-  s.nodes = {0};
-  model.scenes.push_back(s);
-  model.defaultScene = 0;
-
-  if (!binary) buffer.uri = fs::path(path).stem().string() + ".bin";
-  const std::string tmp = path + ".tmp";
-  tinygltf::TinyGLTF writer;
-  bool ok = false;
-  try {
-    ok = writer.WriteGltfSceneToFile(&model, binary ? tmp : path, /*embedImages=*/true,
-                                     /*embedBuffers=*/binary, /*prettyPrint=*/false, binary);
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrCat(path, ": writing failed: ", e.what()));
-  }
-  if (!ok) return absl::UnavailableError(absl::StrCat(path, ": cannot write file"));
-  if (binary) {
-    // Written beside and renamed, so a reader never sees half a file.
-    std::error_code ec;
-    fs::rename(tmp, path, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename from ", tmp, ": ", ec.message()));
-  }
-  return absl::OkStatus();
 }
 
 }  // namespace vistream::scenes

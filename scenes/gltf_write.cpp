@@ -1,0 +1,183 @@
+#include "scenes/gltf_io.h"
+
+#include "scenes/gltf_frame.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+
+#include <absl/strings/str_cat.h>
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+#include <tiny_gltf.h>
+
+namespace vistream::scenes {
+
+namespace {
+
+namespace fs = std::filesystem;
+using gltf_detail::EndsWith;
+using gltf_detail::GltfFromZup;
+
+// Appends raw bytes of `values` to `buffer`, 4-byte aligned; returns the byte offset.
+template <typename T>
+size_t AppendBytes(const std::vector<T>& values, std::vector<unsigned char>* buffer) {
+  while (buffer->size() % 4 != 0) buffer->push_back(0);
+  const size_t offset = buffer->size();
+  buffer->resize(offset + values.size() * sizeof(T));
+  if (!values.empty()) std::memcpy(buffer->data() + offset, values.data(), values.size() * sizeof(T));
+  return offset;
+}
+
+// The shortest decimal that reads back as the same float: min/max stay exact for float
+// readers and the JSON stays short (3017.408, not 3017.407958984375).
+double ShortFloat(double value) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), static_cast<float>(value));
+  return std::strtod(std::string(buf, r.ptr).c_str(), nullptr);
+}
+
+}  // namespace
+
+absl::Status SaveGltf(const Scene& scene, const std::string& path) {
+  if (absl::Status s = ValidateScene(scene, path); !s.ok()) return s;
+  const bool binary = EndsWith(path, ".glb");
+  tinygltf::Model model;
+  model.asset.version = "2.0";
+  model.asset.generator = "vistream";
+  model.buffers.resize(1);
+  tinygltf::Buffer& buffer = model.buffers[0];
+
+  // Three interleaving-free streams, each one bufferView; each object's accessors are ranges
+  // of them, so that every mesh has its own vertex count and bounds (viewers cull by them).
+  std::vector<glm::vec3> positions, normals;
+  std::vector<uint32_t> indices;
+  positions.reserve(scene.VertexCount());
+  normals.reserve(scene.VertexCount());
+  indices.reserve(scene.TriangleCount() * 3);
+  if (scene.VertexCount() > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": more than 2^32 vertices"));
+  }
+  for (const Object& o : scene.objects) {
+    for (const glm::vec3& p : o.mesh.positions) positions.emplace_back(GltfFromZup(glm::dvec3(p)));
+    for (const glm::vec3& n : o.mesh.normals) normals.emplace_back(GltfFromZup(glm::dvec3(n)));
+    indices.insert(indices.end(), o.mesh.indices.begin(), o.mesh.indices.end());  // object-local
+  }
+  const size_t pos_off = AppendBytes(positions, &buffer.data);
+  const size_t nrm_off = AppendBytes(normals, &buffer.data);
+  const size_t idx_off = AppendBytes(indices, &buffer.data);
+  auto add_view = [&](size_t offset, size_t length, int target) {
+    tinygltf::BufferView v;
+    // Several accessors share the vertex views: glTF 2.0 (3.6.2.4) then wants the stride.
+    if (target == TINYGLTF_TARGET_ARRAY_BUFFER) v.byteStride = sizeof(glm::vec3);
+    v.buffer = 0;
+    v.byteOffset = offset;
+    v.byteLength = length;
+    v.target = target;
+    model.bufferViews.push_back(v);
+  };
+  add_view(pos_off, positions.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
+  add_view(nrm_off, normals.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
+  add_view(idx_off, indices.size() * sizeof(uint32_t), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+
+  // The origin node: its translation is the scene origin; objects are its children.
+  tinygltf::Node root;
+  root.name = scene.name.empty() ? "vistream" : scene.name;
+  const glm::dvec3 origin = GltfFromZup(scene.origin);
+  root.translation = {origin.x, origin.y, origin.z};
+  root.extras = tinygltf::Value(tinygltf::Value::Object{
+      {"vistream", tinygltf::Value(tinygltf::Value::Object{{"origin", tinygltf::Value(true)}})}});
+  model.nodes.push_back(root);
+
+  std::vector<std::vector<const Occluder25D*>> occluders(scene.objects.size());
+  for (const Occluder25D& oc : scene.occluders) occluders[oc.object].push_back(&oc);
+
+  auto add_accessor = [&](int view, size_t offset, size_t count, int ctype, int type) {
+    tinygltf::Accessor a;
+    a.bufferView = view;
+    a.byteOffset = offset;
+    a.count = count;
+    a.componentType = ctype;
+    a.type = type;
+    model.accessors.push_back(a);
+    return static_cast<int>(model.accessors.size() - 1);
+  };
+  size_t vertex_base = 0, index_base = 0;
+  for (const Object& o : scene.objects) {
+    const size_t nv = o.mesh.positions.size(), ni = o.mesh.indices.size();
+    const int pa = add_accessor(0, vertex_base * sizeof(glm::vec3), nv, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                TINYGLTF_TYPE_VEC3);
+    glm::dvec3 lo(INFINITY), hi(-INFINITY);  // POSITION needs min and max (glTF 2.0, 3.6.2.4)
+    for (size_t k = vertex_base; k < vertex_base + nv; ++k) {
+      lo = glm::min(lo, glm::dvec3(positions[k]));
+      hi = glm::max(hi, glm::dvec3(positions[k]));
+    }
+    model.accessors[pa].minValues = {ShortFloat(lo.x), ShortFloat(lo.y), ShortFloat(lo.z)};
+    model.accessors[pa].maxValues = {ShortFloat(hi.x), ShortFloat(hi.y), ShortFloat(hi.z)};
+    const int na = add_accessor(1, vertex_base * sizeof(glm::vec3), nv, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                TINYGLTF_TYPE_VEC3);
+    const int ia = add_accessor(2, index_base * sizeof(uint32_t), ni, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                                TINYGLTF_TYPE_SCALAR);
+    vertex_base += nv;
+    index_base += ni;
+
+    tinygltf::Primitive prim;
+    prim.attributes["POSITION"] = pa;
+    prim.attributes["NORMAL"] = na;
+    prim.indices = ia;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    tinygltf::Mesh mesh;
+    mesh.primitives.push_back(prim);
+    model.meshes.push_back(std::move(mesh));
+
+    tinygltf::Node node;
+    node.name = o.name;
+    node.mesh = static_cast<int>(model.meshes.size() - 1);
+    if (!occluders[o.id].empty()) {
+      tinygltf::Value::Array list;
+      for (const Occluder25D* oc : occluders[o.id]) {
+        tinygltf::Value::Array fp;
+        for (const glm::dvec2& p : oc->footprint) {
+          fp.emplace_back(p.x);
+          fp.emplace_back(p.y);
+        }
+        list.emplace_back(tinygltf::Value::Object{{"footprint", tinygltf::Value(std::move(fp))},
+                                                  {"height", tinygltf::Value(oc->height)}});
+      }
+      node.extras = tinygltf::Value(tinygltf::Value::Object{
+          {"vistream", tinygltf::Value(tinygltf::Value::Object{{"occluders", tinygltf::Value(std::move(list))}})}});
+    }
+    model.nodes.push_back(std::move(node));
+    model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));
+  }
+  tinygltf::Scene s;
+  s.name = scene.name;
+  s.nodes = {0};
+  model.scenes.push_back(s);
+  model.defaultScene = 0;
+
+  if (!binary) buffer.uri = fs::path(path).stem().string() + ".bin";
+  const std::string tmp = path + ".tmp";
+  tinygltf::TinyGLTF writer;
+  bool ok = false;
+  try {
+    ok = writer.WriteGltfSceneToFile(&model, binary ? tmp : path, /*embedImages=*/true,
+                                     /*embedBuffers=*/binary, /*prettyPrint=*/false, binary);
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat(path, ": writing failed: ", e.what()));
+  }
+  if (!ok) return absl::UnavailableError(absl::StrCat(path, ": cannot write file"));
+  if (binary) {
+    // Written beside and renamed, so a reader never sees half a file.
+    std::error_code ec;
+    fs::rename(tmp, path, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename from ", tmp, ": ", ec.message()));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace vistream::scenes
