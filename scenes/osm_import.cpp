@@ -1,5 +1,6 @@
 #include "scenes/osm_import.h"
 
+#include <CGAL/box_intersection_d.h>
 #include <absl/strings/str_cat.h>
 
 #include <GeographicLib/UTMUPS.hpp>
@@ -9,22 +10,12 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <limits>
-#include <osmium/area/assembler.hpp>
-#include <osmium/area/multipolygon_manager.hpp>
-#include <osmium/area/problem_reporter.hpp>
-#include <osmium/handler.hpp>
-#include <osmium/handler/node_locations_for_ways.hpp>
-#include <osmium/index/map/flex_mem.hpp>
-#include <osmium/io/pbf_input.hpp>
-#include <osmium/io/xml_input.hpp>
-#include <osmium/osm/area.hpp>
-#include <osmium/relations/manager_util.hpp>
-#include <osmium/visitor.hpp>
-#include <unordered_map>
+#include <glm/geometric.hpp>
 #include <vector>
 
+#include "scenes/osm_read.h"
 #include "scenes/polygon.h"
+#include "scenes/polygon_set.h"
 #include "scenes/progress.h"
 
 namespace vistream::scenes {
@@ -54,165 +45,211 @@ std::optional<double> Number(std::string_view t) {
 // Scene-local coordinates snap to 1/256 m, as the generators' do (scenes/building.cpp).
 double Snap(double x) { return std::round(x * 256.0) / 256.0; }
 
-constexpr double kRoofM = 1.0;  // the roof on top of counted storeys, when no tag says
-
-bool IsBuilding(const osmium::TagList& tags) {
-  const char* v = tags.get_value_by_key("building");
-  return v != nullptr && std::string_view(v) != "no";
+// " (reason: n, reason: n)" for an error that ends an import, so that what was left out is
+// named even when nothing is left.
+std::string Reasons(const OsmImportSummary& s) {
+  std::string out;
+  for (const auto& [reason, n] : s.skipped) {
+    absl::StrAppend(&out, out.empty() ? " (" : ", ", reason, ": ", n);
+  }
+  return out.empty() ? out : out + ")";
 }
 
-// Why osmium's assembler gave up on an object, by the id of the area it would have made
-// (a way's id x 2, a relation's x 2 + 1, as osmium numbers areas).
-class Reasons : public osmium::area::ProblemReporter {
+// UTM in one zone and hemisphere for a whole import: GeographicLib's forward projection forced
+// to the centre's zone, with northings of points across the equator moved to the centre's
+// hemisphere (they differ by the false northing, UTMShift, 10,000 km).
+class Projection {
  public:
-  std::unordered_map<int64_t, std::string> why;
-  std::unordered_map<int64_t, uint64_t> duplicate_nodes;
+  // Fails (a message) when the centre has no UTM/UPS projection.
+  std::string Init(double lat, double lon) {
+    try {
+      GeographicLib::UTMUPS::Forward(lat, lon, zone_, north_, ox_, oy_);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    ox_ = std::round(ox_);
+    oy_ = std::round(oy_);
+    return {};
+  }
+  std::string Zone() const { return GeographicLib::UTMUPS::EncodeZone(zone_, north_); }
+  glm::dvec3 Origin() const { return {ox_, oy_, 0.0}; }
 
-  void report_duplicate_node(osmium::object_id_type, osmium::object_id_type,
-                             osmium::Location) override {
-    ++duplicate_nodes[AreaId()];
-  }
-  void report_intersection(osmium::object_id_type, osmium::Location, osmium::Location,
-                           osmium::object_id_type, osmium::Location, osmium::Location,
-                           osmium::Location) override {
-    Note("self-intersecting ring");
-  }
-  void report_duplicate_segment(const osmium::NodeRef&, const osmium::NodeRef&) override {
-    Note("duplicate segment");
-  }
-  void report_overlapping_segment(const osmium::NodeRef&, const osmium::NodeRef&) override {
-    Note("overlapping segments");
-  }
-  void report_ring_not_closed(const osmium::NodeRef&, const osmium::Way*) override {
-    Note("ring not closed");
-  }
-  void report_way_in_multiple_rings(const osmium::Way&) override { Note("way in several rings"); }
-  void report_invalid_location(osmium::object_id_type, osmium::object_id_type) override {
-    Note("missing node locations");
+  // Scene-local metres, snapped; none where GeographicLib refuses the point (far outside the
+  // zone) or it lies farther than kMaxOffsetM from the centre, where 1/256 m no longer fits in
+  // a float.
+  std::optional<Ring> Local(const std::vector<osmium::Location>& ring) const {
+    constexpr double kMaxOffsetM = 65536.0;
+    Ring out;
+    out.reserve(ring.size());
+    for (const osmium::Location& l : ring) {
+      int z;
+      bool n;
+      double x, y;
+      try {
+        GeographicLib::UTMUPS::Forward(l.lat(), l.lon(), z, n, x, y, zone_);
+      } catch (const std::exception&) {
+        return std::nullopt;
+      }
+      if (zone_ != GeographicLib::UTMUPS::UPS && n != north_) {
+        y += north_ ? -GeographicLib::UTMUPS::UTMShift() : GeographicLib::UTMUPS::UTMShift();
+      }
+      x -= ox_;
+      y -= oy_;
+      if (!(std::abs(x) < kMaxOffsetM && std::abs(y) < kMaxOffsetM)) return std::nullopt;
+      out.emplace_back(Snap(x), Snap(y));
+    }
+    return out;
   }
 
  private:
-  int64_t AreaId() const {
-    return m_object_type == osmium::item_type::way ? 2 * m_object_id : 2 * m_object_id + 1;
-  }
-  void Note(const char* reason) { why.emplace(AreaId(), reason); }  // the first reason counts
+  int zone_ = 0;
+  bool north_ = true;
+  double ox_ = 0.0, oy_ = 0.0;
 };
 
-// Building ways that osmium's manager passes over in silence, counted by reason.
-class WayCensus : public osmium::handler::Handler {
- public:
-  explicit WayCensus(std::map<std::string, uint64_t>* skipped) : skipped_(skipped) {}
-  void way(const osmium::Way& way) {
-    if (!IsBuilding(way.tags())) return;
-    const auto& nodes = way.nodes();
-    if (nodes.size() < 4) {
-      ++(*skipped_)["way with fewer than 4 nodes"];
-      return;
+// A building or part in scene-local metres: valid footprints and heights.
+struct Footprint {
+  const RawBuilding* raw = nullptr;
+  std::vector<PolygonWithHoles> polygons;
+  std::vector<std::vector<Triangle2>> triangles;  // Triangulate's, one per polygon
+  HeightReading heights;
+  bool hidden = false;  // an outline wholly covered by its parts
+};
+
+// Projects, repairs and checks one raw polygon. Invalid inner rings are dropped (counted);
+// none and a reason when the outer ring is unusable.
+std::optional<PolygonWithHoles> LocalPolygon(const RawPolygon& rp, const Projection& proj,
+                                             OsmImportSummary* s, std::string* failure) {
+  PolygonWithHoles poly;
+  std::optional<Ring> outer = proj.Local(rp.outer);
+  if (!outer) {
+    *failure = "farther than 65 km from the data's centre";
+    return std::nullopt;
+  }
+  poly.outer = *std::move(outer);
+  const RingRepairs fix = CleanRing(&poly.outer);
+  s->repaired_duplicate_points += fix.duplicate_points;
+  s->repaired_spikes += fix.spikes;
+  if (poly.outer.size() < 3) {
+    *failure = "ring with fewer than 3 points";
+    return std::nullopt;
+  }
+  if (!IsSimpleRing(poly.outer)) {
+    *failure = "ring not simple after snapping to 4 mm";
+    return std::nullopt;
+  }
+  if (SignedArea(poly.outer) < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
+  for (const std::vector<osmium::Location>& rh : rp.holes) {
+    std::optional<Ring> projected = proj.Local(rh);
+    if (!projected) {
+      ++s->dropped_inner_rings;
+      continue;
     }
-    for (const osmium::NodeRef& n : nodes) {
-      if (!n.location().valid()) {
-        ++(*skipped_)["way with missing nodes"];
-        return;
+    Ring hole = *std::move(projected);
+    const RingRepairs hf = CleanRing(&hole);
+    s->repaired_duplicate_points += hf.duplicate_points;
+    s->repaired_spikes += hf.spikes;
+    // OSM's rules let inner rings touch the outer ring and each other at single nodes; they
+    // must not cross, overlap or nest.
+    bool ok = IsSimpleRing(hole) && RingInsideRing(hole, poly.outer);
+    for (size_t g = 0; ok && g < poly.holes.size(); ++g) ok = RingsApart(hole, poly.holes[g]);
+    if (!ok) {
+      ++s->dropped_inner_rings;
+      continue;
+    }
+    if (SignedArea(hole) > 0.0) std::reverse(hole.begin(), hole.end());
+    poly.holes.push_back(std::move(hole));
+  }
+  return poly;
+}
+
+// Simple 3D Buildings: an outline is drawn only where none of its parts covers it. Parts are
+// matched to outlines by overlapping boxes (CGAL's box intersection), then cut out exactly.
+void CutOutlinesByParts(std::vector<Footprint>* footprints, OsmImportSummary* s) {
+  using Box = CGAL::Box_intersection_d::Box_with_handle_d<double, 2, const Footprint*>;
+  std::vector<Box> outlines, parts;
+  for (const Footprint& f : *footprints) {
+    CGAL::Bbox_2 bb;
+    for (const PolygonWithHoles& p : f.polygons) {
+      for (const glm::dvec2& v : p.outer) bb += CGAL::Bbox_2(v.x, v.y, v.x, v.y);
+    }
+    (f.raw->part ? parts : outlines).emplace_back(bb, &f);
+  }
+  if (parts.empty() || outlines.empty()) return;
+  std::vector<std::pair<const Footprint*, const Footprint*>> pairs;  // (outline, part)
+  CGAL::box_intersection_d(outlines.begin(), outlines.end(), parts.begin(), parts.end(),
+                           [&](const Box& o, const Box& p) { pairs.emplace_back(o.handle(), p.handle()); });
+  std::sort(pairs.begin(), pairs.end());
+  for (size_t i = 0; i < pairs.size();) {
+    // The boxes hold const handles; the outlines are this function's to change.
+    Footprint& outline = const_cast<Footprint&>(*pairs[i].first);
+    std::vector<PolygonWithHoles> cut;
+    for (; i < pairs.size() && pairs[i].first == &outline; ++i) {
+      for (const PolygonWithHoles& p : pairs[i].second->polygons) cut.push_back(p);
+    }
+    std::vector<PolygonWithHoles> rest;
+    std::vector<std::vector<Triangle2>> rest_triangles;
+    bool changed = false;
+    for (size_t k = 0; k < outline.polygons.size(); ++k) {
+      const PolygonWithHoles& p = outline.polygons[k];
+      absl::StatusOr<std::vector<PolygonWithHoles>> pieces = Difference(p, cut);
+      if (!pieces.ok()) {
+        ++s->skipped[std::string(pieces.status().message())];
+        changed = true;
+        continue;
+      }
+      double before = SignedArea(p.outer), after = 0.0;
+      for (const Ring& h : p.holes) before += SignedArea(h);
+      for (const PolygonWithHoles& q : *pieces) {
+        after += SignedArea(q.outer);
+        for (const Ring& h : q.holes) after += SignedArea(h);
+      }
+      if (std::abs(after - before) <= 1e-9 * before) {
+        rest.push_back(p);  // parts beside the outline, not on it: keep its rings as they were
+        rest_triangles.push_back(outline.triangles[k]);
+        continue;
+      }
+      changed = true;
+      for (PolygonWithHoles& piece : *pieces) {
+        // Crossing points were rounded: snap like every coordinate, and check again.
+        for (glm::dvec2& v : piece.outer) v = {Snap(v.x), Snap(v.y)};
+        CleanRing(&piece.outer);
+        if (SignedArea(piece.outer) < 0.0) std::reverse(piece.outer.begin(), piece.outer.end());
+        for (Ring& h : piece.holes) {
+          for (glm::dvec2& v : h) v = {Snap(v.x), Snap(v.y)};
+          CleanRing(&h);
+          if (SignedArea(h) > 0.0) std::reverse(h.begin(), h.end());
+        }
+        // Part nodes on an outline's edge are off its line by up to the grid after projection
+        // and snapping: the difference leaves slivers there. Pieces thinner than kSliverM
+        // (twice the area over the perimeter) are such slivers, not building.
+        constexpr double kSliverM = 0.05;
+        double area = SignedArea(piece.outer), perimeter = 0.0;
+        for (size_t e = 0; e < piece.outer.size(); ++e) {
+          perimeter += glm::length(piece.outer[(e + 1) % piece.outer.size()] - piece.outer[e]);
+        }
+        for (const Ring& h : piece.holes) area += SignedArea(h);
+        if (!(2.0 * area > kSliverM * perimeter)) continue;
+        absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(piece);
+        if (!tris.ok()) {
+          // Slivers between a part and the outline's edge, thinner than the 4 mm grid.
+          ++s->skipped["outline piece beside its parts not simple after snapping"];
+          continue;
+        }
+        rest.push_back(std::move(piece));
+        rest_triangles.push_back(*std::move(tris));
       }
     }
-    if (!way.ends_have_same_location()) ++(*skipped_)["way not closed"];
-  }
-
- private:
-  std::map<std::string, uint64_t>* skipped_;
-};
-
-// A building as read: rings in degrees, the tags that matter.
-struct RawPolygon {
-  std::vector<osmium::Location> outer;
-  std::vector<std::vector<osmium::Location>> holes;
-};
-struct RawBuilding {
-  std::string name;
-  bool from_relation = false;
-  std::vector<RawPolygon> polygons;
-  std::string building, height, building_height, levels, roof_height, roof_levels, min_height,
-      min_level;
-  uint64_t duplicate_nodes = 0;
-};
-
-std::string Tag(const osmium::TagList& tags, const char* key) {
-  const char* v = tags.get_value_by_key(key);
-  return v == nullptr ? std::string() : std::string(v);
-}
-
-std::vector<osmium::Location> RingLocations(const osmium::NodeRefList& ring) {
-  std::vector<osmium::Location> out;
-  out.reserve(ring.size());
-  for (const osmium::NodeRef& n : ring) out.push_back(n.location());
-  // Assembled rings are closed (the first node again at the end): keep it open.
-  if (out.size() > 1 && out.front() == out.back()) out.pop_back();
-  return out;
-}
-
-// A count: "3", "3.5", "3;4" (the first), "2.0 "; none if not a non-negative number.
-std::optional<double> ParseCount(std::string_view text) {
-  const std::optional<double> v = Number(text.substr(0, text.find(';')));
-  if (!v || *v < 0.0) return std::nullopt;
-  return v;
-}
-
-struct Heights {
-  double base = 0.0, top = 0.0;
-};
-
-Heights BuildingHeights(const RawBuilding& b, double storey, OsmImportSummary* s) {
-  Heights h;
-  std::optional<double> top;
-  for (const std::string* tag : {&b.height, &b.building_height}) {
-    if (top || tag->empty()) continue;
-    top = ParseLength(*tag);
-    if (!top) ++s->bad_height_tags;
-  }
-  if (top) {
-    ++s->height_tagged;
-  } else if (!b.levels.empty()) {
-    if (const std::optional<double> levels = ParseCount(b.levels)) {
-      double roof = kRoofM;
-      if (const std::optional<double> r =
-              b.roof_height.empty() ? std::nullopt : ParseLength(b.roof_height)) {
-        roof = *r;
-      } else if (const std::optional<double> rl =
-                     b.roof_levels.empty() ? std::nullopt : ParseCount(b.roof_levels)) {
-        roof = *rl * storey;
-      }
-      top = *levels * storey + roof;
-      ++s->levels_tagged;
+    if (!changed) continue;
+    outline.polygons = std::move(rest);
+    outline.triangles = std::move(rest_triangles);
+    if (outline.polygons.empty()) {
+      outline.hidden = true;
+      ++s->outlines_hidden_by_parts;
     } else {
-      ++s->bad_height_tags;
+      ++s->outlines_cut_by_parts;
     }
   }
-  if (!top) {
-    top = DefaultLevels(b.building) * storey + kRoofM;
-    ++s->height_by_rule;
-  }
-  if (!b.min_height.empty()) {
-    if (const std::optional<double> m = ParseLength(b.min_height)) {
-      h.base = *m;
-    } else {
-      ++s->bad_height_tags;
-    }
-  } else if (!b.min_level.empty()) {
-    if (const std::optional<double> m = ParseCount(b.min_level)) {
-      h.base = *m * storey;
-    } else {
-      ++s->bad_height_tags;
-    }
-  }
-  h.top = *top;
-  if (!(h.top > h.base + 0.1)) {
-    // A base at or above the top: tags that contradict each other; keep one storey.
-    ++s->bad_height_tags;
-    h.top = h.base + storey;
-  }
-  h.base = Snap(h.base);
-  h.top = Snap(h.top);
-  return h;
 }
 
 }  // namespace
@@ -255,104 +292,6 @@ absl::StatusOr<GeoBox> ParseGeoBox(std::string_view text) {
   return b;
 }
 
-int DefaultLevels(std::string_view building) {
-  static const std::pair<std::string_view, int> kTable[] = {
-      {"garage", 1},
-      {"garages", 1},
-      {"shed", 1},
-      {"hut", 1},
-      {"kiosk", 1},
-      {"carport", 1},
-      {"roof", 1},
-      {"service", 1},
-      {"toilets", 1},
-      {"cabin", 1},
-      {"container", 1},
-      {"greenhouse", 1},
-      {"bunker", 1},
-      {"transformer_tower", 2},
-      {"house", 2},
-      {"detached", 2},
-      {"semidetached_house", 2},
-      {"terrace", 2},
-      {"bungalow", 1},
-      {"farm", 2},
-      {"barn", 2},
-      {"retail", 2},
-      {"supermarket", 1},
-      {"industrial", 2},
-      {"warehouse", 2},
-      {"church", 5},
-      {"cathedral", 8},
-      {"chapel", 3},
-      {"apartments", 5},
-      {"residential", 4},
-      {"hotel", 6},
-      {"office", 6},
-      {"commercial", 4},
-      {"hospital", 5},
-      {"school", 3},
-      {"university", 4},
-      {"public", 3},
-      {"civic", 3},
-      {"government", 4},
-      {"train_station", 3},
-      {"stadium", 4},
-  };
-  for (const auto& [key, levels] : kTable) {
-    if (key == building) return levels;
-  }
-  return 4;  // "yes" and everything else
-}
-
-std::optional<double> ParseLength(std::string_view text) {
-  std::string t(Strip(text));
-  for (char& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (t.empty()) return std::nullopt;
-  // Feet and inches: 12'6" or 12'.
-  if (const size_t q = t.find('\''); q != std::string::npos) {
-    const std::optional<double> feet = Number(std::string_view(t).substr(0, q));
-    if (!feet) return std::nullopt;
-    double inches = 0.0;
-    std::string_view rest = Strip(std::string_view(t).substr(q + 1));
-    if (!rest.empty()) {
-      if (rest.back() != '"') return std::nullopt;
-      rest.remove_suffix(1);
-      const std::optional<double> in = Number(rest);
-      if (!in) return std::nullopt;
-      inches = *in;
-    }
-    const double m = *feet * 0.3048 + inches * 0.0254;
-    return std::isfinite(m) && m >= 0.0 && *feet >= 0.0 && inches >= 0.0 ? std::optional<double>(m)
-                                                                         : std::nullopt;
-  }
-  // A number and an optional unit.
-  size_t end = 0;
-  while (end < t.size() &&
-         (std::isdigit(static_cast<unsigned char>(t[end])) || t[end] == '.' || t[end] == '+')) {
-    ++end;
-  }
-  const std::optional<double> v = Number(std::string_view(t).substr(0, end));
-  if (!v || *v < 0.0) return std::nullopt;
-  const std::string_view unit = Strip(std::string_view(t).substr(end));
-  double scale;
-  if (unit.empty() || unit == "m" || unit == "meter" || unit == "meters" || unit == "metre" ||
-      unit == "metres") {
-    scale = 1.0;
-  } else if (unit == "ft" || unit == "feet" || unit == "foot") {
-    scale = 0.3048;
-  } else if (unit == "cm") {
-    scale = 0.01;
-  } else if (unit == "km") {
-    scale = 1000.0;
-  } else if (unit == "mi") {
-    scale = 1609.344;
-  } else {
-    return std::nullopt;
-  }
-  return *v * scale;
-}
-
 absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
                                 OsmImportSummary* summary, const RunControl& run) {
   const auto start = std::chrono::steady_clock::now();
@@ -370,100 +309,19 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     return absl::InvalidArgumentError(
         absl::StrCat("storey height must be positive (", options.storey_m, ")"));
   }
+  if (!(options.max_height_m > 0.0) || !std::isfinite(options.max_height_m)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("the plausible height limit must be positive (", options.max_height_m, ")"));
+  }
 
-  // Read: relations first (for their member ways), then everything, assembling areas.
   std::vector<RawBuilding> raw;
-  try {
-    const osmium::io::File file(path);
-    osmium::area::Assembler::config_type config;
-    Reasons reasons;
-    config.problem_reporter = &reasons;
-    config.create_empty_areas = true;  // a failure leaves an empty area: counted below
-    osmium::TagsFilter filter{false};
-    filter.add_rule(true, osmium::TagMatcher{"building"});
-    osmium::area::MultipolygonManager<osmium::area::Assembler> manager{config, filter};
-    Progress progress(run, absl::StrCat("reading ", fs::path(path).filename().string()), fs::file_size(path, ec));
-    uint64_t read_bytes = 0;
-    osmium::relations::read_relations(file, manager);
-    using Index = osmium::index::map::FlexMem<osmium::unsigned_object_id_type, osmium::Location>;
-    Index index;
-    osmium::handler::NodeLocationsForWays<Index> locations{index};
-    locations.ignore_errors();  // an extract's ways lose nodes at its edge: counted, skipped
-    WayCensus census(&s.skipped);
-    auto on_area = [&](const osmium::Area& area) {
-      if (!IsBuilding(area.tags())) return;
-      const int64_t area_id = area.id();
-      const std::string name = absl::StrCat(area.from_way() ? "way/" : "relation/", area.orig_id());
-      if (area.num_rings().first == 0) {
-        const auto it = reasons.why.find(area_id);
-        ++s.skipped[it != reasons.why.end() ? it->second : std::string("not assembled")];
-        return;
-      }
-      RawBuilding b;
-      b.name = name;
-      b.from_relation = !area.from_way();
-      for (const osmium::OuterRing& outer : area.outer_rings()) {
-        RawPolygon p;
-        p.outer = RingLocations(outer);
-        for (const osmium::InnerRing& inner : area.inner_rings(outer))
-          p.holes.push_back(RingLocations(inner));
-        b.polygons.push_back(std::move(p));
-      }
-      const osmium::TagList& t = area.tags();
-      b.building = Tag(t, "building");
-      b.height = Tag(t, "height");
-      b.building_height = Tag(t, "building:height");
-      b.levels = Tag(t, "building:levels");
-      b.roof_height = Tag(t, "roof:height");
-      b.roof_levels = Tag(t, "roof:levels");
-      b.min_height = Tag(t, "min_height");
-      b.min_level = Tag(t, "building:min_level");
-      if (const auto it = reasons.duplicate_nodes.find(area_id);
-          it != reasons.duplicate_nodes.end()) {
-        b.duplicate_nodes = it->second;
-      }
-      if (options.bbox) {
-        const GeoBox& g = *options.bbox;
-        for (const RawPolygon& p : b.polygons) {
-          for (const osmium::Location& l : p.outer) {
-            if (l.lon() < g.min_lon || l.lon() > g.max_lon || l.lat() < g.min_lat ||
-                l.lat() > g.max_lat) {
-              ++s.skipped["outside the bbox"];
-              return;
-            }
-          }
-        }
-      }
-      raw.push_back(std::move(b));
-    };
-    struct AreaHandler : osmium::handler::Handler {
-      decltype(on_area)* f;
-      void area(const osmium::Area& a) { (*f)(a); }
-    } area_handler;
-    area_handler.f = &on_area;
-    osmium::io::Reader reader(file, osmium::osm_entity_bits::node | osmium::osm_entity_bits::way);
-    while (osmium::memory::Buffer buffer = reader.read()) {
-      if (run.Cancelled()) return absl::CancelledError("OSM import cancelled");
-      osmium::apply(buffer, locations, census, manager.handler([&](osmium::memory::Buffer&& areas) {
-        osmium::apply(areas, area_handler);
-      }));
-      progress.SetDetail(absl::StrCat(raw.size(), " buildings"));
-      progress.Advance(reader.offset() - read_bytes);
-      read_bytes = reader.offset();
-    }
-    reader.close();
-    progress.Finish();
-    manager.for_each_incomplete_relation([&](const osmium::relations::RelationHandle&) {
-      ++s.skipped["relation with members missing"];
-    });
-  } catch (const std::exception& e) {
-    return absl::DataLossError(
-        absl::StrCat(path, ": not readable as OpenStreetMap data (", e.what(), ")"));
+  if (absl::Status read = ReadOsmBuildings(path, options.bbox, &raw, &s, run); !read.ok()) {
+    return read;
   }
   if (raw.empty()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path, ": no buildings (building=*) to import",
-                     s.Skipped() > 0 ? absl::StrCat("; ", s.Skipped(), " skipped") : ""));
+    return absl::InvalidArgumentError(absl::StrCat(
+        path, ": no buildings (building=* or building:part=*) to import",
+        s.Skipped() > 0 ? absl::StrCat("; ", s.Skipped(), " skipped", Reasons(s)) : ""));
   }
 
   // The projection: UTM in the zone of the data's centre, the median longitude and latitude of
@@ -482,139 +340,106 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     return v[v.size() / 2];
   };
   const double clat = median(lats), clon = median(lons);
-  int zone;
-  bool north;
-  double ox, oy;
-  try {
-    GeographicLib::UTMUPS::Forward(clat, clon, zone, north, ox, oy);
-  } catch (const std::exception& e) {
+  Projection proj;
+  if (const std::string why = proj.Init(clat, clon); !why.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": the data's centre (", clat, ", ", clon,
-                                                   ") has no UTM/UPS projection: ", e.what()));
+                                                   ") has no UTM/UPS projection: ", why));
   }
-  s.utm_zone = GeographicLib::UTMUPS::EncodeZone(zone, north);
-  ox = std::round(ox);
-  oy = std::round(oy);
-  // None for a ring the centre's zone cannot take (GeographicLib refuses points far outside
-  // it) or that lies farther than kMaxOffsetM from the centre, where 1/256 m no longer fits
-  // in a float.
-  constexpr double kMaxOffsetM = 65536.0;
-  auto project = [&](const std::vector<osmium::Location>& ring) -> std::optional<Ring> {
-    Ring out;
-    out.reserve(ring.size());
-    for (const osmium::Location& l : ring) {
-      int z;
-      bool n;
-      double x, y;
-      try {
-        GeographicLib::UTMUPS::Forward(l.lat(), l.lon(), z, n, x, y, zone);
-      } catch (const std::exception&) {
-        return std::nullopt;
-      }
-      x -= ox;
-      y -= oy;
-      if (!(std::abs(x) < kMaxOffsetM && std::abs(y) < kMaxOffsetM)) return std::nullopt;
-      out.emplace_back(Snap(x), Snap(y));
-    }
-    return out;
-  };
-  const std::string too_far = "farther than 65 km from the data's centre";
+  s.utm_zone = proj.Zone();
 
-  Scene scene;
-  scene.name = !options.name.empty() ? options.name : fs::path(path).filename().string();
-  if (options.name.empty()) scene.name = scene.name.substr(0, scene.name.find('.'));
-  scene.origin = glm::dvec3(ox, oy, 0.0);
-  Progress progress(run, "building meshes", raw.size());
-  for (size_t i = 0; i < raw.size(); ++i) {
+  // Footprints and heights of every building and part.
+  std::vector<Footprint> footprints;
+  footprints.reserve(raw.size());
+  for (const RawBuilding& b : raw) {
     if (run.Cancelled()) return absl::CancelledError("OSM import cancelled");
-    progress.Advance();
-    const RawBuilding& b = raw[i];
     s.repaired_duplicate_points += b.duplicate_nodes;
-    Mesh mesh;
-    std::vector<Occluder25D> occluders;
-    const Heights h = BuildingHeights(b, options.storey_m, &s);
+    Footprint f;
+    f.raw = &b;
     std::string failure;
     for (const RawPolygon& rp : b.polygons) {
-      PolygonWithHoles poly;
-      std::optional<Ring> outer = project(rp.outer);
-      if (!outer) {
-        failure = too_far;
-        continue;
-      }
-      poly.outer = *std::move(outer);
-      const RingRepairs fix = CleanRing(&poly.outer);
-      s.repaired_duplicate_points += fix.duplicate_points;
-      s.repaired_spikes += fix.spikes;
-      if (poly.outer.size() < 3) {
-        failure = "ring with fewer than 3 points";
-        continue;
-      }
-      if (!IsSimpleRing(poly.outer)) {
-        failure = "ring not simple after snapping to 4 mm";
-        continue;
-      }
-      if (SignedArea(poly.outer) < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
-      for (const std::vector<osmium::Location>& rh : rp.holes) {
-        std::optional<Ring> projected = project(rh);
-        if (!projected) {
-          ++s.dropped_inner_rings;
-          continue;
-        }
-        Ring hole = *std::move(projected);
-        const RingRepairs hf = CleanRing(&hole);
-        s.repaired_duplicate_points += hf.duplicate_points;
-        s.repaired_spikes += hf.spikes;
-        bool ok = IsSimpleRing(hole) && RingInsideRing(hole, poly.outer);
-        for (size_t g = 0; ok && g < poly.holes.size(); ++g) {
-          const Ring& other = poly.holes[g];
-          ok = !RingInsideRing(hole, other) && !RingInsideRing(other, hole);
-          // Touching or crossing holes: Triangulate refuses them; checked there.
-        }
-        if (!ok) {
-          ++s.dropped_inner_rings;
-          continue;
-        }
-        if (SignedArea(hole) > 0.0) std::reverse(hole.begin(), hole.end());
-        poly.holes.push_back(std::move(hole));
-      }
-      absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(poly);
-      if (!tris.ok() && !poly.holes.empty()) {
-        // Holes that touch each other: keep the building whole, without its courtyards.
-        s.dropped_inner_rings += poly.holes.size();
-        poly.holes.clear();
-        tris = Triangulate(poly);
+      std::optional<PolygonWithHoles> poly = LocalPolygon(rp, proj, &s, &failure);
+      if (!poly) continue;
+      absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(*poly);
+      if (!tris.ok() && !poly->holes.empty()) {
+        // Holes the checks let through but the triangles show wrong: keep the building whole,
+        // without its courtyards.
+        s.dropped_inner_rings += poly->holes.size();
+        poly->holes.clear();
+        tris = Triangulate(*poly);
       }
       if (!tris.ok()) {
         failure = std::string(tris.status().message());
         continue;
       }
-      AppendPrism(poly, *tris, h.base, h.top, &mesh);
-      ++s.outer_rings;
-      s.inner_rings += poly.holes.size();
-      if (h.base > 0.0) continue;
-      if (poly.holes.empty()) {
-        occluders.push_back({poly.outer, h.top, 0});
-      } else {
-        for (const Triangle2& t : *tris) occluders.push_back({{t[0], t[1], t[2]}, h.top, 0});
-      }
+      f.polygons.push_back(*std::move(poly));
+      f.triangles.push_back(*std::move(tris));
     }
-    if (mesh.indices.empty()) {
+    if (f.polygons.empty()) {
       ++s.skipped[failure.empty() ? std::string("no polygon left") : failure];
       continue;
     }
-    const ObjectId id = scene.AddObject(b.name, std::move(mesh));
+    f.heights = ReadHeights(b.tags, options.storey_m, options.max_height_m);
+    footprints.push_back(std::move(f));
+  }
+  CutOutlinesByParts(&footprints, &s);
+
+  Scene scene;
+  scene.name = !options.name.empty() ? options.name : fs::path(path).filename().string();
+  if (options.name.empty()) scene.name = scene.name.substr(0, scene.name.find('.'));
+  scene.origin = proj.Origin();
+  Progress progress(run, "building meshes", footprints.size());
+  for (const Footprint& f : footprints) {
+    if (run.Cancelled()) return absl::CancelledError("OSM import cancelled");
+    progress.Advance();
+    if (f.hidden) continue;
+    const HeightReading& h = f.heights;
+    const double base = Snap(h.base), top = Snap(h.top);
+    // Only a solid standing on the ground, with heights that do not contradict each other,
+    // may occlude (visibility/occluder_set.h).
+    const bool occludes = base == 0.0 && !h.base_above_top;
+    if (!(top > base)) {
+      ++s.skipped["thinner than 4 mm"];
+      continue;
+    }
+    Mesh mesh;
+    std::vector<Occluder25D> occluders;
+    for (size_t k = 0; k < f.polygons.size(); ++k) {
+      const PolygonWithHoles& poly = f.polygons[k];
+      const std::vector<Triangle2>& tris = f.triangles[k];
+      AppendPrism(poly, tris, base, top, &mesh);
+      ++s.outer_rings;
+      s.inner_rings += poly.holes.size();
+      if (!occludes) continue;
+      if (poly.holes.empty()) {
+        occluders.push_back({poly.outer, top, 0});
+      } else {
+        for (const Triangle2& t : tris) occluders.push_back({{t[0], t[1], t[2]}, top, 0});
+      }
+    }
+    if (mesh.indices.empty()) continue;
+    const ObjectId id = scene.AddObject(f.raw->name, std::move(mesh));
     for (Occluder25D& o : occluders) {
       o.object = id;
       scene.occluders.push_back(std::move(o));
     }
     s.occluders += occluders.size();
     ++s.buildings;
-    ++(b.from_relation ? s.from_relations : s.from_ways);
-    if (h.base > 0.0) ++s.raised;
+    ++(f.raw->from_relation ? s.from_relations : s.from_ways);
+    s.parts += f.raw->part;
+    s.raised += base > 0.0;
+    s.bad_height_tags += static_cast<uint64_t>(h.unreadable);
+    s.implausible_heights += static_cast<uint64_t>(h.implausible);
+    s.min_height_above_height += h.base_above_top;
+    switch (h.source) {
+      case HeightReading::Source::kHeightTag: ++s.height_tagged; break;
+      case HeightReading::Source::kLevels: ++s.levels_tagged; break;
+      case HeightReading::Source::kRule: ++s.height_by_rule; break;
+    }
   }
   progress.Finish();
   if (scene.objects.empty()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path, ": no building could be imported; ", s.Skipped(), " skipped"));
+    return absl::InvalidArgumentError(absl::StrCat(path, ": no building could be imported; ",
+                                                   s.Skipped(), " skipped", Reasons(s)));
   }
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return scene;

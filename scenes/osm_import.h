@@ -1,28 +1,37 @@
 #pragma once
 // OpenStreetMap buildings as a vistream scene (libosmium).
 //
-// Buildings are the closed ways and multipolygon relations tagged building=* (any value but
-// "no"), assembled by libosmium's area assembler (outer and inner rings). Positions go to UTM
-// (GeographicLib, the zone of the data's centre: the median longitude and latitude of the
-// buildings' nodes) and then to scene-local metres around that centre, rounded to whole metres
-// and kept as Scene::origin; coordinates snap to 1/256 m like the generators' (exact in float,
-// and shared nodes stay shared walls). Buildings farther than 65 km from the centre are skipped.
+// Input: .osm (XML), .osm.pbf, and XML compressed as .osm.bz2 or .osm.gz (libosmium's own
+// decompression); chosen by extension. Files as editors save them import like downloaded ones:
+// negative ids (objects not yet uploaded), ids out of order, no version/user/timestamp.
 //
-// Heights, in this order:
-//   1. height, else building:height: a number with an optional unit (m, metres, ft, feet, ',
-//      and feet-inches like 12'6"); a bare number is metres.
-//   2. building:levels x 3 m, plus the roof: roof:height, else roof:levels x 3 m, else 1 m.
-//   3. No usable tag: by the building tag's value (DefaultLevels below) x 3 m + 1 m. A rule
-//      of the tag alone: the same building always gets the same height.
-// The base: min_height, else building:min_level x 3 m; zero otherwise. A building whose base
-// is above the ground has a mesh from its base up but no occluder (only what is solid from the
-// ground may occlude). Occluders are the footprints themselves (a footprint with courtyards
-// as the triangles of its roof), so that buildings sharing OSM nodes touch exactly and fuse
-// into one blocker (visibility/occluder_set.h).
+// Buildings are the closed ways and multipolygon relations tagged building=* (any value but
+// "no"), and the building parts tagged building:part=* (Simple 3D Buildings), assembled by
+// libosmium's area assembler (outer and inner rings, which may touch each other at single
+// nodes as OSM's multipolygon rules allow). A building outline is drawn only where no part
+// covers it (CGAL's Boolean difference; scenes/polygon_set.h); each part is an object of its
+// own with its own heights. A closed way tagged building that is also the outline of a
+// building relation gives one object, the relation's.
+//
+// Positions go to UTM (GeographicLib) in the zone and hemisphere of the data's centre (the
+// median longitude and latitude of the buildings' nodes), for every building of the import,
+// whichever side of the equator or zone edge it stands on; then to scene-local metres around
+// that centre, rounded to whole metres and kept as Scene::origin. Coordinates snap to 1/256 m
+// like the generators' (exact in float, and shared nodes stay shared walls). Buildings
+// farther than 65 km from the centre are skipped.
+//
+// Heights: ReadHeights (scenes/osm_tags.h): height, building:height, building:levels, the
+// building type's rule; min_height / building:min_level raise the base. Values above
+// OsmImportOptions::max_height_m are implausible (counted, next rule used). An object whose
+// base is above the ground, or whose tags contradict each other (base at or above the top),
+// has a mesh but no occluder: only what is surely solid from the ground may occlude.
+// Occluders are the footprints themselves (a footprint with courtyards as the triangles of its
+// roof), so that buildings sharing OSM nodes touch exactly and fuse into one blocker
+// (visibility/occluder_set.h).
 //
 // Bad data never stops an import: rings with duplicate points or spikes are repaired; rings
 // that are not simple, have fewer than 3 points, lack node locations (an extract's edge) or
-// fail to assemble are skipped, each counted by reason in OsmImportSummary.
+// fail to assemble are skipped, each counted by reason in OsmImportSummary::skipped.
 
 #include <absl/status/statusor.h>
 
@@ -33,6 +42,7 @@
 #include <string>
 #include <string_view>
 
+#include "scenes/osm_tags.h"
 #include "scenes/progress.h"
 #include "scenes/scene.h"
 
@@ -49,6 +59,9 @@ absl::StatusOr<GeoBox> ParseGeoBox(std::string_view text);
 struct OsmImportOptions {
   std::optional<GeoBox> bbox;  // keep only buildings with every node inside
   double storey_m = 3.0;
+  // Heights above this (metres) are bad data: counted in implausible_heights and replaced by
+  // the next rule. The tallest building is 828 m.
+  double max_height_m = 1000.0;
   std::string name;  // the scene's name; default: the file's stem
 };
 
@@ -59,10 +72,16 @@ struct OsmImportSummary {
   uint64_t occluders = 0;
   uint64_t height_tagged = 0, levels_tagged = 0, height_by_rule = 0;
   uint64_t raised = 0;  // base above the ground: no occluder
+  uint64_t parts = 0;   // building:part objects (also counted in buildings)
+  uint64_t outlines_hidden_by_parts = 0;  // outlines wholly covered by their parts: not drawn
+  uint64_t outlines_cut_by_parts = 0;     // outlines drawn only where no part covers them
+  uint64_t merged_way_outlines = 0;       // ways that are also a building relation's outline
   // Repairs (the building was kept).
   uint64_t repaired_duplicate_points = 0, repaired_spikes = 0;
   uint64_t dropped_inner_rings = 0;  // not simple or not inside the outer ring after snapping
   uint64_t bad_height_tags = 0;      // unreadable height/levels values, the next rule used
+  uint64_t implausible_heights = 0;  // values above max_height_m, the next rule used
+  uint64_t min_height_above_height = 0;  // base at or above the top: base dropped, no occluder
   // Skipped buildings or rings, by reason.
   std::map<std::string, uint64_t> skipped;
   std::string utm_zone;  // e.g. "32N"
@@ -74,15 +93,9 @@ struct OsmImportSummary {
   uint64_t Skipped() const;
 };
 
-// The building type's storeys when no tag gives a height: e.g. 1 for garage or shed, 2 for
-// house, 5 for apartments, 4 for anything else ("yes").
-int DefaultLevels(std::string_view building);
-
-// Parses a length tag ("12", "12.5 m", "40 ft", "12'6\""): metres, or none if unreadable.
-std::optional<double> ParseLength(std::string_view text);
-
-// Imports `path` (.osm, .osm.pbf, .pbf; by extension). Errors name the file and what is wrong
-// (missing, truncated, not OSM data, no buildings left).
+// Imports `path` (.osm, .osm.pbf, .pbf, .osm.bz2, .osm.gz; by extension). Errors name the
+// file and what is wrong (missing, truncated, not OSM data, no buildings left: then with the
+// skip reasons, which `summary` also holds on every error path after reading).
 absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions& options,
                                 OsmImportSummary* summary = nullptr,
                                 const RunControl& run = {});

@@ -4,10 +4,13 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_2_algorithms.h>
 #include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/box_intersection_d.h>
 #include <absl/strings/str_cat.h>
 
 #include <cassert>
+#include <cmath>
 #include <list>
+#include <set>
 
 namespace vistream::scenes {
 
@@ -69,14 +72,68 @@ void MarkNesting(Cdt& cdt) {
   }
 }
 
-bool RingsMeet(const Ring& a, const Ring& b) {
-  for (size_t i = 0; i < a.size(); ++i) {
-    const Segment s(P(a[i]), P(a[(i + 1) % a.size()]));
-    for (size_t j = 0; j < b.size(); ++j) {
-      if (CGAL::do_intersect(s, Segment(P(b[j]), P(b[(j + 1) % b.size()])))) return true;
-    }
+// Whether the two segments share nothing but an endpoint of both, the same point.
+bool MeetAtSharedEnd(const Point& a0, const Point& a1, const Point& b0, const Point& b1) {
+  const Segment sa(a0, a1), sb(b0, b1);
+  if (!CGAL::do_intersect(sa, sb)) return true;
+  const Point* shared = nullptr;
+  for (const Point* p : {&a0, &a1}) {
+    if (*p == b0 || *p == b1) shared = p;
   }
-  return false;
+  if (shared == nullptr) return false;  // crossing, or an end on the other's inside
+  // They meet at `shared`: anything more (collinear overlap, or the other ends on the other
+  // segment) is more than a point.
+  const Point& a_other = *shared == a0 ? a1 : a0;
+  const Point& b_other = *shared == b0 ? b1 : b0;
+  if (a_other == b_other) return false;  // the same segment twice
+  if (CGAL::collinear(a_other, *shared, b_other) &&
+      CGAL::collinear_are_ordered_along_line(a_other, *shared, b_other) == false) {
+    return false;  // overlap along a line from the shared end
+  }
+  return true;
+}
+
+// Whether rings `a` and `b` have no common point other than vertices of both (OSM's
+// "touching at a node"); O((n + m) log(n + m) + k) with CGAL's box intersection.
+bool TouchAtMostAtVertices(const Ring& a, const Ring& b) {
+  using Box = CGAL::Box_intersection_d::Box_with_handle_d<double, 2, const size_t*>;
+  const std::vector<Point> pa = Points(a), pb = Points(b);
+  std::vector<size_t> ia(a.size()), ib(b.size());
+  auto boxes = [](const std::vector<Point>& pts, std::vector<size_t>& ids) {
+    std::vector<Box> out;
+    out.reserve(pts.size());
+    for (size_t i = 0; i < pts.size(); ++i) {
+      ids[i] = i;
+      const CGAL::Bbox_2 bb = pts[i].bbox() + pts[(i + 1) % pts.size()].bbox();
+      out.emplace_back(bb, &ids[i]);
+    }
+    return out;
+  };
+  std::vector<Box> ba = boxes(pa, ia), bb = boxes(pb, ib);
+  bool ok = true;
+  CGAL::box_intersection_d(ba.begin(), ba.end(), bb.begin(), bb.end(),
+                           [&](const Box& x, const Box& y) {
+                             if (!ok) return;
+                             const size_t i = *x.handle(), j = *y.handle();
+                             ok = MeetAtSharedEnd(pa[i], pa[(i + 1) % pa.size()], pb[j],
+                                                  pb[(j + 1) % pb.size()]);
+                           });
+  return ok;
+}
+
+// A vertex of `ring` that is not a vertex of `other` (none if all are).
+const glm::dvec2* VertexNotOn(const Ring& ring, const Ring& other) {
+  std::set<std::pair<double, double>> taken;
+  for (const glm::dvec2& p : other) taken.insert({p.x, p.y});
+  for (const glm::dvec2& p : ring) {
+    if (!taken.count({p.x, p.y})) return &p;
+  }
+  return nullptr;
+}
+
+CGAL::Bounded_side Side(const Ring& ring, const glm::dvec2& p) {
+  const std::vector<Point> pts = Points(ring);
+  return CGAL::bounded_side_2(pts.begin(), pts.end(), P(p), K());
 }
 
 }  // namespace
@@ -124,9 +181,17 @@ bool IsSimpleRing(const Ring& ring) {
 }
 
 bool RingInsideRing(const Ring& inner, const Ring& outer) {
-  if (RingsMeet(inner, outer)) return false;
-  const std::vector<Point> pts = Points(outer);
-  return CGAL::bounded_side_2(pts.begin(), pts.end(), P(inner[0]), K()) == CGAL::ON_BOUNDED_SIDE;
+  if (!TouchAtMostAtVertices(inner, outer)) return false;
+  const glm::dvec2* p = VertexNotOn(inner, outer);
+  return p != nullptr && Side(outer, *p) == CGAL::ON_BOUNDED_SIDE;
+}
+
+bool RingsApart(const Ring& a, const Ring& b) {
+  if (!TouchAtMostAtVertices(a, b)) return false;
+  const glm::dvec2* pa = VertexNotOn(a, b);
+  const glm::dvec2* pb = VertexNotOn(b, a);
+  return pa != nullptr && pb != nullptr && Side(b, *pa) == CGAL::ON_UNBOUNDED_SIDE &&
+         Side(a, *pb) == CGAL::ON_UNBOUNDED_SIDE;
 }
 
 absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon) {
@@ -140,11 +205,11 @@ absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polyg
     }
     if (!RingInsideRing(hole, polygon.outer)) {
       return absl::InvalidArgumentError(
-          absl::StrCat("inner ring ", h, " is not strictly inside the outer ring"));
+          absl::StrCat("inner ring ", h, " is not inside the outer ring"));
     }
     for (size_t g = 0; g < h; ++g) {
       const Ring& other = polygon.holes[g];
-      if (RingsMeet(hole, other) || RingInsideRing(hole, other) || RingInsideRing(other, hole)) {
+      if (!RingsApart(hole, other)) {
         return absl::InvalidArgumentError(absl::StrCat("inner rings ", g, " and ", h, " overlap"));
       }
     }
@@ -162,11 +227,23 @@ absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polyg
   }
   MarkNesting(cdt);
   std::vector<Triangle2> out;
+  double area = 0.0;
   for (Cdt::Face_handle f : cdt.finite_face_handles()) {
     if (f->info().nesting % 2 != 1) continue;
     Triangle2 t;
     for (int i = 0; i < 3; ++i) t[i] = {f->vertex(i)->point().x(), f->vertex(i)->point().y()};
+    area += SignedArea(t);
     out.push_back(t);
+  }
+  // Rings that touch at vertices pass the checks above even where they enclose more than the
+  // footprint (a hole leaving and re-entering the outer ring through two shared points): the
+  // triangles must cover exactly the outer ring less the holes.
+  double want = SignedArea(polygon.outer);
+  for (const Ring& hole : polygon.holes) want -= std::abs(SignedArea(hole));
+  if (!(std::abs(area - want) <= 1e-9 * std::abs(SignedArea(polygon.outer)))) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("the rings enclose ", area, " m² where the outer less the inner rings is ",
+                     want, " m²"));
   }
   return out;
 }

@@ -18,7 +18,8 @@ using Ring = std::vector<glm::dvec2>;  // open: the first point is not repeated 
 
 struct PolygonWithHoles {
   Ring outer;               // counter-clockwise
-  std::vector<Ring> holes;  // clockwise, inside `outer`, apart from each other
+  std::vector<Ring> holes;  // clockwise, inside `outer`, apart from each other (touching at
+                            // shared vertices is allowed)
 };
 
 // What CleanRing changed.
@@ -35,13 +36,19 @@ RingRepairs CleanRing(Ring* ring);
 // neighbours at their shared point (exact predicates).
 bool IsSimpleRing(const Ring& ring);
 
-// Whether two simple rings neither cross nor touch, and `inner` lies inside `outer` (exact).
+// Whether simple ring `inner` lies inside simple ring `outer`, meeting it at most at shared
+// vertices (OSM's multipolygon rules let an inner ring touch the outer at a node); exact
+// predicates, O((n + m) log(n + m)) for rings that meet at few places.
 bool RingInsideRing(const Ring& inner, const Ring& outer);
+
+// Whether two simple rings lie outside each other, meeting at most at shared vertices.
+bool RingsApart(const Ring& a, const Ring& b);
 
 using Triangle2 = std::array<glm::dvec2, 3>;
 
 // The footprint as counter-clockwise triangles covering exactly its area (holes left out).
-// Needs simple rings, holes inside the outer ring and apart; an error otherwise.
+// Needs simple rings, holes inside the outer ring and apart (RingInsideRing, RingsApart); an
+// error otherwise, also when the triangles' area is not the outer ring's less the holes'.
 absl::StatusOr<std::vector<Triangle2>> Triangulate(const PolygonWithHoles& polygon);
 
 // Appends the closed, flat-shaded prism of `polygon` from z0 to z1 > z0: walls along every ring

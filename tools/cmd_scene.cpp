@@ -81,6 +81,16 @@ int ImportOsm(const ImportArgs& a) {
   }
   scenes::OsmImportSummary sum;
   absl::StatusOr<scenes::Scene> scene = scenes::ImportOsm(a.input, options, &sum, ToolRun());
+  if (!scene.ok() && a.json) {
+    // The error path reports what was skipped, by reason, as the success path does.
+    nlohmann::json skipped = nlohmann::json::object();
+    for (const auto& [reason, n] : sum.skipped) skipped[reason] = n;
+    const nlohmann::json j = {{"input", a.input},
+                              {"error", std::string(scene.status().message())},
+                              {"skipped", sum.Skipped()},
+                              {"skipped_by_reason", skipped}};
+    std::printf("%s\n", j.dump(2).c_str());
+  }
   if (!scene.ok()) return Fail(scene.status());
   const auto save_start = std::chrono::steady_clock::now();
   if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
@@ -104,6 +114,12 @@ int ImportOsm(const ImportArgs& a) {
         {"levels_tagged", sum.levels_tagged},
         {"height_by_rule", sum.height_by_rule},
         {"bad_height_tags", sum.bad_height_tags},
+        {"implausible_heights", sum.implausible_heights},
+        {"min_height_above_height", sum.min_height_above_height},
+        {"parts", sum.parts},
+        {"outlines_hidden_by_parts", sum.outlines_hidden_by_parts},
+        {"outlines_cut_by_parts", sum.outlines_cut_by_parts},
+        {"merged_way_outlines", sum.merged_way_outlines},
         {"repaired", sum.Repaired()},
         {"repaired_duplicate_points", sum.repaired_duplicate_points},
         {"repaired_spikes", sum.repaired_spikes},
@@ -128,10 +144,16 @@ int ImportOsm(const ImportArgs& a) {
               scene->TriangleCount(), static_cast<unsigned long long>(sum.occluders), sum.seconds, a.output.c_str(),
               save_s);
   std::printf("heights: %llu tagged, %llu from levels, %llu by the building-type rule; %llu raised (no occluder); "
-              "%llu unreadable height tags\n",
+              "%llu unreadable height tags, %llu implausible, %llu min_height above height\n",
               static_cast<unsigned long long>(sum.height_tagged), static_cast<unsigned long long>(sum.levels_tagged),
               static_cast<unsigned long long>(sum.height_by_rule), static_cast<unsigned long long>(sum.raised),
-              static_cast<unsigned long long>(sum.bad_height_tags));
+              static_cast<unsigned long long>(sum.bad_height_tags),
+              static_cast<unsigned long long>(sum.implausible_heights),
+              static_cast<unsigned long long>(sum.min_height_above_height));
+  std::printf("parts: %llu (outlines: %llu hidden by their parts, %llu cut); %llu ways merged into their relation\n",
+              static_cast<unsigned long long>(sum.parts), static_cast<unsigned long long>(sum.outlines_hidden_by_parts),
+              static_cast<unsigned long long>(sum.outlines_cut_by_parts),
+              static_cast<unsigned long long>(sum.merged_way_outlines));
   std::printf("repaired: %llu (%llu duplicate points, %llu spikes, %llu inner rings dropped)\n",
               static_cast<unsigned long long>(sum.Repaired()), static_cast<unsigned long long>(sum.repaired_duplicate_points),
               static_cast<unsigned long long>(sum.repaired_spikes), static_cast<unsigned long long>(sum.dropped_inner_rings));
@@ -244,7 +266,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
 
   auto imp = std::make_shared<ImportArgs>();
   CLI::App* o = scene->add_subcommand("import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene");
-  o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML) or .osm.pbf")->required();
+  o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML), .osm.pbf, .osm.bz2 or .osm.gz")->required();
   o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required();
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
   o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(CLI::Range(1.0, 20.0));
