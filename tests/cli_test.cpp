@@ -18,20 +18,45 @@
 
 namespace {
 
+// The tool's exit codes (README): run-time errors 1, bad options 2.
+constexpr int kRunTimeError = 1;
+constexpr int kBadOption = 2;
+
 struct RunResult {
-  int exit_code;
+  int exit_code;    // the tool's own; 128 + N when a signal N ended it (a crash is no exit code a test expects)
   std::string out;  // stdout and stderr
 };
 
 RunResult Vistream(const std::string& args) {
-  const std::string cmd = std::string(VISTREAM_BIN) + " " + args + " 2>&1";
+  // exec: the shell becomes the tool, so a crash shows as the tool's signal, not as sh's status.
+  const std::string cmd = "exec " + std::string(VISTREAM_BIN) + " " + args + " 2>&1";
   FILE* pipe = popen(cmd.c_str(), "r");
   EXPECT_NE(pipe, nullptr);
   std::string out;
   std::array<char, 4096> buf;
   while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
   const int status = pclose(pipe);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+  if (WIFSIGNALED(status)) return {128 + WTERMSIG(status), out + "\n[killed by signal " + std::to_string(WTERMSIG(status)) + "]"};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : 255, out};
+}
+
+// A bad option: exit 2, "vistream: error: " then `message` (which starts with the option's
+// name), and a hint to --help; no CLI11 bounds with hundreds of digits.
+void ExpectBadOption(const std::string& args, const std::string& message) {
+  const RunResult r = Vistream(args);
+  EXPECT_EQ(r.exit_code, kBadOption) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find("vistream: error: " + message), std::string::npos) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find("--help' for the options"), std::string::npos) << args << "\n" << r.out;
+  EXPECT_EQ(r.out.find("179769"), std::string::npos) << args << "\n" << r.out;
+  EXPECT_LT(r.out.size(), 400u) << args << "\n" << r.out;
+}
+
+// A run-time error: exit 1 and "vistream: error: ..." holding `message`.
+void ExpectRunTimeError(const std::string& args, const std::string& message) {
+  const RunResult r = Vistream(args);
+  EXPECT_EQ(r.exit_code, kRunTimeError) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find("vistream: error: "), std::string::npos) << args << "\n" << r.out;
+  EXPECT_NE(r.out.find(message), std::string::npos) << args << "\n" << r.out;
 }
 
 std::string Tmp(const std::string& name) {
@@ -78,20 +103,76 @@ TEST(Cli, CatalogNamesWorkWithoutAFile) {
   EXPECT_GT(j.at("objects").get<int>(), 1000);
 }
 
-TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
-  const RunResult missing = Vistream("scene info " + Tmp("nope.glb"));
-  EXPECT_EQ(missing.exit_code, 1);
-  EXPECT_NE(missing.out.find("nope.glb"), std::string::npos) << missing.out;
+TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
+  ExpectRunTimeError("scene info " + Tmp("nope.glb"), "nope.glb");
   const std::string bad = Tmp("bad.json");
   std::ofstream(bad) << R"({"name": "bad", "source": {"generator": "city1"}, "viewcell": {"size_m": 0, "height_m": 2}})";
-  const RunResult catalog = Vistream("scene info " + bad);
-  EXPECT_EQ(catalog.exit_code, 1);
-  EXPECT_NE(catalog.out.find("viewcell.size_m"), std::string::npos) << catalog.out;
-  const RunResult unknown = Vistream("scene generate atlantis -o " + Tmp("x.glb"));
-  EXPECT_EQ(unknown.exit_code, 1);
-  EXPECT_NE(unknown.out.find("atlantis"), std::string::npos) << unknown.out;
-  EXPECT_NE(Vistream("scene generate city1").exit_code, 0);  // -o is required
-  EXPECT_NE(Vistream("frobnicate").exit_code, 0);
+  ExpectRunTimeError("scene info " + bad, "viewcell.size_m");
+  ExpectRunTimeError("scene generate atlantis -o " + Tmp("x.glb"), "atlantis");
+  ExpectBadOption("scene generate city1", "--output: is required");
+  ExpectBadOption("frobnicate", "'frobnicate': not a vistream command");
+  ExpectBadOption("", "A subcommand is required");
+  // --help is no error.
+  const RunResult help = Vistream("check-conservative --help");
+  EXPECT_EQ(help.exit_code, 0) << help.out;
+  EXPECT_NE(help.out.find("--allow-unchecked"), std::string::npos) << help.out;
+}
+
+// Every numeric option rejects NaN, infinities, text and out-of-range values, naming itself,
+// before any work starts (a NaN size once gave 0 rays and exit 0; --cell-size nan or 0 once
+// quietly took the catalog's size).
+TEST(Cli, NanInfinityAndOutOfRangeNumbersAreRejectedNamingTheOption) {
+  const std::string png = " -o " + Tmp("never.png");
+  const struct {
+    std::string args, message;
+  } cases[] = {
+      {"epsilon --scene city1 --at 10,5,2.5 --size nan", "--size: 'nan' is not a number from 0 to 100000"},
+      {"epsilon --scene city1 --at 10,5,2.5 --size inf", "--size: 'inf' is not a number"},
+      {"epsilon --scene city1 --at 10,5,2.5 --size -1", "--size: '-1' is not a number"},
+      {"pvs --scene city1 --cell 1,1 --cell-size nan", "--cell-size: 'nan' is not a number from 0.01 to 1e+06"},
+      {"pvs --scene city1 --cell 1,1 --cell-size 0", "--cell-size: '0' is not a number from 0.01"},
+      {"pvs --scene city1 --cell 1,1 --res nan", "--res: 'nan' is not a power of two from 16 to 256"},
+      {"pvs --scene city1 --cell 1,1 --res 100", "--res: '100' is not a power of two from 16 to 256"},
+      {"check-conservative --scene city1 --res 512", "--res: '512' is not a power of two from 16 to 256"},
+      {"agvs --scene city1 --samples 10 --cell-size 0", "--cell-size: '0' is not a number"},
+      {"agvs --scene city1 --seconds nan", "--seconds: 'nan' is not a number"},
+      {"agvs --scene city1 --pixel-error nan", "--pixel-error: 'nan' is not a number"},
+      {"agvs --scene city1 --samples -1", "--samples: '-1' is not a whole number from 1 to"},
+      {"agvs --scene city1 --samples 1e6", "--samples: '1e6' is not a whole number"},
+      {"agvs --scene city1 --samples 10 --seed -1", "--seed: '-1' is not a whole number from 0 to"},
+      {"agvs --scene city1 --samples 10 --threads nan", "--threads: 'nan' is not a whole number"},
+      {"agvs --scene city1 --samples 10 --batch 0", "--batch: '0' is not a whole number from 1 to 16777216"},
+      {"agvs heatmap --scene city1 --seconds 1 --cell-size 0" + png, "--cell-size: '0' is not a number"},
+      {"agvs heatmap --scene city1 --seconds inf" + png, "--seconds: 'inf' is not a number"},
+      {"check-conservative --scene city1 --cell-size 0", "--cell-size: '0' is not a number"},
+      {"check-conservative --scene city1 --cell-size nan", "--cell-size: 'nan' is not a number"},
+      {"check-conservative --scene city1 --seconds -inf", "--seconds: '-inf' is not a number"},
+      {"check-conservative --scene city1 --samples 0", "--samples: '0' is not a whole number"},
+      {"check-conservative --scene city1 --cells nan", "--cells: 'nan' is not a whole number"},
+      {"check-conservative --scene city1 --neighbourhoods -2", "--neighbourhoods: '-2' is not a whole number"},
+      {"check-conservative --scene city1 --rays 0", "--rays: '0' is not a whole number"},
+      {"check-conservative --scene city1 --seed nan", "--seed: 'nan' is not a whole number"},
+      {"scene generate city1 -o x.glb --seed 1.5", "--seed: '1.5' is not a whole number"},
+      {"scene info city1 --leaf-size nan", "--leaf-size: 'nan' is not a whole number from 1 to 1024"},
+      {"scene map city1 -o x.png --size 1e9", "--size: '1e9' is not a whole number from 16 to 16384"},
+      {"scene import-osm x.osm -o x.glb --storey inf", "--storey: 'inf' is not a number from 1 to 20"},
+      {"bench table1 --cells 0", "--cells: '0' is not a whole number"},
+      {"bench table1 --sizes 100,nan", "--sizes: 'nan' is not a number"},
+      {"bench table1 --res 16,300", "--res: '300' is not a whole number from 1 to 256"},
+      {"bench epsilon --count nan", "--count: 'nan' is not a whole number"},
+      {"bench epsilon --size inf", "--size: 'inf' is not a number"},
+      {"bench epsilon --pvs-cell 0", "--pvs-cell: '0' is not a number"},
+      {"bench agvs --seconds nan", "--seconds: 'nan' is not a number"},
+      {"bench agvs --views 0", "--views: '0' is not a whole number"},
+      {"bench agvs --checkpoints 31", "--checkpoints: '31' is not a whole number from 1 to 30"},
+      {"bench agvs --cell-size 0", "--cell-size: '0' is not a number"},
+      {"bench server --sessions nan", "--sessions: 'nan' is not a whole number"},
+      {"bench server --speed nan", "--speed: 'nan' is not a number"},
+      {"bench server --res 0", "--res: '0' is not a whole number"},
+      {"bench client --threads 0", "--threads: '0' is not a whole number from 1 to 256"},
+      {"bench client --seconds inf", "--seconds: 'inf' is not a number"},
+  };
+  for (const auto& c : cases) ExpectBadOption(c.args, c.message);
 }
 
 TEST(Cli, PvsReportsTheSetOfAViewcell) {
@@ -135,19 +216,11 @@ TEST(Cli, PvsAllWritesEveryViewcellAsAPvsFile) {
   }
   // A heatmap reads it back.
   EXPECT_EQ(Vistream("agvs heatmap --scene city1 --pvs " + file + " -o " + Tmp("all.png")).exit_code, 0);
-  const RunResult neither = Vistream("pvs --scene city1");
-  EXPECT_EQ(neither.exit_code, 1);
-  EXPECT_NE(neither.out.find("--cell I,J"), std::string::npos) << neither.out;
-  const RunResult no_out = Vistream("pvs --scene city1 --all");
-  EXPECT_EQ(no_out.exit_code, 1);
-  EXPECT_NE(no_out.out.find("-o FILE"), std::string::npos) << no_out.out;
-  EXPECT_NE(Vistream("pvs --scene city1 --all --cell 1,1 -o " + file).exit_code, 0);
-  const RunResult unwritable = Vistream("pvs --scene city1 --all -o /nonexistent/dir/x.pvs");
-  EXPECT_EQ(unwritable.exit_code, 1);
-  EXPECT_NE(unwritable.out.find("not a writable folder"), std::string::npos) << unwritable.out;
-  const RunResult stray = Vistream("pvs --scene city1 --cell 1,1 -o " + file);
-  EXPECT_EQ(stray.exit_code, 1);
-  EXPECT_NE(stray.out.find("-o writes the PVS file of --all"), std::string::npos) << stray.out;
+  ExpectBadOption("pvs --scene city1", "--cell or --all: give --cell I,J (one viewcell) or --all -o FILE");
+  ExpectBadOption("pvs --scene city1 --all", "--all: writes a PVS file: give -o FILE");
+  ExpectBadOption("pvs --scene city1 --all --cell 1,1 -o " + file, "--all: cannot be given with --cell");
+  ExpectRunTimeError("pvs --scene city1 --all -o /nonexistent/dir/x.pvs", "not a writable folder");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 -o " + file, "-o: writes the PVS file of --all; one viewcell prints");
 }
 
 // A viewcell smaller than the catalog's, among the buildings: city1-255 stands in plain view
@@ -207,21 +280,15 @@ TEST(Cli, Table1ReportsBothBackendsAgainstTheExactTest) {
   int lines = 0;
   for (std::string line; std::getline(in, line);) ++lines;
   EXPECT_EQ(lines, 4);
-  EXPECT_NE(Vistream("bench table1 --scene default --res 100").exit_code, 0);
-  EXPECT_NE(Vistream("bench table1 --scene default --backends vulkan").exit_code, 0);
+  ExpectBadOption("bench table1 --scene default --res 100", "--res: 100: expected a power of two, 1 to 256");
+  ExpectBadOption("bench table1 --scene default --backends vulkan", "--backends: vulkan not in {cpu,gl}");
 }
 
 TEST(Cli, PvsRejectsBadCellsAndBackends) {
-  const RunResult text = Vistream("pvs --scene default --cell ten,3");
-  EXPECT_EQ(text.exit_code, 1);
-  EXPECT_NE(text.out.find("--cell 'ten,3'"), std::string::npos) << text.out;
-  const RunResult outside = Vistream("pvs --scene default --cell 500,3");
-  EXPECT_EQ(outside.exit_code, 1);
-  EXPECT_NE(outside.out.find("outside the grid"), std::string::npos) << outside.out;
-  const RunResult vulkan = Vistream("pvs --scene default --cell 1,1 --backend vulkan");
-  EXPECT_NE(vulkan.exit_code, 0);
-  EXPECT_NE(vulkan.out.find("vulkan"), std::string::npos) << vulkan.out;
-  EXPECT_NE(Vistream("pvs --scene default --cell 1,1 --res 100").exit_code, 0);  // not a power of two
+  ExpectBadOption("pvs --scene default --cell ten,3", "--cell: 'ten,3': expected I,J (two integers)");
+  ExpectRunTimeError("pvs --scene default --cell 500,3", "outside the grid");
+  ExpectBadOption("pvs --scene default --cell 1,1 --backend vulkan", "--backend: vulkan not in {cpu,gl,exact}");
+  ExpectBadOption("pvs --scene default --cell 1,1 --res 100", "--res: '100' is not a power of two");
 }
 
 TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {
@@ -246,17 +313,11 @@ TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {
 }
 
 TEST(Cli, EpsilonRejectsBadPositions) {
-  const RunResult text = Vistream("epsilon --scene city1 --at 1,2 --size 3");
-  EXPECT_EQ(text.exit_code, 1);
-  EXPECT_NE(text.out.find("--at '1,2'"), std::string::npos) << text.out;
-  const RunResult nan = Vistream("epsilon --scene city1 --at nan,0,2 --size 3");
-  EXPECT_EQ(nan.exit_code, 1);
-  EXPECT_NE(nan.out.find("finite"), std::string::npos) << nan.out;
-  const RunResult outside = Vistream("epsilon --scene city1 --at 5000,0,2 --size 3");
-  EXPECT_EQ(outside.exit_code, 1);
-  EXPECT_NE(outside.out.find("outside the scene"), std::string::npos) << outside.out;
-  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size -1").exit_code, 0);
-  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest").exit_code, 0);
+  ExpectBadOption("epsilon --scene city1 --at 1,2 --size 3", "--at: '1,2': expected X,Y,Z (three finite numbers, metres)");
+  ExpectBadOption("epsilon --scene city1 --at nan,0,2 --size 3", "--at: 'nan,0,2': expected X,Y,Z (three finite");
+  ExpectRunTimeError("epsilon --scene city1 --at 5000,0,2 --size 3", "outside the scene");
+  ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size -1", "--size: '-1' is not a number from 0 to 100000");
+  ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest", "--opt: fastest not in");
 }
 
 TEST(Cli, BenchEpsilonReproducesBothTables) {
@@ -317,24 +378,19 @@ TEST(Cli, AgvsReportsItsFiguresAndWritesAPvsFileTheHeatmapReads) {
 }
 
 TEST(Cli, AgvsRejectsBadInput) {
-  const RunResult none = Vistream("agvs --scene city1");
-  EXPECT_EQ(none.exit_code, 1);
-  EXPECT_NE(none.out.find("--seconds"), std::string::npos) << none.out;
-  const RunResult strategy = Vistream("agvs --scene city1 --samples 10 --strategy gvs");
-  EXPECT_EQ(strategy.exit_code, 1);
-  EXPECT_NE(strategy.out.find("'gvs'"), std::string::npos) << strategy.out;
-  EXPECT_NE(Vistream("agvs --scene city1 --samples 10 --filter blur").exit_code, 0);
+  ExpectBadOption("agvs --scene city1", "--seconds, --pixel-error or --samples: give one: when to stop sampling");
+  ExpectBadOption("agvs --samples 10", "--scene: is required");
+  ExpectBadOption("agvs --scene city1 --samples 10 --strategy gvs", "--strategy: unknown sampling strategy 'gvs'");
+  ExpectBadOption("agvs --scene city1 --samples 10 --filter blur", "--filter: 'blur': expected none, object, view or both");
   // A PVS file that is not one, and one made for another scene.
   const std::string junk = Tmp("junk.pvs"), city1 = Tmp("other.pvs");
   std::ofstream(junk) << "not a pvs file";
-  const RunResult bad = Vistream("agvs heatmap --scene city1 --pvs " + junk + " -o " + Tmp("x.png"));
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_NE(bad.out.find(junk), std::string::npos) << bad.out;
+  ExpectRunTimeError("agvs heatmap --scene city1 --pvs " + junk + " -o " + Tmp("x.png"), junk);
   ASSERT_EQ(Vistream("agvs --scene city1 --samples 1000 -o " + city1 + " --json").exit_code, 0);
-  const RunResult other = Vistream("agvs heatmap --scene default --pvs " + city1 + " -o " + Tmp("y.png"));
-  EXPECT_EQ(other.exit_code, 1);
-  EXPECT_NE(other.out.find("another scene"), std::string::npos) << other.out;
-  EXPECT_NE(Vistream("agvs heatmap --scene city1 -o " + Tmp("z.png")).exit_code, 0);  // nothing to draw
+  ExpectRunTimeError("agvs heatmap --scene default --pvs " + city1 + " -o " + Tmp("y.png"), "another scene");
+  ExpectBadOption("agvs heatmap --scene city1 -o " + Tmp("z.png"), "--pvs or --seconds: give one");  // nothing to draw
+  // A state file that is not one.
+  ExpectRunTimeError("agvs --scene city1 --samples 10 --state " + junk, junk);
 }
 
 // The project's main correctness check, end to end: nothing sampling sees from any viewcell
@@ -406,12 +462,8 @@ TEST(Cli, CheckConservativeReplaysASampleCountExactly) {
   EXPECT_EQ(ja.at("pvs_entries_checked"), jb.at("pvs_entries_checked"));
   EXPECT_EQ(ja.at("epsilon_hits_checked"), jb.at("epsilon_hits_checked"));
   // A count or a time, not both; and only the known backends.
-  const RunResult both = Vistream("check-conservative --scene streets --samples 1000 --seconds 1");
-  EXPECT_NE(both.exit_code, 0);
-  EXPECT_NE(both.out.find("--samples"), std::string::npos) << both.out;
-  const RunResult bad = Vistream("check-conservative --scene streets --backend vulkan");
-  EXPECT_NE(bad.exit_code, 0);
-  EXPECT_NE(bad.out.find("--backend"), std::string::npos) << bad.out;
+  ExpectBadOption("check-conservative --scene streets --samples 1000 --seconds 1", "--seconds: cannot be given with --samples");
+  ExpectBadOption("check-conservative --scene streets --backend vulkan", "--backend: vulkan not in {cpu,gl,exact}");
 }
 
 TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
@@ -419,20 +471,56 @@ TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
   const std::string dir = Tmp("a-folder.glb");
   std::filesystem::create_directories(dir);
   for (const std::string& scene : {dir, Tmp("")}) {
-    const RunResult r = Vistream("check-conservative --scene " + scene + " --samples 1000");
-    EXPECT_EQ(r.exit_code, 1) << r.out;
-    EXPECT_NE(r.out.find("is a directory"), std::string::npos) << r.out;
+    ExpectRunTimeError("check-conservative --scene " + scene + " --samples 1000", "is a directory");
   }
-  const RunResult nan = Vistream("check-conservative --scene streets --cell-size nan --samples 1000");
-  EXPECT_EQ(nan.exit_code, 1) << nan.out;
-  EXPECT_NE(nan.out.find("--cell-size"), std::string::npos) << nan.out;
+  ExpectBadOption("check-conservative --scene streets --cell-size nan --samples 1000", "--cell-size: 'nan' is not a number");
   // Viewcells so small that their sets would not fit in any memory (london at 1 m: 162 M cells
   // of 146,325 bits), or that the grid would pass 2^31 cells: said, not an abort.
-  for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.005"}) {
-    const RunResult tiny = Vistream(std::string("check-conservative --samples 1000 ") + args);
-    EXPECT_EQ(tiny.exit_code, 1) << args << ": " << tiny.out;
-    EXPECT_NE(tiny.out.find("larger"), std::string::npos) << args << ": " << tiny.out;
+  for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.01"}) {
+    ExpectRunTimeError(std::string("check-conservative --samples 1000 ") + args, "larger");
   }
+}
+
+// A glTF file of plain meshes has no occluders: the dual ray space hides nothing, so the PVS
+// check could not have failed, and no free street-level neighbourhood may exist. Such a check
+// says so and fails unless --allow-unchecked.
+std::string GltfWithoutOccluders() {
+  const std::string bin = Tmp("no_occluders.bin"), gltf = Tmp("no_occluders.gltf");
+  // Two triangles (glTF is y-up): a 60 x 60 m ground and a 10 m high wall across it.
+  const std::vector<float> p = {0, 0, 0, 60, 0, 0, 0, 0, -60, 30, 0, 0, 30, 0, -60, 30, 10, -30};
+  std::ofstream(bin, std::ios::binary).write(reinterpret_cast<const char*>(p.data()), p.size() * sizeof(float));
+  std::ofstream(gltf) << R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+    "nodes": [{"mesh": 0, "name": "ground"}, {"mesh": 1, "name": "wall"}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}, {"primitives": [{"attributes": {"POSITION": 1}}]}],
+    "accessors": [
+      {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, -60], "max": [60, 0, 0]},
+      {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3", "min": [30, 0, -60], "max": [30, 10, 0]}],
+    "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 36}],
+    "buffers": [{"uri": "no_occluders.bin", "byteLength": 72}]})";
+  return gltf;
+}
+
+TEST(Cli, CheckConservativeThatCheckedNothingSaysSoAndFails) {
+  const std::string args = "check-conservative --scene " + GltfWithoutOccluders() + " --cell-size 10 --samples 100000";
+  const RunResult r = Vistream(args);
+  EXPECT_EQ(r.exit_code, kRunTimeError) << r.out;
+  EXPECT_NE(r.out.find("vistream: error: check-conservative checked nothing: the dual ray space hid nothing"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("--allow-unchecked"), std::string::npos) << r.out;
+  // In JSON too, and --allow-unchecked accepts it (still said, as a warning).
+  const RunResult j = Vistream(args + " --allow-unchecked --json");
+  ASSERT_EQ(j.exit_code, 0) << j.out;
+  const std::string json = j.out.substr(j.out.find('{'), j.out.rfind('}') - j.out.find('{') + 1);
+  const nlohmann::json k = nlohmann::json::parse(json);
+  EXPECT_EQ(k.at("violations").get<int>(), 0);
+  EXPECT_EQ(k.at("occluded_queries").get<int>(), 0);
+  EXPECT_GE(k.at("unchecked").size(), 1u) << j.out;
+  EXPECT_NE(j.out.find("vistream: warning: check-conservative checked nothing"), std::string::npos) << j.out;
+  // A real scene checks both parts: nothing unchecked.
+  const RunResult city = Vistream("check-conservative --scene city1 --cells 4 --samples 200000 --json");
+  ASSERT_EQ(city.exit_code, 0) << city.out;
+  EXPECT_TRUE(nlohmann::json::parse(city.out).at("unchecked").empty()) << city.out;
 }
 
 TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {
@@ -461,14 +549,11 @@ TEST(Cli, ImportOsmWritesASceneAndSummarises) {
   ASSERT_EQ(info.exit_code, 0) << info.out;
   EXPECT_EQ(nlohmann::json::parse(info.out).at("objects").get<int>(), 1) << info.out;
 
-  const RunResult bad_box = Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR +
-                                     "/tests/osm/courtyard.osm -o " + out + " --bbox 7,43,7.5");
-  EXPECT_NE(bad_box.exit_code, 0);
-  EXPECT_NE(bad_box.out.find("needs four numbers"), std::string::npos) << bad_box.out;
-  const RunResult empty =
-      Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out);
-  EXPECT_NE(empty.exit_code, 0);
-  EXPECT_NE(empty.out.find("empty.osm: the file is empty"), std::string::npos) << empty.out;
+  ExpectBadOption(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/courtyard.osm -o " + out +
+                      " --bbox 7,43,7.5",
+                  "--bbox: bbox '7,43,7.5': needs four numbers");
+  ExpectRunTimeError(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out,
+                     "empty.osm: the file is empty");
 }
 
 // The whole pipeline on a real city: the Monaco extract (../shared/data/osm, ODbL), a viewcell

@@ -26,8 +26,34 @@ scenes::RunControl ToolRun();
 // scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings.
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
 
-// A CLI11 check: a finite number in [lo, hi] (CLI11's Range and PositiveNumber let NaN through).
+// Checks for numeric options. CLI11 puts the option's name in front of the message
+// ("--size: 'nan' is not a number from 0 to 100000"). They reject NaN, infinities, text and
+// values outside [lo, hi]; CLI11's Range and PositiveNumber let NaN through and print their
+// bounds with 300 digits.
 CLI::Validator FiniteRange(double lo, double hi);
+// A whole number in [lo, hi], written in decimal digits (no sign for lo >= 0, no exponent).
+CLI::Validator WholeRange(int64_t lo, int64_t hi);
+// A power of two in [lo, hi], as WholeRange reads it (raster resolutions).
+CLI::Validator PowerOfTwo(int64_t lo, int64_t hi);
+
+// The exit code of a bad option or a bad combination of options (vistream-server and
+// vistream-client use it too). Run-time errors exit 1, ^C 130.
+inline constexpr int kBadOptionExit = 2;
+
+// Bounds shared by several commands' options.
+inline constexpr int64_t kMaxSeed = INT64_MAX;
+inline constexpr int64_t kMaxSamples = int64_t{1} << 50;
+inline constexpr double kMaxSeconds = 1e7;       // about 116 days
+inline constexpr double kMinCellSize = 0.01;     // metres; what vistream-server accepts
+inline constexpr double kMaxCellSize = 1e6;
+
+// Prints "vistream: error: <option>: <what>" and a hint to `vistream <command> --help`;
+// returns kBadOptionExit. For what CLI11's checks cannot see (a value's form, two options together).
+int BadOption(const std::string& command, const std::string& option, const std::string& what);
+
+// The exit code for CLI11's parse error `e` in `app`: 0 after printing --help, else
+// kBadOptionExit after printing the error as BadOption does.
+int ParseFailure(const CLI::App& app, const CLI::ParseError& e);
 
 // The whole file, or an error naming it.
 absl::StatusOr<std::string> ReadFile(const std::string& path);
