@@ -1,6 +1,6 @@
 // libFuzzer target: the AGVS sampling-state reader (vistream agvs --state FILE resumes from a
 // user's file) on untrusted bytes, loaded into a sampler of a small generated town. With
-// VISTREAM_FUZZ_SEED=FILE it first writes that sampler's state after one batch there, the
+// VISTREAM_FUZZ_SEED_DIR=DIR it first writes that sampler's state after one batch there, the
 // seed CI starts from.
 #include <cstddef>
 #include <cstdint>
@@ -49,9 +49,9 @@ Town& TheTown() {
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   Town& town = TheTown();
-  if (const char* out = std::getenv("VISTREAM_FUZZ_SEED")) {
+  if (const char* dir = std::getenv("VISTREAM_FUZZ_SEED_DIR")) {
     town.sampler->RunBatch();
-    std::ofstream(out, std::ios::binary) << town.sampler->SaveState();
+    std::ofstream(std::string(dir) + "/seed", std::ios::binary) << town.sampler->SaveState();
   }
   return 0;
 }

@@ -1,5 +1,5 @@
 // libFuzzer target: the PVS-file decoder (vistream-server --pvs-file, agvs heatmap --pvs) on
-// untrusted bytes. With VISTREAM_FUZZ_SEED=FILE it first writes a valid file there (a small
+// untrusted bytes. With VISTREAM_FUZZ_SEED_DIR=DIR it first writes a valid file there (a small
 // grid with a few sets), the seed CI starts from.
 #include <cstddef>
 #include <cstdint>
@@ -35,7 +35,9 @@ std::string SeedFile() {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  if (const char* out = std::getenv("VISTREAM_FUZZ_SEED")) std::ofstream(out, std::ios::binary) << SeedFile();
+  if (const char* dir = std::getenv("VISTREAM_FUZZ_SEED_DIR")) {
+    std::ofstream(std::string(dir) + "/seed", std::ios::binary) << SeedFile();
+  }
   return 0;
 }
 
