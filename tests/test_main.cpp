@@ -1,15 +1,16 @@
 // The main of every test binary: gtest's, with two rules CI relies on.
 //
 // 1. A suite whose SetUpTestSuite or TearDownTestSuite failed fails. gtest 1.12 reports the
-//    tests of such a suite as skipped and prints "[  SKIPPED ]", which ctest (through
-//    gtest_discover_tests' SKIP_REGULAR_EXPRESSION) counted as a skip, not a failure.
-// 2. A skipped test prints "vistream-test: skipped: NAME: REASON", the line ctest reads as a
-//    skip (tests/CMakeLists.txt). With VISTREAM_EXPECTED_SKIPS=FILE (CI sets it), a skip that
-//    FILE does not list is a failure instead. FILE: one test name a line, then its reason;
-//    '#' starts a comment.
+//    tests of such a suite as skipped ("[  SKIPPED ]", exit 1), and ctest, through the
+//    SKIP_REGULAR_EXPRESSION gtest_discover_tests sets, counted them as skips.
+// 2. With VISTREAM_EXPECTED_SKIPS=FILE (CI sets it), a skipped test that FILE does not list
+//    fails. FILE: one test name a line (Suite.Test), then its reason; '#' starts a comment.
+// Either way the test is reported as "[  FAILED  ]", never with gtest's "[  SKIPPED ]" line
+// (ctest adds skip patterns to gtest's rather than replacing it, so that line must not show).
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
@@ -18,7 +19,12 @@
 
 namespace {
 
-std::set<std::string> ExpectedSkips(const char* path, bool* ok) {
+using ::testing::TestEventListener;
+using ::testing::TestInfo;
+using ::testing::TestSuite;
+using ::testing::UnitTest;
+
+std::set<std::string> ReadExpectedSkips(const char* path, bool* ok) {
   std::set<std::string> names;
   std::ifstream in(path);
   *ok = static_cast<bool>(in);
@@ -32,53 +38,85 @@ std::set<std::string> ExpectedSkips(const char* path, bool* ok) {
 
 std::string SkipReason(const ::testing::TestResult& result) {
   for (int k = 0; k < result.total_part_count(); ++k) {
-    const ::testing::TestPartResult& part = result.GetTestPartResult(k);
-    if (part.skipped()) return part.message();
+    if (result.GetTestPartResult(k).skipped()) return result.GetTestPartResult(k).message();
   }
   return "";
 }
+
+// gtest's printer, except for skips that are failures here.
+class Printer : public TestEventListener {
+ public:
+  Printer(TestEventListener* inner, const char* expected_path, std::set<std::string> expected)
+      : inner_(inner), expected_path_(expected_path), expected_(std::move(expected)) {}
+
+  int failures() const { return failures_; }
+
+  void OnTestEnd(const TestInfo& test) override {
+    const TestSuite* suite = UnitTest::GetInstance()->current_test_suite();
+    if (!test.result()->Skipped() || suite == nullptr) return inner_->OnTestEnd(test);
+    const std::string name = std::string(test.test_suite_name()) + "." + test.name();
+    if (suite->ad_hoc_test_result().Failed()) {
+      Fail(name, "did not run: its SetUpTestSuite failed (above)");
+    } else if (expected_path_ != nullptr && expected_.count(name) == 0) {
+      Fail(name, "skipped (" + SkipReason(*test.result()) + "), and " + expected_path_ + " does not expect it");
+    } else {
+      inner_->OnTestEnd(test);
+    }
+  }
+
+  void OnTestIterationEnd(const UnitTest& unit, int iteration) override {
+    if (failures_ == 0) return inner_->OnTestIterationEnd(unit, iteration);
+    std::printf("[  FAILED  ] %d tests skipped where a skip is a failure (above); %d others failed\n", failures_,
+                unit.failed_test_count());
+    std::fflush(stdout);
+  }
+
+  // The rest as gtest prints it.
+  void OnTestProgramStart(const UnitTest& u) override { inner_->OnTestProgramStart(u); }
+  void OnTestIterationStart(const UnitTest& u, int i) override { inner_->OnTestIterationStart(u, i); }
+  void OnEnvironmentsSetUpStart(const UnitTest& u) override { inner_->OnEnvironmentsSetUpStart(u); }
+  void OnEnvironmentsSetUpEnd(const UnitTest& u) override { inner_->OnEnvironmentsSetUpEnd(u); }
+  void OnTestSuiteStart(const TestSuite& s) override { inner_->OnTestSuiteStart(s); }
+#ifndef GTEST_REMOVE_LEGACY_TEST_CASEAPI_
+  void OnTestCaseStart(const ::testing::TestCase& s) override { inner_->OnTestCaseStart(s); }
+  void OnTestCaseEnd(const ::testing::TestCase& s) override { inner_->OnTestCaseEnd(s); }
+#endif
+  void OnTestStart(const TestInfo& t) override { inner_->OnTestStart(t); }
+  void OnTestDisabled(const TestInfo& t) override { inner_->OnTestDisabled(t); }
+  void OnTestPartResult(const ::testing::TestPartResult& r) override { inner_->OnTestPartResult(r); }
+  void OnTestSuiteEnd(const TestSuite& s) override { inner_->OnTestSuiteEnd(s); }
+  void OnEnvironmentsTearDownStart(const UnitTest& u) override { inner_->OnEnvironmentsTearDownStart(u); }
+  void OnEnvironmentsTearDownEnd(const UnitTest& u) override { inner_->OnEnvironmentsTearDownEnd(u); }
+  void OnTestProgramEnd(const UnitTest& u) override { inner_->OnTestProgramEnd(u); }
+
+ private:
+  void Fail(const std::string& name, const std::string& why) {
+    std::printf("[  FAILED  ] %s: %s\n", name.c_str(), why.c_str());
+    std::fflush(stdout);
+    ++failures_;
+  }
+
+  std::unique_ptr<TestEventListener> inner_;
+  const char* expected_path_;
+  std::set<std::string> expected_;
+  int failures_ = 0;
+};
 
 }  // namespace
 
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
-  const int code = RUN_ALL_TESTS();
-  const ::testing::UnitTest& unit = *::testing::UnitTest::GetInstance();
-  bool failed = false;
-  for (int i = 0; i < unit.total_test_suite_count(); ++i) {
-    const ::testing::TestSuite& suite = *unit.GetTestSuite(i);
-    if (suite.ad_hoc_test_result().Failed()) {
-      std::printf("vistream-test: error: %s: SetUpTestSuite or TearDownTestSuite failed (above), so its %d tests "
-                  "did not run: a failure, not a skip\n",
-                  suite.name(), suite.test_to_run_count());
-      failed = true;
-    }
-  }
-  if (failed) return 1;
-
   const char* expected_path = std::getenv("VISTREAM_EXPECTED_SKIPS");
   bool readable = true;
-  const std::set<std::string> expected =
-      expected_path != nullptr ? ExpectedSkips(expected_path, &readable) : std::set<std::string>{};
+  std::set<std::string> expected;
+  if (expected_path != nullptr) expected = ReadExpectedSkips(expected_path, &readable);
   if (!readable) {
     std::printf("vistream-test: error: VISTREAM_EXPECTED_SKIPS: cannot read '%s'\n", expected_path);
     return 1;
   }
-  for (int i = 0; i < unit.total_test_suite_count(); ++i) {
-    const ::testing::TestSuite& suite = *unit.GetTestSuite(i);
-    for (int j = 0; j < suite.total_test_count(); ++j) {
-      const ::testing::TestInfo& test = *suite.GetTestInfo(j);
-      if (!test.should_run() || !test.result()->Skipped()) continue;
-      const std::string name = std::string(suite.name()) + "." + test.name();
-      const std::string reason = SkipReason(*test.result());
-      if (expected_path != nullptr && expected.count(name) == 0) {
-        std::printf("vistream-test: error: %s was skipped (%s), and %s does not expect it\n", name.c_str(),
-                    reason.c_str(), expected_path);
-        failed = true;
-      } else {
-        std::printf("vistream-test: skipped: %s: %s\n", name.c_str(), reason.c_str());
-      }
-    }
-  }
-  return failed ? 1 : code;
+  ::testing::TestEventListeners& listeners = UnitTest::GetInstance()->listeners();
+  auto* printer = new Printer(listeners.Release(listeners.default_result_printer()), expected_path, std::move(expected));
+  listeners.Append(printer);  // owned by gtest from here
+  const int code = RUN_ALL_TESTS();
+  return printer->failures() > 0 ? 1 : code;
 }
