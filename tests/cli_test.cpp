@@ -14,56 +14,16 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/cli_test_util.h"
 #include "visibility/pvs_file.h"
 
 namespace {
 
-// The tool's exit codes (README): run-time errors 1, bad options 2.
-constexpr int kRunTimeError = 1;
-constexpr int kBadOption = 2;
-
-struct RunResult {
-  int exit_code;    // the tool's own; 128 + N when a signal N ended it (a crash is no exit code a test expects)
-  std::string out;  // stdout and stderr
-};
-
-RunResult Vistream(const std::string& args) {
-  // exec: the shell becomes the tool, so a crash shows as the tool's signal, not as sh's status.
-  const std::string cmd = "exec " + std::string(VISTREAM_BIN) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  EXPECT_NE(pipe, nullptr);
-  std::string out;
-  std::array<char, 4096> buf;
-  while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
-  const int status = pclose(pipe);
-  if (WIFSIGNALED(status)) return {128 + WTERMSIG(status), out + "\n[killed by signal " + std::to_string(WTERMSIG(status)) + "]"};
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : 255, out};
-}
-
-// A bad option: exit 2, "vistream: error: " then `message` (which starts with the option's
-// name), and a hint to --help; no CLI11 bounds with hundreds of digits.
-void ExpectBadOption(const std::string& args, const std::string& message) {
-  const RunResult r = Vistream(args);
-  EXPECT_EQ(r.exit_code, kBadOption) << args << "\n" << r.out;
-  EXPECT_NE(r.out.find("vistream: error: " + message), std::string::npos) << args << "\n" << r.out;
-  EXPECT_NE(r.out.find("--help' for the options"), std::string::npos) << args << "\n" << r.out;
-  EXPECT_EQ(r.out.find("179769"), std::string::npos) << args << "\n" << r.out;
-  EXPECT_LT(r.out.size(), 400u) << args << "\n" << r.out;
-}
-
-// A run-time error: exit 1 and "vistream: error: ..." holding `message`.
-void ExpectRunTimeError(const std::string& args, const std::string& message) {
-  const RunResult r = Vistream(args);
-  EXPECT_EQ(r.exit_code, kRunTimeError) << args << "\n" << r.out;
-  EXPECT_NE(r.out.find("vistream: error: "), std::string::npos) << args << "\n" << r.out;
-  EXPECT_NE(r.out.find(message), std::string::npos) << args << "\n" << r.out;
-}
-
-std::string Tmp(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("vistream-cli-" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
-  return (dir / name).string();
-}
+using vistream::testing::ExpectBadOption;
+using vistream::testing::ExpectRunTimeError;
+using vistream::testing::RunResult;
+using vistream::testing::Tmp;
+using vistream::testing::Vistream;
 
 TEST(Cli, GeneratedCity1Reports2128Objects) {
   const std::string glb = Tmp("city1.glb");
@@ -101,78 +61,6 @@ TEST(Cli, CatalogNamesWorkWithoutAFile) {
   const nlohmann::json j = nlohmann::json::parse(info.out);
   EXPECT_EQ(j.at("name"), "default");
   EXPECT_GT(j.at("objects").get<int>(), 1000);
-}
-
-TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
-  ExpectRunTimeError("scene info " + Tmp("nope.glb"), "nope.glb");
-  const std::string bad = Tmp("bad.json");
-  std::ofstream(bad) << R"({"name": "bad", "source": {"generator": "city1"}, "viewcell": {"size_m": 0, "height_m": 2}})";
-  ExpectRunTimeError("scene info " + bad, "viewcell.size_m");
-  ExpectRunTimeError("scene generate atlantis -o " + Tmp("x.glb"), "atlantis");
-  ExpectBadOption("scene generate city1", "--output: is required");
-  ExpectBadOption("frobnicate", "'frobnicate': not a vistream command");
-  ExpectBadOption("", "A subcommand is required");
-  // --help is no error.
-  const RunResult help = Vistream("check-conservative --help");
-  EXPECT_EQ(help.exit_code, 0) << help.out;
-  EXPECT_NE(help.out.find("--allow-unchecked"), std::string::npos) << help.out;
-}
-
-// Every numeric option rejects NaN, infinities, text and out-of-range values, naming itself,
-// before any work starts (a NaN size once gave 0 rays and exit 0; --cell-size nan or 0 once
-// quietly took the catalog's size).
-TEST(Cli, NanInfinityAndOutOfRangeNumbersAreRejectedNamingTheOption) {
-  const std::string png = " -o " + Tmp("never.png");
-  const struct {
-    std::string args, message;
-  } cases[] = {
-      {"epsilon --scene city1 --at 10,5,2.5 --size nan", "--size: 'nan' is not a number from 0 to 100000"},
-      {"epsilon --scene city1 --at 10,5,2.5 --size inf", "--size: 'inf' is not a number"},
-      {"epsilon --scene city1 --at 10,5,2.5 --size -1", "--size: '-1' is not a number"},
-      {"pvs --scene city1 --cell 1,1 --cell-size nan", "--cell-size: 'nan' is not a number from 0.01 to 1e+06"},
-      {"pvs --scene city1 --cell 1,1 --cell-size 0", "--cell-size: '0' is not a number from 0.01"},
-      {"pvs --scene city1 --cell 1,1 --res nan", "--res: 'nan' is not a power of two from 16 to 256"},
-      {"pvs --scene city1 --cell 1,1 --res 100", "--res: '100' is not a power of two from 16 to 256"},
-      {"check-conservative --scene city1 --res 512", "--res: '512' is not a power of two from 16 to 256"},
-      {"agvs --scene city1 --samples 10 --cell-size 0", "--cell-size: '0' is not a number"},
-      {"agvs --scene city1 --seconds nan", "--seconds: 'nan' is not a number"},
-      {"agvs --scene city1 --pixel-error nan", "--pixel-error: 'nan' is not a number"},
-      {"agvs --scene city1 --samples -1", "--samples: '-1' is not a whole number from 1 to"},
-      {"agvs --scene city1 --samples 1e6", "--samples: '1e6' is not a whole number"},
-      {"agvs --scene city1 --samples 10 --seed -1", "--seed: '-1' is not a whole number from 0 to"},
-      {"agvs --scene city1 --samples 10 --threads nan", "--threads: 'nan' is not a whole number"},
-      {"agvs --scene city1 --samples 10 --batch 0", "--batch: '0' is not a whole number from 1 to 16777216"},
-      {"agvs heatmap --scene city1 --seconds 1 --cell-size 0" + png, "--cell-size: '0' is not a number"},
-      {"agvs heatmap --scene city1 --seconds inf" + png, "--seconds: 'inf' is not a number"},
-      {"check-conservative --scene city1 --cell-size 0", "--cell-size: '0' is not a number"},
-      {"check-conservative --scene city1 --cell-size nan", "--cell-size: 'nan' is not a number"},
-      {"check-conservative --scene city1 --seconds -inf", "--seconds: '-inf' is not a number"},
-      {"check-conservative --scene city1 --samples 0", "--samples: '0' is not a whole number"},
-      {"check-conservative --scene city1 --cells nan", "--cells: 'nan' is not a whole number"},
-      {"check-conservative --scene city1 --neighbourhoods -2", "--neighbourhoods: '-2' is not a whole number"},
-      {"check-conservative --scene city1 --rays 0", "--rays: '0' is not a whole number"},
-      {"check-conservative --scene city1 --seed nan", "--seed: 'nan' is not a whole number"},
-      {"scene generate city1 -o x.glb --seed 1.5", "--seed: '1.5' is not a whole number"},
-      {"scene info city1 --leaf-size nan", "--leaf-size: 'nan' is not a whole number from 1 to 1024"},
-      {"scene map city1 -o x.png --size 1e9", "--size: '1e9' is not a whole number from 16 to 16384"},
-      {"scene import-osm x.osm -o x.glb --storey inf", "--storey: 'inf' is not a number from 1 to 20"},
-      {"bench table1 --cells 0", "--cells: '0' is not a whole number"},
-      {"bench table1 --sizes 100,nan", "--sizes: 'nan' is not a number"},
-      {"bench table1 --res 16,300", "--res: '300' is not a whole number from 1 to 256"},
-      {"bench epsilon --count nan", "--count: 'nan' is not a whole number"},
-      {"bench epsilon --size inf", "--size: 'inf' is not a number"},
-      {"bench epsilon --pvs-cell 0", "--pvs-cell: '0' is not a number"},
-      {"bench agvs --seconds nan", "--seconds: 'nan' is not a number"},
-      {"bench agvs --views 0", "--views: '0' is not a whole number"},
-      {"bench agvs --checkpoints 31", "--checkpoints: '31' is not a whole number from 1 to 30"},
-      {"bench agvs --cell-size 0", "--cell-size: '0' is not a number"},
-      {"bench server --sessions nan", "--sessions: 'nan' is not a whole number"},
-      {"bench server --speed nan", "--speed: 'nan' is not a number"},
-      {"bench server --res 0", "--res: '0' is not a whole number"},
-      {"bench client --threads 0", "--threads: '0' is not a whole number from 1 to 256"},
-      {"bench client --seconds inf", "--seconds: 'inf' is not a number"},
-  };
-  for (const auto& c : cases) ExpectBadOption(c.args, c.message);
 }
 
 TEST(Cli, PvsReportsTheSetOfAViewcell) {
@@ -479,48 +367,6 @@ TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
   for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.01"}) {
     ExpectRunTimeError(std::string("check-conservative --samples 1000 ") + args, "larger");
   }
-}
-
-// A glTF file of plain meshes has no occluders: the dual ray space hides nothing, so the PVS
-// check could not have failed, and no free street-level neighbourhood may exist. Such a check
-// says so and fails unless --allow-unchecked.
-std::string GltfWithoutOccluders() {
-  const std::string bin = Tmp("no_occluders.bin"), gltf = Tmp("no_occluders.gltf");
-  // Two triangles (glTF is y-up): a 60 x 60 m ground and a 10 m high wall across it.
-  const std::vector<float> p = {0, 0, 0, 60, 0, 0, 0, 0, -60, 30, 0, 0, 30, 0, -60, 30, 10, -30};
-  std::ofstream(bin, std::ios::binary).write(reinterpret_cast<const char*>(p.data()), p.size() * sizeof(float));
-  std::ofstream(gltf) << R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
-    "nodes": [{"mesh": 0, "name": "ground"}, {"mesh": 1, "name": "wall"}],
-    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}, {"primitives": [{"attributes": {"POSITION": 1}}]}],
-    "accessors": [
-      {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, -60], "max": [60, 0, 0]},
-      {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3", "min": [30, 0, -60], "max": [30, 10, 0]}],
-    "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 36}],
-    "buffers": [{"uri": "no_occluders.bin", "byteLength": 72}]})";
-  return gltf;
-}
-
-TEST(Cli, CheckConservativeThatCheckedNothingSaysSoAndFails) {
-  const std::string args = "check-conservative --scene " + GltfWithoutOccluders() + " --cell-size 10 --samples 100000";
-  const RunResult r = Vistream(args);
-  EXPECT_EQ(r.exit_code, kRunTimeError) << r.out;
-  EXPECT_NE(r.out.find("vistream: error: check-conservative checked nothing: the dual ray space hid nothing"),
-            std::string::npos)
-      << r.out;
-  EXPECT_NE(r.out.find("--allow-unchecked"), std::string::npos) << r.out;
-  // In JSON too, and --allow-unchecked accepts it (still said, as a warning).
-  const RunResult j = Vistream(args + " --allow-unchecked --json");
-  ASSERT_EQ(j.exit_code, 0) << j.out;
-  const std::string json = j.out.substr(j.out.find('{'), j.out.rfind('}') - j.out.find('{') + 1);
-  const nlohmann::json k = nlohmann::json::parse(json);
-  EXPECT_EQ(k.at("violations").get<int>(), 0);
-  EXPECT_EQ(k.at("occluded_queries").get<int>(), 0);
-  EXPECT_GE(k.at("unchecked").size(), 1u) << j.out;
-  EXPECT_NE(j.out.find("vistream: warning: check-conservative checked nothing"), std::string::npos) << j.out;
-  // A real scene checks both parts: nothing unchecked.
-  const RunResult city = Vistream("check-conservative --scene city1 --cells 4 --samples 200000 --json");
-  ASSERT_EQ(city.exit_code, 0) << city.out;
-  EXPECT_TRUE(nlohmann::json::parse(city.out).at("unchecked").empty()) << city.out;
 }
 
 TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {

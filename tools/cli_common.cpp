@@ -1,7 +1,6 @@
 #include "tools/cli_common.h"
 
 #include <cerrno>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -38,47 +37,6 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
   for (const std::string& w : loaded->warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
   if (seconds != nullptr) *seconds = loaded->seconds;
   return std::move(loaded->scene);
-}
-
-CLI::Validator FiniteRange(double lo, double hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
-}
-
-CLI::Validator WholeRange(int64_t lo, int64_t hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        int64_t v = 0;
-        const char* end = text.data() + text.size();
-        const auto [ptr, ec] = std::from_chars(text.data(), end, v);
-        if (text.empty() || ec != std::errc() || ptr != end || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a whole number from %d to %d", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("INTEGER in [%d, %d]", lo, hi));
-}
-
-CLI::Validator PowerOfTwo(int64_t lo, int64_t hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        int64_t v = 0;
-        const char* end = text.data() + text.size();
-        const auto [ptr, ec] = std::from_chars(text.data(), end, v);
-        if (text.empty() || ec != std::errc() || ptr != end || v < lo || v > hi || v <= 0 || (v & (v - 1)) != 0) {
-          return absl::StrFormat("'%s' is not a power of two from %d to %d", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("POWER OF TWO in [%d, %d]", lo, hi));
 }
 
 namespace {

@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <absl/status/statusor.h>
 
+#include "cli/number_options.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "tools/terminal_progress.h"
@@ -26,19 +27,11 @@ scenes::RunControl ToolRun();
 // scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings.
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
 
-// Checks for numeric options. CLI11 puts the option's name in front of the message
-// ("--size: 'nan' is not a number from 0 to 100000"). They reject NaN, infinities, text and
-// values outside [lo, hi]; CLI11's Range and PositiveNumber let NaN through and print their
-// bounds with 300 digits.
-CLI::Validator FiniteRange(double lo, double hi);
-// A whole number in [lo, hi], written in decimal digits (no sign for lo >= 0, no exponent).
-CLI::Validator WholeRange(int64_t lo, int64_t hi);
-// A power of two in [lo, hi], as WholeRange reads it (raster resolutions).
-CLI::Validator PowerOfTwo(int64_t lo, int64_t hi);
-
-// The exit code of a bad option or a bad combination of options (vistream-server and
-// vistream-client use it too). Run-time errors exit 1, ^C 130.
-inline constexpr int kBadOptionExit = 2;
+// Checks for numeric options (cli/number_options.h) and the exit code of a bad option.
+using cli::FiniteRange;
+using cli::kBadOptionExit;
+using cli::PowerOfTwo;
+using cli::WholeRange;
 
 // Bounds shared by several commands' options.
 inline constexpr int64_t kMaxSeed = INT64_MAX;
