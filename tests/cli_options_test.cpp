@@ -33,6 +33,7 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
   ExpectBadOption("scene generate city1", "--output: is required");
   ExpectBadOption("frobnicate", "'frobnicate': not a vistream command");
   ExpectBadOption("", "A subcommand is required");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 --bogus", "--bogus: not an option of 'vistream pvs'");
   // --help is no error.
   const RunResult help = Vistream("check-conservative --help");
   EXPECT_EQ(help.exit_code, 0) << help.out;

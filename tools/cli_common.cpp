@@ -58,8 +58,15 @@ void PrintBadOption(const std::string& message, const std::string& command) {
 }
 
 // CLI11's messages, in the form "<option>: <what is wrong>" where they are not already.
-std::string OptionMessage(const CLI::ParseError& e) {
+std::string OptionMessage(const CLI::ParseError& e, const std::string& command) {
   std::string m = e.what();
+  if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr) {
+    const size_t colon = m.find(": ");
+    const bool several = m.rfind("The following arguments", 0) == 0;
+    if (colon != std::string::npos) {
+      return m.substr(colon + 2) + (several ? ": not options of '" : ": not an option of '") + command + "'";
+    }
+  }
   for (const char* tail : {" is required"}) {
     const size_t at = m.rfind(tail);
     if (at != std::string::npos && at > 0 && at + std::strlen(tail) == m.size() && m.find(' ') == at) {
@@ -91,7 +98,8 @@ int ParseFailure(const CLI::App& app, const CLI::ParseError& e) {
     PrintBadOption("'" + extra.front() + "': not a vistream command", app.get_name());
     return kBadOptionExit;
   }
-  PrintBadOption(OptionMessage(e), CommandPath(app));
+  const std::string command = CommandPath(app);
+  PrintBadOption(OptionMessage(e, command), command);
   return kBadOptionExit;
 }
 
