@@ -1,5 +1,5 @@
 // libFuzzer target: the AGVS sampling-state reader (vistream agvs --state FILE resumes from a
-// user's file) on untrusted bytes, loaded into a sampler of a small generated town. With
+// user's file) on untrusted bytes, loaded into a sampler of the small generated streets scene. With
 // VISTREAM_FUZZ_SEED_DIR=DIR it first writes that sampler's state after one batch there, the
 // seed CI starts from.
 #include <cstddef>
@@ -17,6 +17,11 @@
 
 namespace {
 
+[[noreturn]] void Die(const absl::Status& status) {
+  std::fprintf(stderr, "agvs_state_fuzz: cannot set up: %s\n", std::string(status.message()).c_str());
+  std::abort();
+}
+
 struct Town {
   vistream::scenes::Scene scene;
   std::unique_ptr<vistream::visibility::ViewcellGrid> grid;
@@ -26,19 +31,16 @@ struct Town {
 Town& TheTown() {
   static Town* town = [] {
     auto* t = new Town;
-    absl::StatusOr<vistream::scenes::Scene> s =
-        vistream::scenes::GenerateNamed("streets", vistream::scenes::GeneratorParams{.seed = 1, .width_m = 100});
-    if (!s.ok()) std::abort();
-    t->scene = std::move(*s);
+    t->scene = vistream::scenes::GenerateStreets(vistream::scenes::StreetsOptions{});  // 300 m square
     absl::StatusOr<vistream::visibility::ViewcellGrid> g =
-        vistream::visibility::ViewcellGrid::Create(t->scene.bounds, 25.0, 0.5, 2.0);
-    if (!g.ok()) std::abort();
+        vistream::visibility::ViewcellGrid::Create(t->scene.bounds, 50.0, 0.5, 2.0);
+    if (!g.ok()) Die(g.status());
     t->grid = std::make_unique<vistream::visibility::ViewcellGrid>(std::move(*g));
     vistream::visibility::AgvsOptions options;
     options.batch_samples = 4096;
     options.threads = 1;
     auto sampler = vistream::visibility::GlobalSampler::Create(t->scene, *t->grid, options);
-    if (!sampler.ok()) std::abort();
+    if (!sampler.ok()) Die(sampler.status());
     t->sampler = std::move(*sampler);
     return t;
   }();
