@@ -17,6 +17,7 @@
 #include <absl/strings/str_format.h>
 #include <absl/strings/str_split.h>
 
+#include "cli/number_options.h"
 #include "client/walkthrough.h"
 
 namespace {
@@ -24,18 +25,8 @@ namespace {
 std::atomic<bool> g_stop{false};
 extern "C" void OnSignal(int) { g_stop.store(true); }
 
-// A finite number in [lo, hi] (CLI11's own checks let NaN through).
-CLI::Validator Finite(double lo, double hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        double v = 0.0;
-        if (!absl::SimpleAtod(text, &v) || !std::isfinite(v) || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
-}
+// A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
+using vistream::cli::FiniteRange;
 
 bool ParseSize(const std::string& text, int* width, int* height) {
   const std::vector<std::string> parts = absl::StrSplit(text, 'x');
@@ -78,32 +69,32 @@ int main(int argc, char** argv) {
   app.add_option("--server", o.server, "host:port of vistream-server")->capture_default_str();
   app.add_flag("--headless", o.headless, "draw off-screen (OSMesa) along a walk instead of opening a window");
   app.add_option("--path", o.path, "walk of the scene's catalog entry to follow (headless: default its first)");
-  app.add_option("--speed", o.speed_kmh, "walking speed in km/h (default: the walk's)")->check(Finite(0.01, 10000));
+  app.add_option("--speed", o.speed_kmh, "walking speed in km/h (default: the walk's)")->check(FiniteRange(0.01, 10000));
   app.add_option("--seconds", o.seconds, "stop after this many seconds of the walk (default: all of it)")
-      ->check(Finite(0.01, 1e7));
+      ->check(FiniteRange(0.01, 1e7));
   app.add_option("--size", size, "frame size in pixels, WIDTHxHEIGHT")->capture_default_str();
   app.add_option("--screenshots", o.screenshots_dir, "write PNG screenshots into this folder");
   app.add_option("--every", o.every_s, "seconds of the walk between screenshots and between --verify checks")
-      ->check(Finite(0.01, 1e7))
+      ->check(FiniteRange(0.01, 1e7))
       ->capture_default_str();
   app.add_flag("--verify", o.verify,
                "load the full scene locally and count pixels where the drawn set differs from it (tests)");
   app.add_flag("--json", json, "print the summary as JSON");
   app.add_option("--frame-log", o.frame_log, "write one CSV line per frame to this file");
   app.add_option("--connect-timeout", o.connect_timeout_s, "seconds to wait for the server to answer")
-      ->check(Finite(0.1, 3600))
+      ->check(FiniteRange(0.1, 3600))
       ->capture_default_str();
   app.add_option("--give-up", o.give_up_s, "seconds without the server before the run ends with an error; 0 never")
-      ->check(Finite(0.0, 1e7))
+      ->check(FiniteRange(0.0, 1e7))
       ->capture_default_str();
   app.add_option("--catalog", o.catalog_dir, "scene catalog folder (walks and client budgets)");
   app.add_option("--memory-mb", memory_mb, "memory budget for held geometry, MiB (default: the catalog's)")
-      ->check(Finite(0.0, 1e9));
+      ->check(FiniteRange(0.0, 1e9));
   app.add_option("--triangle-budget", triangle_budget, "triangles a frame may draw (default: the catalog's)")
-      ->check(Finite(0.0, 1e12));
-  app.add_option("--upload-mb", upload_mb, "GPU uploads a frame, MiB")->check(Finite(0.01, 1e6))->capture_default_str();
+      ->check(FiniteRange(0.0, 1e12));
+  app.add_option("--upload-mb", upload_mb, "GPU uploads a frame, MiB")->check(FiniteRange(0.01, 1e6))->capture_default_str();
   app.add_option("--max-fps", o.max_fps, "frame-rate cap; 0 draws as fast as it can")
-      ->check(Finite(0.0, 1e4))
+      ->check(FiniteRange(0.0, 1e4))
       ->capture_default_str();
   app.add_flag("--no-masks", no_masks, "draw the viewcell PVS whole, ignoring ε-masks (a baseline)");
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");

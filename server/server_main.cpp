@@ -18,6 +18,7 @@
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
 
+#include "cli/number_options.h"
 #include "server/event_log.h"
 #include "server/served_scene.h"
 #include "server/service.h"
@@ -63,19 +64,8 @@ void GrpcLog(gpr_log_func_args* args) {
   g_log->Write(0, "grpc", {{"severity", gpr_log_severity_string(args->severity)}, {"message", args->message}});
 }
 
-// A finite number in [lo, hi] (CLI11's own checks let NaN through).
-CLI::Validator Finite(double lo, double hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
-}
+// A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
+using vistream::cli::FiniteRange;
 
 }  // namespace
 
@@ -92,7 +82,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--threads", scene_options.threads, "PVS worker threads (0: one per core)")->capture_default_str();
   app.add_option("--cell-size", scene_options.cell_size, "viewcell edge in metres (default: the catalog entry's)")
-      ->check(Finite(0.01, 1e6));
+      ->check(FiniteRange(0.01, 1e6));
   app.add_option("--res", scene_options.res, "finest dual-ray-space raster (power of two, 1 to 256)")
       ->capture_default_str();
   app.add_option("--backend", scene_options.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
@@ -101,10 +91,10 @@ int main(int argc, char** argv) {
                  "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them");
   app.add_option("--max-sessions", server_options.max_sessions, "sessions at once; more are refused")
       ->check(CLI::Range(1, 100000))->capture_default_str();
-  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(Finite(1, 1 << 20))->capture_default_str();
+  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(FiniteRange(1, 1 << 20))->capture_default_str();
   app.add_option("--max-pose-rate", server_options.limits.max_pose_rate_hz, "poses per second a session may send")
-      ->check(Finite(0.1, 100000))->capture_default_str();
-  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(Finite(0, 3600))
+      ->check(FiniteRange(0.1, 100000))->capture_default_str();
+  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
   try {

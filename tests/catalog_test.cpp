@@ -152,15 +152,16 @@ TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
     EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
   }
   size_t built = 0;
+  std::string absent;  // entries whose data is not here
   for (const std::string& name : names) {
     absl::StatusOr<CatalogEntry> e = FindCatalogEntry(name);
     ASSERT_TRUE(e.ok()) << e.status();
     EXPECT_EQ(e->name, name);
     EXPECT_FALSE(e->walks.empty()) << name << " has no walk path";
     // Entries reading data from outside the repository (../shared/data) are built where that
-    // data is present; said so where it is not.
+    // data is present; where it is not, the test ends as a skip naming them (CI fails on it).
     if (e->source.kind != SceneSource::Kind::kGenerator && !std::filesystem::exists(e->source.path)) {
-      std::printf("note: %s: %s is absent; its walk is not checked here\n", name.c_str(), e->source.path.c_str());
+      absent += " " + name + " (" + e->source.path + ")";
       continue;
     }
     ++built;
@@ -174,6 +175,7 @@ TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
     }
   }
   EXPECT_GE(built, 5u);  // the generated ones at least
+  if (!absent.empty()) GTEST_SKIP() << "data absent, walks not checked:" << absent;
 }
 
 TEST(Catalog, UnknownNameListsTheKnownOnes) {

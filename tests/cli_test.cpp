@@ -14,31 +14,16 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/cli_test_util.h"
 #include "visibility/pvs_file.h"
 
 namespace {
 
-struct RunResult {
-  int exit_code;
-  std::string out;  // stdout and stderr
-};
-
-RunResult Vistream(const std::string& args) {
-  const std::string cmd = std::string(VISTREAM_BIN) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  EXPECT_NE(pipe, nullptr);
-  std::string out;
-  std::array<char, 4096> buf;
-  while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
-  const int status = pclose(pipe);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-
-std::string Tmp(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("vistream-cli-" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
-  return (dir / name).string();
-}
+using vistream::testing::ExpectBadOption;
+using vistream::testing::ExpectRunTimeError;
+using vistream::testing::RunResult;
+using vistream::testing::Tmp;
+using vistream::testing::Vistream;
 
 TEST(Cli, GeneratedCity1Reports2128Objects) {
   const std::string glb = Tmp("city1.glb");
@@ -76,22 +61,6 @@ TEST(Cli, CatalogNamesWorkWithoutAFile) {
   const nlohmann::json j = nlohmann::json::parse(info.out);
   EXPECT_EQ(j.at("name"), "default");
   EXPECT_GT(j.at("objects").get<int>(), 1000);
-}
-
-TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
-  const RunResult missing = Vistream("scene info " + Tmp("nope.glb"));
-  EXPECT_EQ(missing.exit_code, 1);
-  EXPECT_NE(missing.out.find("nope.glb"), std::string::npos) << missing.out;
-  const std::string bad = Tmp("bad.json");
-  std::ofstream(bad) << R"({"name": "bad", "source": {"generator": "city1"}, "viewcell": {"size_m": 0, "height_m": 2}})";
-  const RunResult catalog = Vistream("scene info " + bad);
-  EXPECT_EQ(catalog.exit_code, 1);
-  EXPECT_NE(catalog.out.find("viewcell.size_m"), std::string::npos) << catalog.out;
-  const RunResult unknown = Vistream("scene generate atlantis -o " + Tmp("x.glb"));
-  EXPECT_EQ(unknown.exit_code, 1);
-  EXPECT_NE(unknown.out.find("atlantis"), std::string::npos) << unknown.out;
-  EXPECT_NE(Vistream("scene generate city1").exit_code, 0);  // -o is required
-  EXPECT_NE(Vistream("frobnicate").exit_code, 0);
 }
 
 TEST(Cli, PvsReportsTheSetOfAViewcell) {
@@ -135,19 +104,11 @@ TEST(Cli, PvsAllWritesEveryViewcellAsAPvsFile) {
   }
   // A heatmap reads it back.
   EXPECT_EQ(Vistream("agvs heatmap --scene city1 --pvs " + file + " -o " + Tmp("all.png")).exit_code, 0);
-  const RunResult neither = Vistream("pvs --scene city1");
-  EXPECT_EQ(neither.exit_code, 1);
-  EXPECT_NE(neither.out.find("--cell I,J"), std::string::npos) << neither.out;
-  const RunResult no_out = Vistream("pvs --scene city1 --all");
-  EXPECT_EQ(no_out.exit_code, 1);
-  EXPECT_NE(no_out.out.find("-o FILE"), std::string::npos) << no_out.out;
-  EXPECT_NE(Vistream("pvs --scene city1 --all --cell 1,1 -o " + file).exit_code, 0);
-  const RunResult unwritable = Vistream("pvs --scene city1 --all -o /nonexistent/dir/x.pvs");
-  EXPECT_EQ(unwritable.exit_code, 1);
-  EXPECT_NE(unwritable.out.find("not a writable folder"), std::string::npos) << unwritable.out;
-  const RunResult stray = Vistream("pvs --scene city1 --cell 1,1 -o " + file);
-  EXPECT_EQ(stray.exit_code, 1);
-  EXPECT_NE(stray.out.find("-o writes the PVS file of --all"), std::string::npos) << stray.out;
+  ExpectBadOption("pvs --scene city1", "--cell or --all: give --cell I,J (one viewcell) or --all -o FILE");
+  ExpectBadOption("pvs --scene city1 --all", "--all: writes a PVS file: give -o FILE");
+  ExpectBadOption("pvs --scene city1 --all --cell 1,1 -o " + file, "--cell: cannot be given with --all");
+  ExpectRunTimeError("pvs --scene city1 --all -o /nonexistent/dir/x.pvs", "not a writable folder");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 -o " + file, "-o: writes the PVS file of --all; one viewcell prints");
 }
 
 // A viewcell smaller than the catalog's, among the buildings: city1-255 stands in plain view
@@ -207,21 +168,15 @@ TEST(Cli, Table1ReportsBothBackendsAgainstTheExactTest) {
   int lines = 0;
   for (std::string line; std::getline(in, line);) ++lines;
   EXPECT_EQ(lines, 4);
-  EXPECT_NE(Vistream("bench table1 --scene default --res 100").exit_code, 0);
-  EXPECT_NE(Vistream("bench table1 --scene default --backends vulkan").exit_code, 0);
+  ExpectBadOption("bench table1 --scene default --res 100", "--res: 100: expected a power of two, 1 to 256");
+  ExpectBadOption("bench table1 --scene default --backends vulkan", "--backends: vulkan not in {cpu,gl}");
 }
 
 TEST(Cli, PvsRejectsBadCellsAndBackends) {
-  const RunResult text = Vistream("pvs --scene default --cell ten,3");
-  EXPECT_EQ(text.exit_code, 1);
-  EXPECT_NE(text.out.find("--cell 'ten,3'"), std::string::npos) << text.out;
-  const RunResult outside = Vistream("pvs --scene default --cell 500,3");
-  EXPECT_EQ(outside.exit_code, 1);
-  EXPECT_NE(outside.out.find("outside the grid"), std::string::npos) << outside.out;
-  const RunResult vulkan = Vistream("pvs --scene default --cell 1,1 --backend vulkan");
-  EXPECT_NE(vulkan.exit_code, 0);
-  EXPECT_NE(vulkan.out.find("vulkan"), std::string::npos) << vulkan.out;
-  EXPECT_NE(Vistream("pvs --scene default --cell 1,1 --res 100").exit_code, 0);  // not a power of two
+  ExpectBadOption("pvs --scene default --cell ten,3", "--cell: 'ten,3': expected I,J (two integers)");
+  ExpectRunTimeError("pvs --scene default --cell 500,3", "outside the grid");
+  ExpectBadOption("pvs --scene default --cell 1,1 --backend vulkan", "--backend: vulkan not in {cpu,gl,exact}");
+  ExpectBadOption("pvs --scene default --cell 1,1 --res 100", "--res: '100' is not a power of two");
 }
 
 TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {
@@ -246,17 +201,11 @@ TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {
 }
 
 TEST(Cli, EpsilonRejectsBadPositions) {
-  const RunResult text = Vistream("epsilon --scene city1 --at 1,2 --size 3");
-  EXPECT_EQ(text.exit_code, 1);
-  EXPECT_NE(text.out.find("--at '1,2'"), std::string::npos) << text.out;
-  const RunResult nan = Vistream("epsilon --scene city1 --at nan,0,2 --size 3");
-  EXPECT_EQ(nan.exit_code, 1);
-  EXPECT_NE(nan.out.find("finite"), std::string::npos) << nan.out;
-  const RunResult outside = Vistream("epsilon --scene city1 --at 5000,0,2 --size 3");
-  EXPECT_EQ(outside.exit_code, 1);
-  EXPECT_NE(outside.out.find("outside the scene"), std::string::npos) << outside.out;
-  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size -1").exit_code, 0);
-  EXPECT_NE(Vistream("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest").exit_code, 0);
+  ExpectBadOption("epsilon --scene city1 --at 1,2 --size 3", "--at: '1,2': expected X,Y,Z (three finite numbers, metres)");
+  ExpectBadOption("epsilon --scene city1 --at nan,0,2 --size 3", "--at: 'nan,0,2': expected X,Y,Z (three finite");
+  ExpectRunTimeError("epsilon --scene city1 --at 5000,0,2 --size 3", "outside the scene");
+  ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size -1", "--size: '-1' is not a number from 0 to 100000");
+  ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest", "--opt: fastest not in");
 }
 
 TEST(Cli, BenchEpsilonReproducesBothTables) {
@@ -317,24 +266,19 @@ TEST(Cli, AgvsReportsItsFiguresAndWritesAPvsFileTheHeatmapReads) {
 }
 
 TEST(Cli, AgvsRejectsBadInput) {
-  const RunResult none = Vistream("agvs --scene city1");
-  EXPECT_EQ(none.exit_code, 1);
-  EXPECT_NE(none.out.find("--seconds"), std::string::npos) << none.out;
-  const RunResult strategy = Vistream("agvs --scene city1 --samples 10 --strategy gvs");
-  EXPECT_EQ(strategy.exit_code, 1);
-  EXPECT_NE(strategy.out.find("'gvs'"), std::string::npos) << strategy.out;
-  EXPECT_NE(Vistream("agvs --scene city1 --samples 10 --filter blur").exit_code, 0);
+  ExpectBadOption("agvs --scene city1", "--seconds, --pixel-error or --samples: give one: when to stop sampling");
+  ExpectBadOption("agvs --samples 10", "--scene: is required");
+  ExpectBadOption("agvs --scene city1 --samples 10 --strategy gvs", "--strategy: unknown sampling strategy 'gvs'");
+  ExpectBadOption("agvs --scene city1 --samples 10 --filter blur", "--filter: 'blur': expected none, object, view or both");
   // A PVS file that is not one, and one made for another scene.
   const std::string junk = Tmp("junk.pvs"), city1 = Tmp("other.pvs");
   std::ofstream(junk) << "not a pvs file";
-  const RunResult bad = Vistream("agvs heatmap --scene city1 --pvs " + junk + " -o " + Tmp("x.png"));
-  EXPECT_EQ(bad.exit_code, 1);
-  EXPECT_NE(bad.out.find(junk), std::string::npos) << bad.out;
+  ExpectRunTimeError("agvs heatmap --scene city1 --pvs " + junk + " -o " + Tmp("x.png"), junk);
   ASSERT_EQ(Vistream("agvs --scene city1 --samples 1000 -o " + city1 + " --json").exit_code, 0);
-  const RunResult other = Vistream("agvs heatmap --scene default --pvs " + city1 + " -o " + Tmp("y.png"));
-  EXPECT_EQ(other.exit_code, 1);
-  EXPECT_NE(other.out.find("another scene"), std::string::npos) << other.out;
-  EXPECT_NE(Vistream("agvs heatmap --scene city1 -o " + Tmp("z.png")).exit_code, 0);  // nothing to draw
+  ExpectRunTimeError("agvs heatmap --scene default --pvs " + city1 + " -o " + Tmp("y.png"), "another scene");
+  ExpectBadOption("agvs heatmap --scene city1 -o " + Tmp("z.png"), "--pvs or --seconds: give one");  // nothing to draw
+  // A state file that is not one.
+  ExpectRunTimeError("agvs --scene city1 --samples 10 --state " + junk, junk);
 }
 
 // The project's main correctness check, end to end: nothing sampling sees from any viewcell
@@ -406,12 +350,8 @@ TEST(Cli, CheckConservativeReplaysASampleCountExactly) {
   EXPECT_EQ(ja.at("pvs_entries_checked"), jb.at("pvs_entries_checked"));
   EXPECT_EQ(ja.at("epsilon_hits_checked"), jb.at("epsilon_hits_checked"));
   // A count or a time, not both; and only the known backends.
-  const RunResult both = Vistream("check-conservative --scene streets --samples 1000 --seconds 1");
-  EXPECT_NE(both.exit_code, 0);
-  EXPECT_NE(both.out.find("--samples"), std::string::npos) << both.out;
-  const RunResult bad = Vistream("check-conservative --scene streets --backend vulkan");
-  EXPECT_NE(bad.exit_code, 0);
-  EXPECT_NE(bad.out.find("--backend"), std::string::npos) << bad.out;
+  ExpectBadOption("check-conservative --scene streets --samples 1000 --seconds 1", "--seconds: cannot be given with --samples");
+  ExpectBadOption("check-conservative --scene streets --backend vulkan", "--backend: vulkan not in {cpu,gl,exact}");
 }
 
 TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
@@ -419,19 +359,13 @@ TEST(Cli, CheckConservativeRejectsBadScenesAndSizes) {
   const std::string dir = Tmp("a-folder.glb");
   std::filesystem::create_directories(dir);
   for (const std::string& scene : {dir, Tmp("")}) {
-    const RunResult r = Vistream("check-conservative --scene " + scene + " --samples 1000");
-    EXPECT_EQ(r.exit_code, 1) << r.out;
-    EXPECT_NE(r.out.find("is a directory"), std::string::npos) << r.out;
+    ExpectRunTimeError("check-conservative --scene " + scene + " --samples 1000", "is a directory");
   }
-  const RunResult nan = Vistream("check-conservative --scene streets --cell-size nan --samples 1000");
-  EXPECT_EQ(nan.exit_code, 1) << nan.out;
-  EXPECT_NE(nan.out.find("--cell-size"), std::string::npos) << nan.out;
+  ExpectBadOption("check-conservative --scene streets --cell-size nan --samples 1000", "--cell-size: 'nan' is not a number");
   // Viewcells so small that their sets would not fit in any memory (london at 1 m: 162 M cells
   // of 146,325 bits), or that the grid would pass 2^31 cells: said, not an abort.
-  for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.005"}) {
-    const RunResult tiny = Vistream(std::string("check-conservative --samples 1000 ") + args);
-    EXPECT_EQ(tiny.exit_code, 1) << args << ": " << tiny.out;
-    EXPECT_NE(tiny.out.find("larger"), std::string::npos) << args << ": " << tiny.out;
+  for (const char* args : {"--scene london --cell-size 1", "--scene streets --cell-size 0.01"}) {
+    ExpectRunTimeError(std::string("check-conservative --samples 1000 ") + args, "larger");
   }
 }
 
@@ -461,14 +395,11 @@ TEST(Cli, ImportOsmWritesASceneAndSummarises) {
   ASSERT_EQ(info.exit_code, 0) << info.out;
   EXPECT_EQ(nlohmann::json::parse(info.out).at("objects").get<int>(), 1) << info.out;
 
-  const RunResult bad_box = Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR +
-                                     "/tests/osm/courtyard.osm -o " + out + " --bbox 7,43,7.5");
-  EXPECT_NE(bad_box.exit_code, 0);
-  EXPECT_NE(bad_box.out.find("needs four numbers"), std::string::npos) << bad_box.out;
-  const RunResult empty =
-      Vistream(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out);
-  EXPECT_NE(empty.exit_code, 0);
-  EXPECT_NE(empty.out.find("empty.osm: the file is empty"), std::string::npos) << empty.out;
+  ExpectBadOption(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/courtyard.osm -o " + out +
+                      " --bbox 7,43,7.5",
+                  "--bbox: bbox '7,43,7.5': needs four numbers");
+  ExpectRunTimeError(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out,
+                     "empty.osm: the file is empty");
 }
 
 // The whole pipeline on a real city: the Monaco extract (../shared/data/osm, ODbL), a viewcell

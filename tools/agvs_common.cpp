@@ -27,7 +27,7 @@ absl::StatusOr<visibility::FilterOptions> FilterFromName(const std::string& name
   if (name == "object" || name == "both") f.object_space = true;
   if (name == "view" || name == "both") f.view_space = true;
   if (!f.object_space && !f.view_space) {
-    return absl::InvalidArgumentError("--filter '" + name + "': expected none, object, view or both");
+    return absl::InvalidArgumentError("'" + name + "': expected none, object, view or both");
   }
   return f;
 }

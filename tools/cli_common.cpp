@@ -39,17 +39,68 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
   return std::move(loaded->scene);
 }
 
-CLI::Validator FiniteRange(double lo, double hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < lo || v > hi) {
-          return "'" + text + "' is not a number from " + absl::StrFormat("%g to %g", lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
+namespace {
+
+// The subcommand the user was giving options to: the deepest one parsed.
+std::string CommandPath(const CLI::App& app) {
+  std::string path = app.get_name();
+  const CLI::App* at = &app;
+  for (;;) {
+    const std::vector<const CLI::App*> parsed = at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
+    if (parsed.empty()) return path;
+    at = parsed.front();
+    path += " " + at->get_name();
+  }
+}
+
+void PrintBadOption(const std::string& message, const std::string& command) {
+  std::fprintf(stderr, "vistream: error: %s\nRun '%s --help' for the options.\n", message.c_str(), command.c_str());
+}
+
+// CLI11's messages, in the form "<option>: <what is wrong>" where they are not already.
+std::string OptionMessage(const CLI::ParseError& e, const std::string& command) {
+  std::string m = e.what();
+  if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr) {
+    const size_t colon = m.find(": ");
+    const bool several = m.rfind("The following arguments", 0) == 0;
+    if (colon != std::string::npos) {
+      return m.substr(colon + 2) + (several ? ": not options of '" : ": not an option of '") + command + "'";
+    }
+  }
+  for (const char* tail : {" is required"}) {
+    const size_t at = m.rfind(tail);
+    if (at != std::string::npos && at > 0 && at + std::strlen(tail) == m.size() && m.find(' ') == at) {
+      return m.substr(0, at) + ": is required";
+    }
+  }
+  for (const char* infix : {" excludes ", " requires "}) {
+    const size_t at = m.find(infix);
+    if (at != std::string::npos && m.find(' ') == at) {
+      const std::string verb = std::string(infix) == " excludes " ? ": cannot be given with " : ": needs ";
+      return m.substr(0, at) + verb + m.substr(at + std::strlen(infix));
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+int BadOption(const std::string& command, const std::string& option, const std::string& what) {
+  PrintBadOption(option + ": " + what, "vistream " + command);
+  return kBadOptionExit;
+}
+
+int ParseFailure(const CLI::App& app, const CLI::ParseError& e) {
+  if (dynamic_cast<const CLI::Success*>(&e) != nullptr) return app.exit(e);
+  // CLI11 says "A subcommand is required" for a misspelt one: name it.
+  const std::vector<std::string> extra = app.remaining();
+  if (dynamic_cast<const CLI::RequiredError*>(&e) != nullptr && app.get_subcommands().empty() && !extra.empty()) {
+    PrintBadOption("'" + extra.front() + "': not a vistream command", app.get_name());
+    return kBadOptionExit;
+  }
+  const std::string command = CommandPath(app);
+  PrintBadOption(OptionMessage(e, command), command);
+  return kBadOptionExit;
 }
 
 absl::StatusOr<std::string> ReadFile(const std::string& path) {

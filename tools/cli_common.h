@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <absl/status/statusor.h>
 
+#include "cli/number_options.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "tools/terminal_progress.h"
@@ -26,8 +27,26 @@ scenes::RunControl ToolRun();
 // scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings.
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
 
-// A CLI11 check: a finite number in [lo, hi] (CLI11's Range and PositiveNumber let NaN through).
-CLI::Validator FiniteRange(double lo, double hi);
+// Checks for numeric options (cli/number_options.h) and the exit code of a bad option.
+using cli::FiniteRange;
+using cli::kBadOptionExit;
+using cli::PowerOfTwo;
+using cli::WholeRange;
+
+// Bounds shared by several commands' options.
+inline constexpr int64_t kMaxSeed = INT64_MAX;
+inline constexpr int64_t kMaxSamples = int64_t{1} << 50;
+inline constexpr double kMaxSeconds = 1e7;       // about 116 days
+inline constexpr double kMinCellSize = 0.01;     // metres; what vistream-server accepts
+inline constexpr double kMaxCellSize = 1e6;
+
+// Prints "vistream: error: <option>: <what>" and a hint to `vistream <command> --help`;
+// returns kBadOptionExit. For what CLI11's checks cannot see (a value's form, two options together).
+int BadOption(const std::string& command, const std::string& option, const std::string& what);
+
+// The exit code for CLI11's parse error `e` in `app`: 0 after printing --help, else
+// kBadOptionExit after printing the error as BadOption does.
+int ParseFailure(const CLI::App& app, const CLI::ParseError& e);
 
 // The whole file, or an error naming it.
 absl::StatusOr<std::string> ReadFile(const std::string& path);

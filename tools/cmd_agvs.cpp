@@ -56,14 +56,14 @@ nlohmann::json StatsJson(const visibility::GlobalSampler& s) {
 
 int Agvs(const AgvsArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
-  if (a.scene.empty()) return Fail(absl::InvalidArgumentError("--scene is required"));
+  if (a.scene.empty()) return BadOption("agvs", "--scene", "is required");
   if (a.seconds <= 0 && a.pixel_error <= 0 && a.samples == 0) {
-    return Fail(absl::InvalidArgumentError("give --seconds, --pixel-error or --samples: when to stop sampling"));
+    return BadOption("agvs", "--seconds, --pixel-error or --samples", "give one: when to stop sampling");
   }
   absl::StatusOr<visibility::FilterOptions> filter = FilterFromName(a.filter);
-  if (!filter.ok()) return Fail(filter.status());
+  if (!filter.ok()) return BadOption("agvs", "--filter", std::string(filter.status().message()));
   absl::StatusOr<visibility::SamplingStrategy> strategy = visibility::StrategyFromName(a.strategy);
-  if (!strategy.ok()) return Fail(absl::InvalidArgumentError("--strategy: " + std::string(strategy.status().message())));
+  if (!strategy.ok()) return BadOption("agvs", "--strategy", std::string(strategy.status().message()));
   visibility::AgvsOptions options;
   options.strategy = *strategy;
   options.seed = a.seed;
@@ -142,10 +142,10 @@ struct HeatmapArgs {
 int Heatmap(const HeatmapArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
   if (a.pvs.empty() == (a.seconds <= 0)) {
-    return Fail(absl::InvalidArgumentError("give either --pvs FILE (from agvs -o) or --seconds T to sample first"));
+    return BadOption("agvs heatmap", "--pvs or --seconds", "give one: a PVS file (from agvs -o) or a time to sample first");
   }
   absl::StatusOr<visibility::FilterOptions> filter = FilterFromName(a.filter);
-  if (!filter.ok()) return Fail(filter.status());
+  if (!filter.ok()) return BadOption("agvs heatmap", "--filter", std::string(filter.status().message()));
   visibility::AgvsOptions options;
   options.seed = a.seed;
   absl::StatusOr<SampledScene> s = SampledScene::Load(a.scene, a.cell_size, options);
@@ -186,17 +186,19 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
   auto args = std::make_shared<AgvsArgs>();
   CLI::App* c = app.add_subcommand("agvs", "adaptive global visibility sampling: the PVS of every viewcell at once");
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file (required)");
-  c->add_option("--seconds", args->seconds, "stop after this much sampling time");
-  c->add_option("--pixel-error", args->pixel_error, "stop when the estimated pixel error (of 1024 x 1024) is this low");
-  c->add_option("--samples", args->samples, "stop after this many samples");
+  c->add_option("--seconds", args->seconds, "stop after this much sampling time")->check(FiniteRange(1e-3, kMaxSeconds));
+  c->add_option("--pixel-error", args->pixel_error, "stop when the estimated pixel error (of 1024 x 1024) is this low")
+      ->check(FiniteRange(1e-9, 1024.0 * 1024.0));
+  c->add_option("--samples", args->samples, "stop after this many samples")->check(WholeRange(1, kMaxSamples));
   c->add_option("--strategy", args->strategy, "agvs (adaptive mixture), sgvs (view space-direction only), ref (per cell)");
   c->add_option("-o", args->out, "write the PVS file a server serves from");
   c->add_option("--state", args->state, "resume from this state file if it exists, and save the state there");
   c->add_option("--filter", args->filter, "visibility filter applied to the output: none, object, view, both");
-  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)");
-  c->add_option("--seed", args->seed, "random seed; results depend on it alone");
-  c->add_option("--threads", args->threads, "worker threads (0: one per core)");
-  c->add_option("--batch", args->batch, "samples per batch")->check(CLI::Range(1u, 1u << 24));
+  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
+  c->add_option("--seed", args->seed, "random seed; results depend on it alone")->check(WholeRange(0, kMaxSeed));
+  c->add_option("--threads", args->threads, "worker threads (0: one per core)")->check(WholeRange(0, 1024));
+  c->add_option("--batch", args->batch, "samples per batch")->check(WholeRange(1, 1 << 24));
   c->add_flag("--json", args->json, "print the result as JSON");
   c->callback([args, done, c] {
     if (c->get_subcommands().empty()) done(Agvs(*args));
@@ -206,10 +208,11 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
   CLI::App* hm = c->add_subcommand("heatmap", "PNG of the PVS cost (triangles) of every viewcell over the top view");
   hm->add_option("--scene", h->scene, "catalog name, .json entry or .glb/.gltf file")->required();
   hm->add_option("--pvs", h->pvs, "a PVS file from vistream agvs -o");
-  hm->add_option("--seconds", h->seconds, "or sample this long first");
+  hm->add_option("--seconds", h->seconds, "or sample this long first")->check(FiniteRange(1e-3, kMaxSeconds));
   hm->add_option("--filter", h->filter, "with --seconds: none, object, view, both");
-  hm->add_option("--cell-size", h->cell_size, "viewcell edge in metres (default: the catalog's)");
-  hm->add_option("--seed", h->seed, "random seed");
+  hm->add_option("--cell-size", h->cell_size, "viewcell edge in metres (default: the catalog's)")
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
+  hm->add_option("--seed", h->seed, "random seed")->check(WholeRange(0, kMaxSeed));
   hm->add_option("-o", h->out, "the PNG to write")->required();
   hm->add_flag("--json", h->json, "print the result as JSON");
   hm->callback([h, done] { done(Heatmap(*h)); });

@@ -69,7 +69,7 @@ int Table1(const Table1Args& a) {
   if (a.json) ToolProgress().set_quiet(true);
   for (uint32_t r : a.res) {
     if (r < 1 || r > 256 || (r & (r - 1)) != 0) {
-      return Fail(absl::InvalidArgumentError(absl::StrFormat("--res %u: expected a power of two, 1 to 256", r)));
+      return BadOption("bench table1", "--res", absl::StrFormat("%u: expected a power of two, 1 to 256", r));
     }
   }
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
@@ -240,11 +240,11 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   auto args = std::make_shared<Table1Args>();
   CLI::App* c = bench->add_subcommand("table1", "dual ray space: time and overestimation by resolution and size");
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->capture_default_str();
-  c->add_option("--cells", args->cells, "viewcells sampled per size")->capture_default_str()->check(CLI::PositiveNumber);
-  c->add_option("--seed", args->seed, "seed of the viewcell sample")->capture_default_str();
-  c->add_option("--res", args->res, "raster resolutions")->delimiter(',')->capture_default_str();
+  c->add_option("--cells", args->cells, "viewcells sampled per size")->capture_default_str()->check(WholeRange(1, 1000000));
+  c->add_option("--seed", args->seed, "seed of the viewcell sample")->check(WholeRange(0, kMaxSeed))->capture_default_str();
+  c->add_option("--res", args->res, "raster resolutions")->delimiter(',')->capture_default_str()->check(WholeRange(1, 256));
   c->add_option("--sizes", args->sizes, "viewcell sizes in metres")->delimiter(',')->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--backends", args->backends, "cpu, gl")->delimiter(',')->capture_default_str()
       ->check(CLI::IsMember({"cpu", "gl"}));
   c->add_option("--csv", args->csv, "CSV output ('' for none)")->capture_default_str();

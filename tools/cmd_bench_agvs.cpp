@@ -343,14 +343,15 @@ void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
   CLI::App* c = bench->add_subcommand(
       "agvs", "AGVS, SGVS and REF side by side: PVS size against time, estimated against rendered pixel error");
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file");
-  c->add_option("--seconds", args->seconds, "sampling time of each strategy")->check(CLI::PositiveNumber);
-  c->add_option("--views", args->views, "rendered views for the measured pixel error")->check(CLI::Range(1, 100000));
-  c->add_option("--res", args->res, "pixels per cube face side")->check(CLI::Range(8, 1024));
-  c->add_option("--batch", args->batch, "samples per batch")->check(CLI::Range(1u, 1u << 24));
-  c->add_option("--checkpoints", args->checkpoints, "table rows, at T / 2^k")->check(CLI::Range(1, 30));
-  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)");
-  c->add_option("--seed", args->seed, "random seed");
-  c->add_option("--threads", args->threads, "worker threads (0: one per core)");
+  c->add_option("--seconds", args->seconds, "sampling time of each strategy")->check(FiniteRange(1e-3, kMaxSeconds));
+  c->add_option("--views", args->views, "rendered views for the measured pixel error")->check(WholeRange(1, 100000));
+  c->add_option("--res", args->res, "pixels per cube face side")->check(WholeRange(8, 1024));
+  c->add_option("--batch", args->batch, "samples per batch")->check(WholeRange(1, 1 << 24));
+  c->add_option("--checkpoints", args->checkpoints, "table rows, at T / 2^k")->check(WholeRange(1, 30));
+  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
+  c->add_option("--seed", args->seed, "random seed")->check(WholeRange(0, kMaxSeed));
+  c->add_option("--threads", args->threads, "worker threads (0: one per core)")->check(WholeRange(0, 1024));
   c->add_option("--plot", args->plot, "write the convergence plot (PNG)");
   c->add_flag("--json", args->json, "print the result as JSON");
   c->callback([args, done] { done(BenchAgvs(*args)); });

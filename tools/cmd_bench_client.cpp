@@ -140,7 +140,7 @@ void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
       ->capture_default_str();
   c->add_option("--seconds", args->seconds, "seconds of the walk per mode (0: all of it)")
       ->check(FiniteRange(0.0, 86400.0))->capture_default_str();
-  c->add_option("--threads", args->threads, "server PVS workers")->check(CLI::Range(1, 256))->capture_default_str();
+  c->add_option("--threads", args->threads, "server PVS workers")->check(WholeRange(1, 256))->capture_default_str();
   c->add_flag("--json", args->json, "print one JSON object");
   c->callback([args, done] { done(BenchClient(*args)); });
 }

@@ -67,7 +67,7 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
   std::vector<visibility::EpsilonOptions> options;
   for (const std::string& name : a.opts) {
     absl::StatusOr<visibility::EpsilonOptions> o = visibility::EpsilonOptions::FromName(name);
-    if (!o.ok()) return Fail(absl::InvalidArgumentError("--opts: " + std::string(o.status().message())));
+    if (!o.ok()) return BadOption("bench epsilon", "--opts", std::string(o.status().message()));
     options.push_back(*o);
   }
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
@@ -260,13 +260,13 @@ void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done) {
   auto args = std::make_shared<BenchEpsilonArgs>();
   CLI::App* c = bench->add_subcommand("epsilon", "ε-superset: the paper's Tables 1 and 2 over random neighbourhoods");
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name (city1, city2)")->capture_default_str();
-  c->add_option("--count", args->count, "neighbourhoods")->capture_default_str()->check(CLI::PositiveNumber);
-  c->add_option("--seed", args->seed, "seed of the neighbourhood sample")->capture_default_str();
+  c->add_option("--count", args->count, "neighbourhoods")->capture_default_str()->check(WholeRange(1, 1000000));
+  c->add_option("--seed", args->seed, "seed of the neighbourhood sample")->check(WholeRange(0, kMaxSeed))->capture_default_str();
   c->add_option("--size", args->size, "neighbourhood edge in metres (default: a quarter of the typical object)")
-      ->check(CLI::PositiveNumber);
+      ->check(FiniteRange(1e-3, 1e5));
   c->add_option("--pvs-cell", args->pvs_cell,
                 "test only the PVS of the viewcell of this size around each neighbourhood, as a server would")
-      ->check(CLI::PositiveNumber);
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--opts", args->opts, "columns: none, boxes, occluders, rays, paper, all")
       ->delimiter(',')
       ->capture_default_str()

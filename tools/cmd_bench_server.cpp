@@ -462,17 +462,18 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   auto args = std::make_shared<BenchServerArgs>();
   CLI::App* c = bench->add_subcommand("server", "simulated clients walking a city through a real vistream-server");
   c->add_option("--scene", args->scene, "catalog name, .json or glTF")->capture_default_str();
-  c->add_option("--sessions", args->sessions, "simulated clients at once")->check(CLI::Range(1, 1000))
+  c->add_option("--sessions", args->sessions, "simulated clients at once")->check(WholeRange(1, 1000))
       ->capture_default_str();
   c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(FiniteRange(0.1, 500.0))
       ->capture_default_str();
   c->add_option("--seconds", args->seconds, "how long each client walks, after its start-up")
       ->check(FiniteRange(1.0, 86400.0))->capture_default_str();
   c->add_option("--cell-size", args->cell_size, "viewcell edge, metres (default: the catalog entry's)")
-      ->check(FiniteRange(1.0, 10000.0));
-  c->add_option("--res", args->res, "finest dual-ray-space raster")->capture_default_str();
-  c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->capture_default_str();
-  c->add_option("--seed", args->seed, "walkers' seed")->capture_default_str();
+      ->check(FiniteRange(1.0, 10000.0));  // the walkers need room in a cell
+  c->add_option("--res", args->res, "finest dual-ray-space raster")->check(WholeRange(1, 256))->capture_default_str();
+  c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->check(WholeRange(0, 1024))
+      ->capture_default_str();
+  c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();
   c->add_option("--log", args->log, "write the server's log here");
   c->add_flag("--json", args->json, "print one JSON object");
   c->callback([args, done] { done(BenchServer(*args)); });

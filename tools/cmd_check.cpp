@@ -35,6 +35,7 @@ struct CheckArgs {
   uint32_t res = 128;
   std::string backend = "cpu";
   bool json = false;
+  bool allow_unchecked = false;  // exit 0 even when a part of the check had nothing to check
 };
 
 struct Violation {
@@ -48,11 +49,6 @@ struct Violation {
 
 int Check(const CheckArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
-  if (!(a.seconds > 0)) return Fail(absl::InvalidArgumentError("--seconds must be positive"));
-  // 0 (the default) takes the catalog's size; anything else must be a size.
-  if (!(a.cell_size >= 0.0 && std::isfinite(a.cell_size))) {
-    return Fail(absl::InvalidArgumentError("--cell-size must be a positive number of metres"));
-  }
   absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   visibility::AgvsOptions options;
@@ -157,6 +153,17 @@ int Check(const CheckArgs& a) {
   const size_t pvs_violations =
       std::count_if(violations.begin(), violations.end(), [](const Violation& v) { return v.kind == "pvs"; });
 
+  // A check that could not have failed passes nothing: say which part checked nothing.
+  std::vector<std::string> unchecked;
+  if (pvs_checked == 0) unchecked.push_back("no sampled PVS entry was checked (sampling saw nothing from the cells)");
+  if (drs_stats.occluded == 0) {
+    unchecked.push_back("the dual ray space hid nothing from the checked cells (no occluders?), so no false occlusion could show");
+  }
+  if (a.neighbourhoods > 0 && eps_checked == 0) {
+    unchecked.push_back(neighbourhoods == 0 ? "no free street-level neighbourhood was found for the epsilon-superset"
+                                            : "no sampled ray from the neighbourhoods hit a triangle");
+  }
+
   if (a.json) {
     nlohmann::json j;
     j["scene"] = scene.name;
@@ -185,6 +192,7 @@ int Check(const CheckArgs& a) {
       list.push_back(e);
     }
     j["violation_list"] = list;
+    j["unchecked"] = unchecked;
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     std::printf("%s: %zu cells, %llu sampled PVS entries checked against the dual ray space; %zu neighbourhoods, "
@@ -204,7 +212,18 @@ int Check(const CheckArgs& a) {
       std::printf("\n");
     }
   }
-  return violations.empty() ? 0 : 1;
+  if (!violations.empty()) return 1;
+  if (!unchecked.empty()) {
+    for (const std::string& u : unchecked) {
+      std::fprintf(stderr, "vistream: %s: check-conservative checked nothing: %s\n",
+                   a.allow_unchecked ? "warning" : "error", u.c_str());
+    }
+    if (!a.allow_unchecked) {
+      std::fprintf(stderr, "vistream: (--allow-unchecked accepts this)\n");
+      return 1;
+    }
+  }
+  return 0;
 }
 
 }  // namespace
@@ -215,21 +234,24 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
       "check-conservative",
       "check that the dual-ray-space PVS and the epsilon-superset contain everything sampling sees (exit 1 if not)");
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file")->required();
-  c->add_option("--cells", args->cells, "viewcells to check, sampled (0: every cell)");
+  c->add_option("--cells", args->cells, "viewcells to check, sampled (0: every cell)")->check(WholeRange(0, 1 << 30));
   CLI::Option* seconds =
-      c->add_option("--seconds", args->seconds, "AGVS sampling time before checking")->check(CLI::PositiveNumber);
+      c->add_option("--seconds", args->seconds, "AGVS sampling time before checking")->check(FiniteRange(1e-3, kMaxSeconds));
   c->add_option("--samples", args->samples, "AGVS samples before checking, instead of --seconds (replays exactly)")
-      ->check(CLI::PositiveNumber)
+      ->check(WholeRange(1, kMaxSamples))
       ->excludes(seconds);
   c->add_option("--backend", args->backend, "dual ray space backend: cpu | gl | exact")
       ->check(CLI::IsMember({"cpu", "gl", "exact"}));
-  c->add_option("--neighbourhoods", args->neighbourhoods, "street-level epsilon neighbourhoods to check (0: none)");
-  c->add_option("--rays", args->rays, "sampled rays per neighbourhood");
+  c->add_option("--neighbourhoods", args->neighbourhoods, "street-level epsilon neighbourhoods to check (0: none)")
+      ->check(WholeRange(0, 1000000));
+  c->add_option("--rays", args->rays, "sampled rays per neighbourhood")->check(WholeRange(1, 1000000000));
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
-      ->check(CLI::PositiveNumber);
-  c->add_option("--res", args->res, "dual ray space raster resolution")->check(CLI::IsMember({16u, 32u, 64u, 128u, 256u}));
-  c->add_option("--seed", args->seed, "random seed (sampling, cells, neighbourhoods)");
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
+  c->add_option("--res", args->res, "dual ray space raster resolution")->check(PowerOfTwo(16, 256));
+  c->add_option("--seed", args->seed, "random seed (sampling, cells, neighbourhoods)")->check(WholeRange(0, kMaxSeed));
   c->add_flag("--json", args->json, "print the result as JSON");
+  c->add_flag("--allow-unchecked", args->allow_unchecked,
+              "exit 0 even when a part of the check had nothing to check (it is still said)");
   c->callback([args, done] { done(Check(*args)); });
 }
 

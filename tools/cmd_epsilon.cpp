@@ -29,10 +29,10 @@ int Epsilon(const EpsilonArgs& a) {
   char tail = 0;
   if (std::sscanf(a.at.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) ||
       !std::isfinite(y) || !std::isfinite(z)) {
-    return Fail(absl::InvalidArgumentError("--at '" + a.at + "': expected X,Y,Z (three finite numbers, metres)"));
+    return BadOption("epsilon", "--at", "'" + a.at + "': expected X,Y,Z (three finite numbers, metres)");
   }
   absl::StatusOr<visibility::EpsilonOptions> options = visibility::EpsilonOptions::FromName(a.opt);
-  if (!options.ok()) return Fail(absl::InvalidArgumentError("--opt: " + std::string(options.status().message())));
+  if (!options.ok()) return BadOption("epsilon", "--opt", std::string(options.status().message()));
 
   double load_s = 0.0;
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
@@ -127,7 +127,7 @@ void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--at", args->at, "centre of the neighbourhood X,Y,Z (scene-local metres)")->required();
   c->add_option("--size", args->size, "edge of the neighbourhood box in metres (0: one viewpoint)")
       ->required()
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteRange(0.0, 1e5));
   c->add_option("--opt", args->opt, "optimisations (Table 2's columns): none | boxes | occluders | rays | paper | all")
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "boxes", "occluders", "rays", "paper", "all"}));

@@ -33,8 +33,8 @@ struct PvsArgs {
 
 // Every viewcell of the grid, written as a PVS file the server can serve (--pvs-file).
 int PvsAll(const PvsArgs& a) {
-  if (a.out.empty()) return Fail(absl::InvalidArgumentError("--all writes a PVS file: give -o FILE"));
-  if (!a.map.empty()) return Fail(absl::InvalidArgumentError("--map draws one viewcell: not with --all"));
+  if (a.out.empty()) return BadOption("pvs", "--all", "writes a PVS file: give -o FILE");
+  if (!a.map.empty()) return BadOption("pvs", "--map", "draws one viewcell: not with --all");
   // Find out now, not after minutes of work, whether the file can be written.
   {
     const std::filesystem::path parent = std::filesystem::absolute(a.out).parent_path();
@@ -108,12 +108,12 @@ int PvsAll(const PvsArgs& a) {
 int Pvs(const PvsArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
   if (a.all) return PvsAll(a);
-  if (a.cell.empty()) return Fail(absl::InvalidArgumentError("give --cell I,J (one viewcell) or --all -o FILE"));
-  if (!a.out.empty()) return Fail(absl::InvalidArgumentError("-o writes the PVS file of --all; one viewcell prints"));
+  if (a.cell.empty()) return BadOption("pvs", "--cell or --all", "give --cell I,J (one viewcell) or --all -o FILE");
+  if (!a.out.empty()) return BadOption("pvs", "-o", "writes the PVS file of --all; one viewcell prints");
   int ci = 0, cj = 0;
   char tail = 0;
   if (std::sscanf(a.cell.c_str(), "%d,%d%c", &ci, &cj, &tail) != 2) {
-    return Fail(absl::InvalidArgumentError("--cell '" + a.cell + "': expected I,J (two integers)"));
+    return BadOption("pvs", "--cell", "'" + a.cell + "': expected I,J (two integers)");
   }
   // Viewcell size and band: the option, else the catalog entry's, else 100 m at eye level.
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
@@ -212,9 +212,9 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
       ->excludes(cell);
   c->add_option("-o,--out", args->out, "with --all: the PVS file to write");
   c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
-      ->check(CLI::PositiveNumber);
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two); exact: the raster tried before the exact test")
-      ->check(CLI::IsMember({16u, 32u, 64u, 128u, 256u}));
+      ->check(PowerOfTwo(16, 256));
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");
   c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");

@@ -76,7 +76,7 @@ int ImportOsm(const ImportArgs& a) {
   options.name = a.name;
   if (!a.bbox.empty()) {
     absl::StatusOr<scenes::GeoBox> box = scenes::ParseGeoBox(a.bbox);
-    if (!box.ok()) return Fail(box.status());
+    if (!box.ok()) return BadOption("scene import-osm", "--bbox", std::string(box.status().message()));
     options.bbox = *box;
   }
   scenes::OsmImportSummary sum;
@@ -260,7 +260,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   auto gen = std::make_shared<GenerateArgs>();
   CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london, streets)");
   g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
-  g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)");
+  g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)")->check(WholeRange(0, kMaxSeed));
   g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required();
   g->callback([gen, done] { done(Generate(*gen)); });
 
@@ -269,7 +269,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML), .osm.pbf, .osm.bz2 or .osm.gz")->required();
   o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required();
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
-  o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(CLI::Range(1.0, 20.0));
+  o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(FiniteRange(1.0, 20.0));
   o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)");
   o->add_flag("--json", imp->json, "print the summary as one JSON object");
   o->callback([imp, done] { done(ImportOsm(*imp)); });
@@ -278,14 +278,14 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");
   i->add_option("FILE", info->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   i->add_flag("--json", info->json, "print one JSON object");
-  i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(CLI::Range(1u, 1024u));
+  i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(WholeRange(1, 1024));
   i->callback([info, done] { done(Info(*info)); });
 
   auto map = std::make_shared<MapArgs>();
   CLI::App* m = scene->add_subcommand("map", "write a top-view PNG: footprints by height, walk paths in red");
   m->add_option("FILE", map->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   m->add_option("-o,--output", map->output, "output .png")->required();
-  m->add_option("--size", map->size, "pixels on the longer side")->check(CLI::Range(16, 16384));
+  m->add_option("--size", map->size, "pixels on the longer side")->check(WholeRange(16, 16384));
   m->callback([map, done] { done(Map(*map)); });
 }
 

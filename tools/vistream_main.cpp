@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return vistream::tools::ParseFailure(app, e);  // 0 after --help, else 2
   }
   return exit_code;
 }
