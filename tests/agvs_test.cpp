@@ -641,5 +641,24 @@ TEST(PvsFile, EveryTruncationAndCorruptionIsAClearError) {
   EXPECT_NE(r.status().message().find("byte "), std::string::npos) << r.status();
 }
 
+// A few dozen bytes may claim 2^32 objects: read for a scene, such a file is refused by its
+// object count before its sets (cells x objects bits) are allocated.
+TEST(PvsFile, AHeaderClaimingAnotherObjectCountIsRefusedBeforeAllocating) {
+  PvsFile claims = SomeFile();
+  const size_t cells = claims.sets.cell_count();
+  claims.sets = GlobalPvs(cells, 8);
+  std::string bytes = EncodePvsFile(claims);
+  // The object count follows the magic (8), the version (4) and the name (varint length + bytes).
+  const size_t at = 8 + 4 + 1 + claims.scene.size();
+  const uint64_t huge = uint64_t{1} << 32;
+  ASSERT_EQ(bytes.compare(at, 8, std::string("\x08\0\0\0\0\0\0\0", 8)), 0) << "the layout this test assumes";
+  bytes.replace(at, 8, reinterpret_cast<const char*>(&huge), 8);
+  const absl::StatusOr<PvsFile> r = DecodePvsFile(bytes, "claims.pvs", 8);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("4294967296 objects; this scene has 8"), std::string::npos) << r.status();
+  EXPECT_TRUE(DecodePvsFile(EncodePvsFile(claims), "same.pvs", 8).ok());
+}
+
 }  // namespace
 }  // namespace vistream::visibility

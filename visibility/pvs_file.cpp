@@ -68,7 +68,7 @@ absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid&
   if (!in) return absl::NotFoundError(absl::StrCat("cannot open PVS file '", path, "'"));
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) return absl::DataLossError(absl::StrCat("cannot read PVS file '", path, "'"));
-  absl::StatusOr<PvsFile> f = DecodePvsFile(bytes, path);
+  absl::StatusOr<PvsFile> f = DecodePvsFile(bytes, path, scene.objects.size());
   if (!f.ok()) return f.status();
   if (absl::Status st = CheckPvsFileMatches(*f, grid, scene, path); !st.ok()) return st;
   return f;
@@ -138,7 +138,8 @@ std::string EncodePvsFile(const PvsFile& f) {
   return std::move(w.bytes());
 }
 
-absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where) {
+absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where,
+                                      std::optional<uint64_t> scene_objects) {
   ByteReader r(bytes, where);
   PvsFile f;
   char magic[8];
@@ -182,6 +183,10 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
   // Every cell takes at least one byte: refuse what the remaining bytes cannot hold before
   // allocating the sets.
   if (cells > r.remaining()) return r.Error(absl::StrCat("too few bytes left for ", cells, " cells"));
+  if (scene_objects && objects != *scene_objects) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": made for another scene ('", f.scene, "', ", objects,
+                                                   " objects; this scene has ", *scene_objects, ")"));
+  }
   if (cells * ((objects + 63) / 64) > (uint64_t{1} << 28)) {
     return r.Error(absl::StrCat(cells, " cells of ", objects, " objects would need more than 2 GiB of sets"));
   }

@@ -10,6 +10,7 @@
 // id minus the previous one minus one). Nothing may follow.
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -38,7 +39,11 @@ struct PvsFile {
 };
 
 std::string EncodePvsFile(const PvsFile& file);
-absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where);
+// Reads a file EncodePvsFile wrote; errors name `where` and the field. With `scene_objects`,
+// a file made for a scene of another object count is refused before its sets are allocated
+// (a header alone may otherwise ask for up to 2 GiB of sets).
+absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string& where,
+                                      std::optional<uint64_t> scene_objects = std::nullopt);
 
 // Where a file's sets came from: the sampling strategy or the dual-ray-space backend, and
 // what it took (0 where it does not apply).
