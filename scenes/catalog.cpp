@@ -125,7 +125,7 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
     const fs::path p(r.String("gltf"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
   } else {
-    r.Allow({"osm", "bbox", "storey_m"});
+    r.Allow({"osm", "bbox", "storey_m", "max_height_m"});
     s.kind = SceneSource::Kind::kOsm;
     const fs::path p(r.String("osm"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
@@ -135,6 +135,7 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
       s.bbox = *box;
     }
     s.storey_m = r.Number("storey_m", 1.0, 20.0, 3.0);
+    s.max_height_m = r.Number("max_height_m", 10.0, 10000.0, OsmImportOptions{}.max_height_m);
   }
   return s;
 }
@@ -281,6 +282,7 @@ absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& ru
     OsmImportOptions options;
     options.bbox = entry.source.bbox;
     options.storey_m = entry.source.storey_m;
+    options.max_height_m = entry.source.max_height_m;
     options.name = entry.name;
     return ImportOsm(entry.source.path, options, nullptr, run);
   }

@@ -29,6 +29,7 @@ struct SceneSource {
   std::string path;  // kGltf, kOsm: absolute, resolved against the catalog file's folder
   std::optional<GeoBox> bbox;  // kOsm: keep only buildings inside
   double storey_m = 3.0;       // kOsm
+  double max_height_m = OsmImportOptions{}.max_height_m;  // kOsm
 };
 
 struct ViewcellSpec {

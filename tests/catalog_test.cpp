@@ -69,7 +69,8 @@ TEST(Catalog, GltfSourceResolvesAgainstTheCatalogFolder) {
 
 TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
-      R"({"name": "t", "source": {"osm": "../data/x.osm.pbf", "bbox": "7.4,43.7,7.5,43.8", "storey_m": 3.5},
+      R"({"name": "t", "source": {"osm": "../data/x.osm.pbf", "bbox": "7.4,43.7,7.5,43.8", "storey_m": 3.5,
+                                 "max_height_m": 900},
           "viewcell": {"size_m": 50, "height_m": 2}})",
       "t.json", "/base/scenes");
   ASSERT_TRUE(e.ok()) << e.status();
@@ -78,6 +79,7 @@ TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   ASSERT_TRUE(e->source.bbox.has_value());
   EXPECT_DOUBLE_EQ(e->source.bbox->max_lat, 43.8);
   EXPECT_DOUBLE_EQ(e->source.storey_m, 3.5);
+  EXPECT_DOUBLE_EQ(e->source.max_height_m, 900.0);
   absl::StatusOr<Scene> scene = BuildScene(*e);
   ASSERT_FALSE(scene.ok());
   EXPECT_NE(scene.status().message().find("/base/data/x.osm.pbf: no such file"), std::string::npos) << scene.status();
@@ -91,6 +93,9 @@ TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   const absl::Status unknown = ParseError(
       R"({"name": "t", "source": {"osm": "x.osm", "seed": 3}, "viewcell": {"size_m": 50, "height_m": 2}})");
   EXPECT_NE(unknown.message().find("unknown key"), std::string::npos) << unknown;
+  const absl::Status low = ParseError(
+      R"({"name": "t", "source": {"osm": "x.osm", "max_height_m": 5}, "viewcell": {"size_m": 50, "height_m": 2}})");
+  EXPECT_NE(low.message().find("key 'source.max_height_m'"), std::string::npos) << low;
 }
 
 TEST(Catalog, MalformedJsonGivesLineAndColumn) {

@@ -402,6 +402,37 @@ TEST(Cli, ImportOsmWritesASceneAndSummarises) {
                      "empty.osm: the file is empty");
 }
 
+// The plausible height limit is an option: a 1,500 m tower is bad data by default (counted,
+// the next rule used), a real height with --max-height 2000.
+TEST(Cli, ImportOsmMaxHeightDecidesWhatIsImplausible) {
+  const std::string in = Tmp("tower.osm");
+  {
+    std::ofstream f(in);
+    f << R"(<?xml version="1.0" encoding="UTF-8"?>
+<osm version="0.6">
+ <node id="1" lat="47.0000" lon="8.0000"/>
+ <node id="2" lat="47.0000" lon="8.0002"/>
+ <node id="3" lat="47.0002" lon="8.0002"/>
+ <node id="4" lat="47.0002" lon="8.0000"/>
+ <way id="10"><nd ref="1"/><nd ref="2"/><nd ref="3"/><nd ref="4"/><nd ref="1"/>
+  <tag k="building" v="yes"/><tag k="height" v="1500"/></way>
+</osm>
+)";
+  }
+  const std::string out = Tmp("tower.glb");
+  const RunResult by_default = Vistream("scene import-osm " + in + " -o " + out + " --json");
+  ASSERT_EQ(by_default.exit_code, 0) << by_default.out;
+  const nlohmann::json d = nlohmann::json::parse(by_default.out);
+  EXPECT_EQ(d.at("implausible_heights").get<int>(), 1);
+  EXPECT_LT(d.at("bounds_max")[2].get<double>(), 100.0) << "the rule's height, not 1,500 m";
+  const RunResult allowed = Vistream("scene import-osm " + in + " -o " + out + " --max-height 2000 --json");
+  ASSERT_EQ(allowed.exit_code, 0) << allowed.out;
+  const nlohmann::json a = nlohmann::json::parse(allowed.out);
+  EXPECT_EQ(a.at("implausible_heights").get<int>(), 0);
+  EXPECT_EQ(a.at("bounds_max")[2].get<double>(), 1500.0);
+  ExpectBadOption("scene import-osm " + in + " -o " + out + " --max-height nan", "--max-height");
+}
+
 // The whole pipeline on a real city: the Monaco extract (../shared/data/osm, ODbL), a viewcell
 // on Rue Grimaldi (the catalog's walk) with each backend, and the inclusion check.
 const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";

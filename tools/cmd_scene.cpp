@@ -66,6 +66,7 @@ int Generate(const GenerateArgs& a) {
 struct ImportArgs {
   std::string input, output, bbox, name;
   double storey_m = 3.0;
+  double max_height_m = scenes::OsmImportOptions{}.max_height_m;
   bool json = false;
 };
 
@@ -73,6 +74,7 @@ int ImportOsm(const ImportArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
   scenes::OsmImportOptions options;
   options.storey_m = a.storey_m;
+  options.max_height_m = a.max_height_m;
   options.name = a.name;
   if (!a.bbox.empty()) {
     absl::StatusOr<scenes::GeoBox> box = scenes::ParseGeoBox(a.bbox);
@@ -270,6 +272,9 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required();
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
   o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(FiniteRange(1.0, 20.0));
+  o->add_option("--max-height", imp->max_height_m,
+                "plausible limit in metres: taller height or levels tags are bad data (counted; the next rule is used)")
+      ->check(FiniteRange(10.0, 10000.0));
   o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)");
   o->add_flag("--json", imp->json, "print the summary as one JSON object");
   o->callback([imp, done] { done(ImportOsm(*imp)); });
