@@ -7,15 +7,14 @@
 #include <filesystem>
 #include <fstream>
 #include <glm/geometric.hpp>
-#include <map>
 #include <osmium/io/pbf_output.hpp>
 #include <osmium/io/xml_input.hpp>
 #include <set>
-#include <tuple>
 
 #include "scenes/catalog.h"
 #include "scenes/mesh.h"
 #include "scenes/progress.h"
+#include "tests/osm_test_util.h"
 #include "tests/test_util.h"
 
 namespace vistream::scenes {
@@ -34,21 +33,7 @@ Scene Import(const std::string& path, OsmImportSummary* sum, const OsmImportOpti
   return s.ok() ? *std::move(s) : Scene{};
 }
 
-// Closed: every directed edge (by position) is matched by the same edge the other way round,
-// as often (each wall, roof and floor edge has its twin).
-bool Closed(const Mesh& m) {
-  using P = std::tuple<float, float, float>;
-  std::map<std::pair<P, P>, int> edges;
-  auto key = [&](uint32_t i) { return P{m.positions[i].x, m.positions[i].y, m.positions[i].z}; };
-  for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
-    for (int k = 0; k < 3; ++k) {
-      const P a = key(m.indices[t + k]), b = key(m.indices[t + (k + 1) % 3]);
-      ++edges[{a, b}];
-      --edges[{b, a}];
-    }
-  }
-  return std::all_of(edges.begin(), edges.end(), [](const auto& e) { return e.second == 0; });
-}
+using testing_osm::Closed;
 
 // The area of the triangles facing up at height z.
 double RoofArea(const Mesh& m, float z) {

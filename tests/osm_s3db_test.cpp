@@ -18,9 +18,7 @@ using testing_osm::OccluderCount;
 using testing_osm::RoofArea;
 using testing_osm::WriteMetricOsm;
 
-std::vector<glm::dvec2> Rect(double x0, double y0, double x1, double y1) {
-  return {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
-}
+using testing_osm::Rect;
 
 Scene Import(const std::vector<MetricWay>& ways, OsmImportSummary* sum,
              const std::vector<MetricRelation>& relations = {}) {

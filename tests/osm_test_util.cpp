@@ -81,6 +81,10 @@ double RoofArea(const Mesh& m, float z) {
   return area;
 }
 
+std::vector<glm::dvec2> Rect(double x0, double y0, double x1, double y1) {
+  return {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+}
+
 bool Closed(const Mesh& m) {
   using P = std::tuple<float, float, float>;
   std::map<std::pair<P, P>, int> edges;

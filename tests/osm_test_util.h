@@ -35,6 +35,9 @@ std::string WriteMetricOsm(const std::string& path, glm::dvec2 centre_lat_lon,
                            const std::vector<MetricRelation>& relations = {},
                            bool negative_ids = false, bool shuffle = false);
 
+// The rectangle [x0, x1] x [y0, y1], counter-clockwise (metres).
+std::vector<glm::dvec2> Rect(double x0, double y0, double x1, double y1);
+
 // Shoelace area of a ring (m², positive counter-clockwise).
 double Shoelace(const std::vector<glm::dvec2>& ring);
 

@@ -127,6 +127,16 @@ TEST_F(Pvs, FinerRasterNeverAddsObjects) {
 // it; viewcells from 2 to 300 m anywhere, against and inside buildings; kd leaves of 1 and 4
 // objects; the cpu raster at random resolutions and the exact test. No culled object may be
 // seen: a segment from the cell to a point just off its surface, clear of every prism.
+// A point 1 cm off a random triangle of `o` (walls, roofs and floors alike), on its front.
+glm::dvec3 PointOffSurface(const scenes::Object& o, scenes::Rng& rng) {
+  const size_t t = rng.Below(o.mesh.TriangleCount());
+  const glm::dvec3 v0(o.mesh.positions[o.mesh.indices[3 * t]]), v1(o.mesh.positions[o.mesh.indices[3 * t + 1]]),
+      v2(o.mesh.positions[o.mesh.indices[3 * t + 2]]);
+  double r1 = rng.Uniform(), r2 = rng.Uniform();
+  if (r1 + r2 > 1) r1 = 1 - r1, r2 = 1 - r2;
+  return v0 + r1 * (v1 - v0) + r2 * (v2 - v0) + 0.01 * glm::dvec3(o.mesh.normals[o.mesh.indices[3 * t]]);
+}
+
 TEST(PvsProperty, NothingCulledIsSeenWhateverTheCellSizeLeafSizeAndGrid) {
   size_t culled = 0, checked_cells = 0, seen_free = 0;
   static constexpr double kSizes[] = {2, 4, 8, 16, 50, 100, 300};
@@ -159,15 +169,9 @@ TEST(PvsProperty, NothingCulledIsSeenWhateverTheCellSizeLeafSizeAndGrid) {
           }
           ++culled;
           for (int k = 0; k < 24; ++k) {
-            // A point 1 cm off a random triangle (walls and roofs alike), seen from the cell's
-            // upper rim half the time (Observation 1), else from anywhere in it.
-            const size_t t = rng.Below(o.mesh.TriangleCount());
-            const glm::dvec3 v0(o.mesh.positions[o.mesh.indices[3 * t]]), v1(o.mesh.positions[o.mesh.indices[3 * t + 1]]),
-                v2(o.mesh.positions[o.mesh.indices[3 * t + 2]]);
-            double r1 = rng.Uniform(), r2 = rng.Uniform();
-            if (r1 + r2 > 1) r1 = 1 - r1, r2 = 1 - r2;
-            const glm::dvec3 target = v0 + r1 * (v1 - v0) + r2 * (v2 - v0) +
-                                      0.01 * glm::dvec3(o.mesh.normals[o.mesh.indices[3 * t]]);
+            // A point 1 cm off the surface, seen from the cell's upper rim half the time
+            // (Observation 1), else from anywhere in it.
+            const glm::dvec3 target = PointOffSurface(o, rng);
             if (target.z <= 0.0) continue;  // a floor
             glm::dvec3 from(rng.Uniform(cell.min.x, cell.max.x), rng.Uniform(cell.min.y, cell.max.y),
                             k % 2 == 0 ? cell.max.z : rng.Uniform(cell.min.z, cell.max.z));
@@ -215,13 +219,7 @@ TEST(PvsProperty, CellsOnOrAcrossTheGroundCullOnlyWhatTheyCannotSee) {
         if (in[o.id]) continue;
         ++culled;
         for (int k = 0; k < 16; ++k) {
-          const size_t t = rng.Below(o.mesh.TriangleCount());
-          const glm::dvec3 v0(o.mesh.positions[o.mesh.indices[3 * t]]), v1(o.mesh.positions[o.mesh.indices[3 * t + 1]]),
-              v2(o.mesh.positions[o.mesh.indices[3 * t + 2]]);
-          double r1 = rng.Uniform(), r2 = rng.Uniform();
-          if (r1 + r2 > 1) r1 = 1 - r1, r2 = 1 - r2;
-          const glm::dvec3 target = v0 + r1 * (v1 - v0) + r2 * (v2 - v0) +
-                                    0.01 * glm::dvec3(o.mesh.normals[o.mesh.indices[3 * t]]);
+          const glm::dvec3 target = PointOffSurface(o, rng);
           if (target.z <= 0.0) continue;  // a floor
           // From the floor of the cell above the ground (the ground-level rays) half the time.
           const glm::dvec3 from(rng.Uniform(cell.min.x, cell.max.x), rng.Uniform(cell.min.y, cell.max.y),
