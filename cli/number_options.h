@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <string>
+#include <string_view>
 #include <system_error>
 
 #include <CLI/CLI.hpp>
@@ -20,13 +21,24 @@ namespace vistream::cli {
 // The exit code of a bad option or combination of options (run-time errors exit 1, ^C 130).
 inline constexpr int kBadOptionExit = 2;
 
+namespace internal {
+
+// `text` as a whole finite decimal number (digits, a point, an exponent; no hex, no sign but
+// '-', no spaces, no inf or nan), if it is one.
+inline bool ParseFinite(std::string_view text, double* v) {
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, *v, std::chars_format::general);
+  return !text.empty() && ec == std::errc() && ptr == end && std::isfinite(*v);
+}
+
+}  // namespace internal
+
 // A finite number in [lo, hi].
 inline CLI::Validator FiniteRange(double lo, double hi) {
   return CLI::Validator(
       [lo, hi](std::string& text) -> std::string {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v < lo || v > hi) {
+        double v = 0.0;
+        if (!internal::ParseFinite(text, &v) || v < lo || v > hi) {
           return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
         }
         return "";

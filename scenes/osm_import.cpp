@@ -299,6 +299,9 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   OsmImportSummary& s = summary != nullptr ? *summary : local_summary;
   s = OsmImportSummary{};
   std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": is a directory, not an OpenStreetMap file"));
+  }
   if (!fs::is_regular_file(path, ec)) {
     return absl::NotFoundError(absl::StrCat(path, ": no such file"));
   }

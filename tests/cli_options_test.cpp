@@ -53,6 +53,8 @@ TEST(Cli, NanInfinityAndOutOfRangeNumbersAreRejectedNamingTheOption) {
       {"epsilon --scene city1 --at 10,5,2.5 --size -1", "--size: '-1' is not a number"},
       {"pvs --scene city1 --cell 1,1 --cell-size nan", "--cell-size: 'nan' is not a number from 0.01 to 1e+06"},
       {"pvs --scene city1 --cell 1,1 --cell-size 0", "--cell-size: '0' is not a number from 0.01"},
+      {"pvs --scene city1 --cell 1,1 --cell-size 0x10", "--cell-size: '0x10' is not a number from 0.01"},
+      {"pvs --scene city1 --cell 1,1 --cell-size ' 8'", "--cell-size: ' 8' is not a number from 0.01"},
       {"pvs --scene city1 --cell 1,1 --res nan", "--res: 'nan' is not a power of two from 16 to 256"},
       {"pvs --scene city1 --cell 1,1 --res 100", "--res: '100' is not a power of two from 16 to 256"},
       {"check-conservative --scene city1 --res 512", "--res: '512' is not a power of two from 16 to 256"},

@@ -204,6 +204,12 @@ TEST(Cli, EpsilonRejectsBadPositions) {
   ExpectBadOption("epsilon --scene city1 --at 1,2 --size 3", "--at: '1,2': expected X,Y,Z (three finite numbers, metres)");
   ExpectBadOption("epsilon --scene city1 --at nan,0,2 --size 3", "--at: 'nan,0,2': expected X,Y,Z (three finite");
   ExpectRunTimeError("epsilon --scene city1 --at 5000,0,2 --size 3", "outside the scene");
+  ExpectBadOption("epsilon --scene city1 --at 0x10,5,2 --size 4", "--at: '0x10,5,2': expected X,Y,Z");
+  // z: the box must reach the ground (what lies below it is cut off) and stay below 1 km over
+  // the tallest building.
+  ExpectRunTimeError("epsilon --scene city1 --at 10,5,1e300 --size 4", "z from -2.0 (the box reaching the ground)");
+  ExpectRunTimeError("epsilon --scene city1 --at 10,5,-3 --size 4", "outside the scene");
+  EXPECT_EQ(Vistream("epsilon --scene city1 --at 10,5,-1.5 --size 4").exit_code, 0);
   ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size -1", "--size: '-1' is not a number from 0 to 100000");
   ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest", "--opt: fastest not in");
 }
@@ -400,6 +406,8 @@ TEST(Cli, ImportOsmWritesASceneAndSummarises) {
                   "--bbox: bbox '7,43,7.5': needs four numbers");
   ExpectRunTimeError(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm/empty.osm -o " + out,
                      "empty.osm: the file is empty");
+  ExpectRunTimeError(std::string("scene import-osm ") + VISTREAM_SOURCE_DIR + "/tests/osm -o " + out,
+                     "tests/osm: is a directory, not an OpenStreetMap file");
 }
 
 // The plausible height limit is an option: a 1,500 m tower is bad data by default (counted,

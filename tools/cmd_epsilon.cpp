@@ -1,12 +1,17 @@
 // vistream epsilon: the ε-superset of one small neighbourhood (Cohen-Or & Zadicario 1998).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
 
+#include "cli/number_options.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
 #include "tools/top_view_map.h"
@@ -25,12 +30,12 @@ struct EpsilonArgs {
 
 int Epsilon(const EpsilonArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
-  double x = 0, y = 0, z = 0;
-  char tail = 0;
-  if (std::sscanf(a.at.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) ||
-      !std::isfinite(y) || !std::isfinite(z)) {
-    return BadOption("epsilon", "--at", "'" + a.at + "': expected X,Y,Z (three finite numbers, metres)");
-  }
+  const std::vector<std::string> parts = absl::StrSplit(a.at, ',');
+  double xyz[3] = {0, 0, 0};
+  bool ok = parts.size() == 3;
+  for (size_t k = 0; ok && k < 3; ++k) ok = cli::internal::ParseFinite(parts[k], &xyz[k]);
+  if (!ok) return BadOption("epsilon", "--at", "'" + a.at + "': expected X,Y,Z (three finite numbers, metres)");
+  const double x = xyz[0], y = xyz[1], z = xyz[2];
   absl::StatusOr<visibility::EpsilonOptions> options = visibility::EpsilonOptions::FromName(a.opt);
   if (!options.ok()) return BadOption("epsilon", "--opt", std::string(options.status().message()));
 
@@ -38,12 +43,16 @@ int Epsilon(const EpsilonArgs& a) {
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
   if (!scene.ok()) return Fail(scene.status());
   const scenes::Aabb& bounds = scene->bounds;
-  if (x < bounds.min.x || x > bounds.max.x || y < bounds.min.y || y > bounds.max.y || z < 0.0) {
-    return Fail(absl::OutOfRangeError(absl::StrFormat(
-        "--at %s: outside the scene (x %.1f to %.1f, y %.1f to %.1f, z from 0; scene-local metres)", a.at,
-        bounds.min.x, bounds.max.x, bounds.min.y, bounds.max.y)));
-  }
+  // The box must reach the ground or above it (what lies below is cut off: viewers stand on the
+  // ground), and stay within a kilometre above the tallest building.
   const double h = 0.5 * a.size;
+  const double top = std::max(bounds.max.z, 0.0) + 1000.0;
+  if (x < bounds.min.x || x > bounds.max.x || y < bounds.min.y || y > bounds.max.y || z + h < 0.0 || z > top) {
+    return Fail(absl::OutOfRangeError(absl::StrFormat(
+        "--at %s: outside the scene (x %.1f to %.1f, y %.1f to %.1f, z from %.1f (the box reaching the "
+        "ground) to %.1f; scene-local metres)",
+        a.at, bounds.min.x, bounds.max.x, bounds.min.y, bounds.max.y, -h, top)));
+  }
   const scenes::Aabb box{glm::dvec3(x - h, y - h, z - h), glm::dvec3(x + h, y + h, z + h)};
 
   auto t0 = std::chrono::steady_clock::now();

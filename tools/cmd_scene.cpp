@@ -96,6 +96,12 @@ int ImportOsm(const ImportArgs& a) {
   if (!scene.ok()) return Fail(scene.status());
   const auto save_start = std::chrono::steady_clock::now();
   if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
+  if (ToolRun().Cancelled()) {
+    // ^C while saving: what was asked for was not finished, so nothing is left behind.
+    std::error_code ec;
+    std::filesystem::remove(a.output, ec);
+    return Fail(absl::CancelledError("OSM import cancelled (while saving)"));
+  }
   const double save_s = SecondsSince(save_start);
   if (a.json) {
     nlohmann::json skipped = nlohmann::json::object();
