@@ -157,7 +157,7 @@ int Check(const CheckArgs& a) {
   std::vector<std::string> unchecked;
   if (pvs_checked == 0) unchecked.push_back("no sampled PVS entry was checked (sampling saw nothing from the cells)");
   if (drs_stats.occluded == 0) {
-    unchecked.push_back("the dual ray space hid nothing from the checked cells (no occluders?), so no false occlusion could show");
+    unchecked.push_back("the dual ray space hid nothing from the checked cells (no occluders, or nothing behind them), so no false occlusion could show");
   }
   if (a.neighbourhoods > 0 && eps_checked == 0) {
     unchecked.push_back(neighbourhoods == 0 ? "no free street-level neighbourhood was found for the epsilon-superset"
