@@ -228,7 +228,7 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
     }
     std::printf("\n");
   };
-  auto fmt = [](double v) { return absl::StrFormat(v < 100 ? "%.2f" : "%.0f", v); };
+  auto fmt = [](double v) { return v < 100 ? absl::StrFormat("%.2f", v) : absl::StrFormat("%.0f", v); };
   row2(
       "total time, mean",
       [&](const Column& c) {
