@@ -57,7 +57,7 @@ class CityPlan {
     for (int j = 0; j < ny_; ++j) {
       for (int i = 0; i < nx_; ++i) {
         District d;
-        d.seed = -half_ + cell_ * glm::dvec2(i + rng.Uniform(0.15, 0.85), j + rng.Uniform(0.15, 0.85));
+        d.seed = -half_ + cell_ * (glm::dvec2(i, j) + rng.UniformPoint(0.15, 0.85, 0.15, 0.85));
         const double theta = rng.Uniform(0.0, kPi / 2);
         d.u = glm::dvec2(std::cos(theta), std::sin(theta));
         d.v = glm::dvec2(-d.u.y, d.u.x);
@@ -76,7 +76,7 @@ class CityPlan {
     const int avenues = std::max(2, static_cast<int>(std::lround(16.0 * std::sqrt(area_ratio))));
     for (int k = 0; k < avenues; ++k) {
       Avenue av;
-      const glm::dvec2 mid(rng.Uniform(-0.8, 0.8) * half_.x, rng.Uniform(-0.8, 0.8) * half_.y);
+      const glm::dvec2 mid = rng.UniformPoint(-0.8, 0.8, -0.8, 0.8) * half_;
       const double theta = rng.Uniform(0.0, kPi);
       av.dir = glm::dvec2(std::cos(theta), std::sin(theta));
       av.length = rng.Uniform(0.25, 0.85) * span;
@@ -88,7 +88,7 @@ class CityPlan {
     // A park is a cluster of overlapping discs: an irregular blob, not a circle.
     const int parks = static_cast<int>(14.0 * area_ratio + rng.Uniform());
     for (int k = 0; k < parks; ++k) {
-      const glm::dvec2 centre(rng.Uniform(-0.9, 0.9) * half_.x, rng.Uniform(-0.9, 0.9) * half_.y);
+      const glm::dvec2 centre = rng.UniformPoint(-0.9, 0.9, -0.9, 0.9) * half_;
       const double size = rng.Uniform(250.0, 700.0);
       const int lobes = 2 + static_cast<int>(rng.Below(3));
       for (int l = 0; l < lobes; ++l) {
@@ -98,7 +98,7 @@ class CityPlan {
     }
     const int squares = static_cast<int>(320.0 * area_ratio + rng.Uniform());
     for (int k = 0; k < squares; ++k) {
-      squares_.push_back({glm::dvec2(rng.Uniform(-1.0, 1.0) * half_.x, rng.Uniform(-1.0, 1.0) * half_.y),
+      squares_.push_back({rng.UniformPoint(-1.0, 1.0, -1.0, 1.0) * half_,
                           rng.Uniform(30.0, 85.0)});
     }
     // The river: a sine-sum centreline across the whole width.
@@ -246,11 +246,11 @@ std::vector<Landmark> PlaceLandmarks(const CityPlan& plan, Rng& rng, Scene* scen
     const double pick = rng.Uniform();
     glm::dvec2 c;
     if (pick < 0.55) {
-      c = plan.cluster(0) + glm::dvec2(rng.Uniform(-900, 900), rng.Uniform(-600, 600));
+      c = plan.cluster(0) + rng.UniformPoint(-900, 900, -600, 600);
     } else if (pick < 0.85) {
-      c = plan.cluster(1) + glm::dvec2(rng.Uniform(-600, 600), rng.Uniform(-500, 500));
+      c = plan.cluster(1) + rng.UniformPoint(-600, 600, -500, 500);
     } else {
-      c = glm::dvec2(rng.Uniform(-0.9, 0.9) * plan.half().x, rng.Uniform(-0.9, 0.9) * plan.half().y);
+      c = rng.UniformPoint(-0.9, 0.9, -0.9, 0.9) * plan.half();
     }
     const double side = rng.Uniform(28.0, 60.0);
     const double theta = rng.Uniform(0.0, kPi / 2);

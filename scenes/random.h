@@ -5,6 +5,8 @@
 
 #include <cstdint>
 
+#include <glm/vec2.hpp>
+
 namespace vistream::scenes {
 
 class Rng {
@@ -26,6 +28,14 @@ class Rng {
   // Uniform in [0, 1), 53 random bits.
   double Uniform() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }
   double Uniform(double lo, double hi) { return lo + (hi - lo) * Uniform(); }
+  // A point uniform in [x0, x1] x [y0, y1], y drawn first: two draws in one expression (a
+  // constructor's arguments) come in an order the compiler chooses, and GCC drew y first, so
+  // this keeps the generated cities and makes them the same with every compiler.
+  glm::dvec2 UniformPoint(double x0, double x1, double y0, double y1) {
+    const double y = Uniform(y0, y1);
+    const double x = Uniform(x0, x1);
+    return {x, y};
+  }
   // Uniform integer in [0, n), n > 0, without modulo bias (rejection below 2^64 mod n).
   uint64_t Below(uint64_t n) {
     const uint64_t threshold = (0 - n) % n;

@@ -61,7 +61,7 @@ Scene GenerateTestCity(bool dense, uint64_t seed) {
           const double slack_y = 0.5 * (1.0 - f) * (base[3].y - base[0].y);
           base = ScaleAboutCentroid(
               base, f,
-              glm::dvec2(rng.Uniform(-0.8, 0.8) * slack_x, rng.Uniform(-0.8, 0.8) * slack_y));
+              rng.UniformPoint(-0.8, 0.8, -0.8, 0.8) * glm::dvec2(slack_x, slack_y));
         }
       }
       AddBuilding(&scene, absl::StrCat(scene.name, "-", lot), prisms);
