@@ -413,9 +413,38 @@ absl::StatusOr<Scene> Convert(bool ok, const std::string& err, const std::string
 
 }  // namespace
 
+// tinygltf trusts a .glb's declared lengths (it copies that many bytes): check them first
+// (glTF 2.0, 4.4: a 12-byte header whose length is the file's, then chunks of an 8-byte header
+// and their bytes, each within the file).
+static absl::Status CheckGlbLayout(std::string_view bytes, const std::string& name) {
+  auto u32 = [&](size_t at) {
+    uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return v;
+  };
+  if (bytes.size() < 12) return absl::InvalidArgumentError(absl::StrCat(name, ": a .glb shorter than its header"));
+  if (u32(8) != bytes.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": the .glb header says ", u32(8), " bytes, the file has ", bytes.size()));
+  }
+  for (size_t at = 12; at < bytes.size();) {
+    if (bytes.size() - at < 8) return absl::InvalidArgumentError(absl::StrCat(name, ": a .glb chunk header is cut at byte ", at));
+    const uint64_t length = u32(at);
+    if (length > bytes.size() - at - 8) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(name, ": the .glb chunk at byte ", at, " says ", length, " bytes, past the end of the file"));
+    }
+    at += 8 + length;
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<Scene> LoadGltfFromMemory(std::string_view bytes, bool binary, const std::string& name,
                                          const std::string& base_dir,
                                          std::vector<std::string>* warnings) {
+  if (binary) {
+    if (absl::Status st = CheckGlbLayout(bytes, name); !st.ok()) return st;
+  }
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&SkipImages, nullptr);
   FileAccess access;

@@ -344,6 +344,21 @@ TEST(GltfIo, EveryTruncationOfAGlbIsRejected) {
     ASSERT_FALSE(scene.ok()) << "accepted a .glb cut to " << n << " of " << bytes.size() << " bytes";
     ASSERT_NE(scene.status().message().find("cut.glb"), std::string::npos) << scene.status();
   }
+  // A file cut short but whose header still claims the whole length (tinygltf copies what the
+  // header says): named before anything is read.
+  std::string claims = bytes.substr(0, bytes.size() - 5);
+  const absl::StatusOr<Scene> lying = LoadGltfFromMemory(claims, true, "claims.glb");
+  ASSERT_FALSE(lying.ok());
+  EXPECT_NE(lying.status().message().find("the .glb header says " + std::to_string(bytes.size()) + " bytes, the file has " +
+                                          std::to_string(bytes.size() - 5)),
+            std::string::npos)
+      << lying.status();
+  // A chunk claiming more than the file holds.
+  std::string chunk = bytes;
+  chunk[12] = static_cast<char>(0xff), chunk[13] = static_cast<char>(0xff);
+  const absl::StatusOr<Scene> past = LoadGltfFromMemory(chunk, true, "chunk.glb");
+  ASSERT_FALSE(past.ok());
+  EXPECT_NE(past.status().message().find("chunk at byte 12"), std::string::npos) << past.status();
   // And from a file on disk, with the .glb extension but no magic.
   const std::string cut = TempDir() + "/truncated.glb";
   WriteFile(cut, bytes.substr(0, 3));
