@@ -35,17 +35,7 @@ Scene Import(const std::string& path, OsmImportSummary* sum, const OsmImportOpti
 
 using testing_osm::Closed;
 
-// The area of the triangles facing up at height z.
-double RoofArea(const Mesh& m, float z) {
-  double area = 0.0;
-  for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
-    const glm::dvec3 a(m.positions[m.indices[t]]), b(m.positions[m.indices[t + 1]]),
-        c(m.positions[m.indices[t + 2]]);
-    if (a.z != z || b.z != z || c.z != z) continue;
-    area += 0.5 * glm::cross(b - a, c - a).z;
-  }
-  return area;
-}
+using testing_osm::RoofArea;
 
 const Object* ByName(const Scene& s, const std::string& name) {
   for (const Object& o : s.objects) {
