@@ -81,6 +81,8 @@ int main(int argc, char** argv) {
                "load the full scene locally and count pixels where the drawn set differs from it (tests)");
   app.add_flag("--json", json, "print the summary as JSON");
   app.add_option("--frame-log", o.frame_log, "write one CSV line per frame to this file");
+  app.add_option("--cell-log", o.cell_log,
+                 "write one CSV line per viewcell entered (cell_id,i,j,entered_s,complete_s,margin_s,stalled)");
   app.add_option("--connect-timeout", o.connect_timeout_s, "seconds to wait for the server to answer")
       ->check(FiniteRange(0.1, 3600))
       ->capture_default_str();

@@ -77,6 +77,8 @@ class ObjectStore {
   const std::unordered_map<uint32_t, StoredObject>& objects() const { return objects_; }
   // The latest PVS list of `cell`, if the server sent one.
   const std::vector<uint32_t>* Pvs(uint32_t cell) const;
+  // Every PVS list held, by cell.
+  const std::map<uint32_t, std::vector<uint32_t>>& pvs_lists() const { return pvs_; }
   // Whether `cell`'s PVS list and every object on it are held.
   bool CellComplete(uint32_t cell) const;
   const std::optional<EpsilonMaskSet>& mask() const { return mask_; }

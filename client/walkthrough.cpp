@@ -68,6 +68,12 @@ class Loop {
   }
   bool Cancelled() const { return opt_.cancel != nullptr && opt_.cancel->load(); }
   void SendPose(const glm::dvec3& velocity, double since_start);
+  // Which held cells are complete at `t` (walk clock), and the eye's cell.
+  void ObserveCells(double t, std::optional<uint32_t> cell, bool stalled) {
+    if (connection_ == nullptr || !store_->has_scene_info()) return;
+    margins_.Observe(t, store_->pvs_lists(), [this](uint32_t id) { return renderer_->Uploaded(id); }, cell,
+                     store_->grid().nx, stalled);
+  }
 
   const WalkthroughOptions& opt_;
   WalkthroughSummary* sum_;
@@ -88,6 +94,8 @@ class Loop {
   Camera camera_;
   bool have_start_ = false;  // camera_ holds a start pose
   std::FILE* frame_log_ = nullptr;
+  std::FILE* cell_log_ = nullptr;
+  CellMargins margins_;
   double session_start_ = 0.0;
   uint64_t masks_seen_ = 0;
 };
@@ -196,6 +204,10 @@ absl::Status Loop::Prepare() {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
     if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
     std::fprintf(frame_log_, "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked\n");
+  }
+  if (!opt_.cell_log.empty()) {
+    cell_log_ = std::fopen(opt_.cell_log.c_str(), "w");
+    if (cell_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.cell_log, ": cannot open for writing"));
   }
   if (!opt_.screenshots_dir.empty()) {
     std::error_code ec;
@@ -318,6 +330,7 @@ absl::Status Loop::Startup() {
     if (have_start_) SendPose(glm::dvec3(0.0), Now() - session_start_);
     absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
     if (!p.ok()) return p.status();
+    ObserveCells(Now() - session_start_, std::nullopt, false);  // the walk's clock: shifted at its start
     if (p->complete) break;
     if (const uint64_t n = connection_ != nullptr ? connection_->stats().objects_received : 0; n != objects_seen) {
       objects_seen = n;
@@ -403,6 +416,7 @@ absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn) {
 
 absl::Status Loop::Walkthrough() {
   const double t0 = Now();
+  margins_.Shift(session_start_ - t0);
   double paused = 0.0, next_shot = 0.0, next_check = 0.0, prev_end = Now(), last_title = 0.0;
   int next_progress = 1;
   std::vector<double> frame_ms;
@@ -458,6 +472,7 @@ absl::Status Loop::Walkthrough() {
     }
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
+    ObserveCells(t, p->cell, !p->complete);
     std::vector<uint32_t> everything;
     const std::vector<uint32_t>* set = opt_.draw_everything ? &everything_ : p->pvs;
     if (!p->complete) {
@@ -553,6 +568,7 @@ absl::Status Loop::Walkthrough() {
   }
   const double walked = Now() - t0 - paused;
   sum_->walk_s = walked;
+  margins_.Finish(walked);
   sum_->fps = walked > 0.0 ? static_cast<double>(sum_->frames) / walked : 0.0;
   sum_->frame_ms_p50 = Percentile(frame_ms, 0.5);
   sum_->frame_ms_p99 = Percentile(frame_ms, 0.99);
@@ -590,6 +606,15 @@ absl::Status Loop::Run() {
     sum_->evicted_by_budget = store_->evicted_by_budget();
   }
   sum_->masks_received = masks_seen_;
+  sum_->margins = margins_.Summary();
+  sum_->cells = margins_.entries();
+  if (cell_log_ != nullptr) {
+    const std::string csv = margins_.Csv();
+    const bool failed = std::fwrite(csv.data(), 1, csv.size(), cell_log_) != csv.size();
+    if ((std::fclose(cell_log_) != 0 || failed) && s.ok()) {
+      s = absl::DataLossError(absl::StrCat(opt_.cell_log, ": writing the cell log failed"));
+    }
+  }
   if (frame_log_ != nullptr) {
     const bool failed = std::ferror(frame_log_) != 0;
     if ((std::fclose(frame_log_) != 0 || failed) && s.ok()) {
@@ -654,6 +679,13 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["startup_s"] = s.startup_s;
   j["walk_s"] = s.walk_s;
   j["distance_m"] = s.distance_m;
+  j["cells_entered"] = s.margins.cells_entered;
+  j["stalled_cells"] = s.margins.stalled_cells;
+  // null when no cell was entered after the start cell: no margin was measured.
+  j["min_margin_s"] = s.margins.min_margin_s.has_value() ? nlohmann::ordered_json(*s.margins.min_margin_s)
+                                                         : nlohmann::ordered_json(nullptr);
+  j["mean_margin_s"] = s.margins.mean_margin_s.has_value() ? nlohmann::ordered_json(*s.margins.mean_margin_s)
+                                                           : nlohmann::ordered_json(nullptr);
   j["screenshots"] = s.screenshots;
   j["cancelled"] = s.cancelled;
   return j.dump(2);
@@ -667,6 +699,15 @@ std::string SummaryText(const WalkthroughSummary& s) {
       s.frame_ms_p50, s.frame_ms_p99, s.distance_m, s.cells_visited);
   absl::StrAppendFormat(&out, "  stalls: %d (%.2f s); first viewcell after %.1f s\n", s.stalls, s.stall_s,
                         s.startup_s);
+  if (s.margins.cells_entered > 0) {
+    absl::StrAppendFormat(&out,
+                          "  cells_entered: %d, stalled_cells: %d, min_margin_s: %.3f, mean_margin_s: %.3f (arrival "
+                          "margins after the start cell)\n",
+                          s.margins.cells_entered, s.margins.stalled_cells, *s.margins.min_margin_s,
+                          *s.margins.mean_margin_s);
+  } else {
+    out += "  cells_entered: 0 (no arrival margin measured after the start cell)\n";
+  }
   absl::StrAppendFormat(&out,
                         "  received %.1f MB (%d objects, %d twice, %d reconnects); held at most %.2f MiB%s\n",
                         s.bytes_received / 1e6, s.objects_received, s.duplicates, s.reconnects,

@@ -16,6 +16,7 @@
 #include <absl/status/statusor.h>
 #include <glm/vec3.hpp>
 
+#include "client/cell_margins.h"
 #include "scenes/scene.h"
 
 namespace vistream::client {
@@ -36,6 +37,7 @@ struct WalkthroughOptions {
   double every_s = 10.0;        // between screenshots and between --verify checks
   bool verify = false;          // compare drawn set and full scene in the object-id buffer
   std::string frame_log;        // a CSV line per frame
+  std::string cell_log;         // a CSV line per viewcell entered (client/cell_margins.h)
   std::string catalog_dir;      // empty: the built-in catalog
   std::optional<uint64_t> memory_budget_bytes;  // none: the catalog's client.memory_mb, else unlimited
   std::optional<uint64_t> triangle_budget;      // none: the catalog's client.triangle_budget
@@ -75,6 +77,10 @@ struct WalkthroughSummary {
   uint64_t pixel_error = 0, checked_frames = 0, checked_pixels = 0;
   uint64_t masks_received = 0, frames_masked = 0, cells_visited = 0;
   double startup_s = 0.0, walk_s = 0.0, distance_m = 0.0;
+  // Arrival margins (client/cell_margins.h), walk-clock seconds, over the viewcells entered
+  // after the start cell (the walk waits for that one).
+  MarginSummary margins;
+  std::vector<CellEntry> cells;  // every entry, the start cell's first
   std::vector<std::string> screenshots;
   bool cancelled = false;
 };

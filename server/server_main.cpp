@@ -19,7 +19,9 @@
 #include <absl/strings/str_format.h>
 
 #include "cli/number_options.h"
+#include "scenes/catalog.h"
 #include "server/event_log.h"
+#include "server/link_model.h"
 #include "server/served_scene.h"
 #include "server/service.h"
 
@@ -97,11 +99,48 @@ int main(int argc, char** argv) {
   app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
+  bool emulate_link = false;
+  std::string link_option, time_scale_option;
+  uint64_t link_seed = 1;
+  app.add_flag("--emulate-link", emulate_link,
+               "put each session's traffic through the link its scene's catalog entry declares "
+               "(simulation.link; none declared: an ideal link)");
+  app.add_option("--link", link_option,
+                 "BPS,LATENCY_MS: emulate this bandwidth (bits/s, k/M/G) and one-way latency instead of the "
+                 "declared ones (keeps the declared jitter and loss); implies --emulate-link");
+  app.add_option("--time-scale", time_scale_option,
+                 "K > 0: the emulated link runs K times faster (bandwidth x K, times / K), for walks replayed "
+                 "K times faster (default 1)");
+  app.add_option("--link-seed", link_seed, "seed of the emulated links' jitter and loss draws")
+      ->capture_default_str();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);
     return code == 0 ? 0 : 2;
+  }
+  double time_scale = 1.0;
+  if (!time_scale_option.empty()) {
+    if (!vistream::cli::internal::ParseFinite(time_scale_option, &time_scale) || !(time_scale > 0.0) ||
+        time_scale > 1e6) {
+      std::fprintf(stderr, "vistream-server: error: --time-scale: '%s' is not a number greater than 0 and at most "
+                           "1e6 (e.g. 20: the link runs 20 times faster)\n",
+                   time_scale_option.c_str());
+      return 2;
+    }
+  }
+  if (!link_option.empty()) {
+    // Checked now (bad options exit 2 before the scene loads); applied to the declared link below.
+    absl::StatusOr<vistream::scenes::LinkSpec> check = vistream::server::ParseLinkOption(link_option, std::nullopt);
+    if (!check.ok()) {
+      std::fprintf(stderr, "vistream-server: error: %s\n", std::string(check.status().message()).c_str());
+      return 2;
+    }
+    emulate_link = true;
+  }
+  if (!emulate_link && (!time_scale_option.empty() || app.count("--link-seed") > 0)) {
+    std::fprintf(stderr, "vistream-server: error: --time-scale and --link-seed need --emulate-link or --link\n");
+    return 2;
   }
   scene_options.cache_bytes = static_cast<size_t>(cache_mb * (1 << 20));
 
@@ -148,15 +187,39 @@ int main(int argc, char** argv) {
                          {"cells", static_cast<uint64_t>(s.grid().CellCount())},
                          {"pvs_source", s.pvs_source()},
                          {"load_s", s.load_seconds()}});
+  std::string link_line;
+  if (emulate_link) {
+    // The link the scene's catalog entry declares (a scene file without an entry: none).
+    std::optional<vistream::scenes::LinkSpec> declared;
+    std::string source = "the scene declares no link";
+    if (absl::StatusOr<vistream::scenes::CatalogEntry> entry =
+            vistream::scenes::FindCatalogEntry(scene_options.scene, scene_options.catalog_dir);
+        entry.ok() && entry->simulation.link.has_value()) {
+      declared = entry->simulation.link;
+      source = "declared by " + entry->name;
+    }
+    if (!link_option.empty()) {
+      declared = *vistream::server::ParseLinkOption(link_option, declared);
+      source = "--link";
+    }
+    const vistream::server::LinkParams unscaled = vistream::server::LinkParamsFrom(declared, 1.0);
+    server_options.link = vistream::server::LinkParamsFrom(declared, time_scale);
+    server_options.link_seed = link_seed;
+    link_line = absl::StrFormat("; emulated link %s (%s), time scale %g", unscaled.Describe(), source, time_scale);
+    log.Write(0, "link", {{"link", unscaled.Describe()},
+                          {"source", source},
+                          {"time_scale", time_scale},
+                          {"seed", link_seed}});
+  }
   absl::StatusOr<std::unique_ptr<vistream::server::WalkthroughServer>> server =
       vistream::server::WalkthroughServer::Start(&s, server_options, &log);
   if (!server.ok()) {
     std::fprintf(stderr, "vistream-server: error: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
-  std::printf("vistream-server: ready on %s: scene %s, %zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s\n",
+  std::printf("vistream-server: ready on %s: scene %s, %zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s%s\n",
               (*server)->address().c_str(), s.scene().name.c_str(), s.grid().CellCount(), s.grid().cell_size(),
-              s.grid().nx(), s.grid().ny(), s.scene().objects.size(), s.pvs_source().c_str());
+              s.grid().nx(), s.grid().ny(), s.scene().objects.size(), s.pvs_source().c_str(), link_line.c_str());
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}});
 

@@ -1,8 +1,12 @@
 #include "server/service.h"
 
 #include <chrono>
+#include <condition_variable>
 #include <cstdlib>
+#include <deque>
+#include <queue>
 #include <thread>
+#include <vector>
 
 #include <absl/strings/str_cat.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
@@ -26,8 +30,10 @@ class SessionReactor;
 
 }  // namespace
 
-// Lets worker threads wake a session's reactor, and outlives it: the reactor detaches itself
-// in OnDone, after which a wake does nothing.
+// Lets worker threads (and the link timer) wake a session's reactor, and outlives it: the
+// reactor detaches itself in OnDone, after which a wake does nothing. The mutex is recursive:
+// with link emulation a wake may hand a client message to the session, whose handler must be
+// free to wake the reactor again.
 class SessionLink {
  public:
   void Attach(SessionReactor* r) {
@@ -42,8 +48,64 @@ class SessionLink {
   void End(const grpc::Status& status);
 
  private:
-  std::mutex mu_;
+  std::recursive_mutex mu_;
   SessionReactor* reactor_ = nullptr;
+};
+
+// One thread for the whole server that wakes sessions whose emulated link has something due
+// (a message arriving, the link free again). Entries hold the link weakly: a session that
+// ended is skipped.
+class LinkTimer {
+ public:
+  LinkTimer() : thread_([this] { Run(); }) {}
+  ~LinkTimer() {
+    {
+      std::lock_guard lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  void At(double at_s, std::weak_ptr<SessionLink> link) {
+    {
+      std::lock_guard lock(mu_);
+      due_.push(Due{at_s, std::move(link)});
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  struct Due {
+    double at_s;
+    std::weak_ptr<SessionLink> link;
+    bool operator>(const Due& o) const { return at_s > o.at_s; }
+  };
+  void Run() {
+    std::unique_lock lock(mu_);
+    while (!stop_) {
+      if (due_.empty()) {
+        cv_.wait(lock);
+        continue;
+      }
+      const double at = due_.top().at_s;
+      if (at > SteadySeconds()) {
+        cv_.wait_until(lock, std::chrono::steady_clock::time_point(std::chrono::duration_cast<
+                                 std::chrono::steady_clock::duration>(std::chrono::duration<double>(at))));
+        continue;
+      }
+      std::weak_ptr<SessionLink> weak = due_.top().link;
+      due_.pop();
+      lock.unlock();
+      if (std::shared_ptr<SessionLink> link = weak.lock(); link != nullptr) link->Pump();
+      lock.lock();
+    }
+  }
+
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::priority_queue<Due, std::vector<Due>, std::greater<Due>> due_;
+  bool stop_ = false;
+  std::thread thread_;  // last: starts after the members above exist
 };
 
 namespace {
@@ -52,6 +114,15 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
  public:
   SessionReactor(WalkthroughService* service, std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link)
       : service_(service), session_(std::move(session)), link_(std::move(link)) {
+    if (const std::optional<LinkParams>& p = service_->options().link; p.has_value()) {
+      // Two independent streams per session, reproducible from the server's seed.
+      const uint64_t seed = service_->options().link_seed * 0x9E3779B97F4A7C15ull + 2 * session_->id();
+      down_.emplace(*p, seed);
+      LinkParams up;
+      up.latency_s = p->latency_s;
+      up.jitter_s = p->jitter_s;
+      up_.emplace(up, seed + 1);
+    }
     link_->Attach(this);
     StartRead(&in_);
   }
@@ -71,6 +142,25 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
     if (!message.ParseFromString(bytes)) {
       EndWith(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                            absl::StrCat("message ", reads_, " (", bytes.size(), " bytes) is not a ClientMessage")));
+      return;
+    }
+    if (up_.has_value()) {
+      // Emulated uplink: the session sees the message at its modelled arrival, in order.
+      {
+        std::lock_guard lock(mu_);
+        const double now = SteadySeconds();
+        const LinkModel::Delivery d = up_->Send(now, bytes.size());
+        ++figures_.uplink_messages;
+        figures_.uplink_delay_sum_s += d.arrival_s - now;
+        upward_.push_back(Upward{d.arrival_s, std::move(message)});
+        // A client that floods the link waits for it, as TCP's window would make it.
+        if (upward_.size() < kMaxUpward) {
+          StartRead(&in_);
+        } else {
+          read_paused_ = true;
+        }
+      }
+      Pump();
       return;
     }
     const absl::Status st = session_->OnMessage(message, SteadySeconds());
@@ -99,12 +189,63 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
   void OnDone() override {
     link_->Detach();
     session_->End();
-    service_->Remove(session_->id(), status_);
+    if (down_.has_value()) {
+      figures_.wire_bytes = down_->wire_bytes();
+      figures_.lost_segments = down_->lost_segments();
+    }
+    service_->Remove(session_->id(), status_, down_.has_value() ? &figures_ : nullptr);
     delete this;
   }
 
-  // Starts the next write if none is in flight; finishes the call when asked to and idle.
+  // Hands due client messages to the session (emulation), starts the next write if none is in
+  // flight, and finishes the call when asked to and idle.
   void Pump() {
+    if (up_.has_value()) DeliverUpward();
+    PumpWrites();
+  }
+
+  void EndWith(const grpc::Status& status) {
+    {
+      std::lock_guard lock(mu_);
+      if (finish_requested_) return;
+      finish_requested_ = true;
+      status_ = status;
+    }
+    PumpWrites();
+  }
+
+ private:
+  static constexpr size_t kMaxUpward = 64;  // client messages in the emulated uplink at most
+
+  void DeliverUpward() {
+    std::lock_guard order(deliver_mu_);  // one deliverer at a time: messages stay in order
+    for (;;) {
+      std::optional<v1::ClientMessage> m;
+      {
+        std::lock_guard lock(mu_);
+        if (finish_requested_) return;
+        if (upward_.empty() || upward_.front().arrival_s > SteadySeconds()) break;
+        m = std::move(upward_.front().message);
+        upward_.pop_front();
+      }
+      const absl::Status st = session_->OnMessage(*m, SteadySeconds());
+      if (!st.ok()) {
+        std::lock_guard lock(mu_);
+        if (!finish_requested_) {
+          finish_requested_ = true;
+          status_ = ToGrpc(st);
+        }
+        return;
+      }
+    }
+    std::lock_guard lock(mu_);
+    if (read_paused_ && !finish_requested_ && upward_.size() < kMaxUpward) {
+      read_paused_ = false;
+      StartRead(&in_);
+    }
+  }
+
+  void PumpWrites() {
     std::lock_guard lock(mu_);
     if (finished_ || writing_) return;
     if (!finish_requested_) {
@@ -118,25 +259,66 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
       Finish(status_);
       return;
     }
-    std::optional<v1::ServerMessage> next = session_->NextMessage();
-    if (!next.has_value()) return;
-    grpc::Slice slice(next->SerializeAsString());
+    if (!down_.has_value()) {
+      std::optional<v1::ServerMessage> next = session_->NextMessage();
+      if (!next.has_value()) return;
+      Write(next->SerializeAsString());
+      return;
+    }
+    // Emulated downlink. The link takes the session's next message when it is free (the
+    // previous message's sent_s); one message taken early waits for it, so that it goes on the
+    // link the moment the link is free whatever the timer's delay. What waits in the link is
+    // bounded: it holds what it transmitted in the last latency (plus jitter), at most
+    // max_queued_bytes.
+    const double now = SteadySeconds();
+    for (;;) {
+      if (!next_.has_value()) {
+        std::optional<v1::ServerMessage> m = session_->NextMessage();
+        if (!m.has_value()) break;
+        next_ = Taken{now, m->SerializeAsString()};
+      }
+      if (down_->free_s() > now || in_link_bytes_ >= service_->options().limits.max_queued_bytes) break;
+      const double send_s = std::max(next_->taken_s, down_->free_s());
+      const LinkModel::Delivery d = down_->Send(send_s, next_->bytes.size());
+      ++figures_.messages;
+      figures_.jitter_sum_s += d.jitter_s;
+      figures_.jitter_max_s = std::max(figures_.jitter_max_s, d.jitter_s);
+      figures_.delay_sum_s += d.arrival_s - next_->taken_s;
+      in_link_bytes_ += next_->bytes.size();
+      in_link_.push_back(InLink{d.arrival_s, std::move(next_->bytes)});
+      next_.reset();
+    }
+    if (!in_link_.empty() && in_link_.front().arrival_s <= now) {
+      std::string bytes = std::move(in_link_.front().bytes);
+      in_link_bytes_ -= bytes.size();
+      in_link_.pop_front();
+      Write(std::move(bytes));
+      // OnWriteDone pumps again; only the link's own times need the timer.
+      if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
+      if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
+      return;
+    }
+    if (!in_link_.empty()) WakeAt(in_link_.front().arrival_s);
+    if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
+    if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
+  }
+
+  void Write(std::string bytes) {  // mu_ held
+    grpc::Slice slice(std::move(bytes));
     out_ = grpc::ByteBuffer(&slice, 1);
     writing_ = true;
     StartWrite(&out_);
   }
 
-  void EndWith(const grpc::Status& status) {
-    {
-      std::lock_guard lock(mu_);
-      if (finish_requested_) return;
-      finish_requested_ = true;
-      status_ = status;
-    }
-    Pump();
+  // Asks the server's link timer to pump this session at `at_s`, unless a wake at or before
+  // it is pending already. mu_ held.
+  void WakeAt(double at_s) {
+    const double now = SteadySeconds();
+    if (wake_at_ > now && wake_at_ <= at_s) return;
+    wake_at_ = at_s;
+    service_->WakeAt(at_s, link_);
   }
 
- private:
   WalkthroughService* service_;
   std::shared_ptr<Session> session_;
   std::shared_ptr<SessionLink> link_;
@@ -147,6 +329,29 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
   bool finish_requested_ = false;
   bool finished_ = false;
   grpc::Status status_;
+
+  // Link emulation (ServerOptions::link); empty without it.
+  std::optional<LinkModel> down_, up_;
+  struct Taken {
+    double taken_s;
+    std::string bytes;
+  };
+  std::optional<Taken> next_;  // taken from the session, waiting for the link to be free
+  struct InLink {
+    double arrival_s;
+    std::string bytes;
+  };
+  std::deque<InLink> in_link_;  // on the modelled wire, in order
+  size_t in_link_bytes_ = 0;
+  struct Upward {
+    double arrival_s;
+    v1::ClientMessage message;
+  };
+  std::deque<Upward> upward_;  // client messages on the modelled uplink, in order
+  bool read_paused_ = false;
+  std::mutex deliver_mu_;
+  double wake_at_ = 0.0;  // the latest wake asked of the timer
+  LinkFigures figures_;
 };
 
 // Ends a session that may not start (too many, draining) with `status`.
@@ -169,7 +374,15 @@ void SessionLink::End(const grpc::Status& status) {
 }
 
 WalkthroughService::WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log)
-    : scene_(scene), options_(options), log_(log), start_s_(SteadySeconds()) {}
+    : scene_(scene), options_(options), log_(log), start_s_(SteadySeconds()) {
+  if (options_.link.has_value()) timer_ = std::make_unique<LinkTimer>();
+}
+
+WalkthroughService::~WalkthroughService() = default;
+
+void WalkthroughService::WakeAt(double at_s, const std::shared_ptr<SessionLink>& link) {
+  if (timer_ != nullptr) timer_->At(at_s, link);
+}
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService::Session(
     grpc::CallbackServerContext* context) {
@@ -193,7 +406,7 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   return new SessionReactor(this, session, link);
 }
 
-void WalkthroughService::Remove(uint64_t id, const grpc::Status& status) {
+void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link) {
   v1::SessionStats stats;
   {
     std::lock_guard lock(mu_);
@@ -212,6 +425,19 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status) {
                  {"crossings", stats.crossings()},
                  {"objects_sent", stats.objects_sent()},
                  {"bytes_sent", stats.bytes_sent()}});
+    if (link != nullptr) {
+      const double n = std::max<double>(1.0, static_cast<double>(link->messages));
+      const double up = std::max<double>(1.0, static_cast<double>(link->uplink_messages));
+      log_->Write(id, "link",
+                  {{"messages", link->messages},
+                   {"wire_bytes", link->wire_bytes},
+                   {"lost_segments", link->lost_segments},
+                   {"mean_jitter_ms", 1e3 * link->jitter_sum_s / n},
+                   {"max_jitter_ms", 1e3 * link->jitter_max_s},
+                   {"mean_delay_ms", 1e3 * link->delay_sum_s / n},
+                   {"uplink_messages", link->uplink_messages},
+                   {"uplink_mean_delay_ms", 1e3 * link->uplink_delay_sum_s / up}});
+    }
   }
 }
 

@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <absl/status/statusor.h>
@@ -15,6 +16,7 @@
 
 #include "proto/walkthrough.grpc.pb.h"
 #include "server/event_log.h"
+#include "server/link_model.h"
 #include "server/served_scene.h"
 #include "server/session.h"
 
@@ -27,9 +29,27 @@ struct ServerOptions {
   // Client messages larger than this are refused (RESOURCE_EXHAUSTED); 0: 1 MiB plus room for
   // a Hello that lists every object of the scene.
   size_t max_receive_bytes = 0;
+  // Link emulation (vistream-server --emulate-link): every session's messages go through this
+  // link, already time-scaled (server/link_model.h), on the steady clock. Downlink: the whole
+  // model; uplink (poses, credit: small): its latency and jitter only. None: written at once.
+  std::optional<LinkParams> link;
+  uint64_t link_seed = 1;  // with the session id, seeds each session's two link models
+};
+
+// What one session's emulated link did (its session_end log line).
+struct LinkFigures {
+  uint64_t messages = 0;       // downlink messages
+  uint64_t wire_bytes = 0;     // their bytes on the modelled wire (server/link_model.h WireBytes)
+  uint64_t lost_segments = 0;
+  double jitter_sum_s = 0.0, jitter_max_s = 0.0;  // the jitter draws
+  double delay_sum_s = 0.0;    // taken from the session to arrival: waiting for the link, transmission,
+                               // latency, jitter, loss recovery
+  uint64_t uplink_messages = 0;
+  double uplink_delay_sum_s = 0.0;
 };
 
 class SessionLink;
+class LinkTimer;
 
 // Session is served raw (bytes in, bytes out) so that bytes that are no ClientMessage end the
 // session with INVALID_ARGUMENT naming them, rather than looking like a closed stream.
@@ -38,6 +58,7 @@ class WalkthroughService final
           vistream::v1::Walkthrough::WithCallbackMethod_GetStats<vistream::v1::Walkthrough::Service>> {
  public:
   WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log);
+  ~WalkthroughService() override;
 
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context, const vistream::v1::StatsRequest* request,
@@ -48,8 +69,11 @@ class WalkthroughService final
   vistream::v1::ServerStats Stats() const;
   size_t active_sessions() const;
 
-  // Called by a session's reactor when it is done.
-  void Remove(uint64_t id, const grpc::Status& status);
+  // Called by a session's reactor when it is done; `link` is null without emulation.
+  void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
+  const ServerOptions& options() const { return options_; }
+  // Calls `link`'s Pump at `at_s` (steady clock), unless the link is gone by then.
+  void WakeAt(double at_s, const std::shared_ptr<SessionLink>& link);
 
  private:
   ServedScene* scene_;
@@ -67,6 +91,7 @@ class WalkthroughService final
     std::string peer;
   };
   std::map<uint64_t, Entry> sessions_;
+  std::unique_ptr<LinkTimer> timer_;  // with link emulation: wakes sessions when their link is due
 };
 
 // A running server: the service on its port, with health and reflection.
