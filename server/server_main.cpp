@@ -120,7 +120,7 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
   double time_scale = 1.0;
-  if (!time_scale_option.empty()) {
+  if (app.count("--time-scale") > 0) {
     if (!vistream::cli::internal::ParseFinite(time_scale_option, &time_scale) || !(time_scale > 0.0) ||
         time_scale > 1e6) {
       std::fprintf(stderr, "vistream-server: error: --time-scale: '%s' is not a number greater than 0 and at most "
@@ -129,7 +129,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (!link_option.empty()) {
+  if (app.count("--link") > 0) {
     // Checked now (bad options exit 2 before the scene loads); applied to the declared link below.
     absl::StatusOr<vistream::scenes::LinkSpec> check = vistream::server::ParseLinkOption(link_option, std::nullopt);
     if (!check.ok()) {
@@ -138,7 +138,7 @@ int main(int argc, char** argv) {
     }
     emulate_link = true;
   }
-  if (!emulate_link && (!time_scale_option.empty() || app.count("--link-seed") > 0)) {
+  if (!emulate_link && (app.count("--time-scale") > 0 || app.count("--link-seed") > 0)) {
     std::fprintf(stderr, "vistream-server: error: --time-scale and --link-seed need --emulate-link or --link\n");
     return 2;
   }
@@ -198,7 +198,7 @@ int main(int argc, char** argv) {
       declared = entry->simulation.link;
       source = "declared by " + entry->name;
     }
-    if (!link_option.empty()) {
+    if (app.count("--link") > 0) {
       declared = *vistream::server::ParseLinkOption(link_option, declared);
       source = "--link";
     }

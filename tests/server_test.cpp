@@ -20,6 +20,8 @@
 
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
+#include "scenes/catalog.h"
+#include "server/link_model.h"
 #include "server/service.h"
 #include "visibility/pvs_file.h"
 #include "client/session_stream.h"
@@ -692,6 +694,125 @@ TEST(Server, AnEpsilonMaskNeverReachesPastTheCellWhosePvsItNarrows) {
   EXPECT_NEAR(m.box_max().x() - m.box_min().x(), 2.5, 1e-9);  // 2 m to the left of the eye, 0.5 to the edge
   EXPECT_NEAR(m.box_max().y() - m.box_min().y(), 2.5, 1e-9);
   EXPECT_TRUE(client->Finish().ok());
+}
+
+// ---- link emulation (ServerOptions::link, vistream-server --emulate-link) ----
+
+TEST(ServerLink, AnEmulatedLinkDelaysTheFirstCellByBothLatenciesAndItsTransmission) {
+  ServerOptions o;
+  LinkParams link;
+  link.bandwidth_bps = 4e6;
+  link.latency_s = 0.25;
+  o.link = link;
+  auto server = StartServer(o);
+  auto client = Connect(*server);
+  const auto start = std::chrono::steady_clock::now();
+  const double t0 = std::chrono::duration<double>(start.time_since_epoch()).count();
+  ASSERT_TRUE(client->SendPose(Centre(4, 4)));
+  const CellId cell = Cell(4, 4);
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(cell); }, kWait));
+  const SessionRecord r = client->Snapshot();
+  // The pose went up (0.25 s), the PVS was computed, and its list and geometry came down (0.25 s
+  // after each left, one after another at 4 Mbit/s): nothing of it can be here sooner.
+  uint64_t wire = 0;
+  for (uint32_t id : r.pvs.at(cell)) wire += WireBytes(r.geometry.at(id).ByteSizeLong());
+  const double took = r.CompletedAfter(cell, t0) - t0;
+  std::printf("first cell complete after %.3f s, %llu bytes on the wire\n", took, static_cast<unsigned long long>(wire));
+  EXPECT_GE(took, 0.5 + static_cast<double>(wire) * 8.0 / link.bandwidth_bps) << wire << " bytes on the wire";
+  // Still in the server's order: the current cell's list first.
+  ASSERT_FALSE(r.pvs_order.empty());
+  EXPECT_EQ(r.pvs_order.front(), cell);
+  EXPECT_EQ(r.duplicates, 0u);
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+// The session_end "link" line of a session walked through a server that emulates `link`.
+nlohmann::json LinkLineOfAWalk(const LinkParams& link) {
+  std::FILE* out = std::tmpfile();
+  EXPECT_NE(out, nullptr);
+  nlohmann::json found;
+  {
+    EventLog log(out, /*json=*/true);
+    ServerOptions o;
+    o.link = link;
+    o.listen = "127.0.0.1:0";
+    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
+    EXPECT_TRUE(server.ok()) << server.status();
+    if (!server.ok()) return found;
+    auto client = Connect(**server);
+    for (int i = 3; i <= 6; ++i) {
+      client->SendPose(Centre(i, 4), glm::dvec3(10.0, 0.0, 0.0));
+      EXPECT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(i, 4)); }, kWait));
+    }
+    EXPECT_TRUE(client->Finish().ok());
+    // The reactor logs when it is done, just after the client saw the end.
+    for (int k = 0; k < 200 && (*server)->service().active_sessions() > 0; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    (*server)->Shutdown(1.0);
+  }
+  std::rewind(out);
+  char line[4096];
+  while (std::fgets(line, sizeof(line), out) != nullptr) {
+    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (j.is_object() && j.value("event", "") == "link" && j.contains("session")) found = j;
+  }
+  std::fclose(out);
+  return found;
+}
+
+TEST(ServerLink, TheLogShowsJitterOnlyWhereTheSceneDeclaresIt) {
+  // Time scale 20: the declared links, twenty times faster, so that the walk takes little time.
+  absl::StatusOr<scenes::CatalogEntry> plain = scenes::FindCatalogEntry("default");
+  absl::StatusOr<scenes::CatalogEntry> jittery = scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(plain.ok() && jittery.ok());
+  ASSERT_FALSE(plain->simulation.link->jitter_ms.has_value()) << "default declares no jitter";
+  ASSERT_TRUE(jittery->simulation.link->jitter_ms.has_value()) << "city1 declares jitter";
+
+  const nlohmann::json none = LinkLineOfAWalk(LinkParamsFrom(plain->simulation.link, 20.0));
+  ASSERT_TRUE(none.is_object()) << "no link line in the log";
+  EXPECT_GT(none["messages"].get<double>(), 20);
+  EXPECT_GT(none["wire_bytes"].get<double>(), 1e5);
+  EXPECT_EQ(none["mean_jitter_ms"].get<double>(), 0.0);
+  EXPECT_EQ(none["max_jitter_ms"].get<double>(), 0.0);
+  EXPECT_EQ(none["lost_segments"].get<double>(), 0.0);  // default declares no loss either
+  EXPECT_GE(none["mean_delay_ms"].get<double>(), 40.0 / 20.0);
+
+  const LinkParams city1 = LinkParamsFrom(jittery->simulation.link, 20.0);
+  const nlohmann::json some = LinkLineOfAWalk(city1);
+  ASSERT_TRUE(some.is_object()) << "no link line in the log";
+  EXPECT_GT(some["mean_jitter_ms"].get<double>(), 0.0);
+  EXPECT_LE(some["max_jitter_ms"].get<double>(), 2e3 * city1.jitter_s + 1e-3);  // draws are in [0, 2 jitter]
+  EXPECT_GE(some["mean_delay_ms"].get<double>(), 1e3 * city1.latency_s);
+  EXPECT_GT(some["uplink_messages"].get<double>(), 4);
+}
+
+// The executable's link options: bad values exit 2 before the scene loads, naming the option.
+TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
+  auto run = [](const std::string& args) {
+    std::string out;
+    std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " --scene city1 --listen 127.0.0.1:0 " + args +
+                          " 2>&1").c_str(), "r");
+    if (p == nullptr) return std::make_pair(-1, out);
+    char buf[1024];
+    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
+    const int status = pclose(p);
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, out);
+  };
+  for (const char* k : {"0", "-2", "abc", "nan", "inf", "1e9", "''", "2x"}) {
+    const auto [rc, out] = run(std::string("--emulate-link --time-scale ") + k);
+    EXPECT_EQ(rc, 2) << k << ": " << out;
+    EXPECT_NE(out.find("vistream-server: error: --time-scale: "), std::string::npos) << k << ": " << out;
+  }
+  for (const char* l : {"1M", "1M,", ",200", "fast,200", "1M,-5", "1T,200", "0,200", "1M,nan", "1M,200,3"}) {
+    const auto [rc, out] = run(std::string("--link '") + l + "'");
+    EXPECT_EQ(rc, 2) << l << ": " << out;
+    EXPECT_NE(out.find(std::string("vistream-server: error: --link: '") + l + "'"), std::string::npos)
+        << l << ": " << out;
+  }
+  const auto [rc, out] = run("--time-scale 10");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("--time-scale and --link-seed need --emulate-link or --link"), std::string::npos) << out;
 }
 
 // The executable: started on a free port, stopped with SIGTERM while sessions are open.
