@@ -285,6 +285,7 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
       figures_.jitter_max_s = std::max(figures_.jitter_max_s, d.jitter_s);
       figures_.delay_sum_s += d.arrival_s - next_->taken_s;
       in_link_bytes_ += next_->bytes.size();
+      figures_.max_in_link_bytes = std::max<uint64_t>(figures_.max_in_link_bytes, in_link_bytes_);
       in_link_.push_back(InLink{d.arrival_s, std::move(next_->bytes)});
       next_.reset();
     }
@@ -436,7 +437,8 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
                    {"max_jitter_ms", 1e3 * link->jitter_max_s},
                    {"mean_delay_ms", 1e3 * link->delay_sum_s / n},
                    {"uplink_messages", link->uplink_messages},
-                   {"uplink_mean_delay_ms", 1e3 * link->uplink_delay_sum_s / up}});
+                   {"uplink_mean_delay_ms", 1e3 * link->uplink_delay_sum_s / up},
+                   {"max_in_link_bytes", link->max_in_link_bytes}});
     }
   }
 }

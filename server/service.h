@@ -46,6 +46,7 @@ struct LinkFigures {
                                // latency, jitter, loss recovery
   uint64_t uplink_messages = 0;
   double uplink_delay_sum_s = 0.0;
+  uint64_t max_in_link_bytes = 0;  // the most that waited in the link at once (bounded)
 };
 
 class SessionLink;

@@ -787,6 +787,64 @@ TEST(ServerLink, TheLogShowsJitterOnlyWhereTheSceneDeclaresIt) {
   EXPECT_GT(some["uplink_messages"].get<double>(), 4);
 }
 
+TEST(ServerLink, AClientThatStopsReadingCostsBoundedMemoryThroughTheLinkToo) {
+  std::FILE* out = std::tmpfile();
+  ASSERT_NE(out, nullptr);
+  uint64_t max_queued = 0;
+  ServerOptions o;
+  o.limits.max_queued_bytes = 1 << 20;
+  LinkParams link;
+  link.bandwidth_bps = 1e9;  // fast: the link would take all the session has
+  link.latency_s = 0.05;
+  o.link = link;
+  {
+    EventLog log(out, /*json=*/true);
+    o.listen = "127.0.0.1:0";
+    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
+    ASSERT_TRUE(server.ok()) << server.status();
+    auto stalled = Connect(**server, /*read=*/false);
+    v1::Walkthrough::Stub stats_stub(grpc::CreateChannel((*server)->address(), grpc::InsecureChannelCredentials()));
+    glm::dvec3 p = Centre(3, 3);
+    for (int k = 0; k < 50; ++k) {
+      p.x += 2.0;
+      if (p.x > Centre(25, 3).x) p.x = Centre(3, 3).x;
+      stalled->SendPose(p, {20, 0, 0});
+      grpc::ClientContext ctx;
+      v1::ServerStats s;
+      ASSERT_TRUE(stats_stub.GetStats(&ctx, v1::StatsRequest(), &s).ok());
+      for (const v1::SessionStats& ss : s.sessions()) max_queued = std::max(max_queued, ss.queued_bytes());
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    stalled->Cancel();
+    auto good = Connect(**server);
+    ASSERT_TRUE(good->SendPose(Centre(9, 9)));
+    EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(9, 9)); }, kWait));
+    EXPECT_TRUE(good->Finish().ok());
+    for (int k = 0; k < 200 && (*server)->service().active_sessions() > 0; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    (*server)->Shutdown(1.0);
+  }
+  EXPECT_LE(max_queued, o.limits.max_queued_bytes);
+  std::rewind(out);
+  char line[4096];
+  uint64_t max_in_link = 0;
+  int links = 0;
+  while (std::fgets(line, sizeof(line), out) != nullptr) {
+    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_object() || j.value("event", "") != "link" || !j.contains("session")) continue;
+    ++links;
+    max_in_link = std::max(max_in_link, j["max_in_link_bytes"].get<uint64_t>());
+  }
+  std::fclose(out);
+  EXPECT_EQ(links, 2);
+  // What waits in the link stops growing at the bound (plus the one message that crossed it).
+  EXPECT_LE(max_in_link, o.limits.max_queued_bytes + (uint64_t{1} << 20));
+  EXPECT_GT(max_in_link, 0u);
+  std::printf("stalled client through the link: at most %llu bytes queued, %llu in the link\n",
+              static_cast<unsigned long long>(max_queued), static_cast<unsigned long long>(max_in_link));
+}
+
 // The executable's link options: bad values exit 2 before the scene loads, naming the option.
 TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
   auto run = [](const std::string& args) {
