@@ -22,6 +22,7 @@
 #include <gtest/gtest.h>
 #include <grpcpp/grpcpp.h>
 
+#include "client/cell_margins.h"
 #include "client/object_store.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
@@ -396,6 +397,12 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
   r = RunCommand(Client() + " --headless --frame-log /dev/full --seconds 1 --server " + Address(*server));
   EXPECT_EQ(r.rc, 1) << r.output;
   EXPECT_NE(r.output.find("/dev/full: writing the frame log failed"), std::string::npos) << r.output;
+  r = RunCommand(Client() + " --headless --cell-log /dev/full --seconds 1 --server " + Address(*server));
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("/dev/full: writing the cell log failed"), std::string::npos) << r.output;
+  r = RunCommand(Client() + real + " --cell-log /nonexistent/dir/cells.csv");
+  EXPECT_EQ(r.rc, 1) << r.output;
+  EXPECT_NE(r.output.find("/nonexistent/dir/cells.csv: cannot open for writing"), std::string::npos) << r.output;
   r = RunCommand(Client() + real + " --speed nan");
   EXPECT_EQ(r.rc, 2) << r.output;
   EXPECT_NE(r.output.find("'nan' is not a number"), std::string::npos) << r.output;
@@ -409,6 +416,59 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
 }
 
 // ---- units ----
+
+TEST(CellMargins, EachEntryGetsTheTimeItsCellLastBecameCompleteAndTheStartCellIsNoMargin) {
+  CellMargins m;
+  std::map<uint32_t, std::vector<uint32_t>> lists = {{1, {10, 11}}, {2, {20}}};
+  std::set<uint32_t> ready = {10, 11};
+  auto frame = [&](double t, std::optional<uint32_t> cell) {
+    const bool complete = cell.has_value() && lists.count(*cell) > 0 &&
+                          std::all_of(lists[*cell].begin(), lists[*cell].end(), [&](uint32_t id) { return ready.count(id) > 0; });
+    m.Observe(t, lists, [&](uint32_t id) { return ready.count(id) > 0; }, cell, /*grid_nx=*/4, !complete);
+  };
+  frame(-0.5, std::nullopt);  // start-up: nothing entered yet
+  m.Shift(0.5);               // the walk's clock starts here
+  frame(0.0, 1);              // the start cell, complete
+  frame(1.0, 1);
+  ready.insert(20);
+  frame(2.0, 1);              // cell 2 complete from 2 s
+  ready.erase(20);
+  frame(2.5, 1);              // ...lost an object: starts over
+  ready.insert(20);
+  frame(3.0, 1);
+  frame(5.0, 2);              // entered 2 s after: margin 2
+  lists[3] = {30};
+  frame(6.0, 3);              // entered incomplete: a stall
+  ready.insert(30);
+  frame(7.0, 3);              // complete 1 s after the entry: margin -1
+  frame(8.0, 4);              // no list: a stall, left at 9 s before it completed (a bound)
+  frame(9.0, 1);              // cell 1 complete since the start: margin 9
+  m.Finish(10.0);
+  const std::vector<CellEntry>& e = m.entries();
+  ASSERT_EQ(e.size(), 5u);
+  EXPECT_TRUE(e[0].start);
+  EXPECT_EQ(e[0].cell, 1u);
+  EXPECT_EQ(e[0].i, 1);
+  EXPECT_EQ(e[0].j, 0);
+  EXPECT_DOUBLE_EQ(e[0].complete_s, 0.0);  // complete at -0.5 + 0.5
+  EXPECT_DOUBLE_EQ(e[1].margin_s, 2.0);
+  EXPECT_FALSE(e[1].stalled);
+  EXPECT_DOUBLE_EQ(e[2].complete_s, 7.0);
+  EXPECT_DOUBLE_EQ(e[2].margin_s, -1.0);
+  EXPECT_TRUE(e[2].stalled);
+  EXPECT_DOUBLE_EQ(e[3].complete_s, 9.0);
+  EXPECT_DOUBLE_EQ(e[3].margin_s, -1.0);
+  EXPECT_TRUE(e[3].stalled);
+  EXPECT_DOUBLE_EQ(e[4].margin_s, 9.0);
+  const MarginSummary s = m.Summary();
+  EXPECT_EQ(s.cells_entered, 4u);
+  EXPECT_EQ(s.stalled_cells, 2u);
+  EXPECT_DOUBLE_EQ(*s.min_margin_s, -1.0);
+  EXPECT_DOUBLE_EQ(*s.mean_margin_s, (2.0 - 1.0 - 1.0 + 9.0) / 4.0);
+  EXPECT_EQ(m.Csv().substr(0, m.Csv().find('\n')), "cell_id,i,j,entered_s,complete_s,margin_s,stalled");
+  EXPECT_NE(m.Csv().find("3,3,0,6.0000,7.0000,-1.0000,1\n"), std::string::npos) << m.Csv();
+  EXPECT_FALSE(CellMargins().Summary().min_margin_s.has_value());  // nothing entered: no margin
+}
 
 TEST(ClientGrid, FindsTheCellTheServerFinds) {
   const visibility::ViewcellGrid& grid = Default().grid();
