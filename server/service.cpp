@@ -115,13 +115,11 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
   SessionReactor(WalkthroughService* service, std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link)
       : service_(service), session_(std::move(session)), link_(std::move(link)) {
     if (const std::optional<LinkParams>& p = service_->options().link; p.has_value()) {
-      // Two independent streams per session, reproducible from the server's seed.
-      const uint64_t seed = service_->options().link_seed * 0x9E3779B97F4A7C15ull + 2 * session_->id();
-      down_.emplace(*p, seed);
-      LinkParams up;
-      up.latency_s = p->latency_s;
-      up.jitter_s = p->jitter_s;
-      up_.emplace(up, seed + 1);
+      // Two streams of draws per session, reproducible from the server's seed: session 1 draws
+      // as the simulator does with the same seed (uplink: seed, downlink: seed + 1).
+      const uint64_t seed = service_->options().link_seed + 2 * (session_->id() - 1);
+      up_.emplace(*p, seed);
+      down_.emplace(*p, seed + 1);
     }
     link_->Attach(this);
     StartRead(&in_);

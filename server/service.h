@@ -30,10 +30,12 @@ struct ServerOptions {
   // a Hello that lists every object of the scene.
   size_t max_receive_bytes = 0;
   // Link emulation (vistream-server --emulate-link): every session's messages go through this
-  // link, already time-scaled (server/link_model.h), on the steady clock. Downlink: the whole
-  // model; uplink (poses, credit: small): its latency and jitter only. None: written at once.
+  // link, already time-scaled (server/link_model.h), on the steady clock, in both directions
+  // (a model each way). None: written at once.
   std::optional<LinkParams> link;
-  uint64_t link_seed = 1;  // with the session id, seeds each session's two link models
+  // Session n's uplink draws from link_seed + 2(n - 1), its downlink from one more (session 1
+  // as `vistream simulate --seed link_seed`).
+  uint64_t link_seed = 1;
 };
 
 // What one session's emulated link did (its session_end log line).
