@@ -241,6 +241,9 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
       read_paused_ = false;
       StartRead(&in_);
     }
+    // The next one is due later: wake then, whatever the downlink is doing (a write to a client
+    // that stopped reading must not hold its poses back).
+    if (!upward_.empty() && !finish_requested_) WakeAt(upward_.front().arrival_s);
   }
 
   void PumpWrites() {
@@ -294,12 +297,10 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
       Write(std::move(bytes));
       // OnWriteDone pumps again; only the link's own times need the timer.
       if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
-      if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
       return;
     }
     if (!in_link_.empty()) WakeAt(in_link_.front().arrival_s);
     if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
-    if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
   }
 
   void Write(std::string bytes) {  // mu_ held

@@ -790,7 +790,7 @@ TEST(ServerLink, TheLogShowsJitterOnlyWhereTheSceneDeclaresIt) {
 TEST(ServerLink, AClientThatStopsReadingCostsBoundedMemoryThroughTheLinkToo) {
   std::FILE* out = std::tmpfile();
   ASSERT_NE(out, nullptr);
-  uint64_t max_queued = 0;
+  uint64_t max_queued = 0, crossings = 0;
   ServerOptions o;
   o.limits.max_queued_bytes = 1 << 20;
   LinkParams link;
@@ -806,15 +806,20 @@ TEST(ServerLink, AClientThatStopsReadingCostsBoundedMemoryThroughTheLinkToo) {
     v1::Walkthrough::Stub stats_stub(grpc::CreateChannel((*server)->address(), grpc::InsecureChannelCredentials()));
     glm::dvec3 p = Centre(3, 3);
     for (int k = 0; k < 50; ++k) {
-      p.x += 2.0;
+      p.x += 10.0;  // 100 m/s: a crossing every half second
       if (p.x > Centre(25, 3).x) p.x = Centre(3, 3).x;
       stalled->SendPose(p, {20, 0, 0});
       grpc::ClientContext ctx;
       v1::ServerStats s;
       ASSERT_TRUE(stats_stub.GetStats(&ctx, v1::StatsRequest(), &s).ok());
-      for (const v1::SessionStats& ss : s.sessions()) max_queued = std::max(max_queued, ss.queued_bytes());
+      for (const v1::SessionStats& ss : s.sessions()) {
+        max_queued = std::max(max_queued, ss.queued_bytes());
+        crossings = ss.crossings();
+      }
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
+    // Its poses still come through while the downlink waits for it to read.
+    EXPECT_GE(crossings, 8u);
     stalled->Cancel();
     auto good = Connect(**server);
     ASSERT_TRUE(good->SendPose(Centre(9, 9)));
@@ -841,8 +846,9 @@ TEST(ServerLink, AClientThatStopsReadingCostsBoundedMemoryThroughTheLinkToo) {
   // What waits in the link stops growing at the bound (plus the one message that crossed it).
   EXPECT_LE(max_in_link, o.limits.max_queued_bytes + (uint64_t{1} << 20));
   EXPECT_GT(max_in_link, 0u);
-  std::printf("stalled client through the link: at most %llu bytes queued, %llu in the link\n",
-              static_cast<unsigned long long>(max_queued), static_cast<unsigned long long>(max_in_link));
+  std::printf("stalled client through the link: %llu crossings, at most %llu bytes queued, %llu in the link\n",
+              static_cast<unsigned long long>(crossings), static_cast<unsigned long long>(max_queued),
+              static_cast<unsigned long long>(max_in_link));
 }
 
 // The executable's link options: bad values exit 2 before the scene loads, naming the option.
