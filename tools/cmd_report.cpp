@@ -61,7 +61,7 @@ Plan PlanFor(bool quick) {
   Plan p;
   if (quick) {
     p.table1_scene = "default";
-    p.table1_extra = {"--cells", "1", "--sizes", "50,100", "--res", "16,64,128", "--backends", "cpu"};
+    p.table1_extra = {"--cells", "2", "--sizes", "50,100,300", "--backends", "cpu"};
     p.epsilon_scenes = {"city1"};
     p.epsilon_count = "10";
     p.agvs_scene = "city1", p.agvs_seconds = "4", p.agvs_views = "4";
@@ -138,15 +138,17 @@ void Table1Section(Page& page, const Plan& plan) {
                             "viewcell; overestimation is (P_E − P_C) / P_E of occluded ground area, exact test "
                             "against the raster.",
                             j->value("scene", ""), Int(j->at("objects")), Int(j->at("cells_per_size")),
-                            Int(j->at("seed"))));
+                            Number(j->at("seed"))));
   std::vector<std::vector<std::string>> rows;
-  std::map<std::string, GnuplotData> series;  // "<size> m <backend>" -> res, ms, overestimation
+  std::map<std::pair<double, std::string>, GnuplotData> series;  // (size, backend) -> res, ms, overestimation
+  double res_lo = 1e9, res_hi = 0;
   for (const json& r : j->at("rows")) {
     const std::string res = Int(r.at("res")), size = Number(r.at("cell_size"));
     rows.push_back({res + "²", size + " m", r.value("backend", ""), Fixed(r.at("ms"), 1), Fixed(r.at("median_ms"), 1),
                     Fixed(r.at("overestimation_pct"), 4), Fixed(r.at("pvs_objects"), 0)});
-    const std::string key = absl::StrCat(size, " m, ", r.value("backend", ""));
-    GnuplotData& d = series[key];
+    GnuplotData& d = series[{r.at("cell_size").get<double>(), r.value("backend", "")}];
+    res_lo = std::min(res_lo, r.at("res").get<double>());
+    res_hi = std::max(res_hi, r.at("res").get<double>());
     absl::StrAppend(&d.text, res, " ", r.at("ms").get<double>(), " ", r.at("overestimation_pct").get<double>(), "\n");
   }
   page.Table({"resolution", "viewcell", "backend", "ms", "median ms", "overestimation %", "PVS objects"}, rows);
@@ -164,7 +166,8 @@ void Table1Section(Page& page, const Plan& plan) {
   plot.keep_sources = true;
   std::string ms_plot, over_plot;
   int k = 0;
-  for (auto& [key, d] : series) {
+  for (auto& [size_backend, d] : series) {
+    const std::string key = absl::StrCat(absl::StrFormat("%g", size_backend.first), " m, ", size_backend.second);
     d.name = absl::StrCat("series", k++, ".dat");
     absl::StrAppend(&ms_plot, ms_plot.empty() ? "plot " : ", ", GnuplotQuote(d.name), " using 1:2 with linespoints lw 2 pt 7 title ",
                     GnuplotQuote(key));
@@ -175,7 +178,8 @@ void Table1Section(Page& page, const Plan& plan) {
   plot.script = absl::StrCat(
       "set multiplot layout 2,1 title ",
       GnuplotQuote(absl::StrCat("Dual ray space on ", j->value("scene", ""), ": time and overestimation by raster resolution")),
-      " font ',15'\n", "set grid lc rgb '#d0d0d0'\n", "set logscale x 2\n", "set xtics (16, 32, 64, 128, 256)\n",
+      " font ',15'\n", "set grid lc rgb '#d0d0d0'\n", "set logscale x 2\n", "set xtics (1, 2, 4, 8, 16, 32, 64, 128, 256)\n",
+      absl::StrFormat("set xrange [%g:%g]\n", res_lo / 1.25, res_hi * 1.25),
       "set xlabel 'raster resolution (pixels per side of the dual ray space, log scale)'\n",
       "set key outside right box\n", "set logscale y 10\n", "set title 'Time per viewcell'\n",
       "set ylabel 'time per viewcell (ms, log scale)'\n", ms_plot, "\n",
@@ -193,7 +197,7 @@ void EpsilonSection(Page& page, const Plan& plan) {
     if (!j) continue;
     page.Text(absl::StrFormat("%s: %s random ground-level neighbourhoods of %s m (seed %s), %s convex prisms; means "
                               "per neighbourhood, one core.",
-                              scene, Int(j->at("neighbourhoods")), Fixed(j->at("size"), 2), Int(j->at("seed")),
+                              scene, Int(j->at("neighbourhoods")), Fixed(j->at("size"), 2), Number(j->at("seed")),
                               Int(j->at("prisms"))));
     const json& t1 = j->at("table1");
     page.Table({"Table 1 (column " + t1.value("opt", "") + ")", scene},

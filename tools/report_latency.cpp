@@ -57,7 +57,7 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
   plot.script = absl::StrCat(
       "set multiplot layout 2,1 title ", GnuplotQuote(title), " font ',15'\n", "set grid lc rgb '#d0d0d0'\n",
       "set logscale x 2\n", "set format x '%g'\n", "set xlabel ", GnuplotQuote(xlabel), "\n",
-      "set key top left box opaque\n", "set title 'Stalls (frames drawn before their viewcell\\'s PVS geometry arrived)'\n",
+      "set key top left box opaque\n", "set title 'Stalls (frames drawn before the PVS geometry of their viewcell arrived)'\n",
       "set ylabel 'stalls (count)'\n", "set yrange [0:*]\n",
       "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalls'\n",
       "set title 'Arrival margin (time from a PVS completing to the client entering its cell)'\n",
@@ -96,22 +96,22 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
     a.push_back("--json");
     return a;
   };
-  // The first run says whether this build has the simulator at all.
-  const std::vector<std::string> probe_args = args({"--scheme", "pvs", "--speed", Speed(plan.sweep_speed_kmh)});
-  const Page::Raw probe = page.RunRaw("simulate", probe_args, false);
-  if (probe.exit_code != 0) {
-    if (probe.err.find("'simulate': not a vistream command") != std::string::npos) {
-      page.NotProduced(absl::StrCat(
-          "this build has no `vistream simulate` (`", page.Command(probe_args), "` answered: `",
-          LastLines(probe.err, 2).substr(0, LastLines(probe.err, 2).find('\n')),
-          "`). The discrete-event simulator of server, link and client is not on this branch yet, so no stall, "
-          "margin or bytes figure was made; the section fills in once `simulate` is merged."));
-    } else {
-      page.Failed(page.Command(probe_args),
-                  absl::StrCat("exit ", probe.exit_code, "\n\n```\n", LastLines(probe.err, 8), "\n```"));
-    }
+  // Whether this build has the simulator at all: bare `vistream simulate` answers with the
+  // unknown-subcommand error when it does not (and asks for --scene when it does).
+  const Page::Raw bare = page.RunRaw("simulate (present?)", {"simulate"}, false);
+  if (bare.err.find("'simulate': not a vistream command") != std::string::npos) {
+    page.SetLastResult("absent: not a vistream command");
+    page.NotProduced(absl::StrCat(
+        "this build has no `vistream simulate` (`vistream simulate` answered: `",
+        bare.err.substr(0, bare.err.find('\n')),
+        "`). The discrete-event simulator of server, link and client is not on this branch yet, so no stall, "
+        "margin or bytes figure was made; this section fills in once `simulate` is merged."));
     return;
   }
+  page.SetLastResult("present (it asks for its options)");
+  const std::vector<std::string> probe_args = args({"--scheme", "pvs", "--speed", Speed(plan.sweep_speed_kmh)});
+  const Page::Raw probe = page.RunRaw("simulate " + Speed(plan.sweep_speed_kmh) + " km/h", probe_args, true);
+  if (probe.exit_code != 0) return;
   json first = json::parse(probe.out, nullptr, false);
   if (first.is_discarded() || !first.is_object()) {
     page.Failed(page.Command(probe_args), "its output is not one JSON object");

@@ -75,9 +75,9 @@ std::string Page::Command(const std::vector<std::string>& args) const {
   return s;
 }
 
-void Page::Log(const Step& s) {
+void Page::Log(const Step& s, bool counted) {
   std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds,
-               s.ok ? "" : "FAILED  ", s.command.c_str());
+               s.ok ? "" : counted ? "FAILED  " : "(non-zero exit)  ", s.command.c_str());
   std::fflush(stderr);
 }
 
@@ -93,9 +93,10 @@ Page::Raw Page::RunRaw(const std::string& step, const std::vector<std::string>& 
   std::fprintf(stderr, "report: [%zu] %s ...\n", steps_.size() + 1, step.c_str());
   std::fflush(stderr);
   const absl::StatusOr<ProcessResult> r = RunProcess(argv);
-  Step s{step, command, r.ok() ? r->seconds : 0.0, r.ok() && r->exit_code == 0};
+  Step s{step, command, r.ok() ? r->seconds : 0.0, r.ok() && r->exit_code == 0, ""};
+  s.result = s.ok ? "ok" : r.ok() ? absl::StrCat("failed (exit ", r->exit_code, ")") : "failed (not started)";
   steps_.push_back(s);
-  Log(s);
+  Log(s, counts_as_failure);
   if (!r.ok()) {
     if (counts_as_failure) Failed(command, std::string(r.status().message()));
     return {255, "", std::string(r.status().message())};
@@ -113,6 +114,7 @@ std::optional<json> Page::Run(const std::string& step, const std::vector<std::st
   json j = json::parse(r.out, nullptr, false);
   if (j.is_discarded() || !j.is_object()) {
     steps_.back().ok = false;
+    steps_.back().result = "failed (no JSON)";
     Failed(Command(args), "its output is not one JSON object");
     return std::nullopt;
   }
@@ -129,9 +131,10 @@ bool Page::Plot(const std::string& step, const GnuplotPlot& plot) {
   const auto start = std::chrono::steady_clock::now();
   const absl::Status st = RunGnuplot(plot);
   const std::string name = fs::path(plot.png).filename().string();
-  Step s{step, "gnuplot " + fs::path(plot.png).stem().string() + ".gp", SecondsSince(start), st.ok()};
+  Step s{step, "gnuplot " + fs::path(plot.png).stem().string() + ".gp", SecondsSince(start), st.ok(), ""};
+  s.result = st.ok() ? "ok" : "failed";
   steps_.push_back(s);
-  Log(s);
+  Log(s, true);
   if (!st.ok()) {
     Failed(s.command, std::string(st.message()));
     return false;
@@ -150,11 +153,13 @@ bool Page::CheckFile(const std::string& name) {
 
 void Page::NotProduced(const std::string& why) { absl::StrAppend(&md_, "**Not produced**: ", why, "\n\n"); }
 
+void Page::SetLastResult(const std::string& result) {
+  if (!steps_.empty()) steps_.back().result = result;
+}
+
 void Page::StepTable() {
   std::vector<std::vector<std::string>> rows;
-  for (const Step& s : steps_) {
-    rows.push_back({s.name, "`" + s.command + "`", Fixed(s.seconds, 1), s.ok ? "ok" : "failed"});
-  }
+  for (const Step& s : steps_) rows.push_back({s.name, "`" + s.command + "`", Fixed(s.seconds, 1), s.result});
   Table({"step", "command", "seconds", "result"}, rows);
 }
 
@@ -168,7 +173,7 @@ json Page::Summary() const {
   j["failures"] = failures_;
   j["steps"] = json::array();
   for (const Step& s : steps_) {
-    j["steps"].push_back({{"name", s.name}, {"command", s.command}, {"seconds", s.seconds}, {"ok", s.ok}});
+    j["steps"].push_back({{"name", s.name}, {"command", s.command}, {"seconds", s.seconds}, {"ok", s.ok}, {"result", s.result}});
   }
   return j;
 }

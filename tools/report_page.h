@@ -58,6 +58,8 @@ class Page {
   // "vistream ARGS" as the page shows it.
   std::string Command(const std::vector<std::string>& args) const;
 
+  // What the last step's non-zero exit meant, when it was an answer rather than a failure.
+  void SetLastResult(const std::string& result);
   void StepTable();
   absl::Status Write(const std::string& name) const;
   nlohmann::json Summary() const;
@@ -69,8 +71,9 @@ class Page {
     std::string name, command;
     double seconds = 0.0;
     bool ok = false;
+    std::string result;  // for the step table: "ok", "failed", or what a non-zero exit meant
   };
-  void Log(const Step& s);
+  void Log(const Step& s, bool counted);
 
   std::string self_, dir_;
   std::string md_;
