@@ -46,7 +46,9 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
   plot.height = 900;
   plot.keep_sources = true;
   GnuplotData d{"sweep.dat", "# x, stalls, min margin (s), mean margin (s)\n"};
-  for (const auto& [x, j] : points) {
+  for (const auto& point : points) {
+    const double x = point.first;
+    const json& j = point.second;  // (a name, not a structured binding: clang 14 cannot capture those)
     auto num = [&](const char* k) {
       return j.contains(k) && j.at(k).is_number() ? absl::StrFormat("%.6g", j.at(k).get<double>()) : std::string("NaN");
     };
