@@ -183,10 +183,11 @@ SimulationSpec ReadSimulation(const Reader& r) {
   }
   if (s.Has("client")) {
     const Reader c = s.Object("client");
-    c.Allow({"memory_mb", "triangle_budget"});
+    c.Allow({"memory_mb", "triangle_budget", "frame_ms"});
     ClientSpec client;
     if (c.Has("memory_mb")) client.memory_mb = c.Number("memory_mb", 0.0, 1e7, {}, true);
     if (c.Has("triangle_budget")) client.triangle_budget = c.Unsigned("triangle_budget");
+    if (c.Has("frame_ms")) client.frame_ms = c.Number("frame_ms", 1.0, 1000.0);
     sim.client = client;
   }
   return sim;

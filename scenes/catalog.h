@@ -47,13 +47,17 @@ struct WalkPath {
   std::vector<glm::dvec2> waypoints;  // scene-local metres
 };
 
-// Each effect is modelled only when its key is present.
+// Each effect is modelled only when its key is present (server/link_model.h says how).
 struct LinkSpec {
-  std::optional<double> bandwidth_mbps, latency_ms, jitter_ms, loss_pct;
+  std::optional<double> bandwidth_mbps;  // megabits (10^6) per second, > 0
+  std::optional<double> latency_ms;      // one-way delay
+  std::optional<double> jitter_ms;       // mean extra delay per message
+  std::optional<double> loss_pct;        // per TCP segment
 };
 struct ClientSpec {
-  std::optional<double> memory_mb;
-  std::optional<uint64_t> triangle_budget;
+  std::optional<double> memory_mb;          // decoded geometry the client may hold, MiB
+  std::optional<uint64_t> triangle_budget;  // triangles it can draw a frame
+  std::optional<double> frame_ms;           // its frame time (the simulator's frame clock)
 };
 struct SimulationSpec {
   std::optional<LinkSpec> link;

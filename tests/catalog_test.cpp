@@ -56,6 +56,18 @@ TEST(Catalog, OnlyDeclaredSimulationEffectsArePresent) {
   EXPECT_FALSE(e->simulation.client.has_value());
 }
 
+TEST(Catalog, ClientFrameTimeIsAnEffectOfItsOwn) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(R"({
+    "name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 50, "height_m": 2},
+    "simulation": {"client": {"frame_ms": 16.7}}})", "t.json", "/base");
+  ASSERT_TRUE(e.ok()) << e.status();
+  ASSERT_TRUE(e->simulation.client.has_value());
+  EXPECT_EQ(e->simulation.client->frame_ms, 16.7);
+  EXPECT_FALSE(e->simulation.client->memory_mb.has_value());
+  EXPECT_FALSE(e->simulation.client->triangle_budget.has_value());
+  EXPECT_FALSE(e->simulation.link.has_value());
+}
+
 TEST(Catalog, GltfSourceResolvesAgainstTheCatalogFolder) {
   absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
       R"({"name": "t", "source": {"gltf": "../data/x.glb"}, "viewcell": {"size_m": 50, "height_m": 2}})",
@@ -148,6 +160,15 @@ TEST(Catalog, WrongTypesMissingKeysAndBadRangesAreErrors) {
   ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
                           "simulation": {"link": {"loss_pct": 150}}})",
                       {"simulation.link.loss_pct"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "simulation": {"client": {"frame_ms": 0}}})",
+                      {"simulation.client.frame_ms"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "simulation": {"client": {"frame_time": 16}}})",
+                      {"simulation.client.frame_time"});
+  ExpectErrorMentions(R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 5, "height_m": 2},
+                          "simulation": {"link": {"bandwidth_mbps": "fast"}}})",
+                      {"simulation.link.bandwidth_mbps", "expected a number"});
   ExpectErrorMentions(R"([1, 2])", {"expected an object"});
 }
 
