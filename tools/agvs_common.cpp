@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+
 #include "tools/cli_common.h"
 #include "tools/top_view_map.h"
 
@@ -51,7 +54,7 @@ double MeanTriangles(const scenes::Scene& scene, const visibility::GlobalPvs& se
 }
 
 HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
-                          const visibility::GlobalPvs& sets, const std::string& png) {
+                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source) {
   HeatmapStats h;
   std::vector<uint64_t> cost(sets.cell_count(), 0);
   double sum = 0.0;
@@ -70,9 +73,15 @@ HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::Viewcell
   for (visibility::CellId c = 0; c < sets.cell_count(); ++c) {
     const scenes::Aabb b = grid.CellBox(c);
     const std::vector<glm::dvec2> square = {{b.min.x, b.min.y}, {b.max.x, b.min.y}, {b.max.x, b.max.y}, {b.min.x, b.max.y}};
-    map.FillPolygon(square, Ramp(std::log1p(static_cast<double>(cost[c])) / top));
+    map.FillPolygon(square, Ramp(std::log1p(static_cast<double>(cost[c])) / top), /*antialias=*/false);
   }
-  for (const auto& oc : scene.occluders) map.StrokePolygon(oc.footprint, Rgb{40, 40, 40});
+  const Rgb outline{40, 40, 40};
+  for (const auto& oc : scene.occluders) map.StrokePolygon(oc.footprint, outline, 0.6);
+  map.SetTitle(absl::StrCat(scene.name, ": PVS cost of every viewcell (", source, ")"),
+               absl::StrFormat("%zu viewcells of %g m; mean %.0f, max %llu triangles per viewcell", sets.cell_count(),
+                               grid.cell_size(), h.mean_triangles, static_cast<unsigned long long>(h.max_triangles)));
+  map.AddLegend(outline, "building footprint", Swatch::kOutline);
+  map.SetColourBar("PVS cost (triangles per viewcell, log scale)", static_cast<double>(std::max<uint64_t>(h.max_triangles, 1)));
   h.width = map.width();
   h.height = map.height();
   h.status = map.WritePng(png);

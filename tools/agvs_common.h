@@ -42,8 +42,9 @@ struct HeatmapStats {
   int width = 0, height = 0;
 };
 // Writes a PNG of every cell coloured by its PVS cost (triangles, on a log ramp), with the
-// building footprints outlined over it.
+// building footprints outlined over it. `source` says where the sets came from (for the
+// map's title: "AGVS, 10 s", "PVS file x.pvs").
 HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
-                          const visibility::GlobalPvs& sets, const std::string& png);
+                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source);
 
 }  // namespace vistream::tools

@@ -160,7 +160,9 @@ int Heatmap(const HeatmapArgs& a) {
     s->sampler->Run({a.seconds, 0.0, 0}, ToolRun(), "agvs " + s->scene.name);
     sets = s->sampler->FilteredAll(*filter);
   }
-  const HeatmapStats h = WriteHeatmap(s->scene, s->grid, sets, a.out);
+  const std::string source = !a.pvs.empty() ? "PVS file " + std::filesystem::path(a.pvs).filename().string()
+                                             : absl::StrFormat("AGVS, %g s of sampling", a.seconds);
+  const HeatmapStats h = WriteHeatmap(s->scene, s->grid, sets, a.out, source);
   if (!h.status.ok()) return Fail(h.status);
   if (a.json) {
     nlohmann::json j;

@@ -6,18 +6,20 @@
 // from random points of random cells (OSMesa), a pixel wrong when the object it shows is not
 // in that cell's PVS, weighted by its solid angle and scaled to the estimator's 1024 x 1024.
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <numbers>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
 #include "tools/cli_common.h"
 #include "tools/commands.h"
-#include "tools/top_view_map.h"
+#include "tools/gnuplot.h"
 #include "gl/id_renderer.h"
 #include "scenes/progress.h"
 #include "scenes/random.h"
@@ -90,69 +92,58 @@ double TimeToReach(const std::vector<std::pair<double, double>>& curve, double s
   return -1.0;
 }
 
-Rgb StrategyColour(SamplingStrategy s) {
+const char* StrategyColour(SamplingStrategy s) {
   switch (s) {
-    case SamplingStrategy::kAgvs: return {250, 200, 30};
-    case SamplingStrategy::kSgvs: return {40, 170, 160};
-    case SamplingStrategy::kRef: return {220, 60, 50};
+    case SamplingStrategy::kAgvs: return "#d08c00";
+    case SamplingStrategy::kSgvs: return "#1b9e9e";
+    case SamplingStrategy::kRef: return "#d62728";
   }
-  return {255, 255, 255};
+  return "#000000";
 }
 
-// Two panels on a log time axis: mean PVS size (top, linear) and pixel error (bottom, log;
-// estimated as lines, measured as squares).
-absl::Status WritePlot(const std::vector<Track>& tracks, double seconds, const std::string& png) {
-  constexpr double kW = 1000, kPanel = 400, kGap = 40;
-  TopViewMap map(scenes::Aabb{glm::dvec3(-40, -40, 0), glm::dvec3(kW + 20, 2 * kPanel + kGap + 20, 1)}, 1060,
-                 Rgb{20, 20, 28});
-  double t_min = seconds;
-  double max_size = 1.0, e_min = 1e300, e_max = 1e-300;
+// Two panels on a log time axis (gnuplot): mean PVS size (top, linear) and pixel error
+// (bottom, log; estimated as lines, measured as points).
+absl::Status WritePlot(const std::vector<Track>& tracks, const std::string& scene, size_t cells, double cell_size,
+                       size_t views, const std::string& png) {
+  GnuplotPlot plot;
+  plot.png = png;
+  plot.width = 1200;
+  plot.height = 1000;
+  std::string size_plot, error_plot;
   for (const Track& tr : tracks) {
-    if (!tr.curve.empty()) t_min = std::min(t_min, tr.curve.front().first);
-    for (const auto& [t, s] : tr.curve) max_size = std::max(max_size, s);
+    const std::string name = visibility::StrategyName(tr.strategy);
+    std::string upper = name;
+    for (char& c : upper) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    GnuplotData curve{name + "_curve.dat", "# sampling time (s), mean PVS size (objects per viewcell)\n"};
+    for (const auto& [t, size] : tr.curve) absl::StrAppend(&curve.text, absl::StrFormat("%.6g %.6g\n", t, size));
+    GnuplotData points{name + "_checkpoints.dat", "# sampling time (s), estimated pixel error, measured pixel error\n"};
     for (const Checkpoint& c : tr.checkpoints) {
-      for (double e : {c.estimated, c.measured}) {
-        if (e > 0) e_min = std::min(e_min, e), e_max = std::max(e_max, e);
-      }
+      absl::StrAppend(&points.text, absl::StrFormat("%.6g %.6g %.6g\n", c.seconds, c.estimated, c.measured));
     }
+    const std::string colour = StrategyColour(tr.strategy);
+    absl::StrAppend(&size_plot, size_plot.empty() ? "plot " : ", \\\n     ", GnuplotQuote(curve.name),
+                    " using 1:2 with lines lw 2 lc rgb '", colour, "' title '", upper, "'");
+    absl::StrAppend(&error_plot, error_plot.empty() ? "plot " : ", \\\n     ", GnuplotQuote(points.name),
+                    " using 1:($2 > 0 ? $2 : NaN) with linespoints lw 2 pt 0 lc rgb '", colour, "' title '", upper,
+                    " estimated', ", GnuplotQuote(points.name), " using 1:($3 > 0 ? $3 : NaN) with points pt 5 ps 1.5 lc rgb '",
+                    colour, "' title '", upper, " measured (rendered)'");
+    plot.data.push_back(std::move(curve));
+    plot.data.push_back(std::move(points));
   }
-  t_min = std::max(t_min, 1e-3);
-  if (!(e_min < e_max)) e_min = 0.1, e_max = 10.0;
-  const double lt0 = std::floor(std::log10(t_min)), lt1 = std::ceil(std::log10(seconds));
-  const double le0 = std::floor(std::log10(e_min)), le1 = std::ceil(std::log10(e_max));
-  auto x_of = [&](double t) { return kW * (std::log10(std::max(t, std::pow(10.0, lt0))) - lt0) / std::max(lt1 - lt0, 1.0); };
-  auto y_size = [&](double s) { return kPanel + kGap + kPanel * s / max_size; };
-  auto y_err = [&](double e) { return kPanel * (std::log10(std::max(e, e_min)) - le0) / std::max(le1 - le0, 1.0); };
-  const Rgb axis{110, 110, 120}, grid{50, 50, 60};
-  // Decades of time, tenths of the size range, decades of error.
-  for (double l = lt0; l <= lt1; ++l) {
-    map.Line({x_of(std::pow(10, l)), 0}, {x_of(std::pow(10, l)), kPanel}, grid);
-    map.Line({x_of(std::pow(10, l)), kPanel + kGap}, {x_of(std::pow(10, l)), 2 * kPanel + kGap}, grid);
-  }
-  for (int k = 1; k <= 10; ++k) map.Line({0, y_size(max_size * k / 10)}, {kW, y_size(max_size * k / 10)}, grid);
-  for (double l = le0; l <= le1; ++l) map.Line({0, y_err(std::pow(10, l))}, {kW, y_err(std::pow(10, l))}, grid);
-  map.Line({0, kPanel + kGap}, {kW, kPanel + kGap}, axis);
-  map.Line({0, kPanel + kGap}, {0, 2 * kPanel + kGap}, axis);
-  map.Line({0, 0}, {kW, 0}, axis);
-  map.Line({0, 0}, {0, kPanel}, axis);
-  for (const Track& tr : tracks) {
-    const Rgb c = StrategyColour(tr.strategy);
-    for (size_t i = 1; i < tr.curve.size(); ++i) {
-      map.Line({x_of(tr.curve[i - 1].first), y_size(tr.curve[i - 1].second)},
-               {x_of(tr.curve[i].first), y_size(tr.curve[i].second)}, c, 2);
-    }
-    for (size_t i = 0; i < tr.checkpoints.size(); ++i) {
-      const Checkpoint& p = tr.checkpoints[i];
-      if (i > 0) {
-        const Checkpoint& q = tr.checkpoints[i - 1];
-        map.Line({x_of(q.seconds), y_err(q.estimated)}, {x_of(p.seconds), y_err(p.estimated)}, c, 2);
-      }
-      const double x = x_of(p.seconds), y = y_err(p.measured);
-      const std::vector<glm::dvec2> square = {{x - 5, y - 5}, {x + 5, y - 5}, {x + 5, y + 5}, {x - 5, y + 5}};
-      map.FillPolygon(square, c);
-    }
-  }
-  return map.WritePng(png);
+  plot.script = absl::StrCat(
+      "set multiplot layout 2,1 title ",
+      GnuplotQuote(absl::StrFormat("Global visibility sampling on %s: AGVS, SGVS and REF side by side "
+                                   "(%zu viewcells of %g m, %zu rendered views)",
+                                   scene, cells, cell_size, views)),
+      " font ',15'\n", "set grid xtics ytics mxtics lc rgb '#d0d0d0'\n", "set logscale x 10\n",
+      "set format x '%g'\n", "set key top left box opaque Left reverse\n", "set xlabel 'sampling time (s, log scale)'\n",
+      "set title 'Mean PVS size against sampling time'\n",
+      "set ylabel 'mean PVS size (objects per viewcell)'\n", "set yrange [0:*]\n", size_plot, "\n",
+      "set title ", GnuplotQuote("Pixel error against sampling time (lines: the sampler's estimate; points: measured by rendering)"), "\n",
+      "set logscale y 10\n", "set yrange [*:*]\n", "set format y '10^{%L}'\n", "set key top right box opaque Left reverse\n",
+      "set ylabel 'pixel error (pixels of a 1024 x 1024 view, log scale)'\n", error_plot, "\n",
+      "unset multiplot\n");
+  return RunGnuplot(plot);
 }
 
 int BenchAgvs(const BenchAgvsArgs& a) {
@@ -294,7 +285,10 @@ int BenchAgvs(const BenchAgvsArgs& a) {
     j["strategies"][visibility::StrategyName(t.strategy)] = s;
   }
   if (!a.plot.empty()) {
-    if (absl::Status st = WritePlot(tracks, a.seconds, a.plot); !st.ok()) return Fail(st);
+    if (absl::Status st = WritePlot(tracks, scene->name, grid->CellCount(), grid->cell_size(), views.size(), a.plot);
+        !st.ok()) {
+      return Fail(st);
+    }
     j["plot"] = a.plot;
   }
   if (a.json) {
@@ -329,8 +323,8 @@ int BenchAgvs(const BenchAgvsArgs& a) {
                           : "never");
   }
   if (!a.plot.empty()) {
-    std::printf("plot: %s (log time; top: mean PVS objects, bottom: pixel error, log, lines estimated, squares "
-                "measured; agvs yellow, sgvs teal, ref red)\n",
+    std::printf("plot: %s (gnuplot; log time; top: mean PVS objects, bottom: pixel error, log, lines estimated, "
+                "squares measured)\n",
                 a.plot.c_str());
   }
   return 0;

@@ -7,6 +7,7 @@
 #include <map>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
@@ -248,11 +249,18 @@ int Map(const MapArgs& a) {
     // Log scale: two-storey houses and 300 m towers both stay distinguishable.
     map.FillPolygon(oc->footprint, Ramp(std::log1p(oc->height) / std::log1p(top)));
   }
+  const Rgb walk_colour{220, 30, 30};
   for (const scenes::WalkPath& w : walks) {
     for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
-      map.Line(w.waypoints[k], w.waypoints[k + 1], Rgb{220, 30, 30}, 3);
+      map.Line(w.waypoints[k], w.waypoints[k + 1], walk_colour, 3);
     }
   }
+  const scenes::Aabb& b = scene->bounds;
+  map.SetTitle(absl::StrCat(scene->name, ": building footprints by height, catalog walks"),
+               absl::StrFormat("%zu objects, %zu footprints, %.0f x %.0f m, tallest %.1f m", scene->objects.size(),
+                               order.size(), b.max.x - b.min.x, b.max.y - b.min.y, b.max.z));
+  for (const scenes::WalkPath& w : walks) map.AddLegend(walk_colour, "walk '" + w.name + "'", Swatch::kLine);
+  map.SetColourBar("building height (m, log scale)", top);
   if (absl::Status s = map.WritePng(a.output); !s.ok()) return Fail(s);
   std::printf("wrote %s: %d x %d pixels, %.2f m per pixel, %zu footprints, %zu walks\n", a.output.c_str(),
               map.width(), map.height(), map.metres_per_pixel(), order.size(), walks.size());

@@ -1,8 +1,17 @@
 #pragma once
-// Top-view raster maps of a scene, written as PNG: footprints, viewcells, paths. Used by
-// `vistream scene map` and the visibility tools' --map outputs.
+// Top-view maps of a scene, drawn with Cairo and written as PNG: footprints, viewcells, paths,
+// framed by what makes a map readable on its own: a title, scene-local axes in metres, a
+// legend of the colours (and a colour bar with labelled ticks for a ramp), a scale bar and a
+// north arrow. Used by `vistream scene map`, `pvs --map`, `epsilon --map`, `agvs heatmap`.
+//
+// Layout of the PNG: the title on top; the map (north up, +y) inside a 1-pixel frame of pure
+// black (0, 0, 0), the one pure black in the image (text and marks are near-black), so that a
+// reader (or a test) can find the map area; x and y ticks left of and below the frame; the
+// legend panel right of it. Legend swatches and the colour bar are drawn without antialiasing,
+// so their colours are exact.
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -12,40 +21,91 @@
 
 #include "scenes/aabb.h"
 
+// Cairo's types, so that users of the map need not include cairo.h.
+struct _cairo;
+struct _cairo_surface;
+
 namespace vistream::tools {
 
 struct Rgb {
   uint8_t r = 0, g = 0, b = 0;
+  bool operator==(const Rgb&) const = default;
+};
+
+// How a legend entry shows its colour.
+enum class Swatch {
+  kFill,     // a filled box: areas (footprints, viewcells)
+  kLine,     // a thick line: paths
+  kOutline,  // a thin outline: footprint edges drawn over something else
 };
 
 class TopViewMap {
  public:
-  // An image of the xy extent of `bounds` (scene-local metres), `max_pixels` on its longer
-  // side, north (+y) up, filled with `background`.
+  // A map of the xy extent of `bounds` (scene-local metres), `max_pixels` on its longer side,
+  // north (+y) up, filled with `background`. The PNG adds the title, axes and legend around it.
   TopViewMap(const scenes::Aabb& bounds, int max_pixels, Rgb background);
+  ~TopViewMap();
+  TopViewMap(const TopViewMap&) = delete;
+  TopViewMap& operator=(const TopViewMap&) = delete;
 
-  int width() const { return width_; }
-  int height() const { return height_; }
+  // The map area, in pixels, and its scale.
+  int map_width() const { return width_; }
+  int map_height() const { return height_; }
   double metres_per_pixel() const { return scale_; }
+  // The whole image WritePng writes (map, frame, title, axes, legend).
+  int width() const;
+  int height() const;
 
-  // Fills the polygon (any orientation; even-odd rule) by pixel centres.
-  void FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour);
-  void StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour);
-  void Line(const glm::dvec2& a, const glm::dvec2& b, Rgb colour, int thickness = 1);
+  // Antialiased drawing in scene-local metres. Polygons: any orientation, even-odd rule.
+  // `antialias` false keeps the edges of touching squares (a viewcell grid) seamless.
+  void FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bool antialias = true);
+  // Line widths in pixels.
+  void StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour, double width_px = 1.0);
+  void Line(const glm::dvec2& a, const glm::dvec2& b, Rgb colour, double width_px = 1.0);
 
-  absl::Status WritePng(const std::string& path) const;
+  // The title (what scene, what it shows) and a second line (what cell or box, what figures).
+  void SetTitle(std::string title, std::string subtitle = "");
+  // One legend row: the colour and what it means.
+  void AddLegend(Rgb colour, std::string label, Swatch swatch = Swatch::kFill);
+  // A colour bar for values drawn with Ramp(log1p(v) / log1p(max_value)): `label` names the
+  // quantity and its unit, e.g. "building height (m, log scale)".
+  void SetColourBar(std::string label, double max_value);
+  // A last line in the legend panel (e.g. counts).
+  void AddNote(std::string note);
+
+  // Composes the image and writes it. Errors name the path.
+  absl::Status WritePng(const std::string& path);
 
  private:
+  struct Layout;
   glm::dvec2 PixelFromScene(const glm::dvec2& p) const;
-  void Plot(int x, int y, Rgb colour);
+  void SetColour(Rgb c);
+  Layout ComputeLayout() const;
 
   glm::dvec2 min_;
   double scale_ = 1.0;  // metres per pixel
   int width_ = 1, height_ = 1;
-  std::vector<Rgb> pixels_;
+  double ui_ = 1.0;  // size of text and marks relative to a 1200-pixel map
+  _cairo_surface* surface_ = nullptr;
+  _cairo* cr_ = nullptr;
+
+  std::string title_, subtitle_;
+  struct Entry {
+    Rgb colour;
+    std::string label;
+    Swatch swatch;
+  };
+  std::vector<Entry> legend_;
+  std::string bar_label_;
+  double bar_max_ = 0.0;
+  std::vector<std::string> notes_;
 };
 
-// A perceptually ordered colour ramp for t in [0, 1] (dark blue, teal, yellow).
+// A perceptually ordered colour ramp for t in [0, 1] (viridis-like: dark violet, teal, yellow).
 Rgb Ramp(double t);
+
+// The largest 1, 2 or 5 times a power of ten that is at most `x` (x > 0): scale-bar lengths
+// and tick steps.
+double RoundDown125(double x);
 
 }  // namespace vistream::tools

@@ -1,0 +1,236 @@
+// The tool's figures read on their own: maps (Cairo) with a frame, a title, a legend, a colour
+// bar and a scale bar; plots (gnuplot) of the size asked for; `report`'s option errors. The
+// PNGs are read back with Cairo and checked pixel by pixel where the layout promises exact
+// colours: the map's frame is the image's only pure black, legend swatches and the colour
+// bar are drawn without antialiasing (tools/top_view_map.h).
+#include <cairo.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "tests/cli_test_util.h"
+
+namespace {
+
+using vistream::testing::ExpectBadOption;
+using vistream::testing::ExpectRunTimeError;
+using vistream::testing::RunResult;
+using vistream::testing::Tmp;
+using vistream::testing::Vistream;
+
+struct Rgb {
+  int r, g, b;
+};
+
+class Png {
+ public:
+  explicit Png(const std::string& path) : surface_(cairo_image_surface_create_from_png(path.c_str())) {}
+  ~Png() { cairo_surface_destroy(surface_); }
+  bool ok() const { return cairo_surface_status(surface_) == CAIRO_STATUS_SUCCESS; }
+  int width() const { return cairo_image_surface_get_width(surface_); }
+  int height() const { return cairo_image_surface_get_height(surface_); }
+  Rgb At(int x, int y) const {
+    const unsigned char* row = cairo_image_surface_get_data(surface_) + static_cast<size_t>(y) * cairo_image_surface_get_stride(surface_);
+    uint32_t p = 0;
+    std::memcpy(&p, row + 4 * x, 4);
+    return {static_cast<int>((p >> 16) & 0xff), static_cast<int>((p >> 8) & 0xff), static_cast<int>(p & 0xff)};
+  }
+  // Pixels of exactly `c` in [x0, x1) x [y0, y1).
+  int Count(Rgb c, int x0, int y0, int x1, int y1) const {
+    int n = 0;
+    for (int y = std::max(0, y0); y < std::min(height(), y1); ++y) {
+      for (int x = std::max(0, x0); x < std::min(width(), x1); ++x) {
+        const Rgb p = At(x, y);
+        n += p.r == c.r && p.g == c.g && p.b == c.b;
+      }
+    }
+    return n;
+  }
+  // Pixels darker than 100 in every channel (text, marks).
+  int Dark(int x0, int y0, int x1, int y1) const {
+    int n = 0;
+    for (int y = std::max(0, y0); y < std::min(height(), y1); ++y) {
+      for (int x = std::max(0, x0); x < std::min(width(), x1); ++x) {
+        const Rgb p = At(x, y);
+        n += p.r < 100 && p.g < 100 && p.b < 100;
+      }
+    }
+    return n;
+  }
+
+ private:
+  cairo_surface_t* surface_;
+};
+
+// The map's frame: the bounding box of the pure black pixels (inclusive).
+struct Frame {
+  int x0 = 1 << 30, y0 = 1 << 30, x1 = -1, y1 = -1;
+};
+Frame FindFrame(const Png& png) {
+  Frame f;
+  for (int y = 0; y < png.height(); ++y) {
+    for (int x = 0; x < png.width(); ++x) {
+      const Rgb p = png.At(x, y);
+      if (p.r == 0 && p.g == 0 && p.b == 0) {
+        f.x0 = std::min(f.x0, x), f.y0 = std::min(f.y0, y), f.x1 = std::max(f.x1, x), f.y1 = std::max(f.y1, y);
+      }
+    }
+  }
+  return f;
+}
+
+constexpr Rgb kInk{25, 25, 25};  // text, marks and the scale bar's dark segments
+constexpr Rgb kRamp0{68, 1, 84}, kRamp1{253, 231, 37};
+
+TEST(CliFigures, PvsMapHasATitleALegendAScaleBarAndTheViewcellWhereItIs) {
+  const std::string png_path = Tmp("pvs_legend.png");
+  const RunResult r = Vistream("pvs --scene default --cell 10,10 --res 64 --json --map " + png_path);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const RunResult info = Vistream("scene info default --json");
+  ASSERT_EQ(info.exit_code, 0) << info.out;
+  const nlohmann::json b = nlohmann::json::parse(info.out).at("bounds");
+  const double bx0 = b["min"][0], by0 = b["min"][1], bx1 = b["max"][0], by1 = b["max"][1];
+
+  const Png png(png_path);
+  ASSERT_TRUE(png.ok());
+  const Frame f = FindFrame(png);
+  ASSERT_GE(f.x1, 0) << "no frame";
+  // The map inside the frame: 2048 pixels on the scene's longer side.
+  const int map_w = f.x1 - f.x0 - 1, map_h = f.y1 - f.y0 - 1;
+  EXPECT_EQ(std::max(map_w, map_h), 2048);
+  const double scale = std::max(bx1 - bx0, by1 - by0) / 2048.0;
+  EXPECT_NEAR(map_w, (bx1 - bx0) / scale, 1.0);
+  // Margins on every side: axes left and below, the title above, the legend right.
+  EXPECT_GT(f.x0, 60);
+  EXPECT_GT(f.y0, 40);
+  EXPECT_GT(png.height() - f.y1, 40);
+  EXPECT_GT(png.width() - f.x1, 300);
+  EXPECT_GT(png.Dark(f.x0, 0, png.width(), f.y0), 500) << "no title";
+  EXPECT_GT(png.Dark(f.x0, f.y1 + 1, f.x1, png.height()), 200) << "no x ticks";
+  EXPECT_GT(png.Dark(0, f.y0, f.x0, f.y1), 200) << "no y ticks";
+  // The legend right of the frame: a swatch of each colour the map uses.
+  const int lx = f.x1 + 1;
+  EXPECT_GT(png.Count({30, 200, 60}, lx, 0, png.width(), png.height()), 200) << "viewcell swatch";
+  EXPECT_GT(png.Count({40, 90, 220}, lx, 0, png.width(), png.height()), 200) << "in-PVS swatch";
+  EXPECT_GT(png.Count({215, 50, 40}, lx, 0, png.width(), png.height()), 200) << "occluded swatch";
+  // The scale bar's dark segments (and the north arrow) in exact ink.
+  EXPECT_GT(png.Count(kInk, lx, 0, png.width(), png.height()), 1000) << "no scale bar";
+  // The viewcell's centre, in the map, is the viewcell's green.
+  const auto& cell = j.at("cell_box");
+  const double cx = 0.5 * (cell["min"][0].get<double>() + cell["max"][0].get<double>());
+  const double cy = 0.5 * (cell["min"][1].get<double>() + cell["max"][1].get<double>());
+  const int px = f.x0 + 1 + static_cast<int>((cx - bx0) / scale);
+  const int py = f.y0 + 1 + map_h - 1 - static_cast<int>((cy - by0) / scale);
+  const Rgb c = png.At(px, py);
+  EXPECT_EQ(c.r, 30);
+  EXPECT_EQ(c.g, 200);
+  EXPECT_EQ(c.b, 60);
+}
+
+TEST(CliFigures, HeatmapAndSceneMapHaveALabelledColourBar) {
+  const std::string heat = Tmp("heat_bar.png"), map = Tmp("map_bar.png");
+  const RunResult h = Vistream("agvs heatmap --scene city1 --seconds 0.3 -o " + heat + " --json");
+  ASSERT_EQ(h.exit_code, 0) << h.out;
+  const nlohmann::json j = nlohmann::json::parse(h.out);
+  const Png hp(heat);
+  ASSERT_TRUE(hp.ok());
+  EXPECT_EQ(j.at("width").get<int>(), hp.width());
+  EXPECT_EQ(j.at("height").get<int>(), hp.height());
+  Frame f = FindFrame(hp);
+  ASSERT_GE(f.x1, 0);
+  // The colour bar's two ends, exact, right of the map; its tick labels beside it.
+  EXPECT_GT(hp.Count(kRamp0, f.x1 + 1, 0, hp.width(), hp.height()), 20);
+  EXPECT_GT(hp.Count(kRamp1, f.x1 + 1, 0, hp.width(), hp.height()), 20);
+  EXPECT_GT(hp.Dark(f.x1 + 1, 0, hp.width(), hp.height()), 2000);
+
+  const RunResult m = Vistream("scene map city1 --size 800 -o " + map);
+  ASSERT_EQ(m.exit_code, 0) << m.out;
+  const Png mp(map);
+  ASSERT_TRUE(mp.ok());
+  f = FindFrame(mp);
+  ASSERT_GE(f.x1, 0);
+  EXPECT_EQ(std::max(f.x1 - f.x0 - 1, f.y1 - f.y0 - 1), 800);
+  EXPECT_GT(mp.Count(kRamp0, f.x1 + 1, 0, mp.width(), mp.height()), 20);
+  EXPECT_GT(mp.Count(kRamp1, f.x1 + 1, 0, mp.width(), mp.height()), 20);
+  EXPECT_GT(mp.Count({220, 30, 30}, f.x1 + 1, 0, mp.width(), mp.height()), 40) << "the walk's legend line";
+}
+
+TEST(CliFigures, BenchAgvsPlotIsAGnuplotFigureAndSaysWhenGnuplotIsMissing) {
+  const std::string png = Tmp("agvs_plot.png");
+  const std::string args = "bench agvs --scene city1 --seconds 0.2 --views 1 --res 16 --checkpoints 3 --json --plot ";
+  const RunResult r = Vistream(args + png);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Png p(png);
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p.width(), 1200);
+  EXPECT_EQ(p.height(), 1000);
+  // Axes, tick labels, titles and curves: plenty of dark pixels, not a blank page.
+  EXPECT_GT(p.Dark(0, 0, p.width(), p.height()), 5000);
+  // The three strategies' colours (AGVS, SGVS, REF) as drawn in the plot and its legend.
+  EXPECT_GT(p.Count({0xd0, 0x8c, 0x00}, 0, 0, p.width(), p.height()), 50);
+  EXPECT_GT(p.Count({0x1b, 0x9e, 0x9e}, 0, 0, p.width(), p.height()), 50);
+  EXPECT_GT(p.Count({0xd6, 0x27, 0x28}, 0, 0, p.width(), p.height()), 50);
+
+  setenv("VISTREAM_GNUPLOT", "/nonexistent/gnuplot", 1);
+  ExpectRunTimeError(args + Tmp("no_gnuplot.png"), "cannot run gnuplot ('/nonexistent/gnuplot' not found)");
+  unsetenv("VISTREAM_GNUPLOT");
+}
+
+TEST(CliFigures, ReportRejectsAnOutThatIsNoFolder) {
+  const std::string file = Tmp("not_a_folder");
+  { std::FILE* f = std::fopen(file.c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }
+  ExpectBadOption("report --quick --out " + file, "--out: '" + file + "': cannot make the folder");
+  ExpectBadOption("report --quick --out /proc/vistream-report", "--out: '/proc/vistream-report': cannot make the folder");
+  ExpectBadOption("report --slow", "--slow");
+}
+
+}  // namespace
+
+namespace {
+
+// The whole quick report (about 20 s on the 2-core machine): the page, its stamp, a section for
+// each figure, and every PNG it names.
+TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
+  const std::string dir = Tmp("report");
+  std::filesystem::remove_all(dir);
+  const RunResult r = Vistream("report --quick --json --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  // Progress on stderr, a line a step with its time; then the JSON summary on stdout.
+  EXPECT_NE(r.out.find("report: [1] scene info"), std::string::npos) << r.out;
+  const size_t json_at = r.out.find("\n{\n");
+  ASSERT_NE(json_at, std::string::npos) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out.substr(json_at + 1));
+  EXPECT_EQ(j.at("failures").get<int>(), 0);
+  EXPECT_TRUE(j.at("quick").get<bool>());
+  std::ifstream in(dir + "/report.md");
+  const std::string md((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (const char* s : {"Generated by `vistream report --quick`", "; commit ", "cores", "## Table 1", "## Tables 1 and 2",
+                        "## Global visibility sampling", "## Latency", "## PVS maps", "## PVS cost heatmap",
+                        "Command: `vistream bench table1 --scene default"}) {
+    EXPECT_NE(md.find(s), std::string::npos) << s;
+  }
+  // The latency section: the simulator's figures, or why there are none.
+  EXPECT_TRUE(md.find("this build has no `vistream simulate`") != std::string::npos ||
+              md.find("| speed | stalls |") != std::string::npos);
+  const auto& images = j.at("images");
+  EXPECT_GE(images.size(), 6u);
+  for (const auto& name : images) {
+    EXPECT_NE(md.find("](" + name.get<std::string>() + ")"), std::string::npos) << name;
+    const Png png(dir + "/" + name.get<std::string>());
+    EXPECT_TRUE(png.ok()) << name;
+    EXPECT_GE(png.width(), 800) << name;
+    EXPECT_GT(png.Dark(0, 0, png.width(), png.height()), 1000) << name << ": no text or lines";
+  }
+}
+
+}  // namespace

@@ -1,0 +1,25 @@
+#pragma once
+// The latency section of `vistream report`: stalls and arrival margin against walking speed
+// and link bandwidth, bytes against the baselines, the highest speed without stalls per
+// scheme; from `vistream simulate --json` (the discrete-event simulator of server and link).
+
+#include <string>
+#include <vector>
+
+#include "tools/report_page.h"
+
+namespace vistream::tools {
+
+struct LatencyPlan {
+  std::string scene, path;
+  std::vector<double> speeds_kmh;      // the speed sweep, scheme pvs at the scene's link
+  std::vector<double> bandwidths_mbps; // the bandwidth sweep, at `sweep_speed_kmh` and the scene's latency
+  double sweep_speed_kmh = 6.0;        // also the speed of the per-scheme comparison
+  std::vector<std::string> schemes;
+};
+
+LatencyPlan LatencyPlanFor(bool quick);
+
+void LatencySection(Page& page, const LatencyPlan& plan);
+
+}  // namespace vistream::tools

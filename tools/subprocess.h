@@ -1,0 +1,27 @@
+#pragma once
+// Running a program and collecting what it printed: gnuplot for the plots, and the tool itself
+// (/proc/self/exe) for each step of `vistream report`.
+
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+namespace vistream::tools {
+
+struct ProcessResult {
+  int exit_code = 0;  // the program's own; 128 + N when signal N ended it
+  std::string out;    // its standard output
+  std::string err;    // its standard error
+  double seconds = 0.0;
+};
+
+// Runs `argv` (argv[0] looked up on PATH when it has no '/'), stdin from /dev/null, stdout
+// and stderr collected through temporary files. An error only when it could not be started:
+// NOT_FOUND when the program does not exist, naming it.
+absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv);
+
+// The last `lines` lines of `text`.
+std::string LastLines(const std::string& text, int lines);
+
+}  // namespace vistream::tools
