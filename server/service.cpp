@@ -151,6 +151,7 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
         ++figures_.uplink_messages;
         figures_.uplink_delay_sum_s += d.arrival_s - now;
         upward_.push_back(Upward{d.arrival_s, std::move(message)});
+        WakeAt(d.arrival_s);
         // A client that floods the link waits for it, as TCP's window would make it.
         if (upward_.size() < kMaxUpward) {
           StartRead(&in_);
@@ -216,12 +217,27 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
   static constexpr size_t kMaxUpward = 64;  // client messages in the emulated uplink at most
 
   void DeliverUpward() {
-    std::lock_guard order(deliver_mu_);  // one deliverer at a time: messages stay in order
+    // One deliverer at a time, so that messages stay in order. A caller that finds another at
+    // work leaves it to that one, which looks again after it lets go (a message may have come
+    // due meanwhile); a re-entrant call from the session's own handler returns at once.
+    for (;;) {
+      {
+        std::unique_lock order(deliver_mu_, std::try_to_lock);
+        if (!order.owns_lock()) return;
+        if (!DeliverDue()) return;
+      }
+      std::lock_guard lock(mu_);
+      if (finish_requested_ || upward_.empty() || upward_.front().arrival_s > SteadySeconds()) return;
+    }
+  }
+
+  // Hands the session every client message that has arrived; false when the session ended.
+  bool DeliverDue() {
     for (;;) {
       std::optional<v1::ClientMessage> m;
       {
         std::lock_guard lock(mu_);
-        if (finish_requested_) return;
+        if (finish_requested_) return false;
         if (upward_.empty() || upward_.front().arrival_s > SteadySeconds()) break;
         m = std::move(upward_.front().message);
         upward_.pop_front();
@@ -233,17 +249,19 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
           finish_requested_ = true;
           status_ = ToGrpc(st);
         }
-        return;
+        return false;
       }
     }
     std::lock_guard lock(mu_);
-    if (read_paused_ && !finish_requested_ && upward_.size() < kMaxUpward) {
+    if (finish_requested_) return false;
+    if (read_paused_ && upward_.size() < kMaxUpward) {
       read_paused_ = false;
       StartRead(&in_);
     }
     // The next one is due later: wake then, whatever the downlink is doing (a write to a client
     // that stopped reading must not hold its poses back).
-    if (!upward_.empty() && !finish_requested_) WakeAt(upward_.front().arrival_s);
+    if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
+    return true;
   }
 
   void PumpWrites() {
