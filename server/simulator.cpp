@@ -325,6 +325,7 @@ class Run {
 
   // The client.
   std::unordered_map<uint32_t, Held> held_;
+  std::unordered_set<uint32_t> ever_held_;
   std::unordered_map<CellId, List> lists_;
   struct Mask {
     scenes::Aabb box;
@@ -389,6 +390,7 @@ void Run::Receive(const v1::ServerMessage& m) {
       const uint64_t encoded = g.vertices().size() + g.indices().size();
       r_.geometry_bytes += encoded;
       ++r_.objects_received;
+      if (ever_held_.insert(g.object_id()).second) ++r_.distinct_objects;
       // The client's grant (client/connection.cpp): what it consumed, once half the window is.
       consumed_since_grant_ += encoded;
       if (consumed_since_grant_ >= kCreditWindow / 2) {

@@ -175,7 +175,8 @@ struct SimulationResult {
   uint64_t bytes = 0;           // downlink bytes on the wire (server/link_model.h WireBytes)
   uint64_t uplink_bytes = 0;
   uint64_t geometry_bytes = 0;  // encoded geometry received
-  uint64_t objects_received = 0;
+  uint64_t objects_received = 0;  // geometry messages (an object evicted and needed again comes again)
+  uint64_t distinct_objects = 0;  // objects received at least once
   double mean_triangles_drawn = 0.0;  // per walking frame, after view-frustum culling
   uint64_t max_triangles_drawn = 0;
   uint64_t scene_triangles = 0;

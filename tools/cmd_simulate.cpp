@@ -55,6 +55,7 @@ nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, 
   j["uplink_bytes"] = r.uplink_bytes;
   j["geometry_bytes"] = r.geometry_bytes;
   j["objects_received"] = r.objects_received;
+  j["distinct_objects"] = r.distinct_objects;
   j["mean_triangles_drawn"] = r.mean_triangles_drawn;
   j["max_triangles_drawn"] = r.max_triangles_drawn;
   j["scene_triangles"] = r.scene_triangles;
