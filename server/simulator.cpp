@@ -338,6 +338,21 @@ class Run {
   bool walking_done_ = false;
   std::optional<CellId> cell_;     // while walking: the cell of the last frame
   bool pending_ = false;           // the current record waits for its cell to complete
+  // While pending: whether its list is here, and which of its objects are not.
+  bool pending_list_ = false;
+  std::unordered_set<uint32_t> missing_;
+  void StartPending(CellId cell) {
+    missing_.clear();
+    auto it = lists_.find(cell);
+    pending_list_ = it != lists_.end();
+    if (!pending_list_) return;
+    for (uint32_t o : it->second.objects) {
+      if (held_.count(o) == 0) missing_.insert(o);
+    }
+  }
+  uint64_t frame_index_ = 0;       // of the next frame since the walk started
+  uint64_t triangle_every_ = 1;    // frames between two triangle counts (10 Hz)
+  uint64_t triangle_samples_ = 0;
   double triangles_sum_ = 0.0;
   double crossing_compute_s_ = 0.0;
   bool crossed_ = false;
@@ -382,11 +397,13 @@ void Run::Receive(const v1::ServerMessage& m) {
     case v1::ServerMessage::kPvs: {
       const v1::ViewcellPvs& p = m.pvs();
       lists_[p.cell_id()] = List{{p.object_ids().begin(), p.object_ids().end()}, t};
+      if (pending_ && cell_ == p.cell_id()) StartPending(p.cell_id());
       break;
     }
     case v1::ServerMessage::kGeometry: {
       const v1::ObjectGeometry& g = m.geometry();
       held_[g.object_id()] = Held{t, g.index_count() / 3};
+      if (pending_) missing_.erase(g.object_id());
       const uint64_t encoded = g.vertices().size() + g.indices().size();
       r_.geometry_bytes += encoded;
       ++r_.objects_received;
@@ -402,7 +419,13 @@ void Run::Receive(const v1::ServerMessage& m) {
       break;
     }
     case v1::ServerMessage::kEvict:
-      for (uint32_t o : m.evict().object_ids()) held_.erase(o);
+      for (uint32_t o : m.evict().object_ids()) {
+        held_.erase(o);
+        if (pending_ && pending_list_) {
+          const std::vector<uint32_t>& list = lists_.at(*cell_).objects;  // ascending
+          if (std::binary_search(list.begin(), list.end(), o)) missing_.insert(o);
+        }
+      }
       break;
     case v1::ServerMessage::kEpsilonMask: {
       const v1::EpsilonMask& e = m.epsilon_mask();
@@ -475,11 +498,12 @@ void Run::Frame(double t) {
     rec.cell = *cell;
     rec.entered_s = t;
     const std::optional<double> done = CompleteAt(*cell);
-    if (done.has_value() && *done <= t + 1e-12) {
+    if (done.has_value() && *done <= t + 1e-9) {
       rec.complete_s = *done;
       rec.margin_s = t - *done;
     } else {
       pending_ = true;
+      StartPending(*cell);
       rec.stalled = true;
       ++r_.stalled_cells;
     }
@@ -489,21 +513,23 @@ void Run::Frame(double t) {
     r_.cells.push_back(rec);
   }
   bool complete = true;
-  if (pending_) {
+  if (pending_ && pending_list_ && missing_.empty()) {
     const std::optional<double> done = CompleteAt(*cell_);
-    if (done.has_value() && *done <= t + 1e-12) {
+    if (done.has_value() && *done <= t + 1e-9) {
       CellRecord& rec = r_.cells.back();
       rec.complete_s = *done;
       rec.margin_s = rec.entered_s - *done;
       pending_ = false;
       if (opt_.log != nullptr) Log("stall_end", {{"t_s", t}, {"stalled_s", *done - rec.entered_s}});
-    } else {
-      complete = false;
-      ++r_.stalls;
-      r_.stall_s += r_.frame_s;
     }
   }
-  if (opt_.count_triangles) {
+  if (pending_) {
+    complete = false;
+    ++r_.stalls;
+    r_.stall_s += r_.frame_s;
+  }
+  // Triangles drawn, counted on frames 10 times a second (the mean over every frame, sampled).
+  if (opt_.count_triangles && (r_.frames - 1) % triangle_every_ == 0) {
     // What the renderer draws: the cell's PVS (its mask's triangles while inside the mask's
     // box), or during a stall everything held; culled against the view frustum.
     const Frustum frustum(pose.eye, pose.yaw_rad);
@@ -534,6 +560,7 @@ void Run::Frame(double t) {
       }
     }
     triangles_sum_ += static_cast<double>(tris);
+    ++triangle_samples_;
     r_.max_triangles_drawn = std::max(r_.max_triangles_drawn, tris);
   }
   if (last) {
@@ -541,7 +568,9 @@ void Run::Frame(double t) {
     walking_done_ = true;
     return;
   }
-  q_.At(t + r_.frame_s, [this] { Frame(q_.now()); });
+  // Frame times from the start, not summed, so that they stay on the frame grid.
+  ++frame_index_;
+  q_.At(*walk_t0_ + static_cast<double>(frame_index_) * r_.frame_s, [this] { Frame(q_.now()); });
 }
 
 void Run::Pose(double t) {
@@ -573,6 +602,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   r_.frame_declared = sim.client.has_value() && sim.client->frame_ms.has_value();
   r_.frame_s = r_.frame_declared ? *sim.client->frame_ms / 1000.0 : 1.0 / 60.0;
   r_.scene_triangles = scene_.scene().TriangleCount();
+  triangle_every_ = std::max<uint64_t>(1, static_cast<uint64_t>(std::llround(kPosePeriod / r_.frame_s)));
 
   // The PVS each scheme streams for a cell, and what computing it costs.
   std::shared_ptr<PvsMemo> memo = opt_.memo != nullptr ? opt_.memo : std::make_shared<PvsMemo>();
@@ -671,7 +701,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   r_.path_m = walk_.length_m();
   r_.walk_s = walk_.duration_s();
   r_.sim_s = q_.now();
-  r_.mean_triangles_drawn = r_.frames > 0 ? triangles_sum_ / static_cast<double>(r_.frames) : 0.0;
+  r_.mean_triangles_drawn = triangle_samples_ > 0 ? triangles_sum_ / static_cast<double>(triangle_samples_) : 0.0;
   double sum = 0.0;
   size_t n = 0;
   r_.min_margin_s = 0.0;
