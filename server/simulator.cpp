@@ -775,10 +775,22 @@ absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::Catal
   absl::StatusOr<uint64_t> hi = probe(hi_mps);
   if (!hi.ok()) return hi.status();
   if (*hi == 0) return finish(hi_mps, 0.0);
-  absl::StatusOr<uint64_t> lo = probe(lo_mps);
-  if (!lo.ok()) return lo.status();
-  if (*lo > 0) return finish(0.0, lo_mps);
   double a = lo_mps, b = hi_mps;  // a: no stalls, b: stalls
+  absl::StatusOr<const scenes::WalkPath*> walk = FindWalk(entry, options.path);
+  if (!walk.ok()) return walk.status();
+  const double start = options.speed_mps > 0.0 ? options.speed_mps : (*walk)->speed_mps;
+  bool start_ok = false;
+  if (start > lo_mps && start < hi_mps) {
+    absl::StatusOr<uint64_t> s = probe(start);
+    if (!s.ok()) return s.status();
+    start_ok = *s == 0;
+    (start_ok ? a : b) = start;
+  }
+  if (!start_ok) {
+    absl::StatusOr<uint64_t> lo = probe(lo_mps);
+    if (!lo.ok()) return lo.status();
+    if (*lo > 0) return finish(0.0, lo_mps);
+  }
   while (b > a * (1.0 + precision)) {
     const double m = std::sqrt(a * b);
     absl::StatusOr<uint64_t> s = probe(m);

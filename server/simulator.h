@@ -226,9 +226,11 @@ struct SpeedSearch {
 };
 // Bisection (on the logarithm of the speed) for the highest speed with zero stalls in
 // [lo_mps, hi_mps], until stall_speed <= max_speed * (1 + precision). If hi_mps has no stalls it
-// is the answer (stall_speed_mps 0); if lo_mps stalls, max_speed_mps is 0. Stalls are assumed
-// to appear once and stay as the speed grows (a later run contradicting it is still reported
-// by `runs`). Errors as Simulate's.
+// is the answer (stall_speed_mps 0). The first lower end tried is options.speed_mps (0: the
+// walk's own speed), and lo_mps only if that stalls (a slow walk costs the most to simulate:
+// more frames, and ε-masks while the walker lingers); if lo_mps stalls too, max_speed_mps is 0.
+// Stalls are assumed to appear once and stay as the speed grows (a run contradicting it is
+// still listed in `runs`). Errors as Simulate's.
 absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::CatalogEntry& entry,
                                          const SimulationOptions& options, double lo_mps, double hi_mps,
                                          double precision, const scenes::RunControl& run = {});

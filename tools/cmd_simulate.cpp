@@ -195,6 +195,7 @@ int Simulate(const SimulateArgs& a) {
     const auto t0 = std::chrono::steady_clock::now();
     nlohmann::json j;
     if (search) {
+      opt.speed_mps = 0.0;  // the search starts from the walk's own speed
       absl::StatusOr<server::SpeedSearch> s = server::FindMaxSpeed(**scene, *entry, opt, kMinSearchKmh / 3.6,
                                                                    kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
       if (!s.ok()) return Fail(s.status());
