@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 #include <unordered_map>
@@ -39,38 +40,52 @@ struct SchedulerStats {
   double compute_s = 0.0;
 };
 
-class PvsScheduler {
+// What a session asks for viewcell PVSs: the threaded PvsScheduler in the server, the
+// simulator's SimulatedScheduler (server/simulator.h) on simulated time. Both keep the same
+// policy (PvsSchedulePolicy): earliest deadline first, a shared LRU byte cache, joins, drops.
+class PvsSource {
  public:
-  // Computes one cell; called on a worker thread, concurrently from several. `worker` is the
-  // worker's index in [0, threads).
-  using Compute = std::function<CellPvs(CellId cell, unsigned worker)>;
-  // Receives a requested cell's PVS, on a worker thread. Must not call back into the scheduler
-  // while holding a lock the scheduler's callers hold.
+  // Receives a requested cell's PVS (PvsScheduler: on a worker thread; it must not call back
+  // into the scheduler while holding a lock the scheduler's callers hold).
   using Done = std::function<void(const CellPvsPtr&)>;
-
-  // Starts `threads` workers (at least one). Compute may run per-thread set-up first (e.g. an
-  // OpenGL context): `init(worker)` runs once on each worker thread before any job.
-  PvsScheduler(Compute compute, unsigned threads, size_t cache_bytes,
-               std::function<void(unsigned)> init = nullptr);
-  // Stops the workers; requests still waiting are dropped without calling their Done.
-  ~PvsScheduler();
-  PvsScheduler(const PvsScheduler&) = delete;
-  PvsScheduler& operator=(const PvsScheduler&) = delete;
+  virtual ~PvsSource() = default;
 
   // Asks for `cell` on behalf of `requester` (a session id), needed by `deadline` (seconds on
-  // the steady clock; sooner is served first). A cached cell is returned at once and `done`
-  // is not called; otherwise `done` is called later on a worker thread, exactly once unless
-  // the request is cancelled first. Asking again for the same cell replaces the deadline and
-  // the callback.
-  CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done);
+  // the caller's clock; sooner is served first). A cached cell is returned at once and `done`
+  // is not called; otherwise `done` is called later, exactly once unless the request is
+  // cancelled first, and never from within Request. Asking again for the same cell replaces
+  // the deadline and the callback.
+  virtual CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done) = 0;
   // `requester` no longer needs `cell` (it turned away): its Done will not be called, and a
   // job no one else waits for is dropped if it has not started.
-  void Cancel(uint64_t requester, CellId cell);
+  virtual void Cancel(uint64_t requester, CellId cell) = 0;
   // Everything `requester` asked for (its session ended).
-  void CancelAll(uint64_t requester);
+  virtual void CancelAll(uint64_t requester) = 0;
   // The cached PVS of `cell`, if any (refreshes its place in the LRU order).
-  CellPvsPtr Cached(CellId cell);
+  virtual CellPvsPtr Cached(CellId cell) = 0;
+  virtual SchedulerStats stats() const = 0;
+};
 
+// The scheduling policy without threads or clocks (not thread-safe; the caller locks): jobs
+// with their waiters, the queue by earliest deadline, the LRU byte cache, and the counts.
+class PvsSchedulePolicy {
+ public:
+  using Done = PvsSource::Done;
+  // `cache_bytes`: the cache's budget (the newest entry is always kept); `cache` false: no
+  // cache at all (every request is computed; the paper's plain scheme).
+  explicit PvsSchedulePolicy(size_t cache_bytes, bool cache = true) : cache_budget_(cache_bytes), use_cache_(cache) {}
+
+  // As PvsSource::Request; returns whether a job was (re)queued in `*queued` (may be null).
+  CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done, bool* queued = nullptr);
+  void Cancel(uint64_t requester, CellId cell);
+  void CancelAll(uint64_t requester);
+  CellPvsPtr Cached(CellId cell);
+  bool HasQueued() const { return !queue_.empty(); }
+  // The earliest-deadline job waiting, now marked running; none when no job waits.
+  std::optional<CellId> StartNext();
+  // The running job of `pvs->cell` finished after `seconds` of work: caches the PVS and
+  // returns its waiters' callbacks (ordered by requester), to be called without a lock.
+  std::vector<Done> Finish(const CellPvsPtr& pvs, double seconds);
   SchedulerStats stats() const;
 
  private:
@@ -83,23 +98,51 @@ class PvsScheduler {
     double key = 0.0;  // the earliest deadline, its key in queue_ while not running
     bool running = false;
   };
+  // After a job's waiters changed; returns whether it is queued.
+  bool Requeue(CellId cell, Job* job);
+  void Insert(const CellPvsPtr& pvs);
 
-  void WorkerLoop(unsigned worker);
-  void Requeue(CellId cell, Job* job);  // after its waiters changed; lock held
-  void Insert(const CellPvsPtr& pvs);   // into the cache; lock held
-
-  Compute compute_;
-  std::function<void(unsigned)> init_;
   size_t cache_budget_;
-
-  mutable std::mutex mu_;
-  std::condition_variable work_;
-  bool stopping_ = false;
+  bool use_cache_;
   std::unordered_map<CellId, Job> jobs_;
   std::set<std::pair<double, CellId>> queue_;  // jobs not running, by earliest deadline
   std::list<CellPvsPtr> lru_;                  // most recently used first
   std::unordered_map<CellId, std::list<CellPvsPtr>::iterator> cache_;
   SchedulerStats stats_;
+};
+
+class PvsScheduler : public PvsSource {
+ public:
+  // Computes one cell; called on a worker thread, concurrently from several. `worker` is the
+  // worker's index in [0, threads).
+  using Compute = std::function<CellPvs(CellId cell, unsigned worker)>;
+
+  // Starts `threads` workers (at least one). Compute may run per-thread set-up first (e.g. an
+  // OpenGL context): `init(worker)` runs once on each worker thread before any job.
+  PvsScheduler(Compute compute, unsigned threads, size_t cache_bytes,
+               std::function<void(unsigned)> init = nullptr);
+  // Stops the workers; requests still waiting are dropped without calling their Done.
+  ~PvsScheduler();
+  PvsScheduler(const PvsScheduler&) = delete;
+  PvsScheduler& operator=(const PvsScheduler&) = delete;
+
+  // PvsSource, deadlines on the steady clock; `done` is called on a worker thread.
+  CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done) override;
+  void Cancel(uint64_t requester, CellId cell) override;
+  void CancelAll(uint64_t requester) override;
+  CellPvsPtr Cached(CellId cell) override;
+  SchedulerStats stats() const override;
+
+ private:
+  void WorkerLoop(unsigned worker);
+
+  Compute compute_;
+  std::function<void(unsigned)> init_;
+
+  mutable std::mutex mu_;
+  std::condition_variable work_;
+  bool stopping_ = false;
+  PvsSchedulePolicy policy_;
   std::vector<std::jthread> workers_;
 };
 

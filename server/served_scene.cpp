@@ -89,24 +89,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     };
   }
   s->scheduler_ = std::make_unique<PvsScheduler>(
-      [self](CellId cell, unsigned worker) {
-        CellPvs out;
-        out.cell = cell;
-        if (self->file_ != nullptr) {
-          out.objects = self->file_->sets.Objects(cell);
-          return out;
-        }
-        if (worker >= self->backends_.size()) {
-          // No backend on this worker (the OpenGL context failed): the CPU raster instead.
-          out.objects = self->computer_->Compute(self->grid_->CellBox(cell), self->query_).objects;
-          return out;
-        }
-        const visibility::PvsResult r = self->backends_[worker]->Compute(*self->computer_, self->grid_->CellBox(cell),
-                                                                          self->query_);
-        out.objects = r.objects;
-        out.compute_s = r.ms / 1000.0;
-        return out;
-      },
+      [self](CellId cell, unsigned worker) { return self->ComputePvs(cell, worker); },
       threads, options.cache_bytes, init);
   if (options.backend == "gl" && options.pvs_file.empty()) {
     // Fail at start-up, not on the first request, when there is no OpenGL.
@@ -114,6 +97,24 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     if (!probe.ok()) return probe.status();
   }
   return s;
+}
+
+CellPvs ServedScene::ComputePvs(CellId cell, unsigned worker) const {
+  CellPvs out;
+  out.cell = cell;
+  if (file_ != nullptr) {
+    out.objects = file_->sets.Objects(cell);
+    return out;
+  }
+  if (worker >= backends_.size()) {
+    // No backend on this worker (the OpenGL context failed): the CPU raster instead.
+    out.objects = computer_->Compute(grid_->CellBox(cell), query_).objects;
+    return out;
+  }
+  const visibility::PvsResult r = backends_[worker]->Compute(*computer_, grid_->CellBox(cell), query_);
+  out.objects = r.objects;
+  out.compute_s = r.ms / 1000.0;
+  return out;
 }
 
 }  // namespace vistream::server

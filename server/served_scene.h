@@ -51,6 +51,11 @@ class ServedScene {
   PvsScheduler& scheduler() { return *scheduler_; }
   // Where ε-masks are computed.
   TaskQueue& masks() { return *masks_; }
+  // Computes (or, with a PVS file, looks up) the PVS of `cell` as scheduler worker `worker`
+  // does, on the calling thread; compute_s is the backend's own time (0 for a file's sets).
+  // The simulator calls it on its own thread with worker 0 (the CPU raster when that worker's
+  // backend is OpenGL, whose context is current on the worker thread only).
+  CellPvs ComputePvs(CellId cell, unsigned worker) const;
   // "dual ray space (cpu, 128^2)" or "PVS file F (agvs)".
   const std::string& pvs_source() const { return pvs_source_; }
   double load_seconds() const { return load_seconds_; }

@@ -35,13 +35,21 @@ absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
 }  // namespace
 
 std::shared_ptr<Session> Session::Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
-                                         std::function<void()> wake) {
-  return std::shared_ptr<Session>(new Session(id, scene, limits, log, std::move(wake)));
+                                         std::function<void()> wake, SessionSeams seams) {
+  return std::shared_ptr<Session>(new Session(id, scene, limits, log, std::move(wake), std::move(seams)));
 }
 
 Session::Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
-                 std::function<void()> wake)
-    : id_(id), scene_(scene), limits_(limits), log_(log), wake_(std::move(wake)), start_s_(SteadySeconds()) {
+                 std::function<void()> wake, SessionSeams seams)
+    : id_(id),
+      scene_(scene),
+      limits_(limits),
+      log_(log),
+      wake_(std::move(wake)),
+      seams_(std::move(seams)),
+      pvs_(seams_.pvs != nullptr ? seams_.pvs : &scene->scheduler()),
+      masks_(seams_.masks != nullptr ? seams_.masks : &scene->masks()),
+      start_s_(Now()) {
   stats_.set_session_id(id);
   stats_.set_cell_id(-1);
   pose_tokens_ = 2.0 * limits_.max_pose_rate_hz;
@@ -49,13 +57,15 @@ Session::Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, E
 
 Session::~Session() { End(); }
 
+double Session::Now() const { return seams_.clock ? seams_.clock() : SteadySeconds(); }
+
 void Session::End() {
   {
     std::lock_guard lock(mu_);
     if (ended_) return;
     ended_ = true;
   }
-  scene_->scheduler().CancelAll(id_);
+  pvs_->CancelAll(id_);
 }
 
 absl::Status Session::failure() const {
@@ -178,12 +188,12 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       anchor_ = p;
       anchor_s_ = now;
       mask_requested_ = false;
-    } else if (Turned()) {
+    } else if (seams_.look_ahead && Turned()) {
       SetWanted(now);  // the cells ahead are others now: re-rank requests and geometry
     }
     MaybeRequestMask(now);
   }
-  for (CellId c : left) scene_->scheduler().Cancel(id_, c);
+  for (CellId c : left) pvs_->Cancel(id_, c);
   return absl::OkStatus();
 }
 
@@ -230,8 +240,13 @@ void Session::SetWanted(double now) {
   ranked_velocity_ = velocity_;
   std::vector<std::pair<double, CellId>> order;
   order.emplace_back(now, *current_);
-  for (CellId n : grid.Neighbours(*current_)) order.emplace_back(Deadline(n, now), n);
-  std::sort(order.begin() + 1, order.end());
+  if (seams_.look_ahead) {
+    for (CellId n : grid.Neighbours(*current_)) order.emplace_back(Deadline(n, now), n);
+    std::sort(order.begin() + 1, order.end());
+  } else {
+    // The plain scheme: the grid's order, a millisecond apart (the scheduler serves it so).
+    for (CellId n : grid.Neighbours(*current_)) order.emplace_back(now + 1e-3 * static_cast<double>(order.size()), n);
+  }
   wanted_.clear();
   for (const auto& [deadline, c] : order) wanted_.push_back(c);
   // Forget what no longer matters: requests, PVSs, their queued lists and geometry.
@@ -266,7 +281,7 @@ void Session::SetWanted(double now) {
 void Session::RequestCell(CellId cell, double deadline) {
   requested_.insert(cell);
   std::weak_ptr<Session> weak = weak_from_this();
-  CellPvsPtr cached = scene_->scheduler().Request(id_, cell, deadline, [weak](const CellPvsPtr& pvs) {
+  CellPvsPtr cached = pvs_->Request(id_, cell, deadline, [weak](const CellPvsPtr& pvs) {
     std::shared_ptr<Session> s = weak.lock();
     if (s == nullptr) return;
     {
@@ -388,7 +403,7 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
 }
 
 void Session::MaybeRequestMask(double now) {
-  const visibility::EpsilonSuperset* eps = scene_->epsilon();
+  const visibility::EpsilonSuperset* eps = seams_.epsilon_masks ? scene_->epsilon() : nullptr;
   if (eps == nullptr || !current_.has_value()) return;
   const double half = 0.5 * limits_.epsilon_size_m;
   if (std::abs(position_.x - anchor_.x) > half || std::abs(position_.y - anchor_.y) > half) {
@@ -417,8 +432,10 @@ void Session::MaybeRequestMask(double now) {
   std::weak_ptr<Session> weak = weak_from_this();
   CellPvsPtr pvs = it->second;
   const CellId cell = *current_;
-  scene_->masks().Post([weak, box, pvs, generation, cell, eps] {
-    if (weak.expired()) return;
+  // The work computes the mask; what it returns queues it (the simulator charges the work's
+  // time before delivering).
+  masks_->Post([weak, box, pvs, generation, cell, eps]() -> std::function<void()> {
+    if (weak.expired()) return nullptr;
     const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
     v1::ServerMessage m;
     v1::EpsilonMask* mask = m.mutable_epsilon_mask();
@@ -438,16 +455,18 @@ void Session::MaybeRequestMask(double now) {
       }
       ot->set_visible(std::move(bits));
     }
-    std::shared_ptr<Session> s = weak.lock();
-    if (s == nullptr) return;
-    {
-      std::lock_guard lock(s->mu_);
-      // Stale if the client moved on while it was computed.
-      if (s->ended_ || generation != s->mask_generation_ || !s->current_.has_value() || *s->current_ != cell) return;
-      s->QueueControl(std::move(m));
-      s->stats_.set_epsilon_masks(s->stats_.epsilon_masks() + 1);
-    }
-    if (s->wake_) s->wake_();
+    return [weak, generation, cell, m = std::move(m)]() mutable {
+      std::shared_ptr<Session> s = weak.lock();
+      if (s == nullptr) return;
+      {
+        std::lock_guard lock(s->mu_);
+        // Stale if the client moved on while it was computed.
+        if (s->ended_ || generation != s->mask_generation_ || !s->current_.has_value() || *s->current_ != cell) return;
+        s->QueueControl(std::move(m));
+        s->stats_.set_epsilon_masks(s->stats_.epsilon_masks() + 1);
+      }
+      if (s->wake_) s->wake_();
+    };
   });
 }
 
@@ -524,7 +543,7 @@ v1::SessionStats Session::Stats() const {
   for (const auto& [c, q] : pending_geometry_) pending += q.size();
   s.set_queued_bytes(control_bytes_ + pending * sizeof(uint32_t));
   s.set_held_bytes(held_bytes_);
-  s.set_seconds(SteadySeconds() - start_s_);
+  s.set_seconds(Now() - start_s_);
   return s;
 }
 

@@ -40,12 +40,25 @@ struct SessionLimits {
                                                // at 1 m/s leaves the box sooner)
 };
 
+// What a session runs on: in the server the scene's threaded scheduler and ε-mask queue and the
+// steady clock; in the simulator (server/simulator.h) its own, on simulated time. The defaults
+// are the server's, and leave the session's behaviour as it was.
+struct SessionSeams {
+  PvsSource* pvs = nullptr;       // null: scene->scheduler()
+  TaskRunner* masks = nullptr;    // null: scene->masks()
+  std::function<double()> clock;  // seconds (Stats' session time); empty: the steady clock
+  // false: the paper's plain scheme: neighbours asked for and sent in a fixed grid order
+  // (ViewcellGrid::Neighbours'), not by the client's velocity.
+  bool look_ahead = true;
+  bool epsilon_masks = true;      // false: no ε-masks (the viewcell PVS only)
+};
+
 class Session : public std::enable_shared_from_this<Session> {
  public:
   // `wake` is called, without the session's lock, whenever a message becomes ready from a
   // worker thread (a PVS arrived); the transport then calls NextMessage(). `log` may be null.
   static std::shared_ptr<Session> Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
-                                         std::function<void()> wake);
+                                         std::function<void()> wake, SessionSeams seams = {});
   ~Session();
 
   uint64_t id() const { return id_; }
@@ -63,7 +76,9 @@ class Session : public std::enable_shared_from_this<Session> {
   vistream::v1::SessionStats Stats() const;
 
  private:
-  Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log, std::function<void()> wake);
+  Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log, std::function<void()> wake,
+          SessionSeams seams);
+  double Now() const;
 
   absl::Status OnHello(const vistream::v1::Hello& hello);
   absl::Status OnPose(const vistream::v1::Pose& pose, double now);
@@ -85,6 +100,9 @@ class Session : public std::enable_shared_from_this<Session> {
   const SessionLimits limits_;
   EventLog* const log_;
   std::function<void()> wake_;
+  const SessionSeams seams_;
+  PvsSource* const pvs_;
+  TaskRunner* const masks_;
   const double start_s_;
 
   mutable std::mutex mu_;

@@ -1,6 +1,6 @@
 #pragma once
-// A worker thread for small background jobs (ε-masks), first in first out. Bounded: when more
-// than `capacity` jobs wait, the oldest is dropped (its owner asks again if it still cares).
+// Where a session's small background jobs (ε-masks) run: TaskQueue, a worker thread, in the
+// server; the simulator's own runner on simulated time (server/simulator.h).
 
 #include <condition_variable>
 #include <deque>
@@ -10,7 +10,19 @@
 
 namespace vistream::server {
 
-class TaskQueue {
+class TaskRunner {
+ public:
+  // A job in two steps: the work (run off the caller's thread, or at a simulated time, whose
+  // length the simulator measures), which returns what delivers its result (run right after
+  // it by TaskQueue, or when the simulated work ends). The delivery may be empty.
+  using Work = std::function<std::function<void()>()>;
+  virtual ~TaskRunner() = default;
+  virtual void Post(Work work) = 0;
+};
+
+// A worker thread, first in first out. Bounded: when more than `capacity` jobs wait, the
+// oldest is dropped (its owner asks again if it still cares).
+class TaskQueue : public TaskRunner {
  public:
   explicit TaskQueue(size_t capacity = 64) : capacity_(capacity), thread_([this] { Loop(); }) {}
   ~TaskQueue() {
@@ -23,7 +35,7 @@ class TaskQueue {
   TaskQueue(const TaskQueue&) = delete;
   TaskQueue& operator=(const TaskQueue&) = delete;
 
-  void Post(std::function<void()> task) {
+  void Post(Work task) override {
     {
       std::lock_guard lock(mu_);
       if (tasks_.size() >= capacity_) tasks_.pop_front();
@@ -38,10 +50,10 @@ class TaskQueue {
     for (;;) {
       cv_.wait(lock, [&] { return stopping_ || !tasks_.empty(); });
       if (stopping_) return;
-      std::function<void()> task = std::move(tasks_.front());
+      Work task = std::move(tasks_.front());
       tasks_.pop_front();
       lock.unlock();
-      task();
+      if (std::function<void()> deliver = task()) deliver();
       lock.lock();
     }
   }
@@ -50,7 +62,7 @@ class TaskQueue {
   std::mutex mu_;
   std::condition_variable cv_;
   bool stopping_ = false;
-  std::deque<std::function<void()>> tasks_;
+  std::deque<Work> tasks_;
   std::jthread thread_;  // last: starts after the members it reads
 };
 

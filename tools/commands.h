@@ -15,6 +15,7 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done);
 void AddCheckCommand(CLI::App& app, std::function<void(int)> done);
 void AddReportCommand(CLI::App& app, std::function<void(int)> done);
 void AddBenchCommands(CLI::App& app, std::function<void(int)> done);
+void AddSimulateCommand(CLI::App& app, std::function<void(int)> done);
 // `bench epsilon`, added to the bench subcommand by AddBenchCommands.
 void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done);
 // `bench agvs`, likewise.

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   vistream::tools::AddAgvsCommand(app, done);
   vistream::tools::AddCheckCommand(app, done);
   vistream::tools::AddBenchCommands(app, done);
+  vistream::tools::AddSimulateCommand(app, done);
   vistream::tools::AddReportCommand(app, done);
   vistream::tools::InstallCancelHandler();
   try {

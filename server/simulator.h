@@ -1,0 +1,238 @@
+#pragma once
+// The discrete-event simulator behind `vistream simulate` (DESIGN.md "Simulation" and
+// "Measures"; the papers' claim that a walking client never reaches a viewcell before its PVS
+// has arrived). It runs the server's own Session, with its scheduling policy, PVS cache and
+// meshoptimizer geometry, against a modelled client and a modelled link (server/link_model.h),
+// on simulated time: a PVS is computed with the real PvsComputer when a simulated worker starts
+// it, and completes the measured wall time later on the simulated clock.
+//
+// What is modelled is what the scene's catalog entry declares (simulation.link, .client) and
+// nothing else: an entry without a link gets an ideal one; without client.frame_ms frames are
+// counted at 60 Hz but geometry needs no upload frame.
+//
+// Units: seconds of simulated time (0 = the client opens its session), metres in the scene's
+// local frame (z up), bytes.
+
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <queue>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+#include "scenes/catalog.h"
+#include "scenes/progress.h"
+#include "server/event_log.h"
+#include "server/link_model.h"
+#include "server/pvs_scheduler.h"
+#include "server/served_scene.h"
+#include "server/task_queue.h"
+
+namespace vistream::server {
+
+// What the server streams for a viewcell.
+enum class Scheme {
+  kPvsEps,  // "pvs+eps": the viewcell PVS, narrowed by ε-masks while the client lingers (the server's)
+  kPvs,     // "pvs": the viewcell PVS without ε-masks
+  kRadius,  // "radius": no visibility: every object within R metres of the cell
+  kPlain,   // "plain": the paper's: no shared cache, neighbours in a fixed grid order
+};
+// "pvs+eps", "pvs", "radius", "plain".
+std::string_view SchemeName(Scheme scheme);
+// The inverse; INVALID_ARGUMENT naming the text and the schemes otherwise.
+absl::StatusOr<Scheme> ParseScheme(std::string_view text);
+
+// Simulated time: events run in time order (ties in the order they were added).
+class EventQueue {
+ public:
+  double now() const { return now_; }
+  // Runs `fn` at `t` (not before now()).
+  void At(double t, std::function<void()> fn);
+  bool empty() const { return events_.empty(); }
+  double next_time() const { return events_.top().t; }
+  // Runs the earliest event, advancing now() to its time.
+  void RunNext();
+
+ private:
+  struct Event {
+    double t;
+    uint64_t seq;
+    std::function<void()> fn;
+    bool operator>(const Event& o) const { return t != o.t ? t > o.t : seq > o.seq; }
+  };
+  double now_ = 0.0;
+  uint64_t seq_ = 0;
+  std::priority_queue<Event, std::vector<Event>, std::greater<>> events_;
+};
+
+// Viewcell PVSs computed in this process, with the wall time each took, so that a speed search
+// or a comparison of schemes computes each cell once (whether a run pays the time is the
+// simulated cache's decision). Not thread-safe.
+class PvsMemo {
+ public:
+  struct Entry {
+    CellPvsPtr pvs;
+    double seconds = 0.0;  // wall time of the computation on this machine
+  };
+  // The PVS of `cell`, computed with scene.ComputePvs(cell, 0) the first time.
+  const Entry& Get(const ServedScene& scene, CellId cell);
+  size_t size() const { return entries_.size(); }
+
+ private:
+  std::unordered_map<CellId, Entry> entries_;
+};
+
+// The server's PVS scheduling policy (PvsSchedulePolicy) on `workers` simulated workers: a job
+// starts when a worker is free, takes `compute`'s seconds, and its waiters hear at the end.
+class SimulatedScheduler : public PvsSource {
+ public:
+  // A cell's set and the simulated seconds it costs.
+  using Compute = std::function<CellPvsPtr(CellId cell, double* seconds)>;
+  // `cache` false: no cache at all (the plain scheme).
+  SimulatedScheduler(EventQueue* queue, Compute compute, unsigned workers, size_t cache_bytes, bool cache);
+
+  CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done) override;
+  void Cancel(uint64_t requester, CellId cell) override;
+  void CancelAll(uint64_t requester) override;
+  CellPvsPtr Cached(CellId cell) override;
+  SchedulerStats stats() const override;
+
+  // Starts waiting jobs on the free workers at queue->now(). `on_start(cell, seconds)` hears of
+  // each job started (may be empty).
+  void Dispatch(const std::function<void(CellId, double)>& on_start);
+
+ private:
+  EventQueue* queue_;
+  Compute compute_;
+  unsigned workers_, busy_ = 0;
+  PvsSchedulePolicy policy_;
+};
+
+// ε-masks on one simulated worker, first in first out: the work runs when the worker is free,
+// its delivery its measured time (or `fixed_s`) later.
+class SimulatedTaskRunner : public TaskRunner {
+ public:
+  SimulatedTaskRunner(EventQueue* queue, std::optional<double> fixed_s) : queue_(queue), fixed_s_(fixed_s) {}
+  void Post(Work work) override { waiting_.push_back(std::move(work)); }
+  void Dispatch();
+  uint64_t ran() const { return ran_; }
+
+ private:
+  EventQueue* queue_;
+  std::optional<double> fixed_s_;
+  std::deque<Work> waiting_;
+  bool busy_ = false;
+  uint64_t ran_ = 0;
+};
+
+struct SimulationOptions {
+  std::string path;       // the walk's name; empty: the entry's first walk
+  double speed_mps = 0.0; // walking speed; 0: the walk's own
+  // The link (the entry's declared one, or --link over it); none: an ideal link.
+  std::optional<scenes::LinkSpec> link;
+  // k > 0: a real run replayed k times faster, as the end-to-end comparison runs it: speed x k
+  // and the link's LinkParamsFrom(link, k); compute times, poses (10 Hz) and frames unscaled.
+  double time_scale = 1.0;
+  Scheme scheme = Scheme::kPvsEps;
+  uint64_t seed = 1;                     // the link models' draws (uplink: seed, downlink: seed + 1)
+  unsigned workers = 0;                  // simulated PVS workers; 0: this machine's cores
+  size_t cache_bytes = size_t{256} << 20;  // the shared PVS cache (vistream-server's --cache-mb)
+  // Tests: charge this many seconds per PVS (and per ε-mask) instead of the measured time,
+  // for results that do not depend on the machine.
+  std::optional<double> fixed_compute_s;
+  double radius_m = 0.0;         // the radius scheme's R; 0: NoHoleRadius of the walk
+  EventLog* log = nullptr;       // the simulator's events (and the session's); may be null
+  std::shared_ptr<PvsMemo> memo; // shared by the runs of one process; null: a fresh one
+  double startup_limit_s = 3600.0;  // simulated seconds the first viewcell may take
+  bool count_triangles = true;   // false: skip the per-frame culling (speed search probes)
+};
+
+// One viewcell the client entered while walking (a cell entered twice has two records).
+struct CellRecord {
+  CellId cell = 0;
+  double entered_s = 0.0;   // the first frame drawn in it
+  double complete_s = 0.0;  // its PVS list and every object in it had arrived (and been uploaded at
+                            // a frame, with a declared frame time); the exit time when it never was
+  double margin_s = 0.0;    // entered_s - complete_s; negative: the client waited
+  bool stalled = false;     // frames were drawn in it before it was complete
+  bool startup = false;     // the first cell: the walk waited for it (not a stall)
+};
+
+struct SimulationResult {
+  // Frames drawn inside a viewcell whose PVS geometry had not all arrived, at the declared frame
+  // time (undeclared: 60 Hz, for counting only); their time; the cells they were in.
+  uint64_t stalls = 0;
+  uint64_t stalled_cells = 0;
+  double stall_s = 0.0;
+  // Over the cells entered after the first: entered_s - complete_s (0 when none was entered).
+  double min_margin_s = 0.0, mean_margin_s = 0.0;
+  uint64_t bytes = 0;           // downlink bytes on the wire (server/link_model.h WireBytes)
+  uint64_t uplink_bytes = 0;
+  uint64_t geometry_bytes = 0;  // encoded geometry received
+  uint64_t objects_received = 0;  // geometry messages (an object evicted and needed again comes again)
+  uint64_t distinct_objects = 0;  // objects received at least once
+  double mean_triangles_drawn = 0.0;  // per walking frame, after view-frustum culling
+  uint64_t max_triangles_drawn = 0;
+  uint64_t scene_triangles = 0;
+  uint64_t frames = 0;
+  // Simulated PVS compute seconds of the jobs started from one crossing to the next (and from
+  // the first pose to the first crossing), one entry per crossing.
+  std::vector<double> compute_s_per_crossing;
+  std::vector<CellRecord> cells;
+  uint64_t crossings = 0;
+  uint64_t pvs_computed = 0;     // jobs the simulated scheduler ran (paid for)
+  uint64_t pvs_cache_hits = 0;
+  uint64_t masks = 0;            // ε-masks received
+  uint64_t jitter_draws = 0;     // messages delayed by a jitter draw > 0
+  uint64_t lost_segments = 0;
+  double radius_m = 0.0;         // the radius scheme's R
+  double path_m = 0.0, walk_s = 0.0, sim_s = 0.0, startup_s = 0.0;
+  double speed_mps = 0.0;
+  double frame_s = 0.0;
+  bool frame_declared = false;
+  LinkParams link;               // as modelled (ideal when none was declared)
+  bool link_declared = false;
+};
+
+// The entry's walk named `path` (empty: its first). NOT_FOUND naming the entry's walks;
+// FAILED_PRECONDITION when it declares none.
+absl::StatusOr<const scenes::WalkPath*> FindWalk(const scenes::CatalogEntry& entry, const std::string& path);
+
+// Walks `options.path` through `scene` (prepared by ServedScene::Create from `entry`) with one
+// simulated session. Errors: NOT_FOUND for an unknown walk (naming the entry's walks),
+// INVALID_ARGUMENT for a speed that is not positive and finite or a bad option,
+// DEADLINE_EXCEEDED when the first viewcell does not arrive within startup_limit_s, INTERNAL
+// naming the status when the session ends, CANCELLED when run's flag is raised.
+absl::StatusOr<SimulationResult> Simulate(ServedScene& scene, const scenes::CatalogEntry& entry,
+                                          const SimulationOptions& options, const scenes::RunControl& run = {});
+
+// The radius scheme's R for a walk: the largest distance (metres, between boxes) from a cell the
+// walk passes through to an object of that cell's dual-ray-space PVS, so that streaming every
+// object within R of a cell leaves no hole on this walk. Errors as Simulate's for the walk.
+absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEntry& entry, const std::string& path,
+                                    PvsMemo* memo);
+
+struct SpeedSearch {
+  double max_speed_mps = 0.0;  // the highest speed found with zero stalls (0: none in the bracket)
+  double stall_speed_mps = 0.0;  // the lowest speed found with stalls (0: none in the bracket)
+  SimulationResult at_max;     // the run at max_speed_mps
+  std::vector<std::pair<double, uint64_t>> runs;  // (speed m/s, stalls) of every run, in order
+};
+// Bisection (on the logarithm of the speed) for the highest speed with zero stalls in
+// [lo_mps, hi_mps], until stall_speed <= max_speed * (1 + precision). If hi_mps has no stalls it
+// is the answer (stall_speed_mps 0). The first lower end tried is options.speed_mps (0: the
+// walk's own speed), and lo_mps only if that stalls (a slow walk costs the most to simulate:
+// more frames, and ε-masks while the walker lingers); if lo_mps stalls too, max_speed_mps is 0.
+// Stalls are assumed to appear once and stay as the speed grows (a run contradicting it is
+// still listed in `runs`). Errors as Simulate's.
+absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::CatalogEntry& entry,
+                                         const SimulationOptions& options, double lo_mps, double hi_mps,
+                                         double precision, const scenes::RunControl& run = {});
+
+}  // namespace vistream::server

@@ -1,0 +1,310 @@
+// The discrete-event simulator (server/simulator.h) and `vistream simulate`: the papers' latency
+// claim on city1 and a london-generated city over their declared links, a link too slow for the
+// walk, jitter only where declared, the baselines, the speed search, determinism, bad input.
+#include "server/simulator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <set>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "scenes/catalog.h"
+#include "server/served_scene.h"
+#include "tests/cli_test_util.h"
+
+namespace vistream::server {
+namespace {
+
+// A london-generated city of 1.6 km x 1.6 km (the generator at a smaller size, not a crop of
+// london) with london's declared link and client (tests/simulator/london_small.json).
+std::string LondonSmallPath() { return std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json"; }
+
+struct Prepared {
+  scenes::CatalogEntry entry;
+  std::unique_ptr<ServedScene> scene;
+  std::shared_ptr<PvsMemo> memo = std::make_shared<PvsMemo>();
+};
+
+class SimulatorTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    city1_ = Prepare("city1", 128);
+    london_ = Prepare(LondonSmallPath(), 64);
+  }
+  static void TearDownTestSuite() {
+    delete city1_;
+    delete london_;
+    city1_ = london_ = nullptr;
+  }
+  static Prepared* Prepare(const std::string& name, uint32_t res) {
+    auto p = new Prepared;
+    absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(name);
+    EXPECT_TRUE(entry.ok()) << entry.status();
+    p->entry = *entry;
+    ServedSceneOptions o;
+    o.scene = name;
+    o.res = res;
+    o.threads = 1;
+    absl::StatusOr<std::unique_ptr<ServedScene>> s = ServedScene::Create(o);
+    EXPECT_TRUE(s.ok()) << s.status();
+    p->scene = std::move(*s);
+    return p;
+  }
+  // The declared link, 6 km/h, two simulated workers, measured compute times.
+  static SimulationOptions Options(const Prepared& p, double kmh = 6.0) {
+    SimulationOptions o;
+    o.speed_mps = kmh / 3.6;
+    o.link = p.entry.simulation.link;
+    o.workers = 2;
+    o.memo = p.memo;
+    return o;
+  }
+  static SimulationResult Run(Prepared& p, const SimulationOptions& o) {
+    absl::StatusOr<SimulationResult> r = Simulate(*p.scene, p.entry, o);
+    EXPECT_TRUE(r.ok()) << r.status();
+    return r.ok() ? *r : SimulationResult{};
+  }
+  static Prepared* city1_;
+  static Prepared* london_;
+};
+Prepared* SimulatorTest::city1_ = nullptr;
+Prepared* SimulatorTest::london_ = nullptr;
+
+TEST_F(SimulatorTest, City1AtSixKmhOnItsDeclaredLinkNeverStalls) {
+  ASSERT_TRUE(city1_->entry.simulation.link.has_value());
+  const SimulationResult r = Run(*city1_, Options(*city1_));
+  EXPECT_EQ(r.link.bandwidth_bps, 2e6);
+  EXPECT_GT(r.crossings, 20u);
+  EXPECT_EQ(r.stalls, 0u);
+  EXPECT_EQ(r.stalled_cells, 0u);
+  EXPECT_GT(r.min_margin_s, 0.0);
+  EXPECT_GT(r.mean_margin_s, r.min_margin_s - 1e-12);
+  EXPECT_GT(r.bytes, r.geometry_bytes);  // framing, headers and control messages on top
+  EXPECT_GT(r.mean_triangles_drawn, 0.0);
+  EXPECT_LT(r.mean_triangles_drawn, static_cast<double>(r.scene_triangles));
+}
+
+TEST_F(SimulatorTest, LondonCityAtSixKmhOverOneMbitNeverStalls) {
+  const SimulationResult r = Run(*london_, Options(*london_));
+  EXPECT_EQ(r.link.bandwidth_bps, 1e6);
+  EXPECT_DOUBLE_EQ(r.link.latency_s, 0.2);
+  EXPECT_GT(r.crossings, 10u);
+  EXPECT_EQ(r.stalls, 0u);
+  EXPECT_GT(r.min_margin_s, 0.0);
+  EXPECT_GT(r.startup_s, 0.4);  // a round trip at least before the first viewcell
+}
+
+TEST_F(SimulatorTest, ALinkTooSlowForTheWalkStalls) {
+  SimulationOptions o = Options(*city1_);
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("20k,200", o.link);
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  o.link = *slow;
+  const SimulationResult r = Run(*city1_, o);
+  EXPECT_GT(r.stalls, 0u);
+  EXPECT_GT(r.stalled_cells, 0u);
+  EXPECT_GT(r.stall_s, 0.0);
+  EXPECT_LT(r.min_margin_s, 0.0);
+  EXPECT_NEAR(r.stall_s, static_cast<double>(r.stalls) * r.frame_s, 1e-6);
+}
+
+// The log's deliveries: how many messages got a jitter draw above zero.
+size_t JitteredDeliveries(const std::string& path, size_t* deliveries) {
+  std::ifstream in(path);
+  std::string line;
+  size_t jittered = 0;
+  *deliveries = 0;
+  while (std::getline(in, line)) {
+    const nlohmann::json j = nlohmann::json::parse(line);
+    if (j["event"] != "uplink" && j["event"] != "downlink") continue;
+    ++*deliveries;
+    if (j["jitter_ms"].get<double>() > 0.0) ++jittered;
+  }
+  return jittered;
+}
+
+TEST_F(SimulatorTest, JitterOnlyWhereTheSceneDeclaresIt) {
+  const std::string path = vistream::testing::Tmp("simulator-jitter.jsonl");
+  for (bool declared : {true, false}) {
+    scenes::CatalogEntry entry = city1_->entry;
+    if (!declared) entry.simulation.link->jitter_ms.reset();
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    EventLog log(f, true);
+    SimulationOptions o = Options(*city1_, 30.0);
+    o.link = entry.simulation.link;
+    o.log = &log;
+    absl::StatusOr<SimulationResult> r = Simulate(*city1_->scene, entry, o);
+    std::fclose(f);
+    ASSERT_TRUE(r.ok()) << r.status();
+    size_t deliveries = 0;
+    const size_t jittered = JitteredDeliveries(path, &deliveries);
+    EXPECT_GT(deliveries, 100u);
+    if (declared) {
+      EXPECT_GT(jittered, deliveries / 2) << "city1 declares 10 ms of jitter";
+      EXPECT_GT(r->jitter_draws, 0u);
+    } else {
+      EXPECT_EQ(jittered, 0u) << "no jitter declared: none modelled";
+      EXPECT_EQ(r->jitter_draws, 0u);
+    }
+  }
+}
+
+TEST_F(SimulatorTest, NoDeclaredLinkIsAnIdealLink) {
+  SimulationOptions o = Options(*city1_);
+  o.link.reset();
+  const SimulationResult r = Run(*city1_, o);
+  EXPECT_TRUE(r.link.ideal());
+  EXPECT_FALSE(r.link_declared);
+  EXPECT_EQ(r.jitter_draws, 0u);
+  EXPECT_EQ(r.lost_segments, 0u);
+  EXPECT_EQ(r.stalls, 0u);
+}
+
+TEST_F(SimulatorTest, ThePlainSchemeRecomputesWhatTheSharedCacheKeeps) {
+  // city1's walk comes back along streets it walked: the server's cache answers the cells it
+  // computed before; the plain scheme (no cache) computes them again.
+  SimulationOptions o = Options(*city1_);
+  o.fixed_compute_s = 0.05;
+  o.scheme = Scheme::kPvs;
+  const SimulationResult pvs = Run(*city1_, o);
+  o.scheme = Scheme::kPlain;
+  const SimulationResult plain = Run(*city1_, o);
+  EXPECT_GT(pvs.pvs_cache_hits, 0u);
+  EXPECT_EQ(plain.pvs_cache_hits, 0u);
+  EXPECT_GT(plain.pvs_computed, pvs.pvs_computed);
+}
+
+TEST_F(SimulatorTest, TheRadiusBaselineLeavesNoHoleAndStreamsMoreObjects) {
+  absl::StatusOr<double> radius = NoHoleRadius(*london_->scene, london_->entry, "", london_->memo.get());
+  ASSERT_TRUE(radius.ok()) << radius.status();
+  EXPECT_GT(*radius, 0.0);
+  SimulationOptions o = Options(*london_);
+  o.scheme = Scheme::kRadius;
+  const SimulationResult r = Run(*london_, o);
+  EXPECT_DOUBLE_EQ(r.radius_m, *radius);
+  // No hole: every object of every entered cell's PVS lies within R of that cell.
+  const visibility::ViewcellGrid& grid = london_->scene->grid();
+  std::set<CellId> cells;
+  for (const CellRecord& c : r.cells) cells.insert(c.cell);
+  ASSERT_GT(cells.size(), 5u);
+  for (CellId c : cells) {
+    const scenes::Aabb box = grid.CellBox(c);
+    for (uint32_t id : london_->memo->Get(*london_->scene, c).pvs->objects) {
+      const scenes::Aabb& b = london_->scene->scene().objects[id].bounds;
+      const double dx = std::max({0.0, box.min.x - b.max.x, b.min.x - box.max.x});
+      const double dy = std::max({0.0, box.min.y - b.max.y, b.min.y - box.max.y});
+      const double dz = std::max({0.0, box.min.z - b.max.z, b.min.z - box.max.z});
+      EXPECT_LE(std::sqrt(dx * dx + dy * dy + dz * dz), r.radius_m + 1e-9) << "object " << id << " of cell " << c;
+    }
+  }
+  EXPECT_EQ(r.stalls, 0u);
+  SimulationOptions p = Options(*london_);
+  p.scheme = Scheme::kPvs;
+  const SimulationResult pvs = Run(*london_, p);
+  EXPECT_GE(r.distinct_objects, pvs.distinct_objects);
+  EXPECT_GT(r.mean_triangles_drawn, pvs.mean_triangles_drawn);
+}
+
+TEST_F(SimulatorTest, SpeedSearchBracketsTheFirstStall) {
+  // A slow link so that stalls start at a walking speed; fixed compute times: deterministic.
+  SimulationOptions o = Options(*london_);
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("100k,200", o.link);
+  ASSERT_TRUE(slow.ok());
+  o.link = *slow;
+  o.fixed_compute_s = 0.05;
+  absl::StatusOr<SpeedSearch> s = FindMaxSpeed(*london_->scene, london_->entry, o, 1.0 / 3.6, 500.0 / 3.6, 0.01);
+  ASSERT_TRUE(s.ok()) << s.status();
+  ASSERT_GT(s->max_speed_mps, 0.0);
+  ASSERT_GT(s->stall_speed_mps, s->max_speed_mps);
+  EXPECT_LE(s->stall_speed_mps, s->max_speed_mps * 1.01 + 1e-9);
+  EXPECT_EQ(s->at_max.stalls, 0u);
+  EXPECT_GE(s->runs.size(), 3u);
+  o.speed_mps = s->stall_speed_mps;
+  EXPECT_GT(Run(*london_, o).stalls, 0u);
+  o.speed_mps = s->max_speed_mps;
+  EXPECT_EQ(Run(*london_, o).stalls, 0u);
+}
+
+TEST_F(SimulatorTest, SameSeedSameResult) {
+  SimulationOptions o = Options(*city1_, 20.0);
+  o.fixed_compute_s = 0.02;
+  const SimulationResult a = Run(*city1_, o), b = Run(*city1_, o);
+  EXPECT_EQ(a.bytes, b.bytes);
+  EXPECT_EQ(a.stalls, b.stalls);
+  EXPECT_EQ(a.cells.size(), b.cells.size());
+  EXPECT_EQ(a.min_margin_s, b.min_margin_s);
+  EXPECT_EQ(a.mean_margin_s, b.mean_margin_s);
+  EXPECT_EQ(a.mean_triangles_drawn, b.mean_triangles_drawn);
+  EXPECT_EQ(a.sim_s, b.sim_s);
+  o.seed = 2;
+  const SimulationResult c = Run(*city1_, o);
+  EXPECT_NE(a.mean_margin_s, c.mean_margin_s) << "another seed, other jitter and loss draws";
+}
+
+TEST_F(SimulatorTest, BadInputGetsClearErrors) {
+  SimulationOptions o = Options(*city1_);
+  o.path = "nowhere";
+  absl::StatusOr<SimulationResult> r = Simulate(*city1_->scene, city1_->entry, o);
+  ASSERT_EQ(r.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(r.status().message(), "scene 'city1' has no walk 'nowhere'; its walks: lot-lines");
+  for (double speed : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    o = Options(*city1_);
+    o.speed_mps = speed;
+    r = Simulate(*city1_->scene, city1_->entry, o);
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << speed;
+    EXPECT_NE(r.status().message().find("is not a positive number"), std::string::npos) << r.status();
+  }
+  EXPECT_EQ(ParseScheme("fast").status().message(), "'fast' is not a scheme: expected pvs+eps, pvs, radius or plain");
+}
+
+// The command line.
+
+using vistream::testing::ExpectBadOption;
+using vistream::testing::ExpectRunTimeError;
+using vistream::testing::Vistream;
+
+TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
+  ExpectBadOption("simulate --scene city1 --speed -5", "--speed: '-5' is not a speed: expected km/h above 0");
+  ExpectBadOption("simulate --scene city1 --speed 0", "--speed: '0' is not a speed");
+  ExpectBadOption("simulate --scene city1 --speed nan", "--speed: 'nan' is not a speed");
+  ExpectBadOption("simulate --scene city1 --speed fast", "--speed: 'fast' is not a speed");
+  ExpectBadOption("simulate --scene city1 --link 1M", "--link: '1M': no comma");
+  ExpectBadOption("simulate --scene city1 --link abc,200", "--link: 'abc,200': the bandwidth is not a number");
+  ExpectBadOption("simulate --scene city1 --link 1M,-3", "--link: '1M,-3': the latency must be from 0 to 100000 ms");
+  ExpectBadOption("simulate --scene city1 --scheme fast",
+                  "--scheme: 'fast' is not a scheme: expected pvs+eps, pvs, radius or plain");
+}
+
+TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {
+  ExpectRunTimeError("simulate --scene city1 --path nowhere", "scene 'city1' has no walk 'nowhere'; its walks: lot-lines");
+}
+
+TEST(SimulateCli, JsonHasTheFigures) {
+  const vistream::testing::RunResult r =
+      Vistream("simulate --scene " + LondonSmallPath() + " --res 32 --compute-ms 20 --speed 12 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  // Progress lines on stderr come first (stdout is written at exit).
+  const size_t open = r.out.find("\n{\n");
+  ASSERT_NE(open, std::string::npos) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out.substr(open + 1));
+  for (const char* key : {"stalls", "stall_s", "stalled_cells", "min_margin_s", "mean_margin_s", "bytes",
+                          "geometry_bytes", "mean_triangles_drawn", "scene_triangles", "triangles_pct",
+                          "compute_ms_per_crossing", "cells_entered", "crossings", "scheme", "speed_kmh", "link",
+                          "path", "path_m", "sim_s", "wall_s", "startup_s"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_EQ(j["scheme"], "pvs+eps");
+  EXPECT_NEAR(j["speed_kmh"].get<double>(), 12.0, 1e-9);
+  EXPECT_EQ(j["link"]["described"], "1 Mbit/s, 200 ms, jitter 20 ms, loss 1%");
+  EXPECT_EQ(j["compute"], "fixed 20 ms");
+}
+
+}  // namespace
+}  // namespace vistream::server

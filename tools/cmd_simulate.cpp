@@ -1,0 +1,288 @@
+// vistream simulate: the discrete-event simulator (server/simulator.h): stalls, arrival margins,
+// bytes and triangles drawn along a catalog walk, over the scene's declared link.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
+#include <nlohmann/json.hpp>
+
+#include "server/link_model.h"
+#include "server/served_scene.h"
+#include "server/simulator.h"
+#include "tools/cli_common.h"
+#include "tools/commands.h"
+
+namespace vistream::tools {
+
+namespace {
+
+// The speed search's bracket and precision (`--speed max`).
+constexpr double kMinSearchKmh = 1.0, kMaxSearchKmh = 500.0, kSearchPrecision = 0.01;
+constexpr double kMaxKmh = 1000.0;
+
+struct SimulateArgs {
+  std::string scene, path, speed, link, scheme = "pvs+eps", schemes, log;
+  double cell_size = 0.0, compute_ms = -1.0;
+  int64_t res = 128, threads = 0, seed = 1;
+  bool json = false;
+};
+
+double Pct(const std::vector<double>& v, double q) {
+  if (v.empty()) return 0.0;
+  std::vector<double> s = v;
+  std::sort(s.begin(), s.end());
+  return s[static_cast<size_t>(std::round(q * static_cast<double>(s.size() - 1)))];
+}
+
+nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, const std::string& path) {
+  nlohmann::json j;
+  j["scheme"] = std::string(server::SchemeName(scheme));
+  j["path"] = path;
+  j["speed_kmh"] = r.speed_mps * 3.6;
+  j["stalls"] = r.stalls;
+  j["stall_s"] = r.stall_s;
+  j["stalled_cells"] = r.stalled_cells;
+  j["min_margin_s"] = r.min_margin_s;
+  j["mean_margin_s"] = r.mean_margin_s;
+  j["bytes"] = r.bytes;
+  j["uplink_bytes"] = r.uplink_bytes;
+  j["geometry_bytes"] = r.geometry_bytes;
+  j["objects_received"] = r.objects_received;
+  j["distinct_objects"] = r.distinct_objects;
+  j["mean_triangles_drawn"] = r.mean_triangles_drawn;
+  j["max_triangles_drawn"] = r.max_triangles_drawn;
+  j["scene_triangles"] = r.scene_triangles;
+  j["triangles_pct"] =
+      r.scene_triangles > 0 ? 100.0 * r.mean_triangles_drawn / static_cast<double>(r.scene_triangles) : 0.0;
+  j["compute_ms_per_crossing"] = {{"p50", 1000.0 * Pct(r.compute_s_per_crossing, 0.5)},
+                                  {"p99", 1000.0 * Pct(r.compute_s_per_crossing, 0.99)},
+                                  {"max", 1000.0 * Pct(r.compute_s_per_crossing, 1.0)}};
+  uint64_t entered = 0;
+  for (const server::CellRecord& c : r.cells) entered += c.startup ? 0 : 1;
+  j["cells_entered"] = entered;
+  j["crossings"] = r.crossings;
+  j["pvs_computed"] = r.pvs_computed;
+  j["pvs_cache_hits"] = r.pvs_cache_hits;
+  j["masks"] = r.masks;
+  j["frames"] = r.frames;
+  j["frame_ms"] = r.frame_s * 1000.0;
+  j["frame_declared"] = r.frame_declared;
+  j["jitter_draws"] = r.jitter_draws;
+  j["lost_segments"] = r.lost_segments;
+  if (scheme == server::Scheme::kRadius) j["radius_m"] = r.radius_m;
+  nlohmann::json link;
+  link["bandwidth_bps"] = std::isfinite(r.link.bandwidth_bps) ? nlohmann::json(r.link.bandwidth_bps) : nlohmann::json();
+  link["latency_ms"] = r.link.latency_s * 1000.0;
+  link["jitter_ms"] = r.link.jitter_s * 1000.0;
+  link["loss_pct"] = r.link.loss * 100.0;
+  link["described"] = r.link_declared ? r.link.Describe() : "ideal (the scene declares no link)";
+  j["link"] = link;
+  j["path_m"] = r.path_m;
+  j["walk_s"] = r.walk_s;
+  j["sim_s"] = r.sim_s;
+  j["startup_s"] = r.startup_s;
+  return j;
+}
+
+void PrintText(const nlohmann::json& j) {
+  std::printf("%s on '%s' at %.1f km/h over %s\n", j["scheme"].get<std::string>().c_str(),
+              j["path"].get<std::string>().c_str(), j["speed_kmh"].get<double>(),
+              j["link"]["described"].get<std::string>().c_str());
+  std::printf("  stalls: %llu frames (%.2f s) in %llu of %llu cells entered; first viewcell after %.1f s\n",
+              static_cast<unsigned long long>(j["stalls"].get<uint64_t>()), j["stall_s"].get<double>(),
+              static_cast<unsigned long long>(j["stalled_cells"].get<uint64_t>()),
+              static_cast<unsigned long long>(j["cells_entered"].get<uint64_t>()), j["startup_s"].get<double>());
+  std::printf("  arrival margin: min %.2f s, mean %.2f s\n", j["min_margin_s"].get<double>(),
+              j["mean_margin_s"].get<double>());
+  std::printf("  bytes: %.2f MB on the wire down (%.2f MB geometry), %.2f MB up\n", j["bytes"].get<double>() / 1e6,
+              j["geometry_bytes"].get<double>() / 1e6, j["uplink_bytes"].get<double>() / 1e6);
+  std::printf("  triangles drawn per frame: mean %.0f (%.3f%% of %llu), max %llu\n",
+              j["mean_triangles_drawn"].get<double>(), j["triangles_pct"].get<double>(),
+              static_cast<unsigned long long>(j["scene_triangles"].get<uint64_t>()),
+              static_cast<unsigned long long>(j["max_triangles_drawn"].get<uint64_t>()));
+  std::printf("  PVS compute per crossing: p50 %.0f ms, p99 %.0f ms, max %.0f ms; %llu computed, %llu from the cache\n",
+              j["compute_ms_per_crossing"]["p50"].get<double>(), j["compute_ms_per_crossing"]["p99"].get<double>(),
+              j["compute_ms_per_crossing"]["max"].get<double>(),
+              static_cast<unsigned long long>(j["pvs_computed"].get<uint64_t>()),
+              static_cast<unsigned long long>(j["pvs_cache_hits"].get<uint64_t>()));
+  if (j.contains("radius_m")) std::printf("  radius: %.1f m (the smallest with no hole on this walk)\n", j["radius_m"].get<double>());
+  std::printf("  walk: %.0f m in %.0f s of simulated time\n", j["path_m"].get<double>(), j["sim_s"].get<double>());
+}
+
+int Simulate(const SimulateArgs& a) {
+  // Options first: their errors need no scene.
+  const bool search = a.speed == "max";
+  double speed_kmh = 0.0;
+  if (!a.speed.empty() && !search) {
+    if (!cli::internal::ParseFinite(a.speed, &speed_kmh) || !(speed_kmh > 0.0) || speed_kmh > kMaxKmh) {
+      return BadOption("simulate", "--speed",
+                       absl::StrFormat("'%s' is not a speed: expected km/h above 0 and at most %g, or max", a.speed,
+                                       kMaxKmh));
+    }
+  }
+  std::vector<server::Scheme> schemes;
+  if (!a.schemes.empty()) {
+    const std::vector<std::string> names = absl::StrSplit(a.schemes, ',');
+    for (const std::string& s : names) {
+      absl::StatusOr<server::Scheme> scheme = server::ParseScheme(s);
+      if (!scheme.ok()) return BadOption("simulate", "--schemes", std::string(scheme.status().message()));
+      schemes.push_back(*scheme);
+    }
+  } else {
+    absl::StatusOr<server::Scheme> scheme = server::ParseScheme(a.scheme);
+    if (!scheme.ok()) return BadOption("simulate", "--scheme", std::string(scheme.status().message()));
+    schemes.push_back(*scheme);
+  }
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(a.scene);
+  if (!entry.ok()) return Fail(entry.status());
+  std::optional<scenes::LinkSpec> link = entry->simulation.link;
+  if (!a.link.empty()) {
+    absl::StatusOr<scenes::LinkSpec> l = server::ParseLinkOption(a.link, link, "--link");
+    if (!l.ok()) {
+      std::string m(l.status().message());
+      if (m.rfind("--link: ", 0) == 0) m = m.substr(8);
+      return BadOption("simulate", "--link", m);
+    }
+    link = *l;
+  }
+  absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
+  if (!walk.ok()) return Fail(walk.status());
+  std::FILE* log_file = nullptr;
+  if (!a.log.empty()) {
+    log_file = std::fopen(a.log.c_str(), "w");
+    if (log_file == nullptr) return Fail(absl::NotFoundError(absl::StrCat("--log ", a.log, ": cannot write it")));
+  }
+  std::unique_ptr<server::EventLog> log =
+      log_file != nullptr ? std::make_unique<server::EventLog>(log_file, true) : nullptr;
+  struct Closer {
+    std::FILE* f;
+    ~Closer() {
+      if (f != nullptr) std::fclose(f);
+    }
+  } closer{log_file};
+
+  const auto start = std::chrono::steady_clock::now();
+  server::ServedSceneOptions so;
+  so.scene = a.scene;
+  so.cell_size = a.cell_size;
+  so.res = static_cast<uint32_t>(a.res);
+  so.threads = 1;  // the simulator computes on its own thread; simulated workers are --threads
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> scene = server::ServedScene::Create(so, ToolRun());
+  if (!scene.ok()) return Fail(scene.status());
+  std::fprintf(stderr, "simulate: %s ready after %.1f s (%s, %zu objects)\n", entry->name.c_str(), SecondsSince(start),
+               (*scene)->pvs_source().c_str(), (*scene)->scene().objects.size());
+
+  server::SimulationOptions opt;
+  opt.path = (*walk)->name;
+  opt.speed_mps = speed_kmh / 3.6;
+  opt.link = link;
+  opt.seed = static_cast<uint64_t>(a.seed);
+  opt.workers = static_cast<unsigned>(a.threads);
+  if (a.compute_ms >= 0.0) opt.fixed_compute_s = a.compute_ms / 1000.0;
+  opt.log = log.get();
+  opt.memo = std::make_shared<server::PvsMemo>();
+
+  nlohmann::json runs = nlohmann::json::array();
+  for (server::Scheme scheme : schemes) {
+    opt.scheme = scheme;
+    const auto t0 = std::chrono::steady_clock::now();
+    nlohmann::json j;
+    if (search) {
+      opt.speed_mps = 0.0;  // the search starts from the walk's own speed
+      absl::StatusOr<server::SpeedSearch> s = server::FindMaxSpeed(**scene, *entry, opt, kMinSearchKmh / 3.6,
+                                                                   kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
+      if (!s.ok()) return Fail(s.status());
+      j = ToJson(s->at_max, scheme, opt.path);
+      j["max_speed_kmh"] = s->max_speed_mps * 3.6;
+      j["stall_speed_kmh"] = s->stall_speed_mps > 0.0 ? nlohmann::json(s->stall_speed_mps * 3.6) : nlohmann::json();
+      nlohmann::json probes = nlohmann::json::array();
+      for (const auto& [mps, stalls] : s->runs) probes.push_back({{"speed_kmh", mps * 3.6}, {"stalls", stalls}});
+      j["search"] = {{"bracket_kmh", {kMinSearchKmh, kMaxSearchKmh}}, {"precision", kSearchPrecision}, {"runs", probes}};
+    } else {
+      absl::StatusOr<server::SimulationResult> r = server::Simulate(**scene, *entry, opt, ToolRun());
+      if (!r.ok()) return Fail(r.status());
+      j = ToJson(*r, scheme, opt.path);
+    }
+    j["scene"] = entry->name;
+    j["cell_size_m"] = (*scene)->grid().cell_size();
+    j["res"] = a.res;
+    j["seed"] = a.seed;
+    j["compute"] = opt.fixed_compute_s.has_value() ? absl::StrFormat("fixed %g ms", a.compute_ms) : "measured";
+    j["wall_s"] = SecondsSince(t0);
+    std::fprintf(stderr, "simulate: %s at %.1f km/h: %llu stalls, %.2f MB, %.1f s\n",
+                 std::string(server::SchemeName(scheme)).c_str(), j["speed_kmh"].get<double>(),
+                 static_cast<unsigned long long>(j["stalls"].get<uint64_t>()), j["bytes"].get<double>() / 1e6,
+                 j["wall_s"].get<double>());
+    runs.push_back(j);
+  }
+  if (runs.size() == 1) {
+    if (a.json) {
+      std::printf("%s\n", runs[0].dump(2).c_str());
+    } else {
+      PrintText(runs[0]);
+      if (search) {
+        std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu runs)\n",
+                    runs[0]["max_speed_kmh"].get<double>(), kMinSearchKmh, kMaxSearchKmh, 100.0 * kSearchPrecision,
+                    runs[0]["search"]["runs"].size());
+      }
+    }
+    return 0;
+  }
+  nlohmann::json out;
+  out["runs"] = runs;
+  // Bytes of each scheme against the server's (pvs+eps) or the first listed.
+  size_t ref = 0;
+  for (size_t k = 0; k < runs.size(); ++k) {
+    if (runs[k]["scheme"] == "pvs+eps") ref = k;
+  }
+  const double ref_bytes = runs[ref]["bytes"].get<double>();
+  for (nlohmann::json& j : out["runs"]) {
+    j["bytes_over_" + runs[ref]["scheme"].get<std::string>()] = ref_bytes > 0 ? j["bytes"].get<double>() / ref_bytes : 0.0;
+  }
+  if (a.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    for (const nlohmann::json& j : out["runs"]) PrintText(j);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
+  auto args = std::make_shared<SimulateArgs>();
+  CLI::App* c = app.add_subcommand(
+      "simulate", "discrete-event simulation of a catalog walk: stalls, arrival margins, bytes, triangles drawn");
+  c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
+  c->add_option("--path", args->path, "the entry's walk (default: its first)");
+  c->add_option("--speed", args->speed,
+                "walking speed in km/h (default: the walk's), or max: the highest with zero stalls (bisection in "
+                "[1, 500] km/h to 1%)");
+  c->add_option("--link", args->link,
+                "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
+                "the declared link, none: ideal");
+  c->add_option("--scheme", args->scheme, "pvs+eps (the server's) | pvs (no ε-masks) | radius | plain (the paper's)")
+      ->capture_default_str();
+  c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (overrides --scheme)");
+  c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
+      ->check(FiniteRange(kMinCellSize, kMaxCellSize));
+  c->add_option("--res", args->res, "the dual ray space's finest raster")->capture_default_str()->check(PowerOfTwo(1, 256));
+  c->add_option("--threads", args->threads, "simulated PVS workers (default: this machine's cores)")
+      ->check(WholeRange(0, 1024));
+  c->add_option("--seed", args->seed, "the link models' draws")->capture_default_str()->check(WholeRange(0, kMaxSeed));
+  c->add_option("--compute-ms", args->compute_ms,
+                "charge this many ms per PVS and ε-mask instead of the measured time (machine-independent runs)")
+      ->check(FiniteRange(0.0, 1e7));
+  c->add_option("--log", args->log, "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
+  c->add_flag("--json", args->json, "print one JSON object");
+  c->callback([args, done] { done(Simulate(*args)); });
+}
+
+}  // namespace vistream::tools
