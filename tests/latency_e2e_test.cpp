@@ -1,15 +1,19 @@
 // Real end-to-end runs with time scaled: the vistream-server executable emulating a link
 // (--emulate-link --time-scale K) and the headless vistream-client walking a catalog path at
 // K times its speed, over loopback. A walk of minutes runs in seconds; every time the client
-// reports is real (walk-clock) seconds, K times shorter than the walk's own.
+// reports is real (walk-clock) seconds, K times shorter than the walk's own. Each run is then
+// repeated through the simulator (server/simulator.h, time_scale K), whose stalls and per-cell
+// margins must agree with the real run's within the tolerance derived below.
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -18,6 +22,11 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+
+#include "scenes/catalog.h"
+#include "server/link_model.h"
+#include "server/served_scene.h"
+#include "server/simulator.h"
 
 namespace vistream {
 namespace {
@@ -140,7 +149,92 @@ ClientRun WalkScaled(const std::string& address, const std::string& name) {
   return r;
 }
 
-TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStalls) {
+// ---- the simulator against the real run ----
+
+// A catalog scene, prepared once for the simulator (the real runs use the executable's).
+struct Simulated {
+  scenes::CatalogEntry entry;
+  std::unique_ptr<server::ServedScene> scene;
+};
+Simulated& Prepared(const std::string& name) {
+  static std::map<std::string, std::unique_ptr<Simulated>> prepared;
+  std::unique_ptr<Simulated>& p = prepared[name];
+  if (p != nullptr) return *p;
+  p = std::make_unique<Simulated>();
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(name);
+  EXPECT_TRUE(entry.ok()) << entry.status();
+  if (entry.ok()) p->entry = *entry;
+  server::ServedSceneOptions o;
+  o.scene = name;
+  o.threads = 2;
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> scene = server::ServedScene::Create(o);
+  EXPECT_TRUE(scene.ok()) << scene.status();
+  if (scene.ok()) p->scene = std::move(*scene);
+  return *p;
+}
+
+// The same walk (the scene's first), speed, link and time scale as WalkScaled, through the
+// simulator: its times are the scaled run's seconds, as the client's are.
+absl::StatusOr<server::SimulationResult> SimulateScaled(const std::string& name,
+                                                        const std::optional<scenes::LinkSpec>& link) {
+  Simulated& d = Prepared(name);
+  if (d.scene == nullptr) return absl::FailedPreconditionError("the scene did not load: " + name);
+  server::SimulationOptions o;
+  o.speed_mps = kWalkKmh / 3.6;
+  o.link = link;
+  o.time_scale = kScale;
+  o.workers = 2;  // the server's --threads 2
+  o.seed = 1;     // the server's --link-seed 1: its first session draws as the simulator does
+  return server::Simulate(*d.scene, d.entry, o);
+}
+
+// Margin tolerance, in the scaled run's seconds (the client's walk clock; the simulator's with
+// time_scale K), per cell. The two runs differ, by construction, in:
+//  - poses: both send one every 0.1 s (unscaled), at different phases, so the server learns of
+//    a crossing up to 0.1 s later in one than in the other: 0.1 s;
+//  - frames: entry and completion are each seen at a frame: the simulator's 16.7 ms, the real
+//    client's up to 60 a second, slower under load (p99 ~25 ms here): up to 2 x 25 ms = 0.05 s;
+//  - PVS computation: the simulator charges what it measures computing alone; the real server
+//    computes while the client renders on the same two cores. A crossing brings up to five
+//    cells of 25-70 ms on two workers: up to ~0.15 s apart;
+//  - scheduling: the link timer thread, gRPC and loopback add a few ms per message: 0.05 s.
+// 0.35 s in all (10.5 s of the walk's own time at K = 30; margins here are about 2 s, 60 s of
+// the walk). A cell the real run left (or ended in) before it completed has a bound only.
+constexpr double kMarginTolerance_s = 0.35;
+// Stalled cells on a link too slow: a cell that completes within the tolerance of its entry
+// may stall in one run and not in the other.
+constexpr size_t kStalledCellTolerance = 1;
+
+// Compares the real run's cells (but its last: the walk was cut there) with the simulator's.
+void ExpectAgreement(const ClientRun& real, const server::SimulationResult& sim, bool expect_no_stall) {
+  ASSERT_GE(real.cells.size(), 3u);
+  const size_t n = real.cells.size() - 1;
+  ASSERT_GE(sim.cells.size(), n) << "the simulator entered fewer cells than the real run";
+  size_t real_stalled = 0, sim_stalled = 0;
+  for (size_t k = 0; k < n; ++k) {
+    const CellRow& r = real.cells[k];
+    const server::CellRecord& s = sim.cells[k];
+    ASSERT_EQ(r.cell, s.cell) << "entry " << k << ": the runs walked into different cells";
+    if (k == 0) continue;  // the start cell: both waited for it
+    real_stalled += r.stalled ? 1 : 0;
+    sim_stalled += s.stalled ? 1 : 0;
+    EXPECT_NEAR(r.margin_s, s.margin_s, kMarginTolerance_s)
+        << "cell " << r.cell << " (entry " << k << "): real entered " << r.entered_s << " complete "
+        << r.complete_s << "; simulated entered " << s.entered_s << " complete " << s.complete_s;
+    std::printf("cell %u: margin real %.3f s, simulated %.3f s%s%s\n", r.cell, r.margin_s, s.margin_s,
+                r.stalled ? ", real stalled" : "", s.stalled ? ", simulated stalled" : "");
+  }
+  if (expect_no_stall) {
+    EXPECT_EQ(real_stalled, 0u);
+    EXPECT_EQ(sim_stalled, 0u);
+  } else {
+    EXPECT_GT(sim_stalled, 0u);
+    EXPECT_LE(std::max(real_stalled, sim_stalled) - std::min(real_stalled, sim_stalled), kStalledCellTolerance)
+        << real_stalled << " cells stalled in the real run, " << sim_stalled << " in the simulation";
+  }
+}
+
+TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStallsAndTheSimulatorAgrees) {
   // default declares 20 Mbit/s and 40 ms: at 6 km/h its cells arrive long before the walker.
   auto process = ServerProcess::Start({"--scene", "default", "--emulate-link", "--time-scale", std::to_string(kScale)});
   ASSERT_NE(process, nullptr);
@@ -161,9 +255,13 @@ TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStalls) {
     EXPECT_FALSE(c.stalled) << "cell " << c.cell;
     EXPECT_NEAR(c.margin_s, c.entered_s - c.complete_s, 1e-3);
   }
+  process.reset();  // the simulation measures its PVS computations alone
+  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", Prepared("default").entry.simulation.link);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  ExpectAgreement(run, *sim, /*expect_no_stall=*/true);
 }
 
-TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallWithNegativeMargins) {
+TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallAndTheSimulatorAgrees) {
   // 15 kbit/s: the first cells' geometry (hundreds of kB each crossing) takes longer to send
   // than a walker at 6 km/h takes to cross a 100 m cell; later crossings catch up.
   auto process = ServerProcess::Start(
@@ -187,6 +285,12 @@ TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallWithNegativeMargins) {
     }
   }
   EXPECT_EQ(stalled, run.summary["stalled_cells"].get<size_t>());
+  process.reset();
+  absl::StatusOr<scenes::LinkSpec> slow = server::ParseLinkOption("15k,40", Prepared("default").entry.simulation.link);
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", *slow);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  ExpectAgreement(run, *sim, /*expect_no_stall=*/false);
 }
 
 }  // namespace
