@@ -170,7 +170,6 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
     if (!current_.has_value() || *current_ != *cell) {
       const std::optional<CellId> from = current_;
       const std::vector<CellId> before = wanted_;
-      const std::map<CellId, CellPvsPtr> had = received_;  // SetWanted drops the cells left behind
       current_ = *cell;
       stats_.set_cell_id(*cell);
       if (from.has_value()) {
@@ -184,7 +183,9 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       for (CellId c : before) {
         if (std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end()) left.push_back(c);
       }
-      EvictLeft(had);
+      // Geometry the cells left behind needed stays with the client: it is evicted only when the
+      // memory budget needs the room (MakeRoom: what no wanted cell needs first), so nothing is
+      // sent twice unless the budget forced it out (DESIGN.md: never sent twice in a session).
       anchor_ = p;
       anchor_s_ = now;
       mask_requested_ = false;
@@ -334,24 +335,6 @@ void Session::Emit(CellId cell) {
     if (sent_.count(o) == 0) q.push_back(o);
   }
   stats_.set_pvs_sent(stats_.pvs_sent() + 1);
-}
-
-void Session::EvictLeft(const std::map<CellId, CellPvsPtr>& had) {
-  // What the cells left behind held, less what the current and adjacent PVSs still need.
-  std::set<uint32_t> keep;
-  for (const auto& [c, pvs] : received_) keep.insert(pvs->objects.begin(), pvs->objects.end());
-  std::vector<uint32_t> evict;
-  for (const auto& [c, pvs] : had) {
-    if (received_.count(c) > 0) continue;  // still wanted
-    for (uint32_t o : pvs->objects) {
-      if (sent_.count(o) > 0 && keep.count(o) == 0) {
-        evict.push_back(o);
-        keep.insert(o);  // once
-      }
-    }
-  }
-  if (evict.empty()) return;
-  QueueControl(Forget(std::move(evict), "left behind"));
 }
 
 v1::ServerMessage Session::Forget(std::vector<uint32_t> objects, const char* reason) {

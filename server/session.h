@@ -6,8 +6,9 @@
 // Order of what goes out (DESIGN.md, "Server and client"): SceneInfo after Hello; after the
 // first pose the PVS of the client's cell, its geometry, then the eight neighbours' PVSs and
 // geometry, in the order the client will reach them (its velocity); on each crossing the up to
-// five newly adjacent cells likewise, with Evict hints for geometry that left the current and
-// adjacent PVSs. Control messages (PVS lists, Evict, ε-masks) go before geometry; geometry of
+// five newly adjacent cells likewise. Geometry is sent once: the client keeps what cells left
+// behind needed until its memory budget needs the room, and then an Evict hint names what it
+// may drop (what no wanted cell needs first, then what is needed latest). Control messages (PVS lists, Evict, ε-masks) go before geometry; geometry of
 // the current cell before any neighbour's, and only while the client's credit is positive.
 
 #include <cstdint>
@@ -88,9 +89,6 @@ class Session : public std::enable_shared_from_this<Session> {
   void OnCellReady(const CellPvsPtr& pvs, bool from_cache);  // lock held
   void EmitReady();                                          // lock held
   void Emit(CellId cell);                                    // lock held
-  // Evicts the geometry of the PVSs in `had` (received before a crossing) that no wanted cell's
-  // PVS holds.
-  void EvictLeft(const std::map<CellId, CellPvsPtr>& had);   // lock held
   void MaybeRequestMask(double now);                         // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
   double Deadline(CellId cell, double now) const;

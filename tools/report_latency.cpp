@@ -78,12 +78,12 @@ LatencyPlan LatencyPlanFor(bool quick) {
   p.schemes = {"pvs", "pvs+eps", "radius", "plain"};
   if (quick) {
     p.scene = "default", p.path = "avenue-and-back-streets";
-    p.speeds_kmh = {3, 12, 48};
-    p.bandwidths_mbps = {0.25, 1, 4};
+    p.speeds_kmh = {3, 12, 48, 192};
+    p.bandwidths_mbps = {0.016, 0.064, 0.25, 1, 4};
   } else {
     p.scene = "london", p.path = "cross-town";
-    p.speeds_kmh = {3, 6, 12, 24, 48, 96};
-    p.bandwidths_mbps = {0.25, 0.5, 1, 2, 4};
+    p.speeds_kmh = {3, 6, 12, 24, 48, 96, 192};
+    p.bandwidths_mbps = {0.0625, 0.125, 0.25, 0.5, 1, 2, 4};
   }
   p.sweep_speed_kmh = 6;
   return p;
@@ -188,7 +188,11 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
       by_scheme.emplace_back(s, *j);
     }
     if (auto m = page.Run("simulate " + s + " max", args({"--scheme", s, "--speed", "max"}))) {
-      max_rows.push_back({s, Fixed(m->value("max_speed_kmh", json()), 1)});
+      const json stall = m->value("stall_speed_kmh", json());
+      std::string upper = "?";
+      if (m->contains("search") && (*m)["search"].contains("bracket_kmh")) upper = Fixed((*m)["search"]["bracket_kmh"][1], 0);
+      max_rows.push_back({s, Fixed(m->value("max_speed_kmh", json()), 1),
+                          stall.is_number() ? Fixed(stall, 1) : absl::StrCat("none up to ", upper, " (the search's top)")});
     }
   }
   page.Text(absl::StrFormat("Per scheme at %s km/h (pvs: viewcell PVS; pvs+eps: with ε-masks; radius: distance-radius "
@@ -198,7 +202,7 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
   for (const auto& [s, j] : by_scheme) rows.push_back(Row(s, j));
   page.Table(Head("scheme"), rows);
   page.Text("Highest speed without a stall, per scheme (`--speed max`):");
-  page.Table({"scheme", "max speed km/h"}, max_rows);
+  page.Table({"scheme", "max speed km/h", "slowest speed found to stall, km/h"}, max_rows);
 
   GnuplotPlot bytes;
   bytes.png = page.Path("latency_bytes_" + plan.scene + ".png");
