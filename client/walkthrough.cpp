@@ -18,7 +18,7 @@
 #include "client/object_store.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
-#include "client/walk.h"
+#include "scenes/walk.h"
 #include "client/window_input.h"
 #include "gl/gl_context.h"
 #include "gl/id_renderer.h"
@@ -78,7 +78,7 @@ class Loop {
   const WalkthroughOptions& opt_;
   WalkthroughSummary* sum_;
   std::optional<scenes::CatalogEntry> entry_;
-  std::optional<Walk> walk_;
+  std::optional<scenes::Walk> walk_;
   double walk_limit_s_ = 0.0;
   uint64_t memory_budget_ = 0, triangle_budget_ = 0;
   std::optional<scenes::Scene> owned_scene_;
@@ -127,13 +127,13 @@ absl::Status Loop::Prepare() {
                                                     "'; its walks: ", absl::StrJoin(names, ", ")));
     }
     const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
-    absl::StatusOr<Walk> walk = Walk::Create(*path, speed);
+    absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(*path, speed);
     if (!walk.ok()) return walk.status();
     walk_ = std::move(*walk);
     walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
     sum_->path = path->name;
     sum_->speed_kmh = speed * 3.6;
-    const WalkPose start = walk_->At(0.0);
+    const scenes::WalkPose start = walk_->At(0.0);
     camera_.eye = start.eye;
     camera_.yaw_rad = start.yaw_rad;
     have_start_ = true;
@@ -144,7 +144,7 @@ absl::Status Loop::Prepare() {
     have_start_ = true;
   } else if (entry_.has_value() && !entry_->walks.empty()) {
     // The window without a walk: start where the first walk starts, then the keys move.
-    absl::StatusOr<Walk> walk = Walk::Create(entry_->walks.front(), entry_->walks.front().speed_mps);
+    absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(entry_->walks.front(), entry_->walks.front().speed_mps);
     if (walk.ok()) {
       camera_.eye = walk->At(0.0).eye;
       camera_.yaw_rad = walk->At(0.0).yaw_rad;
@@ -326,12 +326,32 @@ absl::Status Loop::Startup() {
   Log(absl::StrCat("connected to ", opt_.server, " (scene ", sum_->scene, "); waiting for the first viewcell"));
   uint64_t objects_seen = 0;
   double last_arrival = Now();
+  // Following a walk, it waits for the cell it starts in and the first cell the walk enters
+  // (what it reaches first), telling the server the velocity it will walk at so that the cells
+  // ahead are ranked first; the simulator models the same (server/simulator.cpp).
+  const glm::dvec3 velocity = walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0);
+  std::optional<uint32_t> ahead;
+  bool ahead_known = !walk_.has_value();
+  auto ahead_complete = [&] {
+    if (!ahead_known && store_->has_scene_info()) {
+      const GridInfo& g = store_->grid();
+      const std::vector<uint32_t> along =
+          walk_->CellsAlong(g.cell_size, [&g](const glm::dvec2& q) { return g.CellAt(q.x, q.y); });
+      if (along.size() > 1) ahead = along[1];
+      ahead_known = true;
+    }
+    if (!ahead_known) return false;
+    if (!ahead.has_value()) return true;
+    const std::vector<uint32_t>* list = store_->Pvs(*ahead);
+    return list != nullptr &&
+           std::all_of(list->begin(), list->end(), [&](uint32_t id) { return renderer_->Uploaded(id); });
+  };
   for (;;) {
-    if (have_start_) SendPose(glm::dvec3(0.0), Now() - session_start_);
+    if (have_start_) SendPose(velocity, Now() - session_start_);
     absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
     if (!p.ok()) return p.status();
     ObserveCells(Now() - session_start_, std::nullopt, false);  // the walk's clock: shifted at its start
-    if (p->complete) break;
+    if (p->complete && ahead_complete()) break;
     if (const uint64_t n = connection_ != nullptr ? connection_->stats().objects_received : 0; n != objects_seen) {
       objects_seen = n;
       last_arrival = Now();
@@ -365,7 +385,8 @@ absl::Status Loop::Startup() {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   sum_->startup_s = Now() - session_start_;
-  Log(absl::StrFormat("first viewcell complete after %.1f s", sum_->startup_s));
+  Log(ahead.has_value() ? absl::StrFormat("first viewcell and the next on the walk complete after %.1f s", sum_->startup_s)
+                        : absl::StrFormat("first viewcell complete after %.1f s", sum_->startup_s));
   return absl::OkStatus();
 }
 
@@ -441,7 +462,7 @@ absl::Status Loop::Walkthrough() {
     if (walk_.has_value()) {
       const double at = std::min(t, walk_limit_s_);
       last = last || t >= walk_limit_s_;
-      const WalkPose pose = walk_->At(at);
+      const scenes::WalkPose pose = walk_->At(at);
       camera_.eye = pose.eye;
       camera_.yaw_rad = pose.yaw_rad;
       velocity = last ? glm::dvec3(0.0) : pose.velocity;

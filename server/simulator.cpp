@@ -16,6 +16,7 @@
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
+#include "scenes/walk.h"
 #include "server/link_model.h"
 #include "server/session.h"
 #include "server/wire.h"
@@ -29,67 +30,6 @@ namespace v1 = vistream::v1;
 double WallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
-
-// A catalog walk as a function of time: client/walk.h's math (the server cannot depend on the
-// client): the eye looks at the path 8 m ahead; velocity along the next half metre.
-class PathWalk {
- public:
-  static absl::StatusOr<PathWalk> Create(const scenes::WalkPath& path, double speed_mps) {
-    if (!(speed_mps > 0.0) || !std::isfinite(speed_mps)) {
-      return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': speed ", speed_mps, " m/s is not positive"));
-    }
-    PathWalk w;
-    w.speed_ = speed_mps;
-    w.eye_height_ = path.eye_height_m;
-    for (const glm::dvec2& p : path.waypoints) {
-      if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
-        return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': a waypoint is not finite"));
-      }
-      if (!w.points_.empty() && glm::distance(w.points_.back(), p) < 1e-9) continue;
-      w.cumulative_.push_back(w.points_.empty() ? 0.0 : w.cumulative_.back() + glm::distance(w.points_.back(), p));
-      w.points_.push_back(p);
-    }
-    if (w.points_.size() < 2) {
-      return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "' has fewer than two distinct waypoints"));
-    }
-    return w;
-  }
-  double length_m() const { return cumulative_.back(); }
-  double duration_s() const { return length_m() / speed_; }
-  glm::dvec2 PointAt(double s) const {
-    s = std::clamp(s, 0.0, length_m());
-    const size_t k =
-        static_cast<size_t>(std::upper_bound(cumulative_.begin(), cumulative_.end(), s) - cumulative_.begin());
-    if (k >= points_.size()) return points_.back();
-    const double a = cumulative_[k - 1], b = cumulative_[k];
-    return glm::mix(points_[k - 1], points_[k], (s - a) / (b - a));
-  }
-  struct Pose {
-    glm::dvec3 eye{0.0}, velocity{0.0};
-    double yaw_rad = 0.0;
-  };
-  Pose At(double t) const {
-    constexpr double kLookAhead = 8.0;
-    const double s = std::clamp(t * speed_, 0.0, length_m());
-    Pose pose;
-    const glm::dvec2 p = PointAt(s);
-    pose.eye = {p.x, p.y, eye_height_};
-    glm::dvec2 d = PointAt(s + kLookAhead) - p;
-    if (glm::length(d) < 1e-6) d = p - PointAt(s - kLookAhead);
-    pose.yaw_rad = std::atan2(d.y, d.x);
-    if (s < length_m()) {
-      const glm::dvec2 step = PointAt(s + 0.5) - p;
-      const double len = glm::length(step);
-      if (len > 0.0) pose.velocity = glm::dvec3(step / len * speed_, 0.0);
-    }
-    return pose;
-  }
-
- private:
-  std::vector<glm::dvec2> points_;
-  std::vector<double> cumulative_;
-  double speed_ = 1.0, eye_height_ = 1.7;
-};
 
 // The client renderer's view-frustum test (client/renderer.cpp Camera::MayOverlap): 60 degrees
 // vertical field of view, 1280 x 720, level eye; side planes and the eye plane.
@@ -124,18 +64,6 @@ double BoxDistance(const scenes::Aabb& a, const scenes::Aabb& b) {
   const double dy = std::max({0.0, a.min.y - b.max.y, b.min.y - a.max.y});
   const double dz = std::max({0.0, a.min.z - b.max.z, b.min.z - a.max.z});
   return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
-// The cells a walk passes through, in order, each once per visit (sampled every 0.25 m).
-std::vector<CellId> CellsAlong(const PathWalk& walk, const visibility::ViewcellGrid& grid) {
-  std::vector<CellId> cells;
-  const double step = std::min(0.25, 0.01 * grid.cell_size());
-  const size_t n = static_cast<size_t>(std::ceil(walk.length_m() / step));
-  for (size_t k = 0; k <= n; ++k) {
-    const std::optional<CellId> c = grid.CellAt(walk.PointAt(static_cast<double>(k) * step));
-    if (c.has_value() && (cells.empty() || cells.back() != *c)) cells.push_back(*c);
-  }
-  return cells;
 }
 
 const char* BodyName(const v1::ServerMessage& m) {
@@ -260,11 +188,11 @@ absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEnt
                                     PvsMemo* memo) {
   absl::StatusOr<const scenes::WalkPath*> w = FindWalk(entry, path);
   if (!w.ok()) return w.status();
-  absl::StatusOr<PathWalk> walk = PathWalk::Create(**w, std::max(0.1, (*w)->speed_mps));
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**w, std::max(0.1, (*w)->speed_mps));
   if (!walk.ok()) return walk.status();
   double r = 0.0;
   std::set<CellId> seen;
-  for (CellId c : CellsAlong(*walk, scene.grid())) {
+  for (CellId c : walk->CellsAlong(scene.grid().cell_size(), [&](const glm::dvec2& p) { return scene.grid().CellAt(p); })) {
     if (!seen.insert(c).second) continue;
     const scenes::Aabb box = scene.grid().CellBox(c);
     for (uint32_t o : memo->Get(scene, c).pvs->objects) r = std::max(r, BoxDistance(box, scene.scene().objects[o].bounds));
@@ -279,7 +207,7 @@ namespace {
 // The modelled client's side of one run, and the run's bookkeeping.
 class Run {
  public:
-  Run(ServedScene& scene, const SimulationOptions& opt, const PathWalk& walk, SimulationResult* result)
+  Run(ServedScene& scene, const SimulationOptions& opt, const scenes::Walk& walk, SimulationResult* result)
       : scene_(scene), opt_(opt), walk_(walk), r_(*result) {}
 
   absl::Status Go(const scenes::CatalogEntry& entry, const scenes::RunControl& run);
@@ -312,7 +240,7 @@ class Run {
 
   ServedScene& scene_;
   const SimulationOptions& opt_;
-  const PathWalk& walk_;
+  const scenes::Walk& walk_;
   SimulationResult& r_;
 
   EventQueue q_;
@@ -335,6 +263,7 @@ class Run {
   uint64_t consumed_since_grant_ = 0;
   std::optional<double> walk_t0_;  // when the walk started (the first viewcell complete)
   std::optional<CellId> start_cell_;
+  std::optional<CellId> ahead_cell_;  // the first cell the walk enters, if it leaves the first
   bool walking_done_ = false;
   std::optional<CellId> cell_;     // while walking: the cell of the last frame
   bool pending_ = false;           // the current record waits for its cell to complete
@@ -445,8 +374,15 @@ void Run::Receive(const v1::ServerMessage& m) {
       break;
   }
   // The walk starts once the first viewcell is complete (at a frame, as the real client).
+  // The walk starts once the first viewcell and the first one the walk enters are complete (at
+  // a frame, as the real client, client/walkthrough.cpp Startup).
   if (!walk_t0_.has_value() && start_cell_.has_value()) {
-    if (std::optional<double> done = CompleteAt(*start_cell_)) {
+    std::optional<double> done = CompleteAt(*start_cell_);
+    if (done.has_value() && ahead_cell_.has_value()) {
+      const std::optional<double> ahead = CompleteAt(*ahead_cell_);
+      done = ahead.has_value() ? std::optional<double>(std::max(*done, *ahead)) : std::nullopt;
+    }
+    if (done.has_value()) {
       walk_t0_ = std::max(*done, t);
       r_.startup_s = *walk_t0_;
       CellRecord rec;
@@ -484,7 +420,7 @@ void Run::CloseRecord(double t) {
 void Run::Frame(double t) {
   const double walk_t = t - *walk_t0_;
   const bool last = walk_t >= walk_.duration_s();
-  const PathWalk::Pose pose = walk_.At(std::min(walk_t, walk_.duration_s()));
+  const scenes::WalkPose pose = walk_.At(std::min(walk_t, walk_.duration_s()));
   const std::optional<CellId> cell = scene_.grid().CellAt(glm::dvec2(pose.eye));
   ++r_.frames;
   if (cell.has_value() && cell != cell_) {
@@ -576,8 +512,9 @@ void Run::Frame(double t) {
 void Run::Pose(double t) {
   v1::ClientMessage m;
   v1::Pose* p = m.mutable_pose();
-  PathWalk::Pose pose = walk_.At(0.0);
-  pose.velocity = glm::dvec3(0.0);  // waiting for the first viewcell: standing still
+  // Waiting to walk: at the start, with the velocity it will walk at, so that the server ranks
+  // the cells ahead first (as the real client, client/walkthrough.cpp Startup).
+  scenes::WalkPose pose = walk_.At(0.0);
   if (walk_t0_.has_value()) {
     const double walk_t = t - *walk_t0_;
     pose = walk_.At(std::min(walk_t, walk_.duration_s()));
@@ -651,6 +588,11 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   session_ = Session::Create(1, &scene_, limits, opt_.log, nullptr, std::move(seams));
 
   start_cell_ = scene_.grid().CellAt(walk_.PointAt(0.0));
+  if (const std::vector<CellId> along = walk_.CellsAlong(
+          scene_.grid().cell_size(), [this](const glm::dvec2& p) { return scene_.grid().CellAt(p); });
+      start_cell_.has_value() && along.size() > 1 && along[0] == *start_cell_) {
+    ahead_cell_ = along[1];
+  }
   if (!start_cell_.has_value()) {
     return absl::OutOfRangeError("the walk starts outside the scene's viewcell grid");
   }
@@ -730,7 +672,7 @@ absl::StatusOr<SimulationResult> Simulate(ServedScene& scene, const scenes::Cata
   if (!(speed > 0.0) || !std::isfinite(speed)) {
     return absl::InvalidArgumentError(absl::StrCat("speed ", speed * 3.6, " km/h is not a positive number"));
   }
-  absl::StatusOr<PathWalk> walk = PathWalk::Create(**path, speed * options.time_scale);
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**path, speed * options.time_scale);
   if (!walk.ok()) return walk.status();
   SimulationResult result;
   result.speed_mps = speed;

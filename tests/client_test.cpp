@@ -26,7 +26,7 @@
 #include "client/object_store.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
-#include "client/walk.h"
+#include "scenes/walk.h"
 #include "client/walkthrough.h"
 #include "proto/walkthrough.grpc.pb.h"
 #include "scenes/catalog.h"
@@ -90,7 +90,7 @@ struct Crossing {
   uint32_t from = 0;
   std::set<uint32_t> cells;  // from and the cells it may lead into
 };
-std::vector<Crossing> CrossingsAlong(const Walk& walk) {
+std::vector<Crossing> CrossingsAlong(const scenes::Walk& walk) {
   std::vector<Crossing> out;
   const visibility::ViewcellGrid& grid = Default().grid();
   std::optional<uint32_t> last;
@@ -113,10 +113,10 @@ std::vector<Crossing> CrossingsAlong(const Walk& walk) {
   return out;
 }
 
-Walk DefaultWalk(double speed_mps) {
+scenes::Walk DefaultWalk(double speed_mps) {
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("default");
   EXPECT_TRUE(entry.ok()) << entry.status();
-  absl::StatusOr<Walk> w = Walk::Create(entry->walks.front(), speed_mps);
+  absl::StatusOr<scenes::Walk> w = scenes::Walk::Create(entry->walks.front(), speed_mps);
   EXPECT_TRUE(w.ok()) << w.status();
   return *w;
 }
@@ -549,36 +549,6 @@ TEST(ObjectStore, OverBudgetDropsWhatNoNearbyCellNeedsFirstAndNeverTheCurrentCel
   EXPECT_EQ(store.Find(1), nullptr);
   EXPECT_EQ(store.evicted_by_server(), 1u);
   EXPECT_FALSE(store.CellComplete(0));
-}
-
-TEST(Walk, FollowsTheWaypointsAtItsSpeedLookingAhead) {
-  scenes::WalkPath path;
-  path.name = "ell";
-  path.eye_height_m = 1.5;
-  path.waypoints = {{0, 0}, {100, 0}, {100, 0}, {100, 50}};
-  absl::StatusOr<Walk> w = Walk::Create(path, 2.0);
-  ASSERT_TRUE(w.ok()) << w.status();
-  EXPECT_DOUBLE_EQ(w->length_m(), 150.0);
-  EXPECT_DOUBLE_EQ(w->duration_s(), 75.0);
-  const WalkPose a = w->At(10.0);
-  EXPECT_NEAR(a.eye.x, 20.0, 1e-9);
-  EXPECT_NEAR(a.eye.y, 0.0, 1e-9);
-  EXPECT_NEAR(a.eye.z, 1.5, 1e-9);
-  EXPECT_NEAR(a.velocity.x, 2.0, 1e-9);
-  EXPECT_NEAR(a.yaw_rad, 0.0, 1e-9);
-  const WalkPose b = w->At(60.0);  // 120 m: on the second leg, heading +y
-  EXPECT_NEAR(b.eye.x, 100.0, 1e-9);
-  EXPECT_NEAR(b.eye.y, 20.0, 1e-9);
-  EXPECT_NEAR(b.yaw_rad, M_PI / 2, 1e-9);
-  EXPECT_NEAR(b.velocity.y, 2.0, 1e-9);
-  const WalkPose end = w->At(1000.0);
-  EXPECT_NEAR(end.eye.y, 50.0, 1e-9);
-  EXPECT_EQ(end.velocity, glm::dvec3(0.0));
-  path.waypoints = {{1, 1}, {1, 1}};
-  EXPECT_FALSE(Walk::Create(path, 1.0).ok());
-  path.waypoints = {{0, 0}, {1, 1}};
-  EXPECT_FALSE(Walk::Create(path, 0.0).ok());
-  EXPECT_FALSE(Walk::Create(path, std::nan("")).ok());
 }
 
 }  // namespace

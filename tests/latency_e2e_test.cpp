@@ -35,6 +35,7 @@ namespace {
 // its first 20 s (1 km, ten viewcells of 100 m; 600 s of the walk's own time).
 constexpr double kScale = 30.0;
 constexpr double kWalkKmh = 6.0;
+constexpr double kSlowWalkKmh = 24.0;  // on the too-slow link
 constexpr double kSeconds = 20.0;
 
 // A vistream-server process on a free loopback port; stopped (SIGTERM, then SIGKILL after 10 s)
@@ -115,12 +116,12 @@ std::string TempPath(const std::string& name) {
       .string();
 }
 
-// The headless client along the default walk at kWalkKmh * kScale, for kSeconds.
-ClientRun WalkScaled(const std::string& address, const std::string& name) {
+// The headless client along the default walk at kmh * kScale, for kSeconds.
+ClientRun WalkScaled(const std::string& address, const std::string& name, double kmh = kWalkKmh) {
   ClientRun r;
   const std::string cells = TempPath(name + ".csv"), err = TempPath(name + ".err");
   std::ostringstream cmd;
-  cmd << VISTREAM_CLIENT_BIN << " --headless --server " << address << " --speed " << kWalkKmh * kScale
+  cmd << VISTREAM_CLIENT_BIN << " --headless --server " << address << " --speed " << kmh * kScale
       << " --seconds " << kSeconds << " --size 320x180 --max-fps 60 --json --cell-log " << cells << " 2>" << err;
   std::FILE* p = popen(cmd.str().c_str(), "r");
   if (p == nullptr) return r;
@@ -176,11 +177,12 @@ Simulated& Prepared(const std::string& name) {
 // The same walk (the scene's first), speed, link and time scale as WalkScaled, through the
 // simulator: its times are the scaled run's seconds, as the client's are.
 absl::StatusOr<server::SimulationResult> SimulateScaled(const std::string& name,
-                                                        const std::optional<scenes::LinkSpec>& link) {
+                                                        const std::optional<scenes::LinkSpec>& link,
+                                                        double kmh = kWalkKmh) {
   Simulated& d = Prepared(name);
   if (d.scene == nullptr) return absl::FailedPreconditionError("the scene did not load: " + name);
   server::SimulationOptions o;
-  o.speed_mps = kWalkKmh / 3.6;
+  o.speed_mps = kmh / 3.6;
   o.link = link;
   o.time_scale = kScale;
   o.workers = 2;  // the server's --threads 2
@@ -262,15 +264,17 @@ TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStallsAndTheSimulatorAgree
 }
 
 TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallAndTheSimulatorAgrees) {
-  // 15 kbit/s: the first cells' geometry (hundreds of kB each crossing) takes longer to send
-  // than a walker at 6 km/h takes to cross a 100 m cell; later crossings catch up.
+  // 15 kbit/s at 24 km/h: the geometry a crossing brings (tens of kB) takes longer to send than
+  // the walker takes to cross a 100 m cell (15 s). The walk starts once its first two cells are
+  // complete (about 470 s of the walk's time), so at 6 km/h it would not stall before the test's
+  // 20 s (600 s of the walk) were over.
   auto process = ServerProcess::Start(
       {"--scene", "default", "--link", "15k,40", "--time-scale", std::to_string(kScale)});
   ASSERT_NE(process, nullptr);
   ASSERT_FALSE(process->address().empty()) << "no ready line: " << process->ready_line();
   EXPECT_NE(process->ready_line().find("emulated link 15 kbit/s, 40 ms (--link)"), std::string::npos)
       << process->ready_line();
-  const ClientRun run = WalkScaled(process->address(), "slow");
+  const ClientRun run = WalkScaled(process->address(), "slow", kSlowWalkKmh);
   ASSERT_EQ(run.rc, 0) << run.log;
   ASSERT_TRUE(run.summary.is_object()) << run.log;
   std::printf("%s\n", run.summary.dump(2).c_str());
@@ -288,7 +292,7 @@ TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallAndTheSimulatorAgrees) {
   process.reset();
   absl::StatusOr<scenes::LinkSpec> slow = server::ParseLinkOption("15k,40", Prepared("default").entry.simulation.link);
   ASSERT_TRUE(slow.ok()) << slow.status();
-  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", *slow);
+  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", *slow, kSlowWalkKmh);
   ASSERT_TRUE(sim.ok()) << sim.status();
   ExpectAgreement(run, *sim, /*expect_no_stall=*/false);
 }

@@ -103,7 +103,8 @@ TEST_F(SimulatorTest, LondonCityAtSixKmhOverOneMbitNeverStalls) {
 
 TEST_F(SimulatorTest, ALinkTooSlowForTheWalkStalls) {
   SimulationOptions o = Options(*city1_);
-  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("20k,200", o.link);
+  // 5 kbit/s: city1's 50 m cells come every 30 s at 6 km/h, each bringing about 20 kB.
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("5k,200", o.link);
   ASSERT_TRUE(slow.ok()) << slow.status();
   o.link = *slow;
   const SimulationResult r = Run(*city1_, o);
@@ -168,14 +169,23 @@ TEST_F(SimulatorTest, NoDeclaredLinkIsAnIdealLink) {
 }
 
 TEST_F(SimulatorTest, ThePlainSchemeRecomputesWhatTheSharedCacheKeeps) {
-  // city1's walk comes back along streets it walked: the server's cache answers the cells it
-  // computed before; the plain scheme (no cache) computes them again.
-  SimulationOptions o = Options(*city1_);
+  // A walk there and back along a street of city1: on the way back the server's cache answers
+  // the cells it computed before; the plain scheme (no cache) computes them again.
+  Prepared& p = *city1_;
+  const scenes::CatalogEntry declared = p.entry;
+  scenes::WalkPath back;
+  back.name = "there-and-back";
+  back.speed_mps = 1.4;
+  back.waypoints = {{-500, -340}, {-500, 100}, {-500, -340}};
+  p.entry.walks.push_back(back);
+  SimulationOptions o = Options(p);
+  o.path = back.name;
   o.fixed_compute_s = 0.05;
   o.scheme = Scheme::kPvs;
-  const SimulationResult pvs = Run(*city1_, o);
+  const SimulationResult pvs = Run(p, o);
   o.scheme = Scheme::kPlain;
-  const SimulationResult plain = Run(*city1_, o);
+  const SimulationResult plain = Run(p, o);
+  p.entry = declared;
   EXPECT_GT(pvs.pvs_cache_hits, 0u);
   EXPECT_EQ(plain.pvs_cache_hits, 0u);
   EXPECT_GT(plain.pvs_computed, pvs.pvs_computed);

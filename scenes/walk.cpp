@@ -1,4 +1,4 @@
-#include "client/walk.h"
+#include "scenes/walk.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,9 @@
 #include <absl/strings/str_cat.h>
 #include <glm/geometric.hpp>
 
-namespace vistream::client {
+namespace vistream::scenes {
 
-absl::StatusOr<Walk> Walk::Create(const scenes::WalkPath& path, double speed_mps) {
+absl::StatusOr<Walk> Walk::Create(const WalkPath& path, double speed_mps) {
   if (!(speed_mps > 0.0) || !std::isfinite(speed_mps)) {
     return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': speed ", speed_mps, " m/s is not positive"));
   }
@@ -34,7 +34,21 @@ glm::dvec2 Walk::PointAt(double s) const {
   const size_t k = static_cast<size_t>(std::upper_bound(cumulative_.begin(), cumulative_.end(), s) - cumulative_.begin());
   if (k >= points_.size()) return points_.back();
   const double a = cumulative_[k - 1], b = cumulative_[k];
-  return glm::mix(points_[k - 1], points_[k], (s - a) / (b - a));
+  // a + (b - a) f, not glm::mix's a (1 - f) + b f: a segment along a viewcell edge (x or y
+  // constant) stays exactly on it, so the eye does not flip between the two cells.
+  return points_[k - 1] + (points_[k] - points_[k - 1]) * ((s - a) / (b - a));
+}
+
+std::vector<uint32_t> Walk::CellsAlong(
+    double cell_size_m, const std::function<std::optional<uint32_t>(const glm::dvec2&)>& cell_at) const {
+  std::vector<uint32_t> cells;
+  const double step = std::min(0.25, 0.01 * cell_size_m);
+  const size_t n = static_cast<size_t>(std::ceil(length_m() / step));
+  for (size_t k = 0; k <= n; ++k) {
+    const std::optional<uint32_t> c = cell_at(PointAt(static_cast<double>(k) * step));
+    if (c.has_value() && (cells.empty() || cells.back() != *c)) cells.push_back(*c);
+  }
+  return cells;
 }
 
 WalkPose Walk::At(double t) const {
@@ -55,4 +69,4 @@ WalkPose Walk::At(double t) const {
   return pose;
 }
 
-}  // namespace vistream::client
+}  // namespace vistream::scenes

@@ -1,8 +1,11 @@
 #pragma once
-// A walk from the scene catalog (scenes::WalkPath) as a function of distance: where the eye is,
+// A walk from the scene catalog (WalkPath) as a function of distance: where the eye is,
 // where it looks and how fast it moves. The eye looks at the path a few metres ahead, so it
 // turns smoothly round corners.
 
+#include <cstdint>
+#include <functional>
+#include <optional>
 #include <vector>
 
 #include <absl/status/statusor.h>
@@ -11,7 +14,7 @@
 
 #include "scenes/catalog.h"
 
-namespace vistream::client {
+namespace vistream::scenes {
 
 struct WalkPose {
   glm::dvec3 eye{0.0};       // scene-local metres
@@ -23,19 +26,26 @@ class Walk {
  public:
   // Errors (INVALID_ARGUMENT, naming the walk): fewer than two distinct waypoints, non-finite
   // points, a speed that is not positive.
-  static absl::StatusOr<Walk> Create(const scenes::WalkPath& path, double speed_mps);
+  static absl::StatusOr<Walk> Create(const WalkPath& path, double speed_mps);
 
   double length_m() const { return cumulative_.back(); }
   double speed_mps() const { return speed_; }
   double duration_s() const { return length_m() / speed_; }
   // The pose `t` seconds after the start (clamped to the path's ends).
   WalkPose At(double t) const;
+  // The point `s` metres along the path (clamped to its ends), scene-local metres.
+  glm::dvec2 PointAt(double s) const;
+  // The viewcells the walk passes through, in order, each once per visit: `cell_at` (a grid's
+  // lookup of a scene-local point; none outside the grid) of points every 0.25 m along the path,
+  // or every hundredth of `cell_size_m` if that is smaller. The first is the cell the walk starts
+  // in, the next the first one it enters.
+  std::vector<uint32_t> CellsAlong(double cell_size_m,
+                                   const std::function<std::optional<uint32_t>(const glm::dvec2&)>& cell_at) const;
 
  private:
-  glm::dvec2 PointAt(double s) const;
   std::vector<glm::dvec2> points_;
   std::vector<double> cumulative_;  // distance along the path at each point
   double speed_ = 1.0, eye_height_ = 1.7;
 };
 
-}  // namespace vistream::client
+}  // namespace vistream::scenes
