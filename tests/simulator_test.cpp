@@ -290,6 +290,10 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --link 1M,-3", "--link: '1M,-3': the latency must be from 0 to 100000 ms");
   ExpectBadOption("simulate --scene city1 --scheme fast",
                   "--scheme: 'fast' is not a scheme: expected pvs+eps, pvs, radius or plain");
+  ExpectBadOption("simulate --scene city1 --scheme pvs --schemes radius", "--schemes: give --scheme or --schemes, not both");
+  ExpectBadOption("simulate --scene city1 --schemes pvs,radius,pvs", "--schemes: 'pvs' is listed twice");
+  ExpectBadOption("simulate --scene /tmp/x.glb",
+                  "--scene: '/tmp/x.glb' is a glTF file, which has no walks: simulate needs a catalog entry");
 }
 
 TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 #include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
@@ -28,7 +29,7 @@ constexpr double kMinSearchKmh = 1.0, kMaxSearchKmh = 500.0, kSearchPrecision = 
 constexpr double kMaxKmh = 1000.0;
 
 struct SimulateArgs {
-  std::string scene, path, speed, link, scheme = "pvs+eps", schemes, log;
+  std::string scene, path, speed, link, scheme, schemes, log;
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -128,17 +129,28 @@ int Simulate(const SimulateArgs& a) {
     }
   }
   std::vector<server::Scheme> schemes;
+  if (!a.schemes.empty() && !a.scheme.empty()) {
+    return BadOption("simulate", "--schemes", "give --scheme or --schemes, not both");
+  }
   if (!a.schemes.empty()) {
     const std::vector<std::string> names = absl::StrSplit(a.schemes, ',');
     for (const std::string& s : names) {
       absl::StatusOr<server::Scheme> scheme = server::ParseScheme(s);
       if (!scheme.ok()) return BadOption("simulate", "--schemes", std::string(scheme.status().message()));
+      if (std::find(schemes.begin(), schemes.end(), *scheme) != schemes.end()) {
+        return BadOption("simulate", "--schemes", absl::StrCat("'", s, "' is listed twice"));
+      }
       schemes.push_back(*scheme);
     }
   } else {
-    absl::StatusOr<server::Scheme> scheme = server::ParseScheme(a.scheme);
+    absl::StatusOr<server::Scheme> scheme = server::ParseScheme(a.scheme.empty() ? "pvs+eps" : a.scheme);
     if (!scheme.ok()) return BadOption("simulate", "--scheme", std::string(scheme.status().message()));
     schemes.push_back(*scheme);
+  }
+  if (scenes::IsGltfPath(a.scene)) {
+    return BadOption("simulate", "--scene",
+                     absl::StrCat("'", a.scene, "' is a glTF file, which has no walks: simulate needs a catalog entry "
+                                  "(a name such as london, or a catalog .json)"));
   }
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(a.scene);
   if (!entry.ok()) return Fail(entry.status());
@@ -227,8 +239,11 @@ int Simulate(const SimulateArgs& a) {
       std::printf("%s\n", runs[0].dump(2).c_str());
     } else {
       PrintText(runs[0]);
-      if (search) {
-        std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu runs)\n",
+      if (search && runs[0]["stall_speed_kmh"].is_null()) {
+        std::printf("  no stall up to %g km/h, the search's top (%zu run(s))\n", kMaxSearchKmh,
+                    runs[0]["search"]["runs"].size());
+      } else if (search) {
+        std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu run(s))\n",
                     runs[0]["max_speed_kmh"].get<double>(), kMinSearchKmh, kMaxSearchKmh, 100.0 * kSearchPrecision,
                     runs[0]["search"]["runs"].size());
       }
@@ -268,9 +283,9 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--link", args->link,
                 "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
                 "the declared link, none: ideal");
-  c->add_option("--scheme", args->scheme, "pvs+eps (the server's) | pvs (no ε-masks) | radius | plain (the paper's)")
-      ->capture_default_str();
-  c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (overrides --scheme)");
+  c->add_option("--scheme", args->scheme,
+                "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
+  c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "the dual ray space's finest raster")->capture_default_str()->check(PowerOfTwo(1, 256));
