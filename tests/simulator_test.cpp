@@ -294,6 +294,53 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --schemes pvs,radius,pvs", "--schemes: 'pvs' is listed twice");
   ExpectBadOption("simulate --scene /tmp/x.glb",
                   "--scene: '/tmp/x.glb' is a glTF file, which has no walks: simulate needs a catalog entry");
+  ExpectBadOption("simulate --scene city1 --speeds 3,-1", "--speeds: '-1' is not a speed: expected km/h above 0");
+  ExpectBadOption("simulate --scene city1 --speeds ,", "--speeds: no speed listed");
+  ExpectBadOption("simulate --scene city1 --speed 3 --speeds 4", "--speeds: give --speed or --speeds, not both");
+  ExpectBadOption("simulate --scene city1 --speed max --speeds 4", "--speeds: give --speed or --speeds, not both");
+  ExpectBadOption("simulate --scene city1 --bandwidths 1M,0", "--bandwidths: '0' is not a bandwidth");
+  ExpectBadOption("simulate --scene city1 --bandwidths fast", "--bandwidths: 'fast' is not a bandwidth");
+  ExpectBadOption("simulate --scene city1 --bandwidths ,", "--bandwidths: no bandwidth listed");
+}
+
+// --speeds and --bandwidths: one run per scheme, speed and bandwidth, in that nesting, each the
+// same as the run alone (the fixed compute charge makes runs reproducible), bytes against the
+// reference scheme at the same speed and link.
+TEST(SimulateCli, SweepsRunEachPointAsTheSingleRunWould) {
+  auto parse = [](const vistream::testing::RunResult& r) {
+    const size_t open = r.out.find("\n{\n");
+    EXPECT_NE(open, std::string::npos) << r.out;
+    return nlohmann::json::parse(r.out.substr(open + 1));
+  };
+  const std::string base = "simulate --scene " + LondonSmallPath() + " --res 32 --compute-ms 20 --json";
+  const vistream::testing::RunResult sweep =
+      Vistream(base + " --schemes pvs,radius --speeds 12,48 --bandwidths 5k,1M");
+  ASSERT_EQ(sweep.exit_code, 0) << sweep.out;
+  const nlohmann::json runs = parse(sweep)["runs"];
+  ASSERT_EQ(runs.size(), 8u);
+  size_t k = 0;
+  for (double bps : {5e3, 1e6}) {
+    for (double kmh : {12.0, 48.0}) {
+      for (const char* scheme : {"pvs", "radius"}) {
+        const nlohmann::json& j = runs[k++];
+        EXPECT_EQ(j["scheme"], scheme);
+        EXPECT_NEAR(j["speed_kmh"].get<double>(), kmh, 1e-9);
+        EXPECT_EQ(j["link"]["bandwidth_bps"].get<double>(), bps);
+        EXPECT_EQ(j["link"]["latency_ms"].get<double>(), 200.0) << "the declared latency kept";
+        EXPECT_EQ(j["link"]["jitter_ms"].get<double>(), 20.0) << "the declared jitter kept";
+        EXPECT_NEAR(j["bytes_over_pvs"].get<double>(),
+                    j["bytes"].get<double>() / runs[k - 1 - (scheme == std::string("radius") ? 1 : 0)]["bytes"].get<double>(),
+                    1e-12);
+      }
+    }
+  }
+  EXPECT_GT(runs[0]["stalls"].get<uint64_t>(), 0u) << "5 kbit/s stalls";
+  EXPECT_EQ(runs[4]["stalls"].get<uint64_t>(), 0u) << "1 Mbit/s at 12 km/h does not";
+  const nlohmann::json alone = parse(Vistream(base + " --scheme radius --speed 48 --link 1M,200"));
+  const nlohmann::json& same = runs[7];
+  for (const char* key : {"stalls", "stall_s", "min_margin_s", "mean_margin_s", "bytes", "mean_triangles_drawn"}) {
+    EXPECT_EQ(alone[key], same[key]) << key;
+  }
 }
 
 TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {

@@ -28,6 +28,7 @@ struct PvsArgs {
   bool all = false;
   double cell_size = 0.0;
   uint32_t res = 128;
+  int map_size = 2048;
   bool json = false;
 };
 
@@ -141,7 +142,7 @@ int Pvs(const PvsArgs& a) {
   const visibility::PvsResult pvs = backend->ComputeBatch(computer, std::span(&cell, 1), options).front();
 
   if (!a.map.empty()) {
-    TopViewMap map(scene->bounds, 2048, Rgb{250, 250, 250});
+    TopViewMap map(scene->bounds, a.map_size, Rgb{250, 250, 250});
     std::vector<bool> visible(scene->objects.size(), false);
     for (scenes::ObjectId id : pvs.objects) visible[id] = true;
     const Rgb in_pvs{40, 90, 220}, hidden{215, 50, 40}, cell_fill{30, 200, 60}, outline{60, 60, 60};
@@ -229,6 +230,8 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");
   c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");
+  c->add_option("--map-size", args->map_size, "the --map's pixels on its longer side (default 2048)")
+      ->check(WholeRange(16, 16384));
   c->callback([args, done] { done(Pvs(*args)); });
 }
 

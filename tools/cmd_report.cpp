@@ -110,6 +110,9 @@ std::string Stamp() {
                          gib, u.sysname, u.machine);
 }
 
+// The maps' longer side: enough for a street's width at city scale, and PNGs near 1 MB.
+constexpr const char* kMapPixels = "1400";
+
 // --- the sections -------------------------------------------------------------------------
 
 void SceneSection(Page& page, const Plan& plan) {
@@ -122,7 +125,7 @@ void SceneSection(Page& page, const Plan& plan) {
                  Int(info->at("occluders")), Fixed(info->at("area_km2"), 2),
                  Fixed(info->at("bounds").at("max")[2].get<double>() - info->at("bounds").at("min")[2].get<double>(), 1)}});
   }
-  if (page.RunForFile("scene map", {"scene", "map", plan.map_scene, "-o", page.Path(png)}, png)) {
+  if (page.RunForFile("scene map", {"scene", "map", plan.map_scene, "-o", page.Path(png), "--size", kMapPixels}, png)) {
     page.Image(png, plan.map_scene + ": building footprints by height and the catalog's walks");
   }
 }
@@ -278,7 +281,7 @@ void MapsSection(Page& page, const Plan& plan) {
   page.Heading("PVS maps");
   const std::string pvs_png = "pvs_" + plan.pvs_scene + ".png";
   const std::optional<json> p = page.Run(
-      "pvs --map", {"pvs", "--scene", plan.pvs_scene, "--cell", plan.pvs_cell, "--json", "--map", page.Path(pvs_png)});
+      "pvs --map", {"pvs", "--scene", plan.pvs_scene, "--cell", plan.pvs_cell, "--json", "--map", page.Path(pvs_png), "--map-size", kMapPixels});
   if (p) {
     page.Table({"scene", "viewcell", "backend", "raster", "PVS objects", "of", "PVS triangles", "of", "ms"},
                {{p->value("scene", ""), plan.pvs_cell, p->value("backend", ""), Int(p->at("res")) + "²",

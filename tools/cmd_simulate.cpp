@@ -29,7 +29,7 @@ constexpr double kMinSearchKmh = 1.0, kMaxSearchKmh = 500.0, kSearchPrecision = 
 constexpr double kMaxKmh = 1000.0;
 
 struct SimulateArgs {
-  std::string scene, path, speed, link, scheme, schemes, log;
+  std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log;
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -117,17 +117,37 @@ void PrintText(const nlohmann::json& j) {
   std::printf("  walk: %.0f m in %.0f s of simulated time\n", j["path_m"].get<double>(), j["sim_s"].get<double>());
 }
 
+// One walking speed in km/h, or nothing with `why` set.
+std::optional<double> ParseSpeed(const std::string& text, std::string* why) {
+  double kmh = 0.0;
+  if (!cli::internal::ParseFinite(text, &kmh) || !(kmh > 0.0) || kmh > kMaxKmh) {
+    *why = absl::StrFormat("'%s' is not a speed: expected km/h above 0 and at most %g", text, kMaxKmh);
+    return std::nullopt;
+  }
+  return kmh;
+}
+
 int Simulate(const SimulateArgs& a) {
   // Options first: their errors need no scene.
   const bool search = a.speed == "max";
-  double speed_kmh = 0.0;
+  // The runs: every scheme at every speed (--speed, or each of --speeds; 0: the walk's own)
+  // over every link (the declared or --link one, or each of --bandwidths at its latency).
+  std::vector<double> speeds_kmh;
+  std::string why;
+  if (!a.speed.empty() && !a.speeds.empty()) return BadOption("simulate", "--speeds", "give --speed or --speeds, not both");
   if (!a.speed.empty() && !search) {
-    if (!cli::internal::ParseFinite(a.speed, &speed_kmh) || !(speed_kmh > 0.0) || speed_kmh > kMaxKmh) {
-      return BadOption("simulate", "--speed",
-                       absl::StrFormat("'%s' is not a speed: expected km/h above 0 and at most %g, or max", a.speed,
-                                       kMaxKmh));
-    }
+    const std::optional<double> v = ParseSpeed(a.speed, &why);
+    if (!v) return BadOption("simulate", "--speed", why + ", or max");
+    speeds_kmh.push_back(*v);
   }
+  const std::vector<std::string> speed_texts = absl::StrSplit(a.speeds, ',', absl::SkipEmpty());
+  for (const std::string& text : speed_texts) {
+    const std::optional<double> v = ParseSpeed(text, &why);
+    if (!v) return BadOption("simulate", "--speeds", why);
+    speeds_kmh.push_back(*v);
+  }
+  if (!a.speeds.empty() && speeds_kmh.empty()) return BadOption("simulate", "--speeds", "no speed listed");
+  if (speeds_kmh.empty()) speeds_kmh.push_back(0.0);
   std::vector<server::Scheme> schemes;
   if (!a.schemes.empty() && !a.scheme.empty()) {
     return BadOption("simulate", "--schemes", "give --scheme or --schemes, not both");
@@ -164,6 +184,22 @@ int Simulate(const SimulateArgs& a) {
     }
     link = *l;
   }
+  // Each of --bandwidths replaces the link's bandwidth (its latency, jitter and loss kept).
+  std::vector<std::optional<scenes::LinkSpec>> links;
+  const double latency_ms = link.has_value() ? link->latency_ms.value_or(0.0) : 0.0;
+  const std::vector<std::string> bandwidth_texts = absl::StrSplit(a.bandwidths, ',', absl::SkipEmpty());
+  for (const std::string& text : bandwidth_texts) {
+    absl::StatusOr<scenes::LinkSpec> l =
+        server::ParseLinkOption(absl::StrCat(text, ",", absl::StrFormat("%.17g", latency_ms)), link, "--bandwidths");
+    if (!l.ok()) {
+      return BadOption("simulate", "--bandwidths",
+                       absl::StrCat("'", text, "' is not a bandwidth: expected bits per second above 0, with an "
+                                    "optional k, M or G suffix"));
+    }
+    links.push_back(*l);
+  }
+  if (!a.bandwidths.empty() && links.empty()) return BadOption("simulate", "--bandwidths", "no bandwidth listed");
+  if (links.empty()) links.push_back(link);
   absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
   if (!walk.ok()) return Fail(walk.status());
   std::FILE* log_file = nullptr;
@@ -193,8 +229,6 @@ int Simulate(const SimulateArgs& a) {
 
   server::SimulationOptions opt;
   opt.path = (*walk)->name;
-  opt.speed_mps = speed_kmh / 3.6;
-  opt.link = link;
   opt.seed = static_cast<uint64_t>(a.seed);
   opt.workers = static_cast<unsigned>(a.threads);
   if (a.compute_ms >= 0.0) opt.fixed_compute_s = a.compute_ms / 1000.0;
@@ -202,8 +236,22 @@ int Simulate(const SimulateArgs& a) {
   opt.memo = std::make_shared<server::PvsMemo>();
 
   nlohmann::json runs = nlohmann::json::array();
-  for (server::Scheme scheme : schemes) {
+  struct Point {
+    server::Scheme scheme;
+    double speed_kmh;
+    std::optional<scenes::LinkSpec> link;
+  };
+  std::vector<Point> points;
+  for (const auto& l : links) {
+    for (double v : speeds_kmh) {
+      for (server::Scheme scheme : schemes) points.push_back({scheme, v, l});
+    }
+  }
+  for (const Point& point : points) {
+    const server::Scheme scheme = point.scheme;
     opt.scheme = scheme;
+    opt.speed_mps = point.speed_kmh / 3.6;
+    opt.link = point.link;
     const auto t0 = std::chrono::steady_clock::now();
     nlohmann::json j;
     if (search) {
@@ -234,37 +282,43 @@ int Simulate(const SimulateArgs& a) {
                  j["wall_s"].get<double>());
     runs.push_back(j);
   }
+  auto print_run = [&](const nlohmann::json& j) {
+    PrintText(j);
+    if (search && j["stall_speed_kmh"].is_null()) {
+      std::printf("  no stall up to %g km/h, the search's top (%zu run(s))\n", kMaxSearchKmh, j["search"]["runs"].size());
+    } else if (search) {
+      std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu run(s))\n",
+                  j["max_speed_kmh"].get<double>(), kMinSearchKmh, kMaxSearchKmh, 100.0 * kSearchPrecision,
+                  j["search"]["runs"].size());
+    }
+  };
   if (runs.size() == 1) {
     if (a.json) {
       std::printf("%s\n", runs[0].dump(2).c_str());
     } else {
-      PrintText(runs[0]);
-      if (search && runs[0]["stall_speed_kmh"].is_null()) {
-        std::printf("  no stall up to %g km/h, the search's top (%zu run(s))\n", kMaxSearchKmh,
-                    runs[0]["search"]["runs"].size());
-      } else if (search) {
-        std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu run(s))\n",
-                    runs[0]["max_speed_kmh"].get<double>(), kMinSearchKmh, kMaxSearchKmh, 100.0 * kSearchPrecision,
-                    runs[0]["search"]["runs"].size());
-      }
+      print_run(runs[0]);
     }
     return 0;
   }
   nlohmann::json out;
   out["runs"] = runs;
-  // Bytes of each scheme against the server's (pvs+eps) or the first listed.
-  size_t ref = 0;
-  for (size_t k = 0; k < runs.size(); ++k) {
-    if (runs[k]["scheme"] == "pvs+eps") ref = k;
-  }
-  const double ref_bytes = runs[ref]["bytes"].get<double>();
-  for (nlohmann::json& j : out["runs"]) {
-    j["bytes_over_" + runs[ref]["scheme"].get<std::string>()] = ref_bytes > 0 ? j["bytes"].get<double>() / ref_bytes : 0.0;
+  // Bytes of each scheme against the server's (pvs+eps) or the first listed, at the same speed
+  // and link (the runs go scheme by scheme within each speed and link).
+  for (size_t group = 0; group < runs.size(); group += schemes.size()) {
+    size_t ref = group;
+    for (size_t k = group; k < group + schemes.size(); ++k) {
+      if (runs[k]["scheme"] == "pvs+eps") ref = k;
+    }
+    const double ref_bytes = runs[ref]["bytes"].get<double>();
+    for (size_t k = group; k < group + schemes.size(); ++k) {
+      out["runs"][k]["bytes_over_" + runs[ref]["scheme"].get<std::string>()] =
+          ref_bytes > 0 ? runs[k]["bytes"].get<double>() / ref_bytes : 0.0;
+    }
   }
   if (a.json) {
     std::printf("%s\n", out.dump(2).c_str());
   } else {
-    for (const nlohmann::json& j : out["runs"]) PrintText(j);
+    for (const nlohmann::json& j : out["runs"]) print_run(j);
   }
   return 0;
 }
@@ -280,9 +334,15 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--speed", args->speed,
                 "walking speed in km/h (default: the walk's), or max: the highest with zero stalls (bisection in "
                 "[1, 500] km/h to 1%)");
+  c->add_option("--speeds", args->speeds,
+                "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
+                "whose PVSs serve them all");
   c->add_option("--link", args->link,
                 "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
                 "the declared link, none: ideal");
+  c->add_option("--bandwidths", args->bandwidths,
+                "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
+                "link's latency, jitter and loss");
   c->add_option("--scheme", args->scheme,
                 "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
   c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");

@@ -13,6 +13,7 @@ namespace vistream::tools {
 struct LatencyPlan {
   std::string scene, path;
   std::vector<double> speeds_kmh;      // the speed sweep, scheme pvs at the scene's link
+  double speed_sweep_bps = 0.0;        // else at this bandwidth (and the scene's latency), when > 0
   std::vector<double> bandwidths_mbps; // the bandwidth sweep, at `sweep_speed_kmh` and the scene's latency
   double sweep_speed_kmh = 6.0;        // also the speed of the per-scheme comparison
   std::vector<std::string> schemes;

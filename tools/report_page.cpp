@@ -76,8 +76,10 @@ std::string Page::Command(const std::vector<std::string>& args) const {
 }
 
 void Page::Log(const Step& s, bool counted) {
-  std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds,
-               s.ok ? "" : counted ? "FAILED  " : "(non-zero exit)  ", s.command.c_str());
+  // A step whose failure is an answer (a probe) shows its result, not a failure.
+  const std::string state = s.ok ? "" : counted ? "FAILED  " : absl::StrCat("(", s.result, ", as a probe may)  ");
+  std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds, state.c_str(),
+               s.command.c_str());
   std::fflush(stderr);
 }
 
@@ -107,8 +109,8 @@ Page::Raw Page::RunRaw(const std::string& step, const std::vector<std::string>& 
   return {r->exit_code, r->out, r->err};
 }
 
-std::optional<json> Page::Run(const std::string& step, const std::vector<std::string>& args) {
-  absl::StrAppend(&md_, "Command: `", Command(args), "`\n\n");
+std::optional<json> Page::Run(const std::string& step, const std::vector<std::string>& args, bool show_command) {
+  if (show_command) absl::StrAppend(&md_, "Command: `", Command(args), "`\n\n");
   const Raw r = RunRaw(step, args, true);
   if (r.exit_code != 0) return std::nullopt;
   json j = json::parse(r.out, nullptr, false);

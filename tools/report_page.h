@@ -34,9 +34,12 @@ class Page {
   void Table(const std::vector<std::string>& head, const std::vector<std::vector<std::string>>& rows);
   void Image(const std::string& name, const std::string& alt);  // a file in the folder
 
-  // Runs `vistream ARGS` (which must print one JSON object), names the command on the page and
-  // returns the object; on failure writes why on the page and returns nothing.
-  std::optional<nlohmann::json> Run(const std::string& step, const std::vector<std::string>& args);
+  // Runs `vistream ARGS` (which must print one JSON object), names the command on the page
+  // (unless `show_command` is false: a sweep names its commands once, in its own words; every
+  // command is in the steps table anyway) and returns the object; on failure writes why on the
+  // page and returns nothing.
+  std::optional<nlohmann::json> Run(const std::string& step, const std::vector<std::string>& args,
+                                    bool show_command = true);
   // The same for a command that writes `file` (in the folder) and prints no JSON.
   bool RunForFile(const std::string& step, const std::vector<std::string>& args, const std::string& file);
   // The raw result, for a step whose failure may be an answer (a missing subcommand); a
