@@ -149,15 +149,20 @@ int main(int argc, char** argv) {
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 
-  absl::StatusOr<vistream::client::WalkthroughSummary> summary = vistream::client::RunWalkthrough(o);
-  if (!summary.ok()) {
-    std::fprintf(stderr, "vistream-client: error: %s\n", std::string(summary.status().message()).c_str());
+  vistream::client::WalkthroughSummary summary;
+  const absl::Status status = vistream::client::RunWalkthrough(o, &summary);
+  // A walk that ran and then failed (the server lost for good) still says what it did; one
+  // that never started (no server, a bad option found late) has nothing to say.
+  if (status.ok() || summary.frames > 0) {
+    if (json) {
+      std::printf("%s\n", vistream::client::SummaryJson(summary).c_str());
+    } else {
+      std::printf("%s", vistream::client::SummaryText(summary).c_str());
+    }
+  }
+  if (!status.ok()) {
+    std::fprintf(stderr, "vistream-client: error: %s\n", std::string(status.message()).c_str());
     return 1;
   }
-  if (json) {
-    std::printf("%s\n", vistream::client::SummaryJson(*summary).c_str());
-  } else {
-    std::printf("%s", vistream::client::SummaryText(*summary).c_str());
-  }
-  return summary->cancelled ? 130 : 0;
+  return summary.cancelled ? 130 : 0;
 }

@@ -449,6 +449,7 @@ absl::Status Loop::Walkthrough() {
   bool was_connected = true;
   double lost_at = 0.0;
   std::optional<uint32_t> stalled_in;  // the cell a stall was last reported for
+  absl::Status gave_up;  // the server lost for longer than --give-up: the walk ends with it
   for (;;) {
     const double begin = Now();
     const double t = begin - t0 - paused;
@@ -488,8 +489,10 @@ absl::Status Loop::Walkthrough() {
                         : absl::StrFormat("lost the server at %s; reconnecting (drawing what is held)", opt_.server));
     }
     if (!was_connected && opt_.give_up_s > 0.0 && begin - lost_at > opt_.give_up_s) {
-      return absl::UnavailableError(absl::StrFormat("lost the server at %s: no answer for %.0f s", opt_.server,
-                                                    opt_.give_up_s));
+      // The summary of what was walked is still made (and printed), then the error.
+      gave_up = absl::UnavailableError(absl::StrFormat("lost the server at %s: no answer for %.0f s", opt_.server,
+                                                       opt_.give_up_s));
+      break;
     }
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
@@ -599,7 +602,7 @@ absl::Status Loop::Walkthrough() {
     sum_->mean_objects_drawn = static_cast<double>(objects) / static_cast<double>(sum_->frames);
   }
   sum_->cells_visited = cells.size();
-  return absl::OkStatus();
+  return gave_up;
 }
 
 absl::Status Loop::Run() {
@@ -651,11 +654,16 @@ absl::Status Loop::Run() {
 
 }  // namespace
 
+absl::Status RunWalkthrough(const WalkthroughOptions& options, WalkthroughSummary* summary) {
+  *summary = WalkthroughSummary{};
+  summary->server = options.server;
+  Loop loop(options, summary);
+  return loop.Run();
+}
+
 absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& options) {
   WalkthroughSummary summary;
-  summary.server = options.server;
-  Loop loop(options, &summary);
-  if (absl::Status s = loop.Run(); !s.ok()) return s;
+  if (absl::Status s = RunWalkthrough(options, &summary); !s.ok()) return s;
   return summary;
 }
 
@@ -680,9 +688,10 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["scene_triangles"] = s.scene_triangles;
   j["scene_objects"] = s.scene_objects;
   j["max_held_bytes"] = s.max_held_bytes;
-  j["memory_budget_bytes"] = s.memory_budget_bytes;
+  // 0 means no budget: null says so.
+  j["memory_budget_bytes"] = s.memory_budget_bytes > 0 ? nlohmann::json(s.memory_budget_bytes) : nlohmann::json();
   j["frames_over_memory_budget"] = s.frames_over_memory_budget;
-  j["triangle_budget"] = s.triangle_budget;
+  j["triangle_budget"] = s.triangle_budget > 0 ? nlohmann::json(s.triangle_budget) : nlohmann::json();
   j["frames_over_triangle_budget"] = s.frames_over_triangle_budget;
   j["evicted_by_server"] = s.evicted_by_server;
   j["evicted_by_budget"] = s.evicted_by_budget;

@@ -90,6 +90,9 @@ struct WalkthroughSummary {
 // catalog does not have (NOT_FOUND, listing the walks), no window (UNAVAILABLE), the server
 // ending the session for good (its status), the first viewcell not arriving in time.
 absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& options);
+// The same, filling *summary with what was done even when it fails (a walk that gave up on a
+// lost server has walked, drawn and received until then; the summary says how much).
+absl::Status RunWalkthrough(const WalkthroughOptions& options, WalkthroughSummary* summary);
 
 // The summary as JSON (one object) and as lines for people.
 std::string SummaryJson(const WalkthroughSummary& s);

@@ -112,7 +112,8 @@ int main(int argc, char** argv) {
                  "K > 0: the emulated link runs K times faster (bandwidth x K, times / K), for walks replayed "
                  "K times faster (default 1)");
   app.add_option("--link-seed", link_seed, "seed of the emulated links' jitter and loss draws")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 9007199254740991.0));  // a whole number from 0 to 2^53 - 1
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -219,9 +219,17 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
                         "Command: `vistream bench table1 --scene default"}) {
     EXPECT_NE(md.find(s), std::string::npos) << s;
   }
-  // The latency section: the simulator's figures, or why there are none.
-  EXPECT_TRUE(md.find("this build has no `vistream simulate`") != std::string::npos ||
-              md.find("| speed | stalls |") != std::string::npos);
+  // The latency section: the simulator's sweeps, one command each, and their plots.
+  for (const char* s : {"| speed | stalls |", "| bandwidth | stalls |", "| scheme | stalls |",
+                        "Command: `vistream simulate --scene default --path avenue-and-back-streets --scheme pvs --speeds ",
+                        "(latency_speed_default.png)", "(latency_bandwidth_default.png)", "(latency_bytes_default.png)",
+                        "Machine load: the report's processes used "}) {
+    EXPECT_NE(md.find(s), std::string::npos) << s;
+  }
+  EXPECT_EQ(md.find("this build has no `vistream simulate`"), std::string::npos);
+  ASSERT_TRUE(j.at("cpu_share").is_number());
+  EXPECT_GT(j.at("cpu_share").get<double>(), 0.0);
+  EXPECT_LE(j.at("cpu_share").get<double>(), 1.0);
   const auto& images = j.at("images");
   EXPECT_GE(images.size(), 6u);
   for (const auto& name : images) {

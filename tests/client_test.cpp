@@ -20,6 +20,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <grpcpp/grpcpp.h>
 
 #include "client/cell_margins.h"
@@ -282,6 +283,30 @@ TEST(ClientWalk, AServerRestartMidPathLosesNothingAndDownloadsNothingTwice) {
   EXPECT_EQ(s->pixel_error, 0u);
   EXPECT_GE(s->checked_frames, 12u);
   EXPECT_GT(s->distance_m, 150.0);
+}
+
+// A server gone for good: after --give-up seconds the walk ends with UNAVAILABLE naming the
+// server, and the summary (what the client prints before the error) holds what it did.
+TEST(ClientWalk, GivingUpOnALostServerStillSaysWhatWasWalked) {
+  auto server = StartServer();
+  ASSERT_NE(server, nullptr);
+  WalkthroughOptions o = Headless(Address(*server));
+  o.speed_kmh = 36.0;
+  o.seconds = 60.0;
+  o.give_up_s = 2.0;
+  WalkthroughSummary summary;
+  std::future<absl::Status> walk = std::async(std::launch::async, [&] { return RunWalkthrough(o, &summary); });
+  std::this_thread::sleep_for(std::chrono::seconds(4));
+  server.reset();  // and none comes back
+  const absl::Status s = walk.get();
+  ASSERT_EQ(s.code(), absl::StatusCode::kUnavailable) << s;
+  EXPECT_NE(s.message().find("lost the server at " + o.server + ": no answer for 2 s"), std::string::npos) << s;
+  EXPECT_GT(summary.frames, 0u);
+  EXPECT_GT(summary.objects_received, 0u);
+  EXPECT_GT(summary.distance_m, 10.0);
+  EXPECT_LT(summary.walk_s, 30.0) << "it gave up, it did not walk on to the end";
+  const nlohmann::json j = nlohmann::json::parse(SummaryJson(summary));
+  EXPECT_EQ(j["frames"].get<uint64_t>(), summary.frames);
 }
 
 // ---- the executables ----

@@ -878,6 +878,11 @@ TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
     EXPECT_NE(out.find(std::string("vistream-server: error: --link: '") + l + "'"), std::string::npos)
         << l << ": " << out;
   }
+  for (const char* k : {"-1", "abc", "1.5", "1e300"}) {
+    const auto [rc, out] = run(std::string("--emulate-link --link-seed ") + k);
+    EXPECT_EQ(rc, 2) << k << ": " << out;
+    EXPECT_NE(out.find("--link-seed"), std::string::npos) << k << ": " << out;
+  }
   const auto [rc, out] = run("--time-scale 10");
   EXPECT_EQ(rc, 2) << out;
   EXPECT_NE(out.find("--time-scale and --link-seed need --emulate-link or --link"), std::string::npos) << out;

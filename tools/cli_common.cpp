@@ -129,8 +129,12 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 }
 
 int Fail(const absl::Status& status) {
+  if (status.code() == absl::StatusCode::kCancelled) {  // ^C or SIGTERM: not an error of the run
+    std::fprintf(stderr, "vistream: interrupted (%s)\n", std::string(status.message()).c_str());
+    return 130;
+  }
   std::fprintf(stderr, "vistream: error: %s\n", std::string(status.message()).c_str());
-  return status.code() == absl::StatusCode::kCancelled ? 130 : 1;
+  return 1;
 }
 
 }  // namespace vistream::tools
