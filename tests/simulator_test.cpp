@@ -343,6 +343,23 @@ TEST(SimulateCli, SweepsRunEachPointAsTheSingleRunWould) {
   }
 }
 
+// ^C (SIGINT) while simulating: exit 130 and "interrupted", no error and no JSON.
+TEST(SimulateCli, InterruptedExitsWith130SayingSo) {
+  const std::string cmd = "exec timeout --preserve-status -s INT 2 " + std::string(VISTREAM_BIN) + " simulate --scene " +
+                          LondonSmallPath() + " --res 32 --compute-ms 5 --speed 1 --json 2>&1";
+  std::FILE* pipe = popen(cmd.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string out;
+  char buf[4096];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) out.append(buf, n);
+  const int status = pclose(pipe);
+  ASSERT_TRUE(WIFEXITED(status)) << out;
+  EXPECT_EQ(WEXITSTATUS(status), 130) << out;
+  EXPECT_NE(out.find("vistream: interrupted ("), std::string::npos) << out;
+  EXPECT_EQ(out.find("error"), std::string::npos) << out;
+  EXPECT_EQ(out.find("\"stalls\""), std::string::npos) << out;
+}
+
 TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {
   ExpectRunTimeError("simulate --scene city1 --path nowhere", "scene 'city1' has no walk 'nowhere'; its walks: lot-lines");
 }
