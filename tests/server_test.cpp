@@ -85,6 +85,15 @@ std::unique_ptr<SessionStream> Connect(WalkthroughServer& server, bool read = tr
   return c;
 }
 
+// A new session is served: its cell (i, j) arrives complete and it ends cleanly. After a bad
+// client was dealt with, this says the server is still whole.
+void ExpectStillServes(WalkthroughServer& server, int i, int j) {
+  auto good = Connect(server);
+  ASSERT_TRUE(good->SendPose(Centre(i, j)));
+  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(i, j)); }, kWait));
+  EXPECT_TRUE(good->Finish().ok());
+}
+
 TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
   auto server = StartServer();
   auto client = Connect(*server);
@@ -397,11 +406,7 @@ TEST(Server, GarbageBytesEndTheSessionWithAStatus) {
   cq.Shutdown();
   while (cq.Next(&tag, &ok)) {
   }
-  // And the server still serves.
-  auto good = Connect(*server);
-  ASSERT_TRUE(good->SendPose(Centre(5, 5)));
-  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(5, 5)); }, kWait));
-  EXPECT_TRUE(good->Finish().ok());
+  ExpectStillServes(*server, 5, 5);
 }
 
 TEST(Server, TooManySessionsAndTooManyPosesAreRefused) {
@@ -459,10 +464,7 @@ TEST(Server, AClientThatStopsReadingCostsBoundedMemory) {
               static_cast<unsigned long long>(crossings), static_cast<unsigned long long>(sent),
               static_cast<unsigned long long>(max_queued), o.limits.max_queued_bytes);
   stalled->Cancel();
-  auto good = Connect(*server);
-  ASSERT_TRUE(good->SendPose(Centre(9, 9)));
-  EXPECT_TRUE(good->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(9, 9)); }, kWait));
-  EXPECT_TRUE(good->Finish().ok());
+  ExpectStillServes(*server, 9, 9);
 }
 
 TEST(Server, QueuedBytesOverTheLimitEndTheSession) {
