@@ -105,6 +105,61 @@ TEST_F(Pvs, BatchEqualsOneByOneWhateverTheThreads) {
   }
 }
 
+// The five cells a client crossing from `to` - (1, 1) into `to` comes to border (an L around
+// to's far corner), as the batch benchmark takes them.
+std::vector<Aabb> DiagonalCrossing(const ViewcellGrid& grid, CellCoord to) {
+  std::vector<Aabb> cells;
+  for (CellId id : grid.NewlyAdjacent(grid.Id(CellCoord{to.i - 1, to.j - 1}), grid.Id(to))) {
+    cells.push_back(grid.CellBox(id));
+  }
+  return cells;
+}
+
+// The batch call shares work but no answer: each cell gets exactly what Compute gives it,
+// whatever the thread count. With the union box's culling on, a set may only lose objects,
+// and never one that the exact test sees.
+void ExpectAdjacentMatchesSingleCalls(const PvsComputer& computer, std::span<const Aabb> cells) {
+  const auto one = computer.ComputeAdjacent(cells, {}, 1);
+  const auto two = computer.ComputeAdjacent(cells, {}, 2);
+  const auto culled = computer.ComputeAdjacent(cells, {}, 2, /*union_cull=*/true);
+  ASSERT_EQ(one.size(), cells.size());
+  ASSERT_EQ(culled.size(), cells.size());
+  for (size_t k = 0; k < cells.size(); ++k) {
+    const PvsResult single = computer.Compute(cells[k], {});
+    EXPECT_EQ(one[k].objects, single.objects) << "cell " << k;
+    EXPECT_EQ(two[k].objects, single.objects) << "cell " << k;
+    EXPECT_EQ(one[k].triangles, single.triangles) << "cell " << k;
+    EXPECT_GT(single.objects.size(), 0u);
+    EXPECT_LT(single.objects.size(), computer.occluders().pieces().size()) << "nothing culled: a weak check";
+    const auto& c = culled[k].objects;
+    EXPECT_TRUE(std::includes(single.objects.begin(), single.objects.end(), c.begin(), c.end())) << "cell " << k;
+    const PvsResult exact = computer.Compute(cells[k], CellQueryOptions{.exact = true});
+    EXPECT_TRUE(std::includes(c.begin(), c.end(), exact.objects.begin(), exact.objects.end())) << "cell " << k;
+  }
+}
+
+TEST_F(Pvs, AdjacentCellsGetExactlyWhatSingleCallsGive) {
+  const PvsComputer computer(*scene_, *tree_);
+  const auto grid = ViewcellGrid::Create(scene_->bounds, 100.0, 0.5, 2.0);
+  ASSERT_TRUE(grid.ok());
+  for (const CellCoord to : {CellCoord{3, 3}, CellCoord{5, 2}}) {
+    const std::vector<Aabb> cells = DiagonalCrossing(*grid, to);
+    ASSERT_EQ(cells.size(), 5u);
+    ExpectAdjacentMatchesSingleCalls(computer, cells);
+  }
+}
+
+TEST(PvsBatch, CityOneAdjacentCellsGetExactlyWhatSingleCallsGive) {
+  const scenes::Scene scene = scenes::GenerateTestCity(/*dense=*/true, 1);
+  const KdTree tree = KdTree::Build(scene);
+  const PvsComputer computer(scene, tree);
+  const auto grid = ViewcellGrid::Create(scene.bounds, 50.0, 0.5, 2.0);
+  ASSERT_TRUE(grid.ok());
+  const std::vector<Aabb> cells = DiagonalCrossing(*grid, CellCoord{4, 6});
+  ASSERT_EQ(cells.size(), 5u);
+  ExpectAdjacentMatchesSingleCalls(computer, cells);
+}
+
 TEST_F(Pvs, FinerRasterNeverAddsObjects) {
   // A finer raster blocks at least what a coarser one does: PVS(128) is a subset of PVS(4),
   // and smaller somewhere.

@@ -377,7 +377,9 @@ bool RayOnLine(const PlanarProblem& pr, const FreeLine& line, double* u, double*
 
 }  // namespace
 
-void DualRaySpace::SetWitness(const PlanarProblem& pr, double u, double v, FreeLine* witness) const {
+void DualRaySpace::SetWitness(const PlanarProblem& pr, double u, double v, FreeLine* witness) {
+  free_u_ = u;
+  free_v_ = v;
   if (witness == nullptr) return;
   witness->from = pr.SceneFromPlanar(pr.x1, pr.r1 + u * (pr.l1 - pr.r1));
   witness->to = pr.SceneFromPlanar(pr.x2, pr.r2 + v * (pr.l2 - pr.r2));
@@ -459,6 +461,57 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   return ExactlyCovered(blockers_, exact_raster_, n);
 }
 
+bool DualRaySpace::SegmentOnCeilingFree(const PlanarProblem& pr, double p0, double q0, double p1, double q1) {
+  if (!(p0 < p1)) return true;
+  const auto& pieces = occluders_.pieces();
+  const double k = (q1 - q0) / (p1 - p0);
+  const glm::dvec2 from = pr.SceneFromPlanar(p0, q0), to = pr.SceneFromPlanar(p1, q1);
+  const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
+    const OccluderPiece& piece = pieces[id];
+    // Where the piece reaches the segment's height: z = alpha + beta p <= height.
+    double lo = p0, hi = p1;
+    if (pr.beta > 0) hi = std::min(hi, (piece.height - pr.alpha) / pr.beta);
+    else if (pr.beta < 0) lo = std::max(lo, (piece.height - pr.alpha) / pr.beta);
+    else if (piece.height < pr.alpha) return false;
+    if (!(lo <= hi)) return false;
+    planar_.clear();
+    for (const glm::dvec2& w : piece.points) planar_.push_back(pr.PlanarFromScene(w));
+    // Boundary included: a segment that grazes a piece counts as blocked here.
+    return SegmentMeetsPiece(glm::dvec2(lo, q0 + k * (lo - p0)), glm::dvec2(hi, q0 + k * (hi - p0)), planar_);
+  });
+  return !blocked;
+}
+
+bool DualRaySpace::WitnessJoinsBoxes(const scenes::Aabb& a, const scenes::Aabb& b, const PlanarProblem& pr) {
+  // The free ray runs on T from (x1, q1) to (x2, q2), above every occluder between the faces.
+  // Extended along T to where T meets A's top (or A's face) and B's top (or B's face), it is
+  // a segment from a point of A to a point of B; if its extensions over A and B are free too,
+  // A and B see each other and no other planar test can prove B hidden.
+  const int other = 1 - pr.axis;
+  const double o = pr.origin[pr.axis], oq = pr.origin[other];
+  double pa0, pb1;
+  if (pr.sign > 0) {
+    pa0 = a.min[pr.axis] - o, pb1 = b.max[pr.axis] - o;
+  } else {
+    pa0 = -(a.max[pr.axis] - o), pb1 = -(b.min[pr.axis] - o);
+  }
+  const double q1 = pr.r1 + free_u_ * (pr.l1 - pr.r1), q2 = pr.r2 + free_v_ * (pr.l2 - pr.r2);
+  const double k = (q2 - q1) / (pr.x2 - pr.x1);
+  auto q_at = [&](double p) { return q1 + k * (p - pr.x1); };
+  auto z_at = [&](double p) { return pr.alpha + pr.beta * p; };
+  const double pa = z_at(pr.x1) <= a.max.z ? pr.x1 : pa0;
+  const double pb = z_at(pr.x2) <= b.max.z ? pr.x2 : pb1;
+  auto inside = [&](const scenes::Aabb& box, double p, double tol) {
+    const double q = q_at(p), z = z_at(p);  // in the query frame, as the box's sides below
+    return q >= box.min[other] - oq - tol && q <= box.max[other] - oq + tol && z >= box.min.z - tol &&
+           z <= box.max.z + tol;
+  };
+  // Rounding of T's intercept at the box's edge, no more.
+  const double tol = 1e-9 * (1.0 + std::abs(pr.alpha) + std::abs(pr.beta) * (pr.x2 - pa0));
+  if (!inside(a, pa, tol) || !inside(b, pb, tol)) return false;
+  return SegmentOnCeilingFree(pr, pa, q_at(pa), pr.x1, q1) && SegmentOnCeilingFree(pr, pr.x2, q2, pb, q_at(pb));
+}
+
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
                            CellQueryStats* stats, const FreeLine& hint, FreeLine* witness) {
   if (witness != nullptr) witness->valid = false;
@@ -485,6 +538,8 @@ bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const C
       if (stats != nullptr) ++stats->occluded;
       return false;
     }
+    // A free ray that joins A and B proves them visible: the other plane cannot hide B.
+    if (each.valid && k + 1 < count && WitnessJoinsBoxes(a, b, pr[k])) break;
   }
   if (!separable && stats != nullptr) ++stats->non_separable;
   if (witness != nullptr) *witness = found;

@@ -39,6 +39,13 @@ struct CellQueryStats {
   uint64_t free_rays = 0;      // planar tests ended by a free ray
   uint64_t exact_tests = 0;    // planar tests decided by the exact union test
   uint64_t occluded = 0;       // Visible() answers false
+
+  CellQueryStats& operator+=(const CellQueryStats& o) {
+    queries += o.queries, non_separable += o.non_separable, planar_tests += o.planar_tests;
+    gathered += o.gathered, pieces += o.pieces, raster_rows += o.raster_rows, free_rays += o.free_rays;
+    exact_tests += o.exact_tests, occluded += o.occluded;
+    return *this;
+  }
 };
 
 // The planar problem of one separating direction, in a query-relative frame (p along the
@@ -132,7 +139,17 @@ class DualRaySpace {
   // no blockers need building. Exact up to rounding; used to prove visibility early.
   bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
   // *witness = the line of ray (u, v), if witness is not null.
-  void SetWitness(const PlanarProblem& problem, double u, double v, FreeLine* witness) const;
+  // Also keeps (u, v) for WitnessJoinsBoxes.
+  void SetWitness(const PlanarProblem& problem, double u, double v, FreeLine* witness);
+  // Whether the free ray (free_u_, free_v_) of `problem`, extended along the ceiling T into A
+  // and B, joins a point of A to a point of B without meeting an occluder: then A and B are
+  // mutually visible (not merely undecided), and Visible may skip the other separating plane.
+  // Boxes as for Visible; false when unsure.
+  bool WitnessJoinsBoxes(const scenes::Aabb& a, const scenes::Aabb& b, const PlanarProblem& problem);
+  // Whether the segment on T from (p0, q0) to (p1, q1) (planar frame, p0 <= p1) meets no
+  // occluder, boundary included.
+  bool SegmentOnCeilingFree(const PlanarProblem& problem, double p0, double q0, double p1, double q1);
+  double free_u_ = 0, free_v_ = 0;  // the last free ray SetWitness saw
 
   const OccluderSet& occluders_;
   CpuRaster cpu_raster_;

@@ -34,6 +34,20 @@ class PvsComputer {
   std::vector<PvsResult> ComputeBatch(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
                                       unsigned threads = 0) const;
 
+  // Adjacent viewcells at once (scene-local metres; e.g. the five cells a client
+  // crossing a corner diagonally comes to border: ViewcellGrid::NewlyAdjacent), sharing work:
+  // one traversal of the kd-tree for all of them (32 at a time), each node tested only for the cells that
+  // see its parent, the free ray that proved a node visible from one cell tried first for
+  // the next (dual ray space, section 5 of Koltun et al. 2001, per node and cell as Compute).
+  // With `union_cull`, a node that the union box of the cells (their bounding box) is proven
+  // not to see is culled for all of them at once: conservative, since each cell lies inside
+  // that box, but the sets may then be smaller than Compute's where the union's raster closes
+  // a gap that a cell's leaves open. Without it the sets are exactly Compute's. Subtrees go to
+  // up to `threads` threads (0: one per core); results in the order of `cells`, identical
+  // whatever the thread count; each result's `ms` is the whole batch's wall time.
+  std::vector<PvsResult> ComputeAdjacent(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
+                                         unsigned threads = 0, bool union_cull = false) const;
+
   // One viewcell with the caller's query engine (built on occluders()), for another raster
   // backend; on the calling thread.
   PvsResult Compute(const scenes::Aabb& cell, const CellQueryOptions& options, DualRaySpace* drs) const;
