@@ -328,22 +328,11 @@ class Worker {
     }
     uint32_t c_fwd = 0, c_rev = 0;
     double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
-    // The cells first, then their sets: a segment crosses tens of cells of a city, each a
-    // likely cache miss in the sets, and asking for all of them before reading any lets
-    // those misses overlap (two rounds: the index slots, then the blocks).
     walk_.clear();
     VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) { walk_.push_back({cell, t}); });
     if (!walk_.empty()) {
       t_first = walk_.front().second;
       t_last = walk_.back().second;
-    }
-    for (const auto& [cell, t] : walk_) {
-      if (smp.fwd != kNoObject) pvs_.PrefetchIndex(cell, smp.fwd);
-      if (smp.rev != kNoObject) pvs_.PrefetchIndex(cell, smp.rev);
-    }
-    for (const auto& [cell, t] : walk_) {
-      if (smp.fwd != kNoObject) pvs_.PrefetchBlock(cell, smp.fwd);
-      if (smp.rev != kNoObject) pvs_.PrefetchBlock(cell, smp.rev);
     }
     for (const auto& [cell, t] : walk_) {
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
