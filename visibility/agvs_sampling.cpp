@@ -328,13 +328,11 @@ class Worker {
     }
     uint32_t c_fwd = 0, c_rev = 0;
     double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
-    walk_.clear();
-    VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) { walk_.push_back({cell, t}); });
-    if (!walk_.empty()) {
-      t_first = walk_.front().second;
-      t_last = walk_.back().second;
-    }
-    for (const auto& [cell, t] : walk_) {
+    bool walked = false;
+    VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+      if (!walked) t_first = t;
+      t_last = t;
+      walked = true;
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
       if (counts_ != nullptr) ++counts_->cells[cell];
       if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
@@ -345,7 +343,7 @@ class Worker {
         out.entries.push_back({cell, smp.rev, WitnessOf(cell, smp, t, -smp.t_rev)});
         ++c_rev;
       }
-    }
+    });
     out.contribution += c_fwd + c_rev;
     if (options_.strategy != SamplingStrategy::kAgvs) return;
     // Contributing ends become mutation candidates: from the other end (a hit, or where the
@@ -435,7 +433,6 @@ class Worker {
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
   std::vector<FanSurface::Hot> fans_;              // where their objects' surfaces lie
-  std::vector<std::pair<CellId, double>> walk_;    // Emit's cells along a segment, with t inside each
 
  public:
   void CountInto(Counts* counts) { counts_ = counts; }
