@@ -252,6 +252,10 @@ TEST(Cli, AgvsReportsItsFiguresAndWritesAPvsFileTheHeatmapReads) {
   EXPECT_GT(mean, 10.0);
   EXPECT_LT(mean, 2128.0);
   EXPECT_GT(std::filesystem::file_size(pvs), 560u);
+  // Two-level sets: at least the index (4 bytes per cell and 512 ids); on a town this small
+  // every cell may hold all five of its 64-byte blocks, so the bound is a few flat bitsets.
+  EXPECT_GE(j.at("sets_bytes").get<double>(), 560.0 * 5 * 4);
+  EXPECT_LT(j.at("sets_bytes").get<double>(), 560.0 * 2128 / 8 * 4);
 
   const RunResult h = Vistream("agvs heatmap --scene city1 --pvs " + pvs + " -o " + png + " --json");
   ASSERT_EQ(h.exit_code, 0) << h.out;

@@ -104,6 +104,7 @@ int Agvs(const AgvsArgs& a) {
   j["cell_size"] = s->grid.cell_size();
   j["objects"] = s->scene.objects.size();
   j["entries"] = sets.TotalEntries();
+  j["sets_bytes"] = sampler.pvs().MemoryBytes();  // the sampled sets' index and blocks
   j["mean_pvs_objects"] = mean_objects;
   j["mean_pvs_triangles"] = mean_triangles;
   j["cancelled"] = cancelled;
