@@ -103,6 +103,10 @@ struct EpsilonSuperset::Query {
     const Ray* ray;
     bool stop_at_hider;  // test each crossing prism on every ray at once, stop at a hider
     uint32_t hider;
+    // With stop_at_hider: rays [0, own_rays) are the traced vertex's own; a prism crossed by
+    // all of them hides that vertex, which sets own_hidden.
+    size_t own_rays;
+    bool own_hidden;
   };
   static constexpr uint32_t kNone = ~0u;
 
@@ -173,6 +177,7 @@ struct EpsilonSuperset::Query {
       return;
     }
     for (size_t r = 1; r < query.rays.size(); ++r) {
+      if (r == ctx->own_rays) ctx->own_hidden = true;
       if (!query.Crosses(args->primID, query.rays[r])) return;
     }
     // A hider: report a hit at t = 0, so that Embree gives up the rest of the segment.
@@ -186,7 +191,8 @@ struct EpsilonSuperset::Query {
   // Every usable prism `r` crosses, nearest first, into `hits`: one Embree all-hits
   // traversal. With `stop_at_hider`, each is tried on every ray in `rays` as it is met, and
   // the first that all cross ends the traversal and is returned (kNone if none).
-  uint32_t Trace(const Ray& r, bool stop_at_hider = false) {
+  // `own_hidden`, when given, says whether a prism crossed every ray in [0, own_rays).
+  uint32_t Trace(const Ray& r, bool stop_at_hider = false, size_t own_rays = 0, bool* own_hidden = nullptr) {
     hits.clear();
     TraceContext ctx;
     rtcInitIntersectContext(&ctx.base);
@@ -194,6 +200,8 @@ struct EpsilonSuperset::Query {
     ctx.ray = &r;
     ctx.stop_at_hider = stop_at_hider;
     ctx.hider = kNone;
+    ctx.own_rays = own_rays;
+    ctx.own_hidden = false;
     const glm::dvec3 o = q + r.e - set.frame_;
     RTCRayHit rh{};
     rh.ray.org_x = static_cast<float>(o.x);
@@ -209,6 +217,7 @@ struct EpsilonSuperset::Query {
     rtcIntersect1(set.embree_->scene, &ctx.base, &rh);
     ++stats.traversals;
     std::sort(hits.begin(), hits.end());
+    if (own_hidden != nullptr) *own_hidden = ctx.own_hidden || ctx.hider != kNone;
     return ctx.hider;
   }
 
@@ -341,53 +350,87 @@ struct EpsilonSuperset::Query {
     const uint32_t first_vertex = set.vertex_start_[object];
     const uint32_t distinct = set.vertex_start_[object + 1] - first_vertex;
     const uint32_t* corner_of = set.triangle_vertex_.data() + 3 * static_cast<size_t>(set.triangle_base_[object]);
+    // Each distinct vertex's rays, built once: [vertex_ray_start[u], vertex_ray_start[u + 1]).
     vertex_state.assign(distinct, kUnknown);
-    vertex_hiders.resize(distinct);
-    auto hiders = [&](uint32_t u) -> const std::vector<uint32_t>* {
-      if (vertex_state[u] == kUnknown) {
-        rays.clear();
-        std::vector<uint32_t>& h = vertex_hiders[u];
-        h.clear();
-        if (!AddRays(glm::dvec3(set.vertices_[first_vertex + u]))) {
-          vertex_state[u] = kInBox;
-        } else {
-          SpreadRays();
-          Trace(rays[0]);
-          for (const auto& hit : hits) {
-            bool all = true;
-            for (size_t r = 1; r < rays.size() && all; ++r) all = Crosses(hit.second, rays[r]);
-            if (all) h.push_back(hit.second);
-          }
-          std::sort(h.begin(), h.end());
-          stats.rays += rays.size();
-          vertex_state[u] = kKnown;
-        }
+    vertex_hider.assign(distinct, kNone);
+    vertex_miss.assign(distinct, kNone);
+    vertex_ray_start.resize(distinct + 1);
+    vertex_rays.clear();
+    for (uint32_t u = 0; u < distinct; ++u) {
+      vertex_ray_start[u] = static_cast<uint32_t>(vertex_rays.size());
+      rays.clear();
+      if (!AddRays(glm::dvec3(set.vertices_[first_vertex + u]))) {
+        vertex_state[u] = kSeen;  // in the box: nothing hides it
+      } else {
+        SpreadRays();
+        vertex_rays.insert(vertex_rays.end(), rays.begin(), rays.end());
       }
-      return vertex_state[u] == kInBox ? nullptr : &vertex_hiders[u];
+    }
+    vertex_ray_start[distinct] = static_cast<uint32_t>(vertex_rays.size());
+    auto rays_of = [&](uint32_t u) {
+      return std::span<const Ray>(vertex_rays.data() + vertex_ray_start[u], vertex_ray_start[u + 1] - vertex_ray_start[u]);
     };
     for (uint32_t t = 0; t < n; ++t) {
-      bool hidden = true;
-      common.clear();
-      for (int k = 0; k < 3 && hidden; ++k) {
-        const std::vector<uint32_t>* h = hiders(corner_of[3 * t + k]);
-        if (h == nullptr || h->empty()) {
-          hidden = false;
-        } else if (k == 0) {
-          common = *h;
-        } else {
-          scratch.clear();
-          std::set_intersection(common.begin(), common.end(), h->begin(), h->end(), std::back_inserter(scratch));
-          common.swap(scratch);
-          hidden = !common.empty();
+      const uint32_t* v = corner_of + 3 * static_cast<size_t>(t);
+      if (vertex_state[v[0]] == kSeen || vertex_state[v[1]] == kSeen || vertex_state[v[2]] == kSeen) {
+        out->push_back(set.TriangleId(object, t));
+        continue;
+      }
+      // Traced from a vertex not yet traced, if any: a traversal that finds nothing hiding it
+      // alone proves it seen, which settles every other triangle that has it.
+      int first = 0;
+      while (first < 2 && vertex_state[v[first]] == kTraced) ++first;
+      rays.clear();
+      for (int k = 0; k < 3; ++k) {
+        const std::span<const Ray> r = rays_of(v[(first + k) % 3]);
+        rays.insert(rays.end(), r.begin(), r.end());
+      }
+      const size_t own_rays = rays_of(v[first]).size();
+      // The same test as intersecting the three vertices' sets of hiders: one prism crossed
+      // by every ray of every vertex. Tried first on the prisms that hid the last triangles,
+      // then along the traced vertex's first ray, stopping at the first hider.
+      // A vertex remembers the last prism found to hide it and the last found not to:
+      // neighbouring triangles share vertices and are tried on the same prisms.
+      auto hides = [&](uint32_t prism, uint32_t u) {
+        if (vertex_hider[u] == prism) return true;
+        if (vertex_miss[u] == prism) return false;
+        for (const Ray& r : rays_of(u)) {
+          if (!Crosses(prism, r)) {
+            vertex_miss[u] = prism;
+            return false;
+          }
+        }
+        vertex_hider[u] = prism;
+        return true;
+      };
+      uint32_t hider = kNone;
+      for (uint32_t prism : recent) {
+        if (prism != kNone && Usable(prism) && hides(prism, v[0]) && hides(prism, v[1]) && hides(prism, v[2])) {
+          hider = prism;
+          break;
         }
       }
-      if (!hidden) out->push_back(set.TriangleId(object, t));
+      if (hider == kNone) {
+        bool own_hidden = false;
+        hider = Trace(rays[0], true, own_rays, &own_hidden);
+        vertex_state[v[first]] = own_hidden ? kTraced : kSeen;
+      }
+      stats.rays += rays.size();
+      if (hider == kNone) {
+        out->push_back(set.TriangleId(object, t));
+      } else if (recent[0] != hider) {
+        recent[1] = recent[0];
+        recent[0] = hider;
+      }
     }
   }
-  static constexpr uint8_t kUnknown = 0, kKnown = 1, kInBox = 2;
-  std::vector<uint32_t> common, scratch;
+  // Per distinct vertex of the object being tested: kSeen when nothing hides it from the box
+  // (it lies in the box, or a whole traversal found no prism crossed by all its rays), kTraced
+  // when a traversal from it found a prism that hides it alone.
+  static constexpr uint8_t kUnknown = 0, kTraced = 1, kSeen = 2;
   std::vector<uint8_t> vertex_state;
-  std::vector<std::vector<uint32_t>> vertex_hiders;
+  std::vector<uint32_t> vertex_hider, vertex_miss, vertex_ray_start;
+  std::vector<Ray> vertex_rays;
 };
 
 EpsilonSuperset::EpsilonSuperset(const scenes::Scene& scene) : scene_(scene) {}
