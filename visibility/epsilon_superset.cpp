@@ -120,7 +120,10 @@ struct EpsilonSuperset::Query {
   // outside of. A segment from any other corner enters the box through such a face, at a
   // point those corners imply. None for r = 13: a vertex in the box, which nothing hides.
   std::array<uint8_t, 27> corner_mask{};
-  std::vector<uint8_t> dropped;  // per object: hidden, so no longer an occluder
+  // Per object: kNear when its box meets the neighbourhood (which may then lie in its solid),
+  // kDropped when it is hidden and drop_hidden_occluders is on; either stops it occluding.
+  static constexpr uint8_t kNear = 1, kDropped = 2;
+  std::vector<uint8_t> blocked;
   std::optional<ObjectId> skip;  // the occludee's own object, while testing its box
   std::vector<std::pair<double, uint32_t>> hits;
   std::vector<Ray> rays;
@@ -129,7 +132,26 @@ struct EpsilonSuperset::Query {
   EpsilonStats stats;
 
   Query(const EpsilonSuperset& s, const EpsilonOptions& o, const Aabb& b)
-      : set(s), options(o), box(b), q(b.min), dropped(o.drop_hidden_occluders ? s.scene_.objects.size() : 0, 0) {
+      : set(s), options(o), box(b), q(b.min), blocked(s.scene_.objects.size(), 0) {
+    // The objects whose box meets the neighbourhood, from the scene's tree (objects with an
+    // empty box are not in it, and meet nothing).
+    if (!set.tree_.empty()) {
+      const std::vector<KdNode>& nodes = set.tree_.nodes();
+      std::vector<uint32_t> stack = {0};
+      while (!stack.empty()) {
+        const KdNode& node = nodes[stack.back()];
+        stack.pop_back();
+        if (!node.bounds.Overlaps(box)) continue;
+        if (node.IsLeaf()) {
+          for (ObjectId id : set.tree_.LeafObjects(node)) {
+            if (set.scene_.objects[id].bounds.Overlaps(box)) blocked[id] |= kNear;
+          }
+        } else {
+          stack.push_back(static_cast<uint32_t>(node.left));
+          stack.push_back(static_cast<uint32_t>(node.right));
+        }
+      }
+    }
     std::array<Corner, 8> c;
     const int n = Corners(box, &c);
     for (int r = 0; r < 27; ++r) {
@@ -152,9 +174,7 @@ struct EpsilonSuperset::Query {
   // (testing boxes), or its box meets the neighbourhood, which may then lie in its solid.
   bool Usable(uint32_t prism) const {
     const ObjectId object = set.prisms_[prism].object;
-    if (skip == object) return false;
-    if (!dropped.empty() && dropped[object]) return false;
-    return !set.scene_.objects[object].bounds.Overlaps(box);
+    return blocked[object] == 0 && skip != object;
   }
 
   bool Crosses(uint32_t prism, const Ray& r) {
@@ -641,7 +661,7 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
     auto hide = [&](ObjectId id, bool first) {
       ++st.occluded_boxes;
       st.first_occluders += first ? 1 : 0;
-      if (!query.dropped.empty()) query.dropped[id] = 1;
+      if (options.drop_hidden_occluders) query.blocked[id] |= Query::kDropped;
     };
     auto test_object = [&](ObjectId id) {
       bool first = false;
