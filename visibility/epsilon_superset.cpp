@@ -5,6 +5,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <tuple>
 
@@ -396,21 +397,11 @@ struct EpsilonSuperset::Query {
         out->push_back(set.TriangleId(object, t));
         continue;
       }
-      // Traced from a vertex not yet traced, if any: a traversal that finds nothing hiding it
-      // alone proves it seen, which settles every other triangle that has it.
-      int first = 0;
-      while (first < 2 && vertex_state[v[first]] == kTraced) ++first;
-      rays.clear();
-      for (int k = 0; k < 3; ++k) {
-        const std::span<const Ray> r = rays_of(v[(first + k) % 3]);
-        rays.insert(rays.end(), r.begin(), r.end());
-      }
-      const size_t own_rays = rays_of(v[first]).size();
       // The same test as intersecting the three vertices' sets of hiders: one prism crossed
       // by every ray of every vertex. Tried first on the prisms that hid the last triangles,
-      // then along the traced vertex's first ray, stopping at the first hider.
-      // A vertex remembers the last prism found to hide it and the last found not to:
-      // neighbouring triangles share vertices and are tried on the same prisms.
+      // then along one vertex's first ray, stopping at the first hider. A vertex remembers
+      // the last prism found to hide it and the last found not to: neighbouring triangles
+      // share vertices and are tried on the same prisms.
       auto hides = [&](uint32_t prism, uint32_t u) {
         if (vertex_hider[u] == prism) return true;
         if (vertex_miss[u] == prism) return false;
@@ -431,11 +422,28 @@ struct EpsilonSuperset::Query {
         }
       }
       if (hider == kNone) {
+        // Traced from a vertex not yet traced, if any: a traversal that finds nothing hiding
+        // it alone proves it seen, which settles every other triangle that has it. Of those,
+        // the nearest: its segments are the shortest, so Embree proposes fewest prisms.
+        int first = 0;
+        double best = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+          const glm::dvec3& d = rays_of(v[k]).front().d;
+          const double key = glm::dot(d, d) + (vertex_state[v[k]] == kTraced ? 1e30 : 0.0);
+          if (key < best) best = key, first = k;
+        }
+        rays.clear();
+        for (int k = 0; k < 3; ++k) {
+          const std::span<const Ray> r = rays_of(v[(first + k) % 3]);
+          rays.insert(rays.end(), r.begin(), r.end());
+        }
+        const size_t own_rays = rays_of(v[first]).size();
         bool own_hidden = false;
         hider = Trace(rays[0], true, own_rays, &own_hidden);
         vertex_state[v[first]] = own_hidden ? kTraced : kSeen;
+        if (hider != kNone) vertex_hider[v[0]] = vertex_hider[v[1]] = vertex_hider[v[2]] = hider;
       }
-      stats.rays += rays.size();
+      stats.rays += rays_of(v[0]).size() + rays_of(v[1]).size() + rays_of(v[2]).size();
       if (hider == kNone) {
         out->push_back(set.TriangleId(object, t));
       } else if (recent[0] != hider) {
