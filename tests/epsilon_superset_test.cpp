@@ -372,6 +372,41 @@ void ExpectConservative(const Scene& s, const Aabb& box) {
   }
 }
 
+// Two walls with a gap between them hide the two halves of a wide wall behind: each vertex of
+// its front face is hidden, but by one wall or the other, never by one prism alone, and the
+// face is seen through the gap. A triangle is hidden only by a prism that hides all three of
+// its vertices; hiders of the last triangles, remembered per vertex, must not stand in for it.
+TEST(EpsilonSuperset, VerticesHiddenByDifferentPrismsKeepTheirTriangle) {
+  Scene s;
+  scenes::AddBuilding(&s, "left", {{Rect({}, 10, -10, 12, -0.5), 0, 30}});
+  scenes::AddBuilding(&s, "right", {{Rect({}, 10, 0.5, 12, 10), 0, 30}});
+  const ObjectId behind = scenes::AddBuilding(&s, "behind", {{Rect({}, 20, -6, 24, 6), 0, 5}});
+  // Further wide walls behind the first, each hidden whole by the left wall (so that it is a
+  // recent hider when the "behind" object's triangles are tested).
+  scenes::AddBuilding(&s, "hidden", {{Rect({}, 30, -40, 31, -30), 0, 3}});
+  const auto eps = Make(s);
+  for (const char* column : kColumns) {
+    for (double size : {0.0, 0.25}) {
+      const Aabb box{glm::dvec3(-0.5 * size, -0.5 * size, 1.0), glm::dvec3(0.5 * size, 0.5 * size, 1.0 + size)};
+      const EpsilonResult r = eps->Compute(box, Options(column));
+      // The front face of "behind" (x = 20), both its triangles.
+      int front = 0;
+      for (uint32_t t = 0; t < s.objects[behind].mesh.TriangleCount(); ++t) {
+        const scenes::Mesh& m = s.objects[behind].mesh;
+        bool on_front = true;
+        for (int k = 0; k < 3; ++k) on_front &= m.positions[m.indices[3 * t + k]].x == 20.0f;
+        if (on_front) {
+          ++front;
+          EXPECT_TRUE(std::binary_search(r.triangles.begin(), r.triangles.end(), eps->TriangleId(behind, t)))
+              << column << ", size " << size << ": front triangle " << t << " left out";
+        }
+      }
+      EXPECT_EQ(front, 2) << column;
+    }
+  }
+  ExpectConservative(s, Aabb{glm::dvec3(-0.125, -0.125, 1.0), glm::dvec3(0.125, 0.125, 1.25)});
+}
+
 // --- Hard cases. ---
 
 // A wall at x 10..12, |y| <= 5, seen from one point at the origin: its shadow's edge through

@@ -5,6 +5,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <tuple>
 
@@ -103,6 +104,10 @@ struct EpsilonSuperset::Query {
     const Ray* ray;
     bool stop_at_hider;  // test each crossing prism on every ray at once, stop at a hider
     uint32_t hider;
+    // With stop_at_hider: rays [0, own_rays) are the traced vertex's own; a prism crossed by
+    // all of them hides that vertex, which sets own_hidden.
+    size_t own_rays;
+    bool own_hidden;
   };
   static constexpr uint32_t kNone = ~0u;
 
@@ -116,7 +121,10 @@ struct EpsilonSuperset::Query {
   // outside of. A segment from any other corner enters the box through such a face, at a
   // point those corners imply. None for r = 13: a vertex in the box, which nothing hides.
   std::array<uint8_t, 27> corner_mask{};
-  std::vector<uint8_t> dropped;  // per object: hidden, so no longer an occluder
+  // Per object: kNear when its box meets the neighbourhood (which may then lie in its solid),
+  // kDropped when it is hidden and drop_hidden_occluders is on; either stops it occluding.
+  static constexpr uint8_t kNear = 1, kDropped = 2;
+  std::vector<uint8_t> blocked;
   std::optional<ObjectId> skip;  // the occludee's own object, while testing its box
   std::vector<std::pair<double, uint32_t>> hits;
   std::vector<Ray> rays;
@@ -125,7 +133,26 @@ struct EpsilonSuperset::Query {
   EpsilonStats stats;
 
   Query(const EpsilonSuperset& s, const EpsilonOptions& o, const Aabb& b)
-      : set(s), options(o), box(b), q(b.min), dropped(o.drop_hidden_occluders ? s.scene_.objects.size() : 0, 0) {
+      : set(s), options(o), box(b), q(b.min), blocked(s.scene_.objects.size(), 0) {
+    // The objects whose box meets the neighbourhood, from the scene's tree (objects with an
+    // empty box are not in it, and meet nothing).
+    if (!set.tree_.empty()) {
+      const std::vector<KdNode>& nodes = set.tree_.nodes();
+      std::vector<uint32_t> stack = {0};
+      while (!stack.empty()) {
+        const KdNode& node = nodes[stack.back()];
+        stack.pop_back();
+        if (!node.bounds.Overlaps(box)) continue;
+        if (node.IsLeaf()) {
+          for (ObjectId id : set.tree_.LeafObjects(node)) {
+            if (set.scene_.objects[id].bounds.Overlaps(box)) blocked[id] |= kNear;
+          }
+        } else {
+          stack.push_back(static_cast<uint32_t>(node.left));
+          stack.push_back(static_cast<uint32_t>(node.right));
+        }
+      }
+    }
     std::array<Corner, 8> c;
     const int n = Corners(box, &c);
     for (int r = 0; r < 27; ++r) {
@@ -148,9 +175,7 @@ struct EpsilonSuperset::Query {
   // (testing boxes), or its box meets the neighbourhood, which may then lie in its solid.
   bool Usable(uint32_t prism) const {
     const ObjectId object = set.prisms_[prism].object;
-    if (skip == object) return false;
-    if (!dropped.empty() && dropped[object]) return false;
-    return !set.scene_.objects[object].bounds.Overlaps(box);
+    return blocked[object] == 0 && skip != object;
   }
 
   bool Crosses(uint32_t prism, const Ray& r) {
@@ -173,6 +198,7 @@ struct EpsilonSuperset::Query {
       return;
     }
     for (size_t r = 1; r < query.rays.size(); ++r) {
+      if (r == ctx->own_rays) ctx->own_hidden = true;
       if (!query.Crosses(args->primID, query.rays[r])) return;
     }
     // A hider: report a hit at t = 0, so that Embree gives up the rest of the segment.
@@ -186,7 +212,8 @@ struct EpsilonSuperset::Query {
   // Every usable prism `r` crosses, nearest first, into `hits`: one Embree all-hits
   // traversal. With `stop_at_hider`, each is tried on every ray in `rays` as it is met, and
   // the first that all cross ends the traversal and is returned (kNone if none).
-  uint32_t Trace(const Ray& r, bool stop_at_hider = false) {
+  // `own_hidden`, when given, says whether a prism crossed every ray in [0, own_rays).
+  uint32_t Trace(const Ray& r, bool stop_at_hider = false, size_t own_rays = 0, bool* own_hidden = nullptr) {
     hits.clear();
     TraceContext ctx;
     rtcInitIntersectContext(&ctx.base);
@@ -194,6 +221,8 @@ struct EpsilonSuperset::Query {
     ctx.ray = &r;
     ctx.stop_at_hider = stop_at_hider;
     ctx.hider = kNone;
+    ctx.own_rays = own_rays;
+    ctx.own_hidden = false;
     const glm::dvec3 o = q + r.e - set.frame_;
     RTCRayHit rh{};
     rh.ray.org_x = static_cast<float>(o.x);
@@ -209,6 +238,7 @@ struct EpsilonSuperset::Query {
     rtcIntersect1(set.embree_->scene, &ctx.base, &rh);
     ++stats.traversals;
     std::sort(hits.begin(), hits.end());
+    if (own_hidden != nullptr) *own_hidden = ctx.own_hidden || ctx.hider != kNone;
     return ctx.hider;
   }
 
@@ -321,9 +351,11 @@ struct EpsilonSuperset::Query {
   }
 
   // The triangles of `object` that no single prism hides, appended as ids to `out`. With
-  // shared vertices, each distinct vertex gets the complete set of prisms that hide it from
-  // the whole box (one traversal), and a triangle is hidden when its three sets meet: the
-  // same test as triangle by triangle, with a third of the rays.
+  // shared vertices, the rays of each distinct vertex are built once and what is learnt about
+  // a vertex serves every triangle that has it (see EpsilonOptions::shared_vertices); a
+  // triangle is hidden when one prism hides its three vertices: the same test as triangle
+  // by triangle. (Collecting every hider of every vertex and intersecting the sets cost a
+  // complete traversal per vertex; on london a vertex has ten hiders on average.)
   void VisibleTriangles(ObjectId object, uint64_t* tests, std::vector<uint32_t>* out) {
     const scenes::Mesh& mesh = set.scene_.objects[object].mesh;
     const auto n = static_cast<uint32_t>(mesh.TriangleCount());
@@ -341,53 +373,95 @@ struct EpsilonSuperset::Query {
     const uint32_t first_vertex = set.vertex_start_[object];
     const uint32_t distinct = set.vertex_start_[object + 1] - first_vertex;
     const uint32_t* corner_of = set.triangle_vertex_.data() + 3 * static_cast<size_t>(set.triangle_base_[object]);
+    // Each distinct vertex's rays, built once: [vertex_ray_start[u], vertex_ray_start[u + 1]).
     vertex_state.assign(distinct, kUnknown);
-    vertex_hiders.resize(distinct);
-    auto hiders = [&](uint32_t u) -> const std::vector<uint32_t>* {
-      if (vertex_state[u] == kUnknown) {
-        rays.clear();
-        std::vector<uint32_t>& h = vertex_hiders[u];
-        h.clear();
-        if (!AddRays(glm::dvec3(set.vertices_[first_vertex + u]))) {
-          vertex_state[u] = kInBox;
-        } else {
-          SpreadRays();
-          Trace(rays[0]);
-          for (const auto& hit : hits) {
-            bool all = true;
-            for (size_t r = 1; r < rays.size() && all; ++r) all = Crosses(hit.second, rays[r]);
-            if (all) h.push_back(hit.second);
-          }
-          std::sort(h.begin(), h.end());
-          stats.rays += rays.size();
-          vertex_state[u] = kKnown;
-        }
+    vertex_hider.assign(distinct, kNone);
+    vertex_miss.assign(distinct, kNone);
+    vertex_ray_start.resize(distinct + 1);
+    vertex_rays.clear();
+    for (uint32_t u = 0; u < distinct; ++u) {
+      vertex_ray_start[u] = static_cast<uint32_t>(vertex_rays.size());
+      rays.clear();
+      if (!AddRays(glm::dvec3(set.vertices_[first_vertex + u]))) {
+        vertex_state[u] = kSeen;  // in the box: nothing hides it
+      } else {
+        SpreadRays();
+        vertex_rays.insert(vertex_rays.end(), rays.begin(), rays.end());
       }
-      return vertex_state[u] == kInBox ? nullptr : &vertex_hiders[u];
+    }
+    vertex_ray_start[distinct] = static_cast<uint32_t>(vertex_rays.size());
+    auto rays_of = [&](uint32_t u) {
+      return std::span<const Ray>(vertex_rays.data() + vertex_ray_start[u], vertex_ray_start[u + 1] - vertex_ray_start[u]);
     };
     for (uint32_t t = 0; t < n; ++t) {
-      bool hidden = true;
-      common.clear();
-      for (int k = 0; k < 3 && hidden; ++k) {
-        const std::vector<uint32_t>* h = hiders(corner_of[3 * t + k]);
-        if (h == nullptr || h->empty()) {
-          hidden = false;
-        } else if (k == 0) {
-          common = *h;
-        } else {
-          scratch.clear();
-          std::set_intersection(common.begin(), common.end(), h->begin(), h->end(), std::back_inserter(scratch));
-          common.swap(scratch);
-          hidden = !common.empty();
+      const uint32_t* v = corner_of + 3 * static_cast<size_t>(t);
+      if (vertex_state[v[0]] == kSeen || vertex_state[v[1]] == kSeen || vertex_state[v[2]] == kSeen) {
+        out->push_back(set.TriangleId(object, t));
+        continue;
+      }
+      // The same test as intersecting the three vertices' sets of hiders: one prism crossed
+      // by every ray of every vertex. Tried first (with hints) on the prisms that hid the
+      // last triangles, then along one vertex's first ray, stopping at the first hider. A
+      // vertex remembers the last prism found to hide it and the last found not to:
+      // neighbouring triangles share vertices and are tried on the same prisms.
+      auto hides = [&](uint32_t prism, uint32_t u) {
+        if (vertex_hider[u] == prism) return true;
+        if (vertex_miss[u] == prism) return false;
+        for (const Ray& r : rays_of(u)) {
+          if (!Crosses(prism, r)) {
+            vertex_miss[u] = prism;
+            return false;
+          }
+        }
+        vertex_hider[u] = prism;
+        return true;
+      };
+      uint32_t hider = kNone;
+      for (uint32_t prism : recent) {
+        if (!options.hints) break;
+        if (prism != kNone && Usable(prism) && hides(prism, v[0]) && hides(prism, v[1]) && hides(prism, v[2])) {
+          hider = prism;
+          break;
         }
       }
-      if (!hidden) out->push_back(set.TriangleId(object, t));
+      if (hider == kNone) {
+        // Traced from a vertex not yet traced, if any: a traversal that finds nothing hiding
+        // it alone proves it seen, which settles every other triangle that has it. Of those,
+        // the nearest: its segments are the shortest, so Embree proposes fewest prisms.
+        int first = 0;
+        double best = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+          const glm::dvec3& d = rays_of(v[k]).front().d;
+          const double key = glm::dot(d, d) + (vertex_state[v[k]] == kTraced ? 1e30 : 0.0);
+          if (key < best) best = key, first = k;
+        }
+        rays.clear();
+        for (int k = 0; k < 3; ++k) {
+          const std::span<const Ray> r = rays_of(v[(first + k) % 3]);
+          rays.insert(rays.end(), r.begin(), r.end());
+        }
+        const size_t own_rays = rays_of(v[first]).size();
+        bool own_hidden = false;
+        hider = Trace(rays[0], true, own_rays, &own_hidden);
+        vertex_state[v[first]] = own_hidden ? kTraced : kSeen;
+        if (hider != kNone) vertex_hider[v[0]] = vertex_hider[v[1]] = vertex_hider[v[2]] = hider;
+      }
+      stats.rays += rays_of(v[0]).size() + rays_of(v[1]).size() + rays_of(v[2]).size();
+      if (hider == kNone) {
+        out->push_back(set.TriangleId(object, t));
+      } else if (recent[0] != hider) {
+        recent[1] = recent[0];
+        recent[0] = hider;
+      }
     }
   }
-  static constexpr uint8_t kUnknown = 0, kKnown = 1, kInBox = 2;
-  std::vector<uint32_t> common, scratch;
+  // Per distinct vertex of the object being tested: kSeen when nothing hides it from the box
+  // (it lies in the box, or a whole traversal found no prism crossed by all its rays), kTraced
+  // when a traversal from it found a prism that hides it alone.
+  static constexpr uint8_t kUnknown = 0, kTraced = 1, kSeen = 2;
   std::vector<uint8_t> vertex_state;
-  std::vector<std::vector<uint32_t>> vertex_hiders;
+  std::vector<uint32_t> vertex_hider, vertex_miss, vertex_ray_start;
+  std::vector<Ray> vertex_rays;
 };
 
 EpsilonSuperset::EpsilonSuperset(const scenes::Scene& scene) : scene_(scene) {}
@@ -598,7 +672,7 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
     auto hide = [&](ObjectId id, bool first) {
       ++st.occluded_boxes;
       st.first_occluders += first ? 1 : 0;
-      if (!query.dropped.empty()) query.dropped[id] = 1;
+      if (options.drop_hidden_occluders) query.blocked[id] |= Query::kDropped;
     };
     auto test_object = [&](ObjectId id) {
       bool first = false;

@@ -50,8 +50,12 @@ struct EpsilonOptions {
   // one by one, the triangle's own object's, which hide the object's far side); a traversal
   // then stops at the first hider it meets;
   bool hints = true;
-  // and find, per distinct vertex of an object, every prism that hides it from the box; a
-  // triangle is hidden when its vertices' sets meet.
+  // and share the work of an object's triangles through its distinct vertices: each vertex's
+  // rays are built once, remembers the last prism found to hide it and the last found not
+  // to, and once a traversal shows that no prism hides it alone, every triangle that has it
+  // is kept without more tests. A triangle is then tried on the last hiders (with hints)
+  // and traced from one vertex, stopping at the first prism that hides all three (the same
+  // test as with it off: one prism crossed by every ray of the triangle).
   bool shared_vertices = true;
   // A column of Table 2: none, boxes, occluders, rays, all; or paper, the paper's fully
   // optimised column (all but this project's additions).
@@ -67,7 +71,7 @@ struct EpsilonStats {
   uint64_t tested_triangles = 0;   // triangles of the objects whose box survived
   uint64_t rays = 0;               // box-corner to occludee-vertex rays tested
   uint64_t skipped_rays = 0;       // rays left out as implied by others
-  uint64_t traversals = 0;         // Embree all-hits traversals (one per occludee or distinct vertex)
+  uint64_t traversals = 0;         // Embree traversals (one per occludee that the hints did not settle)
   uint64_t box_ray_tests = 0;      // exact ray / prism tests while testing boxes
   uint64_t polygon_ray_tests = 0;  // exact ray / prism tests while testing triangles
   double box_ms = 0.0, polygon_ms = 0.0, ms = 0.0;
