@@ -9,6 +9,7 @@
 #include <glm/gtc/type_ptr.hpp>
 
 #include "gl/shader.h"
+#include "scenes/view_frustum.h"
 
 namespace vistream::client {
 
@@ -83,17 +84,8 @@ glm::dmat4 Camera::ViewProjection() const {
 }
 
 bool Camera::MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const {
-  const glm::dvec3 f = Forward(), u = Up(), r = glm::normalize(glm::cross(f, u));
-  const double ty = std::tan(0.5 * fov_y_rad), tx = ty * static_cast<double>(width) / static_cast<double>(height);
-  // Inward normals of the four side planes through the eye, and the eye plane facing forward.
-  const glm::dvec3 normals[5] = {f * tx + r, f * tx - r, f * ty + u, f * ty - u, f};
-  for (const glm::dvec3& n : normals) {
-    // The box corner farthest along n, relative to the eye.
-    const glm::dvec3 p(n.x >= 0 ? box_max.x : box_min.x, n.y >= 0 ? box_max.y : box_min.y,
-                       n.z >= 0 ? box_max.z : box_min.z);
-    if (glm::dot(n, p - eye) < 0.0) return false;
-  }
-  return true;
+  return scenes::ViewFrustum(eye, Forward(), Up(), fov_y_rad, static_cast<double>(width) / static_cast<double>(height))
+      .MayOverlap(box_min, box_max);
 }
 
 absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* context, int width, int height,

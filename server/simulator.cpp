@@ -16,6 +16,7 @@
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
+#include "scenes/view_frustum.h"
 #include "scenes/walk.h"
 #include "server/link_model.h"
 #include "server/session.h"
@@ -31,33 +32,13 @@ double WallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// The client renderer's view-frustum test (client/renderer.cpp Camera::MayOverlap): 60 degrees
-// vertical field of view, 1280 x 720, level eye; side planes and the eye plane.
-class Frustum {
- public:
-  Frustum(const glm::dvec3& eye, double yaw_rad) : eye_(eye) {
-    constexpr double kFovY = 1.0471975511965976, kAspect = 1280.0 / 720.0;
-    const glm::dvec3 f(std::cos(yaw_rad), std::sin(yaw_rad), 0.0), u(0.0, 0.0, 1.0);
-    const glm::dvec3 r = glm::normalize(glm::cross(f, u));
-    const double ty = std::tan(0.5 * kFovY), tx = ty * kAspect;
-    normals_[0] = f * tx + r;
-    normals_[1] = f * tx - r;
-    normals_[2] = f * ty + u;
-    normals_[3] = f * ty - u;
-    normals_[4] = f;
-  }
-  bool MayOverlap(const scenes::Aabb& b) const {
-    for (const glm::dvec3& n : normals_) {
-      const glm::dvec3 p(n.x >= 0 ? b.max.x : b.min.x, n.y >= 0 ? b.max.y : b.min.y, n.z >= 0 ? b.max.z : b.min.z);
-      if (glm::dot(n, p - eye_) < 0.0) return false;
-    }
-    return true;
-  }
-
- private:
-  glm::dvec3 eye_;
-  glm::dvec3 normals_[5];
-};
+// The client renderer's view (client/renderer.h Camera: 60 degrees vertical field of view,
+// 1280 x 720, a level eye), culled as it culls.
+scenes::ViewFrustum RendererFrustum(const glm::dvec3& eye, double yaw_rad) {
+  constexpr double kFovY = 1.0471975511965976, kAspect = 1280.0 / 720.0;
+  return scenes::ViewFrustum(eye, glm::dvec3(std::cos(yaw_rad), std::sin(yaw_rad), 0.0), glm::dvec3(0.0, 0.0, 1.0),
+                             kFovY, kAspect);
+}
 
 double BoxDistance(const scenes::Aabb& a, const scenes::Aabb& b) {
   const double dx = std::max({0.0, a.min.x - b.max.x, b.min.x - a.max.x});
@@ -468,7 +449,7 @@ void Run::Frame(double t) {
   if (opt_.count_triangles && (r_.frames - 1) % triangle_every_ == 0) {
     // What the renderer draws: the cell's PVS (its mask's triangles while inside the mask's
     // box), or during a stall everything held; culled against the view frustum.
-    const Frustum frustum(pose.eye, pose.yaw_rad);
+    const scenes::ViewFrustum frustum = RendererFrustum(pose.eye, pose.yaw_rad);
     const auto& objects = scene_.scene().objects;
     uint64_t tris = 0;
     if (complete && cell_.has_value()) {
@@ -482,7 +463,7 @@ void Run::Frame(double t) {
       }
       for (uint32_t o : lists_.at(*cell_).objects) {
         auto h = held_.find(o);
-        if (h == held_.end() || !frustum.MayOverlap(objects[o].bounds)) continue;
+        if (h == held_.end() || !frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) continue;
         if (mask != nullptr) {
           auto m = mask->triangles.find(o);
           if (m != mask->triangles.end()) tris += m->second;
@@ -492,7 +473,7 @@ void Run::Frame(double t) {
       }
     } else {
       for (const auto& [o, h] : held_) {
-        if (frustum.MayOverlap(objects[o].bounds)) tris += h.triangles;
+        if (frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) tris += h.triangles;
       }
     }
     triangles_sum_ += static_cast<double>(tris);
