@@ -428,8 +428,10 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     const auto [res, j] = row_stack_.back();
     row_stack_.pop_back();
     if (stats != nullptr) ++stats->raster_rows;
-    if (raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
+    // A full row of the raster is a band that the blockers cover together (each pixel lies in
+    // the RowBounds of one blocker), so on the CPU the band test alone decides the same.
     // Pixels that no one blocker covers may still be covered by several together.
+    if (raster_ != &cpu_raster_ && raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
     if (blockers_.BandCovered(static_cast<double>(j) / res, static_cast<double>(j + 1) / res, &spans_)) continue;
     double u = 0.0;
     if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {
