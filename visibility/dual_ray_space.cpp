@@ -161,17 +161,17 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   lo_.clear();
   hi_.clear();
   for (uint32_t id : gathered_) {
-    const OccluderPiece& piece = pieces[id];
+    const double height = occluders_.bounds(id).height;
     const size_t begin = kept_points_.size();
     double p_min = INFINITY, p_max = -INFINITY;
-    for (const glm::dvec2& w : piece.points) {
+    for (const glm::dvec2& w : occluders_.PointsOf(id)) {
       const glm::dvec2 p = pr.PlanarFromScene(w);
       kept_points_.push_back(p);
       p_min = std::min(p_min, p.x);
       p_max = std::max(p_max, p.x);
     }
     double lo, hi;
-    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) {
+    if (!pr.PieceStrip(height, p_min, p_max, &lo, &hi)) {
       kept_points_.resize(begin);
       continue;
     }
@@ -213,11 +213,12 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   };
   bool fused = false;
   for (uint32_t i = 0; i < kept.size(); ++i) {
-    for (uint32_t k : occluders_.ContactsOf(kept[i])) {
-      const PieceContact& c = occluders_.contacts()[k];
-      const uint32_t other = c.a == kept[i] ? c.b : c.a;
-      const int32_t j = local_[other];
+    const auto contacts = occluders_.ContactsOf(kept[i]);
+    const auto others = occluders_.ContactOthersOf(kept[i]);
+    for (size_t m = 0; m < contacts.size(); ++m) {
+      const int32_t j = local_[others[m]];
       if (j < 0 || static_cast<uint32_t>(j) < i) continue;
+      const PieceContact& c = occluders_.contacts()[contacts[m]];
       const double w0 = pr.PlanarFromScene(c.w0).x, w1 = pr.PlanarFromScene(c.w1).x;
       const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
       const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
@@ -339,21 +340,20 @@ bool SegmentMeetsPiece(const glm::dvec2& a, const glm::dvec2& b, const std::vect
 bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   const double q1 = pr.r1 + u * (pr.l1 - pr.r1), q2 = pr.r2 + v * (pr.l2 - pr.r2);
   const double t_min = pr.CeilingMin();
-  const auto& pieces = occluders_.pieces();
   const glm::dvec2 from = pr.SceneFromPlanar(pr.x1, q1), to = pr.SceneFromPlanar(pr.x2, q2);
   const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
-    const OccluderPiece& piece = pieces[id];
-    if (piece.height <= t_min) return false;
+    const double height = occluders_.bounds(id).height;
+    if (height <= t_min) return false;
     planar_.clear();
     double p_min = INFINITY, p_max = -INFINITY;
-    for (const glm::dvec2& w : piece.points) {
+    for (const glm::dvec2& w : occluders_.PointsOf(id)) {
       planar_.push_back(pr.PlanarFromScene(w));
       p_min = std::min(p_min, planar_.back().x);
       p_max = std::max(p_max, planar_.back().x);
     }
     // The same pieces as the blockers: one on a face of the slab stops nothing.
     double lo, hi;
-    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) return false;
+    if (!pr.PieceStrip(height, p_min, p_max, &lo, &hi)) return false;
     // The ray's part where the piece rises above T.
     const double k = (q2 - q1) / (pr.x2 - pr.x1);
     const glm::dvec2 a(lo, q1 + k * (lo - pr.x1)), b(hi, q1 + k * (hi - pr.x1));
