@@ -240,14 +240,14 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   if (!fused) {
     for (uint32_t i = 0; i < kept.size(); ++i) AddGroup(pr, points_of(i));
   } else {
+    // Members of each group together, groups by root, members ascending: a counting sort by
+    // root (roots are indices into kept), in the order a sort by (root, index) gives.
+    for (uint32_t i = 0; i < kept.size(); ++i) parent_[i] = find(i);
+    group_start_.assign(kept.size() + 1, 0);
+    for (uint32_t i = 0; i < kept.size(); ++i) ++group_start_[parent_[i] + 1];
+    for (size_t r = 0; r < kept.size(); ++r) group_start_[r + 1] += group_start_[r];
     order_.resize(kept.size());
-    for (uint32_t i = 0; i < kept.size(); ++i) {
-      parent_[i] = find(i);
-      order_[i] = i;
-    }
-    std::sort(order_.begin(), order_.end(), [&](uint32_t x, uint32_t y) {
-      return parent_[x] < parent_[y] || (parent_[x] == parent_[y] && x < y);
-    });
+    for (uint32_t i = 0; i < kept.size(); ++i) order_[group_start_[parent_[i]]++] = i;
     for (size_t n = 0; n < order_.size();) {
       size_t end = n + 1;
       while (end < order_.size() && parent_[order_[end]] == parent_[order_[n]]) ++end;
