@@ -341,9 +341,20 @@ bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   const double q1 = pr.r1 + u * (pr.l1 - pr.r1), q2 = pr.r2 + v * (pr.l2 - pr.r2);
   const double t_min = pr.CeilingMin();
   const glm::dvec2 from = pr.SceneFromPlanar(pr.x1, q1), to = pr.SceneFromPlanar(pr.x2, q2);
+  // Most pieces the ray's grid cells list lie wholly beside its line: their box says so, and
+  // their points need not be read. A box corner's side, relative to `from`, is exact to well
+  // under the margin (a micrometre) even far from the origin, so a box beyond it on one side
+  // holds only points that SegmentMeetsPiece finds on that side too: the same answer.
+  const glm::dvec2 d = to - from;
+  const double margin = 1e-6 * std::hypot(d.x, d.y);
   const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
-    const double height = occluders_.bounds(id).height;
+    const PieceBounds& box = occluders_.bounds(id);
+    const double height = box.height;
     if (height <= t_min) return false;
+    const glm::dvec2 m0 = box.min - from, m1 = box.max - from;
+    const double s0 = d.x * m0.y - d.y * m0.x, s1 = d.x * m1.y - d.y * m0.x;
+    const double s2 = d.x * m0.y - d.y * m1.x, s3 = d.x * m1.y - d.y * m1.x;
+    if (std::min({s0, s1, s2, s3}) > margin || std::max({s0, s1, s2, s3}) < -margin) return false;
     planar_.clear();
     double p_min = INFINITY, p_max = -INFINITY;
     for (const glm::dvec2& w : occluders_.PointsOf(id)) {
