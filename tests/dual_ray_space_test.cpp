@@ -437,6 +437,32 @@ TEST(Blockers, BandCoveredAnswersAsTheSortedSweep) {
   EXPECT_GT(open, 300);
 }
 
+// A blocker that BandCovered skips for a band (Blocker::v1_max, v0_min) has no span there: its
+// RowBounds leave nothing of [0, 1]. And skipping happens.
+TEST(Blockers, BandSkipsOnlyBlockersWithoutASpan) {
+  int skipped = 0, kept = 0;
+  ForEachRandomPlanarProblem(1, 150, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    for (const Blocker& g : blockers.groups) {
+      for (uint32_t n : {16u, 128u, 256u}) {
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t j = static_cast<uint32_t>(r.rng.Below(n));
+          const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
+          if (!(v1 > g.v1_max || v0 < g.v0_min)) {
+            ++kept;
+            continue;
+          }
+          ++skipped;
+          const auto [lo, hi] = blockers.RowBounds(g, v0, v1);
+          ASSERT_FALSE(lo <= hi && hi >= 0.0 && lo <= 1.0)
+              << "seed " << r.seed << ", band " << j << "/" << n << ": span [" << lo << ", " << hi << "] skipped";
+        }
+      }
+    }
+  });
+  EXPECT_GT(skipped, 500);
+  EXPECT_GT(kept, 500);
+}
+
 // A hint only saves time: whatever line it names, the answer stays the same. A witness comes
 // only with "visible", and as a hint it proves the same query visible again at once.
 TEST(DualRaySpace, HintsNeverChangeAnAnswerAndWitnessesProveVisibility) {

@@ -269,6 +269,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   std::sort(blockers_.groups.begin(), blockers_.groups.end(),
             [](const Blocker& x, const Blocker& y) { return x.width > y.width; });
   blockers_.eps = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+  blockers_.PrepareBands();
 }
 
 void DualRaySpace::AddGroup(const PlanarProblem& pr, std::span<const glm::dvec2> points) {
