@@ -402,6 +402,67 @@ TEST(Blockers, BandCoveredOnlyWhereNoRayIsFree) {
   EXPECT_GT(open, 100);
 }
 
+// BandCovered's early exit (bins marked as spans arrive) answers exactly as the plain sweep
+// over every blocker's RowBounds, on bands of every height down to one row at 256.
+TEST(Blockers, BandCoveredAnswersAsTheSortedSweep) {
+  int covered = 0, open = 0;
+  std::vector<std::pair<double, double>> scratch, spans;
+  auto sweep = [&](const Blockers& blockers, double v0, double v1) {
+    spans.clear();
+    for (const Blocker& g : blockers.groups) {
+      const auto [lo, hi] = blockers.RowBounds(g, v0, v1);
+      if (lo <= hi && hi >= 0.0 && lo <= 1.0) spans.emplace_back(lo, hi);
+    }
+    std::sort(spans.begin(), spans.end());
+    double cur = 0.0;
+    for (const auto& [lo, hi] : spans) {
+      if (lo > cur) return false;
+      cur = std::max(cur, hi);
+      if (cur >= 1.0) return true;
+    }
+    return false;
+  };
+  ForEachRandomPlanarProblem(1, 150, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    for (uint32_t n : {1u, 4u, 16u, 64u, 128u, 256u}) {
+      for (int k = 0; k < 4; ++k) {
+        const uint32_t j = static_cast<uint32_t>(r.rng.Below(n));
+        const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
+        const bool expected = sweep(blockers, v0, v1);
+        ASSERT_EQ(expected, blockers.BandCovered(v0, v1, &scratch)) << "seed " << r.seed << ", band " << j << "/" << n;
+        (expected ? covered : open)++;
+      }
+    }
+  });
+  EXPECT_GT(covered, 300);
+  EXPECT_GT(open, 300);
+}
+
+// A blocker that BandCovered skips for a band (Blocker::v1_max, v0_min) has no span there: its
+// RowBounds leave nothing of [0, 1]. And skipping happens.
+TEST(Blockers, BandSkipsOnlyBlockersWithoutASpan) {
+  int skipped = 0, kept = 0;
+  ForEachRandomPlanarProblem(1, 150, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    for (const Blocker& g : blockers.groups) {
+      for (uint32_t n : {16u, 128u, 256u}) {
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t j = static_cast<uint32_t>(r.rng.Below(n));
+          const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
+          if (!(v1 > g.v1_max || v0 < g.v0_min)) {
+            ++kept;
+            continue;
+          }
+          ++skipped;
+          const auto [lo, hi] = blockers.RowBounds(g, v0, v1);
+          ASSERT_FALSE(lo <= hi && hi >= 0.0 && lo <= 1.0)
+              << "seed " << r.seed << ", band " << j << "/" << n << ": span [" << lo << ", " << hi << "] skipped";
+        }
+      }
+    }
+  });
+  EXPECT_GT(skipped, 500);
+  EXPECT_GT(kept, 500);
+}
+
 // A hint only saves time: whatever line it names, the answer stays the same. A witness comes
 // only with "visible", and as a hint it proves the same query visible again at once.
 TEST(DualRaySpace, HintsNeverChangeAnAnswerAndWitnessesProveVisibility) {

@@ -54,9 +54,41 @@ bool Blockers::FreeOnLine(double v, std::vector<std::pair<double, double>>* scra
 bool Blockers::BandCovered(double v0, double v1, std::vector<std::pair<double, double>>* scratch) const {
   auto& spans = *scratch;
   spans.clear();
+  // Early exit without sorting: 64 bins of u, bin k = [k/64, (k+1)/64]. A bin is marked when
+  // one span holds it whole, or when a span through its left edge reaches as far as a span
+  // through its right edge starts (two spans overlapping inside it). Marks stand for covered
+  // u only, and k/64 and u * 64 are exact, so a full mask implies what the sweep below would
+  // find from the same spans: the answer is the sweep's, only sooner.
+  constexpr int kBins = 64;
+  uint64_t mask = 0;
+  double reach[kBins], start[kBins];  // per bin: the farthest hi through its left edge, the
+  uint64_t touched = 0;               // nearest lo through its right edge (valid where touched)
+  auto mark = [&](int k) {
+    if ((touched >> k & 1) != 0 && reach[k] >= start[k]) mask |= uint64_t{1} << k;
+  };
   for (const Blocker& g : groups) {
+    if (v1 > g.v1_max || v0 < g.v0_min) continue;
     const auto [lo, hi] = RowBounds(g, v0, v1);
-    if (lo <= hi && hi >= 0.0 && lo <= 1.0) spans.emplace_back(lo, hi);
+    if (!(lo <= hi && hi >= 0.0 && lo <= 1.0)) continue;
+    spans.emplace_back(lo, hi);
+    // Bin edges e0..e1 lie in [lo, hi]: bins e0..e1-1 whole, e1 from its left, e0-1 from its right.
+    const double e0d = std::max(0.0, std::ceil(lo * kBins)), e1d = std::min<double>(kBins, std::floor(hi * kBins));
+    if (!(e0d <= e1d)) continue;
+    const int e0 = static_cast<int>(e0d), e1 = static_cast<int>(e1d);
+    if (e1 > e0) mask |= (e1 - e0 == 64 ? ~uint64_t{0} : ((uint64_t{1} << (e1 - e0)) - 1)) << e0;
+    if (e1 < kBins) {
+      const uint64_t bit = uint64_t{1} << e1;
+      if ((touched & bit) == 0) touched |= bit, reach[e1] = hi, start[e1] = INFINITY;
+      else reach[e1] = std::max(reach[e1], hi);
+      mark(e1);
+    }
+    if (e0 > 0) {
+      const uint64_t bit = uint64_t{1} << (e0 - 1);
+      if ((touched & bit) == 0) touched |= bit, reach[e0 - 1] = -INFINITY, start[e0 - 1] = lo;
+      else start[e0 - 1] = std::min(start[e0 - 1], lo);
+      mark(e0 - 1);
+    }
+    if (mask == ~uint64_t{0}) return true;
   }
   std::sort(spans.begin(), spans.end());
   double cur = 0.0;  // [0, cur] is covered
@@ -66,6 +98,42 @@ bool Blockers::BandCovered(double v0, double v1, std::vector<std::pair<double, d
     if (cur >= 1.0) return true;
   }
   return false;
+}
+
+void Blockers::PrepareBands() {
+  // RowBounds' hi at v1 is max_k (A_k - c_k v1) / b_k with A_k = -eps - a_k, and lo at v0 is
+  // min_k (B_k - c_k v0) / b_k with B_k = eps - a_k (b_k = 0: +-infinity by the sign of the
+  // numerator). Both fall as v rises. Vertex k gives hi >= 0 only for v1 up to about
+  // A_k / c_k, and lo <= 1 only from v0 about (B_k - b_k) / c_k (B_k / c_k where b_k = 0). Each
+  // threshold is widened by 1e-9 of the magnitudes involved, far above the rounding of
+  // RowBounds' few operations; a vertex with c_k = 0 is decided as RowBounds computes it, and
+  // one with a c_k too small for the margin to mean anything keeps its blocker in every band.
+  constexpr double kTiny = 1e-100;
+  for (Blocker& g : groups) {
+    double v1_max = -INFINITY, v0_min = INFINITY;
+    for (uint32_t k = g.begin; k < g.end; ++k) {
+      const BlockerCoeff& c = coeffs[k];
+      const double ca = -eps - c.a, cb = eps - c.a;
+      if (c.c == 0.0) {
+        if (c.b > 0 ? ca * c.inv_b >= 0.0 : ca >= 0.0) v1_max = INFINITY;
+        if (c.b > 0 ? cb * c.inv_b <= 1.0 : cb <= 0.0) v0_min = -INFINITY;
+        continue;
+      }
+      if (!(c.c > kTiny)) {
+        v1_max = INFINITY;
+        v0_min = -INFINITY;
+        continue;
+      }
+      const double vh = ca / c.c;
+      const double bb = c.b > 0 ? c.b : 0.0;
+      const double vl = (cb - bb) / c.c;
+      const double mh = 1e-9 * (1.0 + std::abs(vh)), ml = 1e-9 * (1.0 + (std::abs(cb) + bb) / c.c);
+      v1_max = std::isfinite(vh) ? std::max(v1_max, vh + mh) : INFINITY;
+      v0_min = std::isfinite(vl) && std::isfinite(ml) ? std::min(v0_min, vl - ml) : -INFINITY;
+    }
+    g.v1_max = v1_max;
+    g.v0_min = v0_min;
+  }
 }
 
 std::pair<double, double> Blockers::RowBounds(const Blocker& g, double v0, double v1) const {

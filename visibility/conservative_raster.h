@@ -32,6 +32,9 @@ struct BlockerCoeff {
 struct Blocker {
   uint32_t begin = 0, end = 0;  // its hull vertices: Blockers::coeffs[begin, end)
   double width = 0.0;           // its blocked width along u on the middle row, for ordering
+  // A band [v0, v1] with v1 > v1_max or v0 < v0_min gets no span in [0, 1] from this blocker
+  // (RowBounds' hi < 0 or lo > 1), by a margin far above rounding (Blockers::PrepareBands).
+  double v1_max = INFINITY, v0_min = -INFINITY;
 };
 
 struct Blockers {
@@ -43,6 +46,9 @@ struct Blockers {
     coeffs.clear();
     groups.clear();
   }
+  // Sets each blocker's v1_max and v0_min from its coefficients and eps: call after both are
+  // final. Without it no band skips a blocker.
+  void PrepareBands();
   // Is ray (u, v) blocked by none of the blockers? Exact up to rounding.
   bool FreeRay(double u, double v) const;
   // Is some ray on the line v = const free? Each blocker stops the interval [L(v), U(v)] of

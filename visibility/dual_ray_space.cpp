@@ -161,17 +161,17 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   lo_.clear();
   hi_.clear();
   for (uint32_t id : gathered_) {
-    const OccluderPiece& piece = pieces[id];
+    const double height = occluders_.bounds(id).height;
     const size_t begin = kept_points_.size();
     double p_min = INFINITY, p_max = -INFINITY;
-    for (const glm::dvec2& w : piece.points) {
+    for (const glm::dvec2& w : occluders_.PointsOf(id)) {
       const glm::dvec2 p = pr.PlanarFromScene(w);
       kept_points_.push_back(p);
       p_min = std::min(p_min, p.x);
       p_max = std::max(p_max, p.x);
     }
     double lo, hi;
-    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) {
+    if (!pr.PieceStrip(height, p_min, p_max, &lo, &hi)) {
       kept_points_.resize(begin);
       continue;
     }
@@ -213,11 +213,12 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   };
   bool fused = false;
   for (uint32_t i = 0; i < kept.size(); ++i) {
-    for (uint32_t k : occluders_.ContactsOf(kept[i])) {
-      const PieceContact& c = occluders_.contacts()[k];
-      const uint32_t other = c.a == kept[i] ? c.b : c.a;
-      const int32_t j = local_[other];
+    const auto contacts = occluders_.ContactsOf(kept[i]);
+    const auto others = occluders_.ContactOthersOf(kept[i]);
+    for (size_t m = 0; m < contacts.size(); ++m) {
+      const int32_t j = local_[others[m]];
       if (j < 0 || static_cast<uint32_t>(j) < i) continue;
+      const PieceContact& c = occluders_.contacts()[contacts[m]];
       const double w0 = pr.PlanarFromScene(c.w0).x, w1 = pr.PlanarFromScene(c.w1).x;
       const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
       const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
@@ -239,14 +240,14 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   if (!fused) {
     for (uint32_t i = 0; i < kept.size(); ++i) AddGroup(pr, points_of(i));
   } else {
+    // Members of each group together, groups by root, members ascending: a counting sort by
+    // root (roots are indices into kept), in the order a sort by (root, index) gives.
+    for (uint32_t i = 0; i < kept.size(); ++i) parent_[i] = find(i);
+    group_start_.assign(kept.size() + 1, 0);
+    for (uint32_t i = 0; i < kept.size(); ++i) ++group_start_[parent_[i] + 1];
+    for (size_t r = 0; r < kept.size(); ++r) group_start_[r + 1] += group_start_[r];
     order_.resize(kept.size());
-    for (uint32_t i = 0; i < kept.size(); ++i) {
-      parent_[i] = find(i);
-      order_[i] = i;
-    }
-    std::sort(order_.begin(), order_.end(), [&](uint32_t x, uint32_t y) {
-      return parent_[x] < parent_[y] || (parent_[x] == parent_[y] && x < y);
-    });
+    for (uint32_t i = 0; i < kept.size(); ++i) order_[group_start_[parent_[i]]++] = i;
     for (size_t n = 0; n < order_.size();) {
       size_t end = n + 1;
       while (end < order_.size() && parent_[order_[end]] == parent_[order_[n]]) ++end;
@@ -268,6 +269,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   std::sort(blockers_.groups.begin(), blockers_.groups.end(),
             [](const Blocker& x, const Blocker& y) { return x.width > y.width; });
   blockers_.eps = 1e-9 * (1.0 + (pr.x2 - pr.x1) + (pr.l1 - pr.r1) + (pr.l2 - pr.r2) + std::abs(pr.r1) + std::abs(pr.r2));
+  blockers_.PrepareBands();
 }
 
 void DualRaySpace::AddGroup(const PlanarProblem& pr, std::span<const glm::dvec2> points) {
@@ -339,21 +341,31 @@ bool SegmentMeetsPiece(const glm::dvec2& a, const glm::dvec2& b, const std::vect
 bool DualRaySpace::FreeRayTraced(const PlanarProblem& pr, double u, double v) {
   const double q1 = pr.r1 + u * (pr.l1 - pr.r1), q2 = pr.r2 + v * (pr.l2 - pr.r2);
   const double t_min = pr.CeilingMin();
-  const auto& pieces = occluders_.pieces();
   const glm::dvec2 from = pr.SceneFromPlanar(pr.x1, q1), to = pr.SceneFromPlanar(pr.x2, q2);
+  // Most pieces the ray's grid cells list lie wholly beside its line: their box says so, and
+  // their points need not be read. A box corner's side, relative to `from`, is exact to well
+  // under the margin (a micrometre) even far from the origin, so a box beyond it on one side
+  // holds only points that SegmentMeetsPiece finds on that side too: the same answer.
+  const glm::dvec2 d = to - from;
+  const double margin = 1e-6 * std::hypot(d.x, d.y);
   const bool blocked = occluders_.Trace(from, to, &scratch_, [&](uint32_t id) {
-    const OccluderPiece& piece = pieces[id];
-    if (piece.height <= t_min) return false;
+    const PieceBounds& box = occluders_.bounds(id);
+    const double height = box.height;
+    if (height <= t_min) return false;
+    const glm::dvec2 m0 = box.min - from, m1 = box.max - from;
+    const double s0 = d.x * m0.y - d.y * m0.x, s1 = d.x * m1.y - d.y * m0.x;
+    const double s2 = d.x * m0.y - d.y * m1.x, s3 = d.x * m1.y - d.y * m1.x;
+    if (std::min({s0, s1, s2, s3}) > margin || std::max({s0, s1, s2, s3}) < -margin) return false;
     planar_.clear();
     double p_min = INFINITY, p_max = -INFINITY;
-    for (const glm::dvec2& w : piece.points) {
+    for (const glm::dvec2& w : occluders_.PointsOf(id)) {
       planar_.push_back(pr.PlanarFromScene(w));
       p_min = std::min(p_min, planar_.back().x);
       p_max = std::max(p_max, planar_.back().x);
     }
     // The same pieces as the blockers: one on a face of the slab stops nothing.
     double lo, hi;
-    if (!pr.PieceStrip(piece.height, p_min, p_max, &lo, &hi)) return false;
+    if (!pr.PieceStrip(height, p_min, p_max, &lo, &hi)) return false;
     // The ray's part where the piece rises above T.
     const double k = (q2 - q1) / (pr.x2 - pr.x1);
     const glm::dvec2 a(lo, q1 + k * (lo - pr.x1)), b(hi, q1 + k * (hi - pr.x1));
@@ -428,8 +440,10 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     const auto [res, j] = row_stack_.back();
     row_stack_.pop_back();
     if (stats != nullptr) ++stats->raster_rows;
-    if (raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
+    // A full row of the raster is a band that the blockers cover together (each pixel lies in
+    // the RowBounds of one blocker), so on the CPU the band test alone decides the same.
     // Pixels that no one blocker covers may still be covered by several together.
+    if (raster_ != &cpu_raster_ && raster_->Full(blockers_, res, std::span(&j, 1), &gap_rows_)) continue;
     if (blockers_.BandCovered(static_cast<double>(j) / res, static_cast<double>(j + 1) / res, &spans_)) continue;
     double u = 0.0;
     if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {

@@ -168,7 +168,7 @@ class DualRaySpace {
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_, hull_scratch_;
   std::vector<glm::dvec2> kept_points_;  // the kept pieces' clipped points, one after another
-  std::vector<uint32_t> kept_, kept_begin_, order_;
+  std::vector<uint32_t> kept_, kept_begin_, order_, group_start_;
 };
 
 }  // namespace vistream::visibility

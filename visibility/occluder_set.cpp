@@ -306,10 +306,19 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
   std::partial_sum(per.begin(), per.end(), per.begin());
   set.contact_start_ = per;
   set.contact_index_.resize(per.back());
+  set.contact_other_.resize(per.back());
   std::vector<uint32_t> at(per.begin(), per.end() - 1);
   for (uint32_t k = 0; k < set.contacts_.size(); ++k) {
-    set.contact_index_[at[set.contacts_[k].a]++] = k;
-    set.contact_index_[at[set.contacts_[k].b]++] = k;
+    const PieceContact& c = set.contacts_[k];
+    set.contact_other_[at[c.a]] = c.b;
+    set.contact_index_[at[c.a]++] = k;
+    set.contact_other_[at[c.b]] = c.a;
+    set.contact_index_[at[c.b]++] = k;
+  }
+  set.point_start_.assign(1, 0);
+  for (const OccluderPiece& p : set.pieces_) {
+    set.points_.insert(set.points_.end(), p.points.begin(), p.points.end());
+    set.point_start_.push_back(static_cast<uint32_t>(set.points_.size()));
   }
   return set;
 }

@@ -56,7 +56,17 @@ class OccluderSet {
     return {contact_index_.data() + contact_start_[piece], contact_start_[piece + 1] - contact_start_[piece]};
   }
 
+  // The other piece of each of ContactsOf(piece), in the same order: the fuse loop tests
+  // these first and reads a contact itself only for pieces it kept.
+  std::span<const uint32_t> ContactOthersOf(uint32_t piece) const {
+    return {contact_other_.data() + contact_start_[piece], contact_start_[piece + 1] - contact_start_[piece]};
+  }
+
   const PieceBounds& bounds(uint32_t piece) const { return bounds_[piece]; }
+  // pieces()[piece].points, from one array for all pieces (read where gathering is hot).
+  std::span<const glm::dvec2> PointsOf(uint32_t piece) const {
+    return {points_.data() + point_start_[piece], point_start_[piece + 1] - point_start_[piece]};
+  }
 
   // Appends each piece, once, that is listed in a grid cell the convex polygon `hull`
   // (scene-local xy) overlaps and for whose bounds keep(bounds) is true: so at least every
@@ -79,7 +89,9 @@ class OccluderSet {
   std::vector<OccluderPiece> pieces_;
   std::vector<PieceBounds> bounds_;  // of each piece, compact for gathering
   std::vector<PieceContact> contacts_;
-  std::vector<uint32_t> contact_start_, contact_index_;
+  std::vector<uint32_t> contact_start_, contact_index_, contact_other_;
+  std::vector<glm::dvec2> points_;  // every piece's points, piece after piece
+  std::vector<uint32_t> point_start_;
   // Uniform grid: cell (i, j) lists the pieces whose box overlaps it.
   glm::dvec2 grid_min_{0.0};
   double cell_ = 64.0;
