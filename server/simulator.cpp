@@ -425,8 +425,12 @@ void Run::Frame(double t) {
       ++r_.stalled_cells;
     }
     const visibility::CellCoord c = scene_.grid().Coord(*cell);
-    if (opt_.log != nullptr) Log("enter", {{"t_s", t}, {"cell", absl::StrCat(c.i, ",", c.j)}, {"complete", pending_ ? "no" : "yes"},
-                  {"margin_s", pending_ ? 0.0 : rec.margin_s}});
+    // An entry into an incomplete cell has no margin yet: its stall_end (or the next entry) says.
+    if (opt_.log != nullptr && pending_) {
+      Log("enter", {{"t_s", t}, {"cell", absl::StrCat(c.i, ",", c.j)}, {"complete", "no"}});
+    } else if (opt_.log != nullptr) {
+      Log("enter", {{"t_s", t}, {"cell", absl::StrCat(c.i, ",", c.j)}, {"complete", "yes"}, {"margin_s", rec.margin_s}});
+    }
     r_.cells.push_back(rec);
   }
   bool complete = true;
@@ -686,13 +690,13 @@ absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::Catal
   auto finish = [&](double max_mps, double stall_mps) -> absl::StatusOr<SpeedSearch> {
     out.max_speed_mps = max_mps;
     out.stall_speed_mps = stall_mps;
-    if (max_mps > 0.0) {
-      opt.speed_mps = max_mps;
-      opt.count_triangles = options.count_triangles;
-      absl::StatusOr<SimulationResult> r = Simulate(scene, entry, opt, run);
-      if (!r.ok()) return r.status();
-      out.at_max = std::move(*r);
-    }
+    // The run at the answer; when even the bottom of the bracket stalls, the run there (it
+    // shows how badly).
+    opt.speed_mps = max_mps > 0.0 ? max_mps : stall_mps;
+    opt.count_triangles = options.count_triangles;
+    absl::StatusOr<SimulationResult> r = Simulate(scene, entry, opt, run);
+    if (!r.ok()) return r.status();
+    out.at_max = std::move(*r);
     return out;
   };
   absl::StatusOr<uint64_t> hi = probe(hi_mps);

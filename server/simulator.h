@@ -221,7 +221,7 @@ absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEnt
 struct SpeedSearch {
   double max_speed_mps = 0.0;  // the highest speed found with zero stalls (0: none in the bracket)
   double stall_speed_mps = 0.0;  // the lowest speed found with stalls (0: none in the bracket)
-  SimulationResult at_max;     // the run at max_speed_mps
+  SimulationResult at_max;     // the run at max_speed_mps (none found: the run at stall_speed_mps)
   std::vector<std::pair<double, uint64_t>> runs;  // (speed m/s, stalls) of every run, in order
 };
 // Bisection (on the logarithm of the speed) for the highest speed with zero stalls in

@@ -200,6 +200,30 @@ namespace {
 
 // The whole quick report (about 20 s on the 2-core machine): the page, its stamp, a section for
 // each figure, and every PNG it names.
+// ^C or SIGTERM: the running step is stopped, no other starts, exit 130, and no report.md
+// (an older one is removed first: it would not match the PNGs this run replaced).
+TEST(CliFigures, AStoppedReportWritesNoPage) {
+  for (const char* signal : {"INT", "TERM"}) {
+    const std::string dir = Tmp(std::string("stopped-") + signal);
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    { std::ofstream(dir + "/report.md") << "an older page\n"; }
+    // One signal to the report alone (timeout(1) would send a second to the group: a second ^C
+    // stops at once, by design). The shell prints the report's exit status last.
+    const std::string cmd = std::string("sh -c '") + VISTREAM_BIN + " report --quick --out " + dir +
+                            " 2>&1 & pid=$!; sleep 5; kill -" + signal + " $pid; wait $pid; echo \"rc=$?\"'";
+    std::FILE* pipe = popen(cmd.c_str(), "r");
+    ASSERT_NE(pipe, nullptr);
+    std::string out;
+    char buf[4096];
+    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) out.append(buf, n);
+    pclose(pipe);
+    EXPECT_NE(out.find("rc=130"), std::string::npos) << signal << ": " << out;
+    EXPECT_NE(out.find("vistream: interrupted (report stopped after "), std::string::npos) << signal << ": " << out;
+    EXPECT_FALSE(std::filesystem::exists(dir + "/report.md")) << signal;
+  }
+}
+
 TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
   const std::string dir = Tmp("report");
   std::filesystem::remove_all(dir);

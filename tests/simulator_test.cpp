@@ -301,6 +301,11 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --bandwidths 1M,0", "--bandwidths: '0' is not a bandwidth");
   ExpectBadOption("simulate --scene city1 --bandwidths fast", "--bandwidths: 'fast' is not a bandwidth");
   ExpectBadOption("simulate --scene city1 --bandwidths ,", "--bandwidths: no bandwidth listed");
+  ExpectBadOption("simulate --scene city1 --speeds 3,,12", "--speeds: '3,,12' has an empty item");
+  ExpectBadOption("simulate --scene city1 --speeds 3,3", "--speeds: '3' is listed twice");
+  ExpectBadOption("simulate --scene city1 --bandwidths 16k,,1M", "--bandwidths: '16k,,1M' has an empty item");
+  ExpectBadOption("simulate --scene city1 --bandwidths 1M,1000k", "--bandwidths: '1000k' is listed twice");
+  ExpectBadOption("simulate --scene city1 --bandwidths 1", "--bandwidths: '1' is not a bandwidth: ");
 }
 
 // --speeds and --bandwidths: one run per scheme, speed and bandwidth, in that nesting, each the
@@ -358,6 +363,18 @@ TEST(SimulateCli, InterruptedExitsWith130SayingSo) {
   EXPECT_NE(out.find("vistream: interrupted ("), std::string::npos) << out;
   EXPECT_EQ(out.find("error"), std::string::npos) << out;
   EXPECT_EQ(out.find("\"stalls\""), std::string::npos) << out;
+}
+
+// --link none: an ideal link whatever the entry declares; a log that cannot be written fails
+// the run (exit 1) instead of vanishing.
+TEST(SimulateCli, LinkNoneIsIdealAndALogThatCannotBeWrittenFails) {
+  const std::string base = "simulate --scene " + LondonSmallPath() + " --res 32 --compute-ms 20 --speed 48";
+  const vistream::testing::RunResult r = Vistream(base + " --link none --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out.substr(r.out.find("\n{\n") + 1));
+  EXPECT_EQ(j["link"]["described"], "ideal (the scene declares no link)");
+  EXPECT_EQ(j["jitter_draws"].get<uint64_t>(), 0u);
+  ExpectRunTimeError(base + " --log /dev/full", "--log /dev/full: writing the log failed");
 }
 
 TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -42,7 +43,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 struct ReportArgs {
-  std::string out = "bench/figures";
+  std::string out;  // default: bench/figures (full), bench/figures/quick (--quick: never over the full run)
   bool quick = false;
   bool json = false;
 };
@@ -345,7 +346,9 @@ void HeatmapSection(Page& page, const Plan& plan) {
   if (page.CheckFile(png)) page.Image(png, "PVS cost of every viewcell (AGVS)");
 }
 
-int Report(const ReportArgs& a) {
+int Report(const ReportArgs& given) {
+  ReportArgs a = given;
+  if (a.out.empty()) a.out = a.quick ? "bench/figures/quick" : "bench/figures";
   std::error_code ec;
   fs::create_directories(a.out, ec);
   if (ec || !fs::is_directory(a.out)) {
@@ -357,6 +360,10 @@ int Report(const ReportArgs& a) {
   if (ec) return Fail(absl::InternalError("cannot find this program (/proc/self/exe): " + ec.message()));
 
   const Plan plan = PlanFor(a.quick);
+  // An older page would stand beside the PNGs this run replaces: it goes first, and a run that
+  // is stopped (^C, or SIGTERM, which here stops the running step too) writes none.
+  fs::remove(fs::path(a.out) / "report.md", ec);
+  std::signal(SIGTERM, [](int) { CancelFlag().store(true); });
   Page page(self, a.out);
   const auto start = std::chrono::steady_clock::now();
   const std::optional<MachineCpu> cpu_start = ReadMachineCpu();
@@ -376,6 +383,10 @@ int Report(const ReportArgs& a) {
   MapsSection(page, plan);
   HeatmapSection(page, plan);
   const double seconds = SecondsSince(start);
+  if (CancelFlag().load()) {
+    return Fail(absl::CancelledError(absl::StrFormat("report stopped after %.0f s; no report.md written in %s",
+                                                     seconds, a.out)));
+  }
   page.Heading("Run");
   page.Text(absl::StrFormat("The whole report took %.0f s.", seconds));
   // Whether the machine was the report's alone: the timed figures (ms per viewcell, samples/s,
@@ -418,7 +429,7 @@ void AddReportCommand(CLI::App& app, std::function<void(int)> done) {
   auto args = std::make_shared<ReportArgs>();
   CLI::App* c = app.add_subcommand(
       "report", "regenerate every published figure: report.md with PNG plots and maps, stamped with date, commit, machine");
-  c->add_option("--out", args->out, "folder for report.md and the PNGs")->capture_default_str();
+  c->add_option("--out", args->out, "folder for report.md and the PNGs (default: bench/figures, with --quick bench/figures/quick)");
   c->add_flag("--quick", args->quick, "small scenes and counts (minutes; for CI)");
   c->add_flag("--json", args->json, "print a JSON summary (steps, times, files)");
   c->callback([args, done] { done(Report(*args)); });

@@ -141,12 +141,18 @@ int Simulate(const SimulateArgs& a) {
     speeds_kmh.push_back(*v);
   }
   const std::vector<std::string> speed_texts = absl::StrSplit(a.speeds, ',', absl::SkipEmpty());
+  if (!a.speeds.empty() && speed_texts.empty()) return BadOption("simulate", "--speeds", "no speed listed");
+  if (!a.speeds.empty() && speed_texts.size() != static_cast<size_t>(std::count(a.speeds.begin(), a.speeds.end(), ',')) + 1) {
+    return BadOption("simulate", "--speeds", absl::StrCat("'", a.speeds, "' has an empty item"));
+  }
   for (const std::string& text : speed_texts) {
     const std::optional<double> v = ParseSpeed(text, &why);
     if (!v) return BadOption("simulate", "--speeds", why);
+    if (std::find(speeds_kmh.begin(), speeds_kmh.end(), *v) != speeds_kmh.end()) {
+      return BadOption("simulate", "--speeds", absl::StrCat("'", text, "' is listed twice"));
+    }
     speeds_kmh.push_back(*v);
   }
-  if (!a.speeds.empty() && speeds_kmh.empty()) return BadOption("simulate", "--speeds", "no speed listed");
   if (speeds_kmh.empty()) speeds_kmh.push_back(0.0);
   std::vector<server::Scheme> schemes;
   if (!a.schemes.empty() && !a.scheme.empty()) {
@@ -175,7 +181,9 @@ int Simulate(const SimulateArgs& a) {
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(a.scene);
   if (!entry.ok()) return Fail(entry.status());
   std::optional<scenes::LinkSpec> link = entry->simulation.link;
-  if (!a.link.empty()) {
+  if (a.link == "none") {
+    link.reset();  // an ideal link, whatever the entry declares
+  } else if (!a.link.empty()) {
     absl::StatusOr<scenes::LinkSpec> l = server::ParseLinkOption(a.link, link, "--link");
     if (!l.ok()) {
       std::string m(l.status().message());
@@ -188,17 +196,27 @@ int Simulate(const SimulateArgs& a) {
   std::vector<std::optional<scenes::LinkSpec>> links;
   const double latency_ms = link.has_value() ? link->latency_ms.value_or(0.0) : 0.0;
   const std::vector<std::string> bandwidth_texts = absl::StrSplit(a.bandwidths, ',', absl::SkipEmpty());
+  if (!a.bandwidths.empty() && bandwidth_texts.empty()) return BadOption("simulate", "--bandwidths", "no bandwidth listed");
+  if (!a.bandwidths.empty() && bandwidth_texts.size() != static_cast<size_t>(std::count(a.bandwidths.begin(), a.bandwidths.end(), ',')) + 1) {
+    return BadOption("simulate", "--bandwidths", absl::StrCat("'", a.bandwidths, "' has an empty item"));
+  }
   for (const std::string& text : bandwidth_texts) {
     absl::StatusOr<scenes::LinkSpec> l =
         server::ParseLinkOption(absl::StrCat(text, ",", absl::StrFormat("%.17g", latency_ms)), link, "--bandwidths");
     if (!l.ok()) {
-      return BadOption("simulate", "--bandwidths",
-                       absl::StrCat("'", text, "' is not a bandwidth: expected bits per second above 0, with an "
-                                    "optional k, M or G suffix"));
+      // The link parser's reason (not a number, out of range), about this item.
+      std::string m(l.status().message());
+      const size_t colon = m.find("': ");
+      if (colon != std::string::npos) m = m.substr(colon + 3);
+      return BadOption("simulate", "--bandwidths", absl::StrCat("'", text, "' is not a bandwidth: ", m));
+    }
+    for (const auto& earlier : links) {
+      if (earlier->bandwidth_mbps == l->bandwidth_mbps) {
+        return BadOption("simulate", "--bandwidths", absl::StrCat("'", text, "' is listed twice"));
+      }
     }
     links.push_back(*l);
   }
-  if (!a.bandwidths.empty() && links.empty()) return BadOption("simulate", "--bandwidths", "no bandwidth listed");
   if (links.empty()) links.push_back(link);
   absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
   if (!walk.ok()) return Fail(walk.status());
@@ -260,7 +278,8 @@ int Simulate(const SimulateArgs& a) {
                                                                    kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
       if (!s.ok()) return Fail(s.status());
       j = ToJson(s->at_max, scheme, opt.path);
-      j["max_speed_kmh"] = s->max_speed_mps * 3.6;
+      // Null when even the search's bottom stalls (then the run shown is the one there).
+      j["max_speed_kmh"] = s->max_speed_mps > 0.0 ? nlohmann::json(s->max_speed_mps * 3.6) : nlohmann::json();
       j["stall_speed_kmh"] = s->stall_speed_mps > 0.0 ? nlohmann::json(s->stall_speed_mps * 3.6) : nlohmann::json();
       nlohmann::json probes = nlohmann::json::array();
       for (const auto& [mps, stalls] : s->runs) probes.push_back({{"speed_kmh", mps * 3.6}, {"stalls", stalls}});
@@ -282,9 +301,20 @@ int Simulate(const SimulateArgs& a) {
                  j["wall_s"].get<double>());
     runs.push_back(j);
   }
+  // The log is written as the runs go: its errors (a full disk) show when it is closed.
+  if (log_file != nullptr) {
+    log.reset();
+    const bool failed = std::ferror(log_file) != 0;
+    const int closed = std::fclose(log_file);
+    closer.f = nullptr;
+    if (failed || closed != 0) return Fail(absl::DataLossError(absl::StrCat("--log ", a.log, ": writing the log failed")));
+  }
   auto print_run = [&](const nlohmann::json& j) {
     PrintText(j);
-    if (search && j["stall_speed_kmh"].is_null()) {
+    if (search && j["max_speed_kmh"].is_null()) {
+      std::printf("  stalls even at %g km/h, the search's bottom (%zu run(s)): no speed without a stall\n",
+                  kMinSearchKmh, j["search"]["runs"].size());
+    } else if (search && j["stall_speed_kmh"].is_null()) {
       std::printf("  no stall up to %g km/h, the search's top (%zu run(s))\n", kMaxSearchKmh, j["search"]["runs"].size());
     } else if (search) {
       std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu run(s))\n",

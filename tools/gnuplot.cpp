@@ -54,7 +54,8 @@ absl::Status RunGnuplot(const GnuplotPlot& plot) {
   std::string script = absl::StrCat("# Written by vistream; redraw with: gnuplot ", prefix, "gp\n",
                                     "set terminal pngcairo size ", plot.width, ",", plot.height,
                                     " enhanced font 'DejaVu Sans,12' linewidth 1.5\n", "set output ",
-                                    GnuplotQuote(png.string()), "\n", "set encoding utf8\n");
+                                    GnuplotQuote(plot.keep_sources ? png.filename().string() : png.string()),  // kept: beside its script
+                                    "\n", "set encoding utf8\n");
   std::string body = plot.script;
   for (const GnuplotData& d : plot.data) {
     if (d.name.empty() || d.name.find('/') != std::string::npos) {

@@ -52,14 +52,19 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
   plot.width = 1100;
   plot.height = 900;
   plot.keep_sources = true;
-  GnuplotData d{"sweep.dat", "# x, stalls, min margin (s), mean margin (s)\n"};
+  GnuplotData d{"sweep.dat", "# x, stalled time (% of the walk), min margin (s), mean margin (s)\n"};
   for (const auto& point : points) {
     const double x = point.first;
     const json& j = point.second;  // (a name, not a structured binding: clang 14 cannot capture those)
     auto num = [&](const char* k) {
       return j.contains(k) && j.at(k).is_number() ? absl::StrFormat("%.6g", j.at(k).get<double>()) : std::string("NaN");
     };
-    absl::StrAppend(&d.text, absl::StrFormat("%.6g", x), " ", num("stalls"), " ", num("min_margin_s"), " ",
+    // Stalled time over the walk's time: frame counts fall with speed only because the walk is shorter.
+    const bool have = j.contains("stall_s") && j.at("stall_s").is_number() && j.contains("walk_s") &&
+                      j.at("walk_s").is_number() && j.at("walk_s").get<double>() > 0.0;
+    const std::string pct =
+        have ? absl::StrFormat("%.6g", 100.0 * j.at("stall_s").get<double>() / j.at("walk_s").get<double>()) : "NaN";
+    absl::StrAppend(&d.text, absl::StrFormat("%.6g", x), " ", pct, " ", num("min_margin_s"), " ",
                     num("mean_margin_s"), "\n");
   }
   plot.data.push_back(d);
@@ -71,9 +76,10 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
   plot.script = absl::StrCat(
       "set multiplot layout 2,1 title ", GnuplotQuote(title), " font ',15'\n", "set grid lc rgb '#d0d0d0'\n",
       "set logscale x 2\n", "set xtics (", tics, ")\n", "set lmargin 12\n", "set rmargin 25\n", "set xlabel ", GnuplotQuote(xlabel), "\n",
-      "set key outside right top box\n", "set title 'Stalls (frames drawn before the PVS geometry of their viewcell arrived)'\n",
-      "set ylabel 'stalls (count)'\n", "set yrange [0:*]\n",
-      "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalls'\n",
+      "set key outside right top box\n",
+      "set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived)'\n",
+      "set ylabel 'stalled time (% of the walk)'\n", "set yrange [0:*]\n",
+      "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalled time'\n",
       "set title 'Arrival margin (time from a PVS completing to the client entering its cell)'\n",
       "set ylabel 'margin (s)'\n", "set yrange [*:*]\n", "set key outside right top box\n",
       "plot 'sweep.dat' using 1:3 with linespoints lw 2 pt 7 lc rgb '#1f77b4' title 'minimum margin', "
@@ -213,20 +219,6 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
   rows.clear();
   for (const json& j : by_scheme) rows.push_back(Row(j.value("scheme", "?"), j));
   page.Table(Head("scheme"), rows);
-  const std::vector<std::string> max_args = args({"--schemes", schemes, "--speed", "max"});
-  std::vector<std::vector<std::string>> max_rows;
-  if (const std::optional<json> out = page.Run("simulate max speed", max_args, false)) {
-    for (const json& m : RunsOf(*out)) {
-      const json stall = m.value("stall_speed_kmh", json());
-      std::string upper = "?";
-      if (m.contains("search") && m["search"].contains("bracket_kmh")) upper = Fixed(m["search"]["bracket_kmh"][1], 0);
-      max_rows.push_back({m.value("scheme", "?"), Fixed(m.value("max_speed_kmh", json()), 1),
-                          stall.is_number() ? Fixed(stall, 1) : absl::StrCat("none up to ", upper, " (the search's top)")});
-    }
-  }
-  page.Text(absl::StrCat("Highest speed without a stall, per scheme. Command: `", page.Command(max_args), "`"));
-  page.Table({"scheme", "max speed km/h", "slowest speed found to stall, km/h"}, max_rows);
-
   GnuplotPlot bytes;
   bytes.png = page.Path("latency_bytes_" + plan.scene + ".png");
   bytes.width = 1000;
@@ -251,6 +243,21 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
       "'' using 0:2:(sprintf('%.2f', $2)) with labels offset 0,1 notitle\n");
   const std::string bytes_name = "latency_bytes_" + plan.scene + ".png";
   if (!by_scheme.empty() && page.Plot("bytes per scheme", bytes)) page.Image(bytes_name, "Bytes sent per scheme");
+  const std::vector<std::string> max_args = args({"--schemes", schemes, "--speed", "max"});
+  std::vector<std::vector<std::string>> max_rows;
+  if (const std::optional<json> out = page.Run("simulate max speed", max_args, false)) {
+    for (const json& m : RunsOf(*out)) {
+      const json stall = m.value("stall_speed_kmh", json());
+      std::string upper = "?";
+      if (m.contains("search") && m["search"].contains("bracket_kmh")) upper = Fixed(m["search"]["bracket_kmh"][1], 0);
+      max_rows.push_back({m.value("scheme", "?"), Fixed(m.value("max_speed_kmh", json()), 1),
+                          stall.is_number() ? Fixed(stall, 1) : absl::StrCat("none up to ", upper, " (the search's top)")});
+    }
+  }
+  page.Text(absl::StrCat("Highest speed without a stall, per scheme. Command: `", page.Command(max_args), "`"));
+  page.Table({"scheme", "max speed km/h", "slowest speed found to stall, km/h"}, max_rows);
+
+
 }
 
 }  // namespace vistream::tools

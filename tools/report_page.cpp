@@ -77,7 +77,7 @@ std::string Page::Command(const std::vector<std::string>& args) const {
 
 void Page::Log(const Step& s, bool counted) {
   // A step whose failure is an answer (a probe) shows its result, not a failure.
-  const std::string state = s.ok ? "" : counted ? "FAILED  " : absl::StrCat("(", s.result, ", as a probe may)  ");
+  const std::string state = s.ok ? "" : counted ? "FAILED  " : absl::StrCat("(probe: ", s.result, ")  ");
   std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds, state.c_str(),
                s.command.c_str());
   std::fflush(stderr);
@@ -89,12 +89,14 @@ void Page::Failed(const std::string& command, const std::string& what) {
 }
 
 Page::Raw Page::RunRaw(const std::string& step, const std::vector<std::string>& args, bool counts_as_failure) {
+  // Stopped (^C, SIGTERM): no more steps; the report says so and writes no page.
+  if (CancelFlag().load()) return {130, "", "stopped"};
   std::vector<std::string> argv = {self_};
   argv.insert(argv.end(), args.begin(), args.end());
   const std::string command = Command(args);
   std::fprintf(stderr, "report: [%zu] %s ...\n", steps_.size() + 1, step.c_str());
   std::fflush(stderr);
-  const absl::StatusOr<ProcessResult> r = RunProcess(argv);
+  const absl::StatusOr<ProcessResult> r = RunProcess(argv, &CancelFlag());
   Step s{step, command, r.ok() ? r->seconds : 0.0, r.ok() && r->exit_code == 0, ""};
   s.result = s.ok ? "ok" : r.ok() ? absl::StrCat("failed (exit ", r->exit_code, ")") : "failed (not started)";
   steps_.push_back(s);

@@ -1,12 +1,14 @@
 #include "tools/subprocess.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
+#include <thread>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -21,7 +23,7 @@ namespace vistream::tools {
 
 namespace fs = std::filesystem;
 
-absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv) {
+absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv, const std::atomic<bool>* cancel) {
   if (argv.empty()) return absl::InvalidArgumentError("RunProcess: no program");
   std::error_code ec;
   std::string tmpl = (fs::temp_directory_path(ec) / "vistream-run-XXXXXX").string();
@@ -54,7 +56,20 @@ absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv) {
   if (err == ENOENT) return absl::NotFoundError(absl::StrCat("cannot run '", argv[0], "': not found"));
   if (err != 0) return absl::InternalError(absl::StrCat("cannot run '", argv[0], "': ", std::strerror(err)));
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  if (cancel == nullptr) {
+    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+  } else {
+    bool passed_on = false;
+    for (;;) {
+      const pid_t done = waitpid(pid, &status, WNOHANG);
+      if (done == pid || (done < 0 && errno != EINTR)) break;
+      if (!passed_on && cancel->load()) {
+        kill(pid, SIGINT);  // the program stops as on ^C (and the caller's ^C may have reached it already)
+        passed_on = true;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
   }
   ProcessResult r;
   r.seconds = SecondsSince(start);

@@ -2,6 +2,7 @@
 // Running a program and collecting what it printed: gnuplot for the plots, and the tool itself
 // (/proc/self/exe) for each step of `vistream report`.
 
+#include <atomic>
 #include <string>
 #include <vector>
 
@@ -19,7 +20,10 @@ struct ProcessResult {
 // Runs `argv` (argv[0] looked up on PATH when it has no '/'), stdin from /dev/null, stdout
 // and stderr collected through temporary files. An error only when it could not be started:
 // NOT_FOUND when the program does not exist, naming it.
-absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv);
+// With `cancel`, a flag set while the program runs (a ^C of the caller's) passes SIGINT on to
+// it once, and the program's own exit is returned as usual.
+absl::StatusOr<ProcessResult> RunProcess(const std::vector<std::string>& argv,
+                                         const std::atomic<bool>* cancel = nullptr);
 
 // The last `lines` lines of `text`.
 std::string LastLines(const std::string& text, int lines);

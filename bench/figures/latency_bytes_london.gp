@@ -1,6 +1,6 @@
 # Written by vistream; redraw with: gnuplot latency_bytes_london.gp
 set terminal pngcairo size 1000,650 enhanced font 'DejaVu Sans,12' linewidth 1.5
-set output '/work/main/bench/figures/latency_bytes_london.png'
+set output 'latency_bytes_london.png'
 set encoding utf8
 set title 'london: bytes sent along cross-town at 6 km/h, per scheme' font ',14'
 set style fill solid 0.8 border -1

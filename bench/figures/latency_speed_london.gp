@@ -1,6 +1,6 @@
 # Written by vistream; redraw with: gnuplot latency_speed_london.gp
 set terminal pngcairo size 1100,900 enhanced font 'DejaVu Sans,12' linewidth 1.5
-set output '/work/main/bench/figures/latency_speed_london.png'
+set output 'latency_speed_london.png'
 set encoding utf8
 set multiplot layout 2,1 title 'london: stalls and arrival margin against walking speed (scheme pvs)' font ',15'
 set grid lc rgb '#d0d0d0'

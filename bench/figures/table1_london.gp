@@ -1,6 +1,6 @@
 # Written by vistream; redraw with: gnuplot table1_london.gp
 set terminal pngcairo size 1200,1000 enhanced font 'DejaVu Sans,12' linewidth 1.5
-set output '/work/main/bench/figures/table1_london.png'
+set output 'table1_london.png'
 set encoding utf8
 set multiplot layout 2,1 title 'Dual ray space on london: time and overestimation by raster resolution' font ',15'
 set grid lc rgb '#d0d0d0'
