@@ -77,7 +77,12 @@ absl::StatusOr<scenes::LinkSpec> ParseLinkOption(std::string_view text, const st
   };
   const size_t comma = text.find(',');
   if (comma == std::string_view::npos) return bad("no comma");
+  if (text.find(',', comma + 1) != std::string_view::npos) {
+    return bad("more than two fields (jitter and loss come from the scene's declared link)");
+  }
   std::string_view bps = text.substr(0, comma), ms = text.substr(comma + 1);
+  if (bps.find_first_of("eE") != std::string_view::npos) return bad("the bandwidth has an exponent: write a plain decimal");
+  if (ms.find_first_of("eE") != std::string_view::npos) return bad("the latency has an exponent: write a plain decimal");
   double scale = 1.0;
   if (!bps.empty()) {
     switch (bps.back()) {

@@ -281,7 +281,15 @@ using vistream::testing::ExpectRunTimeError;
 using vistream::testing::Vistream;
 
 TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
-  ExpectBadOption("simulate --scene city1 --speed -5", "--speed: '-5' is not a speed: expected km/h above 0");
+  ExpectBadOption("simulate --scene city1 --speed -5", "--speed: '-5' is not a speed: expected km/h from 1 to 1000");
+  // Below a walker's pace the run only takes hours of wall time.
+  ExpectBadOption("simulate --scene city1 --speed 0.0001", "--speed: '0.0001' is not a speed: expected km/h from 1");
+  ExpectBadOption("simulate --scene city1 --speed ''", "--speed: empty: leave the option out for the default");
+  ExpectBadOption("simulate --scene city1 --link ''", "--link: empty");
+  ExpectBadOption("simulate --scene city1 --path ''", "--path: empty");
+  ExpectBadOption("simulate --scene city1 --link 1M,40,3", "--link: '1M,40,3': more than two fields");
+  ExpectBadOption("simulate --scene city1 --link 1e30,40", "--link: '1e30,40': the bandwidth has an exponent");
+  ExpectBadOption("simulate --scene city1 --link 1M,4e1", "--link: '1M,4e1': the latency has an exponent");
   ExpectBadOption("simulate --scene city1 --speed 0", "--speed: '0' is not a speed");
   ExpectBadOption("simulate --scene city1 --speed nan", "--speed: 'nan' is not a speed");
   ExpectBadOption("simulate --scene city1 --speed fast", "--speed: 'fast' is not a speed");
@@ -294,7 +302,7 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --schemes pvs,radius,pvs", "--schemes: 'pvs' is listed twice");
   ExpectBadOption("simulate --scene /tmp/x.glb",
                   "--scene: '/tmp/x.glb' is a glTF file, which has no walks: simulate needs a catalog entry");
-  ExpectBadOption("simulate --scene city1 --speeds 3,-1", "--speeds: '-1' is not a speed: expected km/h above 0");
+  ExpectBadOption("simulate --scene city1 --speeds 3,-1", "--speeds: '-1' is not a speed: expected km/h from 1 to 1000");
   ExpectBadOption("simulate --scene city1 --speeds ,", "--speeds: no speed listed");
   ExpectBadOption("simulate --scene city1 --speed 3 --speeds 4", "--speeds: give --speed or --speeds, not both");
   ExpectBadOption("simulate --scene city1 --speed max --speeds 4", "--speeds: give --speed or --speeds, not both");
@@ -372,7 +380,7 @@ TEST(SimulateCli, LinkNoneIsIdealAndALogThatCannotBeWrittenFails) {
   const vistream::testing::RunResult r = Vistream(base + " --link none --json");
   ASSERT_EQ(r.exit_code, 0) << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out.substr(r.out.find("\n{\n") + 1));
-  EXPECT_EQ(j["link"]["described"], "ideal (the scene declares no link)");
+  EXPECT_EQ(j["link"]["described"], "ideal (--link none)");
   EXPECT_EQ(j["jitter_draws"].get<uint64_t>(), 0u);
   ExpectRunTimeError(base + " --log /dev/full", "--log /dev/full: writing the log failed");
 }

@@ -26,13 +26,17 @@ namespace {
 
 // The speed search's bracket and precision (`--speed max`).
 constexpr double kMinSearchKmh = 1.0, kMaxSearchKmh = 500.0, kSearchPrecision = 0.01;
-constexpr double kMaxKmh = 1000.0;
+// Walking speeds accepted: from the search's bottom (slower walks only take longer to
+// simulate, hours of wall time at a few metres an hour, and show nothing new) to 1,000 km/h.
+constexpr double kMinKmh = kMinSearchKmh, kMaxKmh = 1000.0;
 
 struct SimulateArgs {
   std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log;
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
+  // Given on the command line (an empty value is an error, not the default).
+  const CLI::Option *speed_opt = nullptr, *link_opt = nullptr, *path_opt = nullptr;
 };
 
 double Pct(const std::vector<double>& v, double q) {
@@ -42,7 +46,8 @@ double Pct(const std::vector<double>& v, double q) {
   return s[static_cast<size_t>(std::round(q * static_cast<double>(s.size() - 1)))];
 }
 
-nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, const std::string& path) {
+nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, const std::string& path,
+                      bool ideal_asked) {
   nlohmann::json j;
   j["scheme"] = std::string(server::SchemeName(scheme));
   j["path"] = path;
@@ -83,7 +88,9 @@ nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, 
   link["latency_ms"] = r.link.latency_s * 1000.0;
   link["jitter_ms"] = r.link.jitter_s * 1000.0;
   link["loss_pct"] = r.link.loss * 100.0;
-  link["described"] = r.link_declared ? r.link.Describe() : "ideal (the scene declares no link)";
+  link["described"] = r.link_declared ? r.link.Describe()
+                      : ideal_asked   ? "ideal (--link none)"
+                                      : "ideal (the scene declares no link)";
   j["link"] = link;
   j["path_m"] = r.path_m;
   j["walk_s"] = r.walk_s;
@@ -120,8 +127,8 @@ void PrintText(const nlohmann::json& j) {
 // One walking speed in km/h, or nothing with `why` set.
 std::optional<double> ParseSpeed(const std::string& text, std::string* why) {
   double kmh = 0.0;
-  if (!cli::internal::ParseFinite(text, &kmh) || !(kmh > 0.0) || kmh > kMaxKmh) {
-    *why = absl::StrFormat("'%s' is not a speed: expected km/h above 0 and at most %g", text, kMaxKmh);
+  if (!cli::internal::ParseFinite(text, &kmh) || !(kmh >= kMinKmh) || kmh > kMaxKmh) {
+    *why = absl::StrFormat("'%s' is not a speed: expected km/h from %g to %g", text, kMinKmh, kMaxKmh);
     return std::nullopt;
   }
   return kmh;
@@ -134,6 +141,11 @@ int Simulate(const SimulateArgs& a) {
   // over every link (the declared or --link one, or each of --bandwidths at its latency).
   std::vector<double> speeds_kmh;
   std::string why;
+  for (const auto& [opt, value] : {std::pair{a.speed_opt, &a.speed}, {a.link_opt, &a.link}, {a.path_opt, &a.path}}) {
+    if (opt != nullptr && opt->count() > 0 && value->empty()) {
+      return BadOption("simulate", opt->get_name(), "empty: leave the option out for the default");
+    }
+  }
   if (!a.speed.empty() && !a.speeds.empty()) return BadOption("simulate", "--speeds", "give --speed or --speeds, not both");
   if (!a.speed.empty() && !search) {
     const std::optional<double> v = ParseSpeed(a.speed, &why);
@@ -201,8 +213,9 @@ int Simulate(const SimulateArgs& a) {
     return BadOption("simulate", "--bandwidths", absl::StrCat("'", a.bandwidths, "' has an empty item"));
   }
   for (const std::string& text : bandwidth_texts) {
-    absl::StatusOr<scenes::LinkSpec> l =
-        server::ParseLinkOption(absl::StrCat(text, ",", absl::StrFormat("%.17g", latency_ms)), link, "--bandwidths");
+    // The latency is set after parsing: printed, a tiny declared latency would need an exponent.
+    absl::StatusOr<scenes::LinkSpec> l = server::ParseLinkOption(absl::StrCat(text, ",0"), link, "--bandwidths");
+    if (l.ok()) l->latency_ms = latency_ms;
     if (!l.ok()) {
       // The link parser's reason (not a number, out of range), about this item.
       std::string m(l.status().message());
@@ -277,7 +290,7 @@ int Simulate(const SimulateArgs& a) {
       absl::StatusOr<server::SpeedSearch> s = server::FindMaxSpeed(**scene, *entry, opt, kMinSearchKmh / 3.6,
                                                                    kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
       if (!s.ok()) return Fail(s.status());
-      j = ToJson(s->at_max, scheme, opt.path);
+      j = ToJson(s->at_max, scheme, opt.path, a.link == "none");
       // Null when even the search's bottom stalls (then the run shown is the one there).
       j["max_speed_kmh"] = s->max_speed_mps > 0.0 ? nlohmann::json(s->max_speed_mps * 3.6) : nlohmann::json();
       j["stall_speed_kmh"] = s->stall_speed_mps > 0.0 ? nlohmann::json(s->stall_speed_mps * 3.6) : nlohmann::json();
@@ -287,7 +300,7 @@ int Simulate(const SimulateArgs& a) {
     } else {
       absl::StatusOr<server::SimulationResult> r = server::Simulate(**scene, *entry, opt, ToolRun());
       if (!r.ok()) return Fail(r.status());
-      j = ToJson(*r, scheme, opt.path);
+      j = ToJson(*r, scheme, opt.path, a.link == "none");
     }
     j["scene"] = entry->name;
     j["cell_size_m"] = (*scene)->grid().cell_size();
@@ -360,14 +373,14 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   CLI::App* c = app.add_subcommand(
       "simulate", "discrete-event simulation of a catalog walk: stalls, arrival margins, bytes, triangles drawn");
   c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
-  c->add_option("--path", args->path, "the entry's walk (default: its first)");
-  c->add_option("--speed", args->speed,
-                "walking speed in km/h (default: the walk's), or max: the highest with zero stalls (bisection in "
+  args->path_opt = c->add_option("--path", args->path, "the entry's walk (default: its first)");
+  args->speed_opt = c->add_option("--speed", args->speed,
+                "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls (bisection in "
                 "[1, 500] km/h to 1%)");
   c->add_option("--speeds", args->speeds,
                 "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
                 "whose PVSs serve them all");
-  c->add_option("--link", args->link,
+  args->link_opt = c->add_option("--link", args->link,
                 "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
                 "the declared link, none: ideal");
   c->add_option("--bandwidths", args->bandwidths,
