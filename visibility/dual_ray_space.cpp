@@ -451,6 +451,11 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
       SetWitness(pr, u, (j + 0.5) / res, witness);
       return false;
     }
+    // Blockers near B's face are steep in RS: where two of them meet, their rectangles over
+    // the band miss a sliver that their trapezoids cover. Tried only here, where it can help.
+    if (blockers_.BandCoveredSlanted(static_cast<double>(j) / res, static_cast<double>(j + 1) / res, &slanted_)) {
+      continue;
+    }
     if (2 * res > options.max_res) {
       undecided = true;
       break;

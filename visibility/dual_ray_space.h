@@ -163,6 +163,7 @@ class DualRaySpace {
   Blockers blockers_;
   std::vector<uint8_t> exact_raster_;  // the raster the exact test starts from
   std::vector<std::pair<double, double>> spans_;  // FreeOnLine's scratch
+  SlantedScratch slanted_;                        // BandCoveredSlanted's
   std::vector<std::pair<uint32_t, uint32_t>> row_stack_;  // (resolution, row) still in question
   std::vector<uint32_t> gap_rows_;
   // Scratch, kept between queries to spare allocations.
