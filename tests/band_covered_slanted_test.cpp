@@ -90,6 +90,46 @@ TEST(BandCoveredSlanted, StaggeredWallsWithRoomBetweenLeaveBVisible) {
   }
 }
 
+// Blockers made by hand in RS: each vertex is a root line u = -(a + c v) / b with b = 1.
+Blockers HandMade(const std::vector<std::vector<std::pair<double, double>>>& blockers_ac) {
+  Blockers blockers;
+  for (const auto& vertices : blockers_ac) {
+    Blocker g;
+    g.begin = static_cast<uint32_t>(blockers.coeffs.size());
+    for (const auto& [a, c] : vertices) blockers.coeffs.push_back(BlockerCoeff::Of(a, 1.0, c));
+    g.end = static_cast<uint32_t>(blockers.coeffs.size());
+    blockers.groups.push_back(g);
+  }
+  blockers.eps = 1e-12;
+  blockers.PrepareBands();
+  return blockers;
+}
+
+// Over the band v in [1/2, 1/2 + 1/128], s = 128 (v - 1/2): blocker P spans u from -10 to
+// 0.03 - 0.12 s, blocker Q from 0.02 - 0.1 s to 10. Up to s = 1/2 P reaches Q (0.03 - 0.12 s
+// >= 0.02 - 0.1 s); from s = 1/5 on Q starts at u <= 0 by itself. So [0, 1] is covered at each
+// v, by P then Q below s = 1/2 and by Q alone above s = 1/5, while no one chain serves the whole
+// band (at s = 1, P ends at -0.09, before Q's -0.08). With P ending at 0.05 - 0.3 s instead,
+// P leaves Q at s = 0.15 before Q reaches u = 0 at s = 0.2: the rays with s = 0.175 and
+// 0 <= u < 0.0025 are free.
+TEST(BandCoveredSlanted, ASeamThatCrossesTheEdgeOfRsIsCoveredPiecewise) {
+  const double v0 = 0.5, v1 = 0.5 + 1.0 / 128;
+  // Root 0.03 - 0.12 s = 0.03 - 15.36 (v - 1/2): a = -(0.03 + 7.68), c = 15.36.
+  const Blockers covered = HandMade({{{10.0, 0.0}, {-7.71, 15.36}}, {{-6.42, 12.8}, {-10.0, 0.0}}});
+  std::vector<std::pair<double, double>> spans;
+  SlantedScratch slanted;
+  EXPECT_FALSE(covered.BandCovered(v0, v1, &spans));
+  EXPECT_TRUE(covered.BandCoveredSlanted(v0, v1, &slanted));
+  for (int m = 0; m <= 64; ++m) {
+    double u = 0;
+    EXPECT_FALSE(covered.FreeOnLine(v0 + (v1 - v0) * m / 64.0, &spans, &u)) << m;
+  }
+  // Root 0.05 - 0.3 s = 0.05 - 38.4 (v - 1/2): a = -(0.05 + 19.2), c = 38.4.
+  const Blockers open = HandMade({{{10.0, 0.0}, {-19.25, 38.4}}, {{-6.42, 12.8}, {-10.0, 0.0}}});
+  EXPECT_FALSE(open.BandCoveredSlanted(v0, v1, &slanted));
+  EXPECT_TRUE(open.FreeRay(0.001, v0 + 0.175 * (v1 - v0)));
+}
+
 // Calls f(rng, blockers) for each planar problem of `per_seed` random boxes B (from kCell) in
 // RandomGridScenes of seeds [first, last], its blockers built.
 template <typename F>

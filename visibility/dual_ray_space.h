@@ -22,7 +22,13 @@ namespace vistream::visibility {
 
 struct CellQueryOptions {
   uint32_t min_res = 16;   // first raster resolution
-  uint32_t max_res = 128;  // refined by doubling up to this; a power of two, at most 256
+  // Refined by doubling up to this; a power of two, at most 256. At max_res n, B is hidden
+  // when every row of RS, split from min_res as long as a row is undecided and at most down to
+  // height 1/n, is covered: by the blockers' rectangles over it (Blockers::BandCovered; what a
+  // full raster row at n would also show) or by their trapezoids (BandCoveredSlanted: each
+  // blocker as the region between two of its root lines over the row). Never less precise at
+  // 2n than at n: the rows tried at n are tried at 2n, and a covered row's halves are covered.
+  uint32_t max_res = 128;
   bool free_ray_test = true;  // test uncovered pixel centres exactly: a free ray ends the query
   // Where the raster at max_res still leaves a gap, decide with the exact union test (CGAL's
   // exact kernel) instead: the reference for overestimation, not for speed.
