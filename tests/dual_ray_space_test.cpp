@@ -349,13 +349,14 @@ TEST(DualRaySpace, TranslatingEverythingFarAwayChangesNothing) {
 
 // PlanarOccluded refines only the rows with a gap, one at a time; it must decide exactly as
 // whole rasters at 16, 32 and 64 would: occluded iff at one resolution every row is full or
-// covered by the blockers together (BandCovered). With the free-ray search on, it must still
-// agree: a free ray leaves a gap at every resolution.
+// covered by the blockers together (BandCovered, or BandCoveredSlanted). With the free-ray
+// search on, it must still agree: a free ray leaves a gap at every resolution.
 TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
-  int occluded = 0, visible = 0, union_helped = 0;
+  int occluded = 0, visible = 0, union_helped = 0, slant_helped = 0;
   CpuRaster raster;
   std::vector<uint8_t> pixels;
   std::vector<std::pair<double, double>> scratch;
+  SlantedScratch slanted;
   ForEachRandomPlanarProblem(1, 150, 3, [&](const RandomQuery& r, const PlanarProblem& pr, const Blockers& blockers) {
     bool covered = false, raster_full = false;
     for (uint32_t n = 16; n <= 64 && !covered && !blockers.groups.empty(); n *= 2) {
@@ -364,7 +365,9 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
       covered = true;
       for (uint32_t j = 0; j < n && covered; ++j) {
         const bool row_full = std::count(pixels.begin() + j * n, pixels.begin() + (j + 1) * n, 1) == n;
-        covered = row_full || blockers.BandCovered(static_cast<double>(j) / n, (j + 1.0) / n, &scratch);
+        const double v0 = static_cast<double>(j) / n, v1 = (j + 1.0) / n;
+        covered = row_full || blockers.BandCovered(v0, v1, &scratch);
+        if (!covered && blockers.BandCoveredSlanted(v0, v1, &slanted)) covered = true, ++slant_helped;
       }
     }
     ASSERT_TRUE(covered || !raster_full) << "seed " << r.seed;
@@ -377,6 +380,7 @@ TEST(DualRaySpace, RowByRowRefinementDecidesLikeWholeRasters) {
   EXPECT_GT(occluded, 50);
   EXPECT_GT(visible, 50);
   EXPECT_GT(union_helped, 5) << "blockers together never covered what none covers alone";
+  EXPECT_GT(slant_helped, 5) << "trapezoids never covered a band that rectangles leave open";
 }
 
 // BandCovered is sound: where it says a band is covered, no ray in it is free.

@@ -100,6 +100,78 @@ bool Blockers::BandCovered(double v0, double v1, std::vector<std::pair<double, d
   return false;
 }
 
+bool Blockers::BandCoveredSlanted(double v0, double v1, SlantedScratch* scratch) const {
+  auto& traps = scratch->trapezoids;
+  traps.clear();
+  for (const Blocker& g : groups) {
+    // Skipped where RowBounds' hi is below 0 already at v0 (h0 < 0: h < 0 over the band) or
+    // its lo above 1 still at v1 (l1 > 1).
+    if (v0 > g.v1_max || v1 < g.v0_min) continue;
+    // RowBounds' lo at v0 and hi at v1, and the vertices that give them.
+    double lo = INFINITY, hi = -INFINITY;
+    uint32_t k_lo = g.end, k_hi = g.end;
+    for (uint32_t k = g.begin; k < g.end; ++k) {
+      const BlockerCoeff& c = coeffs[k];
+      const double ra = -eps - c.a - c.c * v1;
+      const double rb = eps - c.a - c.c * v0;
+      if (c.b > 0) {
+        if (ra * c.inv_b > hi) hi = ra * c.inv_b, k_hi = k;
+        if (rb * c.inv_b < lo) lo = rb * c.inv_b, k_lo = k;
+      } else {
+        if (ra >= 0) hi = INFINITY, k_hi = g.end;
+        if (rb <= 0) lo = -INFINITY, k_lo = g.end;
+      }
+    }
+    // Nothing blocked at v0 from below or at v1 from above: no trapezoid worth having. An
+    // infinite end stays so over the band (b = 0: the sign of eps - a - c v only falls as v
+    // rises, c >= 0), a finite one is a vertex's root line.
+    if (lo == INFINITY || hi == -INFINITY) continue;
+    BandTrapezoid t{lo, -INFINITY, INFINITY, hi};
+    if (k_lo != g.end) t.l1 = (eps - coeffs[k_lo].a - coeffs[k_lo].c * v1) * coeffs[k_lo].inv_b;
+    if (k_hi != g.end) t.h0 = (-eps - coeffs[k_hi].a - coeffs[k_hi].c * v0) * coeffs[k_hi].inv_b;
+    if (t.h0 < 0.0 || t.l1 > 1.0) continue;
+    traps.push_back(t);
+  }
+  // Likeliest order of a chain first: by the lower side at the band's middle; the passes
+  // below repeat until nothing joins, so the order only saves passes.
+  std::sort(traps.begin(), traps.end(),
+            [](const BandTrapezoid& x, const BandTrapezoid& y) { return x.l0 + x.l1 < y.l0 + y.l1; });
+  // Reachability: `reach` holds the upper sides (at v0, at v1) of the trapezoids joined so far
+  // (first the line u = 0), none dominated by another; [0, h(v)] is covered for each at every
+  // v of the band. A line x lies under the reach at every v of the band when the v where it
+  // lies under one reach line cover the band: each such set is the whole band, a prefix or a
+  // suffix (x and the reach line are linear), so a prefix and a suffix that meet will do (in
+  // the band's own fraction s = (v - v0) / (v1 - v0)). A trapezoid whose l lies under the
+  // reach joins, and its h becomes a reach line; the band is covered once u = 1 lies under.
+  auto& reach = scratch->reach;
+  reach.assign(1, {0.0, 0.0});
+  auto under_reach = [&reach](double x0, double x1) {
+    double prefix = -1.0, suffix = 2.0;
+    for (const auto& [r0, r1] : reach) {
+      const double d0 = r0 - x0, d1 = r1 - x1;  // never inf - inf: l < inf and h > -inf
+      if (d0 >= 0.0 && d1 >= 0.0) return true;
+      if (d0 >= 0.0) prefix = std::max(prefix, d0 / (d0 - d1));
+      else if (d1 >= 0.0) suffix = std::min(suffix, d0 / (d0 - d1));
+    }
+    return prefix >= suffix;
+  };
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (BandTrapezoid& t : traps) {
+      if (t.l0 == INFINITY || !under_reach(t.l0, t.l1)) continue;
+      t.l0 = INFINITY;  // joined: never again
+      bool dominated = false;
+      for (const auto& [r0, r1] : reach) dominated |= r0 >= t.h0 && r1 >= t.h1;
+      if (dominated) continue;
+      std::erase_if(reach, [&](const std::pair<double, double>& r) { return t.h0 >= r.first && t.h1 >= r.second; });
+      reach.emplace_back(t.h0, t.h1);
+      if (under_reach(1.0, 1.0)) return true;
+      grew = true;
+    }
+  }
+  return false;
+}
+
 void Blockers::PrepareBands() {
   // RowBounds' hi at v1 is max_k (A_k - c_k v1) / b_k with A_k = -eps - a_k, and lo at v0 is
   // min_k (B_k - c_k v0) / b_k with B_k = eps - a_k (b_k = 0: +-infinity by the sign of the

@@ -37,6 +37,19 @@ struct Blocker {
   double v1_max = INFINITY, v0_min = -INFINITY;
 };
 
+// A blocker's inner trapezoid over one band [v0, v1] of RS (Blockers::BandCoveredSlanted): it
+// blocks every u with l(v) <= u <= h(v), l and h linear in v from (l0, h0) at v0 to (l1, h1)
+// at v1; infinite ends stay infinite across the band.
+struct BandTrapezoid {
+  double l0, l1, h0, h1;
+};
+
+// Scratch for Blockers::BandCoveredSlanted, kept by the caller to spare allocations.
+struct SlantedScratch {
+  std::vector<BandTrapezoid> trapezoids;
+  std::vector<std::pair<double, double>> reach;  // (at v0, at v1): [0, reach] is covered
+};
+
 struct Blockers {
   std::vector<BlockerCoeff> coeffs;
   std::vector<Blocker> groups;  // widest first: a row usually fills after a few
@@ -59,6 +72,22 @@ struct Blockers {
   // every v of the band; true when their union covers [0, 1]. Stronger than a full row of
   // the raster, which needs each pixel inside one blocker.
   bool BandCovered(double v0, double v1, std::vector<std::pair<double, double>>* scratch) const;
+  // Is the whole band v0 <= v <= v1 blocked, with each blocker's region there taken as a
+  // trapezoid instead of a rectangle? Over the band, blocker g blocks at least the u with
+  // l(v) <= u <= h(v), where l is the root line -(a_k + eps + c_k v) / b_k of the vertex k that
+  // gives RowBounds' lo at v0 and h that of the vertex giving its hi at v1 (L <= l and h <= U
+  // as single lines; the trapezoid holds the RowBounds rectangle, since both lines fall as v
+  // rises). Covered is then decided for the union of the trapezoids, with their sides checked
+  // at v0 and v1 only: u = 0 reaches; a trapezoid whose l lies, at each v of the band, under
+  // the h of some trapezoid reached (or under u = 0) is reached; the band is covered when
+  // u = 1 lies so under the reached h. Sides are linear in v, so "under one line at v0 and
+  // v1" holds over the band, and "under one line up to some v, under another from there" is
+  // decided from the lines' crossings. True wherever BandCovered is, and on both halves of
+  // a band where it is; weaker than the exact union (each blocker counts as one trapezoid over
+  // the band). This catches the seams of steep blockers (pieces near B's face, where
+  // |dU/dv| = c / b is large) whose regions overlap by less than the band's slant: there
+  // BandCovered fails at every resolution up to about |dU/dv| / overlap.
+  bool BandCoveredSlanted(double v0, double v1, SlantedScratch* scratch) const;
   // The wholly blocked pixels of `g` in the row [v0, v1] are those with u0 >= first and
   // u1 <= second (u0, u1 the pixel's sides).
   std::pair<double, double> RowBounds(const Blocker& g, double v0, double v1) const;

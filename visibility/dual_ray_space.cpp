@@ -430,8 +430,9 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
   }
   if (blockers_.groups.empty()) return false;
   // Row by row, depth first: a row with a gap at n is searched for a free ray along its middle
-  // line, exactly, then split into its two rows at 2n (a row full at n is full at 2n). The
-  // raster is full when every row is; a row still with a gap at max_res leaves B visible.
+  // line, exactly, then tried with the blockers' trapezoids, then split into its two rows at
+  // 2n (a row covered at n is covered at 2n). The raster is full when every row is; a row
+  // still with a gap at max_res leaves B visible.
   const uint32_t n0 = std::clamp(options.min_res, 1u, std::max(1u, options.max_res));
   row_stack_.clear();
   bool undecided = false;
@@ -450,6 +451,11 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
       if (stats != nullptr) ++stats->free_rays;
       SetWitness(pr, u, (j + 0.5) / res, witness);
       return false;
+    }
+    // Blockers near B's face are steep in RS: where two of them meet, their rectangles over
+    // the band miss a sliver that their trapezoids cover. Tried only here, where it can help.
+    if (blockers_.BandCoveredSlanted(static_cast<double>(j) / res, static_cast<double>(j + 1) / res, &slanted_)) {
+      continue;
     }
     if (2 * res > options.max_res) {
       undecided = true;

@@ -22,7 +22,13 @@ namespace vistream::visibility {
 
 struct CellQueryOptions {
   uint32_t min_res = 16;   // first raster resolution
-  uint32_t max_res = 128;  // refined by doubling up to this; a power of two, at most 256
+  // Refined by doubling up to this; a power of two, at most 256. At max_res n, B is hidden
+  // when every row of RS, split from min_res as long as a row is undecided and at most down to
+  // height 1/n, is covered: by the blockers' rectangles over it (Blockers::BandCovered; what a
+  // full raster row at n would also show) or by their trapezoids (BandCoveredSlanted: each
+  // blocker as the region between two of its root lines over the row). Never less precise at
+  // 2n than at n: the rows tried at n are tried at 2n, and a covered row's halves are covered.
+  uint32_t max_res = 128;
   bool free_ray_test = true;  // test uncovered pixel centres exactly: a free ray ends the query
   // Where the raster at max_res still leaves a gap, decide with the exact union test (CGAL's
   // exact kernel) instead: the reference for overestimation, not for speed.
@@ -163,6 +169,7 @@ class DualRaySpace {
   Blockers blockers_;
   std::vector<uint8_t> exact_raster_;  // the raster the exact test starts from
   std::vector<std::pair<double, double>> spans_;  // FreeOnLine's scratch
+  SlantedScratch slanted_;                        // BandCoveredSlanted's
   std::vector<std::pair<uint32_t, uint32_t>> row_stack_;  // (resolution, row) still in question
   std::vector<uint32_t> gap_rows_;
   // Scratch, kept between queries to spare allocations.
