@@ -165,6 +165,65 @@ TEST(CliFigures, HeatmapAndSceneMapHaveALabelledColourBar) {
   EXPECT_GT(mp.Count({220, 30, 30}, f.x1 + 1, 0, mp.width(), mp.height()), 40) << "the walk's legend line";
 }
 
+// A legend's outline swatch: a horizontal run of at least `run` pixels of exactly `c` right of
+// the frame. Antialiased text never makes one (its edge pixels blend with the paper).
+bool HasLegendRun(const Png& png, const Frame& f, Rgb c, int run) {
+  for (int y = 0; y < png.height(); ++y) {
+    int n = 0;
+    for (int x = f.x1 + 1; x < png.width(); ++x) {
+      const Rgb p = png.At(x, y);
+      n = p.r == c.r && p.g == c.g && p.b == c.b ? n + 1 : 0;
+      if (n >= run) return true;
+    }
+  }
+  return false;
+}
+
+// city1 is about 1,400 m on its longer side: 600 pixels are 2.3 m each (too coarse for
+// outlines, which are drawn below 1.5 m a pixel), 2,000 pixels 0.7 m each.
+TEST(CliFigures, HeatmapSizeSetsTheMapAndFootprintsAreOutlinedOnlyWhereAPixelIsFine) {
+  const Rgb outline{40, 40, 40};  // agvs_common.cpp's footprint outline
+  for (const int size : {600, 2000}) {
+    const std::string png_path = Tmp("heat_size_" + std::to_string(size) + ".png");
+    const RunResult r = Vistream("agvs heatmap --scene city1 --seconds 0.2 --size " + std::to_string(size) + " -o " +
+                                 png_path + " --json");
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    const Png png(png_path);
+    ASSERT_TRUE(png.ok());
+    EXPECT_EQ(j.at("width").get<int>(), png.width());
+    const Frame f = FindFrame(png);
+    ASSERT_GE(f.x1, 0) << "no frame";
+    EXPECT_EQ(std::max(f.x1 - f.x0 - 1, f.y1 - f.y0 - 1), size);
+    const double mpp = j.at("metres_per_pixel").get<double>();
+    EXPECT_GT(mpp * size, 1300.0);
+    EXPECT_LT(mpp * size, 1600.0);
+    const bool fine = size == 2000;
+    EXPECT_EQ(j.at("footprint_outlines").get<bool>(), fine) << size;
+    // The legend shows the outline swatch exactly when the map has outlines.
+    EXPECT_EQ(HasLegendRun(png, f, outline, 20), fine) << size;
+  }
+  for (const char* bad : {"0", "15", "16385", "1e3", "big"}) {
+    ExpectBadOption(std::string("agvs heatmap --scene city1 --seconds 0.2 -o ") + Tmp("bad.png") + " --size " + bad,
+                    "--size");
+  }
+}
+
+TEST(CliFigures, SceneMapOutlinesFootprintsOnlyWhereAPixelIsFine) {
+  const Rgb outline{60, 60, 60};  // cmd_scene.cpp's footprint edge
+  for (const int size : {600, 2000}) {
+    const std::string png_path = Tmp("scene_size_" + std::to_string(size) + ".png");
+    const RunResult r = Vistream("scene map city1 --size " + std::to_string(size) + " -o " + png_path);
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const Png png(png_path);
+    ASSERT_TRUE(png.ok());
+    const Frame f = FindFrame(png);
+    ASSERT_GE(f.x1, 0) << "no frame";
+    EXPECT_EQ(std::max(f.x1 - f.x0 - 1, f.y1 - f.y0 - 1), size);
+    EXPECT_EQ(HasLegendRun(png, f, outline, 20), size == 2000) << size;
+  }
+}
+
 TEST(CliFigures, BenchAgvsPlotIsAGnuplotFigureAndSaysWhenGnuplotIsMissing) {
   const std::string png = Tmp("agvs_plot.png");
   const std::string args = "bench agvs --scene city1 --seconds 0.2 --views 1 --res 16 --checkpoints 3 --json --plot ";
