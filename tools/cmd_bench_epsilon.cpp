@@ -47,9 +47,30 @@ const std::map<std::string, PaperTable2> kPaperTable2 = {{"none", {30170, -1, 29
                                                          {"paper", {7030, 5550, 1390, 42414, 38648}},
                                                          {"all", {7030, 5550, 1390, 42414, 38648}}};
 
+// One neighbourhood's figures in one column, for --json's per-neighbourhood list: where the
+// time goes, and a digest of the superset (to compare builds set by set).
+struct QueryFigures {
+  double ms = 0, box_ms = 0, polygon_ms = 0;
+  uint64_t traversals = 0, box_tests = 0, polygon_tests = 0, rays = 0, tested_triangles = 0, visible_triangles = 0;
+  uint64_t occluded_boxes = 0, digest = 0;
+};
+
+// FNV-1a over the sorted triangle ids: equal sets give equal digests.
+uint64_t Digest(const std::vector<uint32_t>& triangles) {
+  uint64_t h = 1469598103934665603ull;
+  for (uint32_t t : triangles) {
+    for (int b = 0; b < 4; ++b) {
+      h ^= (t >> (8 * b)) & 0xffu;
+      h *= 1099511628211ull;
+    }
+  }
+  return h;
+}
+
 struct Column {
   std::string opt;
   std::vector<double> ms;
+  std::vector<QueryFigures> queries;
   double box_ms = 0, polygon_ms = 0, rays = 0, traversals = 0, box_tests = 0, polygon_tests = 0;
   double visible_triangles = 0, total_triangles = 0, occluded_boxes = 0, total_boxes = 0, first_occluders = 0;
 };
@@ -127,6 +148,8 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
       Column& col = columns[c];
       const visibility::EpsilonStats& s = r.stats;
       col.ms.push_back(s.ms);
+      col.queries.push_back({s.ms, s.box_ms, s.polygon_ms, s.traversals, s.box_ray_tests, s.polygon_ray_tests, s.rays,
+                             s.tested_triangles, s.visible_triangles, s.occluded_boxes, Digest(r.triangles)});
       col.box_ms += s.box_ms;
       col.polygon_ms += s.polygon_ms;
       col.rays += static_cast<double>(s.rays);
@@ -177,6 +200,27 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
     for (const Column& c : columns) {
       double sum = 0;
       for (double m : c.ms) sum += m;
+      // Per neighbourhood, in sample order; the digest (hex) of its superset, and of all of them.
+      nlohmann::json per = nlohmann::json::array();
+      uint64_t all = 1469598103934665603ull;
+      for (size_t k = 0; k < c.queries.size(); ++k) {
+        const QueryFigures& f = c.queries[k];
+        const scenes::Aabb& b = boxes[k];
+        per.push_back({{"centre", {b.Centre().x, b.Centre().y, b.Centre().z}},
+                       {"pvs_objects", a.pvs_cell > 0 ? pvs[k].size() : 0},
+                       {"ms", f.ms},
+                       {"box_ms", f.box_ms},
+                       {"polygon_ms", f.polygon_ms},
+                       {"traversals", f.traversals},
+                       {"box_ray_tests", f.box_tests},
+                       {"polygon_ray_tests", f.polygon_tests},
+                       {"rays", f.rays},
+                       {"occluded_boxes", f.occluded_boxes},
+                       {"tested_triangles", f.tested_triangles},
+                       {"visible_triangles", f.visible_triangles},
+                       {"digest", absl::StrFormat("%016x", f.digest)}});
+        all = (all ^ f.digest) * 1099511628211ull;
+      }
       j["table2"].push_back({{"opt", c.opt},
                              {"ms", sum / n},
                              {"median_ms", Median(c.ms)},
@@ -186,7 +230,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
                              {"traversals", mean(c.traversals)},
                              {"box_ray_tests", mean(c.box_tests)},
                              {"polygon_ray_tests", mean(c.polygon_tests)},
-                             {"visible_triangles", mean(c.visible_triangles)}});
+                             {"visible_triangles", mean(c.visible_triangles)},
+                             {"digest", absl::StrFormat("%016x", all)},
+                             {"per_neighbourhood", per}});
     }
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
