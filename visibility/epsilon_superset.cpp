@@ -419,6 +419,11 @@ struct EpsilonSuperset::Query {
       auto hides = [&](uint32_t prism, uint32_t u) {
         if (vertex_hider[u] == prism) return true;
         if (vertex_miss[u] == prism) return false;
+        if (vertex_state[u] == kKnown) {
+          // Its list holds every usable prism that hides it (callers test usable prisms).
+          const uint32_t* first = vertex_hiders.data() + vertex_hiders_start[u];
+          return std::find(first, first + HiderCount(u), prism) != first + HiderCount(u);
+        }
         for (const Ray& r : rays_of(u)) {
           if (!Crosses(prism, r)) {
             vertex_miss[u] = prism;
@@ -748,11 +753,22 @@ EpsilonResult EpsilonSuperset::Compute(const Aabb& box, const EpsilonOptions& op
         st.total_boxes = tree->root().count;
         const std::vector<KdNode>& nodes = tree->nodes();
         std::vector<uint32_t> stack = {0};
+        // A node's box is tested only where that pays: the test costs about what one object's
+        // does, and saves `count` of them when the box is hidden. The odds are this query's
+        // share of hidden node boxes so far: near the street, over a whole city, many far
+        // nodes are hidden; over a viewcell's PVS, few (london: 8%, and under 2% of those
+        // above 16 objects). Skipping a test never changes the result: a prism that hides a
+        // node's box hides each box in it, which is then found hidden on its own.
+        double node_tests = 0.0, nodes_hidden = 0.0;
         while (!stack.empty()) {
           const KdNode& node = nodes[stack.back()];
           stack.pop_back();
           bool first = false;
-          if (node.count > 1 && query.BoxHidden(node.bounds, std::nullopt, &st.box_ray_tests, &first)) {
+          const bool worth_testing =
+              node.count > 1 && (nodes_hidden + 1.0) * node.count > 0.5 * (node_tests + 2.0);
+          if (worth_testing) ++node_tests;
+          if (worth_testing && query.BoxHidden(node.bounds, std::nullopt, &st.box_ray_tests, &first)) {
+            ++nodes_hidden;
             for (ObjectId k : tree->ObjectsBelow(node)) hide(id_of(k), first);
             continue;
           }
