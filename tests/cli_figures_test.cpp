@@ -245,6 +245,41 @@ TEST(CliFigures, BenchAgvsPlotIsAGnuplotFigureAndSaysWhenGnuplotIsMissing) {
   unsetenv("VISTREAM_GNUPLOT");
 }
 
+// bench epsilon --json: per neighbourhood, where the time goes and a digest of the superset,
+// so that two builds can be compared set by set. Columns none and rays are the same exact test
+// (neither drops hidden occluders), so their sets, and digests, agree neighbourhood by
+// neighbourhood; the means are those of the per-neighbourhood figures.
+TEST(CliFigures, BenchEpsilonJsonGivesPerNeighbourhoodFiguresAndSetDigests) {
+  const RunResult r = Vistream("bench epsilon --scene city2 --count 4 --opts none,rays --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const auto& t2 = j.at("table2");
+  ASSERT_EQ(t2.size(), 2u);
+  for (const auto& c : t2) {
+    const auto& per = c.at("per_neighbourhood");
+    ASSERT_EQ(per.size(), 4u);
+    double ms = 0, cpu = 0, visible = 0;
+    for (const auto& q : per) {
+      ms += q.at("ms").get<double>();
+      cpu += q.at("cpu_ms").get<double>();
+      visible += q.at("visible_triangles").get<double>();
+      EXPECT_EQ(q.at("digest").get<std::string>().size(), 16u);
+      // A thread's CPU time never exceeds the wall-clock time it took (timer granularity aside).
+      EXPECT_LE(q.at("cpu_ms").get<double>(), q.at("ms").get<double>() + 1.0);
+      EXPECT_EQ(q.at("centre").size(), 3u);
+    }
+    EXPECT_NEAR(c.at("ms").get<double>(), ms / 4, 1e-9 + 1e-9 * ms);
+    EXPECT_NEAR(c.at("cpu_ms").get<double>(), cpu / 4, 1e-9 + 1e-9 * cpu);
+    EXPECT_NEAR(c.at("visible_triangles").get<double>(), visible / 4, 1e-9 * (1 + visible));
+  }
+  for (size_t k = 0; k < 4; ++k) {
+    EXPECT_EQ(t2[0]["per_neighbourhood"][k].at("digest"), t2[1]["per_neighbourhood"][k].at("digest")) << k;
+  }
+  EXPECT_EQ(t2[0].at("digest"), t2[1].at("digest"));
+  // Different sets give different digests: the neighbourhoods see different parts of the city.
+  EXPECT_NE(t2[0]["per_neighbourhood"][0].at("digest"), t2[0]["per_neighbourhood"][1].at("digest"));
+}
+
 TEST(CliFigures, ReportRejectsAnOutThatIsNoFolder) {
   const std::string file = Tmp("not_a_folder");
   { std::FILE* f = std::fopen(file.c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }
