@@ -348,6 +348,27 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
   ASSERT_TRUE(j.at("cpu_share").is_number());
   EXPECT_GT(j.at("cpu_share").get<double>(), 0.0);
   EXPECT_LE(j.at("cpu_share").get<double>(), 1.0);
+  // The gnuplot figures keep their script beside them (NAME.gp), which writes NAME.png at the
+  // size the report asks for.
+  const struct {
+    const char* name;
+    int width, height;
+  } plots[] = {{"table1_default", 1200, 1000},
+               {"latency_speed_default", 1100, 900},
+               {"latency_bandwidth_default", 1100, 900},
+               {"latency_bytes_default", 1000, 650}};
+  for (const auto& p : plots) {
+    std::ifstream gp(dir + "/" + p.name + ".gp");
+    const std::string script((std::istreambuf_iterator<char>(gp)), std::istreambuf_iterator<char>());
+    EXPECT_NE(script.find(std::string("set output '") + p.name + ".png'"), std::string::npos) << p.name;
+    EXPECT_NE(script.find("set terminal pngcairo size " + std::to_string(p.width) + "," + std::to_string(p.height)),
+              std::string::npos)
+        << p.name;
+    const Png png(dir + "/" + p.name + ".png");
+    ASSERT_TRUE(png.ok()) << p.name;
+    EXPECT_EQ(png.width(), p.width) << p.name;
+    EXPECT_EQ(png.height(), p.height) << p.name;
+  }
   const auto& images = j.at("images");
   EXPECT_GE(images.size(), 6u);
   for (const auto& name : images) {
