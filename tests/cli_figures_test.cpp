@@ -165,6 +165,65 @@ TEST(CliFigures, HeatmapAndSceneMapHaveALabelledColourBar) {
   EXPECT_GT(mp.Count({220, 30, 30}, f.x1 + 1, 0, mp.width(), mp.height()), 40) << "the walk's legend line";
 }
 
+// A legend's outline swatch: a horizontal run of at least `run` pixels of exactly `c` right of
+// the frame. Antialiased text never makes one (its edge pixels blend with the paper).
+bool HasLegendRun(const Png& png, const Frame& f, Rgb c, int run) {
+  for (int y = 0; y < png.height(); ++y) {
+    int n = 0;
+    for (int x = f.x1 + 1; x < png.width(); ++x) {
+      const Rgb p = png.At(x, y);
+      n = p.r == c.r && p.g == c.g && p.b == c.b ? n + 1 : 0;
+      if (n >= run) return true;
+    }
+  }
+  return false;
+}
+
+// city1 is about 1,400 m on its longer side: 600 pixels are 2.3 m each (too coarse for
+// outlines, which are drawn below 1.5 m a pixel), 2,000 pixels 0.7 m each.
+TEST(CliFigures, HeatmapSizeSetsTheMapAndFootprintsAreOutlinedOnlyWhereAPixelIsFine) {
+  const Rgb outline{40, 40, 40};  // agvs_common.cpp's footprint outline
+  for (const int size : {600, 2000}) {
+    const std::string png_path = Tmp("heat_size_" + std::to_string(size) + ".png");
+    const RunResult r = Vistream("agvs heatmap --scene city1 --seconds 0.2 --size " + std::to_string(size) + " -o " +
+                                 png_path + " --json");
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    const Png png(png_path);
+    ASSERT_TRUE(png.ok());
+    EXPECT_EQ(j.at("width").get<int>(), png.width());
+    const Frame f = FindFrame(png);
+    ASSERT_GE(f.x1, 0) << "no frame";
+    EXPECT_EQ(std::max(f.x1 - f.x0 - 1, f.y1 - f.y0 - 1), size);
+    const double mpp = j.at("metres_per_pixel").get<double>();
+    EXPECT_GT(mpp * size, 1300.0);
+    EXPECT_LT(mpp * size, 1600.0);
+    const bool fine = size == 2000;
+    EXPECT_EQ(j.at("footprint_outlines").get<bool>(), fine) << size;
+    // The legend shows the outline swatch exactly when the map has outlines.
+    EXPECT_EQ(HasLegendRun(png, f, outline, 20), fine) << size;
+  }
+  for (const char* bad : {"0", "15", "16385", "1e3", "big"}) {
+    ExpectBadOption(std::string("agvs heatmap --scene city1 --seconds 0.2 -o ") + Tmp("bad.png") + " --size " + bad,
+                    "--size");
+  }
+}
+
+TEST(CliFigures, SceneMapOutlinesFootprintsOnlyWhereAPixelIsFine) {
+  const Rgb outline{60, 60, 60};  // cmd_scene.cpp's footprint edge
+  for (const int size : {600, 2000}) {
+    const std::string png_path = Tmp("scene_size_" + std::to_string(size) + ".png");
+    const RunResult r = Vistream("scene map city1 --size " + std::to_string(size) + " -o " + png_path);
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const Png png(png_path);
+    ASSERT_TRUE(png.ok());
+    const Frame f = FindFrame(png);
+    ASSERT_GE(f.x1, 0) << "no frame";
+    EXPECT_EQ(std::max(f.x1 - f.x0 - 1, f.y1 - f.y0 - 1), size);
+    EXPECT_EQ(HasLegendRun(png, f, outline, 20), size == 2000) << size;
+  }
+}
+
 TEST(CliFigures, BenchAgvsPlotIsAGnuplotFigureAndSaysWhenGnuplotIsMissing) {
   const std::string png = Tmp("agvs_plot.png");
   const std::string args = "bench agvs --scene city1 --seconds 0.2 --views 1 --res 16 --checkpoints 3 --json --plot ";
@@ -184,6 +243,41 @@ TEST(CliFigures, BenchAgvsPlotIsAGnuplotFigureAndSaysWhenGnuplotIsMissing) {
   setenv("VISTREAM_GNUPLOT", "/nonexistent/gnuplot", 1);
   ExpectRunTimeError(args + Tmp("no_gnuplot.png"), "cannot run gnuplot ('/nonexistent/gnuplot' not found)");
   unsetenv("VISTREAM_GNUPLOT");
+}
+
+// bench epsilon --json: per neighbourhood, where the time goes and a digest of the superset,
+// so that two builds can be compared set by set. Columns none and rays are the same exact test
+// (neither drops hidden occluders), so their sets, and digests, agree neighbourhood by
+// neighbourhood; the means are those of the per-neighbourhood figures.
+TEST(CliFigures, BenchEpsilonJsonGivesPerNeighbourhoodFiguresAndSetDigests) {
+  const RunResult r = Vistream("bench epsilon --scene city2 --count 4 --opts none,rays --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const auto& t2 = j.at("table2");
+  ASSERT_EQ(t2.size(), 2u);
+  for (const auto& c : t2) {
+    const auto& per = c.at("per_neighbourhood");
+    ASSERT_EQ(per.size(), 4u);
+    double ms = 0, cpu = 0, visible = 0;
+    for (const auto& q : per) {
+      ms += q.at("ms").get<double>();
+      cpu += q.at("cpu_ms").get<double>();
+      visible += q.at("visible_triangles").get<double>();
+      EXPECT_EQ(q.at("digest").get<std::string>().size(), 16u);
+      // A thread's CPU time never exceeds the wall-clock time it took (timer granularity aside).
+      EXPECT_LE(q.at("cpu_ms").get<double>(), q.at("ms").get<double>() + 1.0);
+      EXPECT_EQ(q.at("centre").size(), 3u);
+    }
+    EXPECT_NEAR(c.at("ms").get<double>(), ms / 4, 1e-9 + 1e-9 * ms);
+    EXPECT_NEAR(c.at("cpu_ms").get<double>(), cpu / 4, 1e-9 + 1e-9 * cpu);
+    EXPECT_NEAR(c.at("visible_triangles").get<double>(), visible / 4, 1e-9 * (1 + visible));
+  }
+  for (size_t k = 0; k < 4; ++k) {
+    EXPECT_EQ(t2[0]["per_neighbourhood"][k].at("digest"), t2[1]["per_neighbourhood"][k].at("digest")) << k;
+  }
+  EXPECT_EQ(t2[0].at("digest"), t2[1].at("digest"));
+  // Different sets give different digests: the neighbourhoods see different parts of the city.
+  EXPECT_NE(t2[0]["per_neighbourhood"][0].at("digest"), t2[0]["per_neighbourhood"][1].at("digest"));
 }
 
 TEST(CliFigures, ReportRejectsAnOutThatIsNoFolder) {
@@ -254,6 +348,27 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
   ASSERT_TRUE(j.at("cpu_share").is_number());
   EXPECT_GT(j.at("cpu_share").get<double>(), 0.0);
   EXPECT_LE(j.at("cpu_share").get<double>(), 1.0);
+  // The gnuplot figures keep their script beside them (NAME.gp), which writes NAME.png at the
+  // size the report asks for.
+  const struct {
+    const char* name;
+    int width, height;
+  } plots[] = {{"table1_default", 1200, 1000},
+               {"latency_speed_default", 1100, 900},
+               {"latency_bandwidth_default", 1100, 900},
+               {"latency_bytes_default", 1000, 650}};
+  for (const auto& p : plots) {
+    std::ifstream gp(dir + "/" + p.name + ".gp");
+    const std::string script((std::istreambuf_iterator<char>(gp)), std::istreambuf_iterator<char>());
+    EXPECT_NE(script.find(std::string("set output '") + p.name + ".png'"), std::string::npos) << p.name;
+    EXPECT_NE(script.find("set terminal pngcairo size " + std::to_string(p.width) + "," + std::to_string(p.height)),
+              std::string::npos)
+        << p.name;
+    const Png png(dir + "/" + p.name + ".png");
+    ASSERT_TRUE(png.ok()) << p.name;
+    EXPECT_EQ(png.width(), p.width) << p.name;
+    EXPECT_EQ(png.height(), p.height) << p.name;
+  }
   const auto& images = j.at("images");
   EXPECT_GE(images.size(), 6u);
   for (const auto& name : images) {

@@ -635,5 +635,44 @@ TEST(EpsilonSuperset, ABoxOnTheGroundCullsLikeOneJustAboveIt) {
   EXPECT_EQ(eps->Compute(below, Options("all")).triangles, eps->Compute(footprint, Options("all")).triangles);
 }
 
+// The shortcuts that only save work (hints, shared vertices with their hider lists, kd-node
+// boxes tested or skipped by the odds) must give exactly the set of the plain test, over the
+// whole city and over a PVS-like list (the objects near the neighbourhood, as a server asks):
+// the plain test tries every prism on every triangle, so the sets are known without them.
+TEST(EpsilonSuperset, WorkSavingShortcutsGiveThePlainTestsSetOnCity1AndOverObjectLists) {
+  const Scene s = scenes::GenerateTestCity(true, 1);
+  const auto eps = Make(s);
+  const std::vector<Aabb> boxes = SampleNeighbourhoods(s, 12, 0.25 * TypicalObjectSize(s), 0.5, 11);
+  ASSERT_EQ(boxes.size(), 12u);
+  const EpsilonOptions all = Options("all");
+  EpsilonOptions plain = all;  // the same boxes, occluders and rays, no shortcut
+  plain.hints = plain.shared_vertices = false;
+  // Without dropping hidden occluders, a kd-node box tested or not, or no hierarchy at all,
+  // cannot change the set either.
+  EpsilonOptions keep = all;
+  keep.drop_hidden_occluders = false;
+  EpsilonOptions keep_flat = keep;
+  keep_flat.hierarchy = false;
+  size_t visible = 0, total = 0;
+  for (size_t q = 0; q < boxes.size(); ++q) {
+    std::vector<ObjectId> near;
+    for (const scenes::Object& o : s.objects) {
+      const glm::dvec3 gap = glm::max(glm::dvec3(0.0), glm::max(o.bounds.min - boxes[q].max, boxes[q].min - o.bounds.max));
+      if (glm::length(glm::dvec2(gap)) < 150.0) near.push_back(o.id);
+    }
+    ASSERT_LT(near.size(), s.objects.size());
+    const EpsilonResult r = eps->Compute(boxes[q], all);
+    EXPECT_EQ(r.triangles, eps->Compute(boxes[q], plain).triangles) << q;
+    EXPECT_EQ(eps->Compute(boxes[q], all, near).triangles, eps->Compute(boxes[q], plain, near).triangles) << q;
+    EXPECT_EQ(eps->Compute(boxes[q], keep).triangles, eps->Compute(boxes[q], keep_flat).triangles) << q;
+    EXPECT_EQ(eps->Compute(boxes[q], keep, near).triangles, eps->Compute(boxes[q], keep_flat, near).triangles) << q;
+    visible += r.triangles.size();
+    total += r.stats.total_triangles;
+  }
+  // Not a trivial agreement: the sets are a small part of the city, and not empty.
+  EXPECT_GT(visible, 0u);
+  EXPECT_LT(visible, total / 10);
+}
+
 }  // namespace
 }  // namespace vistream::visibility

@@ -54,7 +54,8 @@ double MeanTriangles(const scenes::Scene& scene, const visibility::GlobalPvs& se
 }
 
 HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
-                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source) {
+                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source,
+                          int max_pixels) {
   HeatmapStats h;
   std::vector<uint64_t> cost(sets.cell_count(), 0);
   double sum = 0.0;
@@ -68,7 +69,7 @@ HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::Viewcell
   h.mean_triangles = sets.cell_count() > 0 ? sum / static_cast<double>(sets.cell_count()) : 0.0;
   scenes::Aabb area = grid.Bounds();
   area.Extend(scene.bounds);
-  TopViewMap map(area, 2048, Rgb{250, 250, 250});
+  TopViewMap map(area, max_pixels, Rgb{250, 250, 250});
   const double top = std::log1p(static_cast<double>(std::max<uint64_t>(h.max_triangles, 1)));
   for (visibility::CellId c = 0; c < sets.cell_count(); ++c) {
     const scenes::Aabb b = grid.CellBox(c);
@@ -76,12 +77,20 @@ HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::Viewcell
     map.FillPolygon(square, Ramp(std::log1p(static_cast<double>(cost[c])) / top), /*antialias=*/false);
   }
   const Rgb outline{40, 40, 40};
-  for (const auto& oc : scene.occluders) map.StrokePolygon(oc.footprint, outline, 0.6);
+  h.outlines = map.outlines_readable();
+  if (h.outlines) {
+    for (const auto& oc : scene.occluders) map.StrokePolygon(oc.footprint, outline, 0.6);
+  }
   map.SetTitle(absl::StrCat(scene.name, ": PVS cost of every viewcell (", source, ")"),
                absl::StrFormat("%zu viewcells of %g m; mean %.0f, max %llu triangles per viewcell", sets.cell_count(),
                                grid.cell_size(), h.mean_triangles, static_cast<unsigned long long>(h.max_triangles)));
-  map.AddLegend(outline, "building footprint", Swatch::kOutline);
+  if (h.outlines) {
+    map.AddLegend(outline, "building footprint", Swatch::kOutline);
+  } else {
+    map.AddNote(absl::StrFormat("footprints outlined below %g m per pixel only", TopViewMap::kOutlineMetresPerPixel));
+  }
   map.SetColourBar("PVS cost (triangles per viewcell, log scale)", static_cast<double>(std::max<uint64_t>(h.max_triangles, 1)));
+  h.metres_per_pixel = map.metres_per_pixel();
   h.width = map.width();
   h.height = map.height();
   h.status = map.WritePng(png);

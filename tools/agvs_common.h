@@ -39,12 +39,17 @@ struct HeatmapStats {
   absl::Status status;
   uint64_t max_triangles = 0;
   double mean_triangles = 0.0;
-  int width = 0, height = 0;
+  int width = 0, height = 0;  // the whole image, pixels
+  double metres_per_pixel = 0.0;
+  bool outlines = false;  // footprints outlined (only where a pixel is fine enough to read them)
 };
-// Writes a PNG of every cell coloured by its PVS cost (triangles, on a log ramp), with the
-// building footprints outlined over it. `source` says where the sets came from (for the
-// map's title: "AGVS, 10 s", "PVS file x.pvs").
+// Writes a PNG of every cell coloured by its PVS cost (triangles, on a log ramp), the map
+// `max_pixels` (16..16384) on its longer side. The building footprints are outlined over it
+// where a pixel is under TopViewMap::kOutlineMetresPerPixel; on a coarser map the legend says
+// they are left out. `source` says where the sets came from (for the map's title: "AGVS,
+// 10 s", "PVS file x.pvs"). Errors (in `status`) name the PNG.
 HeatmapStats WriteHeatmap(const scenes::Scene& scene, const visibility::ViewcellGrid& grid,
-                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source);
+                          const visibility::GlobalPvs& sets, const std::string& png, const std::string& source,
+                          int max_pixels);
 
 }  // namespace vistream::tools

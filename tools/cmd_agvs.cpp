@@ -137,6 +137,7 @@ struct HeatmapArgs {
   std::string scene, pvs, out, filter = "none";
   double seconds = 0.0, cell_size = 0.0;
   uint64_t seed = 1;
+  int size = 2048;
   bool json = false;
 };
 
@@ -163,7 +164,7 @@ int Heatmap(const HeatmapArgs& a) {
   }
   const std::string source = !a.pvs.empty() ? "PVS file " + std::filesystem::path(a.pvs).filename().string()
                                              : absl::StrFormat("AGVS, %g s of sampling", a.seconds);
-  const HeatmapStats h = WriteHeatmap(s->scene, s->grid, sets, a.out, source);
+  const HeatmapStats h = WriteHeatmap(s->scene, s->grid, sets, a.out, source, a.size);
   if (!h.status.ok()) return Fail(h.status);
   if (a.json) {
     nlohmann::json j;
@@ -174,6 +175,8 @@ int Heatmap(const HeatmapArgs& a) {
     j["mean_pvs_triangles"] = h.mean_triangles;
     j["width"] = h.width;
     j["height"] = h.height;
+    j["metres_per_pixel"] = h.metres_per_pixel;
+    j["footprint_outlines"] = h.outlines;
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
   }
@@ -217,6 +220,10 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   hm->add_option("--seed", h->seed, "random seed")->check(WholeRange(0, kMaxSeed));
   hm->add_option("-o", h->out, "the PNG to write")->required();
+  hm->add_option("--size", h->size,
+                 absl::StrFormat("the map's pixels on its longer side (default 2048); footprints are outlined only "
+                                 "below %g m per pixel", TopViewMap::kOutlineMetresPerPixel))
+      ->check(WholeRange(16, 16384));
   hm->add_flag("--json", h->json, "print the result as JSON");
   hm->callback([h, done] { done(Heatmap(*h)); });
 }

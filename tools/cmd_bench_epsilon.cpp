@@ -1,6 +1,8 @@
 // vistream bench epsilon: Tables 1 and 2 of Cohen-Or & Zadicario 1998 with this project's
 // numbers: culling over random ground-level neighbourhoods, and the time each optimisation
 // column takes, all columns over the same neighbourhoods in one run.
+#include <time.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <map>
@@ -47,9 +49,30 @@ const std::map<std::string, PaperTable2> kPaperTable2 = {{"none", {30170, -1, 29
                                                          {"paper", {7030, 5550, 1390, 42414, 38648}},
                                                          {"all", {7030, 5550, 1390, 42414, 38648}}};
 
+// One neighbourhood's figures in one column, for --json's per-neighbourhood list: where the
+// time goes, and a digest of the superset (to compare builds set by set).
+struct QueryFigures {
+  double ms = 0, box_ms = 0, polygon_ms = 0, cpu_ms = 0;
+  uint64_t traversals = 0, box_tests = 0, polygon_tests = 0, rays = 0, tested_triangles = 0, visible_triangles = 0;
+  uint64_t occluded_boxes = 0, digest = 0;
+};
+
+// FNV-1a over the sorted triangle ids: equal sets give equal digests.
+uint64_t Digest(const std::vector<uint32_t>& triangles) {
+  uint64_t h = 1469598103934665603ull;
+  for (uint32_t t : triangles) {
+    for (int b = 0; b < 4; ++b) {
+      h ^= (t >> (8 * b)) & 0xffu;
+      h *= 1099511628211ull;
+    }
+  }
+  return h;
+}
+
 struct Column {
   std::string opt;
-  std::vector<double> ms;
+  std::vector<double> ms, cpu_ms;
+  std::vector<QueryFigures> queries;
   double box_ms = 0, polygon_ms = 0, rays = 0, traversals = 0, box_tests = 0, polygon_tests = 0;
   double visible_triangles = 0, total_triangles = 0, occluded_boxes = 0, total_boxes = 0, first_occluders = 0;
 };
@@ -58,6 +81,14 @@ double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const size_t n = v.size();
   return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// This thread's CPU time in ms: unlike the wall-clock times, it leaves out the time the
+// thread waits for a core on a loaded machine.
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
 std::string Paper(double v) { return v < 0 ? "-" : absl::StrFormat("%.0f", v); }
@@ -113,8 +144,10 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
   for (size_t k = 0; k < boxes.size(); ++k) {
     std::vector<uint32_t> reference;
     for (size_t c = 0; c < options.size(); ++c) {
+      const double cpu0 = ThreadCpuMs();
       const visibility::EpsilonResult r =
           a.pvs_cell > 0 ? (*eps)->Compute(boxes[k], options[c], pvs[k]) : (*eps)->Compute(boxes[k], options[c]);
+      const double cpu_ms = ThreadCpuMs() - cpu0;
       // Every column is the same conservative test with different shortcuts: a column that
       // drops hidden occluders may keep more, none may keep less than the first column.
       if (c == 0) {
@@ -127,6 +160,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
       Column& col = columns[c];
       const visibility::EpsilonStats& s = r.stats;
       col.ms.push_back(s.ms);
+      col.cpu_ms.push_back(cpu_ms);
+      col.queries.push_back({s.ms, s.box_ms, s.polygon_ms, cpu_ms, s.traversals, s.box_ray_tests, s.polygon_ray_tests, s.rays,
+                             s.tested_triangles, s.visible_triangles, s.occluded_boxes, Digest(r.triangles)});
       col.box_ms += s.box_ms;
       col.polygon_ms += s.polygon_ms;
       col.rays += static_cast<double>(s.rays);
@@ -177,16 +213,46 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
     for (const Column& c : columns) {
       double sum = 0;
       for (double m : c.ms) sum += m;
+      // Per neighbourhood, in sample order; the digest (hex) of its superset, and of all of them.
+      nlohmann::json per = nlohmann::json::array();
+      uint64_t all = 1469598103934665603ull;
+      for (size_t k = 0; k < c.queries.size(); ++k) {
+        const QueryFigures& f = c.queries[k];
+        const scenes::Aabb& b = boxes[k];
+        per.push_back({{"centre", {b.Centre().x, b.Centre().y, b.Centre().z}},
+                       {"pvs_objects", a.pvs_cell > 0 ? pvs[k].size() : 0},
+                       {"ms", f.ms},
+                       {"box_ms", f.box_ms},
+                       {"polygon_ms", f.polygon_ms},
+                       {"cpu_ms", f.cpu_ms},
+                       {"traversals", f.traversals},
+                       {"box_ray_tests", f.box_tests},
+                       {"polygon_ray_tests", f.polygon_tests},
+                       {"rays", f.rays},
+                       {"occluded_boxes", f.occluded_boxes},
+                       {"tested_triangles", f.tested_triangles},
+                       {"visible_triangles", f.visible_triangles},
+                       {"digest", absl::StrFormat("%016x", f.digest)}});
+        all = (all ^ f.digest) * 1099511628211ull;
+      }
       j["table2"].push_back({{"opt", c.opt},
                              {"ms", sum / n},
                              {"median_ms", Median(c.ms)},
+                             {"cpu_ms", [&] {
+                                double cpu = 0;
+                                for (double m : c.cpu_ms) cpu += m;
+                                return cpu / n;
+                              }()},
+                             {"median_cpu_ms", Median(c.cpu_ms)},
                              {"box_ms", mean(c.box_ms)},
                              {"polygon_ms", mean(c.polygon_ms)},
                              {"rays", mean(c.rays)},
                              {"traversals", mean(c.traversals)},
                              {"box_ray_tests", mean(c.box_tests)},
                              {"polygon_ray_tests", mean(c.polygon_tests)},
-                             {"visible_triangles", mean(c.visible_triangles)}});
+                             {"visible_triangles", mean(c.visible_triangles)},
+                             {"digest", absl::StrFormat("%016x", all)},
+                             {"per_neighbourhood", per}});
     }
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
@@ -238,6 +304,16 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
       },
       [](const PaperTable2& p) { return p.total_ms; });
   row2("total time, median", [&](const Column& c) { return fmt(Median(c.ms)); }, [](const PaperTable2&) { return -1.0; });
+  row2(
+      "thread CPU time, mean",
+      [&](const Column& c) {
+        double sum = 0;
+        for (double m : c.cpu_ms) sum += m;
+        return fmt(sum / n);
+      },
+      [](const PaperTable2&) { return -1.0; });
+  row2("thread CPU time, median", [&](const Column& c) { return fmt(Median(c.cpu_ms)); },
+       [](const PaperTable2&) { return -1.0; });
   row2("box occlusion time", [&](const Column& c) { return fmt(mean(c.box_ms)); },
        [](const PaperTable2& p) { return p.box_ms; });
   row2("polygon occlusion time", [&](const Column& c) { return fmt(mean(c.polygon_ms)); },

@@ -194,11 +194,7 @@ void Table1Section(Page& page, const Plan& plan) {
   page.Text("The exact planar test (CGAL), which the overestimation is measured against:");
   page.Table({"viewcell", "exact ms", "exact PVS objects"}, exact);
 
-  GnuplotPlot plot;
-  plot.png = page.Path("table1_" + plan.table1_scene + ".png");
-  plot.width = 1200;
-  plot.height = 1000;
-  plot.keep_sources = true;
+  GnuplotPlot plot = GnuplotPlot::Kept(page.Path("table1_" + plan.table1_scene + ".png"), 1200, 1000);
   std::string ms_plot, over_plot;
   int k = 0;
   for (auto& [size_backend, d] : series) {
@@ -338,7 +334,7 @@ void HeatmapSection(Page& page, const Plan& plan) {
   const std::string png = "heatmap_" + plan.heatmap_scene + ".png";
   const std::optional<json> h =
       page.Run("agvs heatmap", {"agvs", "heatmap", "--scene", plan.heatmap_scene, "--seconds", plan.heatmap_seconds,
-                                "-o", page.Path(png), "--json"});
+                                "-o", page.Path(png), "--size", kMapPixels, "--json"});
   if (!h) return;
   page.Table({"scene", "viewcells", "mean PVS triangles", "max PVS triangles"},
              {{h->value("scene", ""), Int(h->at("cells")), Fixed(h->at("mean_pvs_triangles"), 0),

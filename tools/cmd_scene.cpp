@@ -245,9 +245,17 @@ int Map(const MapArgs& a) {
   for (const auto& oc : scene->occluders) order.push_back(&oc);
   std::sort(order.begin(), order.end(), [](auto* x, auto* y) { return x->height < y->height; });
   const double top = std::max(1.0, scene->bounds.max.z);
+  // Where a footprint is a few pixels, smoothed edges blend every building into its
+  // neighbours: no outline to read, and colours that swell the PNG (london: 3.6 MB). There
+  // the footprints are filled pixel-sharp and not outlined.
+  const bool outlines = map.outlines_readable();
   for (const scenes::Occluder25D* oc : order) {
     // Log scale: two-storey houses and 300 m towers both stay distinguishable.
-    map.FillPolygon(oc->footprint, Ramp(std::log1p(oc->height) / std::log1p(top)));
+    map.FillPolygon(oc->footprint, Ramp(std::log1p(oc->height) / std::log1p(top)), /*antialias=*/outlines);
+  }
+  const Rgb outline{60, 60, 60};
+  if (outlines) {
+    for (const scenes::Occluder25D* oc : order) map.StrokePolygon(oc->footprint, outline, 0.6);
   }
   const Rgb walk_colour{220, 30, 30};
   for (const scenes::WalkPath& w : walks) {
@@ -260,6 +268,12 @@ int Map(const MapArgs& a) {
                absl::StrFormat("%zu objects, %zu footprints, %.0f x %.0f m, tallest %.1f m", scene->objects.size(),
                                order.size(), b.max.x - b.min.x, b.max.y - b.min.y, b.max.z));
   for (const scenes::WalkPath& w : walks) map.AddLegend(walk_colour, "walk '" + w.name + "'", Swatch::kLine);
+  if (outlines) {
+    map.AddLegend(outline, "building footprint edge", Swatch::kOutline);
+  } else {
+    map.AddNote(absl::StrFormat("footprints outlined below %g m per pixel only",
+                                TopViewMap::kOutlineMetresPerPixel));
+  }
   map.SetColourBar("building height (m, log scale)", top);
   if (absl::Status s = map.WritePng(a.output); !s.ok()) return Fail(s);
   std::printf("wrote %s: %d x %d pixels, %.2f m per pixel, %zu footprints, %zu walks\n", a.output.c_str(),

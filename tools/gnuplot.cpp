@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <utility>
 
 #include <absl/strings/str_cat.h>
 
@@ -24,6 +25,15 @@ std::string GnuplotQuote(const std::string& s) {
     if (c == '\'') out += '\'';
   }
   return out + "'";
+}
+
+GnuplotPlot GnuplotPlot::Kept(std::string png, int width, int height) {
+  GnuplotPlot plot;
+  plot.png = std::move(png);
+  plot.width = width;
+  plot.height = height;
+  plot.keep_sources = true;
+  return plot;
 }
 
 absl::Status RunGnuplot(const GnuplotPlot& plot) {

@@ -24,6 +24,10 @@ struct GnuplotPlot {
   // Keep the script and the data beside the PNG (OUT.gp, OUT.<name>) so that the figure can
   // be redrawn; else they go to a temporary folder that is removed afterwards.
   bool keep_sources = false;
+
+  // A `width` x `height` pixel plot to `png` whose script and data are kept beside it: the
+  // report's figures, which a reader can redraw. The caller adds the script and the data.
+  static GnuplotPlot Kept(std::string png, int width, int height);
 };
 
 // Writes the script and data, runs gnuplot (VISTREAM_GNUPLOT if set, else `gnuplot` on PATH)

@@ -47,11 +47,7 @@ std::vector<std::string> Head(const std::string& first) {
 // Stalls (top) and margins (bottom) against x: one file, columns x, stalls, min, mean margin.
 GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const std::string& xlabel,
                       const std::vector<std::pair<double, json>>& points) {
-  GnuplotPlot plot;
-  plot.png = png;
-  plot.width = 1100;
-  plot.height = 900;
-  plot.keep_sources = true;
+  GnuplotPlot plot = GnuplotPlot::Kept(png, 1100, 900);
   GnuplotData d{"sweep.dat", "# x, stalled time (% of the walk), min margin (s), mean margin (s)\n"};
   for (const auto& point : points) {
     const double x = point.first;
@@ -219,11 +215,7 @@ void LatencySection(Page& page, const LatencyPlan& plan) {
   rows.clear();
   for (const json& j : by_scheme) rows.push_back(Row(j.value("scheme", "?"), j));
   page.Table(Head("scheme"), rows);
-  GnuplotPlot bytes;
-  bytes.png = page.Path("latency_bytes_" + plan.scene + ".png");
-  bytes.width = 1000;
-  bytes.height = 650;
-  bytes.keep_sources = true;
+  GnuplotPlot bytes = GnuplotPlot::Kept(page.Path("latency_bytes_" + plan.scene + ".png"), 1000, 650);
   GnuplotData d{"bytes.dat", "# scheme, MB sent\n"};
   for (const json& j : by_scheme) {
     if (j.contains("bytes") && j.at("bytes").is_number()) {

@@ -85,8 +85,9 @@ TopViewMap::TopViewMap(const scenes::Aabb& bounds, int max_pixels, Rgb backgroun
   const double h = std::max(bounds.max.y - bounds.min.y, 1e-6);
   max_pixels = std::clamp(max_pixels, 16, 16384);
   scale_ = std::max(w, h) / max_pixels;
-  width_ = std::max(1, static_cast<int>(std::ceil(w / scale_)));
-  height_ = std::max(1, static_cast<int>(std::ceil(h / scale_)));
+  // The longer side is max_pixels exactly: w / (w / n) can round to a hair above n.
+  width_ = std::max(1, static_cast<int>(std::ceil(w / scale_ - 1e-6)));
+  height_ = std::max(1, static_cast<int>(std::ceil(h / scale_ - 1e-6)));
   min_ = glm::dvec2(bounds.min.x, bounds.min.y);
   ui_ = std::clamp(max_pixels / 1200.0, 0.8, 3.0);
   surface_ = cairo_image_surface_create(CAIRO_FORMAT_RGB24, width_, height_);

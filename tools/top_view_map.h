@@ -52,6 +52,11 @@ class TopViewMap {
   int map_width() const { return width_; }
   int map_height() const { return height_; }
   double metres_per_pixel() const { return scale_; }
+  // Whether footprint outlines read at this scale: a pixel under kOutlineMetresPerPixel. On a
+  // coarser map a street is a pixel or two, the strokes of neighbouring buildings merge into
+  // noise, and that noise is most of the PNG's bytes (london at 9 m a pixel: several MB).
+  static constexpr double kOutlineMetresPerPixel = 1.5;
+  bool outlines_readable() const { return scale_ < kOutlineMetresPerPixel; }
   // The whole image WritePng writes (map, frame, title, axes, legend).
   int width() const;
   int height() const;
