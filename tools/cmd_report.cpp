@@ -32,6 +32,7 @@
 #include "tools/commands.h"
 #include "tools/gnuplot.h"
 #include "tools/report_latency.h"
+#include "tools/report_pace.h"
 #include "tools/report_page.h"
 #include "tools/subprocess.h"
 
@@ -59,6 +60,7 @@ struct Plan {
   std::string heatmap_scene, heatmap_seconds;
   std::string map_scene;
   LatencyPlan latency;
+  PacePlan pace;
 };
 
 Plan PlanFor(bool quick) {
@@ -83,6 +85,7 @@ Plan PlanFor(bool quick) {
     p.map_scene = "london";
   }
   p.latency = LatencyPlanFor(quick);
+  p.pace = PacePlanFor(quick);
   return p;
 }
 
@@ -376,6 +379,7 @@ int Report(const ReportArgs& given) {
   Table1Section(page, plan);
   EpsilonSection(page, plan);
   AgvsSection(page, plan);
+  PaceSection(page, plan.pace);
   LatencySection(page, plan.latency);
   MapsSection(page, plan);
   HeatmapSection(page, plan);
