@@ -134,6 +134,36 @@ bool StrictlyInside(const OccluderPiece& piece, const glm::dvec2& q) {
   return inside;
 }
 
+// Among one pair's contacts out[begin..], drops each whose box (in xy) lies within another's
+// (of two with equal boxes, the later). The fuse test of a planar query asks whether some
+// contact's extent along the separating axis meets a strip; a contact's extent then lies
+// within the other's, and the planar frame's map of a coordinate is monotone even in
+// floating point, so the other one answers yes whenever the dropped one would: the same
+// blockers, from far fewer contacts (a triangulated footprint's triangles meet at shared
+// vertices through many edge pairs, each recording the same point).
+void DropCoveredContacts(std::vector<PieceContact>* out, size_t begin) {
+  auto& c = *out;
+  const size_t end = c.size();
+  auto covers = [&](size_t y, size_t x) {  // contact y's box holds contact x's
+    const glm::dvec2 lx = glm::min(c[x].w0, c[x].w1), hx = glm::max(c[x].w0, c[x].w1);
+    const glm::dvec2 ly = glm::min(c[y].w0, c[y].w1), hy = glm::max(c[y].w0, c[y].w1);
+    return ly.x <= lx.x && ly.y <= lx.y && hx.x <= hy.x && hx.y <= hy.y;
+  };
+  // Decided for all first, then compacted: every contact is compared with all the others.
+  std::vector<uint8_t> drop(end - begin, 0);
+  for (size_t x = begin; x < end; ++x) {
+    for (size_t y = begin; y < end && drop[x - begin] == 0; ++y) {
+      // Of two contacts with equal boxes, the earlier one stays.
+      drop[x - begin] = y != x && covers(y, x) && (y < x || !covers(x, y));
+    }
+  }
+  size_t kept = begin;
+  for (size_t x = begin; x < end; ++x) {
+    if (drop[x - begin] == 0) c[kept++] = c[x];
+  }
+  c.resize(kept);
+}
+
 // Every way two pieces touch, as witnesses lying in both: collinear overlaps of edges,
 // crossings and touchings of edges, and containment.
 void FindContacts(uint32_t ia, uint32_t ib, const OccluderPiece& a, const OccluderPiece& b,
@@ -175,7 +205,10 @@ void FindContacts(uint32_t ia, uint32_t ib, const OccluderPiece& a, const Occlud
       }
     });
   });
-  if (out->size() != before) return;
+  if (out->size() != before) {
+    DropCoveredContacts(out, before);
+    return;
+  }
   if (StrictlyInside(a, b.points[0])) out->push_back({ia, ib, b.points[0], b.points[0]});
   else if (StrictlyInside(b, a.points[0])) out->push_back({ia, ib, a.points[0], a.points[0]});
 }

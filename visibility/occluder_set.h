@@ -27,6 +27,8 @@ struct OccluderPiece {
 
 // Pieces `a` and `b` share the segment [w0, w1] (w0 == w1 for a single point): it lies in
 // both closed pieces, so whatever part of it survives clipping both proves them connected.
+// A pair's contacts are few: none lies within the xy box of another of the same pair (that
+// other one survives any clip to a strip along x or y that the inner one survives).
 struct PieceContact {
   uint32_t a = 0, b = 0;
   glm::dvec2 w0{0.0}, w1{0.0};
