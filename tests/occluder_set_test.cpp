@@ -278,5 +278,29 @@ TEST(OccluderSet, NoContactLiesWithinAnotherOfTheSamePair) {
   }
 }
 
+// Pieces are stored along a space-filling curve, not in the scene's order: a grid of houses
+// listed in shuffled order comes out with neighbours mostly next to each other, which keeps
+// a shaft's pieces close together in memory.
+TEST(OccluderSet, PiecesAreStoredInSpatialOrder) {
+  scenes::Scene s;
+  for (int j = 0; j < 32; ++j) {
+    for (int i = 0; i < 32; ++i) {
+      const double x = 10.0 * i, y = 10.0 * j;
+      s.occluders.push_back({{{x, y}, {x + 6, y}, {x + 6, y + 6}, {x, y + 6}}, 5.0, 0});
+    }
+  }
+  scenes::Rng rng(11);
+  for (size_t k = s.occluders.size(); k > 1; --k) std::swap(s.occluders[k - 1], s.occluders[rng.Below(k)]);
+  const OccluderSet set = OccluderSet::Build(s);
+  ASSERT_EQ(set.pieces().size(), 1024u);
+  // On a Z-order curve 3 steps in 4 go to a house next door, diagonals included (at most
+  // 14.2 m); in shuffled order fewer than 1 in 100 do.
+  int next_door = 0;
+  for (size_t k = 1; k < set.pieces().size(); ++k) {
+    next_door += glm::length(set.pieces()[k].box_min - set.pieces()[k - 1].box_min) <= 14.2;
+  }
+  EXPECT_GE(next_door, 700);
+}
+
 }  // namespace
 }  // namespace vistream::visibility

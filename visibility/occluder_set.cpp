@@ -107,6 +107,20 @@ bool ClipToBox(const glm::dvec2& lo, const glm::dvec2& hi, std::vector<glm::dvec
   return pts.size() >= 3 && scenes::SignedArea(pts) > 0.0;
 }
 
+// Interleaves the bits of x and y (x in the even bits): the Z-order curve's index.
+uint64_t MortonCode(uint32_t x, uint32_t y) {
+  auto spread = [](uint64_t v) {
+    v &= 0xffffffffu;
+    v = (v | v << 16) & 0x0000ffff0000ffffull;
+    v = (v | v << 8) & 0x00ff00ff00ff00ffull;
+    v = (v | v << 4) & 0x0f0f0f0f0f0f0f0full;
+    v = (v | v << 2) & 0x3333333333333333ull;
+    v = (v | v << 1) & 0x5555555555555555ull;
+    return v;
+  };
+  return spread(x) | spread(y) << 1;
+}
+
 void Boxes(OccluderPiece* p) {
   p->box_min = glm::dvec2(INFINITY);
   p->box_max = glm::dvec2(-INFINITY);
@@ -258,6 +272,32 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
         add({fp[i], fp[(i + 1) % fp.size()]});
       }
     }
+  }
+
+  // Pieces in the order of a Z-order curve over their box centres (ties by their order so
+  // far): a shaft's pieces then lie close together in memory, where a scene's order (an OSM
+  // file's way ids, say) scatters them over the whole arrays.
+  {
+    glm::dvec2 lo(INFINITY), hi(-INFINITY);
+    for (const OccluderPiece& p : set.pieces_) {
+      lo = glm::min(lo, p.box_min);
+      hi = glm::max(hi, p.box_max);
+    }
+    const double span = std::max({hi.x - lo.x, hi.y - lo.y, 1e-9});
+    std::vector<std::pair<uint64_t, uint32_t>> keys(set.pieces_.size());
+    for (uint32_t id = 0; id < keys.size(); ++id) {
+      const OccluderPiece& p = set.pieces_[id];
+      const glm::dvec2 c = 0.5 * (p.box_min + p.box_max);
+      auto cell = [&](double v, double v0) {
+        return static_cast<uint32_t>(std::clamp((v - v0) / span * 65535.0, 0.0, 65535.0));
+      };
+      keys[id] = {MortonCode(cell(c.x, lo.x), cell(c.y, lo.y)), id};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<OccluderPiece> sorted;
+    sorted.reserve(keys.size());
+    for (const auto& k : keys) sorted.push_back(std::move(set.pieces_[k.second]));
+    set.pieces_.swap(sorted);
   }
 
   // The grid over all pieces.
