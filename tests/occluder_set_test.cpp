@@ -278,6 +278,37 @@ TEST(OccluderSet, NoContactLiesWithinAnotherOfTheSamePair) {
   }
 }
 
+// Every point's owner is the lowest-numbered piece that holds the very same point, found here
+// by brute force: the fused groups' hulls read a shared vertex from its owner only.
+TEST(OccluderSet, EachPointsOwnerIsTheFirstPieceHoldingIt) {
+  scenes::Scene s;
+  std::vector<glm::dvec2> comb;  // a comb: its triangles share vertices
+  for (int k = 0; k < 8; ++k) comb.insert(comb.end(), {{4.0 * k, 0.0}, {4.0 * k + 2, 0.0}, {4.0 * k + 2, 9.0}, {4.0 * k + 3, 9.0}});
+  comb.push_back({32.0, -5.0});
+  comb.push_back({0.0, -5.0});
+  s.occluders.push_back({comb, 8.0, 0});
+  scenes::Rng rng(5);
+  const scenes::Scene grid = testing::RandomGridScene(rng);  // neighbours share corners
+  s.occluders.insert(s.occluders.end(), grid.occluders.begin(), grid.occluders.end());
+  const OccluderSet set = OccluderSet::Build(s);
+  int shared = 0;
+  for (uint32_t id = 0; id < set.pieces().size(); ++id) {
+    const auto points = set.PointsOf(id);
+    const auto owners = set.PointOwnersOf(id);
+    ASSERT_EQ(owners.size(), points.size());
+    for (size_t k = 0; k < points.size(); ++k) {
+      uint32_t first = id;
+      for (uint32_t other = 0; other < id && first == id; ++other) {
+        const auto q = set.PointsOf(other);
+        if (std::find(q.begin(), q.end(), points[k]) != q.end()) first = other;
+      }
+      EXPECT_EQ(owners[k], first) << "piece " << id << ", point " << k;
+      shared += first != id;
+    }
+  }
+  EXPECT_GT(shared, 40);  // the comb's triangles alone share dozens
+}
+
 // Pieces are stored along a space-filling curve, not in the scene's order: a grid of houses
 // listed in shuffled order comes out with neighbours mostly next to each other, which keeps
 // a shaft's pieces close together in memory.
