@@ -226,7 +226,10 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
       const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
       if (lo <= hi) {
-        parent_[find(i)] = find(static_cast<uint32_t>(j));
+        // The later piece's root under the earlier one's: i runs upwards, so a group's first
+        // member stays its root and the trees stay flat (the other way round, a footprint's
+        // triangles, fused in order, made a chain that every find walked).
+        parent_[find(static_cast<uint32_t>(j))] = find(i);
         fused = true;
       }
     }
