@@ -393,21 +393,25 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     set.points_.insert(set.points_.end(), p.points.begin(), p.points.end());
     set.point_start_.push_back(static_cast<uint32_t>(set.points_.size()));
   }
-  // Each point's first holder: point slots sorted by (x, y, piece), one run per distinct point.
-  std::vector<uint32_t> slot(set.points_.size()), piece_of(set.points_.size());
+  // Each point's first holder: point slots sorted by (x, y, piece), one run per distinct
+  // point (the keys sorted by value, not through an index: a million of them on london).
+  struct Slot {
+    glm::dvec2 w;
+    uint32_t piece, slot;
+  };
+  std::vector<Slot> slots;
+  slots.reserve(set.points_.size());
   for (uint32_t id = 0; id < n; ++id) {
-    for (uint32_t k = set.point_start_[id]; k < set.point_start_[id + 1]; ++k) piece_of[k] = id;
+    for (uint32_t k = set.point_start_[id]; k < set.point_start_[id + 1]; ++k) slots.push_back({set.points_[k], id, k});
   }
-  std::iota(slot.begin(), slot.end(), 0u);
-  std::sort(slot.begin(), slot.end(), [&](uint32_t x, uint32_t y) {
-    const glm::dvec2 &a = set.points_[x], &b = set.points_[y];
-    return a.x < b.x || (a.x == b.x && (a.y < b.y || (a.y == b.y && piece_of[x] < piece_of[y])));
+  std::sort(slots.begin(), slots.end(), [](const Slot& a, const Slot& b) {
+    return a.w.x < b.w.x || (a.w.x == b.w.x && (a.w.y < b.w.y || (a.w.y == b.w.y && a.piece < b.piece)));
   });
   set.point_owner_.resize(set.points_.size());
-  for (size_t r = 0; r < slot.size();) {
+  for (size_t r = 0; r < slots.size();) {
     size_t e = r + 1;
-    while (e < slot.size() && set.points_[slot[e]] == set.points_[slot[r]]) ++e;
-    for (size_t k = r; k < e; ++k) set.point_owner_[slot[k]] = piece_of[slot[r]];
+    while (e < slots.size() && slots[e].w == slots[r].w) ++e;
+    for (size_t k = r; k < e; ++k) set.point_owner_[slots[k].slot] = slots[r].piece;
     r = e;
   }
   return set;
