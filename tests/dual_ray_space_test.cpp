@@ -772,5 +772,40 @@ TEST(DualRaySpace, NeverOccludedWhileASegmentReachesBWhateverTheCellSize) {
   EXPECT_GT(occluded, cases / 20) << occluded << " of " << cases;
 }
 
+// A tall house and a low one share a wall along the shaft; the sloping ceiling clips the low
+// one to its near part. Fused, they block as the hull of the tall house and the low house's
+// clipped part: five corners, one of them the shared wall's far end, which the tall house
+// must bring though the low house also holds it (and may own it) before clipping.
+TEST(DualRaySpace, AFusedGroupKeepsASharedCornerThatClippingTookFromItsOwner) {
+  const Aabb a = Box(-10, 0, 0, 0, 10, 2), b = Box(30, 0, 0, 40, 10, 12);
+  PlanarProblem pr;
+  ASSERT_TRUE(MakePlanarProblem(a, b, 0, 1.0, &pr));
+  ASSERT_DOUBLE_EQ(pr.alpha, 2.0);  // T: z = 2 + p / 4 in the frame at A's corner (-10, 0)
+  ASSERT_DOUBLE_EQ(pr.beta, 0.25);
+  bool low_owns = false;
+  for (const bool low_below : {false, true}) {
+    // Planar p = x + 10: both houses span p 12..30; the low one (7 m) rises above T for p < 20.
+    const double tall_y = low_below ? 4 : -1, low_y = low_below ? -1 : 4;
+    Scene s;
+    s.occluders = {Rect(2, tall_y, 20, tall_y + 5, 20), Rect(2, low_y, 20, low_y + 5, 7)};
+    const OccluderSet set = OccluderSet::Build(s);
+    ASSERT_EQ(set.pieces().size(), 2u);
+    const uint32_t low = set.pieces()[0].height == 7 ? 0 : 1;
+    const glm::dvec2 far_end(20, 4);
+    const auto points = set.PointsOf(1 - low);
+    const size_t k = static_cast<size_t>(std::find(points.begin(), points.end(), far_end) - points.begin());
+    ASSERT_LT(k, points.size());
+    low_owns |= set.PointOwnersOf(1 - low)[k] == low;
+    DualRaySpace drs(set);
+    drs.BuildBlockers(pr);
+    ASSERT_EQ(drs.blockers().groups.size(), 1u) << "the houses fuse along their wall";
+    const Blocker& g = drs.blockers().groups[0];
+    // Hull in (p, q): (12, q0), (30, q0), (30, 4) - the far end -, (20, q1), (12, q1) and the
+    // like when the low house is below.
+    EXPECT_EQ(g.end - g.begin, 5u) << (low_below ? "low house below" : "low house above");
+  }
+  EXPECT_TRUE(low_owns) << "neither layout let the clipped house own the shared corner";
+}
+
 }  // namespace
 }  // namespace vistream::visibility

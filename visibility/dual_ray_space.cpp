@@ -157,6 +157,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   // Kept pieces' points go to kept_points_, piece i's from kept_begin_[i].
   kept_.clear();
   kept_begin_.clear();
+  kept_clipped_.clear();
   kept_points_.clear();
   lo_.clear();
   hi_.clear();
@@ -175,7 +176,8 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       kept_points_.resize(begin);
       continue;
     }
-    if (p_min < lo || p_max > hi) {
+    const bool clipped = p_min < lo || p_max > hi;
+    if (clipped) {
       planar_.assign(kept_points_.begin() + static_cast<ptrdiff_t>(begin), kept_points_.end());
       ClipStrip(planar_, lo, hi, &clipped_, &clip_tmp_);
       kept_points_.resize(begin);
@@ -198,6 +200,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
     local_[id] = static_cast<int32_t>(kept_.size());
     kept_.push_back(id);
     kept_begin_.push_back(static_cast<uint32_t>(begin));
+    kept_clipped_.push_back(clipped);
     lo_.push_back(lo);
     hi_.push_back(hi);
   }
@@ -223,12 +226,14 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       const double lo = std::max({std::min(w0, w1), lo_[i], lo_[j]});
       const double hi = std::min({std::max(w0, w1), hi_[i], hi_[j]});
       if (lo <= hi) {
-        parent_[find(i)] = find(static_cast<uint32_t>(j));
+        // The later piece's root under the earlier one's: i runs upwards, so a group's first
+        // member stays its root and the trees stay flat (the other way round, a footprint's
+        // triangles, fused in order, made a chain that every find walked).
+        parent_[find(static_cast<uint32_t>(j))] = find(i);
         fused = true;
       }
     }
   }
-  for (uint32_t id : kept) local_[id] = -1;
 
   // Each blocker blocks exactly the rays that separate its points, so only the convex hull of
   // its points matters: g is affine in the point. Turn the hull vertices into coefficients. A
@@ -254,10 +259,26 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       if (end == n + 1) {
         AddGroup(pr, points_of(order_[n]));
       } else {
+        // A point that the group holds twice (a vertex shared by a footprint's triangles) is
+        // read once: where its owner is an unclipped member, from the owner only. The same
+        // points, so the same hull, from a third as many to sort.
         group_points_.clear();
+        const uint32_t root = parent_[order_[n]];
         for (size_t m = n; m < end; ++m) {
-          const auto pts = points_of(order_[m]);
-          group_points_.insert(group_points_.end(), pts.begin(), pts.end());
+          const uint32_t i = order_[m];
+          const auto pts = points_of(i);
+          if (kept_clipped_[i]) {
+            group_points_.insert(group_points_.end(), pts.begin(), pts.end());
+            continue;
+          }
+          const auto owners = occluders_.PointOwnersOf(kept[i]);
+          for (size_t k = 0; k < pts.size(); ++k) {
+            if (owners[k] != kept[i]) {
+              const int32_t j = local_[owners[k]];
+              if (j >= 0 && parent_[j] == root && !kept_clipped_[j]) continue;
+            }
+            group_points_.push_back(pts[k]);
+          }
         }
         ConvexHull(&group_points_, &hull_scratch_);
         AddGroup(pr, group_points_);
@@ -265,6 +286,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       n = end;
     }
   }
+  for (uint32_t id : kept) local_[id] = -1;
   // Widest first: a row usually fills after a few blockers, and the rest are skipped.
   std::sort(blockers_.groups.begin(), blockers_.groups.end(),
             [](const Blocker& x, const Blocker& y) { return x.width > y.width; });

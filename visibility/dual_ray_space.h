@@ -176,6 +176,7 @@ class DualRaySpace {
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_, hull_scratch_;
   std::vector<glm::dvec2> kept_points_;  // the kept pieces' clipped points, one after another
   std::vector<uint32_t> kept_, kept_begin_, order_, group_start_;
+  std::vector<uint8_t> kept_clipped_;  // whether kept piece i was clipped to its strip
 };
 
 }  // namespace vistream::visibility

@@ -107,6 +107,20 @@ bool ClipToBox(const glm::dvec2& lo, const glm::dvec2& hi, std::vector<glm::dvec
   return pts.size() >= 3 && scenes::SignedArea(pts) > 0.0;
 }
 
+// Interleaves the bits of x and y (x in the even bits): the Z-order curve's index.
+uint64_t MortonCode(uint32_t x, uint32_t y) {
+  auto spread = [](uint64_t v) {
+    v &= 0xffffffffu;
+    v = (v | v << 16) & 0x0000ffff0000ffffull;
+    v = (v | v << 8) & 0x00ff00ff00ff00ffull;
+    v = (v | v << 4) & 0x0f0f0f0f0f0f0f0full;
+    v = (v | v << 2) & 0x3333333333333333ull;
+    v = (v | v << 1) & 0x5555555555555555ull;
+    return v;
+  };
+  return spread(x) | spread(y) << 1;
+}
+
 void Boxes(OccluderPiece* p) {
   p->box_min = glm::dvec2(INFINITY);
   p->box_max = glm::dvec2(-INFINITY);
@@ -132,6 +146,36 @@ bool StrictlyInside(const OccluderPiece& piece, const glm::dvec2& q) {
   bool inside = true;
   ForEdges(piece, [&](const glm::dvec2& a, const glm::dvec2& b) { inside &= Orient(a, b, q) > 0; });
   return inside;
+}
+
+// Among one pair's contacts out[begin..], drops each whose box (in xy) lies within another's
+// (of two with equal boxes, the later). The fuse test of a planar query asks whether some
+// contact's extent along the separating axis meets a strip; a contact's extent then lies
+// within the other's, and the planar frame's map of a coordinate is monotone even in
+// floating point, so the other one answers yes whenever the dropped one would: the same
+// blockers, from far fewer contacts (a triangulated footprint's triangles meet at shared
+// vertices through many edge pairs, each recording the same point).
+void DropCoveredContacts(std::vector<PieceContact>* out, size_t begin) {
+  auto& c = *out;
+  const size_t end = c.size();
+  auto covers = [&](size_t y, size_t x) {  // contact y's box holds contact x's
+    const glm::dvec2 lx = glm::min(c[x].w0, c[x].w1), hx = glm::max(c[x].w0, c[x].w1);
+    const glm::dvec2 ly = glm::min(c[y].w0, c[y].w1), hy = glm::max(c[y].w0, c[y].w1);
+    return ly.x <= lx.x && ly.y <= lx.y && hx.x <= hy.x && hx.y <= hy.y;
+  };
+  // Decided for all first, then compacted: every contact is compared with all the others.
+  std::vector<uint8_t> drop(end - begin, 0);
+  for (size_t x = begin; x < end; ++x) {
+    for (size_t y = begin; y < end && drop[x - begin] == 0; ++y) {
+      // Of two contacts with equal boxes, the earlier one stays.
+      drop[x - begin] = y != x && covers(y, x) && (y < x || !covers(x, y));
+    }
+  }
+  size_t kept = begin;
+  for (size_t x = begin; x < end; ++x) {
+    if (drop[x - begin] == 0) c[kept++] = c[x];
+  }
+  c.resize(kept);
 }
 
 // Every way two pieces touch, as witnesses lying in both: collinear overlaps of edges,
@@ -175,7 +219,10 @@ void FindContacts(uint32_t ia, uint32_t ib, const OccluderPiece& a, const Occlud
       }
     });
   });
-  if (out->size() != before) return;
+  if (out->size() != before) {
+    DropCoveredContacts(out, before);
+    return;
+  }
   if (StrictlyInside(a, b.points[0])) out->push_back({ia, ib, b.points[0], b.points[0]});
   else if (StrictlyInside(b, a.points[0])) out->push_back({ia, ib, a.points[0], a.points[0]});
 }
@@ -225,6 +272,32 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
         add({fp[i], fp[(i + 1) % fp.size()]});
       }
     }
+  }
+
+  // Pieces in the order of a Z-order curve over their box centres (ties by their order so
+  // far): a shaft's pieces then lie close together in memory, where a scene's order (an OSM
+  // file's way ids, say) scatters them over the whole arrays.
+  {
+    glm::dvec2 lo(INFINITY), hi(-INFINITY);
+    for (const OccluderPiece& p : set.pieces_) {
+      lo = glm::min(lo, p.box_min);
+      hi = glm::max(hi, p.box_max);
+    }
+    const double span = std::max({hi.x - lo.x, hi.y - lo.y, 1e-9});
+    std::vector<std::pair<uint64_t, uint32_t>> keys(set.pieces_.size());
+    for (uint32_t id = 0; id < keys.size(); ++id) {
+      const OccluderPiece& p = set.pieces_[id];
+      const glm::dvec2 c = 0.5 * (p.box_min + p.box_max);
+      auto cell = [&](double v, double v0) {
+        return static_cast<uint32_t>(std::clamp((v - v0) / span * 65535.0, 0.0, 65535.0));
+      };
+      keys[id] = {MortonCode(cell(c.x, lo.x), cell(c.y, lo.y)), id};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<OccluderPiece> sorted;
+    sorted.reserve(keys.size());
+    for (const auto& k : keys) sorted.push_back(std::move(set.pieces_[k.second]));
+    set.pieces_.swap(sorted);
   }
 
   // The grid over all pieces.
@@ -319,6 +392,27 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
   for (const OccluderPiece& p : set.pieces_) {
     set.points_.insert(set.points_.end(), p.points.begin(), p.points.end());
     set.point_start_.push_back(static_cast<uint32_t>(set.points_.size()));
+  }
+  // Each point's first holder: point slots sorted by (x, y, piece), one run per distinct
+  // point (the keys sorted by value, not through an index: a million of them on london).
+  struct Slot {
+    glm::dvec2 w;
+    uint32_t piece, slot;
+  };
+  std::vector<Slot> slots;
+  slots.reserve(set.points_.size());
+  for (uint32_t id = 0; id < n; ++id) {
+    for (uint32_t k = set.point_start_[id]; k < set.point_start_[id + 1]; ++k) slots.push_back({set.points_[k], id, k});
+  }
+  std::sort(slots.begin(), slots.end(), [](const Slot& a, const Slot& b) {
+    return a.w.x < b.w.x || (a.w.x == b.w.x && (a.w.y < b.w.y || (a.w.y == b.w.y && a.piece < b.piece)));
+  });
+  set.point_owner_.resize(set.points_.size());
+  for (size_t r = 0; r < slots.size();) {
+    size_t e = r + 1;
+    while (e < slots.size() && slots[e].w == slots[r].w) ++e;
+    for (size_t k = r; k < e; ++k) set.point_owner_[slots[k].slot] = slots[r].piece;
+    r = e;
   }
   return set;
 }

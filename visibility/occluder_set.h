@@ -27,6 +27,8 @@ struct OccluderPiece {
 
 // Pieces `a` and `b` share the segment [w0, w1] (w0 == w1 for a single point): it lies in
 // both closed pieces, so whatever part of it survives clipping both proves them connected.
+// A pair's contacts are few: none lies within the xy box of another of the same pair (that
+// other one survives any clip to a strip along x or y that the inner one survives).
 struct PieceContact {
   uint32_t a = 0, b = 0;
   glm::dvec2 w0{0.0}, w1{0.0};
@@ -62,6 +64,13 @@ class OccluderSet {
     return {contact_other_.data() + contact_start_[piece], contact_start_[piece + 1] - contact_start_[piece]};
   }
 
+  // For each of PointsOf(piece), in order, the first piece (lowest id, maybe `piece` itself)
+  // that holds the very same point (equal coordinates): the triangles of a footprint share
+  // its vertices, and a fused group that holds the owner unclipped has the point already.
+  std::span<const uint32_t> PointOwnersOf(uint32_t piece) const {
+    return {point_owner_.data() + point_start_[piece], point_start_[piece + 1] - point_start_[piece]};
+  }
+
   const PieceBounds& bounds(uint32_t piece) const { return bounds_[piece]; }
   // pieces()[piece].points, from one array for all pieces (read where gathering is hot).
   std::span<const glm::dvec2> PointsOf(uint32_t piece) const {
@@ -92,6 +101,7 @@ class OccluderSet {
   std::vector<uint32_t> contact_start_, contact_index_, contact_other_;
   std::vector<glm::dvec2> points_;  // every piece's points, piece after piece
   std::vector<uint32_t> point_start_;
+  std::vector<uint32_t> point_owner_;  // parallel to points_: see PointOwnersOf
   // Uniform grid: cell (i, j) lists the pieces whose box overlaps it.
   glm::dvec2 grid_min_{0.0};
   double cell_ = 64.0;
