@@ -151,7 +151,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   for (ObjectId id = 0; id < scene.objects.size(); ++id) {
     if (!m.MakeObject(scene.objects[id].mesh, &m.objects[id])) {
       return absl::InvalidArgumentError(absl::StrCat("object ", id, " (", scene.objects[id].name,
-                                                     ") has a non-finite position or an index out of range"));
+                                                     ") has a non-finite position, an index out of range or 2^29 triangles or more"));
     }
     if (!m.objects[id].indices.empty()) m.Attach(id);
   }

@@ -234,9 +234,12 @@ class Worker {
     // Embree's geometry normal is cross(v1 - v0, v2 - v0), as the meshes' outward normals are
     // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
     h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
-    if (options_.backface_rule && !h.back && s_.has_coincident[h.object]) {
-      const uint32_t triangle = s_.objects[h.object].TriangleOf(h.quad, h.second);
-      h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
+    if (options_.backface_rule && !h.back && s_.coincident_quads[h.object] != nullptr) {
+      const uint32_t word = s_.coincident_quads[h.object][h.quad];
+      if (Impl::Object::HitsCoincident(word, h.second)) {
+        const uint32_t triangle = Impl::Object::TriangleOfWord(word, h.second);
+        h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
+      }
     }
     return h;
   }
