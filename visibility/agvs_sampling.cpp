@@ -2,6 +2,8 @@
 #include "visibility/agvs_internal.h"
 #include "visibility/discovery_rays.h"
 
+#include <tuple>
+
 // Drawing and casting samples: the worker each thread runs, a batch, sampling from a box.
 
 namespace vistream::visibility {
@@ -48,6 +50,10 @@ class Worker {
     Rng rng(seed);
     out_ = out;
     if (!plan.candidates.empty()) Gather(plan);
+    if (plan.dist == Distribution::kObjectDirection || plan.dist == Distribution::kTwoPoint) {
+      SurfaceChunk(plan.dist, rng);
+      return;
+    }
     for (uint32_t i = 0; i < kChunk; ++i) {
       switch (plan.dist) {
         case Distribution::kViewSpaceDirection: {
@@ -72,38 +78,10 @@ class Worker {
           Emit(smp);
           break;
         }
-        case Distribution::kObjectDirection: {
-          if (s_.surface.empty()) break;
-          glm::dvec3 n;
-          ObjectId o;
-          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
-          glm::dvec3 b1, b2;
-          Basis(n, &b1, &b2);
-          const auto [cos_phi, sin_phi] = UniformCircle(rng);
-          const double cos_t = std::sqrt(rng.Uniform()), sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
-          Sample smp;
-          smp.dist = plan.dist;
-          smp.origin = p;
-          smp.dir = sin_t * cos_phi * b1 + sin_t * sin_phi * b2 + cos_t * n;
-          const Hit h = Cast(p, smp.dir, kSurfaceOffset);
-          smp.valid = !h.back;
-          smp.t_fwd = h.t;
-          smp.fwd = h.object;
-          smp.t_rev = 0.0;
-          smp.rev = o;
-          Emit(smp);
+        case Distribution::kObjectDirection:
+        case Distribution::kTwoPoint:
+          // Drawn for the whole chunk at once (SurfaceChunk).
           break;
-        }
-        case Distribution::kTwoPoint: {
-          if (s_.surface.empty()) break;
-          CellId cell;
-          const glm::dvec3 v = ViewSpacePoint(rng, &cell);
-          glm::dvec3 n;
-          ObjectId o;
-          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
-          EmitSegment(v, p, plan.dist);
-          break;
-        }
         case Distribution::kTwoPointMutation: {
           const Candidate& c = candidates_[i];
           const double len = glm::length(c.to - c.from);  // positive: see add_candidate in Emit
@@ -151,6 +129,73 @@ class Worker {
     }
   }
 
+  // A chunk of object-direction or two-point samples, each of which starts from a surface
+  // point. The random numbers do not depend on what the samples hit, so the whole chunk's are
+  // drawn first, in the order one sample after the other draws them (the same samples as
+  // drawing and casting each in turn); the alias table's entries they pick are prefetched
+  // then, and read once all are on their way. The table is over 100 MB for a city: entry
+  // after entry, each would be a cache miss waited for alone.
+  void SurfaceChunk(Distribution dist, Rng& rng) {
+    if (s_.surface.empty()) return;
+    ahead_.resize(kChunk);
+    const double columns = static_cast<double>(s_.surface.size());
+    for (Ahead& a : ahead_) {
+      if (dist == Distribution::kTwoPoint) a.view = ViewSpacePoint(rng, &a.cell);
+      a.x = rng.Uniform() * columns;
+      a.u = rng.Uniform();
+      a.v = rng.Uniform();
+      if (dist == Distribution::kObjectDirection) {
+        std::tie(a.cos_phi, a.sin_phi) = UniformCircle(rng);
+        a.cos_t = std::sqrt(rng.Uniform());
+      }
+      a.entry = static_cast<uint32_t>(std::min(static_cast<size_t>(a.x), s_.surface.size() - 1));
+      PrefetchEntry(a.entry);
+    }
+    for (Ahead& a : ahead_) {
+      const Impl::SurfaceEntry& e = s_.surface[a.entry];
+      if (a.x - static_cast<double>(a.entry) >= e.keep) {
+        a.entry = e.alias;
+        PrefetchEntry(a.entry);
+      }
+    }
+    for (const Ahead& a : ahead_) {
+      glm::dvec3 n;
+      ObjectId o;
+      const glm::dvec3 p = PointOn(s_.surface[a.entry], a.u, a.v, &o, &n);
+      if (dist == Distribution::kTwoPoint) {
+        EmitSegment(a.view, p, dist);
+        continue;
+      }
+      glm::dvec3 b1, b2;
+      Basis(n, &b1, &b2);
+      const double sin_t = std::sqrt(std::max(0.0, 1.0 - a.cos_t * a.cos_t));
+      Sample smp;
+      smp.dist = dist;
+      smp.origin = p;
+      smp.dir = sin_t * a.cos_phi * b1 + sin_t * a.sin_phi * b2 + a.cos_t * n;
+      const Hit h = Cast(p, smp.dir, kSurfaceOffset);
+      smp.valid = !h.back;
+      smp.t_fwd = h.t;
+      smp.fwd = h.object;
+      smp.t_rev = 0.0;
+      smp.rev = o;
+      Emit(smp);
+    }
+  }
+  // A sample's random numbers, drawn ahead (SurfaceChunk).
+  struct Ahead {
+    glm::dvec3 view{0.0};  // two-point: the view space point
+    CellId cell = 0;
+    double x = 0.0, u = 0.0, v = 0.0;  // the surface point's: column (scaled), barycentrics
+    double cos_phi = 0.0, sin_phi = 0.0, cos_t = 0.0;  // object-direction: the direction's
+    uint32_t entry = 0;  // the alias table's entry: the column, then its alias if taken
+  };
+  void PrefetchEntry(uint32_t entry) const {
+    const char* p = reinterpret_cast<const char*>(&s_.surface[entry]);
+    __builtin_prefetch(p);
+    __builtin_prefetch(p + sizeof(Impl::SurfaceEntry) - 1);  // an entry may straddle two lines
+  }
+
   struct Hit {
     double t = kInf;
     ObjectId object = kNoObject;
@@ -174,9 +219,14 @@ class Worker {
     const size_t column = std::min(static_cast<size_t>(x), s_.surface.size() - 1);
     const Impl::SurfaceEntry* e = &s_.surface[column];
     if (x - static_cast<double>(column) >= e->keep) e = &s_.surface[e->alias];
-    *id = e->object;
-    const glm::dvec3 a(e->tri.a), e1(e->tri.e1), e2(e->tri.e2);
-    double u = rng.Uniform(), v = rng.Uniform();
+    const double u = rng.Uniform(), v = rng.Uniform();
+    return PointOn(*e, u, v, id, normal);
+  }
+
+  // The point of barycentrics (u, v), folded into the triangle, of the entry's triangle.
+  static glm::dvec3 PointOn(const Impl::SurfaceEntry& e, double u, double v, ObjectId* id, glm::dvec3* normal) {
+    *id = e.object;
+    const glm::dvec3 a(e.tri.a), e1(e.tri.e1), e2(e.tri.e2);
     if (u + v > 1.0) {
       u = 1.0 - u;
       v = 1.0 - v;
@@ -436,6 +486,7 @@ class Worker {
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
   std::vector<FanSurface::Hot> fans_;              // where their objects' surfaces lie
+  std::vector<Ahead> ahead_;                       // SurfaceChunk's draws
 
  public:
   void CountInto(Counts* counts) { counts_ = counts; }
