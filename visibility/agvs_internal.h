@@ -26,6 +26,7 @@
 #include "visibility/parallel.h"
 #include "visibility/pvs_file.h"
 #include "visibility/silhouette.h"
+#include "visibility/agvs_surface.h"
 
 namespace vistream::visibility {
 
@@ -264,16 +265,9 @@ struct GlobalSampler::Impl {
     RTCScene alone = nullptr;
   };
   std::vector<Object> objects;
-  // Surface points are drawn from a uniform alive object with surface area, then uniformly on
-  // its surface: as one choice of a triangle, from Walker's alias table over every triangle of
-  // those objects (one or two cache misses a point, where a search per object took several).
-  struct SurfaceEntry {
-    EdgeTriangle tri;
-    float keep;      // the chance to keep this triangle rather than take its alias
-    uint32_t alias;  // index into `surface`
-    ObjectId object;
-  };
-  std::vector<SurfaceEntry> surface;
+  // Where surface points are drawn (agvs_surface.h): from a uniform alive object with
+  // surface area, then uniformly on its surface.
+  SurfaceTable surface;
   glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
   Aabb view_space;                   // frame-relative
   double cell_radius = 0.0;
@@ -395,51 +389,12 @@ struct GlobalSampler::Impl {
     rtcCommitScene(rtc);
     dirty = false;
   }
-  // Vose's construction of the alias table.
   void RebuildSurface() {
-    surface.clear();
-    std::vector<double> weight;
-    size_t sampleable = 0;
+    std::vector<std::span<const EdgeTriangle>> tris(objects.size());
     for (ObjectId id = 0; id < objects.size(); ++id) {
-      const Object& o = objects[id];
-      if (!o.alive || !(o.area > 0.0)) continue;
-      ++sampleable;
-      const size_t first = weight.size();
-      double sum = 0.0;
-      for (const EdgeTriangle& t : o.tris) {
-        surface.push_back({t, 1.0f, static_cast<uint32_t>(surface.size()), id});
-        weight.push_back(glm::length(glm::cross(glm::dvec3(t.e1), glm::dvec3(t.e2))));
-        sum += weight.back();
-      }
-      if (!(sum > 0.0)) {  // area too small for the float edges to show
-        surface.resize(first);
-        weight.resize(first);
-        --sampleable;
-        continue;
-      }
-      for (size_t i = first; i < weight.size(); ++i) weight[i] /= sum;
+      if (objects[id].alive && objects[id].area > 0.0) tris[id] = objects[id].tris;
     }
-    // Scaled so that the mean weight is 1: each object's triangles sum to n / objects.
-    const double scale = static_cast<double>(surface.size()) / static_cast<double>(std::max<size_t>(sampleable, 1));
-    std::vector<uint32_t> small, large;
-    for (uint32_t i = 0; i < surface.size(); ++i) {
-      weight[i] *= scale;
-      (weight[i] < 1.0 ? small : large).push_back(i);
-    }
-    while (!small.empty() && !large.empty()) {
-      const uint32_t s = small.back(), l = large.back();
-      small.pop_back();
-      surface[s].keep = static_cast<float>(weight[s]);
-      surface[s].alias = l;
-      weight[l] -= 1.0 - weight[s];
-      if (weight[l] < 1.0) {
-        large.pop_back();
-        small.push_back(l);
-      }
-    }
-    // What is left holds weight 1 up to rounding: always kept.
-    for (uint32_t i : small) surface[i].keep = 1.0f;
-    for (uint32_t i : large) surface[i].keep = 1.0f;
+    surface = SurfaceTable(tris);
   }
 
   static void BuildTris(Object* o) {

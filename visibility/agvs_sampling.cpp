@@ -138,30 +138,26 @@ class Worker {
   void SurfaceChunk(Distribution dist, Rng& rng) {
     if (s_.surface.empty()) return;
     ahead_.resize(kChunk);
+    xs_.resize(kChunk);
+    picks_.resize(kChunk);
     const double columns = static_cast<double>(s_.surface.size());
-    for (Ahead& a : ahead_) {
+    for (uint32_t i = 0; i < kChunk; ++i) {
+      Ahead& a = ahead_[i];
       if (dist == Distribution::kTwoPoint) a.view = ViewSpacePoint(rng, &a.cell);
-      a.x = rng.Uniform() * columns;
+      xs_[i] = rng.Uniform() * columns;
       a.u = rng.Uniform();
       a.v = rng.Uniform();
       if (dist == Distribution::kObjectDirection) {
         std::tie(a.cos_phi, a.sin_phi) = UniformCircle(rng);
         a.cos_t = std::sqrt(rng.Uniform());
       }
-      a.entry = static_cast<uint32_t>(std::min(static_cast<size_t>(a.x), s_.surface.size() - 1));
-      PrefetchEntry(a.entry);
     }
-    for (Ahead& a : ahead_) {
-      const Impl::SurfaceEntry& e = s_.surface[a.entry];
-      if (a.x - static_cast<double>(a.entry) >= e.keep) {
-        a.entry = e.alias;
-        PrefetchEntry(a.entry);
-      }
-    }
-    for (const Ahead& a : ahead_) {
+    s_.surface.PickMany(xs_, picks_);
+    for (uint32_t i = 0; i < kChunk; ++i) {
+      const Ahead& a = ahead_[i];
       glm::dvec3 n;
       ObjectId o;
-      const glm::dvec3 p = PointOn(s_.surface[a.entry], a.u, a.v, &o, &n);
+      const glm::dvec3 p = PointOn(s_.surface[picks_[i]], a.u, a.v, &o, &n);
       if (dist == Distribution::kTwoPoint) {
         EmitSegment(a.view, p, dist);
         continue;
@@ -182,19 +178,13 @@ class Worker {
       Emit(smp);
     }
   }
-  // A sample's random numbers, drawn ahead (SurfaceChunk).
+  // A sample's random numbers but the surface point's column, drawn ahead (SurfaceChunk).
   struct Ahead {
     glm::dvec3 view{0.0};  // two-point: the view space point
     CellId cell = 0;
-    double x = 0.0, u = 0.0, v = 0.0;  // the surface point's: column (scaled), barycentrics
+    double u = 0.0, v = 0.0;  // the surface point's barycentrics
     double cos_phi = 0.0, sin_phi = 0.0, cos_t = 0.0;  // object-direction: the direction's
-    uint32_t entry = 0;  // the alias table's entry: the column, then its alias if taken
   };
-  void PrefetchEntry(uint32_t entry) const {
-    const char* p = reinterpret_cast<const char*>(&s_.surface[entry]);
-    __builtin_prefetch(p);
-    __builtin_prefetch(p + sizeof(Impl::SurfaceEntry) - 1);  // an entry may straddle two lines
-  }
 
   struct Hit {
     double t = kInf;
@@ -215,16 +205,13 @@ class Worker {
   // Precondition: the alias table is not empty.
   glm::dvec3 SurfacePoint(Rng& rng, ObjectId* id, glm::dvec3* normal) {
     // One uniform picks the column and, with its fraction, whether to keep it.
-    const double x = rng.Uniform() * static_cast<double>(s_.surface.size());
-    const size_t column = std::min(static_cast<size_t>(x), s_.surface.size() - 1);
-    const Impl::SurfaceEntry* e = &s_.surface[column];
-    if (x - static_cast<double>(column) >= e->keep) e = &s_.surface[e->alias];
+    const uint32_t entry = s_.surface.Pick(rng.Uniform() * static_cast<double>(s_.surface.size()));
     const double u = rng.Uniform(), v = rng.Uniform();
-    return PointOn(*e, u, v, id, normal);
+    return PointOn(s_.surface[entry], u, v, id, normal);
   }
 
   // The point of barycentrics (u, v), folded into the triangle, of the entry's triangle.
-  static glm::dvec3 PointOn(const Impl::SurfaceEntry& e, double u, double v, ObjectId* id, glm::dvec3* normal) {
+  static glm::dvec3 PointOn(const SurfaceTable::Entry& e, double u, double v, ObjectId* id, glm::dvec3* normal) {
     *id = e.object;
     const glm::dvec3 a(e.tri.a), e1(e.tri.e1), e2(e.tri.e2);
     if (u + v > 1.0) {
@@ -487,6 +474,8 @@ class Worker {
   std::vector<Candidate> candidates_;            // this chunk's, gathered
   std::vector<FanSurface::Hot> fans_;              // where their objects' surfaces lie
   std::vector<Ahead> ahead_;                       // SurfaceChunk's draws
+  std::vector<double> xs_;                         // their columns, scaled
+  std::vector<uint32_t> picks_;                    // the entries those pick
 
  public:
   void CountInto(Counts* counts) { counts_ = counts; }
