@@ -20,13 +20,13 @@
 
 #include "scenes/progress.h"
 #include "scenes/random.h"
+#include "visibility/agvs_surface.h"
 #include "visibility/bytes.h"
 #include "visibility/coincident_faces.h"
 #include "visibility/kdtree.h"
 #include "visibility/parallel.h"
 #include "visibility/pvs_file.h"
 #include "visibility/silhouette.h"
-#include "visibility/agvs_surface.h"
 
 namespace vistream::visibility {
 
@@ -435,6 +435,16 @@ struct GlobalSampler::Impl {
 namespace agvs_detail {
 // Updates the pixel-error estimate from the sampler's window of camera rays (agvs.cpp).
 void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats);
+
+// A batch's mixture (the paper's section 4.3): the distributions it draws from, each one's
+// share (contribution per ray over the last batches, floored at options.min_probability) and
+// its number of chunks out of the batch's (at least one each).
+struct Mixture {
+  std::vector<Distribution> available;
+  std::array<double, kDistributionCount> share{};
+  std::vector<uint32_t> quota;  // by Distribution
+};
+Mixture PlanMixture(const GlobalSampler::Impl& m, const AgvsOptions& options);
 }  // namespace agvs_detail
 
 }  // namespace vistream::visibility
