@@ -436,7 +436,7 @@ namespace agvs_detail {
 // Updates the pixel-error estimate from the sampler's window of camera rays (agvs.cpp).
 void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats);
 
-// A batch's mixture (the paper's section 4.3): the distributions it draws from, each one's
+// A batch's mixture (the paper's section 4.2): the distributions it draws from, each one's
 // share (contribution per ray over the last batches, floored at options.min_probability) and
 // its number of chunks out of the batch's (at least one each).
 struct Mixture {

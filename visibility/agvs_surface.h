@@ -1,5 +1,5 @@
 #pragma once
-// The global sampler's surface points (AGVS, Bittner et al. 2009, section 4.2: the
+// The global sampler's surface points (AGVS, Bittner et al. 2009, section 4.3: the
 // object-direction and two-point distributions start from "a random point on a random
 // object"): a uniform object among those with surface area, then a uniform point of its
 // surface, drawn as one choice of a triangle from Walker's alias table over every triangle of
