@@ -403,64 +403,6 @@ TEST_F(Agvs, SampleFromBoxHitsFrontFacesItCanSee) {
   EXPECT_EQ(sampler->SampleFromBox(box, 2000, 3).size(), hits.size());
 }
 
-// Touching houses each have their own party wall, in the same place, facing away from each
-// other, and a tier's floor lies on the roof below it: whichever of two coincident faces
-// Embree reports, a sample that starts inside a house must be discarded. So a viewcell inside
-// a house sees nothing, and one in the street sees what the street sees.
-TEST_F(Agvs, NothingIsSeenThroughPartyWallsOrFromInsideATerrace) {
-  scenes::Scene s;
-  s.name = "terrace";
-  const double heights[] = {9, 12, 9, 15};
-  for (int k = 0; k < 4; ++k) {
-    scenes::AddBuilding(&s, "house", {scenes::Prism{Rect(10.0 * k, 0, 10.0 * (k + 1), 12), 0.0, heights[k]}});
-  }
-  scenes::AddBuilding(&s, "tiered", {scenes::Prism{Rect(50, 0, 70, 20), 0.0, 10.0},
-                                     scenes::Prism{Rect(55, 5, 65, 15), 10.0, 30.0}});
-  scenes::AddBuilding(&s, "across the street", {scenes::Prism{Rect(0, 24, 70, 30), 0.0, 8.0}});
-  absl::StatusOr<ViewcellGrid> g = ViewcellGrid::Create(Aabb{glm::dvec3(0, 0, 0), glm::dvec3(70, 30, 30)}, 2.0, 0.5, 2.0);
-  ASSERT_TRUE(g.ok());
-  auto sampler = Sampler(s, *g);
-  for (int round = 0; round < 60; ++round) sampler->RunBatch();
-  size_t inside = 0, street = 0;
-  for (CellId c = 0; c < g->CellCount(); ++c) {
-    const Aabb cell = g->CellBox(c);
-    // Strictly inside: a cell whose face lies on a street wall is reached by segments that end
-    // on that wall.
-    const bool in_house = (cell.min.x > 0 && cell.max.x < 40 && cell.min.y > 0 && cell.max.y < 12) ||
-                          (cell.min.x > 50 && cell.max.x < 70 && cell.min.y > 0 && cell.max.y < 20);
-    if (in_house) {
-      ++inside;
-      EXPECT_TRUE(sampler->pvs().Objects(c).empty()) << "cell " << c << " at (" << cell.min.x << ", " << cell.min.y
-                                                     << ") inside a house sees " << sampler->pvs().Objects(c).size()
-                                                     << " objects";
-    } else if (cell.min.y >= 20 && cell.max.y <= 24 && cell.max.x <= 40) {
-      ++street;
-      EXPECT_GE(sampler->pvs().Objects(c).size(), 2u) << "cell " << c << " in the street";
-    }
-  }
-  EXPECT_GT(inside, 60u);
-  EXPECT_GT(street, 10u);
-}
-
-// The ground is solid: a cell standing on it never sees what lies beneath it (a slab under an
-// open square), while it does see the building beside it.
-TEST_F(Agvs, NothingBeneathTheGroundIsSeen) {
-  scenes::Scene s;
-  s.name = "basement";
-  scenes::AddBuilding(&s, "house", {scenes::Prism{Rect(0, 0, 10, 10), 0.0, 8.0}});
-  scenes::AddBuilding(&s, "slab below the square", {scenes::Prism{Rect(12, 0, 30, 20), -4.0, -1.0}});
-  absl::StatusOr<ViewcellGrid> g = ViewcellGrid::Create(Aabb{glm::dvec3(0, 0, -4), glm::dvec3(30, 20, 8)}, 2.0, 0.0, 2.0);
-  ASSERT_TRUE(g.ok());
-  auto sampler = Sampler(s, *g);
-  for (int round = 0; round < 30; ++round) sampler->RunBatch();
-  size_t see_house = 0;
-  for (CellId c = 0; c < g->CellCount(); ++c) {
-    EXPECT_FALSE(sampler->pvs().Contains(c, 1)) << "cell " << c << " sees the slab beneath the ground";
-    see_house += sampler->pvs().Contains(c, 0);
-  }
-  EXPECT_GT(see_house, g->CellCount() / 2);
-}
-
 TEST_F(Agvs, CreateRejectsEmptyScenes) {
   scenes::Scene empty;
   empty.bounds = Aabb{glm::dvec3(0), glm::dvec3(10)};

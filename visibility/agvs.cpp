@@ -107,6 +107,69 @@ void agvs_detail::UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions
   stats->estimate_rays = n;
 }
 
+Mixture agvs_detail::PlanMixture(const GlobalSampler::Impl& m, const AgvsOptions& options) {
+  Mixture mix;
+  std::vector<Distribution>& available = mix.available;
+  switch (options.strategy) {
+    case SamplingStrategy::kRef: available = {Distribution::kRef}; break;
+    case SamplingStrategy::kSgvs: available = {Distribution::kViewSpaceDirection}; break;
+    case SamplingStrategy::kAgvs:
+      available = {Distribution::kViewSpaceDirection, Distribution::kObjectDirection, Distribution::kTwoPoint};
+      if (m.buffer.size() > 0) {
+        available.push_back(Distribution::kTwoPointMutation);
+        available.push_back(Distribution::kSilhouetteMutation);
+      }
+      break;
+  }
+  std::array<double, kDistributionCount>& share = mix.share;
+  {
+    double sum = 0.0;
+    for (Distribution d : available) {
+      const auto k = static_cast<size_t>(d);
+      // Until a distribution has been tried, it gets the best weight seen.
+      share[k] = m.ema_cost[k] > 0.0 ? m.ema_contribution[k] / m.ema_cost[k] : -1.0;
+    }
+    double best = 0.0;
+    for (Distribution d : available) best = std::max(best, share[static_cast<size_t>(d)]);
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      if (w < 0.0) w = best > 0.0 ? best : 1.0;
+      sum += w;
+    }
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      w = sum > 0.0 ? w / sum : 1.0 / available.size();
+    }
+    // The floor keeps every distribution alive (the stationary ones make the whole progressive).
+    const double floor = std::min(options.min_probability, 1.0 / available.size());
+    sum = 0.0;
+    for (Distribution d : available) sum += std::max(share[static_cast<size_t>(d)], floor);
+    for (Distribution d : available) {
+      double& w = share[static_cast<size_t>(d)];
+      w = std::max(w, floor) / sum;
+    }
+  }
+  const uint32_t chunks = (options.batch_samples + kChunk - 1) / kChunk;
+  std::vector<uint32_t>& quota = mix.quota;
+  quota.assign(kDistributionCount, 0);
+  {
+    uint32_t given = 0;
+    std::vector<std::pair<double, size_t>> remainders;
+    for (Distribution d : available) {
+      const auto k = static_cast<size_t>(d);
+      const double exact = share[k] * chunks;
+      quota[k] = std::max<uint32_t>(1, static_cast<uint32_t>(exact));
+      given += quota[k];
+      remainders.emplace_back(exact - std::floor(exact), k);
+    }
+    std::sort(remainders.begin(), remainders.end(), [](auto& a, auto& b) {
+      return a.first != b.first ? a.first > b.first : a.second < b.second;
+    });
+    for (size_t r = 0; given < chunks; r = (r + 1) % remainders.size(), ++given) ++quota[remainders[r].second];
+  }
+  return mix;
+}
+
 GlobalSampler::GlobalSampler(const ViewcellGrid& grid, const AgvsOptions& options)
     : grid_(grid), options_(options), impl_(std::make_unique<Impl>()) {}
 
@@ -151,7 +214,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   for (ObjectId id = 0; id < scene.objects.size(); ++id) {
     if (!m.MakeObject(scene.objects[id].mesh, &m.objects[id])) {
       return absl::InvalidArgumentError(absl::StrCat("object ", id, " (", scene.objects[id].name,
-                                                     ") has a non-finite position or an index out of range"));
+                                                     ") has a non-finite position, an index out of range or 2^29 triangles or more"));
     }
     if (!m.objects[id].indices.empty()) m.Attach(id);
   }

@@ -129,7 +129,7 @@ absl::StatusOr<scenes::ObjectId> GlobalSampler::InsertObject(const scenes::Mesh&
   Impl::Object o;
   if (mesh.indices.size() < 3) return absl::InvalidArgumentError("insert: the mesh has no triangle");
   if (!m.MakeObject(mesh, &o)) {
-    return absl::InvalidArgumentError("insert: the mesh has a non-finite position or an index out of range");
+    return absl::InvalidArgumentError("insert: the mesh has a non-finite position, an index out of range or 2^29 triangles or more");
   }
   const auto id = static_cast<ObjectId>(m.objects.size());
   m.objects.push_back(std::move(o));

@@ -20,6 +20,7 @@
 
 #include "scenes/progress.h"
 #include "scenes/random.h"
+#include "visibility/agvs_surface.h"
 #include "visibility/bytes.h"
 #include "visibility/coincident_faces.h"
 #include "visibility/kdtree.h"
@@ -237,14 +238,21 @@ struct GlobalSampler::Impl {
     // searching silhouettes are heuristics; visibility itself is Embree's.
     std::vector<EdgeTriangle> tris;
     FanSurface fan;  // the same, for the silhouette search
-    // Embree reads the triangles as quads (PairTriangles): each quad's first triangle, and
-    // whether it has a second.
-    std::vector<uint32_t> quad_first;
-    std::vector<bool> quad_pair;
+    // Embree reads the triangles as quads (PairTriangles): per quad, one word holding its
+    // first triangle, whether it has a second, and which of its triangles lie on a coincident
+    // face (set by Rebuild). One word, so that a hit reads one cache line to learn all three.
+    std::vector<uint32_t> quads;
+    static constexpr uint32_t kQuadPair = 1u << 29, kFirstCoincident = 1u << 30, kSecondCoincident = 1u << 31;
+    static constexpr uint32_t kMaxTriangles = kQuadPair;  // first triangles below this fit the word
     // The triangle Embree hit: the quad's first (q, r, p) where u + v <= 1, its second
     // (s, p, r) beyond.
-    uint32_t TriangleOf(uint32_t quad, bool second) const {
-      return quad_first[quad] + (quad_pair[quad] && second ? 1 : 0);
+    static uint32_t TriangleOfWord(uint32_t quad_word, bool second) {
+      return (quad_word & (kQuadPair - 1)) + ((quad_word & kQuadPair) != 0 && second ? 1 : 0);
+    }
+    uint32_t TriangleOf(uint32_t quad, bool second) const { return TriangleOfWord(quads[quad], second); }
+    // Whether that triangle lies on a face of opposite orientation (CoincidentFaces).
+    static bool HitsCoincident(uint32_t quad_word, bool second) {
+      return (quad_word & ((quad_word & kQuadPair) != 0 && second ? kSecondCoincident : kFirstCoincident)) != 0;
     }
     double area = 0.0;
     Aabb bounds;                   // frame-relative, from verts
@@ -257,16 +265,9 @@ struct GlobalSampler::Impl {
     RTCScene alone = nullptr;
   };
   std::vector<Object> objects;
-  // Surface points are drawn from a uniform alive object with surface area, then uniformly on
-  // its surface: as one choice of a triangle, from Walker's alias table over every triangle of
-  // those objects (one or two cache misses a point, where a search per object took several).
-  struct SurfaceEntry {
-    EdgeTriangle tri;
-    float keep;      // the chance to keep this triangle rather than take its alias
-    uint32_t alias;  // index into `surface`
-    ObjectId object;
-  };
-  std::vector<SurfaceEntry> surface;
+  // Where surface points are drawn (agvs_surface.h): from a uniform alive object with
+  // surface area, then uniformly on its surface.
+  SurfaceTable surface;
   glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
   Aabb view_space;                   // frame-relative
   double cell_radius = 0.0;
@@ -290,11 +291,13 @@ struct GlobalSampler::Impl {
   KdTree tree;  // over the boxes of live objects, for the object-space filter
 
   // Faces that lie on a face of opposite orientation (party walls, a tier's floor on the roof
-  // below it), and per object whether it has one. A ray reaches such a face only from inside
-  // the solid behind its partner, but Embree may report the partner's front face: the ray's
-  // sample is discarded like one that hits a back face.
+  // below it), and per object its quad words (Object::quads) if it has one, else null: a hit
+  // on an object without reads nothing more, one on an object with reads one word to learn
+  // whether its triangle has a partner. A ray reaches such a face only from inside the solid
+  // behind its partner, but Embree may report the partner's front face: the ray's sample is
+  // discarded like one that hits a back face.
   CoincidentFaces coincident;
-  std::vector<uint8_t> has_coincident;
+  std::vector<const uint32_t*> coincident_quads;
 
   // The surface table, the kd-tree and the coincident faces, rebuilt after every edit, never
   // lazily, so that const calls stay thread-safe.
@@ -309,8 +312,22 @@ struct GlobalSampler::Impl {
     }
     tree = KdTree::Build(boxes);
     coincident = FindCoincidentFaces(meshes, kCoincidentTolerance);
-    has_coincident.assign(objects.size(), 0);
-    for (ObjectId o = 0; o < objects.size(); ++o) has_coincident[o] = !coincident.of_mesh[o].empty();
+    coincident_quads.assign(objects.size(), nullptr);
+    for (ObjectId o = 0; o < objects.size(); ++o) {
+      std::vector<uint32_t>& q = objects[o].quads;
+      for (uint32_t& w : q) w &= ~(Object::kFirstCoincident | Object::kSecondCoincident);
+      if (coincident.of_mesh[o].empty() || q.empty()) continue;
+      for (const CoincidentFaces::Entry& e : coincident.of_mesh[o]) {
+        // The quad holding triangle e.triangle: the last whose first triangle is not past it.
+        const auto it = std::upper_bound(q.begin(), q.end(), e.triangle, [](uint32_t t, uint32_t w) {
+          return t < (w & (Object::kQuadPair - 1));
+        });
+        if (it == q.begin()) continue;
+        uint32_t& w = *(it - 1);
+        w |= e.triangle == (w & (Object::kQuadPair - 1)) ? Object::kFirstCoincident : Object::kSecondCoincident;
+      }
+      coincident_quads[o] = q.data();
+    }
   }
 
   // Whether frame-relative point `p` on triangle `triangle` of `object` also lies on a face of
@@ -344,8 +361,8 @@ struct GlobalSampler::Impl {
       v[3 * i + 2] = o.verts[i].z;
     }
     EmbreeQuads q = PairTriangles(o.indices);
-    o.quad_first = std::move(q.first);
-    o.quad_pair = std::move(q.pair);
+    o.quads.resize(q.first.size());
+    for (size_t i = 0; i < q.first.size(); ++i) o.quads[i] = q.first[i] | (q.pair[i] ? Object::kQuadPair : 0u);
     const std::vector<uint32_t>& quads = q.indices;
     auto* ix = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
                                                               4 * sizeof(uint32_t), quads.size() / 4));
@@ -372,51 +389,12 @@ struct GlobalSampler::Impl {
     rtcCommitScene(rtc);
     dirty = false;
   }
-  // Vose's construction of the alias table.
   void RebuildSurface() {
-    surface.clear();
-    std::vector<double> weight;
-    size_t sampleable = 0;
+    std::vector<std::span<const EdgeTriangle>> tris(objects.size());
     for (ObjectId id = 0; id < objects.size(); ++id) {
-      const Object& o = objects[id];
-      if (!o.alive || !(o.area > 0.0)) continue;
-      ++sampleable;
-      const size_t first = weight.size();
-      double sum = 0.0;
-      for (const EdgeTriangle& t : o.tris) {
-        surface.push_back({t, 1.0f, static_cast<uint32_t>(surface.size()), id});
-        weight.push_back(glm::length(glm::cross(glm::dvec3(t.e1), glm::dvec3(t.e2))));
-        sum += weight.back();
-      }
-      if (!(sum > 0.0)) {  // area too small for the float edges to show
-        surface.resize(first);
-        weight.resize(first);
-        --sampleable;
-        continue;
-      }
-      for (size_t i = first; i < weight.size(); ++i) weight[i] /= sum;
+      if (objects[id].alive && objects[id].area > 0.0) tris[id] = objects[id].tris;
     }
-    // Scaled so that the mean weight is 1: each object's triangles sum to n / objects.
-    const double scale = static_cast<double>(surface.size()) / static_cast<double>(std::max<size_t>(sampleable, 1));
-    std::vector<uint32_t> small, large;
-    for (uint32_t i = 0; i < surface.size(); ++i) {
-      weight[i] *= scale;
-      (weight[i] < 1.0 ? small : large).push_back(i);
-    }
-    while (!small.empty() && !large.empty()) {
-      const uint32_t s = small.back(), l = large.back();
-      small.pop_back();
-      surface[s].keep = static_cast<float>(weight[s]);
-      surface[s].alias = l;
-      weight[l] -= 1.0 - weight[s];
-      if (weight[l] < 1.0) {
-        large.pop_back();
-        small.push_back(l);
-      }
-    }
-    // What is left holds weight 1 up to rounding: always kept.
-    for (uint32_t i : small) surface[i].keep = 1.0f;
-    for (uint32_t i : large) surface[i].keep = 1.0f;
+    surface = SurfaceTable(tris);
   }
 
   static void BuildTris(Object* o) {
@@ -431,8 +409,8 @@ struct GlobalSampler::Impl {
     o->fan = FanSurface(o->verts, o->indices);
   }
 
-  // Fills `o` from scene-local positions; false if a position is not finite or an index is
-  // out of range.
+  // Fills `o` from scene-local positions; false if a position is not finite, an index is out
+  // of range or the mesh has 2^29 triangles or more.
   bool MakeObject(const scenes::Mesh& mesh, Object* o) const {
     o->verts.clear();
     o->bounds = Aabb{};
@@ -445,6 +423,7 @@ struct GlobalSampler::Impl {
     for (uint32_t i : mesh.indices) {
       if (i >= mesh.positions.size()) return false;
     }
+    if (mesh.indices.size() / 3 >= Object::kMaxTriangles) return false;  // Object::quads holds 29 bits
     o->indices.assign(mesh.indices.begin(), mesh.indices.end() - mesh.indices.size() % 3);
     BuildTris(o);
     o->radius = BoxRadius(o->bounds);
@@ -456,6 +435,16 @@ struct GlobalSampler::Impl {
 namespace agvs_detail {
 // Updates the pixel-error estimate from the sampler's window of camera rays (agvs.cpp).
 void UpdateEstimate(const GlobalSampler::Impl& m, const AgvsOptions& options, AgvsStats* stats);
+
+// A batch's mixture (the paper's section 4.2): the distributions it draws from, each one's
+// share (contribution per ray over the last batches, floored at options.min_probability) and
+// its number of chunks out of the batch's (at least one each).
+struct Mixture {
+  std::vector<Distribution> available;
+  std::array<double, kDistributionCount> share{};
+  std::vector<uint32_t> quota;  // by Distribution
+};
+Mixture PlanMixture(const GlobalSampler::Impl& m, const AgvsOptions& options);
 }  // namespace agvs_detail
 
 }  // namespace vistream::visibility

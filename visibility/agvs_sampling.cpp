@@ -2,6 +2,8 @@
 #include "visibility/agvs_internal.h"
 #include "visibility/discovery_rays.h"
 
+#include <tuple>
+
 // Drawing and casting samples: the worker each thread runs, a batch, sampling from a box.
 
 namespace vistream::visibility {
@@ -48,6 +50,10 @@ class Worker {
     Rng rng(seed);
     out_ = out;
     if (!plan.candidates.empty()) Gather(plan);
+    if (plan.dist == Distribution::kObjectDirection || plan.dist == Distribution::kTwoPoint) {
+      SurfaceChunk(plan.dist, rng);
+      return;
+    }
     for (uint32_t i = 0; i < kChunk; ++i) {
       switch (plan.dist) {
         case Distribution::kViewSpaceDirection: {
@@ -72,38 +78,10 @@ class Worker {
           Emit(smp);
           break;
         }
-        case Distribution::kObjectDirection: {
-          if (s_.surface.empty()) break;
-          glm::dvec3 n;
-          ObjectId o;
-          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
-          glm::dvec3 b1, b2;
-          Basis(n, &b1, &b2);
-          const auto [cos_phi, sin_phi] = UniformCircle(rng);
-          const double cos_t = std::sqrt(rng.Uniform()), sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
-          Sample smp;
-          smp.dist = plan.dist;
-          smp.origin = p;
-          smp.dir = sin_t * cos_phi * b1 + sin_t * sin_phi * b2 + cos_t * n;
-          const Hit h = Cast(p, smp.dir, kSurfaceOffset);
-          smp.valid = !h.back;
-          smp.t_fwd = h.t;
-          smp.fwd = h.object;
-          smp.t_rev = 0.0;
-          smp.rev = o;
-          Emit(smp);
+        case Distribution::kObjectDirection:
+        case Distribution::kTwoPoint:
+          // Drawn for the whole chunk at once (SurfaceChunk).
           break;
-        }
-        case Distribution::kTwoPoint: {
-          if (s_.surface.empty()) break;
-          CellId cell;
-          const glm::dvec3 v = ViewSpacePoint(rng, &cell);
-          glm::dvec3 n;
-          ObjectId o;
-          const glm::dvec3 p = SurfacePoint(rng, &o, &n);
-          EmitSegment(v, p, plan.dist);
-          break;
-        }
         case Distribution::kTwoPointMutation: {
           const Candidate& c = candidates_[i];
           const double len = glm::length(c.to - c.from);  // positive: see add_candidate in Emit
@@ -151,6 +129,63 @@ class Worker {
     }
   }
 
+  // A chunk of object-direction or two-point samples, each of which starts from a surface
+  // point. The random numbers do not depend on what the samples hit, so the whole chunk's are
+  // drawn first, in the order one sample after the other draws them (the same samples as
+  // drawing and casting each in turn); the alias table's entries they pick are prefetched
+  // then, and read once all are on their way. The table is over 100 MB for a city: entry
+  // after entry, each would be a cache miss waited for alone.
+  void SurfaceChunk(Distribution dist, Rng& rng) {
+    if (s_.surface.empty()) return;
+    ahead_.resize(kChunk);
+    xs_.resize(kChunk);
+    picks_.resize(kChunk);
+    const double columns = static_cast<double>(s_.surface.size());
+    for (uint32_t i = 0; i < kChunk; ++i) {
+      Ahead& a = ahead_[i];
+      if (dist == Distribution::kTwoPoint) a.view = ViewSpacePoint(rng, &a.cell);
+      xs_[i] = rng.Uniform() * columns;
+      a.u = rng.Uniform();
+      a.v = rng.Uniform();
+      if (dist == Distribution::kObjectDirection) {
+        std::tie(a.cos_phi, a.sin_phi) = UniformCircle(rng);
+        a.cos_t = std::sqrt(rng.Uniform());
+      }
+    }
+    s_.surface.PickMany(xs_, picks_);
+    for (uint32_t i = 0; i < kChunk; ++i) {
+      const Ahead& a = ahead_[i];
+      glm::dvec3 n;
+      ObjectId o;
+      const glm::dvec3 p = PointOn(s_.surface[picks_[i]], a.u, a.v, &o, &n);
+      if (dist == Distribution::kTwoPoint) {
+        EmitSegment(a.view, p, dist);
+        continue;
+      }
+      glm::dvec3 b1, b2;
+      Basis(n, &b1, &b2);
+      const double sin_t = std::sqrt(std::max(0.0, 1.0 - a.cos_t * a.cos_t));
+      Sample smp;
+      smp.dist = dist;
+      smp.origin = p;
+      smp.dir = sin_t * a.cos_phi * b1 + sin_t * a.sin_phi * b2 + a.cos_t * n;
+      const Hit h = Cast(p, smp.dir, kSurfaceOffset);
+      smp.valid = !h.back;
+      smp.t_fwd = h.t;
+      smp.fwd = h.object;
+      smp.t_rev = 0.0;
+      smp.rev = o;
+      Emit(smp);
+    }
+  }
+  // A sample's random numbers but the surface point's column, drawn ahead (SurfaceChunk).
+  struct Ahead {
+    glm::dvec3 view{0.0};  // two-point: the view space point
+    CellId cell = 0;
+    double u = 0.0, v = 0.0;  // the surface point's barycentrics
+    double cos_phi = 0.0, sin_phi = 0.0, cos_t = 0.0;  // object-direction: the direction's
+  };
+
   struct Hit {
     double t = kInf;
     ObjectId object = kNoObject;
@@ -170,13 +205,15 @@ class Worker {
   // Precondition: the alias table is not empty.
   glm::dvec3 SurfacePoint(Rng& rng, ObjectId* id, glm::dvec3* normal) {
     // One uniform picks the column and, with its fraction, whether to keep it.
-    const double x = rng.Uniform() * static_cast<double>(s_.surface.size());
-    const size_t column = std::min(static_cast<size_t>(x), s_.surface.size() - 1);
-    const Impl::SurfaceEntry* e = &s_.surface[column];
-    if (x - static_cast<double>(column) >= e->keep) e = &s_.surface[e->alias];
-    *id = e->object;
-    const glm::dvec3 a(e->tri.a), e1(e->tri.e1), e2(e->tri.e2);
-    double u = rng.Uniform(), v = rng.Uniform();
+    const uint32_t entry = s_.surface.Pick(rng.Uniform() * static_cast<double>(s_.surface.size()));
+    const double u = rng.Uniform(), v = rng.Uniform();
+    return PointOn(s_.surface[entry], u, v, id, normal);
+  }
+
+  // The point of barycentrics (u, v), folded into the triangle, of the entry's triangle.
+  static glm::dvec3 PointOn(const SurfaceTable::Entry& e, double u, double v, ObjectId* id, glm::dvec3* normal) {
+    *id = e.object;
+    const glm::dvec3 a(e.tri.a), e1(e.tri.e1), e2(e.tri.e2);
     if (u + v > 1.0) {
       u = 1.0 - u;
       v = 1.0 - v;
@@ -234,9 +271,12 @@ class Worker {
     // Embree's geometry normal is cross(v1 - v0, v2 - v0), as the meshes' outward normals are
     // (counter-clockwise seen from outside); reading it here saves a cache miss per ray.
     h.back = options_.backface_rule && rh.hit.Ng_x * dir.x + rh.hit.Ng_y * dir.y + rh.hit.Ng_z * dir.z > 0.0;
-    if (options_.backface_rule && !h.back && s_.has_coincident[h.object]) {
-      const uint32_t triangle = s_.objects[h.object].TriangleOf(h.quad, h.second);
-      h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
+    if (options_.backface_rule && !h.back && s_.coincident_quads[h.object] != nullptr) {
+      const uint32_t word = s_.coincident_quads[h.object][h.quad];
+      if (Impl::Object::HitsCoincident(word, h.second)) {
+        const uint32_t triangle = Impl::Object::TriangleOfWord(word, h.second);
+        h.back = s_.OnCoincidentFace(h.object, triangle, origin + static_cast<double>(h.t) * dir);
+      }
     }
     return h;
   }
@@ -328,11 +368,19 @@ class Worker {
     }
     uint32_t c_fwd = 0, c_rev = 0;
     double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
-    bool walked = false;
+    // The cells first, with the set lines their tests read prefetched; then the tests, in the
+    // same order (a segment crosses tens of cells, each test a likely cache miss).
+    walk_.clear();
     VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
-      if (!walked) t_first = t;
-      t_last = t;
-      walked = true;
+      walk_.emplace_back(cell, t);
+      if (smp.fwd != kNoObject) pvs_.Prefetch(cell, smp.fwd);
+      if (smp.rev != kNoObject) pvs_.Prefetch(cell, smp.rev);
+    });
+    if (!walk_.empty()) {
+      t_first = walk_.front().second;
+      t_last = walk_.back().second;
+    }
+    for (const auto& [cell, t] : walk_) {
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
       if (counts_ != nullptr) ++counts_->cells[cell];
       if (smp.fwd != kNoObject && !pvs_.Contains(cell, smp.fwd)) {
@@ -343,7 +391,7 @@ class Worker {
         out.entries.push_back({cell, smp.rev, WitnessOf(cell, smp, t, -smp.t_rev)});
         ++c_rev;
       }
-    });
+    }
     out.contribution += c_fwd + c_rev;
     if (options_.strategy != SamplingStrategy::kAgvs) return;
     // Contributing ends become mutation candidates: from the other end (a hit, or where the
@@ -433,6 +481,10 @@ class Worker {
   std::vector<std::pair<double, double>> fan_;   // the silhouette search's scratch
   std::vector<Candidate> candidates_;            // this chunk's, gathered
   std::vector<FanSurface::Hot> fans_;              // where their objects' surfaces lie
+  std::vector<Ahead> ahead_;                       // SurfaceChunk's draws
+  std::vector<double> xs_;                         // their columns, scaled
+  std::vector<uint32_t> picks_;                    // the entries those pick
+  std::vector<std::pair<CellId, double>> walk_;    // Emit's cells along a segment
 
  public:
   void CountInto(Counts* counts) { counts_ = counts; }
@@ -445,64 +497,10 @@ void GlobalSampler::RunBatch() {
   Impl& m = *impl_;
   m.Commit();
 
-  // Which distributions, in what shares.
-  std::vector<Distribution> available;
-  switch (options_.strategy) {
-    case SamplingStrategy::kRef: available = {Distribution::kRef}; break;
-    case SamplingStrategy::kSgvs: available = {Distribution::kViewSpaceDirection}; break;
-    case SamplingStrategy::kAgvs:
-      available = {Distribution::kViewSpaceDirection, Distribution::kObjectDirection, Distribution::kTwoPoint};
-      if (m.buffer.size() > 0) {
-        available.push_back(Distribution::kTwoPointMutation);
-        available.push_back(Distribution::kSilhouetteMutation);
-      }
-      break;
-  }
-  std::array<double, kDistributionCount> share{};
-  {
-    double sum = 0.0;
-    for (Distribution d : available) {
-      const auto k = static_cast<size_t>(d);
-      // Until a distribution has been tried, it gets the best weight seen.
-      share[k] = m.ema_cost[k] > 0.0 ? m.ema_contribution[k] / m.ema_cost[k] : -1.0;
-    }
-    double best = 0.0;
-    for (Distribution d : available) best = std::max(best, share[static_cast<size_t>(d)]);
-    for (Distribution d : available) {
-      double& w = share[static_cast<size_t>(d)];
-      if (w < 0.0) w = best > 0.0 ? best : 1.0;
-      sum += w;
-    }
-    for (Distribution d : available) {
-      double& w = share[static_cast<size_t>(d)];
-      w = sum > 0.0 ? w / sum : 1.0 / available.size();
-    }
-    // The floor keeps every distribution alive (the stationary ones make the whole progressive).
-    const double floor = std::min(options_.min_probability, 1.0 / available.size());
-    sum = 0.0;
-    for (Distribution d : available) sum += std::max(share[static_cast<size_t>(d)], floor);
-    for (Distribution d : available) {
-      double& w = share[static_cast<size_t>(d)];
-      w = std::max(w, floor) / sum;
-    }
-  }
-  const uint32_t chunks = (options_.batch_samples + kChunk - 1) / kChunk;
-  std::vector<uint32_t> quota(kDistributionCount, 0);
-  {
-    uint32_t given = 0;
-    std::vector<std::pair<double, size_t>> remainders;
-    for (Distribution d : available) {
-      const auto k = static_cast<size_t>(d);
-      const double exact = share[k] * chunks;
-      quota[k] = std::max<uint32_t>(1, static_cast<uint32_t>(exact));
-      given += quota[k];
-      remainders.emplace_back(exact - std::floor(exact), k);
-    }
-    std::sort(remainders.begin(), remainders.end(), [](auto& a, auto& b) {
-      return a.first != b.first ? a.first > b.first : a.second < b.second;
-    });
-    for (size_t r = 0; given < chunks; r = (r + 1) % remainders.size(), ++given) ++quota[remainders[r].second];
-  }
+  const Mixture mixture = PlanMixture(m, options_);
+  const std::vector<Distribution>& available = mixture.available;
+  const std::array<double, kDistributionCount>& share = mixture.share;
+  const std::vector<uint32_t>& quota = mixture.quota;
   for (Distribution d : available) stats_.distributions[static_cast<size_t>(d)].probability = share[static_cast<size_t>(d)];
 
   const uint64_t batch = stats_.batches;

@@ -39,6 +39,13 @@ class GlobalPvs {
     const int64_t at = Find(cell, object / kBlockBits);
     return at >= 0 && ((blocks_[cell][at].words[object % kBlockBits / 64] >> (object % 64)) & 1u);
   }
+  // Asks for the cache line Contains(cell, object) will read, if the cell holds a block for
+  // the object: a caller about to test many (cell, object) pairs prefetches them all first,
+  // so that their misses overlap.
+  void Prefetch(CellId cell, scenes::ObjectId object) const {
+    const int64_t at = Find(cell, object / kBlockBits);
+    if (at >= 0) __builtin_prefetch(&blocks_[cell][at]);
+  }
   // Returns true when the object was not yet in the cell's set. Not thread-safe with any
   // other call on the same cell (it may add a block).
   bool Insert(CellId cell, scenes::ObjectId object);
