@@ -97,6 +97,30 @@ TEST(ProvenVisibleAlong, FreeRayOfOnePlaneThatMissesTheCellProvesNothing) {
   EXPECT_TRUE(open_drs.ProvenVisibleAlong(kCell, b, Line(5, 5, 35, 35)));
 }
 
+// Decisions are taken in the query's frame: far from the origin (UTM-sized coordinates) the
+// same lines prove the same things.
+TEST(ProvenVisibleAlong, AnswersDoNotChangeWhenTheSceneIsTranslated) {
+  const glm::dvec2 t(500000, 5000000);
+  auto moved = [&](Scene s) {
+    for (Occluder25D& o : s.occluders) {
+      for (glm::dvec2& p : o.footprint) p += t;
+    }
+    return s;
+  };
+  auto box = [&](const Aabb& b) { return Aabb{b.min + glm::dvec3(t, 0), b.max + glm::dvec3(t, 0)}; };
+  auto line = [&](double x0, double y0, double x1, double y1) { return Line(x0 + t.x, y0 + t.y, x1 + t.x, y1 + t.y); };
+  const Scene gap = moved(WallWithGap());
+  const OccluderSet gap_set = OccluderSet::Build(gap);
+  DualRaySpace drs(gap_set);
+  EXPECT_TRUE(drs.ProvenVisibleAlong(box(kCell), box(kBeyondWall), line(10, 5, 50, 5)));
+  EXPECT_FALSE(drs.ProvenVisibleAlong(box(kCell), box(kBeyondWall), line(10, 2, 50, 2)));
+  Scene wall;
+  wall.occluders.push_back(Rect(-100, 12, 100, 13, 30));
+  const OccluderSet wall_set = OccluderSet::Build(moved(wall));
+  DualRaySpace wall_drs(wall_set);
+  EXPECT_FALSE(wall_drs.ProvenVisibleAlong(box(kCell), box(Box(30, 30, 0.5, 40, 40, 2.5)), line(10, 15, 30, 35)));
+}
+
 // The batch gives each cell exactly what Compute gives it, on 1, 2 and 8 threads (8 on two
 // cores: idle threads are handed nodes from the root down, so the sharing is exercised).
 void ExpectBatchEqualsSingles(const PvsComputer& computer, std::span<const Aabb> cells) {
