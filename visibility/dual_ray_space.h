@@ -130,7 +130,8 @@ class DualRaySpace {
   // near A, say) on the ceiling of a separating plane's shaft is free and, extended along the
   // ceiling, joins a point of A to a point of B (or is free on every separating plane). False
   // when unsure. Boxes in scene-local metres, `line` in scene-local xy; section 5 of Koltun et
-  // al. 2001 (the shaft's ceiling), as Visible. Counts one query and its free rays in *stats.
+  // al. 2001 (the shaft's ceiling), as Visible. In *stats: each free ray it traced, as a planar
+  // test ended by a free ray, and one query when it proves.
   bool ProvenVisibleAlong(const scenes::Aabb& a, const scenes::Aabb& b, const FreeLine& line,
                           CellQueryStats* stats = nullptr);
 
