@@ -131,6 +131,16 @@ class DualRaySpace {
   bool Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
                CellQueryStats* stats = nullptr, const FreeLine& hint = {}, FreeLine* witness = nullptr);
 
+  // True only when Visible(a, b) is sure to answer true, proven at the cost of a ray or two:
+  // A and B share no separating plane, or the ray of `line` (a FreeLine found for another box
+  // near A, say) on the ceiling of a separating plane's shaft is free and, extended along the
+  // ceiling, joins a point of A to a point of B (or is free on every separating plane). False
+  // when unsure. Boxes in scene-local metres, `line` in scene-local xy; section 5 of Koltun et
+  // al. 2001 (the shaft's ceiling), as Visible. In *stats: each free ray it traced, as a planar
+  // test ended by a free ray, and one query when it proves.
+  bool ProvenVisibleAlong(const scenes::Aabb& a, const scenes::Aabb& b, const FreeLine& line,
+                          CellQueryStats* stats = nullptr);
+
   // The planar test of one separating direction: true when the raster proves every ray of RS
   // blocked. `hint` and `witness` as for Visible.
   bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats,

@@ -36,14 +36,17 @@ class PvsComputer {
 
   // Adjacent viewcells at once (scene-local metres; e.g. the five cells a client
   // crossing a corner diagonally comes to border: ViewcellGrid::NewlyAdjacent), sharing work:
-  // one traversal of the kd-tree for all of them (32 at a time), each node tested only for the cells that
-  // see its parent, the free ray that proved a node visible from one cell tried first for
-  // the next (dual ray space, section 5 of Koltun et al. 2001, per node and cell as Compute).
+  // one traversal of the kd-tree for all of them (32 at a time), each node tested only for the
+  // cells that see its parent (dual ray space, section 5 of Koltun et al. 2001, per node and
+  // cell as Compute). A free ray that proved a node visible from one cell is tried for the
+  // next: if, extended, it joins that cell to the node (DualRaySpace::ProvenVisibleAlong), the
+  // node is visible from it without a query of its own; else it serves as a hint.
   // With `union_cull`, a node that the union box of the cells (their bounding box) is proven
   // not to see is culled for all of them at once: conservative, since each cell lies inside
   // that box, but the sets may then be smaller than Compute's where the union's raster closes
-  // a gap that a cell's leaves open. Without it the sets are exactly Compute's. Subtrees go to
-  // up to `threads` threads (0: one per core); results in the order of `cells`, identical
+  // a gap that a cell's leaves open. Without it the sets are exactly Compute's. Up to `threads`
+  // threads (0: one per core) share the traversal from the root down (an idle thread is handed
+  // the oldest node of a busy one's stack); results in the order of `cells`, identical
   // whatever the thread count; each result's `ms` is the whole batch's wall time.
   std::vector<PvsResult> ComputeAdjacent(std::span<const scenes::Aabb> cells, const CellQueryOptions& options,
                                          unsigned threads = 0, bool union_cull = false) const;

@@ -1,0 +1,59 @@
+// DualRaySpace::ProvenVisibleAlong: visibility proven by one given line, without blockers.
+// Apart from dual_ray_space.cpp because only the batch calls (PvsComputer::ComputeAdjacent)
+// use it, to try for one viewcell the free ray found for its neighbour.
+#include "visibility/dual_ray_space.h"
+
+namespace vistream::visibility {
+
+namespace {
+
+// The ray (u, v) of `pr` along `line`, if the line crosses both s1 and s2 (as the hint of
+// DualRaySpace::PlanarOccluded is mapped).
+bool RayAlongLine(const PlanarProblem& pr, const FreeLine& line, double* u, double* v) {
+  const glm::dvec2 a = pr.PlanarFromScene(line.from), b = pr.PlanarFromScene(line.to);
+  if (!(b.x != a.x) || !(pr.l1 > pr.r1) || !(pr.l2 > pr.r2)) return false;
+  const double k = (b.y - a.y) / (b.x - a.x);
+  *u = (a.y + k * (pr.x1 - a.x) - pr.r1) / (pr.l1 - pr.r1);
+  *v = (a.y + k * (pr.x2 - a.x) - pr.r2) / (pr.l2 - pr.r2);
+  return *u >= 0 && *u <= 1 && *v >= 0 && *v <= 1;
+}
+
+}  // namespace
+
+bool DualRaySpace::ProvenVisibleAlong(const scenes::Aabb& a, const scenes::Aabb& b, const FreeLine& line,
+                                      CellQueryStats* stats) {
+  PlanarProblem pr[2];
+  int count = 0;
+  for (int axis = 0; axis < 2; ++axis) {
+    for (double sign : {1.0, -1.0}) {
+      if (MakePlanarProblem(a, b, axis, sign, &pr[count])) {
+        ++count;
+        break;
+      }
+    }
+  }
+  // Visible answers true for boxes that no plane separates.
+  if (count == 0) {
+    if (stats != nullptr) ++stats->queries, ++stats->non_separable;
+    return true;
+  }
+  if (!line.valid) return false;
+  // A plane on which the ray is free cannot prove B hidden (its raster is conservative, and
+  // the ray lies in a pixel that is then not wholly blocked). The other plane can, unless the
+  // ray, extended, is a free segment from A to B: then nothing hides B from A.
+  int free_planes = 0;
+  bool proven = false;
+  for (int k = 0; k < count && !proven; ++k) {
+    double u = 0, v = 0;
+    if (!RayAlongLine(pr[k], line, &u, &v) || !FreeRayTraced(pr[k], u, v)) continue;
+    ++free_planes;
+    if (stats != nullptr) ++stats->planar_tests, ++stats->free_rays;
+    SetWitness(pr[k], u, v, nullptr);  // WitnessJoinsBoxes reads the ray from there
+    proven = count == 1 || WitnessJoinsBoxes(a, b, pr[k]);
+  }
+  proven = proven || free_planes == count;
+  if (proven && stats != nullptr) ++stats->queries;
+  return proven;
+}
+
+}  // namespace vistream::visibility
