@@ -18,13 +18,8 @@ using scenes::Aabb;
 using scenes::Occluder25D;
 using scenes::Scene;
 
-Aabb Box(double x0, double y0, double z0, double x1, double y1, double z1) {
-  return Aabb{glm::dvec3(x0, y0, z0), glm::dvec3(x1, y1, z1)};
-}
-
-Occluder25D Rect(double x0, double y0, double x1, double y1, double h) {
-  return Occluder25D{{{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}}, h, 0};
-}
+using vistream::testing::Box;
+using vistream::testing::Rect;
 
 const Aabb kCell = Box(0, 0, 0.5, 10, 10, 2.5);
 const Aabb kB = Box(100, 0, 0, 110, 10, 1);

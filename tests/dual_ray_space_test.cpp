@@ -56,13 +56,8 @@ Scene Translated(Scene s, const glm::dvec2& t) {
   return s;
 }
 
-Aabb Box(double x0, double y0, double z0, double x1, double y1, double z1) {
-  return Aabb{glm::dvec3(x0, y0, z0), glm::dvec3(x1, y1, z1)};
-}
-
-Occluder25D Rect(double x0, double y0, double x1, double y1, double h) {
-  return Occluder25D{{{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}}, h, 0};
-}
+using vistream::testing::Box;
+using vistream::testing::Rect;
 
 bool Visible(const Scene& s, const Aabb& a, const Aabb& b, uint32_t res = 128) {
   const OccluderSet set = OccluderSet::Build(s);

@@ -145,4 +145,12 @@ scenes::Aabb RandomGridBox(scenes::Rng& rng) {
   return scenes::Aabb{glm::dvec3(x, y, 0), glm::dvec3(x + w, y + d, h)};
 }
 
+scenes::Aabb Box(double x0, double y0, double z0, double x1, double y1, double z1) {
+  return scenes::Aabb{glm::dvec3(x0, y0, z0), glm::dvec3(x1, y1, z1)};
+}
+
+scenes::Occluder25D Rect(double x0, double y0, double x1, double y1, double h) {
+  return scenes::Occluder25D{{{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}}, h, 0};
+}
+
 }  // namespace vistream::testing

@@ -30,6 +30,12 @@ scenes::Scene RandomGridScene(scenes::Rng& rng);
 // whole metres, from the ground up to 1..24 m.
 scenes::Aabb RandomGridBox(scenes::Rng& rng);
 
+// The box [x0, x1] x [y0, y1] x [z0, z1] (scene-local metres).
+scenes::Aabb Box(double x0, double y0, double z0, double x1, double y1, double z1);
+
+// The rectangle [x0, x1] x [y0, y1] as a 2.5D occluder of height h (counter-clockwise).
+scenes::Occluder25D Rect(double x0, double y0, double x1, double y1, double h);
+
 // A hash of every position, normal, index and occluder: equal scenes hash equal.
 uint64_t SceneHash(const scenes::Scene& scene);
 

@@ -129,6 +129,19 @@ bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, d
   return true;
 }
 
+int SeparatingPlanes(const scenes::Aabb& a, const scenes::Aabb& b, PlanarProblem (&out)[2]) {
+  int count = 0;
+  for (int axis = 0; axis < 2; ++axis) {
+    for (double sign : {1.0, -1.0}) {
+      if (MakePlanarProblem(a, b, axis, sign, &out[count])) {
+        ++count;
+        break;
+      }
+    }
+  }
+  return count;
+}
+
 void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
   const auto& pieces = occluders_.pieces();
   if (local_.size() != pieces.size()) local_.assign(pieces.size(), -1);
@@ -561,15 +574,7 @@ bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const C
   // Up to two planes separate A and B (one per axis); the one with the longer slab first:
   // its shaft holds more occluders, so it is likelier to prove B hidden.
   PlanarProblem pr[2];
-  int count = 0;
-  for (int axis = 0; axis < 2; ++axis) {
-    for (double sign : {1.0, -1.0}) {
-      if (MakePlanarProblem(a, b, axis, sign, &pr[count])) {
-        ++count;
-        break;
-      }
-    }
-  }
+  const int count = SeparatingPlanes(a, b, pr);
   if (count == 2 && pr[1].x2 - pr[1].x1 > pr[0].x2 - pr[0].x1) std::swap(pr[0], pr[1]);
   const bool separable = count > 0;
   FreeLine found, each;

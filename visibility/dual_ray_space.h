@@ -105,6 +105,11 @@ struct PlanarProblem {
 // false when that plane does not separate them.
 bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, double sign, PlanarProblem* out);
 
+// The planar problems of the vertical planes that separate A and B, at most one per axis (x
+// first), in out[0, count); returns count, 0 when no plane separates them (boxes that touch
+// or overlap in x and in y). Boxes as for MakePlanarProblem.
+int SeparatingPlanes(const scenes::Aabb& a, const scenes::Aabb& b, PlanarProblem (&out)[2]);
+
 // A line in the scene's xy plane, through `from` (on A's side) and `to` (on B's side): the
 // ground track of a ray that a planar test found free.
 struct FreeLine {

@@ -23,15 +23,7 @@ bool RayAlongLine(const PlanarProblem& pr, const FreeLine& line, double* u, doub
 bool DualRaySpace::ProvenVisibleAlong(const scenes::Aabb& a, const scenes::Aabb& b, const FreeLine& line,
                                       CellQueryStats* stats) {
   PlanarProblem pr[2];
-  int count = 0;
-  for (int axis = 0; axis < 2; ++axis) {
-    for (double sign : {1.0, -1.0}) {
-      if (MakePlanarProblem(a, b, axis, sign, &pr[count])) {
-        ++count;
-        break;
-      }
-    }
-  }
+  const int count = SeparatingPlanes(a, b, pr);
   // Visible answers true for boxes that no plane separates.
   if (count == 0) {
     if (stats != nullptr) ++stats->queries, ++stats->non_separable;
