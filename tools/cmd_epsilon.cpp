@@ -68,7 +68,7 @@ int Epsilon(const EpsilonArgs& a) {
     for (scenes::ObjectId id : r.objects) visible[id] = true;
     const Rgb in_set{40, 90, 220}, hidden{215, 50, 40}, box_fill{30, 200, 60}, outline{60, 60, 60};
     for (const auto& oc : scene->occluders) map.FillPolygon(oc.footprint, visible[oc.object] ? in_set : hidden);
-    const bool outlines = map.metres_per_pixel() < 1.5;
+    const bool outlines = map.outlines_readable();
     if (outlines) {
       for (const auto& oc : scene->occluders) map.StrokePolygon(oc.footprint, outline);
     }
