@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/random.h"
+#include "tests/dual_ray_space_test_util.h"
 #include "tests/test_util.h"
 #include "visibility/conservative_raster.h"
 #include "visibility/dual_ray_space.h"
@@ -21,7 +22,9 @@ using scenes::Scene;
 using vistream::testing::Box;
 using vistream::testing::Rect;
 
-const Aabb kCell = Box(0, 0, 0.5, 10, 10, 2.5);
+using test_queries::ForEachRandomPlanarProblem;
+using test_queries::kCell;
+using test_queries::RandomQuery;
 const Aabb kB = Box(100, 0, 0, 110, 10, 1);
 
 // Two 20 m walls just before B, staggered: the first stops at y = 5.02 (x 90 to 90.1), the
@@ -125,36 +128,15 @@ TEST(BandCoveredSlanted, ASeamThatCrossesTheEdgeOfRsIsCoveredPiecewise) {
   EXPECT_TRUE(open.FreeRay(0.001, v0 + 0.175 * (v1 - v0)));
 }
 
-// Calls f(rng, blockers) for each planar problem of `per_seed` random boxes B (from kCell) in
-// RandomGridScenes of seeds [first, last], its blockers built.
-template <typename F>
-void ForEachRandomBlockers(uint64_t first, uint64_t last, int per_seed, F&& f) {
-  for (uint64_t seed = first; seed <= last; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    for (int q = 0; q < per_seed; ++q) {
-      const Aabb b = testing::RandomGridBox(rng);
-      for (int axis = 0; axis < 2; ++axis) {
-        for (double sign : {1.0, -1.0}) {
-          PlanarProblem pr;
-          if (!MakePlanarProblem(kCell, b, axis, sign, &pr)) continue;
-          drs.BuildBlockers(pr);
-          f(seed, rng, drs.blockers());
-        }
-      }
-    }
-  }
-}
-
 // Sound: where the trapezoids cover a band, no line v = const in it holds a free ray
 // (FreeOnLine finds one whenever one exists), at its edges, on a grid and at random v.
 TEST(BandCoveredSlanted, CoversOnlyBandsWithoutAFreeRay) {
   int covered = 0, only_slanted = 0, open = 0;
   std::vector<std::pair<double, double>> spans;
   SlantedScratch slanted;
-  ForEachRandomBlockers(1, 200, 3, [&](uint64_t seed, scenes::Rng& rng, const Blockers& blockers) {
+  ForEachRandomPlanarProblem(1, 200, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    const uint64_t seed = r.seed;
+    scenes::Rng& rng = r.rng;
     for (uint32_t n : {1u, 4u, 16u, 64u, 128u}) {
       for (int k = 0; k < 3; ++k) {
         const uint32_t j = static_cast<uint32_t>(rng.Below(n));
@@ -187,7 +169,9 @@ TEST(BandCoveredSlanted, HoldsWhereRectanglesCoverAndOnBothHalves) {
   int rect = 0, halves = 0;
   std::vector<std::pair<double, double>> spans;
   SlantedScratch slanted;
-  ForEachRandomBlockers(1, 200, 3, [&](uint64_t seed, scenes::Rng& rng, const Blockers& blockers) {
+  ForEachRandomPlanarProblem(1, 200, 3, [&](const RandomQuery& r, const PlanarProblem&, const Blockers& blockers) {
+    const uint64_t seed = r.seed;
+    scenes::Rng& rng = r.rng;
     for (uint32_t n : {1u, 2u, 8u, 32u, 128u}) {
       for (int k = 0; k < 3; ++k) {
         const uint32_t j = static_cast<uint32_t>(rng.Below(n));

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/random.h"
+#include "tests/dual_ray_space_test_util.h"
 #include "tests/test_util.h"
 #include "visibility/exact_cover.h"
 
@@ -58,6 +59,10 @@ Scene Translated(Scene s, const glm::dvec2& t) {
 
 using vistream::testing::Box;
 using vistream::testing::Rect;
+using test_queries::ForEachRandomPlanarProblem;
+using test_queries::ForEachRandomQuery;
+using test_queries::kCell;
+using test_queries::RandomQuery;
 
 bool Visible(const Scene& s, const Aabb& a, const Aabb& b, uint32_t res = 128) {
   const OccluderSet set = OccluderSet::Build(s);
@@ -65,7 +70,6 @@ bool Visible(const Scene& s, const Aabb& a, const Aabb& b, uint32_t res = 128) {
   return drs.Visible(a, b, CellQueryOptions{.max_res = res});
 }
 
-const Aabb kCell = Box(0, 0, 0.5, 10, 10, 2.5);
 
 // --- Known answers. ---
 
@@ -259,44 +263,6 @@ std::string Describe(const Scene& s, const Aabb& a, const Aabb& b) {
     out << "}";
   }
   return out.str();
-}
-
-// One random query from kCell: a RandomGridScene, its query engine, and a box B in it.
-struct RandomQuery {
-  uint64_t seed;
-  int q;            // the query's number within its seed
-  scenes::Rng& rng;  // the seed's generator, for the test's own draws
-  const Scene& s;
-  DualRaySpace& drs;
-  Aabb b;
-};
-
-// Calls f(query) for `per_seed` random boxes B in each RandomGridScene, seeds [first, last].
-template <typename F>
-void ForEachRandomQuery(uint64_t first, uint64_t last, int per_seed, F&& f) {
-  for (uint64_t seed = first; seed <= last; ++seed) {
-    scenes::Rng rng(seed);
-    const Scene s = testing::RandomGridScene(rng);
-    const OccluderSet set = OccluderSet::Build(s);
-    DualRaySpace drs(set);
-    for (int q = 0; q < per_seed; ++q) f(RandomQuery{seed, q, rng, s, drs, testing::RandomGridBox(rng)});
-  }
-}
-
-// Calls f(query, problem, blockers) for each planar problem of those queries, its blockers
-// built.
-template <typename F>
-void ForEachRandomPlanarProblem(uint64_t first, uint64_t last, int per_seed, F&& f) {
-  ForEachRandomQuery(first, last, per_seed, [&](const RandomQuery& r) {
-    for (int axis = 0; axis < 2; ++axis) {
-      for (double sign : {1.0, -1.0}) {
-        PlanarProblem pr;
-        if (!MakePlanarProblem(kCell, r.b, axis, sign, &pr)) continue;
-        r.drs.BuildBlockers(pr);
-        f(r, pr, r.drs.blockers());
-      }
-    }
-  });
 }
 
 TEST(DualRaySpace, NeverOccludedWhileAFreeSegmentExists) {
