@@ -105,7 +105,7 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
     explicit Walker(const OccluderSet& occluders, size_t cells) : drs(occluders), objects(cells), stats(cells) {}
     DualRaySpace drs;
     std::vector<AdjacentEntry> stack;
-    std::vector<FreeLine> hints;  // pool: entry e's lines at [e.hints, e.hints + cells)
+    std::vector<FreeLine> hints;  // pool: entry e's lines at [e.hints, e.hints + cells), ascending by stack order
     std::vector<FreeLine> found;  // the free lines found so far for the node being expanded
     std::vector<std::vector<ObjectId>> objects;
     std::vector<CellQueryStats> stats;
@@ -151,16 +151,12 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
         if (!w.drs.Visible(all, node.bounds, options, &w.union_stats)) break;
       }
     }
-    if (seen == 0) {
-      w.hints.resize(base);
-      return;
-    }
+    if (seen == 0) return;
     if (node.IsLeaf()) {
       for (size_t c = 0; c < n; ++c) {
         if ((seen >> c & 1) == 0) continue;
         for (ObjectId id : tree_.LeafObjects(node)) w.objects[c].push_back(id);
       }
-      w.hints.resize(base);
       return;
     }
     w.stack.push_back({node.right, seen, base});
@@ -189,6 +185,9 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
         }
         const AdjacentEntry e = w.stack.back();
         w.stack.pop_back();
+        // The stack's lines lie in ascending order, e's last: what follows them belongs to
+        // subtrees already walked, so the pool stays as deep as the stack.
+        w.hints.resize(e.hints + n);
         expand(w, e);
       }
     }
