@@ -20,6 +20,7 @@
 #include "scenes/walk.h"
 #include "server/link_model.h"
 #include "server/session.h"
+#include "server/simulated_holdings.h"
 #include "server/wire.h"
 
 namespace vistream::server {
@@ -194,14 +195,6 @@ class Run {
   absl::Status Go(const scenes::CatalogEntry& entry, const scenes::RunControl& run);
 
  private:
-  struct Held {
-    double arrival_s;
-    uint64_t triangles;
-  };
-  struct List {
-    std::vector<uint32_t> objects;
-    double arrival_s;
-  };
 
   // Callers check opt_.log first: the fields cost formatting.
   void Log(std::string_view event, std::initializer_list<EventLog::Field> fields) { opt_.log->Write(0, event, fields); }
@@ -210,7 +203,10 @@ class Run {
   void Receive(const v1::ServerMessage& m);
   // When `cell` became complete (list and objects arrived; uploaded at the next frame when the
   // frame time is declared), if it is.
-  std::optional<double> CompleteAt(CellId cell) const;
+  std::optional<double> CompleteAt(CellId cell) {
+    const std::optional<double> t = holdings_.CompleteAt(cell);
+    return t.has_value() ? std::optional<double>(FrameCeil(*t)) : std::nullopt;
+  }
   double FrameCeil(double t) const {
     if (!r_.frame_declared) return t;
     return std::ceil(t / r_.frame_s - 1e-9) * r_.frame_s;
@@ -233,9 +229,7 @@ class Run {
   absl::Status failure_;
 
   // The client.
-  std::unordered_map<uint32_t, Held> held_;
-  std::unordered_set<uint32_t> ever_held_;
-  std::unordered_map<CellId, List> lists_;
+  SimulatedHoldings holdings_;
   struct Mask {
     scenes::Aabb box;
     std::unordered_map<uint32_t, uint64_t> triangles;  // visible triangles per object
@@ -253,11 +247,11 @@ class Run {
   std::unordered_set<uint32_t> missing_;
   void StartPending(CellId cell) {
     missing_.clear();
-    auto it = lists_.find(cell);
-    pending_list_ = it != lists_.end();
+    const std::vector<uint32_t>* list = holdings_.ListOf(cell);
+    pending_list_ = list != nullptr;
     if (!pending_list_) return;
-    for (uint32_t o : it->second.objects) {
-      if (held_.count(o) == 0) missing_.insert(o);
+    for (uint32_t o : *list) {
+      if (holdings_.Of(o) == nullptr) missing_.insert(o);
     }
   }
   uint64_t frame_index_ = 0;       // of the next frame since the walk started
@@ -306,18 +300,18 @@ void Run::Receive(const v1::ServerMessage& m) {
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
       const v1::ViewcellPvs& p = m.pvs();
-      lists_[p.cell_id()] = List{{p.object_ids().begin(), p.object_ids().end()}, t};
+      const std::vector<uint32_t> objects(p.object_ids().begin(), p.object_ids().end());
+      holdings_.SetList(p.cell_id(), objects, t);
       if (pending_ && cell_ == p.cell_id()) StartPending(p.cell_id());
       break;
     }
     case v1::ServerMessage::kGeometry: {
       const v1::ObjectGeometry& g = m.geometry();
-      held_[g.object_id()] = Held{t, g.index_count() / 3};
+      if (holdings_.Receive(g.object_id(), t, g.index_count() / 3)) ++r_.distinct_objects;
       if (pending_) missing_.erase(g.object_id());
       const uint64_t encoded = g.vertices().size() + g.indices().size();
       r_.geometry_bytes += encoded;
       ++r_.objects_received;
-      if (ever_held_.insert(g.object_id()).second) ++r_.distinct_objects;
       // The client's grant (client/connection.cpp): what it consumed, once half the window is.
       consumed_since_grant_ += encoded;
       if (consumed_since_grant_ >= kCreditWindow / 2) {
@@ -330,9 +324,9 @@ void Run::Receive(const v1::ServerMessage& m) {
     }
     case v1::ServerMessage::kEvict:
       for (uint32_t o : m.evict().object_ids()) {
-        held_.erase(o);
+        holdings_.Evict(o);
         if (pending_ && pending_list_) {
-          const std::vector<uint32_t>& list = lists_.at(*cell_).objects;  // ascending
+          const std::vector<uint32_t>& list = *holdings_.ListOf(*cell_);  // ascending
           if (std::binary_search(list.begin(), list.end(), o)) missing_.insert(o);
         }
       }
@@ -376,18 +370,6 @@ void Run::Receive(const v1::ServerMessage& m) {
       q_.At(*walk_t0_, [this] { Frame(q_.now()); });
     }
   }
-}
-
-std::optional<double> Run::CompleteAt(CellId cell) const {
-  auto it = lists_.find(cell);
-  if (it == lists_.end()) return std::nullopt;
-  double when = it->second.arrival_s;
-  for (uint32_t o : it->second.objects) {
-    auto h = held_.find(o);
-    if (h == held_.end()) return std::nullopt;
-    when = std::max(when, h->second.arrival_s);
-  }
-  return FrameCeil(when);
 }
 
 void Run::CloseRecord(double t) {
@@ -465,19 +447,20 @@ void Run::Frame(double t) {
           mask = &*mask_;
         }
       }
-      for (uint32_t o : lists_.at(*cell_).objects) {
-        auto h = held_.find(o);
-        if (h == held_.end() || !frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) continue;
+      for (uint32_t o : *holdings_.ListOf(*cell_)) {
+        const SimulatedHoldings::Held* h = holdings_.Of(o);
+        if (h == nullptr || !frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) continue;
         if (mask != nullptr) {
           auto m = mask->triangles.find(o);
           if (m != mask->triangles.end()) tris += m->second;
         } else {
-          tris += h->second.triangles;
+          tris += h->triangles;
         }
       }
     } else {
-      for (const auto& [o, h] : held_) {
-        if (frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) tris += h.triangles;
+      for (uint32_t o = 0; o < holdings_.IdBound(); ++o) {
+        const SimulatedHoldings::Held* h = holdings_.Of(o);
+        if (h != nullptr && frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) tris += h->triangles;
       }
     }
     triangles_sum_ += static_cast<double>(tris);
