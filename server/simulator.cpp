@@ -116,6 +116,20 @@ const PvsMemo::Entry& PvsMemo::Get(const ServedScene& scene, CellId cell) {
   return entries_.emplace(cell, Entry{std::move(pvs), seconds}).first->second;
 }
 
+const PvsMemo::Entry& PvsMemo::GetRadius(const ServedScene& scene, CellId cell, double radius_m) {
+  auto it = radius_entries_.find({cell, radius_m});
+  if (it != radius_entries_.end()) return it->second;
+  const double start = WallSeconds();
+  auto pvs = std::make_shared<CellPvs>();
+  pvs->cell = cell;
+  const scenes::Aabb box = scene.grid().CellBox(cell);
+  for (const scenes::Object& o : scene.scene().objects) {
+    if (BoxDistance(box, o.bounds) <= radius_m) pvs->objects.push_back(o.id);
+  }
+  const double seconds = WallSeconds() - start;
+  return radius_entries_.emplace(std::make_pair(cell, radius_m), Entry{std::move(pvs), seconds}).first->second;
+}
+
 // SimulatedScheduler
 
 SimulatedScheduler::SimulatedScheduler(EventQueue* queue, Compute compute, unsigned workers, size_t cache_bytes,
@@ -511,7 +525,6 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
 
   // The PVS each scheme streams for a cell, and what computing it costs.
   std::shared_ptr<PvsMemo> memo = opt_.memo != nullptr ? opt_.memo : std::make_shared<PvsMemo>();
-  std::unordered_map<CellId, CellPvsPtr> radius_sets;
   if (opt_.scheme == Scheme::kRadius) {
     if (opt_.radius_m > 0.0) {
       r_.radius_m = opt_.radius_m;
@@ -522,24 +535,10 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
     }
   }
   SimulatedScheduler::Compute compute = [&](CellId cell, double* seconds) -> CellPvsPtr {
-    if (opt_.scheme != Scheme::kRadius) {
-      const PvsMemo::Entry& e = memo->Get(scene_, cell);
-      *seconds = opt_.fixed_compute_s.value_or(e.seconds);
-      return e.pvs;
-    }
-    const double start = WallSeconds();
-    auto it = radius_sets.find(cell);
-    if (it == radius_sets.end()) {
-      auto pvs = std::make_shared<CellPvs>();
-      pvs->cell = cell;
-      const scenes::Aabb box = scene_.grid().CellBox(cell);
-      for (const scenes::Object& o : scene_.scene().objects) {
-        if (BoxDistance(box, o.bounds) <= r_.radius_m) pvs->objects.push_back(o.id);
-      }
-      it = radius_sets.emplace(cell, std::move(pvs)).first;
-    }
-    *seconds = opt_.fixed_compute_s.value_or(WallSeconds() - start);
-    return it->second;
+    const PvsMemo::Entry& e =
+        opt_.scheme == Scheme::kRadius ? memo->GetRadius(scene_, cell, r_.radius_m) : memo->Get(scene_, cell);
+    *seconds = opt_.fixed_compute_s.value_or(e.seconds);
+    return e.pvs;
   };
   const unsigned workers = opt_.workers != 0 ? opt_.workers : std::max(1u, std::thread::hardware_concurrency());
   sched_ = std::make_unique<SimulatedScheduler>(&q_, compute, workers, opt_.cache_bytes, opt_.scheme != Scheme::kPlain);

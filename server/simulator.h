@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <queue>
@@ -82,10 +83,16 @@ class PvsMemo {
   };
   // The PVS of `cell`, computed with scene.ComputePvs(cell, 0) the first time.
   const Entry& Get(const ServedScene& scene, CellId cell);
+  // The radius baseline's set of `cell`: every object whose box lies within `radius_m` (metres,
+  // box to box) of the cell's, found by a scan of the scene the first time. Kept like the PVSs,
+  // so that every run of a process (a speed search's probes and its run at the answer) is
+  // charged the same seconds for it.
+  const Entry& GetRadius(const ServedScene& scene, CellId cell, double radius_m);
   size_t size() const { return entries_.size(); }
 
  private:
   std::unordered_map<CellId, Entry> entries_;
+  std::map<std::pair<CellId, double>, Entry> radius_entries_;
 };
 
 // The server's PVS scheduling policy (PvsSchedulePolicy) on `workers` simulated workers: a job

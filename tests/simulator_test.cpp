@@ -222,6 +222,33 @@ TEST_F(SimulatorTest, TheRadiusBaselineLeavesNoHoleAndStreamsMoreObjects) {
   EXPECT_GT(r.mean_triangles_drawn, pvs.mean_triangles_drawn);
 }
 
+TEST_F(SimulatorTest, TheRadiusSetIsComputedOnceAndChargedTheSameSecondsEveryTime) {
+  PvsMemo memo;
+  const visibility::ViewcellGrid& grid = london_->scene->grid();
+  const CellId cell = *grid.CellAt(glm::dvec2(0.5 * (grid.CellBox(0).min + grid.CellBox(0).max)));
+  const PvsMemo::Entry& first = memo.GetRadius(*london_->scene, cell, 250.0);
+  const PvsMemo::Entry& again = memo.GetRadius(*london_->scene, cell, 250.0);
+  EXPECT_EQ(&first, &again);
+  EXPECT_EQ(first.pvs, again.pvs);
+  EXPECT_GE(first.seconds, 0.0);
+  // The set is what a scan finds: every object within 250 m of the cell's box, box to box.
+  const scenes::Aabb box = grid.CellBox(cell);
+  std::vector<uint32_t> scan;
+  for (const scenes::Object& o : london_->scene->scene().objects) {
+    const double dx = std::max({0.0, box.min.x - o.bounds.max.x, o.bounds.min.x - box.max.x});
+    const double dy = std::max({0.0, box.min.y - o.bounds.max.y, o.bounds.min.y - box.max.y});
+    const double dz = std::max({0.0, box.min.z - o.bounds.max.z, o.bounds.min.z - box.max.z});
+    if (std::sqrt(dx * dx + dy * dy + dz * dz) <= 250.0) scan.push_back(o.id);
+  }
+  EXPECT_EQ(first.pvs->objects, scan);
+  EXPECT_GT(scan.size(), 0u);
+  EXPECT_LT(scan.size(), london_->scene->scene().objects.size());
+  // Another radius is another set.
+  const PvsMemo::Entry& wider = memo.GetRadius(*london_->scene, cell, 500.0);
+  EXPECT_NE(&wider, &first);
+  EXPECT_GT(wider.pvs->objects.size(), scan.size());
+}
+
 TEST_F(SimulatorTest, SpeedSearchBracketsTheFirstStall) {
   // A slow link so that stalls start at a walking speed; fixed compute times: deterministic.
   SimulationOptions o = Options(*london_);
