@@ -422,39 +422,47 @@ bool RayOnLine(const PlanarProblem& pr, const FreeLine& line, double* u, double*
   return *u >= 0 && *u <= 1 && *v >= 0 && *v <= 1;
 }
 
+// The line of ray (u, v) of `pr`, in scene coordinates.
+FreeLine LineOf(const PlanarProblem& pr, double u, double v) {
+  return FreeLine{pr.SceneFromPlanar(pr.x1, pr.r1 + u * (pr.l1 - pr.r1)), pr.SceneFromPlanar(pr.x2, pr.r2 + v * (pr.l2 - pr.r2)),
+                  true};
+}
+
 }  // namespace
 
 void DualRaySpace::SetWitness(const PlanarProblem& pr, double u, double v, FreeLine* witness) {
   free_u_ = u;
   free_v_ = v;
-  if (witness == nullptr) return;
-  witness->from = pr.SceneFromPlanar(pr.x1, pr.r1 + u * (pr.l1 - pr.r1));
-  witness->to = pr.SceneFromPlanar(pr.x2, pr.r2 + v * (pr.l2 - pr.r2));
-  witness->valid = true;
+  if (witness != nullptr) *witness = LineOf(pr, u, v);
 }
 
 bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOptions& options, CellQueryStats* stats,
-                                  const FreeLine& hint, FreeLine* witness) {
+                                  const FreeLine& hint, FreeLine* witness, FreeLinePool* pool) {
   if (witness != nullptr) witness->valid = false;
+  // A free ray proves B visible: *witness is set, and a ray of a new line goes to the pool.
+  auto found = [&](double u, double v, bool new_line) {
+    if (stats != nullptr) {
+      ++stats->planar_tests;
+      ++stats->free_rays;
+    }
+    SetWitness(pr, u, v, witness);
+    if (new_line && pool != nullptr) pool->Add(LineOf(pr, u, v));
+    return false;
+  };
   // Most B turn out visible: a few traced rays often prove it before any blocker is built,
   // and a ray costs only the grid cells it crosses, where the shaft's blockers cost its area.
-  // The hint first: the line that proved a box around B visible often proves B visible too.
+  // The hint first: the line that proved a box around B visible often proves B visible too;
+  // then the lines that proved other boxes visible from A and cross B's shaft (most recent
+  // first: the traversal's last nodes lie near B); then fixed rays spread over RS.
   if (options.free_ray_test) {
     static constexpr double kRays[][2] = {{0.5, 0.5}, {1.0 / 6, 1.0 / 6}, {5.0 / 6, 5.0 / 6}, {1.0 / 6, 5.0 / 6},
                                           {5.0 / 6, 1.0 / 6}, {0.5, 1.0 / 6}, {0.5, 5.0 / 6}, {1.0 / 6, 0.5},
                                           {5.0 / 6, 0.5}, {0, 0}, {1, 1}, {0, 1}, {1, 0}};
-    double hu = 0, hv = 0;
-    const bool hinted = RayOnLine(pr, hint, &hu, &hv);
-    for (int k = hinted ? -1 : 0; k < static_cast<int>(std::size(kRays)); ++k) {
-      const double u = k < 0 ? hu : kRays[k][0], v = k < 0 ? hv : kRays[k][1];
-      if (FreeRayTraced(pr, u, v)) {
-        if (stats != nullptr) {
-          ++stats->planar_tests;
-          ++stats->free_rays;
-        }
-        SetWitness(pr, u, v, witness);
-        return false;
-      }
+    double u = 0, v = 0;
+    if (RayOnLine(pr, hint, &u, &v) && FreeRayTraced(pr, u, v)) return found(u, v, false);
+    if (pool != nullptr && FreeRayFromPool(pr, *pool, hint, &u, &v)) return found(u, v, false);
+    for (const auto& ray : kRays) {
+      if (FreeRayTraced(pr, ray[0], ray[1])) return found(ray[0], ray[1], true);
     }
   }
   BuildBlockers(pr);
@@ -485,6 +493,7 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     if (options.free_ray_test && blockers_.FreeOnLine((j + 0.5) / res, &spans_, &u)) {
       if (stats != nullptr) ++stats->free_rays;
       SetWitness(pr, u, (j + 0.5) / res, witness);
+      if (pool != nullptr) pool->Add(LineOf(pr, u, (j + 0.5) / res));
       return false;
     }
     // Blockers near B's face are steep in RS: where two of them meet, their rectangles over
@@ -568,7 +577,7 @@ bool DualRaySpace::WitnessJoinsBoxes(const scenes::Aabb& a, const scenes::Aabb& 
 }
 
 bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
-                           CellQueryStats* stats, const FreeLine& hint, FreeLine* witness) {
+                           CellQueryStats* stats, const FreeLine& hint, FreeLine* witness, FreeLinePool* pool) {
   if (witness != nullptr) witness->valid = false;
   if (stats != nullptr) ++stats->queries;
   // Up to two planes separate A and B (one per axis); the one with the longer slab first:
@@ -579,7 +588,7 @@ bool DualRaySpace::Visible(const scenes::Aabb& a, const scenes::Aabb& b, const C
   const bool separable = count > 0;
   FreeLine found, each;
   for (int k = 0; k < count; ++k) {
-    const bool occluded = PlanarOccluded(pr[k], options, stats, hint, &each);
+    const bool occluded = PlanarOccluded(pr[k], options, stats, hint, &each, pool);
     if (each.valid) found = each;
     if (occluded) {
       if (stats != nullptr) ++stats->occluded;

@@ -16,6 +16,7 @@
 
 #include "scenes/aabb.h"
 #include "visibility/conservative_raster.h"
+#include "visibility/free_line_pool.h"
 #include "visibility/occluder_set.h"
 
 namespace vistream::visibility {
@@ -110,13 +111,6 @@ bool MakePlanarProblem(const scenes::Aabb& a, const scenes::Aabb& b, int axis, d
 // or overlap in x and in y). Boxes as for MakePlanarProblem.
 int SeparatingPlanes(const scenes::Aabb& a, const scenes::Aabb& b, PlanarProblem (&out)[2]);
 
-// A line in the scene's xy plane, through `from` (on A's side) and `to` (on B's side): the
-// ground track of a ray that a planar test found free.
-struct FreeLine {
-  glm::dvec2 from{0.0}, to{0.0};
-  bool valid = false;
-};
-
 // One query engine per thread: it keeps scratch buffers between queries.
 class DualRaySpace {
  public:
@@ -133,8 +127,13 @@ class DualRaySpace {
   // `hint`, when valid, is a line worth tracing first (a free one found for a box around B,
   // say): it only saves time. When B is visible and a free ray proved it, *witness (if not
   // null) is set to that ray's line; otherwise it is marked invalid.
+  //
+  // `pool`, when not null, holds free lines found before from A (for other boxes): those
+  // that cross B's shaft are traced before any blocker is built, and the free rays this query
+  // finds itself are added to it. Only a speed-up: every line is traced again on B's shaft.
   bool Visible(const scenes::Aabb& a, const scenes::Aabb& b, const CellQueryOptions& options,
-               CellQueryStats* stats = nullptr, const FreeLine& hint = {}, FreeLine* witness = nullptr);
+               CellQueryStats* stats = nullptr, const FreeLine& hint = {}, FreeLine* witness = nullptr,
+               FreeLinePool* pool = nullptr);
 
   // True only when Visible(a, b) is sure to answer true, proven at the cost of a ray or two:
   // A and B share no separating plane, or the ray of `line` (a FreeLine found for another box
@@ -147,9 +146,9 @@ class DualRaySpace {
                           CellQueryStats* stats = nullptr);
 
   // The planar test of one separating direction: true when the raster proves every ray of RS
-  // blocked. `hint` and `witness` as for Visible.
+  // blocked. `hint`, `witness` and `pool` as for Visible.
   bool PlanarOccluded(const PlanarProblem& problem, const CellQueryOptions& options, CellQueryStats* stats,
-                      const FreeLine& hint = {}, FreeLine* witness = nullptr);
+                      const FreeLine& hint = {}, FreeLine* witness = nullptr, FreeLinePool* pool = nullptr);
 
   // Gathers, clips and fuses the occluders of `problem` into blockers(); no raster yet.
   void BuildBlockers(const PlanarProblem& problem);
@@ -159,6 +158,10 @@ class DualRaySpace {
   // The same question for ray (u, v), answered by tracing it through the occluder grid:
   // no blockers need building. Exact up to rounding; used to prove visibility early.
   bool FreeRayTraced(const PlanarProblem& problem, double u, double v);
+  // A ray of `problem` along a line of `pool` (but `hint`'s) that FreeRayTraced finds free:
+  // true with it in (*u, *v), false when none is.
+  bool FreeRayFromPool(const PlanarProblem& problem, const FreeLinePool& pool, const FreeLine& hint, double* u,
+                       double* v);
   // *witness = the line of ray (u, v), if witness is not null.
   // Also keeps (u, v) for WitnessJoinsBoxes.
   void SetWitness(const PlanarProblem& problem, double u, double v, FreeLine* witness);
@@ -187,6 +190,7 @@ class DualRaySpace {
   SlantedScratch slanted_;                        // BandCoveredSlanted's
   std::vector<std::pair<uint32_t, uint32_t>> row_stack_;  // (resolution, row) still in question
   std::vector<uint32_t> gap_rows_;
+  std::vector<uint32_t> pool_lines_;  // FreeLinePool::Candidates' answer
   // Scratch, kept between queries to spare allocations.
   std::vector<glm::dvec2> planar_, clipped_, clip_tmp_, group_points_, hull_scratch_;
   std::vector<glm::dvec2> kept_points_;  // the kept pieces' clipped points, one after another

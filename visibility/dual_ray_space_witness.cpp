@@ -1,6 +1,7 @@
-// DualRaySpace::ProvenVisibleAlong: visibility proven by one given line, without blockers.
-// Apart from dual_ray_space.cpp because only the batch calls (PvsComputer::ComputeAdjacent)
-// use it, to try for one viewcell the free ray found for its neighbour.
+// Visibility proven by given lines, without blockers: DualRaySpace::ProvenVisibleAlong, which
+// only the batch calls (PvsComputer::ComputeAdjacent) use, to try for one viewcell the free
+// ray found for its neighbour; and DualRaySpace::FreeRayFromPool, the lines found before from
+// the same viewcell.
 #include "visibility/dual_ray_space.h"
 
 namespace vistream::visibility {
@@ -46,6 +47,23 @@ bool DualRaySpace::ProvenVisibleAlong(const scenes::Aabb& a, const scenes::Aabb&
   proven = proven || free_planes == count;
   if (proven && stats != nullptr) ++stats->queries;
   return proven;
+}
+
+bool DualRaySpace::FreeRayFromPool(const PlanarProblem& pr, const FreeLinePool& pool, const FreeLine& hint, double* u,
+                                   double* v) {
+  if (pool.size() == 0) return false;
+  // The directions of the rays from s1 to s2 span the cone between these two.
+  const glm::dvec2 d0 = pr.SceneFromPlanar(pr.x2, pr.r2) - pr.SceneFromPlanar(pr.x1, pr.l1);
+  const glm::dvec2 d1 = pr.SceneFromPlanar(pr.x2, pr.l2) - pr.SceneFromPlanar(pr.x1, pr.r1);
+  pool_lines_.clear();
+  pool.Candidates(d0, d1, &pool_lines_);
+  for (uint32_t i : pool_lines_) {
+    const FreeLine& line = pool.line(i);
+    // The hint was traced already.
+    if (hint.valid && line.from == hint.from && line.to == hint.to) continue;
+    if (RayAlongLine(pr, line, u, v) && FreeRayTraced(pr, *u, *v)) return true;
+  }
+  return false;
 }
 
 }  // namespace vistream::visibility

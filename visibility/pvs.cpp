@@ -24,12 +24,15 @@ PvsResult PvsComputer::Compute(const scenes::Aabb& cell, const CellQueryOptions&
   // Each node waits with the line of the free ray that proved its parent visible: the
   // likeliest free ray for it too.
   std::vector<std::pair<int32_t, FreeLine>> stack = {{0, FreeLine{}}};
+  // The free lines found so far from this cell: one may run through the gap that shows a
+  // node far from the one it was found for.
+  FreeLinePool pool;
   while (!stack.empty()) {
     const auto [index, hint] = stack.back();
     stack.pop_back();
     const KdNode& node = nodes[index];
     FreeLine witness;
-    if (!drs->Visible(cell, node.bounds, options, &result.stats, hint, &witness)) continue;
+    if (!drs->Visible(cell, node.bounds, options, &result.stats, hint, &witness, &pool)) continue;
     if (node.IsLeaf()) {
       for (ObjectId id : tree_.LeafObjects(node)) result.objects.push_back(id);
     } else {
