@@ -102,8 +102,11 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
 
   // One traversal state per thread: its own engine, stack, hints and per-cell object lists.
   struct Walker {
-    explicit Walker(const OccluderSet& occluders, size_t cells) : drs(occluders), objects(cells), stats(cells) {}
+    explicit Walker(const OccluderSet& occluders, size_t cells)
+        : drs(occluders), pools(cells), objects(cells), stats(cells) {}
     DualRaySpace drs;
+    // Per cell, the free lines this thread found from it (as PvsComputer::Compute keeps them).
+    std::vector<FreeLinePool> pools;
     std::vector<AdjacentEntry> stack;
     std::vector<FreeLine> hints;  // pool: entry e's lines at [e.hints, e.hints + cells), ascending by stack order
     std::vector<FreeLine> found;  // the free lines found so far for the node being expanded
@@ -137,7 +140,7 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
       if (!visible) {
         // The parent's line first, else a neighbour's (it may still save a probe or two).
         const FreeLine& hint = parent_hint.valid || w.found.empty() ? parent_hint : w.found.back();
-        visible = w.drs.Visible(cells[c], node.bounds, options, &w.stats[c], hint, &witness);
+        visible = w.drs.Visible(cells[c], node.bounds, options, &w.stats[c], hint, &witness, &w.pools[c]);
         if (visible && witness.valid) w.found.push_back(witness);
       }
       if (visible) {
