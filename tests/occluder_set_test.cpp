@@ -194,11 +194,11 @@ TEST(OccluderSet, ContactsOfAPartitionReachEveryStripTheSharedWallReaches) {
   EXPECT_GT(strips_missed, 1000);
 }
 
-// A star-shaped footprint in general position is triangulated; two of its triangles meet
+// A star-shaped footprint in general position is cut into convex pieces; two of them meet
 // exactly in the hull of their shared vertices (a diagonal, a vertex, or nothing), and the
-// contacts reach exactly the strips that hull reaches, though the triangles around a vertex
+// contacts reach exactly the strips that hull reaches, though the pieces around a vertex
 // meet there through many pairs of edges.
-TEST(OccluderSet, ContactsOfATriangulatedFootprintReachEveryStripTheSharedVerticesReach) {
+TEST(OccluderSet, ContactsOfAPartitionedFootprintReachEveryStripTheSharedVerticesReach) {
   int sharing = 0, strips_met = 0;
   for (uint64_t seed = 1; seed <= 40; ++seed) {
     scenes::Rng rng(seed);
@@ -218,7 +218,7 @@ TEST(OccluderSet, ContactsOfATriangulatedFootprintReachEveryStripTheSharedVertic
     std::vector<double> coords;
     for (const glm::dvec2& p : footprint.footprint) coords.insert(coords.end(), {p.x, p.y});
     for (uint32_t a = 0; a < set.pieces().size(); ++a) {
-      ASSERT_EQ(set.pieces()[a].points.size(), 3u);
+      ASSERT_TRUE(scenes::IsConvexCcw(set.pieces()[a].points)) << "seed " << seed << ": piece " << a;
       for (uint32_t b = a + 1; b < set.pieces().size(); ++b) {
         glm::dvec2 lo(INFINITY), hi(-INFINITY);
         for (const glm::dvec2& p : set.pieces()[a].points) {
@@ -248,9 +248,9 @@ TEST(OccluderSet, ContactsOfATriangulatedFootprintReachEveryStripTheSharedVertic
 // record that vertex once for every pair of edges that meet there.
 TEST(OccluderSet, NoContactLiesWithinAnotherOfTheSamePair) {
   scenes::Scene s;
-  std::vector<glm::dvec2> comb;  // a comb: many reflex corners, many triangles
-  for (int k = 0; k < 12; ++k) comb.insert(comb.end(), {{4.0 * k, 0.0}, {4.0 * k + 2, 0.0}, {4.0 * k + 2, 9.0 + k % 3}, {4.0 * k + 3, 9.0}});
-  comb.push_back({48.0, -5.0});
+  std::vector<glm::dvec2> comb;  // a comb: many reflex corners, many convex pieces
+  for (int k = 0; k < 24; ++k) comb.insert(comb.end(), {{4.0 * k, 0.0}, {4.0 * k + 2, 0.0}, {4.0 * k + 2, 9.0 + k % 3}, {4.0 * k + 3, 9.0}});
+  comb.push_back({96.0, -5.0});
   comb.push_back({0.0, -5.0});
   std::reverse(comb.begin(), comb.end());
   s.occluders.push_back({comb, 8.0, 0});
@@ -282,9 +282,9 @@ TEST(OccluderSet, NoContactLiesWithinAnotherOfTheSamePair) {
 // by brute force: the fused groups' hulls read a shared vertex from its owner only.
 TEST(OccluderSet, EachPointsOwnerIsTheFirstPieceHoldingIt) {
   scenes::Scene s;
-  std::vector<glm::dvec2> comb;  // a comb: its triangles share vertices
-  for (int k = 0; k < 8; ++k) comb.insert(comb.end(), {{4.0 * k, 0.0}, {4.0 * k + 2, 0.0}, {4.0 * k + 2, 9.0}, {4.0 * k + 3, 9.0}});
-  comb.push_back({32.0, -5.0});
+  std::vector<glm::dvec2> comb;  // a comb: its convex pieces share vertices
+  for (int k = 0; k < 16; ++k) comb.insert(comb.end(), {{4.0 * k, 0.0}, {4.0 * k + 2, 0.0}, {4.0 * k + 2, 9.0}, {4.0 * k + 3, 9.0}});
+  comb.push_back({64.0, -5.0});
   comb.push_back({0.0, -5.0});
   s.occluders.push_back({comb, 8.0, 0});
   scenes::Rng rng(5);
@@ -306,7 +306,7 @@ TEST(OccluderSet, EachPointsOwnerIsTheFirstPieceHoldingIt) {
       shared += first != id;
     }
   }
-  EXPECT_GT(shared, 40);  // the comb's triangles alone share dozens
+  EXPECT_GT(shared, 40);  // the comb's pieces alone share dozens
 }
 
 // Pieces are stored along a space-filling curve, not in the scene's order: a grid of houses

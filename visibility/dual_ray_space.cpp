@@ -241,7 +241,7 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       if (lo <= hi) {
         // The later piece's root under the earlier one's: i runs upwards, so a group's first
         // member stays its root and the trees stay flat (the other way round, a footprint's
-        // triangles, fused in order, made a chain that every find walked).
+        // pieces, fused in order, made a chain that every find walked).
         parent_[find(static_cast<uint32_t>(j))] = find(i);
         fused = true;
       }
@@ -272,9 +272,9 @@ void DualRaySpace::BuildBlockers(const PlanarProblem& pr) {
       if (end == n + 1) {
         AddGroup(pr, points_of(order_[n]));
       } else {
-        // A point that the group holds twice (a vertex shared by a footprint's triangles) is
-        // read once: where its owner is an unclipped member, from the owner only. The same
-        // points, so the same hull, from a third as many to sort.
+        // A point that the group holds twice (a vertex shared by a footprint's convex pieces)
+        // is read once: where its owner is an unclipped member, from the owner only. The same
+        // points, so the same hull, from fewer to sort.
         group_points_.clear();
         const uint32_t root = parent_[order_[n]];
         for (size_t m = n; m < end; ++m) {

@@ -4,23 +4,15 @@
 #include <cmath>
 #include <numeric>
 
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include "scenes/mesh.h"
+#include "visibility/convex_partition.h"
 
 namespace vistream::visibility {
 
 namespace {
-
-using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
-
-// Exact sign of the turn a -> b -> c: +1 left, -1 right, 0 collinear.
-int Orient(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c) {
-  const auto o = CGAL::orientation(Kernel::Point_2(a.x, a.y), Kernel::Point_2(b.x, b.y), Kernel::Point_2(c.x, c.y));
-  return o == CGAL::LEFT_TURN ? 1 : (o == CGAL::RIGHT_TURN ? -1 : 0);
-}
 
 // p on the closed segment [a, b], exactly.
 bool OnSegment(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
@@ -35,39 +27,6 @@ std::vector<glm::dvec2> Distinct(const std::vector<glm::dvec2>& fp) {
   }
   while (out.size() > 1 && out.front() == out.back()) out.pop_back();
   return out;
-}
-
-bool IsEar(const std::vector<glm::dvec2>& poly, const std::vector<int>& idx, size_t i) {
-  const size_t n = idx.size();
-  const glm::dvec2 &a = poly[idx[(i + n - 1) % n]], &b = poly[idx[i]], &c = poly[idx[(i + 1) % n]];
-  if (Orient(a, b, c) <= 0) return false;
-  for (size_t k = 0; k < n; ++k) {
-    if (k == i || k == (i + n - 1) % n || k == (i + 1) % n) continue;
-    const glm::dvec2& p = poly[idx[k]];
-    if (Orient(a, b, p) >= 0 && Orient(b, c, p) >= 0 && Orient(c, a, p) >= 0) return false;
-  }
-  return true;
-}
-
-// Ear clipping of a simple counter-clockwise polygon; empty when the polygon is not simple.
-std::vector<std::array<int, 3>> Triangulate(const std::vector<glm::dvec2>& poly) {
-  std::vector<int> idx(poly.size());
-  std::iota(idx.begin(), idx.end(), 0);
-  std::vector<std::array<int, 3>> tris;
-  while (idx.size() > 3) {
-    bool clipped = false;
-    for (size_t i = 0; i < idx.size(); ++i) {
-      if (!IsEar(poly, idx, i)) continue;
-      const size_t n = idx.size();
-      tris.push_back({idx[(i + n - 1) % n], idx[i], idx[(i + 1) % n]});
-      idx.erase(idx.begin() + static_cast<long>(i));
-      clipped = true;
-      break;
-    }
-    if (!clipped) return {};
-  }
-  tris.push_back({idx[0], idx[1], idx[2]});
-  return tris;
 }
 
 // Clips a convex piece (counter-clockwise polygon, or a segment) to the closed box [lo, hi]
@@ -153,8 +112,8 @@ bool StrictlyInside(const OccluderPiece& piece, const glm::dvec2& q) {
 // contact's extent along the separating axis meets a strip; a contact's extent then lies
 // within the other's, and the planar frame's map of a coordinate is monotone even in
 // floating point, so the other one answers yes whenever the dropped one would: the same
-// blockers, from far fewer contacts (a triangulated footprint's triangles meet at shared
-// vertices through many edge pairs, each recording the same point).
+// blockers, from far fewer contacts (a footprint's convex pieces meet at shared vertices
+// through many edge pairs, each recording the same point).
 void DropCoveredContacts(std::vector<PieceContact>* out, size_t begin) {
   auto& c = *out;
   const size_t end = c.size();
@@ -258,13 +217,17 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     };
     if (scenes::SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
     const bool degenerate = fp.size() < 3 || scenes::SignedArea(fp) == 0.0;
-    std::vector<std::array<int, 3>> tris;
-    if (!degenerate && !scenes::IsConvexCcw(fp)) tris = Triangulate(fp);
+    std::vector<std::vector<int>> parts;
+    if (!degenerate && !scenes::IsConvexCcw(fp)) parts = ConvexPartition(fp);
     if (!degenerate && scenes::IsConvexCcw(fp)) {
       add(fp);
-    } else if (!tris.empty()) {
-      // Triangles of a non-convex footprint, fused along their shared diagonals below.
-      for (const auto& t : tris) add({fp[t[0]], fp[t[1]], fp[t[2]]});
+    } else if (!parts.empty()) {
+      // Convex pieces of a non-convex footprint, fused along their shared diagonals below.
+      for (const std::vector<int>& part : parts) {
+        std::vector<glm::dvec2> pts;
+        for (int k : part) pts.push_back(fp[k]);
+        add(std::move(pts));
+      }
     } else {
       // Zero area or not simple: the boundary as segments, joined at their shared vertices.
       for (size_t i = 0; i < fp.size(); ++i) {

@@ -1,6 +1,7 @@
 #pragma once
-// Occluders prepared for from-region queries: every 2.5D occluder footprint as convex pieces,
-// the contacts between pieces (shared walls, overlaps, a footprint's own diagonals) that let
+// Occluders prepared for from-region queries: every 2.5D occluder footprint as convex pieces
+// (a non-convex one cut by ConvexPartition: a few pieces, not a triangle per vertex), the
+// contacts between pieces (shared walls, overlaps, a footprint's own diagonals) that let
 // touching buildings fuse into one blocker, and a grid for gathering the pieces in a shaft.
 
 #include <algorithm>
@@ -65,7 +66,7 @@ class OccluderSet {
   }
 
   // For each of PointsOf(piece), in order, the first piece (lowest id, maybe `piece` itself)
-  // that holds the very same point (equal coordinates): the triangles of a footprint share
+  // that holds the very same point (equal coordinates): the convex pieces of a footprint share
   // its vertices, and a fused group that holds the owner unclipped has the point already.
   std::span<const uint32_t> PointOwnersOf(uint32_t piece) const {
     return {point_owner_.data() + point_start_[piece], point_start_[piece + 1] - point_start_[piece]};
