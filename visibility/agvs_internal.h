@@ -114,6 +114,9 @@ struct Sample {
   ObjectId fwd = kNoObject, rev = kNoObject;
   Distribution dist = Distribution::kViewSpaceDirection;
   bool valid = false;
+  // Its free segment cannot meet the view space, so it adds nothing; rays left uncast
+  // (Worker::CastBoth), and valid, t and the objects are not known.
+  bool misses = false;
   CellId origin_cell = 0;  // view space-direction and ref samples
 };
 

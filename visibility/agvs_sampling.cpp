@@ -61,7 +61,7 @@ class Worker {
           smp.dist = plan.dist;
           smp.origin = ViewSpacePoint(rng, &smp.origin_cell);
           smp.dir = UniformDirection(rng);
-          CastBoth(&smp, 0.0);
+          CastBoth(&smp, false);
           Emit(smp);
           break;
         }
@@ -100,7 +100,7 @@ class Worker {
           if (i + 1 < kChunk) FanSurface::Prefetch(fans_[i + 1]);
           const Candidate& c = candidates_[i];
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
-          const Sample smp = EmitSegment(c.from, to, plan.dist);
+          const Sample smp = EmitSegment(c.from, to, plan.dist, true);
           if (!smp.valid || smp.fwd == kNoObject) break;
           // A depth discontinuity behind the silhouette: search the silhouette again from the
           // far hit point back towards the view space (the reverse sampling of GVS).
@@ -169,12 +169,20 @@ class Worker {
       smp.dist = dist;
       smp.origin = p;
       smp.dir = sin_t * a.cos_phi * b1 + sin_t * a.sin_phi * b2 + a.cos_t * n;
+      smp.t_rev = 0.0;
+      smp.rev = o;
+      // The segment runs from the surface point forwards only: if the view space lies behind
+      // it or off the line, the ray cannot add anything (CastBoth).
+      double near = 0.0, far = 0.0;
+      if (!ViewSpaceSpan(p, smp.dir, &near, &far) || far < 0.0) {
+        smp.misses = true;
+        Emit(smp);
+        continue;
+      }
       const Hit h = Cast(p, smp.dir, kSurfaceOffset);
       smp.valid = !h.back;
       smp.t_fwd = h.t;
       smp.fwd = h.object;
-      smp.t_rev = 0.0;
-      smp.rev = o;
       Emit(smp);
     }
   }
@@ -281,32 +289,47 @@ class Worker {
     return h;
   }
 
-  void CastBoth(Sample* smp, double tnear) {
-    const Hit f = Cast(smp->origin, smp->dir, tnear);
-    if (f.back) {
-      // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
-      smp->valid = false;
-      smp->t_fwd = f.t;
-      smp->fwd = f.object;
+  // Casts the sample's rays both ways, but leaves uncast what cannot count: the free segment
+  // adds its two ends to the cells it crosses, so a line that misses the view space adds
+  // nothing, and neither does one whose ray towards the view space ends before reaching it,
+  // whatever the other ray would meet (Sample::misses). That ray is cast first. Decided as
+  // Emit's walk decides which cells a segment crosses, so every sample that adds something
+  // casts the same rays as when both were always cast. `whole`: both rays always, for a
+  // segment whose far hit is read even if it adds nothing (the silhouette mutation).
+  void CastBoth(Sample* smp, bool whole) {
+    double a = -kInf, b = kInf;
+    if (!ViewSpaceSpan(smp->origin, smp->dir, &a, &b) && !whole) {
+      smp->misses = true;
       return;
     }
-    const Hit r = Cast(smp->origin, -smp->dir, tnear);
-    smp->valid = !r.back;
-    smp->t_fwd = f.t;
-    smp->fwd = f.object;
-    smp->t_rev = r.t;
-    smp->rev = r.object;
+    const bool reverse_first = !whole && b < 0.0;
+    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0);
+    (reverse_first ? smp->t_rev : smp->t_fwd) = first.t;
+    (reverse_first ? smp->rev : smp->fwd) = first.object;
+    if (first.back) {
+      // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
+      smp->valid = false;
+      return;
+    }
+    if (!whole && (reverse_first ? first.t < -b : first.t < a)) {
+      smp->misses = true;
+      return;
+    }
+    const Hit second = Cast(smp->origin, reverse_first ? smp->dir : -smp->dir, 0.0);
+    (reverse_first ? smp->t_fwd : smp->t_rev) = second.t;
+    (reverse_first ? smp->fwd : smp->rev) = second.object;
+    smp->valid = !second.back;
   }
 
-  // The sample on the line from `a` to `b`, cast both ways from their midpoint.
-  Sample EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist) {
+  // The sample on the line from `a` to `b`, cast both ways from their midpoint (CastBoth).
+  Sample EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist, bool whole = false) {
     Sample smp;
     smp.dist = dist;
     const glm::dvec3 d = b - a;
     const double len = glm::length(d);
     smp.origin = 0.5 * (a + b);
     smp.dir = len > 0.0 && std::isfinite(len) ? d / len : glm::dvec3(0, 0, 1);
-    CastBoth(&smp, 0.0);
+    CastBoth(&smp, whole);
     Emit(smp);
     return smp;
   }
@@ -340,17 +363,16 @@ class Worker {
   void Emit(const Sample& smp) {
     ChunkResult& out = *out_;
     ++out.samples;
+    if (smp.misses) return;
     if (!smp.valid) {
       ++out.discarded;
       return;
     }
-    if (counts_ != nullptr) {
-      // Per-object sampling densities, for the object-space filter.
-      if (smp.rev != kNoObject && smp.dist != Distribution::kRef) ++counts_->objects[smp.rev];
-      if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
-    }
     if (smp.dist == Distribution::kRef) {
-      if (counts_ != nullptr) ++counts_->cells[smp.origin_cell];
+      if (counts_ != nullptr) {
+        ++counts_->cells[smp.origin_cell];
+        if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
+      }
       // A ref ray is a camera ray too: a uniform point and direction in a uniform cell.
       ++out.estimator_rays;
       if (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) {
@@ -366,8 +388,6 @@ class Worker {
       out.estimator_hits += (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) +
                             (smp.rev != kNoObject && !pvs_.Contains(smp.origin_cell, smp.rev));
     }
-    uint32_t c_fwd = 0, c_rev = 0;
-    double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
     // The cells first, with the set lines their tests read prefetched; then the tests, in the
     // same order (a segment crosses tens of cells, each test a likely cache miss).
     walk_.clear();
@@ -376,10 +396,15 @@ class Worker {
       if (smp.fwd != kNoObject) pvs_.Prefetch(cell, smp.fwd);
       if (smp.rev != kNoObject) pvs_.Prefetch(cell, smp.rev);
     });
-    if (!walk_.empty()) {
-      t_first = walk_.front().second;
-      t_last = walk_.back().second;
+    if (walk_.empty()) return;
+    // The first and last cell's points along the segment.
+    const double t_first = walk_.front().second, t_last = walk_.back().second;
+    if (counts_ != nullptr) {
+      // Per-object sampling densities from the view space, for the object-space filter.
+      if (smp.rev != kNoObject) ++counts_->objects[smp.rev];
+      if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
     }
+    uint32_t c_fwd = 0, c_rev = 0;
     for (const auto& [cell, t] : walk_) {
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
       if (counts_ != nullptr) ++counts_->cells[cell];
@@ -426,22 +451,36 @@ class Worker {
   }
 
  public:
+  // The part [*a, *b] of the line origin + t dir inside the view space; false, leaving them
+  // unspecified, if it misses.
+  bool ViewSpaceSpan(const glm::dvec3& origin, const glm::dvec3& dir, double* a, double* b) const {
+    const Aabb& vs = s_.view_space;
+    double lo = -kInf, hi = kInf;
+    for (int k = 0; k < 3; ++k) {
+      if (dir[k] == 0.0) {
+        if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return false;
+        continue;
+      }
+      double t0 = (vs.min[k] - origin[k]) / dir[k], t1 = (vs.max[k] - origin[k]) / dir[k];
+      if (t0 > t1) std::swap(t0, t1);
+      lo = std::max(lo, t0);
+      hi = std::min(hi, t1);
+    }
+    *a = lo;
+    *b = hi;
+    return lo <= hi;
+  }
+
   // Calls visit(cell, t) for each viewcell the part [t0, t1] of the line origin + t dir
   // passes through, with t a parameter inside that cell, in order along the line.
   template <typename F>
   void VisitCells(const glm::dvec3& origin, const glm::dvec3& dir, double t0, double t1, F&& visit) const {
-    const Aabb& vs = s_.view_space;
-    for (int k = 0; k < 3; ++k) {
-      if (dir[k] == 0.0) {
-        if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return;
-        continue;
-      }
-      double a = (vs.min[k] - origin[k]) / dir[k], b = (vs.max[k] - origin[k]) / dir[k];
-      if (a > b) std::swap(a, b);
-      t0 = std::max(t0, a);
-      t1 = std::min(t1, b);
-    }
+    double a = 0.0, b = 0.0;
+    if (!ViewSpaceSpan(origin, dir, &a, &b)) return;
+    t0 = std::max(t0, a);
+    t1 = std::min(t1, b);
     if (!(t0 <= t1)) return;
+    const Aabb& vs = s_.view_space;
     const double size = grid_.cell_size();
     const glm::dvec3 p = origin + t0 * dir;
     int i = std::clamp(static_cast<int>(std::floor((p.x - vs.min.x) / size)), 0, grid_.nx() - 1);
