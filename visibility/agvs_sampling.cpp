@@ -172,14 +172,11 @@ class Worker {
       smp.t_rev = 0.0;
       smp.rev = o;
       // The segment runs from the surface point forwards only: if the view space lies behind
-      // it or off the line, the ray cannot add anything (CastBoth).
+      // it or off the line, or the ray ends before it, the sample adds nothing (CastBoth).
       double near = 0.0, far = 0.0;
-      if (!ViewSpaceSpan(p, smp.dir, &near, &far) || far < 0.0) {
-        smp.misses = true;
-        Emit(smp);
-        continue;
-      }
-      const Hit h = Cast(p, smp.dir, kSurfaceOffset);
+      const bool meets = ViewSpaceSpan(p, smp.dir, &near, &far) && far >= 0.0;
+      const Hit h = meets ? Cast(p, smp.dir, kSurfaceOffset, near) : Hit{};
+      smp.misses = !meets || h.short_of_reach;
       smp.valid = !h.back;
       smp.t_fwd = h.t;
       smp.fwd = h.object;
@@ -200,6 +197,7 @@ class Worker {
     uint32_t quad = 0;    // Embree's primitive
     bool second = false;  // in the quad's second triangle
     bool back = false;
+    bool short_of_reach = false;  // met something before the reach asked for: t, object unknown
   };
 
   glm::dvec3 ViewSpacePoint(Rng& rng, CellId* cell) {
@@ -232,7 +230,11 @@ class Worker {
     return a + u * e1 + v * e2;
   }
 
-  Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear) {
+  // The first hit along origin + t dir for t >= tnear. With `reach` past tnear, a ray that
+  // meets anything before `reach` returns short_of_reach, what it met unknown: an occlusion
+  // query, which stops at any hit, tells that for less than the search for the nearest one,
+  // which then starts at `reach`. Either way it counts as one ray.
+  Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear, double reach = 0.0) {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -265,8 +267,26 @@ class Worker {
     rh.ray.time = 0.0f;
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(s_.rtc, &ctx, &rh);
     ++out_->embree_rays;
+    // The largest float below `reach`: what the query meets lies before it, and the search
+    // then meets nothing before it, so neither tells `reach` apart from where it rounds to.
+    float below = 0.0f;
+    if (reach > tnear) {
+      below = std::nextafter(static_cast<float>(reach), 0.0f);
+      if (static_cast<double>(below) >= reach) below = std::nextafter(below, 0.0f);
+    }
+    if (below > rh.ray.tnear) {
+      RTCRay query = rh.ray;
+      query.tfar = std::min(query.tfar, below);
+      rtcOccluded1(s_.rtc, &ctx, &query);
+      if (query.tfar < 0.0f) {
+        Hit blocked;
+        blocked.short_of_reach = true;
+        return blocked;
+      }
+      rh.ray.tnear = below;
+    }
+    rtcIntersect1(s_.rtc, &ctx, &rh);
     Hit h;
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
       h.t = ground_t;
@@ -292,10 +312,11 @@ class Worker {
   // Casts the sample's rays both ways, but leaves uncast what cannot count: the free segment
   // adds its two ends to the cells it crosses, so a line that misses the view space adds
   // nothing, and neither does one whose ray towards the view space ends before reaching it,
-  // whatever the other ray would meet (Sample::misses). That ray is cast first. Decided as
-  // Emit's walk decides which cells a segment crosses, so every sample that adds something
-  // casts the same rays as when both were always cast. `whole`: both rays always, for a
-  // segment whose far hit is read even if it adds nothing (the silhouette mutation).
+  // whatever the other ray would meet (Sample::misses). That ray is cast first, asking first
+  // whether anything lies before the view space (Cast's reach). Decided as Emit's walk
+  // decides which cells a segment crosses, so every sample that adds something finds the
+  // same hits as when both rays were always cast. `whole`: both rays in full, for a segment
+  // whose far hit is read even if it adds nothing (the silhouette mutation).
   void CastBoth(Sample* smp, bool whole) {
     double a = -kInf, b = kInf;
     if (!ViewSpaceSpan(smp->origin, smp->dir, &a, &b) && !whole) {
@@ -303,16 +324,16 @@ class Worker {
       return;
     }
     const bool reverse_first = !whole && b < 0.0;
-    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0);
+    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0, whole ? 0.0 : reverse_first ? -b : a);
+    if (first.short_of_reach) {
+      smp->misses = true;
+      return;
+    }
     (reverse_first ? smp->t_rev : smp->t_fwd) = first.t;
     (reverse_first ? smp->rev : smp->fwd) = first.object;
     if (first.back) {
       // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
       smp->valid = false;
-      return;
-    }
-    if (!whole && (reverse_first ? first.t < -b : first.t < a)) {
-      smp->misses = true;
       return;
     }
     const Hit second = Cast(smp->origin, reverse_first ? smp->dir : -smp->dir, 0.0);
