@@ -174,7 +174,7 @@ class Worker {
       // The segment runs from the surface point forwards only: if the view space lies behind
       // it or off the line, or the ray ends before it, the sample adds nothing (CastBoth).
       double near = 0.0, far = 0.0;
-      const bool meets = ViewSpaceSpan(p, smp.dir, &near, &far) && far >= 0.0;
+      const bool meets = ViewSpaceSpan(s_.view_space, p, smp.dir, &near, &far) && far >= 0.0;
       const Hit h = meets ? Cast(p, smp.dir, kSurfaceOffset, near) : Hit{};
       smp.misses = !meets || h.short_of_reach;
       smp.valid = !h.back;
@@ -319,7 +319,7 @@ class Worker {
   // whose far hit is read even if it adds nothing (the silhouette mutation).
   void CastBoth(Sample* smp, bool whole) {
     double a = -kInf, b = kInf;
-    if (!ViewSpaceSpan(smp->origin, smp->dir, &a, &b) && !whole) {
+    if (!ViewSpaceSpan(s_.view_space, smp->origin, smp->dir, &a, &b) && !whole) {
       smp->misses = true;
       return;
     }
@@ -412,7 +412,7 @@ class Worker {
     // The cells first, with the set lines their tests read prefetched; then the tests, in the
     // same order (a segment crosses tens of cells, each test a likely cache miss).
     walk_.clear();
-    VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+    VisitCells(grid_, s_.view_space, smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
       walk_.emplace_back(cell, t);
       if (smp.fwd != kNoObject) pvs_.Prefetch(cell, smp.fwd);
       if (smp.rev != kNoObject) pvs_.Prefetch(cell, smp.rev);
@@ -469,66 +469,6 @@ class Worker {
     if (!s_.witness_cell[cell]) return kNoWitness;
     out_->witnesses.push_back({s_.frame + smp.origin + t * smp.dir, s_.frame + smp.origin + t_obj * smp.dir});
     return static_cast<uint32_t>(out_->witnesses.size() - 1);
-  }
-
- public:
-  // The part [*a, *b] of the line origin + t dir inside the view space; false, leaving them
-  // unspecified, if it misses.
-  bool ViewSpaceSpan(const glm::dvec3& origin, const glm::dvec3& dir, double* a, double* b) const {
-    const Aabb& vs = s_.view_space;
-    double lo = -kInf, hi = kInf;
-    for (int k = 0; k < 3; ++k) {
-      if (dir[k] == 0.0) {
-        if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return false;
-        continue;
-      }
-      double t0 = (vs.min[k] - origin[k]) / dir[k], t1 = (vs.max[k] - origin[k]) / dir[k];
-      if (t0 > t1) std::swap(t0, t1);
-      lo = std::max(lo, t0);
-      hi = std::min(hi, t1);
-    }
-    *a = lo;
-    *b = hi;
-    return lo <= hi;
-  }
-
-  // Calls visit(cell, t) for each viewcell the part [t0, t1] of the line origin + t dir
-  // passes through, with t a parameter inside that cell, in order along the line.
-  template <typename F>
-  void VisitCells(const glm::dvec3& origin, const glm::dvec3& dir, double t0, double t1, F&& visit) const {
-    double a = 0.0, b = 0.0;
-    if (!ViewSpaceSpan(origin, dir, &a, &b)) return;
-    t0 = std::max(t0, a);
-    t1 = std::min(t1, b);
-    if (!(t0 <= t1)) return;
-    const Aabb& vs = s_.view_space;
-    const double size = grid_.cell_size();
-    const glm::dvec3 p = origin + t0 * dir;
-    int i = std::clamp(static_cast<int>(std::floor((p.x - vs.min.x) / size)), 0, grid_.nx() - 1);
-    int j = std::clamp(static_cast<int>(std::floor((p.y - vs.min.y) / size)), 0, grid_.ny() - 1);
-    const int si = dir.x > 0 ? 1 : (dir.x < 0 ? -1 : 0), sj = dir.y > 0 ? 1 : (dir.y < 0 ? -1 : 0);
-    auto next = [&](int s, int idx, double lo, double o, double d) {
-      if (s == 0) return kInf;
-      const double edge = lo + (s > 0 ? idx + 1 : idx) * size;
-      return (edge - o) / d;
-    };
-    double tx = next(si, i, vs.min.x, origin.x, dir.x), ty = next(sj, j, vs.min.y, origin.y, dir.y);
-    const double dtx = si != 0 ? size / std::abs(dir.x) : kInf, dty = sj != 0 ? size / std::abs(dir.y) : kInf;
-    double t = t0;
-    for (;;) {
-      const double exit = std::min({tx, ty, t1});
-      visit(grid_.Id({i, j}), 0.5 * (t + exit));
-      if (exit >= t1) return;
-      t = exit;
-      if (tx <= ty) {
-        i += si;
-        tx += dtx;
-      } else {
-        j += sj;
-        ty += dty;
-      }
-      if (i < 0 || j < 0 || i >= grid_.nx() || j >= grid_.ny()) return;
-    }
   }
 
  private:
