@@ -1,7 +1,7 @@
 #pragma once
 // What the parts of the global sampler share (agvs.cpp, agvs_sampling.cpp, agvs_edit.cpp,
 // agvs_state.cpp): the sampler's state (GlobalSampler::Impl) and the helpers it is written
-// with. Internal: included by those files only.
+// with. Internal: included by those files and their tests only.
 
 #include <embree3/rtcore.h>
 #include <unistd.h>
@@ -27,6 +27,7 @@
 #include "visibility/parallel.h"
 #include "visibility/pvs_file.h"
 #include "visibility/silhouette.h"
+#include "visibility/viewcell_grid.h"
 
 namespace vistream::visibility {
 
@@ -108,12 +109,75 @@ inline double BoxDistance(const Aabb& a, const Aabb& b) {
   return std::sqrt(s);
 }
 
+// The part [*a, *b] of the line origin + t dir inside box `vs` (the view space, frame-relative
+// metres; dir need not be unit length, t is in its units); false, leaving them unspecified,
+// if it misses. Emit's walk and the rays a sample casts decide with this same span.
+inline bool ViewSpaceSpan(const Aabb& vs, const glm::dvec3& origin, const glm::dvec3& dir, double* a, double* b) {
+  double lo = -kInf, hi = kInf;
+  for (int k = 0; k < 3; ++k) {
+    if (dir[k] == 0.0) {
+      if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return false;
+      continue;
+    }
+    double t0 = (vs.min[k] - origin[k]) / dir[k], t1 = (vs.max[k] - origin[k]) / dir[k];
+    if (t0 > t1) std::swap(t0, t1);
+    lo = std::max(lo, t0);
+    hi = std::min(hi, t1);
+  }
+  *a = lo;
+  *b = hi;
+  return lo <= hi;
+}
+
+// Calls visit(cell, t) for each viewcell of `grid` the part [t0, t1] of the line origin + t dir
+// passes through, with t a parameter inside that cell, in order along the line; `vs` is the
+// grid's box, frame-relative (the sampler's view space).
+template <typename F>
+void VisitCells(const ViewcellGrid& grid, const Aabb& vs, const glm::dvec3& origin, const glm::dvec3& dir, double t0,
+              double t1, F&& visit) {
+  double a = 0.0, b = 0.0;
+  if (!ViewSpaceSpan(vs, origin, dir, &a, &b)) return;
+  t0 = std::max(t0, a);
+  t1 = std::min(t1, b);
+  if (!(t0 <= t1)) return;
+  const double size = grid.cell_size();
+  const glm::dvec3 p = origin + t0 * dir;
+  int i = std::clamp(static_cast<int>(std::floor((p.x - vs.min.x) / size)), 0, grid.nx() - 1);
+  int j = std::clamp(static_cast<int>(std::floor((p.y - vs.min.y) / size)), 0, grid.ny() - 1);
+  const int si = dir.x > 0 ? 1 : (dir.x < 0 ? -1 : 0), sj = dir.y > 0 ? 1 : (dir.y < 0 ? -1 : 0);
+  auto next = [&](int s, int idx, double lo, double o, double d) {
+    if (s == 0) return kInf;
+    const double edge = lo + (s > 0 ? idx + 1 : idx) * size;
+    return (edge - o) / d;
+  };
+  double tx = next(si, i, vs.min.x, origin.x, dir.x), ty = next(sj, j, vs.min.y, origin.y, dir.y);
+  const double dtx = si != 0 ? size / std::abs(dir.x) : kInf, dty = sj != 0 ? size / std::abs(dir.y) : kInf;
+  double t = t0;
+  for (;;) {
+    const double exit = std::min({tx, ty, t1});
+    visit(grid.Id({i, j}), 0.5 * (t + exit));
+    if (exit >= t1) return;
+    t = exit;
+    if (tx <= ty) {
+      i += si;
+      tx += dtx;
+    } else {
+      j += sj;
+      ty += dty;
+    }
+    if (i < 0 || j < 0 || i >= grid.nx() || j >= grid.ny()) return;
+  }
+}
+
 struct Sample {
   glm::dvec3 origin{0.0}, dir{0.0};  // frame-relative; dir is unit length
   double t_fwd = kInf, t_rev = kInf;  // distances to the hits along +dir and -dir
   ObjectId fwd = kNoObject, rev = kNoObject;
   Distribution dist = Distribution::kViewSpaceDirection;
   bool valid = false;
+  // Its free segment cannot meet the view space, so it adds nothing; rays left uncast
+  // (Worker::CastBoth), and valid, t and the objects are not known.
+  bool misses = false;
   CellId origin_cell = 0;  // view space-direction and ref samples
 };
 

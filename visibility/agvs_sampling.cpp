@@ -61,7 +61,7 @@ class Worker {
           smp.dist = plan.dist;
           smp.origin = ViewSpacePoint(rng, &smp.origin_cell);
           smp.dir = UniformDirection(rng);
-          CastBoth(&smp, 0.0);
+          CastBoth(&smp, false);
           Emit(smp);
           break;
         }
@@ -100,7 +100,7 @@ class Worker {
           if (i + 1 < kChunk) FanSurface::Prefetch(fans_[i + 1]);
           const Candidate& c = candidates_[i];
           const glm::dvec3 to = Silhouette(c.from, c.to, c.r_to, c.object, rng);
-          const Sample smp = EmitSegment(c.from, to, plan.dist);
+          const Sample smp = EmitSegment(c.from, to, plan.dist, true);
           if (!smp.valid || smp.fwd == kNoObject) break;
           // A depth discontinuity behind the silhouette: search the silhouette again from the
           // far hit point back towards the view space (the reverse sampling of GVS).
@@ -169,12 +169,17 @@ class Worker {
       smp.dist = dist;
       smp.origin = p;
       smp.dir = sin_t * a.cos_phi * b1 + sin_t * a.sin_phi * b2 + a.cos_t * n;
-      const Hit h = Cast(p, smp.dir, kSurfaceOffset);
+      smp.t_rev = 0.0;
+      smp.rev = o;
+      // The segment runs from the surface point forwards only: if the view space lies behind
+      // it or off the line, or the ray ends before it, the sample adds nothing (CastBoth).
+      double near = 0.0, far = 0.0;
+      const bool meets = ViewSpaceSpan(s_.view_space, p, smp.dir, &near, &far) && far >= 0.0;
+      const Hit h = meets ? Cast(p, smp.dir, kSurfaceOffset, near) : Hit{};
+      smp.misses = !meets || h.short_of_reach;
       smp.valid = !h.back;
       smp.t_fwd = h.t;
       smp.fwd = h.object;
-      smp.t_rev = 0.0;
-      smp.rev = o;
       Emit(smp);
     }
   }
@@ -192,6 +197,7 @@ class Worker {
     uint32_t quad = 0;    // Embree's primitive
     bool second = false;  // in the quad's second triangle
     bool back = false;
+    bool short_of_reach = false;  // met something before the reach asked for: t, object unknown
   };
 
   glm::dvec3 ViewSpacePoint(Rng& rng, CellId* cell) {
@@ -224,7 +230,11 @@ class Worker {
     return a + u * e1 + v * e2;
   }
 
-  Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear) {
+  // The first hit along origin + t dir for t >= tnear. With `reach` past tnear, a ray that
+  // meets anything before `reach` returns short_of_reach, what it met unknown: an occlusion
+  // query, which stops at any hit, tells that for less than the search for the nearest one,
+  // which then starts at `reach`. Either way it counts as one ray.
+  Hit Cast(const glm::dvec3& origin, const glm::dvec3& dir, double tnear, double reach = 0.0) {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -257,8 +267,26 @@ class Worker {
     rh.ray.time = 0.0f;
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(s_.rtc, &ctx, &rh);
     ++out_->embree_rays;
+    // The largest float below `reach`: what the query meets lies before it, and the search
+    // then meets nothing before it, so neither tells `reach` apart from where it rounds to.
+    float below = 0.0f;
+    if (reach > tnear) {
+      below = std::nextafter(static_cast<float>(reach), 0.0f);
+      if (static_cast<double>(below) >= reach) below = std::nextafter(below, 0.0f);
+    }
+    if (below > rh.ray.tnear) {
+      RTCRay query = rh.ray;
+      query.tfar = std::min(query.tfar, below);
+      rtcOccluded1(s_.rtc, &ctx, &query);
+      if (query.tfar < 0.0f) {
+        Hit blocked;
+        blocked.short_of_reach = true;
+        return blocked;
+      }
+      rh.ray.tnear = below;
+    }
+    rtcIntersect1(s_.rtc, &ctx, &rh);
     Hit h;
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
       h.t = ground_t;
@@ -281,32 +309,48 @@ class Worker {
     return h;
   }
 
-  void CastBoth(Sample* smp, double tnear) {
-    const Hit f = Cast(smp->origin, smp->dir, tnear);
-    if (f.back) {
-      // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
-      smp->valid = false;
-      smp->t_fwd = f.t;
-      smp->fwd = f.object;
+  // Casts the sample's rays both ways, but leaves uncast what cannot count: the free segment
+  // adds its two ends to the cells it crosses, so a line that misses the view space adds
+  // nothing, and neither does one whose ray towards the view space ends before reaching it,
+  // whatever the other ray would meet (Sample::misses). That ray is cast first, asking first
+  // whether anything lies before the view space (Cast's reach). Decided as Emit's walk
+  // decides which cells a segment crosses, so every sample that adds something finds the
+  // same hits as when both rays were always cast. `whole`: both rays in full, for a segment
+  // whose far hit is read even if it adds nothing (the silhouette mutation).
+  void CastBoth(Sample* smp, bool whole) {
+    double a = -kInf, b = kInf;
+    if (!ViewSpaceSpan(s_.view_space, smp->origin, smp->dir, &a, &b) && !whole) {
+      smp->misses = true;
       return;
     }
-    const Hit r = Cast(smp->origin, -smp->dir, tnear);
-    smp->valid = !r.back;
-    smp->t_fwd = f.t;
-    smp->fwd = f.object;
-    smp->t_rev = r.t;
-    smp->rev = r.object;
+    const bool reverse_first = !whole && b < 0.0;
+    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0, whole ? 0.0 : reverse_first ? -b : a);
+    if (first.short_of_reach) {
+      smp->misses = true;
+      return;
+    }
+    (reverse_first ? smp->t_rev : smp->t_fwd) = first.t;
+    (reverse_first ? smp->rev : smp->fwd) = first.object;
+    if (first.back) {
+      // Starts inside a solid: discarded whatever the other way holds, so that ray is not cast.
+      smp->valid = false;
+      return;
+    }
+    const Hit second = Cast(smp->origin, reverse_first ? smp->dir : -smp->dir, 0.0);
+    (reverse_first ? smp->t_fwd : smp->t_rev) = second.t;
+    (reverse_first ? smp->fwd : smp->rev) = second.object;
+    smp->valid = !second.back;
   }
 
-  // The sample on the line from `a` to `b`, cast both ways from their midpoint.
-  Sample EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist) {
+  // The sample on the line from `a` to `b`, cast both ways from their midpoint (CastBoth).
+  Sample EmitSegment(const glm::dvec3& a, const glm::dvec3& b, Distribution dist, bool whole = false) {
     Sample smp;
     smp.dist = dist;
     const glm::dvec3 d = b - a;
     const double len = glm::length(d);
     smp.origin = 0.5 * (a + b);
     smp.dir = len > 0.0 && std::isfinite(len) ? d / len : glm::dvec3(0, 0, 1);
-    CastBoth(&smp, 0.0);
+    CastBoth(&smp, whole);
     Emit(smp);
     return smp;
   }
@@ -340,17 +384,16 @@ class Worker {
   void Emit(const Sample& smp) {
     ChunkResult& out = *out_;
     ++out.samples;
+    if (smp.misses) return;
     if (!smp.valid) {
       ++out.discarded;
       return;
     }
-    if (counts_ != nullptr) {
-      // Per-object sampling densities, for the object-space filter.
-      if (smp.rev != kNoObject && smp.dist != Distribution::kRef) ++counts_->objects[smp.rev];
-      if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
-    }
     if (smp.dist == Distribution::kRef) {
-      if (counts_ != nullptr) ++counts_->cells[smp.origin_cell];
+      if (counts_ != nullptr) {
+        ++counts_->cells[smp.origin_cell];
+        if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
+      }
       // A ref ray is a camera ray too: a uniform point and direction in a uniform cell.
       ++out.estimator_rays;
       if (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) {
@@ -366,20 +409,23 @@ class Worker {
       out.estimator_hits += (smp.fwd != kNoObject && !pvs_.Contains(smp.origin_cell, smp.fwd)) +
                             (smp.rev != kNoObject && !pvs_.Contains(smp.origin_cell, smp.rev));
     }
-    uint32_t c_fwd = 0, c_rev = 0;
-    double t_first = 0.0, t_last = 0.0;  // the first and last cell's points along the segment
     // The cells first, with the set lines their tests read prefetched; then the tests, in the
     // same order (a segment crosses tens of cells, each test a likely cache miss).
     walk_.clear();
-    VisitCells(smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
+    VisitCells(grid_, s_.view_space, smp.origin, smp.dir, -smp.t_rev, smp.t_fwd, [&](CellId cell, double t) {
       walk_.emplace_back(cell, t);
       if (smp.fwd != kNoObject) pvs_.Prefetch(cell, smp.fwd);
       if (smp.rev != kNoObject) pvs_.Prefetch(cell, smp.rev);
     });
-    if (!walk_.empty()) {
-      t_first = walk_.front().second;
-      t_last = walk_.back().second;
+    if (walk_.empty()) return;
+    // The first and last cell's points along the segment.
+    const double t_first = walk_.front().second, t_last = walk_.back().second;
+    if (counts_ != nullptr) {
+      // Per-object sampling densities from the view space, for the object-space filter.
+      if (smp.rev != kNoObject) ++counts_->objects[smp.rev];
+      if (smp.fwd != kNoObject) ++counts_->objects[smp.fwd];
     }
+    uint32_t c_fwd = 0, c_rev = 0;
     for (const auto& [cell, t] : walk_) {
       // Every valid segment counts towards its cells' sampling density (the object-space filter).
       if (counts_ != nullptr) ++counts_->cells[cell];
@@ -423,52 +469,6 @@ class Worker {
     if (!s_.witness_cell[cell]) return kNoWitness;
     out_->witnesses.push_back({s_.frame + smp.origin + t * smp.dir, s_.frame + smp.origin + t_obj * smp.dir});
     return static_cast<uint32_t>(out_->witnesses.size() - 1);
-  }
-
- public:
-  // Calls visit(cell, t) for each viewcell the part [t0, t1] of the line origin + t dir
-  // passes through, with t a parameter inside that cell, in order along the line.
-  template <typename F>
-  void VisitCells(const glm::dvec3& origin, const glm::dvec3& dir, double t0, double t1, F&& visit) const {
-    const Aabb& vs = s_.view_space;
-    for (int k = 0; k < 3; ++k) {
-      if (dir[k] == 0.0) {
-        if (origin[k] < vs.min[k] || origin[k] > vs.max[k]) return;
-        continue;
-      }
-      double a = (vs.min[k] - origin[k]) / dir[k], b = (vs.max[k] - origin[k]) / dir[k];
-      if (a > b) std::swap(a, b);
-      t0 = std::max(t0, a);
-      t1 = std::min(t1, b);
-    }
-    if (!(t0 <= t1)) return;
-    const double size = grid_.cell_size();
-    const glm::dvec3 p = origin + t0 * dir;
-    int i = std::clamp(static_cast<int>(std::floor((p.x - vs.min.x) / size)), 0, grid_.nx() - 1);
-    int j = std::clamp(static_cast<int>(std::floor((p.y - vs.min.y) / size)), 0, grid_.ny() - 1);
-    const int si = dir.x > 0 ? 1 : (dir.x < 0 ? -1 : 0), sj = dir.y > 0 ? 1 : (dir.y < 0 ? -1 : 0);
-    auto next = [&](int s, int idx, double lo, double o, double d) {
-      if (s == 0) return kInf;
-      const double edge = lo + (s > 0 ? idx + 1 : idx) * size;
-      return (edge - o) / d;
-    };
-    double tx = next(si, i, vs.min.x, origin.x, dir.x), ty = next(sj, j, vs.min.y, origin.y, dir.y);
-    const double dtx = si != 0 ? size / std::abs(dir.x) : kInf, dty = sj != 0 ? size / std::abs(dir.y) : kInf;
-    double t = t0;
-    for (;;) {
-      const double exit = std::min({tx, ty, t1});
-      visit(grid_.Id({i, j}), 0.5 * (t + exit));
-      if (exit >= t1) return;
-      t = exit;
-      if (tx <= ty) {
-        i += si;
-        tx += dtx;
-      } else {
-        j += sj;
-        ty += dty;
-      }
-      if (i < 0 || j < 0 || i >= grid_.nx() || j >= grid_.ny()) return;
-    }
   }
 
  private:
