@@ -4,7 +4,9 @@
 //
 // A sample is a ray cast both ways from a point: the free segment between the two hits sees
 // both hit objects, so they are added to every viewcell the segment pierces (a DDA over the
-// grid). Sampled sets only ever grow towards the exact visible sets, never past them
+// grid). Rays that cannot add anything are not cast (a line missing the viewcells' slab, or
+// the far ray when the one towards the slab stops before it). Sampled sets only ever grow
+// towards the exact visible sets, never past them
 // (aggressive): AGVS ⊆ exact ⊆ any conservative set. That makes this the oracle the
 // conservative algorithms are checked against.
 //
