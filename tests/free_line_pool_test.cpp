@@ -162,5 +162,24 @@ TEST(DualRaySpace, PoolsNeverChangeAnAnswer) {
   EXPECT_GT(from_pool, 40);
 }
 
+// The batch skips the fixed probe rays for a node an earlier cell found hidden: the same
+// answers, and the blockers decide where the probes would have.
+TEST(DualRaySpace, WithoutProbeRaysTheAnswersAreTheSame) {
+  CellQueryOptions unprobed;
+  unprobed.probe_rays = false;
+  int decided_by_blockers = 0, visible_count = 0;
+  ForEachRandomQuery(1, 400, 4, [&](const RandomQuery& r) {
+    CellQueryStats probed_stats, unprobed_stats;
+    const bool visible = r.drs.Visible(kCell, r.b, {}, &probed_stats);
+    ASSERT_EQ(visible, r.drs.Visible(kCell, r.b, unprobed, &unprobed_stats)) << "seed " << r.seed;
+    visible_count += visible;
+    // A query the probes proved visible without blockers needs them without the probes.
+    decided_by_blockers += visible && probed_stats.gathered == 0 && probed_stats.free_rays > 0 &&
+                           unprobed_stats.gathered > 0;
+  });
+  EXPECT_GT(visible_count, 40);
+  EXPECT_GT(decided_by_blockers, 20);
+}
+
 }  // namespace
 }  // namespace vistream::visibility

@@ -462,6 +462,7 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     if (RayOnLine(pr, hint, &u, &v) && FreeRayTraced(pr, u, v)) return found(u, v, false);
     if (pool != nullptr && FreeRayFromPool(pr, *pool, hint, &u, &v)) return found(u, v, false);
     for (const auto& ray : kRays) {
+      if (!options.probe_rays) break;
       if (FreeRayTraced(pr, ray[0], ray[1])) return found(ray[0], ray[1], true);
     }
   }

@@ -31,6 +31,10 @@ struct CellQueryOptions {
   // 2n than at n: the rows tried at n are tried at 2n, and a covered row's halves are covered.
   uint32_t max_res = 128;
   bool free_ray_test = true;  // test uncovered pixel centres exactly: a free ray ends the query
+  // Trace the fixed probe rays (13 spread over RS) before building blockers. Only a speed-up,
+  // the answer is the same without: where B is likely hidden (hidden from a neighbouring
+  // viewcell, say) they are mostly traced in vain.
+  bool probe_rays = true;
   // Where the raster at max_res still leaves a gap, decide with the exact union test (CGAL's
   // exact kernel) instead: the reference for overestimation, not for speed.
   bool exact = false;

@@ -99,6 +99,8 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
   }
   const auto& nodes = tree_.nodes();
   const uint32_t full = static_cast<uint32_t>((uint64_t{1} << std::min<size_t>(n, 32)) - 1);
+  CellQueryOptions unprobed = options;
+  unprobed.probe_rays = false;
 
   // One traversal state per thread: its own engine, stack, hints and per-cell object lists.
   struct Walker {
@@ -123,6 +125,7 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
     w.hints.resize(base + n);
     w.found.clear();
     bool union_tested = false;
+    bool hidden_before = false;
     for (size_t c = 0; c < n; ++c) {
       if ((e.mask >> c & 1) == 0) continue;
       const FreeLine& parent_hint = w.hints[e.hints + c];
@@ -140,9 +143,13 @@ std::vector<PvsResult> PvsComputer::ComputeAdjacent(std::span<const scenes::Aabb
       if (!visible) {
         // The parent's line first, else a neighbour's (it may still save a probe or two).
         const FreeLine& hint = parent_hint.valid || w.found.empty() ? parent_hint : w.found.back();
-        visible = w.drs.Visible(cells[c], node.bounds, options, &w.stats[c], hint, &witness, &w.pools[c]);
+        // Hidden from an earlier cell of the batch: likely hidden from this one too, so its
+        // probe rays would mostly be traced in vain (the answer is the same without them).
+        visible = w.drs.Visible(cells[c], node.bounds, hidden_before ? unprobed : options, &w.stats[c], hint,
+                                &witness, &w.pools[c]);
         if (visible && witness.valid) w.found.push_back(witness);
       }
+      hidden_before |= !visible;
       if (visible) {
         seen |= 1u << c;
         w.hints[base + c] = witness.valid ? witness : parent_hint;
