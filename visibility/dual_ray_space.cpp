@@ -461,9 +461,10 @@ bool DualRaySpace::PlanarOccluded(const PlanarProblem& pr, const CellQueryOption
     double u = 0, v = 0;
     if (RayOnLine(pr, hint, &u, &v) && FreeRayTraced(pr, u, v)) return found(u, v, false);
     if (pool != nullptr && FreeRayFromPool(pr, *pool, hint, &u, &v)) return found(u, v, false);
-    for (const auto& ray : kRays) {
-      if (!options.probe_rays) break;
-      if (FreeRayTraced(pr, ray[0], ray[1])) return found(ray[0], ray[1], true);
+    if (options.probe_rays) {
+      for (const auto& ray : kRays) {
+        if (FreeRayTraced(pr, ray[0], ray[1])) return found(ray[0], ray[1], true);
+      }
     }
   }
   BuildBlockers(pr);
