@@ -209,7 +209,6 @@ class Run {
   absl::Status Go(const scenes::CatalogEntry& entry, const scenes::RunControl& run);
 
  private:
-
   // Callers check opt_.log first: the fields cost formatting.
   void Log(std::string_view event, std::initializer_list<EventLog::Field> fields) { opt_.log->Write(0, event, fields); }
   void SendUp(v1::ClientMessage m, const char* what);
