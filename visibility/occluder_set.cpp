@@ -217,9 +217,10 @@ OccluderSet OccluderSet::Build(const scenes::Scene& scene, double grid_cell_m) {
     };
     if (scenes::SignedArea(fp) < 0.0) std::reverse(fp.begin(), fp.end());
     const bool degenerate = fp.size() < 3 || scenes::SignedArea(fp) == 0.0;
+    const bool convex = !degenerate && scenes::IsConvexCcw(fp);
     std::vector<std::vector<int>> parts;
-    if (!degenerate && !scenes::IsConvexCcw(fp)) parts = ConvexPartition(fp);
-    if (!degenerate && scenes::IsConvexCcw(fp)) {
+    if (!degenerate && !convex) parts = ConvexPartition(fp);
+    if (convex) {
       add(fp);
     } else if (!parts.empty()) {
       // Convex pieces of a non-convex footprint, fused along their shared diagonals below.
