@@ -10,10 +10,10 @@ set lmargin 12
 set rmargin 25
 set xlabel 'link bandwidth (Mbit/s, log scale)'
 set key outside right top box
-set title 'Stalls (frames drawn before the PVS geometry of their viewcell arrived)'
-set ylabel 'stalls (count)'
+set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived)'
+set ylabel 'stalled time (% of the walk)'
 set yrange [0:*]
-plot 'latency_bandwidth_london.sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalls'
+plot 'latency_bandwidth_london.sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalled time'
 set title 'Arrival margin (time from a PVS completing to the client entering its cell)'
 set ylabel 'margin (s)'
 set yrange [*:*]
