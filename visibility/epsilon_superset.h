@@ -34,6 +34,8 @@
 #include "scenes/scene.h"
 #include "visibility/kdtree.h"
 
+struct RTCIntersectFunctionNArguments;  // Embree's (embree3/rtcore_geometry.h)
+
 namespace vistream::visibility {
 
 using scenes::Aabb;
@@ -124,6 +126,9 @@ class EpsilonSuperset {
   struct Embree;
   struct Query;
   friend struct Query;
+  // Embree's intersect callback for the prisms' user geometry (Query::Intersect, defined
+  // beside the query in epsilon_superset.cpp), for Create to register.
+  static void IntersectPrisms(const RTCIntersectFunctionNArguments* args);
 
   explicit EpsilonSuperset(const scenes::Scene& scene);
 
