@@ -83,5 +83,50 @@ TEST(AgvsViewSpace, WalkVisitsTheCellsOfThePartInsideTheSpanOnly) {
   EXPECT_EQ(visits, 0);
 }
 
+// The first ray of a sample points at the view space and asks, up to where the line enters
+// it, whether anything lies in between: its points before `reach` lie outside the box, just
+// past it inside (or the origin itself lies in the span and nothing is asked). Also far from
+// the origin of the frame, as a translated scene's view space is.
+TEST(AgvsViewSpace, FirstRayPointsAtTheViewSpaceAndReachesWhereTheLineEntersIt) {
+  for (const glm::dvec3 shift : {glm::dvec3(0.0), glm::dvec3(500000.0, 5000000.0, 0.0)}) {
+    const Aabb vs{glm::dvec3(0, 0, 0.5) + shift, glm::dvec3(400, 300, 2.5) + shift};
+    scenes::Rng rng(11);
+    int behind = 0, ahead = 0, within = 0;
+    for (int n = 0; n < 20000; ++n) {
+      const glm::dvec3 o = shift + glm::dvec3(rng.Uniform() * 600 - 100, rng.Uniform() * 500 - 100, rng.Uniform() * 30 - 2);
+      glm::dvec3 d = UniformDirection(rng);
+      if (n % 7 == 0) d.z = 0.0;
+      double a = 0.0, b = 0.0;
+      if (!ViewSpaceSpan(vs, o, d, &a, &b)) continue;
+      const FirstRay whole = FirstRayOf(a, b, /*whole=*/true);
+      ASSERT_FALSE(whole.reverse);
+      ASSERT_EQ(whole.reach, 0.0);
+      const FirstRay first = FirstRayOf(a, b, /*whole=*/false);
+      const glm::dvec3 ray = first.reverse ? -d : d;
+      if (a <= 0.0 && b >= 0.0) {
+        ++within;
+        ASSERT_FALSE(first.reverse) << n;
+        ASSERT_LE(first.reach, 0.0) << n;  // no occlusion query: the origin is in the span
+        continue;
+      }
+      (first.reverse ? behind : ahead) += 1;
+      ASSERT_GT(first.reach, 0.0) << n;
+      // Past the reach the ray runs inside the box (a margin for the box's rounding).
+      const double len = b - a, tol = 1e-9 * (1.0 + first.reach);
+      ASSERT_TRUE(Inside(Aabb{vs.min - 1e-6, vs.max + 1e-6}, o + (first.reach + 0.5 * len) * ray)) << n;
+      ASSERT_TRUE(Inside(Aabb{vs.min - 1e-6, vs.max + 1e-6}, o + (first.reach + tol) * ray)) << n;
+      // Before it, from the origin on, outside.
+      for (int k = 0; k < 16; ++k) {
+        const double t = first.reach * (k / 16.0) - tol;
+        if (t < 0.0) continue;
+        ASSERT_FALSE(Inside(Aabb{vs.min + 1e-6, vs.max - 1e-6}, o + t * ray)) << n << " k " << k;
+      }
+    }
+    EXPECT_GT(behind, 1000);
+    EXPECT_GT(ahead, 1000);
+    EXPECT_GT(within, 10);
+  }
+}
+
 }  // namespace
 }  // namespace vistream::visibility

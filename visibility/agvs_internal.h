@@ -129,6 +129,22 @@ inline bool ViewSpaceSpan(const Aabb& vs, const glm::dvec3& origin, const glm::d
   return lo <= hi;
 }
 
+// The first ray a sample casts (GlobalSampler's CastBoth), for the line origin + t dir whose
+// view-space span is [a, b] (ViewSpaceSpan): the ray towards the span (`reverse`: along -dir,
+// when the span lies wholly behind the origin), and `reach`, the distance along that ray to
+// where the line enters the span, up to which an occlusion query first asks whether anything
+// lies before the view space (at most 0, no query, when the origin lies in the span). With
+// `whole`, both rays are cast in full: forward first, no query.
+struct FirstRay {
+  bool reverse = false;
+  double reach = 0.0;
+};
+inline FirstRay FirstRayOf(double a, double b, bool whole) {
+  if (whole) return {};
+  const bool reverse = b < 0.0;
+  return {reverse, reverse ? -b : a};
+}
+
 // Calls visit(cell, t) for each viewcell of `grid` the part [t0, t1] of the line origin + t dir
 // passes through, with t a parameter inside that cell, in order along the line; `vs` is the
 // grid's box, frame-relative (the sampler's view space).

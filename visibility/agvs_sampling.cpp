@@ -323,8 +323,9 @@ class Worker {
       smp->misses = true;
       return;
     }
-    const bool reverse_first = !whole && b < 0.0;
-    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0, whole ? 0.0 : reverse_first ? -b : a);
+    const FirstRay plan = FirstRayOf(a, b, whole);
+    const bool reverse_first = plan.reverse;
+    const Hit first = Cast(smp->origin, reverse_first ? -smp->dir : smp->dir, 0.0, plan.reach);
     if (first.short_of_reach) {
       smp->misses = true;
       return;
