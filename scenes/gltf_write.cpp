@@ -2,6 +2,7 @@
 
 #include "scenes/gltf_frame.h"
 
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -161,22 +162,60 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
   model.defaultScene = 0;
 
   if (!binary) buffer.uri = fs::path(path).stem().string() + ".bin";
-  const std::string tmp = path + ".tmp";
   tinygltf::TinyGLTF writer;
+  if (binary) {
+    // Written beside and renamed, so a reader never sees half a file, and a failed write (a
+    // full disk, a file size limit) leaves what was there before: tinygltf does not check
+    // its stream, so the stream is ours.
+    const std::string tmp = path + ".tmp";
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out.is_open()) return absl::UnavailableError(absl::StrCat(path, ": cannot create: ", std::strerror(errno)));
+    bool ok = false;
+    try {
+      ok = writer.WriteGltfSceneToStream(&model, out, /*prettyPrint=*/false, /*writeBinary=*/true);
+    } catch (const std::exception& e) {
+      out.close();
+      fs::remove(tmp);
+      return absl::InternalError(absl::StrCat(path, ": writing failed: ", e.what()));
+    }
+    out.close();
+    if (!ok || out.fail()) {
+      fs::remove(tmp);
+      return absl::UnavailableError(absl::StrCat(path, ": cannot write (disk full, or a file size limit?)"));
+    }
+    std::error_code ec;
+    fs::rename(tmp, path, ec);
+    if (ec) {
+      fs::remove(tmp);
+      return absl::UnavailableError(absl::StrCat(path, ": cannot write: ", ec.message()));
+    }
+    return absl::OkStatus();
+  }
   bool ok = false;
   try {
-    ok = writer.WriteGltfSceneToFile(&model, binary ? tmp : path, /*embedImages=*/true,
-                                     /*embedBuffers=*/binary, /*prettyPrint=*/false, binary);
+    ok = writer.WriteGltfSceneToFile(&model, path, /*embedImages=*/true, /*embedBuffers=*/false, /*prettyPrint=*/false,
+                                     /*writeBinary=*/false);
   } catch (const std::exception& e) {
     return absl::InternalError(absl::StrCat(path, ": writing failed: ", e.what()));
   }
   if (!ok) return absl::UnavailableError(absl::StrCat(path, ": cannot write file"));
-  if (binary) {
-    // Written beside and renamed, so a reader never sees half a file.
-    std::error_code ec;
-    fs::rename(tmp, path, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename from ", tmp, ": ", ec.message()));
+  // tinygltf writes the JSON and its .bin without checking either stream: a write cut short
+  // shows as a .bin shorter than the buffer or a JSON that does not end its object.
+  const fs::path bin = fs::path(path).parent_path() / buffer.uri;
+  std::error_code ec;
+  const uintmax_t bin_size = fs::file_size(bin, ec);
+  bool whole = !ec && bin_size == buffer.data.size();
+  if (whole) {
+    // tinygltf ends the JSON with a newline.
+    std::ifstream in(path, std::ios::binary | std::ios::ate);
+    whole = in.is_open() && in.tellg() >= 2;
+    if (whole) {
+      char end[2] = {};
+      in.seekg(-2, std::ios::end);
+      whole = in.read(end, 2) && end[0] == '}' && end[1] == '\n';
+    }
   }
+  if (!whole) return absl::UnavailableError(absl::StrCat(path, ": cannot write (disk full, or a file size limit?)"));
   return absl::OkStatus();
 }
 

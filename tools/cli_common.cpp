@@ -117,10 +117,21 @@ absl::StatusOr<std::string> ReadFile(const std::string& path) {
 }
 
 absl::Status WriteFile(const std::string& path, const std::string& bytes) {
-  std::FILE* f = std::fopen(path.c_str(), "wb");
+  // Written beside and renamed: a write that fails (a full disk, a file size limit) leaves
+  // what was there before, never half a file.
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (f == nullptr) return absl::PermissionDeniedError("cannot write '" + path + "': " + std::strerror(errno));
   const bool ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-  if (std::fclose(f) != 0 || !ok) return absl::DataLossError("cannot write '" + path + "' (disk full?)");
+  if (std::fclose(f) != 0 || !ok) {
+    std::remove(tmp.c_str());
+    return absl::DataLossError("cannot write '" + path + "' (disk full?); it is left as it was");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    std::remove(tmp.c_str());
+    return absl::PermissionDeniedError("cannot write '" + path + "': " + why);
+  }
   return absl::OkStatus();
 }
 

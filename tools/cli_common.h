@@ -48,8 +48,16 @@ int BadOption(const std::string& command, const std::string& option, const std::
 // kBadOptionExit after printing the error as BadOption does.
 int ParseFailure(const CLI::App& app, const CLI::ParseError& e);
 
+// An output file's path: not empty (an empty -o is a bad option, exit 2, not a file named by
+// the extension alone or a write error).
+inline CLI::Validator OutputPath() {
+  return CLI::Validator([](std::string& text) -> std::string { return text.empty() ? "an empty path" : ""; }, "PATH");
+}
+
 // The whole file, or an error naming it.
 absl::StatusOr<std::string> ReadFile(const std::string& path);
+// Writes `bytes` to `path` through `path`.tmp renamed over it, so a failed write (disk full,
+// a file size limit, no permission) leaves the file as it was; the error names the path.
 absl::Status WriteFile(const std::string& path, const std::string& bytes);
 
 // Seconds elapsed since `start`.

@@ -291,13 +291,13 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london, streets)");
   g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
   g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)")->check(WholeRange(0, kMaxSeed));
-  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required();
+  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required()->check(OutputPath());
   g->callback([gen, done] { done(Generate(*gen)); });
 
   auto imp = std::make_shared<ImportArgs>();
   CLI::App* o = scene->add_subcommand("import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene");
   o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML), .osm.pbf, .osm.bz2 or .osm.gz")->required();
-  o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required();
+  o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required()->check(OutputPath());
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
   o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(FiniteRange(1.0, 20.0));
   o->add_option("--max-height", imp->max_height_m,
@@ -317,7 +317,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   auto map = std::make_shared<MapArgs>();
   CLI::App* m = scene->add_subcommand("map", "write a top-view PNG: footprints by height, walk paths in red");
   m->add_option("FILE", map->file, ".glb/.gltf file, catalog name or catalog .json")->required();
-  m->add_option("-o,--output", map->output, "output .png")->required();
+  m->add_option("-o,--output", map->output, "output .png")->required()->check(OutputPath());
   m->add_option("--size", map->size, "pixels on the longer side")->check(WholeRange(16, 16384));
   m->callback([map, done] { done(Map(*map)); });
 }

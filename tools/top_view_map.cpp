@@ -1,8 +1,10 @@
 #include "tools/top_view_map.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 
 #include <cairo.h>
 
@@ -369,10 +371,18 @@ absl::Status TopViewMap::WritePng(const std::string& path) {
 
   cairo_destroy(cr);
   cairo_surface_flush(out);
-  const cairo_status_t st = cairo_surface_write_to_png(out, path.c_str());
+  // Written beside and renamed: a failed write leaves no half PNG where the map should be.
+  const std::string tmp = path + ".tmp";
+  const cairo_status_t st = cairo_surface_write_to_png(out, tmp.c_str());
   cairo_surface_destroy(out);
   if (st != CAIRO_STATUS_SUCCESS) {
+    std::remove(tmp.c_str());
     return absl::UnavailableError(absl::StrCat("cannot write the PNG '", path, "': ", cairo_status_to_string(st)));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    std::remove(tmp.c_str());
+    return absl::UnavailableError(absl::StrCat("cannot write the PNG '", path, "': ", why));
   }
   return absl::OkStatus();
 }

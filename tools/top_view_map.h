@@ -78,7 +78,8 @@ class TopViewMap {
   // A last line in the legend panel (e.g. counts).
   void AddNote(std::string note);
 
-  // Composes the image and writes it. Errors name the path.
+  // Composes the image and writes it (to `path`.tmp, renamed over `path`: a failed write
+  // leaves what was there). Errors name the path.
   absl::Status WritePng(const std::string& path);
 
  private:
