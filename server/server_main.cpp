@@ -17,6 +17,7 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_join.h>
 
 #include "cli/number_options.h"
 #include "scenes/catalog.h"
@@ -81,19 +82,31 @@ int main(int argc, char** argv) {
   app.add_option("--scene", scene_options.scene, "catalog name, catalog .json or .glb/.gltf file")->required();
   app.add_option("--catalog", scene_options.catalog_dir, "folder of catalog entries (default: the source tree's scenes/)");
   app.add_option("--listen", server_options.listen, "address to listen on, host:port (port 0: any free one)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            const size_t colon = text.rfind(':');
+            int64_t port = -1;
+            if (colon == std::string::npos || colon == 0 ||
+                !vistream::cli::internal::ParseWhole(text.substr(colon + 1), &port) || port < 0 || port > 65535) {
+              return "'" + text + "' is not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:50051)";
+            }
+            return "";
+          },
+          "HOST:PORT"));
   app.add_option("--threads", scene_options.threads, "PVS worker threads (0: one per core)")->capture_default_str();
   app.add_option("--cell-size", scene_options.cell_size, "viewcell edge in metres (default: the catalog entry's)")
       ->check(FiniteRange(0.01, 1e6));
   app.add_option("--res", scene_options.res, "finest dual-ray-space raster (power of two, 1 to 256)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(vistream::cli::PowerOfTwo(1, 256));
   app.add_option("--backend", scene_options.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
       ->capture_default_str();
   app.add_option("--pvs-file", scene_options.pvs_file,
                  "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them");
   app.add_option("--max-sessions", server_options.max_sessions, "sessions at once; more are refused")
-      ->check(CLI::Range(1, 100000))->capture_default_str();
-  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(FiniteRange(1, 1 << 20))->capture_default_str();
+      ->check(vistream::cli::WholeRange(1, 100000))->capture_default_str();
+  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(FiniteRange(1, 1e6))->capture_default_str();
   app.add_option("--max-pose-rate", server_options.limits.max_pose_rate_hz, "poses per second a session may send")
       ->check(FiniteRange(0.1, 100000))->capture_default_str();
   app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
@@ -117,8 +130,14 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);
-    return code == 0 ? 0 : 2;
+    if (dynamic_cast<const CLI::Success*>(&e) != nullptr) return app.exit(e);
+    // Bad options exit 2 before the scene loads, in the vistream tool's form.
+    std::string message = e.what();
+    if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr && !app.remaining().empty()) {
+      message = absl::StrJoin(app.remaining(), " ") + ": not options of vistream-server";
+    }
+    std::fprintf(stderr, "vistream-server: error: %s\nRun 'vistream-server --help' for the options.\n", message.c_str());
+    return 2;
   }
   double time_scale = 1.0;
   if (app.count("--time-scale") > 0) {

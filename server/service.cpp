@@ -183,7 +183,16 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
     Pump();
   }
 
-  void OnCancel() override { EndWith(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client")); }
+  void OnCancel() override {
+    const grpc::Status cancelled(grpc::StatusCode::CANCELLED, "cancelled by the client (or its connection lost)");
+    {
+      // A client that goes away (killed, its connection lost) ends its reads too, which may come
+      // first and end the call as a client that closed its side does: the log says which it was.
+      std::lock_guard lock(mu_);
+      if (finish_requested_ && status_.ok()) status_ = cancelled;
+    }
+    EndWith(cancelled);
+  }
 
   void OnDone() override {
     link_->Detach();

@@ -25,6 +25,7 @@
 #include "server/service.h"
 #include "visibility/pvs_file.h"
 #include "client/session_stream.h"
+#include "tests/server_test_util.h"
 
 namespace vistream::server {
 namespace {
@@ -32,58 +33,14 @@ namespace {
 namespace v1 = vistream::v1;
 using client::SessionRecord;
 using client::SessionStream;
-
-constexpr double kWait = 120.0;  // seconds any one wait may take on a loaded 2-core machine
-
-// city1 with 50 m viewcells (28 x 20), shared by every test: it takes a few seconds to prepare.
-ServedScene& City1() {
-  static ServedScene* scene = [] {
-    ServedSceneOptions o;
-    o.scene = "city1";
-    o.threads = 2;
-    absl::StatusOr<std::unique_ptr<ServedScene>> s = ServedScene::Create(o);
-    EXPECT_TRUE(s.ok()) << s.status();
-    return s->release();
-  }();
-  return *scene;
-}
-
-std::unique_ptr<WalkthroughServer> StartServer(ServerOptions options = {}) {
-  options.listen = "127.0.0.1:0";
-  absl::StatusOr<std::unique_ptr<WalkthroughServer>> s = WalkthroughServer::Start(&City1(), options, nullptr);
-  EXPECT_TRUE(s.ok()) << s.status();
-  return std::move(*s);
-}
-
-// The eye at the centre of cell (i, j).
-glm::dvec3 Centre(int i, int j) {
-  const visibility::ViewcellGrid& g = City1().grid();
-  const scenes::Aabb b = g.CellBox(visibility::CellCoord{i, j});
-  return {0.5 * (b.min.x + b.max.x), 0.5 * (b.min.y + b.max.y), g.base_z() + 1.2};
-}
-
-CellId Cell(int i, int j) { return City1().grid().Id({i, j}); }
-
-std::set<CellId> Around(CellId c) {
-  std::set<CellId> s{c};
-  for (CellId n : City1().grid().Neighbours(c)) s.insert(n);
-  return s;
-}
-
-// The PVS `vistream pvs` computes for the cell (same backend, same options).
-std::vector<uint32_t> ExpectedPvs(CellId cell) {
-  static const visibility::KdTree tree = visibility::KdTree::Build(City1().scene());
-  static const visibility::PvsComputer computer(City1().scene(), tree);
-  static const absl::StatusOr<gl::PvsBackend> cpu = gl::PvsBackend::Create("cpu");
-  return cpu->Compute(computer, City1().grid().CellBox(cell), gl::QueryOptionsFor(128)).objects;
-}
-
-std::unique_ptr<SessionStream> Connect(WalkthroughServer& server, bool read = true) {
-  auto c = std::make_unique<SessionStream>(server.address());
-  c->Start(SessionStream::HelloFor("city1"), read);
-  c->SendCredit(uint64_t{1} << 40);
-  return c;
-}
+using test::Around;
+using test::Cell;
+using test::Centre;
+using test::City1;
+using test::Connect;
+using test::ExpectedPvs;
+using test::kWait;
+using test::StartServer;
 
 // A new session is served: its cell (i, j) arrives complete and it ends cleanly. After a bad
 // client was dealt with, this says the server is still whole.
@@ -767,6 +724,46 @@ nlohmann::json LinkLineOfAWalk(const LinkParams& link) {
   return found;
 }
 
+// A client that goes away mid-walk (its call cancelled, as when it is killed) ends only its own
+// session, and the log says it was cancelled, not that it ended as a client that finished.
+TEST(ServerLog, AClientThatGoesAwayIsLoggedAsCancelledNotAsFinished) {
+  std::FILE* out = std::tmpfile();
+  ASSERT_NE(out, nullptr);
+  {
+    EventLog log(out, /*json=*/true);
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
+    ASSERT_TRUE(server.ok()) << server.status();
+    auto gone = Connect(**server);
+    ASSERT_TRUE(gone->SendPose(Centre(4, 4)));
+    ASSERT_TRUE(gone->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(4, 4)); }, kWait));
+    gone->Cancel();
+    for (int k = 0; k < 500 && (*server)->service().active_sessions() > 0; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    ExpectStillServes(**server, 6, 4);
+    for (int k = 0; k < 500 && (*server)->service().active_sessions() > 0; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    (*server)->Shutdown(1.0);
+  }
+  std::rewind(out);
+  std::vector<nlohmann::json> ends;
+  char line[4096];
+  while (std::fgets(line, sizeof(line), out) != nullptr) {
+    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (j.is_object() && j.value("event", "") == "session_end") ends.push_back(j);
+  }
+  std::fclose(out);
+  ASSERT_EQ(ends.size(), 2u);
+  EXPECT_EQ(ends[0].value("code", -1), static_cast<int>(grpc::StatusCode::CANCELLED)) << ends[0].dump();
+  EXPECT_EQ(ends[0].value("status", ""), "error") << ends[0].dump();
+  EXPECT_NE(ends[0].value("message", "").find("cancelled by the client"), std::string::npos) << ends[0].dump();
+  EXPECT_EQ(ends[1].value("code", -1), 0) << ends[1].dump();
+  EXPECT_EQ(ends[1].value("status", ""), "OK") << ends[1].dump();
+}
+
 TEST(ServerLink, TheLogShowsJitterOnlyWhereTheSceneDeclaresIt) {
   // Time scale 20: the declared links, twenty times faster, so that the walk takes little time.
   absl::StatusOr<scenes::CatalogEntry> plain = scenes::FindCatalogEntry("default");
@@ -855,94 +852,6 @@ TEST(ServerLink, AClientThatStopsReadingCostsBoundedMemoryThroughTheLinkToo) {
   std::printf("stalled client through the link: %llu crossings, at most %llu bytes queued, %llu in the link\n",
               static_cast<unsigned long long>(crossings), static_cast<unsigned long long>(max_queued),
               static_cast<unsigned long long>(max_in_link));
-}
-
-// The executable's link options: bad values exit 2 before the scene loads, naming the option.
-TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
-  auto run = [](const std::string& args) {
-    std::string out;
-    std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " --scene city1 --listen 127.0.0.1:0 " + args +
-                          " 2>&1").c_str(), "r");
-    if (p == nullptr) return std::make_pair(-1, out);
-    char buf[1024];
-    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
-    const int status = pclose(p);
-    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, out);
-  };
-  for (const char* k : {"0", "-2", "abc", "nan", "inf", "1e9", "''", "2x"}) {
-    const auto [rc, out] = run(std::string("--emulate-link --time-scale ") + k);
-    EXPECT_EQ(rc, 2) << k << ": " << out;
-    EXPECT_NE(out.find("vistream-server: error: --time-scale: "), std::string::npos) << k << ": " << out;
-  }
-  for (const char* l : {"1M", "1M,", ",200", "fast,200", "1M,-5", "1T,200", "0,200", "1M,nan", "1M,200,3"}) {
-    const auto [rc, out] = run(std::string("--link '") + l + "'");
-    EXPECT_EQ(rc, 2) << l << ": " << out;
-    EXPECT_NE(out.find(std::string("vistream-server: error: --link: '") + l + "'"), std::string::npos)
-        << l << ": " << out;
-  }
-  for (const char* k : {"-1", "abc", "1.5", "1e300"}) {
-    const auto [rc, out] = run(std::string("--emulate-link --link-seed ") + k);
-    EXPECT_EQ(rc, 2) << k << ": " << out;
-    EXPECT_NE(out.find("--link-seed"), std::string::npos) << k << ": " << out;
-  }
-  const auto [rc, out] = run("--time-scale 10");
-  EXPECT_EQ(rc, 2) << out;
-  EXPECT_NE(out.find("--time-scale and --link-seed need --emulate-link or --link"), std::string::npos) << out;
-}
-
-// The executable: started on a free port, stopped with SIGTERM while sessions are open.
-TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
-  int out[2];
-  ASSERT_EQ(pipe(out), 0);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    dup2(out[1], STDOUT_FILENO);
-    close(out[0]);
-    execl(VISTREAM_SERVER_BIN, VISTREAM_SERVER_BIN, "--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  close(out[1]);
-  struct Reap {  // never leave the server running, whatever fails below
-    pid_t pid;
-    bool waited = false;
-    ~Reap() {
-      if (!waited) {
-        kill(pid, SIGKILL);
-        waitpid(pid, nullptr, 0);
-      }
-    }
-  } reap{pid};
-  std::FILE* f = fdopen(out[0], "r");
-  char line[1024] = {};
-  ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing";
-  const std::string ready(line);
-  const size_t at = ready.find("ready on ");
-  ASSERT_NE(at, std::string::npos) << ready;
-  const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
-  EXPECT_NE(ready.find("560 viewcells"), std::string::npos) << ready;
-  EXPECT_NE(ready.find("2128 objects"), std::string::npos) << ready;
-  std::vector<std::unique_ptr<SessionStream>> clients;
-  for (int k = 0; k < 2; ++k) {
-    clients.push_back(std::make_unique<SessionStream>(address));
-    clients.back()->Start(SessionStream::HelloFor("city1"));
-    clients.back()->SendCredit(uint64_t{1} << 40);
-    clients.back()->SendPose(Centre(4 + k, 4));
-    ASSERT_TRUE(clients.back()->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
-  }
-  ASSERT_EQ(kill(pid, SIGTERM), 0);
-  for (auto& c : clients) {
-    const grpc::Status st = c->AwaitEnd(kWait);
-    EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAVAILABLE) << st.error_message();
-    EXPECT_NE(st.error_message().find("shutting down"), std::string::npos) << st.error_message();
-  }
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  reap.waited = true;
-  EXPECT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0);
-  std::fclose(f);
 }
 
 }  // namespace

@@ -1,0 +1,143 @@
+// The vistream-server executable: its options, checked before the scene loads, and SIGTERM.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "client/session_stream.h"
+#include "tests/server_test_util.h"
+
+namespace vistream::server {
+namespace {
+
+using client::SessionRecord;
+using client::SessionStream;
+using test::Centre;
+using test::kWait;
+
+// Runs the executable with `args`; its exit code (-1 if it did not exit) and its output.
+std::pair<int, std::string> RunServer(const std::string& args) {
+  std::string out;
+  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " " + args + " 2>&1").c_str(), "r");
+  if (p == nullptr) return {-1, out};
+  char buf[1024];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+// Bad options exit 2 in the tool's form, naming the option, before any scene is looked for:
+// the scene named here does not exist, and the error is about the option all the same.
+TEST(ServerProcess, BadOptionsExitTwoBeforeTheSceneLoadsNamingThem) {
+  const std::pair<const char*, const char*> cases[] = {
+      {"--res 100", "vistream-server: error: --res: '100' is not a power of two from 1 to 256"},
+      {"--res 512", "vistream-server: error: --res: '512' is not a power of two from 1 to 256"},
+      {"--listen 127.0.0.1:99999", "vistream-server: error: --listen: '127.0.0.1:99999' is not host:port"},
+      {"--listen 50051", "vistream-server: error: --listen: '50051' is not host:port"},
+      {"--listen localhost:", "vistream-server: error: --listen: 'localhost:' is not host:port"},
+      {"--port 99999", "vistream-server: error: --port 99999: not options of vistream-server"},
+      {"stray", "vistream-server: error: stray: not options of vistream-server"},
+      {"--cache-mb -1", "vistream-server: error: --cache-mb: '-1' is not a number from 1 to 1e+06"},
+      {"--max-sessions 0", "vistream-server: error: --max-sessions: '0' is not a whole number from 1 to 100000"},
+      {"--max-sessions 1.5", "vistream-server: error: --max-sessions: '1.5' is not a whole number from 1 to 100000"},
+  };
+  for (const auto& [args, message] : cases) {
+    const auto [rc, out] = RunServer(std::string("--scene no-such-scene ") + args);
+    EXPECT_EQ(rc, 2) << args << ": " << out;
+    EXPECT_NE(out.find(message), std::string::npos) << args << ": " << out;
+    EXPECT_NE(out.find("Run 'vistream-server --help' for the options."), std::string::npos) << args << ": " << out;
+    EXPECT_EQ(out.find("no-such-scene"), std::string::npos) << args << ": " << out;
+  }
+  // Good values pass the checks: the scene is what fails then.
+  const auto [rc, out] = RunServer("--scene no-such-scene --res 64 --listen 127.0.0.1:0 --max-sessions 3");
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("no-such-scene"), std::string::npos) << out;
+}
+
+// The executable's link options: bad values exit 2 before the scene loads, naming the option.
+TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
+  auto run = [](const std::string& args) { return RunServer("--scene city1 --listen 127.0.0.1:0 " + args); };
+  for (const char* k : {"0", "-2", "abc", "nan", "inf", "1e9", "''", "2x"}) {
+    const auto [rc, out] = run(std::string("--emulate-link --time-scale ") + k);
+    EXPECT_EQ(rc, 2) << k << ": " << out;
+    EXPECT_NE(out.find("vistream-server: error: --time-scale: "), std::string::npos) << k << ": " << out;
+  }
+  for (const char* l : {"1M", "1M,", ",200", "fast,200", "1M,-5", "1T,200", "0,200", "1M,nan", "1M,200,3"}) {
+    const auto [rc, out] = run(std::string("--link '") + l + "'");
+    EXPECT_EQ(rc, 2) << l << ": " << out;
+    EXPECT_NE(out.find(std::string("vistream-server: error: --link: '") + l + "'"), std::string::npos)
+        << l << ": " << out;
+  }
+  for (const char* k : {"-1", "abc", "1.5", "1e300"}) {
+    const auto [rc, out] = run(std::string("--emulate-link --link-seed ") + k);
+    EXPECT_EQ(rc, 2) << k << ": " << out;
+    EXPECT_NE(out.find("--link-seed"), std::string::npos) << k << ": " << out;
+  }
+  const auto [rc, out] = run("--time-scale 10");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("--time-scale and --link-seed need --emulate-link or --link"), std::string::npos) << out;
+}
+
+// The executable: started on a free port, stopped with SIGTERM while sessions are open.
+TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
+  int out[2];
+  ASSERT_EQ(pipe(out), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(out[1], STDOUT_FILENO);
+    close(out[0]);
+    execl(VISTREAM_SERVER_BIN, VISTREAM_SERVER_BIN, "--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(out[1]);
+  struct Reap {  // never leave the server running, whatever fails below
+    pid_t pid;
+    bool waited = false;
+    ~Reap() {
+      if (!waited) {
+        kill(pid, SIGKILL);
+        waitpid(pid, nullptr, 0);
+      }
+    }
+  } reap{pid};
+  std::FILE* f = fdopen(out[0], "r");
+  char line[1024] = {};
+  ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing";
+  const std::string ready(line);
+  const size_t at = ready.find("ready on ");
+  ASSERT_NE(at, std::string::npos) << ready;
+  const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
+  EXPECT_NE(ready.find("560 viewcells"), std::string::npos) << ready;
+  EXPECT_NE(ready.find("2128 objects"), std::string::npos) << ready;
+  std::vector<std::unique_ptr<SessionStream>> clients;
+  for (int k = 0; k < 2; ++k) {
+    clients.push_back(std::make_unique<SessionStream>(address));
+    clients.back()->Start(SessionStream::HelloFor("city1"));
+    clients.back()->SendCredit(uint64_t{1} << 40);
+    clients.back()->SendPose(Centre(4 + k, 4));
+    ASSERT_TRUE(clients.back()->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  }
+  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  for (auto& c : clients) {
+    const grpc::Status st = c->AwaitEnd(kWait);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAVAILABLE) << st.error_message();
+    EXPECT_NE(st.error_message().find("shutting down"), std::string::npos) << st.error_message();
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  reap.waited = true;
+  EXPECT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  std::fclose(f);
+}
+
+}  // namespace
+}  // namespace vistream::server
