@@ -173,8 +173,9 @@ void Table1Section(Page& page, const Plan& plan) {
   const std::optional<json> j = page.Run("bench table1", args);
   if (!j) return;
   page.Text(absl::StrFormat("%s, %s objects, %s sampled viewcells per size (seed %s). Times are the mean per "
-                            "viewcell; overestimation is (P_E − P_C) / P_E of occluded ground area, exact test "
-                            "against the raster.",
+                            "viewcell; overestimation is (P_E − P_C) / P_E, where P_E is the ground area of the "
+                            "objects the exact test finds occluded and P_C that of the objects the raster "
+                            "(the conservative test) finds occluded.",
                             j->value("scene", ""), Int(j->at("objects")), Int(j->at("cells_per_size")),
                             Number(j->at("seed"))));
   std::vector<std::vector<std::string>> rows;

@@ -77,7 +77,8 @@ std::string Page::Command(const std::vector<std::string>& args) const {
 
 void Page::Log(const Step& s, bool counted) {
   // A step whose failure is an answer (a probe) shows its result, not a failure.
-  const std::string state = s.ok ? "" : counted ? "FAILED  " : absl::StrCat("(probe: ", s.result, ")  ");
+  // (A probe's page result is set after this line: here only that its exit was its answer.)
+  const std::string state = s.ok ? "" : counted ? "FAILED  " : "(probe: its exit status is the answer)  ";
   std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds, state.c_str(),
                s.command.c_str());
   std::fflush(stderr);
