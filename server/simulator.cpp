@@ -313,8 +313,7 @@ void Run::Receive(const v1::ServerMessage& m) {
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
       const v1::ViewcellPvs& p = m.pvs();
-      const std::vector<uint32_t> objects(p.object_ids().begin(), p.object_ids().end());
-      holdings_.SetList(p.cell_id(), objects, t);
+      holdings_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t);
       if (pending_ && cell_ == p.cell_id()) StartPending(p.cell_id());
       break;
     }

@@ -1,15 +1,16 @@
 #include "tools/top_view_map.h"
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
+#include <string>
 
 #include <cairo.h>
 
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
+
+#include "tools/cli_common.h"
 
 namespace vistream::tools {
 
@@ -371,18 +372,22 @@ absl::Status TopViewMap::WritePng(const std::string& path) {
 
   cairo_destroy(cr);
   cairo_surface_flush(out);
-  // Written beside and renamed: a failed write leaves no half PNG where the map should be.
-  const std::string tmp = path + ".tmp";
-  const cairo_status_t st = cairo_surface_write_to_png(out, tmp.c_str());
+  // Encoded in memory, then written by WriteFile: through FILE.tmp renamed once whole, so a
+  // failed write leaves no half PNG where the map should be.
+  std::string png;
+  const cairo_status_t st = cairo_surface_write_to_png_stream(
+      out,
+      [](void* closure, const unsigned char* data, unsigned int size) {
+        static_cast<std::string*>(closure)->append(reinterpret_cast<const char*>(data), size);
+        return CAIRO_STATUS_SUCCESS;
+      },
+      &png);
   cairo_surface_destroy(out);
   if (st != CAIRO_STATUS_SUCCESS) {
-    std::remove(tmp.c_str());
     return absl::UnavailableError(absl::StrCat("cannot write the PNG '", path, "': ", cairo_status_to_string(st)));
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(tmp.c_str());
-    return absl::UnavailableError(absl::StrCat("cannot write the PNG '", path, "': ", why));
+  if (absl::Status w = WriteFile(path, png); !w.ok()) {
+    return absl::UnavailableError(absl::StrCat("cannot write the PNG '", path, "': ", w.message()));
   }
   return absl::OkStatus();
 }
