@@ -383,9 +383,12 @@ TEST(SimulateCli, SweepsRunEachPointAsTheSingleRunWould) {
   }
 }
 
-// ^C (SIGINT) while simulating: exit 130 and "interrupted", no error and no JSON.
+// ^C (SIGINT) while simulating: exit 130 and "interrupted", no error and no JSON. --foreground:
+// one SIGINT, as a terminal's ^C sends; without it timeout also signals its process group, and
+// a second SIGINT stops at once (cli_signal_test.cpp).
 TEST(SimulateCli, InterruptedExitsWith130SayingSo) {
-  const std::string cmd = "exec timeout --preserve-status -s INT 2 " + std::string(VISTREAM_BIN) + " simulate --scene " +
+  const std::string cmd = "exec timeout --foreground --preserve-status -s INT 2 " + std::string(VISTREAM_BIN) +
+                          " simulate --scene " +
                           LondonSmallPath() + " --res 32 --compute-ms 5 --speed 1 --json 2>&1";
   std::FILE* pipe = popen(cmd.c_str(), "r");
   ASSERT_NE(pipe, nullptr);

@@ -9,6 +9,8 @@
 #include <cstring>
 #include <filesystem>
 
+#include <unistd.h>
+
 #include <absl/strings/str_format.h>
 
 #include "scenes/catalog.h"
@@ -23,7 +25,11 @@ std::atomic<bool>& CancelFlag() {
 
 void InstallCancelHandler() {
   std::signal(SIGINT, [](int) {
-    if (CancelFlag().exchange(true)) std::_Exit(130);  // a second ^C stops at once
+    if (CancelFlag().exchange(true)) {  // a second ^C stops at once, saying so (write(2) is signal-safe)
+      static constexpr char kSay[] = "\nvistream: interrupted (a second ^C: stopped at once)\n";
+      [[maybe_unused]] const ssize_t n = write(STDERR_FILENO, kSay, sizeof(kSay) - 1);
+      std::_Exit(130);
+    }
   });
 }
 

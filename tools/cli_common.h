@@ -19,6 +19,8 @@ namespace vistream::tools {
 
 // Set by SIGINT; long computations poll it through Progress.
 std::atomic<bool>& CancelFlag();
+// SIGINT sets CancelFlag(); a second SIGINT before the program has stopped exits at once with
+// 130, after "vistream: interrupted (a second ^C: stopped at once)" on stderr.
 void InstallCancelHandler();
 
 // What the tool's long computations report to and poll: the terminal sink and CancelFlag().
