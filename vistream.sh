@@ -79,8 +79,10 @@ case "$cmd" in
     # headless client along the default walk (at 60 km/h unless --speed is given, checking
     # its frames against the full scene), then the server is stopped.
     out="$BUILD_DIR/walkthrough"
-    mkdir -p "$out/screenshots"
-    rm -f "$out"/screenshots/*.png
+    # This run's screenshots go to a fresh folder that replaces the last run's only once it
+    # holds any: a run that fails before its first frame (a bad --path) leaves the old ones.
+    rm -rf "$out/screenshots.new"
+    mkdir -p "$out/screenshots.new"
     "$BUILD_DIR/bin/vistream-server" --scene default --listen 127.0.0.1:0 >"$out/server.out" 2>"$out/server.log" &
     server=$!
     stop_server() { kill -TERM "$server" 2>/dev/null && wait "$server" 2>/dev/null || true; }
@@ -101,9 +103,10 @@ case "$cmd" in
     log "server ready on $address (log: $out/server.log)"
     defaults=()
     [[ " $* " == *" --speed "* ]] || defaults+=(--speed 60)
+    [[ " $* " == *" --every "* ]] || defaults+=(--every 10)
     rm -f "$out/frames.csv"
-    "$BUILD_DIR/bin/vistream-client" --server "$address" --headless --verify --every 10 \
-      --screenshots "$out/screenshots" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" &
+    "$BUILD_DIR/bin/vistream-client" --server "$address" --headless --verify \
+      --screenshots "$out/screenshots.new" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" &
     client=$!
     # A signal to this script reaches the client (which stops after its frame and prints what
     # it walked); the server is stopped on the way out.
@@ -113,9 +116,13 @@ case "$cmd" in
     while kill -0 "$client" 2>/dev/null; do wait "$client" || rc=$?; done
     stop_server
     trap - EXIT
-    if [ "$rc" -ne 2 ]; then
-      shots=$(find "$out/screenshots" -name '*.png' | wc -l)
+    shots=$(find "$out/screenshots.new" -name '*.png' | wc -l)
+    if [ "$shots" -gt 0 ]; then
+      rm -rf "$out/screenshots"
+      mv "$out/screenshots.new" "$out/screenshots"
       log "screenshots: $shots PNGs in $out/screenshots; per-frame log: $out/frames.csv"
+    else
+      rm -rf "$out/screenshots.new"
     fi
     exit "$rc"
     ;;

@@ -168,7 +168,6 @@ TEST(Cli, Table1ReportsBothBackendsAgainstTheExactTest) {
   int lines = 0;
   for (std::string line; std::getline(in, line);) ++lines;
   EXPECT_EQ(lines, 4);
-  ExpectBadOption("bench table1 --scene default --res 100", "--res: 100: expected a power of two, 1 to 256");
   ExpectBadOption("bench table1 --scene default --backends vulkan", "--backends: vulkan not in {cpu,gl}");
 }
 
@@ -177,6 +176,21 @@ TEST(Cli, PvsRejectsBadCellsAndBackends) {
   ExpectRunTimeError("pvs --scene default --cell 500,3", "outside the grid");
   ExpectBadOption("pvs --scene default --cell 1,1 --backend vulkan", "--backend: vulkan not in {cpu,gl,exact}");
   ExpectBadOption("pvs --scene default --cell 1,1 --res 100", "--res: '100' is not a power of two");
+}
+
+// Every power of two from 1 to 256 is a raster the query takes (as the server's --res): the
+// coarsest one keeps every object the finest one does, and possibly more.
+TEST(Cli, PvsAtTheCoarsestRasterHoldsTheFinestOnesObjects) {
+  std::map<int, std::vector<std::string>> names;
+  for (int res : {1, 256}) {
+    const RunResult r = Vistream("pvs --scene default --cell 10,10 --res " + std::to_string(res) + " --json");
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    names[res] = nlohmann::json::parse(r.out).at("object_names").get<std::vector<std::string>>();
+    std::sort(names[res].begin(), names[res].end());
+  }
+  ASSERT_FALSE(names[256].empty());
+  EXPECT_TRUE(std::includes(names[1].begin(), names[1].end(), names[256].begin(), names[256].end()));
+  EXPECT_GT(names[1].size(), names[256].size()) << "at 1x1 the raster should keep more than the finest";
 }
 
 TEST(Cli, EpsilonReportsTheSupersetOfANeighbourhood) {

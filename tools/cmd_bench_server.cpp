@@ -470,7 +470,7 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
       ->check(FiniteRange(1.0, 86400.0))->capture_default_str();
   c->add_option("--cell-size", args->cell_size, "viewcell edge, metres (default: the catalog entry's)")
       ->check(FiniteRange(1.0, 10000.0));  // the walkers need room in a cell
-  c->add_option("--res", args->res, "finest dual-ray-space raster")->check(WholeRange(1, 256))->capture_default_str();
+  c->add_option("--res", args->res, "finest dual-ray-space raster")->check(PowerOfTwo(1, 256))->capture_default_str();
   c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->check(WholeRange(0, 1024))
       ->capture_default_str();
   c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();

@@ -247,7 +247,7 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--rays", args->rays, "sampled rays per neighbourhood")->check(WholeRange(1, 1000000000));
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
-  c->add_option("--res", args->res, "dual ray space raster resolution")->check(PowerOfTwo(16, 256));
+  c->add_option("--res", args->res, "dual ray space raster resolution")->check(PowerOfTwo(1, 256));
   c->add_option("--seed", args->seed, "random seed (sampling, cells, neighbourhoods)")->check(WholeRange(0, kMaxSeed));
   c->add_flag("--json", args->json, "print the result as JSON");
   c->add_flag("--allow-unchecked", args->allow_unchecked,

@@ -225,8 +225,8 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("-o,--out", args->out, "with --all: the PVS file to write");
   c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
-  c->add_option("--res", args->res, "finest raster resolution (16..256, a power of two); exact: the raster tried before the exact test")
-      ->check(PowerOfTwo(16, 256));
+  c->add_option("--res", args->res, "finest raster resolution (a power of two, 1 to 256); exact: the raster tried before the exact test")
+      ->check(PowerOfTwo(1, 256));
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");
   c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");
