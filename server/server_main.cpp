@@ -20,6 +20,7 @@
 #include <absl/strings/str_join.h>
 
 #include "cli/number_options.h"
+#include "cli/stop_signal.h"
 #include "scenes/catalog.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
@@ -54,12 +55,6 @@ std::atomic<bool> g_stop{false};
 volatile std::sig_atomic_t g_signal = 0;
 std::atomic<int64_t> g_first_signal_ns{0};
 EventLog* g_log = nullptr;
-
-int64_t MonotonicNs() {  // async-signal-safe
-  timespec t{};
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return int64_t{t.tv_sec} * 1000000000 + t.tv_nsec;
-}
 
 // gRPC's own log lines go into the server's log.
 void GrpcLog(gpr_log_func_args* args) {
@@ -169,12 +164,11 @@ int main(int argc, char** argv) {
   action.sa_handler = [](int sig) {
     // A second signal a second or more after the first stops at once (exit 1): a drain that
     // hangs can be cut short, while one signal delivered twice (by a wrapper) does not count.
-    if (g_stop.exchange(true)) {
-      if (MonotonicNs() - g_first_signal_ns.load() > 1000000000) std::_Exit(1);
-      return;
+    switch (vistream::cli::ClassifyStopSignal(&g_stop, &g_first_signal_ns)) {
+      case vistream::cli::StopSignal::kFirst: g_signal = sig; return;
+      case vistream::cli::StopSignal::kEcho: return;
+      case vistream::cli::StopSignal::kSecond: std::_Exit(1);
     }
-    g_first_signal_ns = MonotonicNs();
-    g_signal = sig;
   };
   sigemptyset(&action.sa_mask);
   sigaction(SIGINT, &action, nullptr);

@@ -384,8 +384,8 @@ TEST(SimulateCli, SweepsRunEachPointAsTheSingleRunWould) {
 }
 
 // ^C (SIGINT) while simulating: exit 130 and "interrupted", no error and no JSON. --foreground:
-// one SIGINT, as a terminal's ^C sends; without it timeout also signals its process group, and
-// a second SIGINT stops at once (cli_signal_test.cpp).
+// one SIGINT, as a terminal's ^C sends (without it timeout also signals its process group: an
+// echo the handler ignores, cli/stop_signal.h).
 TEST(SimulateCli, InterruptedExitsWith130SayingSo) {
   const std::string cmd = "exec timeout --foreground --preserve-status -s INT 2 " + std::string(VISTREAM_BIN) +
                           " simulate --scene " +

@@ -13,6 +13,7 @@
 
 #include <absl/strings/str_format.h>
 
+#include "cli/stop_signal.h"
 #include "scenes/catalog.h"
 #include "tools/terminal_progress.h"
 
@@ -25,11 +26,12 @@ std::atomic<bool>& CancelFlag() {
 
 void InstallCancelHandler() {
   std::signal(SIGINT, [](int) {
-    if (CancelFlag().exchange(true)) {  // a second ^C stops at once, saying so (write(2) is signal-safe)
-      static constexpr char kSay[] = "\nvistream: interrupted (a second ^C: stopped at once)\n";
-      [[maybe_unused]] const ssize_t n = write(STDERR_FILENO, kSay, sizeof(kSay) - 1);
-      std::_Exit(130);
-    }
+    static std::atomic<int64_t> first_ns{0};
+    if (cli::ClassifyStopSignal(&CancelFlag(), &first_ns) != cli::StopSignal::kSecond) return;
+    // Stopped at once, saying so (write(2) is async-signal-safe).
+    static constexpr char kSay[] = "\nvistream: interrupted (a second ^C: stopped at once)\n";
+    [[maybe_unused]] const ssize_t n = write(STDERR_FILENO, kSay, sizeof(kSay) - 1);
+    std::_Exit(130);
   });
 }
 

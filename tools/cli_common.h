@@ -19,8 +19,9 @@ namespace vistream::tools {
 
 // Set by SIGINT; long computations poll it through Progress.
 std::atomic<bool>& CancelFlag();
-// SIGINT sets CancelFlag(); a second SIGINT before the program has stopped exits at once with
-// 130, after "vistream: interrupted (a second ^C: stopped at once)" on stderr.
+// SIGINT sets CancelFlag(); a second SIGINT a second or more after the first, before the
+// program has stopped, exits at once with 130 after "vistream: interrupted (a second ^C:
+// stopped at once)" on stderr; one within the second is ignored (cli/stop_signal.h).
 void InstallCancelHandler();
 
 // What the tool's long computations report to and poll: the terminal sink and CancelFlag().
