@@ -764,6 +764,42 @@ TEST(ServerLog, AClientThatGoesAwayIsLoggedAsCancelledNotAsFinished) {
   EXPECT_EQ(ends[1].value("status", ""), "OK") << ends[1].dump();
 }
 
+// A cell's PVS is logged as computed, with its computation's time, by the session that had it
+// computed, and as a cache hit costing nothing by the next one.
+TEST(ServerLog, ACacheHitIsLoggedWithNoComputeTime) {
+  std::FILE* out = std::tmpfile();
+  ASSERT_NE(out, nullptr);
+  {
+    EventLog log(out, /*json=*/true);
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
+    ASSERT_TRUE(server.ok()) << server.status();
+    ExpectStillServes(**server, 6, 4);
+    ExpectStillServes(**server, 6, 4);
+    (*server)->Shutdown(1.0);
+  }
+  std::rewind(out);
+  std::vector<nlohmann::json> here;  // the pvs lines of cell 6,4, in order
+  char line[4096];
+  while (std::fgets(line, sizeof(line), out) != nullptr) {
+    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_object() || j.value("event", "") != "pvs") continue;
+    const std::string source = j.value("source", "");
+    ASSERT_TRUE(source == "computed" || source == "cache") << j.dump();
+    if (source == "cache") {
+      EXPECT_EQ(j.value("ms", -1.0), 0.0) << j.dump();
+    } else {
+      EXPECT_GT(j.value("ms", -1.0), 0.0) << j.dump();
+    }
+    if (j.value("cell", "") == "6,4") here.push_back(j);
+  }
+  std::fclose(out);
+  ASSERT_EQ(here.size(), 2u);
+  EXPECT_NE(here[0].value("session", 0), here[1].value("session", 0));
+  EXPECT_EQ(here[1].value("source", ""), "cache") << here[1].dump();
+}
+
 TEST(ServerLink, TheLogShowsJitterOnlyWhereTheSceneDeclaresIt) {
   // Time scale 20: the declared links, twenty times faster, so that the walk takes little time.
   absl::StatusOr<scenes::CatalogEntry> plain = scenes::FindCatalogEntry("default");
