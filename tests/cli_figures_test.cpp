@@ -294,16 +294,17 @@ namespace {
 
 // The whole quick report (about 20 s on the 2-core machine): the page, its stamp, a section for
 // each figure, and every PNG it names.
-// ^C or SIGTERM: the running step is stopped, no other starts, exit 130, and no report.md
-// (an older one is removed first: it would not match the PNGs this run replaced).
+// ^C or SIGTERM: the running step is stopped (and says so, not FAILED), no other starts, exit
+// 130, and no report.md (an older one is removed first: it would not match the PNGs this run
+// replaced).
 TEST(CliFigures, AStoppedReportWritesNoPage) {
   for (const char* signal : {"INT", "TERM"}) {
     const std::string dir = Tmp(std::string("stopped-") + signal);
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     { std::ofstream(dir + "/report.md") << "an older page\n"; }
-    // One signal to the report alone (timeout(1) would send a second to the group: a second ^C
-    // stops at once, by design). The shell prints the report's exit status last.
+    // One signal to the report alone, as a ^C in a terminal would be. The shell prints the
+    // report's exit status last.
     const std::string cmd = std::string("sh -c '") + VISTREAM_BIN + " report --quick --out " + dir +
                             " 2>&1 & pid=$!; sleep 5; kill -" + signal + " $pid; wait $pid; echo \"rc=$?\"'";
     std::FILE* pipe = popen(cmd.c_str(), "r");
@@ -315,6 +316,7 @@ TEST(CliFigures, AStoppedReportWritesNoPage) {
     EXPECT_NE(out.find("rc=130"), std::string::npos) << signal << ": " << out;
     EXPECT_NE(out.find("vistream: interrupted (report stopped after "), std::string::npos) << signal << ": " << out;
     EXPECT_FALSE(std::filesystem::exists(dir + "/report.md")) << signal;
+    EXPECT_EQ(out.find("FAILED"), std::string::npos) << signal << ": the stopped step is not a failure: " << out;
   }
 }
 

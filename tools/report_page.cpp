@@ -78,7 +78,11 @@ std::string Page::Command(const std::vector<std::string>& args) const {
 void Page::Log(const Step& s, bool counted) {
   // A step whose failure is an answer (a probe) shows its result, not a failure.
   // (A probe's page result is set after this line: here only that its exit was its answer.)
-  const std::string state = s.ok ? "" : counted ? "FAILED  " : "(probe: its exit status is the answer)  ";
+  // A step cut short by ^C or SIGTERM shows as stopped, not failed.
+  const std::string state = s.ok                    ? ""
+                            : s.result == "stopped" ? "STOPPED  "
+                            : counted               ? "FAILED  "
+                                                    : "(probe: its exit status is the answer)  ";
   std::fprintf(stderr, "report: [%zu] %-22s %7.1f s  %s%s\n", steps_.size(), s.name.c_str(), s.seconds, state.c_str(),
                s.command.c_str());
   std::fflush(stderr);
@@ -99,7 +103,10 @@ Page::Raw Page::RunRaw(const std::string& step, const std::vector<std::string>& 
   std::fflush(stderr);
   const absl::StatusOr<ProcessResult> r = RunProcess(argv, &CancelFlag());
   Step s{step, command, r.ok() ? r->seconds : 0.0, r.ok() && r->exit_code == 0, ""};
-  s.result = s.ok ? "ok" : r.ok() ? absl::StrCat("failed (exit ", r->exit_code, ")") : "failed (not started)";
+  s.result = s.ok                  ? "ok"
+             : CancelFlag().load() ? "stopped"
+             : r.ok()              ? absl::StrCat("failed (exit ", r->exit_code, ")")
+                                   : "failed (not started)";
   steps_.push_back(s);
   Log(s, counts_as_failure);
   if (!r.ok()) {
