@@ -91,7 +91,7 @@ int BatchRow(const visibility::PvsComputer& computer, const visibility::Viewcell
              const std::vector<visibility::CellCoord>& samples, uint32_t res, double size,
              const visibility::CellQueryOptions& options,
              const std::vector<std::vector<std::vector<scenes::ObjectId>>>& exact_batch, OccludedArea&& occluded_area,
-             Row* row) {
+             scenes::Progress* progress, Row* row) {
   *row = Row{res, size, "cpu"};
   row->batch_cells = 5;
   std::vector<double> batch_ms, singles_ms;
@@ -124,6 +124,8 @@ int BatchRow(const visibility::PvsComputer& computer, const visibility::Viewcell
     }
     batch_ms.push_back(batch[0].ms);
     singles_ms.push_back(singles);
+    progress->Advance();
+    if (progress->Cancelled()) return Fail(absl::CancelledError("interrupted"));
   }
   double sum = 0, singles_sum = 0;
   for (double m : batch_ms) sum += m;
@@ -178,7 +180,10 @@ int Table1(const Table1Args& a) {
   }
   std::vector<Row> rows;
   nlohmann::json exact_json = nlohmann::json::array();
-  scenes::Progress progress(ToolRun(), "table1", a.sizes.size() * a.cells * (1 + a.res.size() * a.backends.size()));
+  // A step: one viewcell's query per resolution and backend and its exact set; with --batch also
+  // one sample's five exact sets, and its batch and five single calls per resolution.
+  const size_t per_cell = 1 + a.res.size() * a.backends.size() + (a.batch ? 1 + a.res.size() : 0);
+  scenes::Progress progress(ToolRun(), "table1", a.sizes.size() * a.cells * per_cell);
   for (double size : a.sizes) {
     absl::StatusOr<visibility::ViewcellGrid> grid =
         visibility::ViewcellGrid::Create(scene->bounds, size, spec.base_m, 2.0);
@@ -196,6 +201,7 @@ int Table1(const Table1Args& a) {
           exact_batch.back().push_back(
               exact->Compute(computer, cell, visibility::CellQueryOptions{.max_res = 256}).objects);
         }
+        progress.Advance();
         if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
       }
     }
@@ -257,7 +263,8 @@ int Table1(const Table1Args& a) {
         }
       }
       if (a.batch) {
-        const int status = BatchRow(computer, *grid, samples, res, size, options, exact_batch, occluded_area, &row_out);
+        const int status = BatchRow(computer, *grid, samples, res, size, options, exact_batch, occluded_area, &progress,
+                                    &row_out);
         if (status != 0) return status;
         rows.push_back(row_out);
         if (csv.is_open()) {
