@@ -13,6 +13,7 @@
 #include "scenes/progress.h"
 #include "scenes/random.h"
 #include "visibility/bytes.h"
+#include "tests/temp_dir.h"
 #include "visibility/pvs_file.h"
 
 namespace vistream::visibility {
@@ -533,7 +534,7 @@ TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {
   EXPECT_NE(cells.message().find("f.pvs"), std::string::npos) << cells;
   EXPECT_NE(cells.message().find("6 x 4 cells of 25 m"), std::string::npos) << cells;
 
-  const std::string path = ::testing::TempDir() + "/load.pvs";
+  const std::string path = vistream::testing::ProcessTempDir() + "/load.pvs";
   {
     std::ofstream out(path, std::ios::binary);
     out << EncodePvsFile(made);
@@ -544,7 +545,7 @@ TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {
   EXPECT_EQ(loaded->scene_fingerprint, made.scene_fingerprint);
   EXPECT_EQ(LoadPvsFile(path, other, scene).status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(LoadPvsFile(path + ".missing", grid, scene).status().code(), absl::StatusCode::kNotFound);
-  const absl::Status dir = LoadPvsFile(::testing::TempDir(), grid, scene).status();
+  const absl::Status dir = LoadPvsFile(vistream::testing::ProcessTempDir(), grid, scene).status();
   EXPECT_EQ(dir.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(dir.message().find("directory"), std::string::npos) << dir;
 

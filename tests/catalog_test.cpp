@@ -8,6 +8,7 @@
 
 #include "scenes/city_generator.h"
 #include "scenes/progress.h"
+#include "tests/temp_dir.h"
 #include "tests/test_util.h"
 
 namespace vistream::scenes {
@@ -213,7 +214,7 @@ TEST(Catalog, UnknownNameListsTheKnownOnes) {
 
 TEST(Catalog, LoadSceneTakesNamesPathsAndAnotherCatalogFolder) {
   // A folder of its own with one entry: found there by name, and not in the default catalog.
-  const std::string dir = ::testing::TempDir() + "/catalog_elsewhere";
+  const std::string dir = vistream::testing::ProcessTempDir() + "/catalog_elsewhere";
   std::filesystem::create_directories(dir);
   std::FILE* f = std::fopen((dir + "/tiny.json").c_str(), "w");
   ASSERT_NE(f, nullptr);

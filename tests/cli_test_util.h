@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/temp_dir.h"
+
 namespace vistream::testing {
 
 // The tool's exit codes (README): run-time errors 1, bad options 2.
@@ -54,10 +56,7 @@ inline void ExpectRunTimeError(const std::string& args, const std::string& messa
   EXPECT_NE(r.out.find(message), std::string::npos) << args << "\n" << r.out;
 }
 
-inline std::string Tmp(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("vistream-cli-" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
-  return (dir / name).string();
-}
+// A path in the process's own temporary folder (emptied at start, removed at exit).
+inline std::string Tmp(const std::string& name) { return ProcessTempDir() + "/" + name; }
 
 }  // namespace vistream::testing

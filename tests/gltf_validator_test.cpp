@@ -13,6 +13,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/temp_dir.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -32,11 +34,7 @@ RunResult RunCommand(const std::string& cmd, bool merge_stderr) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
 
-std::string Tmp(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("vistream-gltf-validator-" + std::to_string(getpid()));
-  fs::create_directories(dir);
-  return (dir / name).string();
-}
+std::string Tmp(const std::string& name) { return vistream::testing::ProcessTempDir() + "/" + name; }
 
 // The validator's report on `file`; fails the test (with how to install the validator) when
 // it cannot run.

@@ -10,18 +10,11 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
+#include "tests/temp_dir.h"
+
 namespace vistream::testing {
 
-std::string TempDir() {
-  static const std::string dir = [] {
-    const auto path = std::filesystem::temp_directory_path() /
-                      ("vistream-test-" + std::to_string(getpid()));
-    std::filesystem::remove_all(path);
-    std::filesystem::create_directories(path);
-    return path.string();
-  }();
-  return dir;
-}
+std::string TempDir() { return ProcessTempDir(); }
 
 namespace {
 

@@ -8,7 +8,8 @@
 
 namespace vistream::testing {
 
-// A fresh empty directory under the system temp dir, unique to this test process.
+// A fresh empty directory under the system temp dir, unique to this test process and removed
+// at its exit (ProcessTempDir, tests/temp_dir.h).
 std::string TempDir();
 
 // True when the polygon footprints of the scene's occluders keep at least `clearance` metres
