@@ -442,6 +442,7 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
     stats = it->second.session->Stats();
     bytes_sent_ended_ += stats.bytes_sent();
     sessions_.erase(it);
+    ++ending_;
   }
   if (log_ != nullptr) {
     log_->Write(id, "session_end",
@@ -467,6 +468,8 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
                    {"max_in_link_bytes", link->max_in_link_bytes}});
     }
   }
+  std::lock_guard lock(mu_);
+  --ending_;
 }
 
 grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerContext* context,
@@ -489,7 +492,7 @@ void WalkthroughService::Drain() {
 
 size_t WalkthroughService::active_sessions() const {
   std::lock_guard lock(mu_);
-  return sessions_.size();
+  return sessions_.size() + ending_;
 }
 
 v1::ServerStats WalkthroughService::Stats() const {

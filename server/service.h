@@ -70,6 +70,8 @@ class WalkthroughService final
   // Refuses new sessions and ends every open one with UNAVAILABLE.
   void Drain();
   vistream::v1::ServerStats Stats() const;
+  // Sessions open, and ended ones whose end is not yet logged (so that once this is 0, every
+  // `session_end` line is written).
   size_t active_sessions() const;
 
   // Called by a session's reactor when it is done; `link` is null without emulation.
@@ -88,6 +90,7 @@ class WalkthroughService final
   uint64_t next_id_ = 1;
   uint64_t sessions_total_ = 0;
   uint64_t bytes_sent_ended_ = 0;  // of sessions that ended
+  size_t ending_ = 0;              // removed from sessions_, their end not yet logged
   struct Entry {
     std::shared_ptr<server::Session> session;
     std::shared_ptr<SessionLink> link;
