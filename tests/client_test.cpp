@@ -1,7 +1,10 @@
 // The thin client against a real server on loopback: headless walks of the default scene
 // (stalls, pixel error, screenshots), a memory budget, a server restart, the window front end
 // under Xvfb, and bad input to the executable. Plus its units: grid lookup, object store, walk.
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -379,19 +382,23 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
   auto server = StartServer();
   ASSERT_NE(server, nullptr);
   const std::string real = " --headless --server " + Address(*server);
-  // Nothing listens on a port that was just free.
-  int free_port = 0;
-  {
-    grpc::ServerBuilder b;
-    b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &free_port);
-    auto probe = b.BuildAndStart();
-    probe->Shutdown();
-  }
+  // Nothing listens on a port this test holds bound (so that no one else takes it) without
+  // listening: a connection to it is refused.
+  const int held = socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(held, 0);
+  sockaddr_in at{};
+  at.sin_family = AF_INET;
+  at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t at_len = sizeof(at);
+  ASSERT_EQ(bind(held, reinterpret_cast<const sockaddr*>(&at), sizeof(at)), 0);
+  ASSERT_EQ(getsockname(held, reinterpret_cast<sockaddr*>(&at), &at_len), 0);
+  const int free_port = ntohs(at.sin_port);
   Ran r = RunCommand(Client() + " --headless --connect-timeout 1 --server 127.0.0.1:" + std::to_string(free_port));
   EXPECT_EQ(r.rc, 1) << r.output;
   EXPECT_NE(r.output.find("no vistream server answers at 127.0.0.1:" + std::to_string(free_port)),
             std::string::npos)
       << r.output;
+  close(held);
 
   FutureServer future;
   int future_port = 0;
