@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <set>
 #include <thread>
@@ -697,73 +698,69 @@ TEST(ServerLink, AnEmulatedLinkDelaysTheFirstCellByBothLatenciesAndItsTransmissi
   EXPECT_TRUE(client->Finish().ok());
 }
 
-// The session_end "link" line of a session walked through a server that emulates `link`.
-nlohmann::json LinkLineOfAWalk(const LinkParams& link) {
+// The JSON log lines of a city1 server on a free loopback port (with `o`'s other options)
+// while `use` runs against it, up to its shutdown (which waits until every session's end is
+// logged).
+std::vector<nlohmann::json> LogOf(ServerOptions o, const std::function<void(WalkthroughServer&)>& use) {
   std::FILE* out = std::tmpfile();
   EXPECT_NE(out, nullptr);
-  nlohmann::json found;
+  if (out == nullptr) return {};
   {
     EventLog log(out, /*json=*/true);
-    ServerOptions o;
-    o.link = link;
     o.listen = "127.0.0.1:0";
     absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
     EXPECT_TRUE(server.ok()) << server.status();
-    if (!server.ok()) return found;
-    auto client = Connect(**server);
-    for (int i = 3; i <= 6; ++i) {
-      client->SendPose(Centre(i, 4), glm::dvec3(10.0, 0.0, 0.0));
-      EXPECT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(i, 4)); }, kWait));
+    if (server.ok()) {
+      use(**server);
+      (*server)->Shutdown(1.0);
     }
-    EXPECT_TRUE(client->Finish().ok());
-    // The reactor logs when it is done, just after the client saw the end.
-    for (int k = 0; k < 200 && (*server)->service().active_sessions() > 0; ++k) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    (*server)->Shutdown(1.0);
   }
   std::rewind(out);
+  std::vector<nlohmann::json> lines;
   char line[4096];
   while (std::fgets(line, sizeof(line), out) != nullptr) {
     nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
-    if (j.is_object() && j.value("event", "") == "link" && j.contains("session")) found = j;
+    if (j.is_object()) lines.push_back(std::move(j));
   }
   std::fclose(out);
+  return lines;
+}
+
+// The session_end "link" line of a session walked through a server that emulates `link`.
+nlohmann::json LinkLineOfAWalk(const LinkParams& link) {
+  ServerOptions o;
+  o.link = link;
+  nlohmann::json found;
+  for (nlohmann::json& j : LogOf(o, [](WalkthroughServer& server) {
+         auto client = Connect(server);
+         for (int i = 3; i <= 6; ++i) {
+           client->SendPose(Centre(i, 4), glm::dvec3(10.0, 0.0, 0.0));
+           EXPECT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(i, 4)); }, kWait));
+         }
+         EXPECT_TRUE(client->Finish().ok());
+       })) {
+    if (j.value("event", "") == "link" && j.contains("session")) found = std::move(j);
+  }
   return found;
 }
 
 // A client that goes away mid-walk (its call cancelled, as when it is killed) ends only its own
 // session, and the log says it was cancelled, not that it ended as a client that finished.
 TEST(ServerLog, AClientThatGoesAwayIsLoggedAsCancelledNotAsFinished) {
-  std::FILE* out = std::tmpfile();
-  ASSERT_NE(out, nullptr);
-  {
-    EventLog log(out, /*json=*/true);
-    ServerOptions o;
-    o.listen = "127.0.0.1:0";
-    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
-    ASSERT_TRUE(server.ok()) << server.status();
-    auto gone = Connect(**server);
-    ASSERT_TRUE(gone->SendPose(Centre(4, 4)));
-    ASSERT_TRUE(gone->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(4, 4)); }, kWait));
-    gone->Cancel();
-    for (int k = 0; k < 500 && (*server)->service().active_sessions() > 0; ++k) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    ExpectStillServes(**server, 6, 4);
-    for (int k = 0; k < 500 && (*server)->service().active_sessions() > 0; ++k) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    (*server)->Shutdown(1.0);
-  }
-  std::rewind(out);
   std::vector<nlohmann::json> ends;
-  char line[4096];
-  while (std::fgets(line, sizeof(line), out) != nullptr) {
-    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
-    if (j.is_object() && j.value("event", "") == "session_end") ends.push_back(j);
+  for (nlohmann::json& j : LogOf({}, [](WalkthroughServer& server) {
+         auto gone = Connect(server);
+         ASSERT_TRUE(gone->SendPose(Centre(4, 4)));
+         ASSERT_TRUE(gone->WaitFor([&](const SessionRecord& r) { return r.CellComplete(Cell(4, 4)); }, kWait));
+         gone->Cancel();
+         // Its end is logged before the next session starts (active until then).
+         for (int k = 0; k < 500 && server.service().active_sessions() > 0; ++k) {
+           std::this_thread::sleep_for(std::chrono::milliseconds(10));
+         }
+         ExpectStillServes(server, 6, 4);
+       })) {
+    if (j.value("event", "") == "session_end") ends.push_back(std::move(j));
   }
-  std::fclose(out);
   ASSERT_EQ(ends.size(), 2u);
   EXPECT_EQ(ends[0].value("code", -1), static_cast<int>(grpc::StatusCode::CANCELLED)) << ends[0].dump();
   EXPECT_EQ(ends[0].value("status", ""), "error") << ends[0].dump();
@@ -775,24 +772,12 @@ TEST(ServerLog, AClientThatGoesAwayIsLoggedAsCancelledNotAsFinished) {
 // A cell's PVS is logged as computed, with its computation's time, by the session that had it
 // computed, and as a cache hit costing nothing by the next one.
 TEST(ServerLog, ACacheHitIsLoggedWithNoComputeTime) {
-  std::FILE* out = std::tmpfile();
-  ASSERT_NE(out, nullptr);
-  {
-    EventLog log(out, /*json=*/true);
-    ServerOptions o;
-    o.listen = "127.0.0.1:0";
-    absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(&City1(), o, &log);
-    ASSERT_TRUE(server.ok()) << server.status();
-    ExpectStillServes(**server, 6, 4);
-    ExpectStillServes(**server, 6, 4);
-    (*server)->Shutdown(1.0);
-  }
-  std::rewind(out);
   std::vector<nlohmann::json> here;  // the pvs lines of cell 6,4, in order
-  char line[4096];
-  while (std::fgets(line, sizeof(line), out) != nullptr) {
-    nlohmann::json j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
-    if (!j.is_object() || j.value("event", "") != "pvs") continue;
+  for (const nlohmann::json& j : LogOf({}, [](WalkthroughServer& server) {
+         ExpectStillServes(server, 6, 4);
+         ExpectStillServes(server, 6, 4);
+       })) {
+    if (j.value("event", "") != "pvs") continue;
     const std::string source = j.value("source", "");
     ASSERT_TRUE(source == "computed" || source == "cache") << j.dump();
     if (source == "cache") {
@@ -802,7 +787,6 @@ TEST(ServerLog, ACacheHitIsLoggedWithNoComputeTime) {
     }
     if (j.value("cell", "") == "6,4") here.push_back(j);
   }
-  std::fclose(out);
   ASSERT_EQ(here.size(), 2u);
   EXPECT_NE(here[0].value("session", 0), here[1].value("session", 0));
   EXPECT_EQ(here[1].value("source", ""), "cache") << here[1].dump();
