@@ -36,6 +36,7 @@
 #include "scenes/catalog.h"
 #include "server/served_scene.h"
 #include "server/service.h"
+#include "tests/temp_dir.h"
 
 namespace vistream::client {
 namespace {
@@ -67,10 +68,9 @@ std::unique_ptr<WalkthroughServer> StartServer(int port = 0) {
 
 std::string Address(const WalkthroughServer& s) { return "127.0.0.1:" + std::to_string(s.port()); }
 
-// A fresh folder under the test's temporary directory.
+// A fresh folder in the test process's own temporary folder (removed at exit).
 std::string TempDir(const std::string& name) {
-  const std::filesystem::path p = std::filesystem::temp_directory_path() /
-                                  ("vistream_client_test_" + std::to_string(getpid()) + "_" + name);
+  const std::filesystem::path p = std::filesystem::path(vistream::testing::ProcessTempDir()) / name;
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p.string();

@@ -27,6 +27,7 @@
 #include "server/link_model.h"
 #include "server/served_scene.h"
 #include "server/simulator.h"
+#include "tests/temp_dir.h"
 
 namespace vistream {
 namespace {
@@ -110,11 +111,8 @@ struct ClientRun {
   std::string log;             // stderr
 };
 
-std::string TempPath(const std::string& name) {
-  return (std::filesystem::temp_directory_path() /
-          ("vistream_latency_e2e_" + std::to_string(getpid()) + "_" + name))
-      .string();
-}
+// A path in the test process's own temporary folder (removed at exit).
+std::string TempPath(const std::string& name) { return vistream::testing::ProcessTempDir() + "/" + name; }
 
 // The headless client along the default walk at kmh * kScale, for kSeconds.
 ClientRun WalkScaled(const std::string& address, const std::string& name, double kmh = kWalkKmh) {

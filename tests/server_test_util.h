@@ -70,4 +70,13 @@ inline std::unique_ptr<SessionStream> Connect(WalkthroughServer& server, bool re
   return c;
 }
 
+// A new session is served: its cell (i, j) arrives complete and it ends cleanly. After a bad
+// client was dealt with, this says the server is still whole.
+inline void ExpectStillServes(WalkthroughServer& server, int i, int j) {
+  auto good = Connect(server);
+  ASSERT_TRUE(good->SendPose(Centre(i, j)));
+  EXPECT_TRUE(good->WaitFor([&](const client::SessionRecord& r) { return r.CellComplete(Cell(i, j)); }, kWait));
+  EXPECT_TRUE(good->Finish().ok());
+}
+
 }  // namespace vistream::server::test
