@@ -101,9 +101,15 @@ case "$cmd" in
     done
     [ -n "$address" ] || { log "the server was not ready after 300 s; log in $out/server.log"; exit 1; }
     log "server ready on $address (log: $out/server.log)"
-    defaults=()
-    [[ " $* " == *" --speed "* ]] || defaults+=(--speed 60)
-    [[ " $* " == *" --every "* ]] || defaults+=(--every 10)
+    # The script's defaults, unless given (as --speed 30 or --speed=30).
+    speed=(--speed 60) every=(--every 10)
+    for a in "$@"; do
+      case "$a" in
+        --speed | --speed=*) speed=() ;;
+        --every | --every=*) every=() ;;
+      esac
+    done
+    defaults=("${speed[@]}" "${every[@]}")
     rm -f "$out/frames.csv"
     "$BUILD_DIR/bin/vistream-client" --server "$address" --headless --verify \
       --screenshots "$out/screenshots.new" --frame-log "$out/frames.csv" "${defaults[@]}" "$@" &
