@@ -314,6 +314,9 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --speed ''", "--speed: empty: leave the option out for the default");
   ExpectBadOption("simulate --scene city1 --link ''", "--link: empty");
   ExpectBadOption("simulate --scene city1 --path ''", "--path: empty");
+  for (const char* option : {"--speeds", "--bandwidths", "--scheme", "--schemes", "--log"}) {
+    ExpectBadOption(std::string("simulate --scene city1 ") + option + " ''", std::string(option) + ": empty");
+  }
   ExpectBadOption("simulate --scene city1 --link 1M,40,3", "--link: '1M,40,3': more than two fields");
   ExpectBadOption("simulate --scene city1 --link 1e30,40", "--link: '1e30,40': the bandwidth has an exponent");
   ExpectBadOption("simulate --scene city1 --link 1M,4e1", "--link: '1M,4e1': the latency has an exponent");

@@ -35,8 +35,8 @@ struct SimulateArgs {
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
-  // Given on the command line (an empty value is an error, not the default).
-  const CLI::Option *speed_opt = nullptr, *link_opt = nullptr, *path_opt = nullptr;
+  // The text options, with their values: one given empty is an error, not the default.
+  std::vector<std::pair<const CLI::Option*, const std::string*>> texts;
 };
 
 double Pct(const std::vector<double>& v, double q) {
@@ -141,8 +141,8 @@ int Simulate(const SimulateArgs& a) {
   // over every link (the declared or --link one, or each of --bandwidths at its latency).
   std::vector<double> speeds_kmh;
   std::string why;
-  for (const auto& [opt, value] : {std::pair{a.speed_opt, &a.speed}, {a.link_opt, &a.link}, {a.path_opt, &a.path}}) {
-    if (opt != nullptr && opt->count() > 0 && value->empty()) {
+  for (const auto& [opt, value] : a.texts) {
+    if (opt->count() > 0 && value->empty()) {
       return BadOption("simulate", opt->get_name(), "empty: leave the option out for the default");
     }
   }
@@ -373,22 +373,23 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   CLI::App* c = app.add_subcommand(
       "simulate", "discrete-event simulation of a catalog walk: stalls, arrival margins, bytes, triangles drawn");
   c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
-  args->path_opt = c->add_option("--path", args->path, "the entry's walk (default: its first)");
-  args->speed_opt = c->add_option("--speed", args->speed,
+  const CLI::Option* path = c->add_option("--path", args->path, "the entry's walk (default: its first)");
+  const CLI::Option* speed = c->add_option("--speed", args->speed,
                 "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls (bisection in "
                 "[1, 500] km/h to 1%)");
-  c->add_option("--speeds", args->speeds,
+  const CLI::Option* speeds = c->add_option("--speeds", args->speeds,
                 "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
                 "whose PVSs serve them all");
-  args->link_opt = c->add_option("--link", args->link,
+  const CLI::Option* link = c->add_option("--link", args->link,
                 "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
                 "the declared link, none: ideal");
-  c->add_option("--bandwidths", args->bandwidths,
+  const CLI::Option* bandwidths = c->add_option("--bandwidths", args->bandwidths,
                 "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
                 "link's latency, jitter and loss");
-  c->add_option("--scheme", args->scheme,
+  const CLI::Option* scheme = c->add_option("--scheme", args->scheme,
                 "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
-  c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
+  const CLI::Option* schemes =
+      c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "the dual ray space's finest raster")->capture_default_str()->check(PowerOfTwo(1, 256));
@@ -398,7 +399,11 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--compute-ms", args->compute_ms,
                 "charge this many ms per PVS and ε-mask instead of the measured time (machine-independent runs)")
       ->check(FiniteRange(0.0, 1e7));
-  c->add_option("--log", args->log, "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
+  const CLI::Option* log = c->add_option(
+      "--log", args->log, "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
+  args->texts = {{path, &args->path},         {speed, &args->speed},   {speeds, &args->speeds},
+                 {link, &args->link},         {bandwidths, &args->bandwidths}, {scheme, &args->scheme},
+                 {schemes, &args->schemes},   {log, &args->log}};
   c->add_flag("--json", args->json, "print one JSON object");
   c->callback([args, done] { done(Simulate(*args)); });
 }
