@@ -289,6 +289,25 @@ TEST(Cli, AgvsReportsItsFiguresAndWritesAPvsFileTheHeatmapReads) {
             nlohmann::json::parse(a.out).at("mean_pvs_objects").get<double>());
 }
 
+// ^C while sampling: what was sampled is kept (the JSON says cancelled, the PVS file is
+// written), the command says it was interrupted and exits 130, as every command does.
+TEST(Cli, AnInterruptedAgvsKeepsWhatItSampledAndSaysSo) {
+  const std::string pvs = Tmp("interrupted.pvs");
+  std::filesystem::remove(pvs);
+  const std::string cmd = std::string("sh -c '") + VISTREAM_BIN + " agvs --scene city1 --seconds 60 --json -o " + pvs +
+                          " 2>&1 & pid=$!; sleep 3; kill -INT $pid; wait $pid; echo \"rc=$?\"'";
+  std::FILE* pipe = popen(cmd.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string out;
+  char buf[4096];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) out.append(buf, n);
+  pclose(pipe);
+  EXPECT_NE(out.find("rc=130"), std::string::npos) << out;
+  EXPECT_NE(out.find("vistream: interrupted (sampling stopped after "), std::string::npos) << out;
+  EXPECT_NE(out.find("\"cancelled\": true"), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::exists(pvs)) << out;
+}
+
 TEST(Cli, AgvsRejectsBadInput) {
   ExpectBadOption("agvs --scene city1", "--seconds, --pixel-error or --samples: give one: when to stop sampling");
   ExpectBadOption("agvs --samples 10", "--scene: is required");

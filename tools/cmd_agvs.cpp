@@ -109,9 +109,19 @@ int Agvs(const AgvsArgs& a) {
   j["mean_pvs_triangles"] = mean_triangles;
   j["cancelled"] = cancelled;
   if (!a.out.empty()) j["pvs_file"] = a.out;
+  // ^C: what was sampled is kept (an anytime result), and said so, as every interrupted command.
+  auto interrupted = [&] {
+    std::fprintf(stderr, "vistream: interrupted (sampling stopped after %llu samples%s)\n",
+                 static_cast<unsigned long long>(sampler.stats().samples),
+                 a.out.empty() && a.state.empty() ? ""
+                 : a.out.empty()                  ? "; the state saved"
+                 : a.state.empty()                ? "; the PVS file written from them"
+                                                  : "; the state saved and the PVS file written from them");
+    return 130;
+  };
   if (a.json) {
     std::printf("%s\n", j.dump(2).c_str());
-    return cancelled ? 130 : 0;
+    return cancelled ? interrupted() : 0;
   }
   const visibility::AgvsStats& st = sampler.stats();
   std::printf("%s, %zu cells of %.0f m: %llu samples in %.1f s (%.2f M samples/s, %.2f M rays/s)%s\n",
@@ -130,7 +140,8 @@ int Agvs(const AgvsArgs& a) {
                 ds.probability);
   }
   if (!a.out.empty()) std::printf("PVS file: %s\n", a.out.c_str());
-  return cancelled ? 130 : 0;
+  std::fflush(stdout);
+  return cancelled ? interrupted() : 0;
 }
 
 struct HeatmapArgs {
