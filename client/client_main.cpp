@@ -18,6 +18,7 @@
 #include <absl/strings/str_split.h>
 
 #include "cli/number_options.h"
+#include "cli/unexpected_arguments.h"
 #include "client/walkthrough.h"
 
 namespace {
@@ -102,41 +103,35 @@ int main(int argc, char** argv) {
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
   app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
+  // Bad options exit 2, in the vistream tool's form: "<option>: <what is wrong>", then the hint.
+  auto bad_option = [](const std::string& message) {
+    std::fprintf(stderr, "vistream-client: error: %s\nRun 'vistream-client --help' for the options.\n", message.c_str());
+    return 2;
+  };
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    std::fprintf(stderr, "vistream-client: error: %s\n", e.what());
-    return 2;
+    // Unknown options first: a misspelt option often hides another complaint.
+    const std::string unexpected = vistream::cli::UnexpectedArguments(app.remaining(), "vistream-client");
+    return bad_option(unexpected.empty() ? e.what() : unexpected);
   }
   if (!ValidAddress(o.server)) {
-    std::fprintf(stderr, "vistream-client: error: --server '%s': expected HOST:PORT with a port from 1 to 65535\n",
-                 o.server.c_str());
-    return 2;
+    return bad_option("--server: '" + o.server + "': expected HOST:PORT with a port from 1 to 65535");
   }
   if (!ParseSize(size, &o.width, &o.height)) {
-    std::fprintf(stderr, "vistream-client: error: --size '%s': expected WIDTHxHEIGHT from 16x16 to 8192x8192, e.g. 1280x720\n",
-                 size.c_str());
-    return 2;
+    return bad_option("--size: '" + size + "': expected WIDTHxHEIGHT from 16x16 to 8192x8192, e.g. 1280x720");
   }
   if (!pose.empty()) {
     vistream::client::FixedPose p;
     if (!ParsePose(pose, &p)) {
-      std::fprintf(stderr, "vistream-client: error: --pose '%s': expected X,Y,Z,YAW,PITCH (metres, degrees; pitch within +-89)\n",
-                   pose.c_str());
-      return 2;
+      return bad_option("--pose: '" + pose + "': expected X,Y,Z,YAW,PITCH (metres, degrees; pitch within +-89)");
     }
     o.pose = p;
   }
-  if (o.frames > 0 && !o.pose.has_value()) {
-    std::fprintf(stderr, "vistream-client: error: --frames needs --pose\n");
-    return 2;
-  }
-  if (!o.path.empty() && o.pose.has_value()) {
-    std::fprintf(stderr, "vistream-client: error: --path and --pose exclude each other\n");
-    return 2;
-  }
+  if (o.frames > 0 && !o.pose.has_value()) return bad_option("--frames: needs --pose");
+  if (!o.path.empty() && o.pose.has_value()) return bad_option("--path: cannot be given with --pose");
   if (memory_mb >= 0.0) o.memory_budget_bytes = static_cast<uint64_t>(memory_mb * 1048576.0);
   if (triangle_budget >= 0.0) o.triangle_budget = static_cast<uint64_t>(triangle_budget);
   o.upload_budget_bytes = static_cast<uint64_t>(upload_mb * 1048576.0);

@@ -21,6 +21,7 @@
 
 #include "cli/number_options.h"
 #include "cli/stop_signal.h"
+#include "cli/unexpected_arguments.h"
 #include "scenes/catalog.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
@@ -126,10 +127,12 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     if (dynamic_cast<const CLI::Success*>(&e) != nullptr) return app.exit(e);
-    // Bad options exit 2 before the scene loads, in the vistream tool's form.
-    std::string message = e.what();
-    if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr && !app.remaining().empty()) {
-      message = absl::StrJoin(app.remaining(), " ") + ": not options of vistream-server";
+    // Bad options exit 2 before the scene loads, in the vistream tool's form; unknown ones
+    // first (a misspelt option often hides a required one).
+    std::string message = vistream::cli::UnexpectedArguments(app.remaining(), "vistream-server");
+    if (message.empty()) message = e.what();
+    for (const std::string& r : app.remaining()) {
+      if (r == "--port" || r.rfind("--port=", 0) == 0) message += " (the address is --listen HOST:PORT)";
     }
     std::fprintf(stderr, "vistream-server: error: %s\nRun 'vistream-server --help' for the options.\n", message.c_str());
     return 2;

@@ -32,8 +32,14 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
   ExpectRunTimeError("scene generate atlantis -o " + Tmp("x.glb"), "atlantis");
   ExpectBadOption("scene generate city1", "--output: is required");
   ExpectBadOption("frobnicate", "'frobnicate': not a vistream command");
-  ExpectBadOption("", "A subcommand is required");
+  ExpectBadOption("", "'vistream' needs a command: scene, pvs, epsilon, agvs, check-conservative, bench");
+  ExpectBadOption("scene", "'vistream scene' needs a command: generate, import-osm, info, map");
+  ExpectBadOption("bench nosuch", "'nosuch': not a vistream bench command");
   ExpectBadOption("pvs --scene city1 --cell 1,1 --bogus", "--bogus: not an option of 'vistream pvs'");
+  // Named before the required option it hides, without the value beside it.
+  ExpectBadOption("pvs --sene city1", "--sene: not an option of 'vistream pvs'");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 --frob 1 --blah", "--frob, --blah: not options of 'vistream pvs'");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 stray", "'stray': not expected by 'vistream pvs'");
   // --help is no error.
   const RunResult help = Vistream("check-conservative --help");
   EXPECT_EQ(help.exit_code, 0) << help.out;

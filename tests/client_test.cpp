@@ -419,12 +419,14 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
   for (const char* size : {"12x", "1280", "0x720", "1280x720x3", "-5x10", "axb", "99999x99999"}) {
     r = RunCommand(Client() + real + " --size " + size);
     EXPECT_EQ(r.rc, 2) << size << ": " << r.output;
-    EXPECT_NE(r.output.find(std::string("--size '") + size + "'"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(std::string("--size: '") + size + "': expected WIDTHxHEIGHT"), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find("Run 'vistream-client --help' for the options."), std::string::npos) << r.output;
   }
   for (const char* address : {"127.0.0.1:99999", "127.0.0.1", "127.0.0.1:", "127.0.0.1:80x"}) {
     r = RunCommand(Client() + " --headless --server " + address);
     EXPECT_EQ(r.rc, 2) << address << ": " << r.output;
-    EXPECT_NE(r.output.find(std::string("--server '") + address + "'"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(std::string("--server: '") + address + "'"), std::string::npos) << r.output;
   }
   r = RunCommand(Client() + " --headless --frame-log /dev/full --seconds 1 --server " + Address(*server));
   EXPECT_EQ(r.rc, 1) << r.output;
@@ -440,7 +442,11 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
   EXPECT_NE(r.output.find("'nan' is not a number"), std::string::npos) << r.output;
   r = RunCommand(Client() + real + " --pose 1,2");
   EXPECT_EQ(r.rc, 2) << r.output;
-  EXPECT_NE(r.output.find("--pose '1,2'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--pose: '1,2'"), std::string::npos) << r.output;
+  r = RunCommand(Client() + real + " --port 5");
+  EXPECT_EQ(r.rc, 2) << r.output;
+  EXPECT_NE(r.output.find("vistream-client: error: --port: not an option of vistream-client"), std::string::npos)
+      << r.output;
   // A pose outside the scene: the server ends the session, and the client says why.
   r = RunCommand(Client() + real + " --pose 99999,0,1.7,0,0");
   EXPECT_EQ(r.rc, 1) << r.output;

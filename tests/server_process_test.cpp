@@ -41,8 +41,8 @@ TEST(ServerProcess, BadOptionsExitTwoBeforeTheSceneLoadsNamingThem) {
       {"--listen 127.0.0.1:99999", "vistream-server: error: --listen: '127.0.0.1:99999' is not host:port"},
       {"--listen 50051", "vistream-server: error: --listen: '50051' is not host:port"},
       {"--listen localhost:", "vistream-server: error: --listen: 'localhost:' is not host:port"},
-      {"--port 99999", "vistream-server: error: --port 99999: not options of vistream-server"},
-      {"stray", "vistream-server: error: stray: not options of vistream-server"},
+      {"--port 99999", "vistream-server: error: --port: not an option of vistream-server (the address is --listen"},
+      {"stray", "vistream-server: error: 'stray': not expected by vistream-server"},
       {"--cache-mb -1", "vistream-server: error: --cache-mb: '-1' is not a number from 1 to 1e+06"},
       {"--max-sessions 0", "vistream-server: error: --max-sessions: '0' is not a whole number from 1 to 100000"},
       {"--max-sessions 1.5", "vistream-server: error: --max-sessions: '1.5' is not a whole number from 1 to 100000"},
@@ -53,6 +53,14 @@ TEST(ServerProcess, BadOptionsExitTwoBeforeTheSceneLoadsNamingThem) {
     EXPECT_NE(out.find(message), std::string::npos) << args << ": " << out;
     EXPECT_NE(out.find("Run 'vistream-server --help' for the options."), std::string::npos) << args << ": " << out;
     EXPECT_EQ(out.find("no-such-scene"), std::string::npos) << args << ": " << out;
+  }
+  // An unknown option is named before the missing --scene it may hide.
+  {
+    const auto [rc, out] = RunServer("--port 5");
+    EXPECT_EQ(rc, 2) << out;
+    EXPECT_NE(out.find("vistream-server: error: --port: not an option of vistream-server (the address is --listen"),
+              std::string::npos)
+        << out;
   }
   // Good values pass the checks: the scene is what fails then.
   const auto [rc, out] = RunServer("--scene no-such-scene --res 64 --listen 127.0.0.1:0 --max-sessions 3");

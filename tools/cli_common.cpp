@@ -12,8 +12,10 @@
 #include <unistd.h>
 
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_join.h>
 
 #include "cli/stop_signal.h"
+#include "cli/unexpected_arguments.h"
 #include "scenes/catalog.h"
 #include "tools/terminal_progress.h"
 
@@ -66,15 +68,8 @@ void PrintBadOption(const std::string& message, const std::string& command) {
 }
 
 // CLI11's messages, in the form "<option>: <what is wrong>" where they are not already.
-std::string OptionMessage(const CLI::ParseError& e, const std::string& command) {
+std::string OptionMessage(const CLI::ParseError& e) {
   std::string m = e.what();
-  if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr) {
-    const size_t colon = m.find(": ");
-    const bool several = m.rfind("The following arguments", 0) == 0;
-    if (colon != std::string::npos) {
-      return m.substr(colon + 2) + (several ? ": not options of '" : ": not an option of '") + command + "'";
-    }
-  }
   for (const char* tail : {" is required"}) {
     const size_t at = m.rfind(tail);
     if (at != std::string::npos && at > 0 && at + std::strlen(tail) == m.size() && m.find(' ') == at) {
@@ -100,14 +95,32 @@ int BadOption(const std::string& command, const std::string& option, const std::
 
 int ParseFailure(const CLI::App& app, const CLI::ParseError& e) {
   if (dynamic_cast<const CLI::Success*>(&e) != nullptr) return app.exit(e);
+  const std::string command = CommandPath(app);
+  // The deepest command given, and what it left over.
+  const CLI::App* at = &app;
+  for (;;) {
+    const std::vector<const CLI::App*> parsed = at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
+    if (parsed.empty()) break;
+    at = parsed.front();
+  }
+  const std::vector<std::string> extra = at->remaining();
   // CLI11 says "A subcommand is required" for a misspelt one: name it.
-  const std::vector<std::string> extra = app.remaining();
-  if (dynamic_cast<const CLI::RequiredError*>(&e) != nullptr && app.get_subcommands().empty() && !extra.empty()) {
-    PrintBadOption("'" + extra.front() + "': not a vistream command", app.get_name());
+  const bool has_commands = !at->get_subcommands({}).empty();
+  if (has_commands && at->get_subcommands([](const CLI::App* s) { return s->parsed(); }).empty() && !extra.empty() &&
+      extra.front().rfind('-', 0) != 0) {
+    PrintBadOption("'" + extra.front() + "': not a " + command + " command", command);
     return kBadOptionExit;
   }
-  const std::string command = CommandPath(app);
-  PrintBadOption(OptionMessage(e, command), command);
+  if (has_commands && extra.empty() && dynamic_cast<const CLI::RequiredError*>(&e) != nullptr &&
+      at->get_subcommands([](const CLI::App* s) { return s->parsed(); }).empty()) {
+    std::vector<std::string> names;
+    for (const CLI::App* s : at->get_subcommands({})) names.push_back(s->get_name());
+    PrintBadOption("'" + command + "' needs a command: " + absl::StrJoin(names, ", "), command);
+    return kBadOptionExit;
+  }
+  // Unknown options first: a misspelt option often hides a required one.
+  const std::string unexpected = cli::UnexpectedArguments(extra, "'" + command + "'");
+  PrintBadOption(unexpected.empty() ? OptionMessage(e) : unexpected, command);
   return kBadOptionExit;
 }
 
