@@ -86,6 +86,9 @@ std::vector<scenes::Aabb> DiagonalCrossing(const visibility::ViewcellGrid& grid,
 // One --batch row: per sample, the five single calls (one core) and then the batch (two
 // threads), side by side; the batch's sets are checked against the single calls' and the
 // exact sets.
+// ^C: the rows measured so far are in the CSV (written as they come).
+int Stopped() { return Fail(absl::CancelledError("table1 stopped; a --csv file keeps the rows measured")); }
+
 template <typename OccludedArea>
 int BatchRow(const visibility::PvsComputer& computer, const visibility::ViewcellGrid& grid,
              const std::vector<visibility::CellCoord>& samples, uint32_t res, double size,
@@ -125,7 +128,7 @@ int BatchRow(const visibility::PvsComputer& computer, const visibility::Viewcell
     batch_ms.push_back(batch[0].ms);
     singles_ms.push_back(singles);
     progress->Advance();
-    if (progress->Cancelled()) return Fail(absl::CancelledError("interrupted"));
+    if (progress->Cancelled()) return Stopped();
   }
   double sum = 0, singles_sum = 0;
   for (double m : batch_ms) sum += m;
@@ -202,7 +205,7 @@ int Table1(const Table1Args& a) {
               exact->Compute(computer, cell, visibility::CellQueryOptions{.max_res = 256}).objects);
         }
         progress.Advance();
-        if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+        if (progress.Cancelled()) return Stopped();
       }
     }
 
@@ -217,7 +220,7 @@ int Table1(const Table1Args& a) {
       exact_ms += r.ms;
       exact_objects += static_cast<double>(r.objects.size());
       progress.Advance();
-      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+      if (progress.Cancelled()) return Stopped();
     }
     exact_json.push_back({{"cell_size", size},
                           {"ms", exact_ms / static_cast<double>(cells.size())},
@@ -242,7 +245,7 @@ int Table1(const Table1Args& a) {
           p_e += exact_occluded[k];
           p_c += occluded_area(r.objects);
           progress.Advance();
-          if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+          if (progress.Cancelled()) return Stopped();
         }
         const auto n = static_cast<double>(cells.size());
         double sum = 0;

@@ -191,7 +191,7 @@ int BenchAgvs(const BenchAgvsArgs& a) {
       v.objects.assign(seen.begin(), seen.end());
       views.push_back(std::move(v));
       progress.Advance();
-      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("bench agvs stopped"));
     }
     progress.Finish();
   }
@@ -242,7 +242,7 @@ int BenchAgvs(const BenchAgvsArgs& a) {
         progress.Advance(now - shown);
         shown = now;
       }
-      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("bench agvs stopped"));
     }
     progress.Finish();
   }

@@ -175,7 +175,7 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
       col.total_boxes += static_cast<double>(s.total_boxes);
       col.first_occluders += static_cast<double>(s.first_occluders);
       progress.Advance();
-      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("bench epsilon stopped"));
     }
   }
   progress.Finish();

@@ -383,7 +383,7 @@ int BenchServer(const BenchServerArgs& a) {
   rss.join();
   const int server_exit = stop_server();
   std::fclose(f);
-  if (CancelFlag().load()) return Fail(absl::CancelledError("interrupted"));
+  if (CancelFlag().load()) return Fail(absl::CancelledError("bench server stopped"));
 
   uint64_t late = 0, entered = 0, crossings = 0, incomplete = 0, started = 0, without_late = 0, bytes = 0, raw = 0;
   std::vector<double> crossing_ms, startup_s;

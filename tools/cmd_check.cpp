@@ -72,7 +72,7 @@ int Check(const CheckArgs& a) {
   const visibility::RunLimits limits = a.samples > 0 ? visibility::RunLimits{0.0, 0.0, a.samples}
                                                      : visibility::RunLimits{a.seconds, 0.0, 0};
   sampler.Run(limits, ToolRun(), "agvs " + scene.name);
-  if (CancelFlag().load()) return Fail(absl::CancelledError("cancelled"));
+  if (CancelFlag().load()) return Fail(absl::CancelledError("check-conservative stopped; nothing concluded"));
 
   // The dual-ray-space PVS of each checked cell.
   std::vector<Violation> violations;
@@ -109,7 +109,7 @@ int Check(const CheckArgs& a) {
         }
       }
       progress.Advance(n);
-      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("check-conservative stopped; nothing concluded"));
     }
     progress.Finish();
   }
@@ -135,7 +135,7 @@ int Check(const CheckArgs& a) {
         violations.push_back({"epsilon", b, h.object, static_cast<int64_t>(h.triangle), true, h.from, h.to});
       }
       progress.Advance();
-      if (progress.Cancelled()) return Fail(absl::CancelledError("cancelled"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("check-conservative stopped; nothing concluded"));
     }
     progress.Finish();
   }

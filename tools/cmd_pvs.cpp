@@ -66,7 +66,7 @@ int PvsAll(const PvsArgs& a) {
     scenes::Progress progress(ToolRun(), "pvs of every viewcell (" + a.backend + ")", grid->CellCount());
     constexpr size_t kChunk = 64;
     for (size_t first = 0; first < grid->CellCount(); first += kChunk) {
-      if (progress.Cancelled()) return Fail(absl::CancelledError("interrupted; nothing written"));
+      if (progress.Cancelled()) return Fail(absl::CancelledError("pvs --all stopped; nothing written"));
       std::vector<scenes::Aabb> cells;
       for (size_t c = first; c < std::min(grid->CellCount(), first + kChunk); ++c) {
         cells.push_back(grid->CellBox(static_cast<visibility::CellId>(c)));
