@@ -24,6 +24,7 @@ namespace {
 using vistream::testing::ExpectBadOption;
 using vistream::testing::ExpectRunTimeError;
 using vistream::testing::RunResult;
+using vistream::testing::ShellOutput;
 using vistream::testing::Tmp;
 using vistream::testing::Vistream;
 
@@ -307,12 +308,7 @@ TEST(CliFigures, AStoppedReportWritesNoPage) {
     // report's exit status last.
     const std::string cmd = std::string("sh -c '") + VISTREAM_BIN + " report --quick --out " + dir +
                             " 2>&1 & pid=$!; sleep 5; kill -" + signal + " $pid; wait $pid; echo \"rc=$?\"'";
-    std::FILE* pipe = popen(cmd.c_str(), "r");
-    ASSERT_NE(pipe, nullptr);
-    std::string out;
-    char buf[4096];
-    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) out.append(buf, n);
-    pclose(pipe);
+    const std::string out = ShellOutput(cmd);
     EXPECT_NE(out.find("rc=130"), std::string::npos) << signal << ": " << out;
     EXPECT_NE(out.find("vistream: interrupted (report stopped after "), std::string::npos) << signal << ": " << out;
     EXPECT_FALSE(std::filesystem::exists(dir + "/report.md")) << signal;

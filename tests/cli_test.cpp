@@ -22,6 +22,7 @@ namespace {
 using vistream::testing::ExpectBadOption;
 using vistream::testing::ExpectRunTimeError;
 using vistream::testing::RunResult;
+using vistream::testing::ShellOutput;
 using vistream::testing::Tmp;
 using vistream::testing::Vistream;
 
@@ -300,12 +301,7 @@ TEST(Cli, AnInterruptedAgvsKeepsWhatItSampledAndSaysSo) {
                           " >" + log + " 2>&1 & pid=$!; for i in $(seq 600); do grep -q \"samples/s\" " + log +
                           " && break; sleep 0.1; done; sleep 0.5; kill -INT $pid; wait $pid; echo \"rc=$?\"; cat " +
                           log + "'";
-  std::FILE* pipe = popen(cmd.c_str(), "r");
-  ASSERT_NE(pipe, nullptr);
-  std::string out;
-  char buf[4096];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) out.append(buf, n);
-  pclose(pipe);
+  const std::string out = ShellOutput(cmd);
   EXPECT_NE(out.find("rc=130"), std::string::npos) << out;
   EXPECT_NE(out.find("vistream: interrupted (sampling stopped after "), std::string::npos) << out;
   EXPECT_NE(out.find("samples/s, error"), std::string::npos) << "no progress seen before the signal: " << out;

@@ -23,6 +23,18 @@ struct RunResult {
   std::string out;  // stdout and stderr
 };
 
+// What a shell command line printed on stdout (its own redirections decide the rest).
+inline std::string ShellOutput(const std::string& cmd) {
+  FILE* pipe = popen(cmd.c_str(), "r");
+  EXPECT_NE(pipe, nullptr) << cmd;
+  if (pipe == nullptr) return "";
+  std::string out;
+  std::array<char, 4096> buf;
+  while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
+  pclose(pipe);
+  return out;
+}
+
 // `shell` runs in the shell first (e.g. "ulimit -f 64; "), and applies to the tool.
 inline RunResult Vistream(const std::string& args, const std::string& shell = "") {
   // exec: the shell becomes the tool, so a crash shows as the tool's signal, not as sh's status.
