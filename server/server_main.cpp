@@ -17,7 +17,6 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
-#include <absl/strings/str_join.h>
 
 #include "cli/number_options.h"
 #include "cli/stop_signal.h"

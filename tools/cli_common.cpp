@@ -51,15 +51,16 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
 
 namespace {
 
-// The subcommand the user was giving options to: the deepest one parsed.
-std::string CommandPath(const CLI::App& app) {
-  std::string path = app.get_name();
+// The subcommand the user was giving options to: the deepest one parsed (`app` itself when
+// none was), and its path as typed ("vistream bench table1") in `path`.
+const CLI::App* DeepestCommand(const CLI::App& app, std::string* path) {
+  *path = app.get_name();
   const CLI::App* at = &app;
   for (;;) {
     const std::vector<const CLI::App*> parsed = at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
-    if (parsed.empty()) return path;
+    if (parsed.empty()) return at;
     at = parsed.front();
-    path += " " + at->get_name();
+    *path += " " + at->get_name();
   }
 }
 
@@ -95,24 +96,17 @@ int BadOption(const std::string& command, const std::string& option, const std::
 
 int ParseFailure(const CLI::App& app, const CLI::ParseError& e) {
   if (dynamic_cast<const CLI::Success*>(&e) != nullptr) return app.exit(e);
-  const std::string command = CommandPath(app);
-  // The deepest command given, and what it left over.
-  const CLI::App* at = &app;
-  for (;;) {
-    const std::vector<const CLI::App*> parsed = at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
-    if (parsed.empty()) break;
-    at = parsed.front();
-  }
+  // The deepest command given (none of its own subcommands was), and what it left over.
+  std::string command;
+  const CLI::App* at = DeepestCommand(app, &command);
   const std::vector<std::string> extra = at->remaining();
-  // CLI11 says "A subcommand is required" for a misspelt one: name it.
   const bool has_commands = !at->get_subcommands({}).empty();
-  if (has_commands && at->get_subcommands([](const CLI::App* s) { return s->parsed(); }).empty() && !extra.empty() &&
-      extra.front().rfind('-', 0) != 0) {
+  // CLI11 says "A subcommand is required" for a misspelt one: name it.
+  if (has_commands && !extra.empty() && extra.front().rfind('-', 0) != 0) {
     PrintBadOption("'" + extra.front() + "': not a " + command + " command", command);
     return kBadOptionExit;
   }
-  if (has_commands && extra.empty() && dynamic_cast<const CLI::RequiredError*>(&e) != nullptr &&
-      at->get_subcommands([](const CLI::App* s) { return s->parsed(); }).empty()) {
+  if (has_commands && extra.empty() && dynamic_cast<const CLI::RequiredError*>(&e) != nullptr) {
     std::vector<std::string> names;
     for (const CLI::App* s : at->get_subcommands({})) names.push_back(s->get_name());
     PrintBadOption("'" + command + "' needs a command: " + absl::StrJoin(names, ", "), command);

@@ -83,12 +83,12 @@ std::vector<scenes::Aabb> DiagonalCrossing(const visibility::ViewcellGrid& grid,
   return out;
 }
 
-// One --batch row: per sample, the five single calls (one core) and then the batch (two
-// threads), side by side; the batch's sets are checked against the single calls' and the
-// exact sets.
 // ^C: the rows measured so far are in the CSV (written as they come).
 int Stopped() { return Fail(absl::CancelledError("table1 stopped; a --csv file keeps the rows measured")); }
 
+// One --batch row: per sample, the five single calls (one core) and then the batch (two
+// threads), side by side; the batch's sets are checked against the single calls' and the
+// exact sets.
 template <typename OccludedArea>
 int BatchRow(const visibility::PvsComputer& computer, const visibility::ViewcellGrid& grid,
              const std::vector<visibility::CellCoord>& samples, uint32_t res, double size,
