@@ -36,7 +36,8 @@ namespace vistream::server {
 struct SessionLimits {
   double max_pose_rate_hz = 120.0;             // sustained poses per second (bursts to twice that)
   size_t max_queued_bytes = size_t{8} << 20;   // bytes waiting to be written to the client
-  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog)
+  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog); a
+                                               // session whose Hello picks a scene uses that scene's
   double epsilon_dwell_s = 2.0;                // time inside it before a mask is computed (a walker
                                                // at 1 m/s leaves the box sooner)
 };
@@ -54,15 +55,33 @@ struct SessionSeams {
   bool epsilon_masks = true;      // false: no ε-masks (the viewcell PVS only)
 };
 
+// The scenes a server serves, by the name a Hello gives (ServedScene::name()).
+struct SceneDirectory {
+  std::vector<ServedScene*> scenes;  // not owned; in the configuration's order
+  // Null when no scene has that name.
+  ServedScene* Find(std::string_view name) const;
+  // "'a', 'b'": for messages.
+  std::string Names() const;
+};
+
 class Session : public std::enable_shared_from_this<Session> {
  public:
   // `wake` is called, without the session's lock, whenever a message becomes ready from a
   // worker thread (a PVS arrived); the transport then calls NextMessage(). `log` may be null.
   static std::shared_ptr<Session> Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
                                          std::function<void()> wake, SessionSeams seams = {});
+  // A session of a server of several scenes: its Hello picks one of `scenes` (not owned; it
+  // must outlive the session), and a scene it does not list ends it with NOT_FOUND naming
+  // those it does. The seams' pvs and masks must be null (each scene's own are used).
+  static std::shared_ptr<Session> Create(uint64_t id, const SceneDirectory* scenes, const SessionLimits& limits,
+                                         EventLog* log, std::function<void()> wake);
   ~Session();
 
   uint64_t id() const { return id_; }
+  // The scene the session's Hello picked; null before it (a server of several scenes).
+  ServedScene* scene() const;
+  // Whether Hello has arrived.
+  bool greeted() const;
 
   // Handles one client message at `now` (seconds on the steady clock). A status other than OK
   // ends the session with it (the status names the message and what is wrong).
@@ -77,8 +96,8 @@ class Session : public std::enable_shared_from_this<Session> {
   vistream::v1::SessionStats Stats() const;
 
  private:
-  Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log, std::function<void()> wake,
-          SessionSeams seams);
+  Session(uint64_t id, ServedScene* scene, const SceneDirectory* directory, const SessionLimits& limits,
+          EventLog* log, std::function<void()> wake, SessionSeams seams);
   double Now() const;
 
   absl::Status OnHello(const vistream::v1::Hello& hello);
@@ -94,14 +113,18 @@ class Session : public std::enable_shared_from_this<Session> {
   double Deadline(CellId cell, double now) const;
 
   const uint64_t id_;
-  ServedScene* const scene_;
+  const SceneDirectory* const directory_;  // null: the scene is fixed at Create
+  // Set at Create, or by Hello from directory_ (under mu_, before any reader needs them: every
+  // other message is refused before Hello).
+  ServedScene* scene_;
   const SessionLimits limits_;
   EventLog* const log_;
   std::function<void()> wake_;
   const SessionSeams seams_;
-  PvsSource* const pvs_;
-  TaskRunner* const masks_;
+  PvsSource* pvs_;
+  TaskRunner* masks_;
   const double start_s_;
+  double epsilon_size_m_;  // limits_' for a fixed scene; the picked scene's catalog value otherwise
 
   mutable std::mutex mu_;
   bool ended_ = false;
