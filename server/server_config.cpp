@@ -48,7 +48,7 @@ class Reader {
  public:
   Reader(std::string path, fs::path base) : path_(std::move(path)), base_(std::move(base)) {}
 
-  absl::Status Error(int line, std::string_view key, std::string_view what) const {
+  absl::Status Error(int line, const std::string& key, const std::string& what) const {
     return absl::InvalidArgumentError(absl::StrCat(path_, ":", line, ": ", key, ": ", what));
   }
 
@@ -273,7 +273,7 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
     root = toml::parse(text, path);
   } catch (const toml::parse_error& e) {
     return absl::InvalidArgumentError(absl::StrCat(path, ":", e.source().begin.line, ":", e.source().begin.column,
-                                                   ": ", e.description()));
+                                                   ": ", std::string(e.description())));
   }
   ServerConfig c;
   c.path = path;
