@@ -53,8 +53,8 @@ std::shared_ptr<Session> Session::Create(uint64_t id, ServedScene* scene, const 
 }
 
 std::shared_ptr<Session> Session::Create(uint64_t id, const SceneDirectory* scenes, const SessionLimits& limits,
-                                         EventLog* log, std::function<void()> wake) {
-  return std::shared_ptr<Session>(new Session(id, nullptr, scenes, limits, log, std::move(wake), {}));
+                                         EventLog* log, std::function<void()> wake, SessionSeams seams) {
+  return std::shared_ptr<Session>(new Session(id, nullptr, scenes, limits, log, std::move(wake), std::move(seams)));
 }
 
 Session::Session(uint64_t id, ServedScene* scene, const SceneDirectory* directory, const SessionLimits& limits,
@@ -219,6 +219,7 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       stats_.set_cell_id(*cell);
       if (from.has_value()) {
         stats_.set_crossings(stats_.crossings() + 1);
+        if (seams_.late_cell && !Served(*cell)) seams_.late_cell(scene_->name());
         if (log_ != nullptr) {
           const visibility::CellCoord a = scene_->grid().Coord(*from), b = scene_->grid().Coord(*cell);
           log_->Write(id_, "crossing", {{"from", absl::StrCat(a.i, ",", a.j)}, {"to", absl::StrCat(b.i, ",", b.j)}});
@@ -227,6 +228,14 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       SetWanted(now);
       for (CellId c : before) {
         if (std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end()) left.push_back(c);
+      }
+      if (from.has_value() && seams_.crossing_served) {
+        Crossing crossing{now, {}};
+        for (CellId c : wanted_) {
+          if (std::find(before.begin(), before.end(), c) == before.end() && !Served(c)) crossing.cells.push_back(c);
+        }
+        crossings_.push_back(std::move(crossing));
+        NoteServedCrossings(now);
       }
       // Geometry the cells left behind needed stays with the client: it is evicted only when the
       // memory budget needs the room (MakeRoom: what no wanted cell needs first), so nothing is
@@ -509,9 +518,30 @@ void Session::QueueControl(v1::ServerMessage message) {
   }
 }
 
+bool Session::Served(CellId cell) const {
+  if (emitted_.count(cell) == 0) return false;
+  auto it = pending_geometry_.find(cell);
+  if (it == pending_geometry_.end()) return true;
+  return std::all_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return sent_.count(o) > 0; });
+}
+
+void Session::NoteServedCrossings(double now) {
+  while (!crossings_.empty()) {
+    Crossing& c = crossings_.front();
+    // A cell the client turned away from no longer counts.
+    std::erase_if(c.cells, [&](CellId cell) {
+      return std::find(wanted_.begin(), wanted_.end(), cell) == wanted_.end() || Served(cell);
+    });
+    if (!c.cells.empty()) return;
+    seams_.crossing_served(scene_->name(), now - c.at_s);
+    crossings_.pop_front();
+  }
+}
+
 std::optional<v1::ServerMessage> Session::NextMessage() {
   std::lock_guard lock(mu_);
   if (ended_ || !failure_.ok()) return std::nullopt;
+  if (!crossings_.empty() && control_.empty()) NoteServedCrossings(Now());
   if (!control_.empty()) {
     Control c = std::move(control_.front());
     control_.pop_front();

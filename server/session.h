@@ -53,6 +53,11 @@ struct SessionSeams {
   // (ViewcellGrid::Neighbours'), not by the client's velocity.
   bool look_ahead = true;
   bool epsilon_masks = true;      // false: no ε-masks (the viewcell PVS only)
+  // Server metrics (empty: none), called under the session's lock (they must not call back):
+  // the cells a crossing made newly adjacent were served (their PVS lists and geometry handed to
+  // the transport) `seconds` after the crossing; a client entered a cell before it was served.
+  std::function<void(const std::string& scene, double seconds)> crossing_served;
+  std::function<void(const std::string& scene)> late_cell;
 };
 
 // The scenes a server serves, by the name a Hello gives (ServedScene::name()).
@@ -74,7 +79,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // must outlive the session), and a scene it does not list ends it with NOT_FOUND naming
   // those it does. The seams' pvs and masks must be null (each scene's own are used).
   static std::shared_ptr<Session> Create(uint64_t id, const SceneDirectory* scenes, const SessionLimits& limits,
-                                         EventLog* log, std::function<void()> wake);
+                                         EventLog* log, std::function<void()> wake, SessionSeams seams = {});
   ~Session();
 
   uint64_t id() const { return id_; }
@@ -110,6 +115,10 @@ class Session : public std::enable_shared_from_this<Session> {
   void Emit(CellId cell);                                    // lock held
   void MaybeRequestMask(double now);                         // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
+  // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
+  bool Served(CellId cell) const;                            // lock held
+  // Reports crossings whose new cells are all served now (SessionSeams::crossing_served).
+  void NoteServedCrossings(double now);                      // lock held
   double Deadline(CellId cell, double now) const;
 
   const uint64_t id_;
@@ -162,6 +171,11 @@ class Session : public std::enable_shared_from_this<Session> {
   };
   std::deque<Control> control_;
   size_t control_bytes_ = 0;
+  struct Crossing {
+    double at_s;
+    std::vector<CellId> cells;  // newly adjacent, not yet served
+  };
+  std::deque<Crossing> crossings_;  // with SessionSeams::crossing_served only
 
   // ε-mask: the neighbourhood the client lingers in, and what was sent for it.
   glm::dvec3 anchor_{0.0};

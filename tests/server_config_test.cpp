@@ -101,7 +101,7 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
   EXPECT_EQ(c->scenes[0].source(), "london");
   EXPECT_EQ(c->scenes[0].cache_mb, 512.0);
   EXPECT_EQ(c->scenes[0].res, 128u);  // the default
-  EXPECT_EQ(c->scenes[0].line, 24);
+  EXPECT_EQ(c->scenes[0].line, 23);
   EXPECT_EQ(c->scenes[1].name, "town");
   EXPECT_EQ(c->scenes[1].source(), dir + "/a.pem");
   EXPECT_EQ(c->scenes[1].pvs_file, dir + "/a.pem");
