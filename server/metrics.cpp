@@ -23,7 +23,8 @@ bool ValidName(std::string_view name, bool colon_allowed) {
   if (name.empty()) return false;
   for (size_t i = 0; i < name.size(); ++i) {
     const char c = name[i];
-    const bool letter = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' || (colon_allowed && c == ':');
+    const bool letter =
+        (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' || (colon_allowed && c == ':');
     if (!letter && !(i > 0 && c >= '0' && c <= '9')) return false;
   }
   return true;
@@ -90,8 +91,10 @@ MetricLabels Normalized(std::string_view metric, const MetricLabels& labels, boo
       Fail("metric " + std::string(metric) + ": label name '" + name +
            "' must match [a-zA-Z_][a-zA-Z0-9_]* and not start with __");
     }
-    if (histogram && name == "le") Fail("histogram " + std::string(metric) + ": the label name 'le' is reserved");
-    if (i > 0 && sorted[i - 1].first == name) Fail("metric " + std::string(metric) + ": label '" + name + "' given twice");
+    if (histogram && name == "le")
+      Fail("histogram " + std::string(metric) + ": the label name 'le' is reserved");
+    if (i > 0 && sorted[i - 1].first == name)
+      Fail("metric " + std::string(metric) + ": label '" + name + "' given twice");
   }
   return sorted;
 }
@@ -112,8 +115,8 @@ void Counter::FailNegativeAdd(double v) {
 Histogram::Histogram(std::vector<double> bounds) : bounds_(std::move(bounds)) {
   for (size_t i = 0; i < bounds_.size(); ++i) {
     if (!std::isfinite(bounds_[i]) || (i > 0 && !(bounds_[i - 1] < bounds_[i]))) {
-      Fail("histogram bounds must be finite and strictly increasing; bound " + std::to_string(i) + " is " +
-           FormatValue(bounds_[i]));
+      Fail("histogram bounds must be finite and strictly increasing; bound " + std::to_string(i) +
+           " is " + FormatValue(bounds_[i]));
     }
   }
   counts_ = std::make_unique<std::atomic<uint64_t>[]>(bounds_.size() + 1);
@@ -141,8 +144,8 @@ Histogram::Snapshot Histogram::Read() const {
   return s;
 }
 
-MetricsRegistry::Family& MetricsRegistry::Declare(std::string_view name, std::string_view help, Type type,
-                                                  const std::vector<double>* bounds) {
+MetricsRegistry::Family& MetricsRegistry::Declare(std::string_view name, std::string_view help,
+                                                  Type type, const std::vector<double>* bounds) {
   static constexpr const char* kTypeNames[] = {"counter", "gauge", "histogram"};
   const std::string n(name);
   if (auto it = families_.find(name); it != families_.end()) {
@@ -151,7 +154,8 @@ MetricsRegistry::Family& MetricsRegistry::Declare(std::string_view name, std::st
       Fail("metric " + n + " declared as a " + kTypeNames[static_cast<int>(type)] + ", already a " +
            kTypeNames[static_cast<int>(f.type)]);
     }
-    if (bounds != nullptr && *bounds != f.bounds) Fail("histogram " + n + " declared again with other buckets");
+    if (bounds != nullptr && *bounds != f.bounds)
+      Fail("histogram " + n + " declared again with other buckets");
     return f;
   }
   if (!ValidName(name, true)) Fail("metric name '" + n + "' must match [a-zA-Z_:][a-zA-Z0-9_:]*");
@@ -179,22 +183,24 @@ MetricsRegistry::Family& MetricsRegistry::Declare(std::string_view name, std::st
   return f;
 }
 
-Counter* MetricsRegistry::GetCounter(std::string_view name, std::string_view help, const MetricLabels& labels) {
+Counter* MetricsRegistry::GetCounter(std::string_view name, std::string_view help,
+                                     const MetricLabels& labels) {
   MetricLabels key = Normalized(name, labels, false);
   std::lock_guard<std::mutex> lock(mu_);
   Family& f = Declare(name, help, Type::kCounter, nullptr);
   return Child(f.counters, std::move(key), [] { return std::make_unique<Counter>(); });
 }
 
-Gauge* MetricsRegistry::GetGauge(std::string_view name, std::string_view help, const MetricLabels& labels) {
+Gauge* MetricsRegistry::GetGauge(std::string_view name, std::string_view help,
+                                 const MetricLabels& labels) {
   MetricLabels key = Normalized(name, labels, false);
   std::lock_guard<std::mutex> lock(mu_);
   Family& f = Declare(name, help, Type::kGauge, nullptr);
   return Child(f.gauges, std::move(key), [] { return std::make_unique<Gauge>(); });
 }
 
-Histogram* MetricsRegistry::GetHistogram(std::string_view name, std::string_view help, std::vector<double> buckets,
-                                         const MetricLabels& labels) {
+Histogram* MetricsRegistry::GetHistogram(std::string_view name, std::string_view help,
+                                         std::vector<double> buckets, const MetricLabels& labels) {
   MetricLabels key = Normalized(name, labels, true);
   std::lock_guard<std::mutex> lock(mu_);
   Family& f = Declare(name, help, Type::kHistogram, &buckets);
@@ -208,7 +214,8 @@ void MetricsRegistry::AddCollector(std::function<void()> collect) {
 
 std::string MetricsRegistry::Render() {
   std::lock_guard<std::mutex> render_lock(render_mu_);
-  for (const std::function<void()>& collect : collectors_) collect();  // mu_ not held: they may Get...()
+  for (const std::function<void()>& collect : collectors_)
+    collect();  // mu_ not held: they may Get...()
 
   std::lock_guard<std::mutex> lock(mu_);
   std::string out;
@@ -219,7 +226,9 @@ std::string MetricsRegistry::Render() {
     AppendHelp(out, f.help);
     out += "\n# TYPE ";
     out += name;
-    out += f.type == Type::kCounter ? " counter\n" : f.type == Type::kGauge ? " gauge\n" : " histogram\n";
+    out += f.type == Type::kCounter ? " counter\n"
+           : f.type == Type::kGauge ? " gauge\n"
+                                    : " histogram\n";
     auto sample = [&](std::string_view series, const MetricLabels& labels, const std::string& value,
                       const std::string* le = nullptr) {
       out += series;
@@ -253,11 +262,15 @@ uint64_t ProcessResidentBytes() {
 }
 
 void RegisterProcessMetrics(MetricsRegistry* registry) {
-  Gauge* resident = registry->GetGauge("vistream_process_resident_memory_bytes",
-                                       "Resident memory of the server process in bytes (/proc/self/statm).");
-  registry->AddCollector([resident] { resident->Set(static_cast<double>(ProcessResidentBytes())); });
+  Gauge* resident =
+      registry->GetGauge("vistream_process_resident_memory_bytes",
+                         "Resident memory of the server process in bytes (/proc/self/statm).");
+  registry->AddCollector(
+      [resident] { resident->Set(static_cast<double>(ProcessResidentBytes())); });
 }
 
-std::vector<double> SecondsBuckets() { return {0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30}; }
+std::vector<double> SecondsBuckets() {
+  return {0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30};
+}
 
 }  // namespace vistream::server

@@ -94,7 +94,8 @@ class MetricsRegistry {
   // counter not ending in `_total`, a gauge or histogram ending in it), one name declared with
   // two types or (histograms) two sets of bounds, a name that collides with a histogram's
   // `_bucket`/`_sum`/`_count` series, a bad or repeated label name, a histogram label `le`.
-  Counter* GetCounter(std::string_view name, std::string_view help, const MetricLabels& labels = {});
+  Counter* GetCounter(std::string_view name, std::string_view help,
+                      const MetricLabels& labels = {});
   Gauge* GetGauge(std::string_view name, std::string_view help, const MetricLabels& labels = {});
   // `buckets`: upper bounds as for Histogram, e.g. SecondsBuckets().
   Histogram* GetHistogram(std::string_view name, std::string_view help, std::vector<double> buckets,
@@ -124,7 +125,8 @@ class MetricsRegistry {
     std::map<MetricLabels, std::unique_ptr<Histogram>> histograms;
   };
   // The family `name` of `type`, declared if new (checking the rules); under mu_.
-  Family& Declare(std::string_view name, std::string_view help, Type type, const std::vector<double>* bounds);
+  Family& Declare(std::string_view name, std::string_view help, Type type,
+                  const std::vector<double>* bounds);
 
   std::mutex render_mu_;  // one Render() at a time; guards collectors_
   std::vector<std::function<void()>> collectors_;

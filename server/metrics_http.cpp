@@ -28,14 +28,15 @@ struct ListenAddress {
 
 // HOST:PORT, or [IPV6]:PORT, with a port from 0 to 65535.
 absl::StatusOr<ListenAddress> ParseListen(const std::string& listen) {
-  const absl::Status malformed = absl::InvalidArgumentError(
-      absl::StrCat("metrics listen address '", listen,
-                   "': expected HOST:PORT with a port from 0 to 65535 (0: any free port), e.g. 127.0.0.1:9464"));
+  const absl::Status malformed = absl::InvalidArgumentError(absl::StrCat(
+      "metrics listen address '", listen,
+      "': expected HOST:PORT with a port from 0 to 65535 (0: any free port), e.g. 127.0.0.1:9464"));
   ListenAddress a;
   std::string port;
   if (listen.starts_with('[')) {
     const size_t close = listen.find(']');
-    if (close == std::string::npos || close + 1 >= listen.size() || listen[close + 1] != ':') return malformed;
+    if (close == std::string::npos || close + 1 >= listen.size() || listen[close + 1] != ':')
+      return malformed;
     a.host = listen.substr(1, close - 1);
     a.shown = listen.substr(0, close + 1);
     port = listen.substr(close + 2);
@@ -82,9 +83,8 @@ std::string BindFailure(const ListenAddress& a, int error) {
 
 }  // namespace
 
-absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(const std::string& listen,
-                                                                             MetricsRegistry* registry,
-                                                                             std::function<bool()> healthy) {
+absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(
+    const std::string& listen, MetricsRegistry* registry, std::function<bool()> healthy) {
   absl::StatusOr<ListenAddress> a = ParseListen(listen);
   if (!a.ok()) return a.status();
 
@@ -104,20 +104,24 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
   http.Get("/metrics", [registry](const httplib::Request&, httplib::Response& res) {
     res.set_content(registry->Render(), "text/plain; version=0.0.4; charset=utf-8");
   });
-  http.Get("/healthz", [healthy = std::move(healthy)](const httplib::Request&, httplib::Response& res) {
-    const bool serving = !healthy || healthy();
-    res.status = serving ? 200 : 503;
-    res.set_content(serving ? "serving\n" : "draining\n", "text/plain; charset=utf-8");
-  });
+  http.Get("/healthz",
+           [healthy = std::move(healthy)](const httplib::Request&, httplib::Response& res) {
+             const bool serving = !healthy || healthy();
+             res.status = serving ? 200 : 503;
+             res.set_content(serving ? "serving\n" : "draining\n", "text/plain; charset=utf-8");
+           });
   // httplib calls this for every status >= 400, our 503 too: only fill in the 404s.
-  http.set_error_handler(httplib::Server::HandlerWithResponse([](const httplib::Request&, httplib::Response& res) {
-    if (res.status != 404) return httplib::Server::HandlerResponse::Unhandled;
-    res.set_content("not found: this server answers /metrics and /healthz\n", "text/plain; charset=utf-8");
-    return httplib::Server::HandlerResponse::Handled;
-  }));
+  http.set_error_handler(
+      httplib::Server::HandlerWithResponse([](const httplib::Request&, httplib::Response& res) {
+        if (res.status != 404) return httplib::Server::HandlerResponse::Unhandled;
+        res.set_content("not found: this server answers /metrics and /healthz\n",
+                        "text/plain; charset=utf-8");
+        return httplib::Server::HandlerResponse::Handled;
+      }));
 
   errno = 0;
-  const int port = a->port == 0 ? http.bind_to_any_port(a->host) : (http.bind_to_port(a->host, a->port) ? a->port : -1);
+  const int port = a->port == 0 ? http.bind_to_any_port(a->host)
+                                : (http.bind_to_port(a->host, a->port) ? a->port : -1);
   if (port <= 0) {
     const int error = errno;
     return absl::UnavailableError(
@@ -132,7 +136,8 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
     http.listen_after_bind();
     returned->store(true);
   });
-  while (!http.is_running() && !returned->load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  while (!http.is_running() && !returned->load())
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
   if (!http.is_running()) {
     s->thread_.join();
     return absl::UnavailableError(absl::StrCat("cannot listen for metrics on ", s->address_,

@@ -29,13 +29,13 @@ class MetricsHttpServer {
   // Errors: INVALID_ARGUMENT for a malformed address (naming it), UNAVAILABLE when it cannot
   // listen there (naming the address and why: in use, not an address of this machine, ...).
   static absl::StatusOr<std::unique_ptr<MetricsHttpServer>> Start(const std::string& listen,
-                                                                   MetricsRegistry* registry,
-                                                                   std::function<bool()> healthy);
+                                                                  MetricsRegistry* registry,
+                                                                  std::function<bool()> healthy);
   ~MetricsHttpServer();
   MetricsHttpServer(const MetricsHttpServer&) = delete;
   MetricsHttpServer& operator=(const MetricsHttpServer&) = delete;
 
-  int port() const { return port_; }                     // the bound port
+  int port() const { return port_; }                       // the bound port
   const std::string& address() const { return address_; }  // HOST:PORT with the bound port
 
   // Stops accepting, ends the connections (waiting up to about a second for an idle kept-alive

@@ -1,6 +1,10 @@
 // The metrics registry (server/metrics.h): Prometheus's text exposition format, exact to the
 // line, checked by Prometheus's own promtool; and its HTTP endpoint (server/metrics_http.h) on
 // loopback: /metrics, /healthz, 404s and the errors of a bad or busy address.
+#include "server/metrics.h"
+
+#include <gtest/gtest.h>
+#include <httplib.h>
 #include <sys/wait.h>
 
 #include <atomic>
@@ -16,11 +20,7 @@
 #include <utility>
 #include <vector>
 
-#include <gtest/gtest.h>
-#include <httplib.h>
-
 #include "absl/strings/str_cat.h"
-#include "server/metrics.h"
 #include "server/metrics_http.h"
 #include "tests/temp_dir.h"
 
@@ -43,13 +43,16 @@ std::vector<std::string> Lines(const std::string& text, const std::string& prefi
 
 TEST(Metrics, RendersHelpTypeLabelsAndCumulativeBucketsExactly) {
   MetricsRegistry r;
-  r.GetCounter("vistream_bytes_sent_total", "Bytes sent to clients.", {{"scene", "london"}})->Add(1536);
+  r.GetCounter("vistream_bytes_sent_total", "Bytes sent to clients.", {{"scene", "london"}})
+      ->Add(1536);
   // Backslash, double quote and newline are escaped in label values; a later help is ignored.
   r.GetCounter("vistream_bytes_sent_total", "other help", {{"scene", "a \"b\" \\ c\nd"}})->Add(2);
   r.GetGauge("vistream_sessions_active", "Sessions open now.")->Set(3);
   Histogram* h =
-      r.GetHistogram("vistream_pvs_compute_seconds", "PVS compute time\\cell,\nin seconds.", {0.1, 1, 10}, {{"scene", "london"}});
-  for (double v : {0.0625, 0.5, 1.0, 40.5}) h->Observe(v);  // 1.0 falls in le="1": bounds are inclusive
+      r.GetHistogram("vistream_pvs_compute_seconds", "PVS compute time\\cell,\nin seconds.",
+                     {0.1, 1, 10}, {{"scene", "london"}});
+  // 1.0 falls in le="1": bounds are inclusive.
+  for (double v : {0.0625, 0.5, 1.0, 40.5}) h->Observe(v);
   const std::string expected = R"exp(# HELP vistream_bytes_sent_total Bytes sent to clients.
 # TYPE vistream_bytes_sent_total counter
 vistream_bytes_sent_total{scene="a \"b\" \\ c\nd"} 2
@@ -72,17 +75,21 @@ vistream_sessions_active 3
 
 TEST(Metrics, OneChildPerLabelSetWhateverTheOrderAndLabelsRenderSortedByName) {
   MetricsRegistry r;
-  Counter* a = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.", {{"scene", "x"}, {"code", "OK"}});
-  Counter* b = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.", {{"code", "OK"}, {"scene", "x"}});
-  Counter* c = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.", {{"code", "CANCELLED"}, {"scene", "x"}});
+  Counter* a = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.",
+                            {{"scene", "x"}, {"code", "OK"}});
+  Counter* b = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.",
+                            {{"code", "OK"}, {"scene", "x"}});
+  Counter* c = r.GetCounter("vistream_sessions_ended_total", "Sessions ended.",
+                            {{"code", "CANCELLED"}, {"scene", "x"}});
   EXPECT_EQ(a, b);
   EXPECT_NE(a, c);
   a->Add();
   b->Add(0.5);
   EXPECT_EQ(a->value(), 1.5);
-  EXPECT_EQ(Lines(r.Render(), "vistream_sessions_ended_total"),
-            (std::vector<std::string>{R"(vistream_sessions_ended_total{code="CANCELLED",scene="x"} 0)",
-                                      R"(vistream_sessions_ended_total{code="OK",scene="x"} 1.5)"}));
+  EXPECT_EQ(
+      Lines(r.Render(), "vistream_sessions_ended_total"),
+      (std::vector<std::string>{R"(vistream_sessions_ended_total{code="CANCELLED",scene="x"} 0)",
+                                R"(vistream_sessions_ended_total{code="OK",scene="x"} 1.5)"}));
 }
 
 TEST(Metrics, GaugesGoUpAndDownAndRenderSpecialValues) {
@@ -95,7 +102,8 @@ TEST(Metrics, GaugesGoUpAndDownAndRenderSpecialValues) {
   r.GetGauge("vistream_inf", "An infinite value.")->Set(std::numeric_limits<double>::infinity());
   r.GetGauge("vistream_nan", "Not a number.")->Set(std::nan(""));
   const std::string text = r.Render();
-  EXPECT_EQ(Lines(text, "vistream_queue_length "), std::vector<std::string>{"vistream_queue_length -2"});
+  EXPECT_EQ(Lines(text, "vistream_queue_length "),
+            std::vector<std::string>{"vistream_queue_length -2"});
   EXPECT_EQ(Lines(text, "vistream_big "), std::vector<std::string>{"vistream_big 1e+300"});
   EXPECT_EQ(Lines(text, "vistream_inf "), std::vector<std::string>{"vistream_inf +Inf"});
   EXPECT_EQ(Lines(text, "vistream_nan "), std::vector<std::string>{"vistream_nan NaN"});
@@ -107,9 +115,10 @@ TEST(Metrics, HistogramWithoutBoundsHasOnlyInfAndIgnoresNan) {
   h->Observe(2);
   h->Observe(std::nan(""));
   h->Observe(-1);
-  EXPECT_EQ(Lines(r.Render(), "vistream_wait_seconds"),
-            (std::vector<std::string>{R"(vistream_wait_seconds_bucket{le="+Inf"} 2)", "vistream_wait_seconds_sum 1",
-                                      "vistream_wait_seconds_count 2"}));
+  EXPECT_EQ(
+      Lines(r.Render(), "vistream_wait_seconds"),
+      (std::vector<std::string>{R"(vistream_wait_seconds_bucket{le="+Inf"} 2)",
+                                "vistream_wait_seconds_sum 1", "vistream_wait_seconds_count 2"}));
   EXPECT_EQ(h, r.GetHistogram("vistream_wait_seconds", "Waits.", {}));
 }
 
@@ -127,7 +136,8 @@ TEST(Metrics, CollectorsRunBeforeEveryRender) {
   r.AddCollector([&] {
     ++runs;
     // A collector may declare and look up metrics.
-    r.GetGauge("vistream_sessions_active", "Sessions open now.", {{"scene", "london"}})->Set(runs * 10);
+    r.GetGauge("vistream_sessions_active", "Sessions open now.", {{"scene", "london"}})
+        ->Set(runs * 10);
   });
   EXPECT_EQ(Lines(r.Render(), "vistream_sessions_active{"),
             std::vector<std::string>{R"(vistream_sessions_active{scene="london"} 10)"});
@@ -139,14 +149,15 @@ TEST(Metrics, CollectorsRunBeforeEveryRender) {
 TEST(Metrics, ProcessResidentMemoryIsMeasuredAndGrowsWithTouchedMemory) {
   const uint64_t before = ProcessResidentBytes();
   EXPECT_GT(before, uint64_t{1} << 20);
-  std::vector<char> block(64 << 20, 1);    // written, so resident
+  std::vector<char> block(64 << 20, 1);               // written, so resident
   asm volatile("" : : "r"(block.data()) : "memory");  // and not optimised away
   EXPECT_GT(ProcessResidentBytes(), before + (48u << 20));
   EXPECT_EQ(block[block.size() / 2], 1);
 
   MetricsRegistry r;
   RegisterProcessMetrics(&r);
-  const std::vector<std::string> line = Lines(r.Render(), "vistream_process_resident_memory_bytes ");
+  const std::vector<std::string> line =
+      Lines(r.Render(), "vistream_process_resident_memory_bytes ");
   ASSERT_EQ(line.size(), 1u);
   EXPECT_GT(std::stod(line[0].substr(line[0].find(' ') + 1)), 64.0 * (1 << 20));
 }
@@ -174,7 +185,8 @@ TEST(Metrics, ConcurrentUpdatesFromSeveralThreadsAllCount) {
     threads.emplace_back([&r, t] {
       // Every thread looks its children up itself, the first ones at the same time.
       Counter* c = r.GetCounter("vistream_t_total", "Events.", {{"scene", "london"}});
-      Counter* mine = r.GetCounter("vistream_t_total", "Events.", {{"scene", "t" + std::to_string(t)}});
+      Counter* mine =
+          r.GetCounter("vistream_t_total", "Events.", {{"scene", "t" + std::to_string(t)}});
       Gauge* g = r.GetGauge("vistream_t_open", "Open.");
       Histogram* h = r.GetHistogram("vistream_t_seconds", "Times.", {1.0});
       for (int i = 0; i < kEach; ++i) {
@@ -190,9 +202,12 @@ TEST(Metrics, ConcurrentUpdatesFromSeveralThreadsAllCount) {
   scraper.join();
   EXPECT_GT(renders.load(), 0);
 
-  EXPECT_EQ(r.GetCounter("vistream_t_total", "Events.", {{"scene", "london"}})->value(), kThreads * kEach);
+  EXPECT_EQ(r.GetCounter("vistream_t_total", "Events.", {{"scene", "london"}})->value(),
+            kThreads * kEach);
   for (int t = 0; t < kThreads; ++t) {
-    EXPECT_EQ(r.GetCounter("vistream_t_total", "Events.", {{"scene", "t" + std::to_string(t)}})->value(), 2 * kEach);
+    EXPECT_EQ(
+        r.GetCounter("vistream_t_total", "Events.", {{"scene", "t" + std::to_string(t)}})->value(),
+        2 * kEach);
   }
   EXPECT_EQ(r.GetGauge("vistream_t_open", "Open.")->value(), kThreads * kEach);
   const Histogram::Snapshot s = r.GetHistogram("vistream_t_seconds", "Times.", {1.0})->Read();
@@ -209,46 +224,58 @@ class MetricsDeathTest : public ::testing::Test {
 };
 
 TEST_F(MetricsDeathTest, CountersEndInTotal) {
-  EXPECT_DEATH(r.GetCounter("vistream_bytes_sent", "Bytes."), "counter vistream_bytes_sent: a counter's name ends in _total");
+  EXPECT_DEATH(r.GetCounter("vistream_bytes_sent", "Bytes."),
+               "counter vistream_bytes_sent: a counter's name ends in _total");
 }
 
 TEST_F(MetricsDeathTest, OnlyCountersEndInTotal) {
   EXPECT_DEATH(r.GetGauge("vistream_open_total", "Open."), "only counters' names end in _total");
-  EXPECT_DEATH(r.GetHistogram("vistream_wait_total", "Waits.", {1}), "only counters' names end in _total");
+  EXPECT_DEATH(r.GetHistogram("vistream_wait_total", "Waits.", {1}),
+               "only counters' names end in _total");
 }
 
 TEST_F(MetricsDeathTest, NamesFollowPrometheusRules) {
   for (const char* name : {"", "1abc", "vistream-sessions", "vistream sessions", "vistream_é"}) {
-    EXPECT_DEATH(r.GetGauge(name, "Help."), "must match \\[a-zA-Z_:\\]\\[a-zA-Z0-9_:\\]\\*") << name;
+    EXPECT_DEATH(r.GetGauge(name, "Help."), "must match \\[a-zA-Z_:\\]\\[a-zA-Z0-9_:\\]\\*")
+        << name;
   }
 }
 
 TEST_F(MetricsDeathTest, OneNameHasOneTypeAndOneSetOfBuckets) {
   r.GetCounter("vistream_x_total", "X.");
-  EXPECT_DEATH(r.GetGauge("vistream_x_total", "X."), "metric vistream_x_total declared as a gauge, already a counter");
+  EXPECT_DEATH(r.GetGauge("vistream_x_total", "X."),
+               "metric vistream_x_total declared as a gauge, already a counter");
   r.GetHistogram("vistream_y_seconds", "Y.", {1, 2});
-  EXPECT_DEATH(r.GetHistogram("vistream_y_seconds", "Y.", {1, 3}), "declared again with other buckets");
+  EXPECT_DEATH(r.GetHistogram("vistream_y_seconds", "Y.", {1, 3}),
+               "declared again with other buckets");
 }
 
 TEST_F(MetricsDeathTest, HistogramSeriesDoNotMeetOtherMetrics) {
   r.GetHistogram("vistream_y_seconds", "Y.", {1});
-  EXPECT_DEATH(r.GetGauge("vistream_y_seconds_count", "Y."), "a series of the histogram vistream_y_seconds");
+  EXPECT_DEATH(r.GetGauge("vistream_y_seconds_count", "Y."),
+               "a series of the histogram vistream_y_seconds");
   r.GetGauge("vistream_z_seconds_sum", "Z.");
-  EXPECT_DEATH(r.GetHistogram("vistream_z_seconds", "Z.", {1}), "its series vistream_z_seconds_sum is already a metric");
+  EXPECT_DEATH(r.GetHistogram("vistream_z_seconds", "Z.", {1}),
+               "its series vistream_z_seconds_sum is already a metric");
 }
 
 TEST_F(MetricsDeathTest, LabelNamesFollowPrometheusRules) {
   EXPECT_DEATH(r.GetGauge("vistream_g", "G.", {{"__name", "x"}}), "label name '__name'");
   EXPECT_DEATH(r.GetGauge("vistream_g", "G.", {{"a-b", "x"}}), "label name 'a-b'");
-  EXPECT_DEATH(r.GetGauge("vistream_g", "G.", {{"scene", "x"}, {"scene", "y"}}), "label 'scene' given twice");
-  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {1}, {{"le", "1"}}), "the label name 'le' is reserved");
+  EXPECT_DEATH(r.GetGauge("vistream_g", "G.", {{"scene", "x"}, {"scene", "y"}}),
+               "label 'scene' given twice");
+  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {1}, {{"le", "1"}}),
+               "the label name 'le' is reserved");
 }
 
 TEST_F(MetricsDeathTest, HistogramBoundsAreFiniteAndIncrease) {
-  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {1, 1}), "strictly increasing; bound 1 is 1");
-  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {2, 1}), "strictly increasing; bound 1 is 1");
-  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {1, std::numeric_limits<double>::infinity()}),
-               "bound 1 is \\+Inf");
+  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {1, 1}),
+               "strictly increasing; bound 1 is 1");
+  EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {2, 1}),
+               "strictly increasing; bound 1 is 1");
+  EXPECT_DEATH(
+      r.GetHistogram("vistream_h_seconds", "H.", {1, std::numeric_limits<double>::infinity()}),
+      "bound 1 is \\+Inf");
   EXPECT_DEATH(r.GetHistogram("vistream_h_seconds", "H.", {std::nan("")}), "bound 0 is NaN");
 }
 
@@ -264,7 +291,8 @@ std::pair<int, std::string> Promtool(const std::string& exposition) {
   const std::string file = testing::ProcessTempDir() + "/exposition.txt";
   std::ofstream(file) << exposition;
   std::string out;
-  std::FILE* p = popen((std::string(VISTREAM_PROMTOOL) + " check metrics < " + file + " 2>&1").c_str(), "r");
+  std::FILE* p =
+      popen((std::string(VISTREAM_PROMTOOL) + " check metrics < " + file + " 2>&1").c_str(), "r");
   if (p == nullptr) return {-1, "popen failed"};
   char buf[1024];
   for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
@@ -286,13 +314,19 @@ TEST(MetricsPromtool, PassesARenderedRegistryWithEveryTypeAndLabels) {
   RegisterProcessMetrics(&r);
   for (const char* scene : {"london", "monaco", "quote \" backslash \\ newline \n end"}) {
     r.GetGauge("vistream_sessions_active", "Sessions open now.", {{"scene", scene}})->Set(2);
-    r.GetCounter("vistream_sessions_ended_total", "Sessions ended, by status code.", {{"scene", scene}, {"code", "OK"}})->Add(3);
-    r.GetCounter("vistream_bytes_sent_total", "Bytes sent to clients.", {{"scene", scene}})->Add(1e9);
-    Histogram* h = r.GetHistogram("vistream_pvs_compute_seconds", "Time to compute one cell's PVS, in seconds.",
-                                  SecondsBuckets(), {{"scene", scene}});
+    r.GetCounter("vistream_sessions_ended_total", "Sessions ended, by status code.",
+                 {{"scene", scene}, {"code", "OK"}})
+        ->Add(3);
+    r.GetCounter("vistream_bytes_sent_total", "Bytes sent to clients.", {{"scene", scene}})
+        ->Add(1e9);
+    Histogram* h = r.GetHistogram("vistream_pvs_compute_seconds",
+                                  "Time to compute one cell's PVS, in seconds.", SecondsBuckets(),
+                                  {{"scene", scene}});
     for (double v : {0.001, 0.02, 0.3, 4.0, 50.0}) h->Observe(v);
   }
-  r.GetCounter("vistream_pvs_cache_hits_total", "PVS requests served from the cache.\nSecond line \\ of help.")->Add();
+  r.GetCounter("vistream_pvs_cache_hits_total",
+               "PVS requests served from the cache.\nSecond line \\ of help.")
+      ->Add();
   const std::string text = r.Render();
   const auto [rc, out] = Promtool(text);
   EXPECT_EQ(rc, 0) << out << "\non:\n" << text;
@@ -302,9 +336,12 @@ TEST(MetricsPromtool, PassesARenderedRegistryWithEveryTypeAndLabels) {
 TEST(MetricsPromtool, FlagsABadExposition) {
   ASSERT_NO_FATAL_FAILURE(RequirePromtool());
   {  // A rule broken: promtool lints it.
-    const auto [rc, out] = Promtool("# HELP sessions_ended Sessions.\n# TYPE sessions_ended counter\nsessions_ended 3\n");
+    const auto [rc, out] = Promtool(
+        "# HELP sessions_ended Sessions.\n# TYPE sessions_ended counter\nsessions_ended 3\n");
     EXPECT_NE(rc, 0) << out;
-    EXPECT_NE(out.find("sessions_ended counter metrics should have \"_total\" suffix"), std::string::npos) << out;
+    EXPECT_NE(out.find("sessions_ended counter metrics should have \"_total\" suffix"),
+              std::string::npos)
+        << out;
   }
   {  // Not the format at all.
     const auto [rc, out] = Promtool("vistream_x{scene=london} 1\n");
@@ -314,15 +351,18 @@ TEST(MetricsPromtool, FlagsABadExposition) {
 }
 
 // An HTTP server on a free loopback port, for these tests.
-std::unique_ptr<MetricsHttpServer> StartHttp(MetricsRegistry* r, std::function<bool()> healthy = nullptr) {
-  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> s = MetricsHttpServer::Start("127.0.0.1:0", r, std::move(healthy));
+std::unique_ptr<MetricsHttpServer> StartHttp(MetricsRegistry* r,
+                                             std::function<bool()> healthy = nullptr) {
+  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> s =
+      MetricsHttpServer::Start("127.0.0.1:0", r, std::move(healthy));
   EXPECT_TRUE(s.ok()) << s.status();
   return s.ok() ? std::move(*s) : nullptr;
 }
 
 TEST(MetricsHttp, ServesTheRegistryOnMetrics) {
   MetricsRegistry r;
-  Counter* c = r.GetCounter("vistream_pvs_computations_total", "PVSs computed.", {{"scene", "london"}});
+  Counter* c =
+      r.GetCounter("vistream_pvs_computations_total", "PVSs computed.", {{"scene", "london"}});
   c->Add(4);
   std::unique_ptr<MetricsHttpServer> s = StartHttp(&r);
   ASSERT_NE(s, nullptr);
@@ -336,12 +376,16 @@ TEST(MetricsHttp, ServesTheRegistryOnMetrics) {
   EXPECT_TRUE(res->get_header_value("Content-Type").starts_with("text/plain; version=0.0.4"))
       << res->get_header_value("Content-Type");
   EXPECT_EQ(res->body, r.Render());
-  EXPECT_NE(res->body.find("vistream_pvs_computations_total{scene=\"london\"} 4\n"), std::string::npos) << res->body;
+  EXPECT_NE(res->body.find("vistream_pvs_computations_total{scene=\"london\"} 4\n"),
+            std::string::npos)
+      << res->body;
 
   c->Add();  // every request renders afresh
   res = client.Get("/metrics");
   ASSERT_TRUE(res) << httplib::to_string(res.error());
-  EXPECT_NE(res->body.find("vistream_pvs_computations_total{scene=\"london\"} 5\n"), std::string::npos) << res->body;
+  EXPECT_NE(res->body.find("vistream_pvs_computations_total{scene=\"london\"} 5\n"),
+            std::string::npos)
+      << res->body;
 }
 
 TEST(MetricsHttp, HealthzIs200WhileHealthyAnd503WhileDraining) {
@@ -368,18 +412,23 @@ TEST(MetricsHttp, OtherPathsAre404) {
     httplib::Result res = client.Get(path);
     ASSERT_TRUE(res) << path << ": " << httplib::to_string(res.error());
     EXPECT_EQ(res->status, 404) << path;
-    EXPECT_NE(res->body.find("/metrics and /healthz"), std::string::npos) << path << ": " << res->body;
+    EXPECT_NE(res->body.find("/metrics and /healthz"), std::string::npos)
+        << path << ": " << res->body;
   }
 }
 
 TEST(MetricsHttp, MalformedAddressIsInvalidArgumentNamingIt) {
   MetricsRegistry r;
-  for (const char* listen : {"", "9464", "127.0.0.1", "127.0.0.1:", ":9464", "127.0.0.1:http", "127.0.0.1:65536",
-                             "127.0.0.1:-1", "127.0.0.1:123456", "::1:9464", "[::1]9464", "[::1", "[]:9464"}) {
-    absl::StatusOr<std::unique_ptr<MetricsHttpServer>> s = MetricsHttpServer::Start(listen, &r, nullptr);
+  for (const char* listen :
+       {"", "9464", "127.0.0.1", "127.0.0.1:", ":9464", "127.0.0.1:http", "127.0.0.1:65536",
+        "127.0.0.1:-1", "127.0.0.1:123456", "::1:9464", "[::1]9464", "[::1", "[]:9464"}) {
+    absl::StatusOr<std::unique_ptr<MetricsHttpServer>> s =
+        MetricsHttpServer::Start(listen, &r, nullptr);
     ASSERT_FALSE(s.ok()) << listen;
-    EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument) << listen << ": " << s.status();
-    EXPECT_NE(s.status().message().find(absl::StrCat("'", listen, "': expected HOST:PORT")), std::string::npos)
+    EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument)
+        << listen << ": " << s.status();
+    EXPECT_NE(s.status().message().find(absl::StrCat("'", listen, "': expected HOST:PORT")),
+              std::string::npos)
         << s.status();
   }
 }
@@ -388,11 +437,13 @@ TEST(MetricsHttp, PortInUseIsUnavailableNamingAddressAndReason) {
   MetricsRegistry r;
   std::unique_ptr<MetricsHttpServer> first = StartHttp(&r);
   ASSERT_NE(first, nullptr);
-  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> second = MetricsHttpServer::Start(first->address(), &r, nullptr);
+  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> second =
+      MetricsHttpServer::Start(first->address(), &r, nullptr);
   ASSERT_FALSE(second.ok());
   EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable) << second.status();
-  EXPECT_EQ(second.status().message(), absl::StrCat("cannot listen for metrics on ", first->address(), ": the port ",
-                                                    first->port(), " is in use"));
+  EXPECT_EQ(second.status().message(),
+            absl::StrCat("cannot listen for metrics on ", first->address(), ": the port ",
+                         first->port(), " is in use"));
   // The first one still answers.
   httplib::Result res = httplib::Client("127.0.0.1", first->port()).Get("/healthz");
   ASSERT_TRUE(res) << httplib::to_string(res.error());
@@ -418,7 +469,8 @@ TEST(MetricsHttp, StopIsIdempotentAndFreesThePort) {
   client.set_connection_timeout(2);
   EXPECT_FALSE(client.Get("/healthz"));
   // The address is free again, for a server started in its place.
-  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> again = MetricsHttpServer::Start(address, &r, nullptr);
+  absl::StatusOr<std::unique_ptr<MetricsHttpServer>> again =
+      MetricsHttpServer::Start(address, &r, nullptr);
   ASSERT_TRUE(again.ok()) << again.status();
   EXPECT_EQ((*again)->address(), address);
 }
