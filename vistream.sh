@@ -17,6 +17,7 @@ PACKAGES=(
   xvfb xauth
   libcairo2-dev gnuplot-nox fonts-dejavu-core   # figures: maps through Cairo, plots through gnuplot
   libtomlplusplus-dev   # the server's configuration file
+  libcpp-httplib-dev prometheus   # the server's /metrics and /healthz; promtool checks the exposition in a test
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}
