@@ -158,7 +158,9 @@ void PvsWorkerPool::WorkerLoop(unsigned worker) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     lock.lock();
     std::vector<PvsSource::Done> done = lane->policy_.Finish(pvs, seconds);
+    const std::function<void(double)> observe = lane->observe_;
     lock.unlock();
+    if (observe) observe(seconds);
     for (PvsSource::Done& d : done) {
       if (d) d(pvs);
     }
@@ -186,6 +188,11 @@ PvsScheduler::PvsScheduler(Compute compute, PvsWorkerPool* pool, size_t cache_by
 PvsScheduler::~PvsScheduler() {
   pool_->Remove(this);
   own_pool_.reset();  // joins its workers
+}
+
+void PvsScheduler::SetComputeObserver(std::function<void(double)> observe) {
+  std::lock_guard lock(mu_);
+  observe_ = std::move(observe);
 }
 
 CellPvsPtr PvsScheduler::Request(uint64_t requester, CellId cell, double deadline, Done done) {

@@ -175,9 +175,13 @@ class PvsScheduler : public PvsSource {
   CellPvsPtr Cached(CellId cell) override;
   SchedulerStats stats() const override;
   unsigned threads() const { return pool_->threads(); }
+  // Called (on the worker, without a lock) with the seconds each computation took; set it
+  // before the first request.
+  void SetComputeObserver(std::function<void(double seconds)> observe);
 
  private:
   friend class PvsWorkerPool;
+  std::function<void(double)> observe_;  // guarded by mu_
 
   Compute compute_;
   std::function<void(unsigned)> init_;

@@ -30,7 +30,10 @@
 #include "scenes/catalog.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
+#include "server/metrics.h"
+#include "server/metrics_http.h"
 #include "server/served_scene.h"
+#include "server/service_metrics.h"
 #include "server/server_config.h"
 #include "server/service.h"
 
@@ -328,7 +331,17 @@ int main(int argc, char** argv) {
     served.push_back(std::move(*scene));
   }
   std::vector<vistream::server::ServedScene*> scenes;
-  for (const auto& s : served) scenes.push_back(s.get());
+  std::vector<std::string> names;
+  for (const auto& s : served) {
+    scenes.push_back(s.get());
+    names.push_back(s->name());
+  }
+  // Metrics: declared for every scene, fed by the schedulers, the sessions and (at each scrape)
+  // the service's statistics.
+  vistream::server::MetricsRegistry registry;
+  vistream::server::ServiceMetrics metrics(&registry, names);
+  for (vistream::server::ServedScene* s : scenes) s->scheduler().SetComputeObserver(metrics.PvsComputeObserver(s->name()));
+  server_options.metrics = &metrics;
   // One scene: its catalog ε box (a session of several scenes takes its scene's at Hello).
   server_options.limits.epsilon_size_m = scenes.front()->viewcell().epsilon_m;
   std::string link_line;
@@ -361,6 +374,19 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "vistream-server: error: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
+  metrics.Watch(&(*server)->service());
+  std::unique_ptr<vistream::server::MetricsHttpServer> http;
+  if (!config.metrics_listen.empty()) {
+    // /healthz answers 503 from the first stop signal on, while the sessions drain.
+    absl::StatusOr<std::unique_ptr<vistream::server::MetricsHttpServer>> started =
+        vistream::server::MetricsHttpServer::Start(config.metrics_listen, &registry, [] { return !g_stop.load(); });
+    if (!started.ok()) {
+      std::fprintf(stderr, "vistream-server: error: metrics.listen: %s\n", std::string(started.status().message()).c_str());
+      return 1;
+    }
+    http = std::move(*started);
+    log.Write(0, "metrics", {{"address", http->address()}, {"paths", "/metrics /healthz"}});
+  }
   // One scene: "scene NAME, ..."; several: "N scenes: NAME (...); NAME (...)".
   std::string what;
   for (const vistream::server::ServedScene* s : scenes) {
@@ -374,7 +400,9 @@ int main(int argc, char** argv) {
                               s->name(), one);
     }
   }
-  std::printf("vistream-server: ready on %s: %s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str());
+  const std::string metrics_line = http != nullptr ? "; metrics on http://" + http->address() + "/metrics" : "";
+  std::printf("vistream-server: ready on %s: %s%s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str(),
+              metrics_line.c_str());
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}, {"scenes", scenes.size()}});
 
@@ -382,6 +410,7 @@ int main(int argc, char** argv) {
   log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(config.grace_s);
+  if (http != nullptr) http->Stop();  // its collector reads the service
   server->reset();
   served.clear();  // the scenes' schedulers leave the pool before it stops
   log.Write(0, "stopped", {});

@@ -12,6 +12,8 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
+#include "server/service_metrics.h"
+
 namespace vistream::server {
 
 namespace {
@@ -415,9 +417,11 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
     grpc::CallbackServerContext* context) {
   std::lock_guard lock(mu_);
   if (draining_) {
+    if (options_.metrics != nullptr) options_.metrics->SessionRefused("draining");
     return new RefusedReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
   if (sessions_.size() >= options_.max_sessions) {
+    if (options_.metrics != nullptr) options_.metrics->SessionRefused("too_many");
     if (log_ != nullptr) {
       log_->Write(EventLog::Level::kWarn, 0, "session_refused", {{"peer", context->peer()}, {"reason", "too many sessions"}});
     }
@@ -429,9 +433,12 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   ++sessions_total_;
   auto link = std::make_shared<SessionLink>();
   // One scene: the session is bound to it (its Hello must name it); several: Hello picks.
+  SessionSeams seams;
+  if (options_.metrics != nullptr) options_.metrics->AddSessionSeams(&seams);
   std::shared_ptr<server::Session> session =
-      scenes_.scenes.size() == 1 ? Session::Create(id, scenes_.scenes[0], options_.limits, log_, [link] { link->Pump(); })
-                                 : Session::Create(id, &scenes_, options_.limits, log_, [link] { link->Pump(); });
+      scenes_.scenes.size() == 1
+          ? Session::Create(id, scenes_.scenes[0], options_.limits, log_, [link] { link->Pump(); }, std::move(seams))
+          : Session::Create(id, &scenes_, options_.limits, log_, [link] { link->Pump(); }, std::move(seams));
   sessions_[id] = Entry{session, link, context->peer()};
   if (log_ != nullptr) log_->Write(id, "session_start", {{"peer", context->peer()}});
   return new SessionReactor(this, session, link);
@@ -449,12 +456,14 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
       SceneTotals& t = scene_totals_[stats.scene()];
       ++t.ended;
       t.bytes_sent += stats.bytes_sent();
+      t.geometry_bytes_sent += stats.geometry_bytes_sent();
     }
     sessions_.erase(it);
     ++ending_;
   }
   if (log_ != nullptr) {
     const grpc::StatusCode code = status.error_code();
+    if (options_.metrics != nullptr) options_.metrics->SessionEnded(stats.scene(), static_cast<int>(code));
     const bool fine = code == grpc::StatusCode::OK || code == grpc::StatusCode::CANCELLED;
     log_->Write(fine ? EventLog::Level::kInfo : EventLog::Level::kWarn, id, "session_end",
                 {{"scene", stats.scene()},
@@ -543,6 +552,7 @@ v1::ServerStats WalkthroughService::Stats() const {
     if (auto it = by_name.find(name); it != by_name.end()) {
       it->second->set_sessions_total(t.ended);
       it->second->set_bytes_sent(t.bytes_sent);
+      it->second->set_geometry_bytes_sent(t.geometry_bytes_sent);
     }
   }
   uint64_t bytes = bytes_sent_ended_;
@@ -556,6 +566,7 @@ v1::ServerStats WalkthroughService::Stats() const {
       scene->set_sessions_active(scene->sessions_active() + 1);
       scene->set_sessions_total(scene->sessions_total() + 1);
       scene->set_bytes_sent(scene->bytes_sent() + ss->bytes_sent());
+      scene->set_geometry_bytes_sent(scene->geometry_bytes_sent() + ss->geometry_bytes_sent());
     }
   }
   s.set_bytes_sent(bytes);

@@ -22,6 +22,8 @@
 
 namespace vistream::server {
 
+class ServiceMetrics;
+
 struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
   size_t max_sessions = 256;
@@ -33,6 +35,8 @@ struct ServerOptions {
   // link, already time-scaled (server/link_model.h), on the steady clock, in both directions
   // (a model each way). None: written at once.
   std::optional<LinkParams> link;
+  // Server metrics (server/service_metrics.h; not owned, must outlive the server); null: none.
+  ServiceMetrics* metrics = nullptr;
   // Session n's uplink draws from link_seed + 2(n - 1), its downlink from one more (session 1
   // as `vistream simulate --seed link_seed`).
   uint64_t link_seed = 1;
@@ -94,6 +98,7 @@ class WalkthroughService final
   struct SceneTotals {
     uint64_t ended = 0;      // sessions of the scene that ended
     uint64_t bytes_sent = 0;  // by them
+    uint64_t geometry_bytes_sent = 0;
   };
   std::map<std::string, SceneTotals> scene_totals_;  // by scene name
   size_t ending_ = 0;              // removed from sessions_, their end not yet logged

@@ -21,7 +21,10 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "client/session_stream.h"
 #include "server/metrics_http.h"
+#include "tests/server_process_util.h"
+#include "tests/server_test_util.h"
 #include "tests/temp_dir.h"
 
 namespace vistream::server {
@@ -473,6 +476,118 @@ TEST(MetricsHttp, StopIsIdempotentAndFreesThePort) {
       MetricsHttpServer::Start(address, &r, nullptr);
   ASSERT_TRUE(again.ok()) << again.status();
   EXPECT_EQ((*again)->address(), address);
+}
+
+// ---- vistream-server's own metrics (server/service_metrics.h), through the executable ----
+
+// The value of the series `series` (name and labels as rendered) in `text`; NaN when absent.
+double SeriesValue(const std::string& text, const std::string& series) {
+  for (const std::string& line : Lines(text, series + " ")) return std::stod(line.substr(series.size() + 1));
+  return std::nan("");
+}
+
+// The server's /metrics port from its ready line ("...; metrics on http://HOST:PORT/metrics").
+int MetricsPort(const std::string& ready) {
+  const size_t at = ready.find("metrics on http://");
+  if (at == std::string::npos) return -1;
+  const size_t colon = ready.find(':', at + 18);
+  return std::stoi(ready.substr(colon + 1));
+}
+
+std::string Fetch(int port, const std::string& path, int* status = nullptr) {
+  httplib::Client client("127.0.0.1", port);
+  auto r = client.Get(path);
+  if (status != nullptr) *status = r ? r->status : -1;
+  return r ? r->body : "";
+}
+
+TEST(ServerMetrics, AScriptedWalkMovesTheCountersAndPromtoolPassesOnTheOutput) {
+  ASSERT_NO_FATAL_FAILURE(RequirePromtool());
+  std::string error;
+  auto server = test::RunningServer::Start(
+      VISTREAM_SERVER_BIN, {"--scene", "city1", "--listen", "127.0.0.1:0", "--metrics-listen", "127.0.0.1:0"}, &error,
+      testing::ProcessTempDir() + "/metrics_walk.log");
+  ASSERT_NE(server, nullptr) << error;
+  const int port = MetricsPort(server->ready_line());
+  ASSERT_GT(port, 0) << server->ready_line();
+  const std::string before = Fetch(port, "/metrics");
+  for (const char* name : {"vistream_sessions_active", "vistream_sessions_ended_total", "vistream_bytes_sent_total",
+                           "vistream_pvs_computations_total", "vistream_pvs_cache_hits_total",
+                           "vistream_pvs_compute_seconds", "vistream_crossing_served_seconds",
+                           "vistream_late_cells_total", "vistream_pvs_queue_length",
+                           "vistream_process_resident_memory_bytes"}) {
+    EXPECT_NE(before.find(std::string("# TYPE ") + name + " "), std::string::npos) << name << "\n" << before;
+  }
+  EXPECT_EQ(SeriesValue(before, "vistream_pvs_computations_total{scene=\"city1\"}"), 0.0);
+  EXPECT_GT(SeriesValue(before, "vistream_process_resident_memory_bytes"), 1e6);
+
+  // A walker in (4, 4) crosses into (5, 4): nine cells, then three more.
+  client::SessionStream c(server->address());
+  c.Start(client::SessionStream::HelloFor("city1"));
+  c.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(c.SendPose(test::Centre(4, 4)));
+  ASSERT_TRUE(c.WaitFor([](const client::SessionRecord& r) { return r.AllComplete(test::Around(test::Cell(4, 4))); },
+                        test::kWait));
+  ASSERT_TRUE(c.SendPose(test::Centre(5, 4), glm::dvec3(1.4, 0.0, 0.0)));
+  ASSERT_TRUE(c.WaitFor([](const client::SessionRecord& r) { return r.AllComplete(test::Around(test::Cell(5, 4))); },
+                        test::kWait));
+  // Served is seen when the session is next asked for a message: give it a moment.
+  std::string during;
+  for (int k = 0; k < 100; ++k) {
+    during = Fetch(port, "/metrics");
+    if (SeriesValue(during, "vistream_crossing_served_seconds_count{scene=\"city1\"}") >= 1.0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_EQ(SeriesValue(during, "vistream_sessions_active{scene=\"city1\"}"), 1.0) << during;
+  EXPECT_EQ(SeriesValue(during, "vistream_pvs_computations_total{scene=\"city1\"}"), 12.0) << during;
+  EXPECT_EQ(SeriesValue(during, "vistream_pvs_compute_seconds_count{scene=\"city1\"}"), 12.0) << during;
+  EXPECT_GT(SeriesValue(during, "vistream_bytes_sent_total{scene=\"city1\"}"), 1e4) << during;
+  EXPECT_GT(SeriesValue(during, "vistream_geometry_bytes_sent_total{scene=\"city1\"}"), 1e4) << during;
+  EXPECT_EQ(SeriesValue(during, "vistream_crossing_served_seconds_count{scene=\"city1\"}"), 1.0) << during;
+  EXPECT_EQ(SeriesValue(during, "vistream_late_cells_total{scene=\"city1\"}"), 0.0) << during;
+  EXPECT_TRUE(c.Finish().ok());
+  std::string after;
+  for (int k = 0; k < 100; ++k) {
+    after = Fetch(port, "/metrics");
+    if (SeriesValue(after, "vistream_sessions_ended_total{code=\"OK\",scene=\"city1\"}") >= 1.0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_EQ(SeriesValue(after, "vistream_sessions_ended_total{code=\"OK\",scene=\"city1\"}"), 1.0) << after;
+  EXPECT_EQ(SeriesValue(after, "vistream_sessions_active{scene=\"city1\"}"), 0.0) << after;
+  const auto [rc, out] = Promtool(after);
+  EXPECT_EQ(rc, 0) << out << "\n" << after;
+  EXPECT_EQ(out, "") << after;
+  EXPECT_EQ(server->Stop(SIGTERM), 0);
+}
+
+// SIGTERM: /healthz says 503 while a session that stopped reading still holds the drain open.
+TEST(ServerMetrics, HealthzTurns503OnSigtermBeforeTheSessionsEnd) {
+  std::string error;
+  auto server = test::RunningServer::Start(VISTREAM_SERVER_BIN,
+                                           {"--scene", "city1", "--listen", "127.0.0.1:0", "--metrics-listen",
+                                            "127.0.0.1:0", "--grace", "20"},
+                                           &error, testing::ProcessTempDir() + "/metrics_drain.log");
+  ASSERT_NE(server, nullptr) << error;
+  const int port = MetricsPort(server->ready_line());
+  int status = 0;
+  EXPECT_EQ(Fetch(port, "/healthz", &status), "serving\n");
+  EXPECT_EQ(status, 200);
+  client::SessionStream stalled(server->address());
+  stalled.Start(client::SessionStream::HelloFor("city1"), /*read=*/false);
+  stalled.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(stalled.SendPose(test::Centre(4, 4)));
+  std::this_thread::sleep_for(std::chrono::seconds(2));  // its writes fill the transport's window
+  ASSERT_EQ(kill(server->pid(), SIGTERM), 0);
+  bool draining = false;
+  for (int k = 0; k < 200 && !draining; ++k) {
+    const std::string body = Fetch(port, "/healthz", &status);
+    draining = status == 503;
+    if (!draining) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_TRUE(draining) << "status " << status;
+  EXPECT_FALSE(stalled.Ended()) << "the session ended before /healthz said 503";
+  stalled.Cancel();
+  EXPECT_EQ(server->Stop(0), 0);  // it ends by itself once the session is gone
 }
 
 }  // namespace

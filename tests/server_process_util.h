@@ -66,10 +66,11 @@ class RunningServer {
   // The port of address().
   int port() const { return std::stoi(address_.substr(address_.rfind(':') + 1)); }
 
-  // Sends `sig` and waits: the exit code, 128 + the signal if killed, -1 if already stopped.
+  // Sends `sig` (0: none, only waits) and waits: the exit code, 128 + the signal if killed, -1
+  // if already stopped.
   int Stop(int sig = SIGTERM) {
     if (pid_ <= 0) return -1;
-    kill(pid_, sig);
+    if (sig != 0) kill(pid_, sig);
     int status = 0;
     waitpid(pid_, &status, 0);
     pid_ = -1;
