@@ -24,6 +24,7 @@
 #include "scenes/catalog.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
+#include "server/security.h"
 #include "server/served_scene.h"
 #include "server/service.h"
 
@@ -64,6 +65,21 @@ void GrpcLog(gpr_log_func_args* args) {
 
 // A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
 using vistream::cli::FiniteRange;
+
+// SIGHUP re-reads the token file (main polls the flag); the sessions open stay open.
+std::atomic<bool> g_reload{false};
+
+void ReloadTokens(vistream::server::TokenStore* tokens, EventLog* log) {
+  if (tokens == nullptr) {
+    log->Write(0, "sighup_ignored", {{"reason", "no --tokens file to reload"}});
+    return;
+  }
+  if (const absl::Status st = tokens->Reload(); !st.ok()) {
+    log->Write(0, "tokens_reload_failed", {{"error", st.message()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+    return;
+  }
+  log->Write(0, "tokens_reloaded", {{"file", tokens->path()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+}
 
 }  // namespace
 
@@ -107,6 +123,28 @@ int main(int argc, char** argv) {
   app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
+  // Security (server/security.h): configuration keys tls.*, auth.tokens and limits.*.
+  vistream::server::TlsSettings tls;
+  std::string tokens_file;
+  app.add_option("--tls-cert", tls.cert, "PEM certificate chain: serve TLS (with --tls-key)");
+  app.add_option("--tls-key", tls.key, "PEM private key of --tls-cert (unencrypted)");
+  app.add_option("--tls-client-ca", tls.client_ca,
+                 "PEM CA bundle: clients must present a certificate it signed (mutual TLS)");
+  app.add_flag("--insecure", tls.insecure, "allow plaintext on an address that is not loopback");
+  app.add_option("--tokens", tokens_file,
+                 "file of `name token` lines: sessions need one of its tokens (re-read on SIGHUP)");
+  app.add_option("--hello-timeout", server_options.hello_timeout_s,
+                 "seconds a new stream has to send Hello before it ends DEADLINE_EXCEEDED (0: no limit)")
+      ->check(FiniteRange(0, 86400))
+      ->capture_default_str();
+  app.add_option("--max-sessions-per-address", server_options.max_sessions_per_address,
+                 "sessions at once from one client address (0: no limit)")
+      ->check(vistream::cli::WholeRange(0, 100000))
+      ->capture_default_str();
+  app.add_option("--max-sessions-per-token", server_options.max_sessions_per_token,
+                 "sessions at once per token (0: no limit)")
+      ->check(vistream::cli::WholeRange(0, 100000))
+      ->capture_default_str();
   bool emulate_link = false;
   std::string link_option, time_scale_option;
   uint64_t link_seed = 1;
@@ -160,6 +198,25 @@ int main(int argc, char** argv) {
     return 2;
   }
   scene_options.cache_bytes = static_cast<size_t>(cache_mb * (1 << 20));
+  {
+    // TLS files and the token file are checked before the scene loads: a bad one exits 2.
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+        vistream::server::ServerCredentialsFor(tls, server_options.listen);
+    if (!credentials.ok()) {
+      std::fprintf(stderr, "vistream-server: error: %s\n", std::string(credentials.status().message()).c_str());
+      return 2;
+    }
+    server_options.credentials = *std::move(credentials);
+    if (!tokens_file.empty()) {
+      absl::StatusOr<std::shared_ptr<vistream::server::TokenStore>> tokens =
+          vistream::server::TokenStore::Load(tokens_file);
+      if (!tokens.ok()) {
+        std::fprintf(stderr, "vistream-server: error: --tokens: %s\n", std::string(tokens.status().message()).c_str());
+        return 2;
+      }
+      server_options.tokens = *std::move(tokens);
+    }
+  }
 
   // SIGTERM and SIGINT only raise a flag (whichever thread takes them); main polls it.
   struct sigaction action {};
@@ -175,11 +232,19 @@ int main(int argc, char** argv) {
   sigemptyset(&action.sa_mask);
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  struct sigaction hup {};
+  hup.sa_handler = [](int) { g_reload.store(true); };
+  sigemptyset(&hup.sa_mask);
+  sigaction(SIGHUP, &hup, nullptr);
 
   EventLog log(stderr, json_log);
   g_log = &log;
   gpr_set_log_function(GrpcLog);
   LogProgress progress(&log);
+  log.Write(0, "security", {{"tls", tls.cert.empty() ? "off" : (tls.client_ca.empty() ? "on" : "mutual")},
+                            {"tenants", server_options.tokens == nullptr
+                                            ? std::string("no authentication")
+                                            : std::to_string(server_options.tokens->size())}});
   log.Write(0, "loading", {{"scene", scene_options.scene}});
   const auto load_start = std::chrono::steady_clock::now();
   absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
@@ -239,7 +304,10 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}});
 
-  while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  while (!g_stop) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (g_reload.exchange(false)) ReloadTokens(server_options.tokens.get(), &log);
+  }
   log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(grace_s);

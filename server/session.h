@@ -63,6 +63,8 @@ class Session : public std::enable_shared_from_this<Session> {
   ~Session();
 
   uint64_t id() const { return id_; }
+  // Whether the session's Hello has been taken (the server's Hello timeout watches this).
+  bool greeted() const;
 
   // Handles one client message at `now` (seconds on the steady clock). A status other than OK
   // ends the session with it (the status names the message and what is wrong).
