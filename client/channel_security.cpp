@@ -37,7 +37,9 @@ absl::StatusOr<std::string> ReadWhole(const std::string& option, const std::stri
   const bool failed = std::ferror(f) != 0;
   const int err = errno;
   std::fclose(f);
-  if (failed) return absl::InvalidArgumentError(absl::StrCat(option, ": ", path, ": cannot read: ", std::strerror(err)));
+  if (failed) {
+    return absl::InvalidArgumentError(absl::StrCat(option, ": ", path, ": cannot read: ", std::strerror(err)));
+  }
   return text;
 }
 
@@ -110,8 +112,9 @@ absl::StatusOr<std::string> ReadToken(const std::string& path) {
     }
     return std::string(line);
   }
-  return absl::InvalidArgumentError(absl::StrCat(
-      "--token-file: ", path, ": no token in it: the file holds the token alone on its first line (# comments allowed)"));
+  return absl::InvalidArgumentError(
+      absl::StrCat("--token-file: ", path,
+                   ": no token in it: the file holds the token alone on its first line (# comments allowed)"));
 }
 
 // A TCP connection to `host`:`port` within `timeout_s`, with reads and writes that time out
@@ -142,7 +145,8 @@ int ConnectTcp(const std::string& host, const std::string& port, double timeout_
       continue;
     }
     fcntl(fd, F_SETFL, flags);
-    timeval tv{static_cast<time_t>(timeout_s), static_cast<suseconds_t>((timeout_s - static_cast<time_t>(timeout_s)) * 1e6)};
+    const auto whole = static_cast<time_t>(timeout_s);
+    timeval tv{whole, static_cast<suseconds_t>((timeout_s - static_cast<double>(whole)) * 1e6)};
     setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
     setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof(tv));
   }
@@ -168,8 +172,9 @@ absl::StatusOr<ChannelSecurity> LoadChannelSecurity(const std::string& ca_file, 
                                                     const std::string& key_file, const std::string& token_file) {
   ChannelSecurity s;
   if (cert_file.empty() != key_file.empty()) {
-    return absl::InvalidArgumentError(cert_file.empty() ? "--tls-key: needs --tls-cert (the certificate of the key)"
-                                                        : "--tls-cert: needs --tls-key (the certificate's private key)");
+    return absl::InvalidArgumentError(cert_file.empty()
+                                          ? "--tls-key: needs --tls-cert (the certificate of the key)"
+                                          : "--tls-cert: needs --tls-key (the certificate's private key)");
   }
   if (!cert_file.empty() && ca_file.empty()) {
     return absl::InvalidArgumentError(
@@ -191,7 +196,9 @@ absl::StatusOr<ChannelSecurity> LoadChannelSecurity(const std::string& ca_file, 
     absl::StatusOr<std::string> key = ReadWhole("--tls-key", key_file);
     if (!key.ok()) return key.status();
     const std::vector<Owned<X509>> chain = PemCertificates(*cert);
-    if (chain.empty()) return absl::InvalidArgumentError(absl::StrCat("--tls-cert: ", cert_file, ": not a PEM certificate"));
+    if (chain.empty()) {
+      return absl::InvalidArgumentError(absl::StrCat("--tls-cert: ", cert_file, ": not a PEM certificate"));
+    }
     bool encrypted = false;
     Owned<EVP_PKEY> pkey = PemKey(*key, &encrypted);
     if (pkey == nullptr) {
@@ -246,7 +253,9 @@ std::string DiagnoseTls(const std::string& address, const ChannelSecurity& secur
     return "";
   }
   if (tls) {
-    for (const Owned<X509>& ca : PemCertificates(security.tls_ca)) X509_STORE_add_cert(SSL_CTX_get_cert_store(ctx.get()), ca.get());
+    for (const Owned<X509>& ca : PemCertificates(security.tls_ca)) {
+      X509_STORE_add_cert(SSL_CTX_get_cert_store(ctx.get()), ca.get());
+    }
     SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_PEER, nullptr);
   } else {
     SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_NONE, nullptr);

@@ -71,8 +71,8 @@ HelloWatchdog::~HelloWatchdog() {
 }
 
 void HelloWatchdog::Watch(std::weak_ptr<Session> session, std::function<void()> expire) {
-  const auto due = std::chrono::steady_clock::now() +
-                   std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(timeout_s_));
+  const auto due = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                          std::chrono::duration<double>(timeout_s_));
   {
     std::lock_guard lock(mu_);
     watched_.push_back(Watched{due, std::move(session), std::move(expire)});

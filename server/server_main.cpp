@@ -75,7 +75,8 @@ void ReloadTokens(vistream::server::TokenStore* tokens, EventLog* log) {
     return;
   }
   if (const absl::Status st = tokens->Reload(); !st.ok()) {
-    log->Write(0, "tokens_reload_failed", {{"error", st.message()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+    log->Write(0, "tokens_reload_failed",
+               {{"error", st.message()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
     return;
   }
   log->Write(0, "tokens_reloaded", {{"file", tokens->path()}, {"tenants", static_cast<uint64_t>(tokens->size())}});

@@ -130,7 +130,8 @@ TEST(SecurityTls, AClientWithTheCaWalksAndClientsWithoutItAreToldWhy) {
             std::string::npos)
       << plain.status();
   // A CA that did not sign the server's certificate.
-  absl::StatusOr<v1::ServerStats> other = client::Probe(server->address(), 5.0, nullptr, Security(Certs().other_ca_crt));
+  absl::StatusOr<v1::ServerStats> other =
+      client::Probe(server->address(), 5.0, nullptr, Security(Certs().other_ca_crt));
   ASSERT_EQ(other.status().code(), absl::StatusCode::kUnavailable) << other.status();
   EXPECT_NE(other.status().message().find("TLS handshake failed: the server's certificate is not trusted by --tls-ca " +
                                           Certs().other_ca_crt),
@@ -343,7 +344,8 @@ TEST(SecurityProcess, BadSecurityOptionsExitTwoBeforeTheSceneLoads) {
 }
 
 TEST(SecurityProcess, SighupRevokesATokenWithoutDroppingItsOpenSession) {
-  const std::string path = TokensFile("tokens-sighup", std::string("alice ") + kAliceToken + "\nbob " + kBobToken + "\n");
+  const std::string path =
+      TokensFile("tokens-sighup", std::string("alice ") + kAliceToken + "\nbob " + kBobToken + "\n");
   const std::string log = TokensFile("server-sighup.log", "");
   int out[2];
   ASSERT_EQ(pipe(out), 0);

@@ -142,7 +142,8 @@ TEST(TokenStore, ParseErrorsNamePathAndLineAndNeverTheToken) {
     ASSERT_EQ(store.status().code(), absl::StatusCode::kInvalidArgument) << text << ": " << store.status();
     EXPECT_NE(store.status().message().find(path + message), std::string::npos) << store.status();
     for (const char* token : {"aaaaaaaaaaaaaaaaaaaaaaaa", "short-token", "cccccccccccccccccccccccc"}) {
-      EXPECT_EQ(store.status().message().find(token), std::string::npos) << "the message repeats a token: " << store.status();
+      EXPECT_EQ(store.status().message().find(token), std::string::npos)
+          << "the message repeats a token: " << store.status();
     }
   }
   absl::StatusOr<std::shared_ptr<TokenStore>> missing = TokenStore::Load("/nonexistent/tokens");
@@ -188,7 +189,9 @@ TEST(TokenStore, ReloadServesTheNewFileAndKeepsTheOldTokensWhenItIsBad) {
 TEST(BearerToken, TakesTheTokenOfABearerAuthorizationOnly) {
   auto token = [](const std::vector<std::pair<std::string, std::string>>& entries) {
     Metadata m;  // string_refs into `entries`, as gRPC's point into its own buffers
-    for (const auto& [k, v] : entries) m.emplace(grpc::string_ref(k.data(), k.size()), grpc::string_ref(v.data(), v.size()));
+    for (const auto& [k, v] : entries) {
+      m.emplace(grpc::string_ref(k.data(), k.size()), grpc::string_ref(v.data(), v.size()));
+    }
     return BearerToken(m);
   };
   EXPECT_EQ(token({{"authorization", "Bearer abc"}}), "abc");

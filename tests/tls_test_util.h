@@ -58,7 +58,8 @@ inline const TestCerts& Certs() {
     EXPECT_TRUE(WriteText(d + "client.ext", "extendedKeyUsage=clientAuth\n"));
     const std::string key = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
     const std::string commands[] = {
-        "openssl req -x509 " + key + " -keyout " + c->ca_key + " -out " + c->ca_crt + " -days 3 -subj /CN=vistream-test-ca",
+        "openssl req -x509 " + key + " -keyout " + c->ca_key + " -out " + c->ca_crt +
+            " -days 3 -subj /CN=vistream-test-ca",
         "openssl req -x509 " + key + " -keyout " + c->other_key + " -out " + c->other_ca_crt +
             " -days 3 -subj /CN=another-ca",
         "openssl req " + key + " -keyout " + c->server_key + " -out " + d + "server.csr -subj /CN=localhost",
