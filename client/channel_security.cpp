@@ -166,6 +166,13 @@ std::string SslReasons() {
   return out;
 }
 
+// Set when the server asked for a client certificate and the handshake had none to give.
+thread_local bool t_certificate_requested = false;
+int NoteCertificateRequest(SSL*, X509**, EVP_PKEY**) {
+  t_certificate_requested = true;
+  return 0;  // none
+}
+
 }  // namespace
 
 absl::StatusOr<ChannelSecurity> LoadChannelSecurity(const std::string& ca_file, const std::string& cert_file,
@@ -270,6 +277,8 @@ std::string DiagnoseTls(const std::string& address, const ChannelSecurity& secur
       SSL_CTX_use_PrivateKey(ctx.get(), key.get());
     }
   }
+  SSL_CTX_set_client_cert_cb(ctx.get(), NoteCertificateRequest);
+  t_certificate_requested = false;
   static const unsigned char kAlpn[] = {2, 'h', '2'};
   SSL_CTX_set_alpn_protos(ctx.get(), kAlpn, sizeof(kAlpn));
   Owned<SSL> ssl(SSL_new(ctx.get()));
@@ -309,11 +318,13 @@ std::string DiagnoseTls(const std::string& address, const ChannelSecurity& secur
                         "): give --tls-ca the CA that signed it");
   }
   if (!failed) return "";
-  if (absl::StrContains(reasons, "alert")) {
-    if (security.tls_cert.empty()) {
-      return absl::StrCat("TLS handshake failed: the server requires a client certificate (mutual TLS; ", reasons,
-                          "): give --tls-cert and --tls-key");
-    }
+  // A server that requires a client certificate ends the handshake, often without an alert
+  // (gRPC's servers just close), once it has asked for one and got none.
+  if (t_certificate_requested) {
+    return absl::StrCat("TLS handshake failed: the server requires a client certificate (mutual TLS; ", reasons,
+                        "): give --tls-cert and --tls-key");
+  }
+  if (!security.tls_cert.empty() && peer_certificate) {
     return absl::StrCat("TLS handshake failed: the server refused the client certificate in ", security.tls_cert_file,
                         " (", reasons, "): give --tls-cert a certificate signed by a CA the server trusts");
   }

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <grpc/support/log.h>
+
 #include <CLI/CLI.hpp>
 #include <absl/strings/numbers.h>
 #include <absl/strings/str_format.h>
@@ -149,6 +151,9 @@ int main(int argc, char** argv) {
   if (triangle_budget >= 0.0) o.triangle_budget = static_cast<uint64_t>(triangle_budget);
   o.upload_budget_bytes = static_cast<uint64_t>(upload_mb * 1048576.0);
   o.use_masks = !no_masks;
+  // gRPC's own log lines (a failed TLS handshake, once per retry) say less than the error this
+  // client prints; GRPC_VERBOSITY in the environment brings them back.
+  if (std::getenv("GRPC_VERBOSITY") == nullptr) gpr_set_log_function([](gpr_log_func_args*) {});
   o.cancel = &g_stop;
   o.log = [](const std::string& line) { std::fprintf(stderr, "vistream-client: %s\n", line.c_str()); };
   struct sigaction sa {};

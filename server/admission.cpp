@@ -6,7 +6,8 @@
 namespace vistream::server {
 
 std::string PeerHost(std::string_view peer) {
-  const std::string p = absl::StrReplaceAll(peer, {{"%5B", "["}, {"%5D", "]"}, {"%5b", "["}, {"%5d", "]"}});
+  const std::string p = absl::StrReplaceAll(absl::string_view(peer.data(), peer.size()),
+                                            {{"%5B", "["}, {"%5D", "]"}, {"%5b", "["}, {"%5d", "]"}});
   std::string_view rest(p);
   if (rest.rfind("ipv4:", 0) == 0) {
     rest.remove_prefix(5);

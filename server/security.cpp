@@ -24,7 +24,7 @@ namespace vistream::server {
 namespace {
 
 // The whole of `path`, or "KEY: PATH: cannot read: why" (KEY empty: "PATH: cannot read: why").
-absl::StatusOr<std::string> ReadWhole(const std::string& path, std::string_view key) {
+absl::StatusOr<std::string> ReadWhole(const std::string& path, const std::string& key) {
   const std::string prefix = key.empty() ? path : absl::StrCat(key, ": ", path);
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (f == nullptr) return absl::InvalidArgumentError(absl::StrCat(prefix, ": cannot read: ", std::strerror(errno)));

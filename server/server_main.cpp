@@ -76,7 +76,7 @@ void ReloadTokens(vistream::server::TokenStore* tokens, EventLog* log) {
   }
   if (const absl::Status st = tokens->Reload(); !st.ok()) {
     log->Write(0, "tokens_reload_failed",
-               {{"error", st.message()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+               {{"error", std::string(st.message())}, {"tenants", static_cast<uint64_t>(tokens->size())}});
     return;
   }
   log->Write(0, "tokens_reloaded", {{"file", tokens->path()}, {"tenants", static_cast<uint64_t>(tokens->size())}});

@@ -422,7 +422,8 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
     absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata());
     if (!t.ok()) {
       if (log_ != nullptr) {
-        log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", t.status().message()}});
+        log_->Write(0, "session_refused",
+                    {{"peer", context->peer()}, {"reason", std::string(t.status().message())}});
       }
       return new RefusedReactor(ToGrpc(t.status()));
     }
@@ -440,7 +441,9 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
         absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
   }
   if (absl::Status q = quota_.Admit(host, tenant); !q.ok()) {
-    if (log_ != nullptr) log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", q.message()}});
+    if (log_ != nullptr) {
+      log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", std::string(q.message())}});
+    }
     return new RefusedReactor(ToGrpc(q));
   }
   const uint64_t id = next_id_++;

@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include <grpcpp/generic/generic_stub.h>
 #include <gtest/gtest.h>
 
 #include "client/connection.h"
@@ -48,16 +49,19 @@ std::string TokensFile(const std::string& name, const std::string& text) {
   return dir + "/" + name;
 }
 
-ChannelSecurity Security(const std::string& ca_file = "", const std::string& token = "", bool client_cert = false) {
+// What the client sends: TLS with `ca_file`, a client certificate (`cert_file`, its key
+// `key_file`), a bearer token.
+ChannelSecurity Security(const std::string& ca_file = "", const std::string& token = "",
+                         const std::string& cert_file = "", const std::string& key_file = "") {
   ChannelSecurity s;
   if (!ca_file.empty()) {
     s.tls_ca = ReadText(ca_file);
     s.tls_ca_file = ca_file;
   }
-  if (client_cert) {
-    s.tls_cert = ReadText(Certs().client_crt);
-    s.tls_key = ReadText(Certs().client_key);
-    s.tls_cert_file = Certs().client_crt;
+  if (!cert_file.empty()) {
+    s.tls_cert = ReadText(cert_file);
+    s.tls_key = ReadText(key_file);
+    s.tls_cert_file = cert_file;
   }
   s.token = token;
   s.token_file = "the test's token";
@@ -161,11 +165,19 @@ TEST(SecurityTls, MutualTlsRefusesAClientWithoutACertificateAndServesOneWithIt) 
             std::string::npos)
       << without.status();
   EXPECT_NE(without.status().message().find("give --tls-cert and --tls-key"), std::string::npos) << without.status();
-  absl::StatusOr<v1::ServerStats> with =
-      client::Probe(server->address(), 30.0, nullptr, Security(Certs().ca_crt, "", true));
+  // A certificate that a CA the server does not trust signed.
+  absl::StatusOr<v1::ServerStats> stranger = client::Probe(
+      server->address(), 5.0, nullptr, Security(Certs().ca_crt, "", Certs().stranger_crt, Certs().stranger_key));
+  ASSERT_EQ(stranger.status().code(), absl::StatusCode::kUnavailable) << stranger.status();
+  EXPECT_NE(stranger.status().message().find("TLS handshake failed: the server refused the client certificate in " +
+                                             Certs().stranger_crt),
+            std::string::npos)
+      << stranger.status();
+  const ChannelSecurity client = Security(Certs().ca_crt, "", Certs().client_crt, Certs().client_key);
+  absl::StatusOr<v1::ServerStats> with = client::Probe(server->address(), 30.0, nullptr, client);
   ASSERT_TRUE(with.ok()) << with.status();
   EXPECT_EQ(with->scene(), "city1");
-  auto good = Open(*server, Security(Certs().ca_crt, "", true));
+  auto good = Open(*server, client);
   ExpectWalks(*good, 3, 4);
   EXPECT_TRUE(good->Finish().ok());
   EXPECT_EQ(server->service().Stats().sessions_total(), 1u) << "the client without a certificate got a session";
@@ -295,6 +307,10 @@ TEST(SecurityLimits, AStreamWithoutHelloEndsDeadlineExceededAfterTheTimeout) {
   EXPECT_EQ(st.error_message(), "no Hello within 0.5 s");
   EXPECT_GE(waited, 0.45);
   EXPECT_LT(waited, 10.0);
+  // The server counts the session out once it is done with it, a moment after the client saw it end.
+  for (int k = 0; k < 200 && server->service().active_sessions() > 0; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
   EXPECT_EQ(server->service().active_sessions(), 0u);
   // A session that says Hello in time is not ended by the timeout, however long it then stays.
   auto greeted = test::Connect(*server);

@@ -73,7 +73,7 @@ TEST(ServerCredentials, BadTlsFilesAreNamedWithWhatIsWrong) {
     TlsSettings tls;
     std::string message;
   };
-  const Certs& c = Certs();
+  const testing::TestCerts& c = Certs();
   const Case cases[] = {
       {{c.server_crt, "", "", false}, "tls.cert is given without tls.key"},
       {{"", c.server_key, "", false}, "tls.key is given without tls.cert"},

@@ -1,7 +1,8 @@
 #pragma once
 // Certificates for the TLS tests, made with the `openssl` command in the test process's
 // temporary folder: a CA, a server certificate it signed for 127.0.0.1 and localhost, a client
-// certificate it signed, and a second CA that signed neither. Also small file helpers.
+// certificate it signed, and a second CA that signed neither but a client certificate of its
+// own (a stranger's). Also small file helpers.
 
 #include <cstdio>
 #include <cstdlib>
@@ -21,8 +22,8 @@ struct TestCerts {
   std::string ca_crt, ca_key;          // the CA that signed the two below
   std::string server_crt, server_key;  // for IP 127.0.0.1 and DNS localhost
   std::string client_crt, client_key;  // a client certificate (mutual TLS)
-  std::string other_ca_crt;            // a CA that signed neither
-  std::string other_key;               // a key of no certificate above
+  std::string other_ca_crt, other_ca_key;      // a CA that signed neither
+  std::string stranger_crt, stranger_key;      // a client certificate that the other CA signed
 };
 
 // Writes `text` to `path` (replacing it); false on failure.
@@ -53,14 +54,16 @@ inline const TestCerts& Certs() {
     c->client_crt = d + "client.crt";
     c->client_key = d + "client.key";
     c->other_ca_crt = d + "other-ca.crt";
-    c->other_key = d + "other-ca.key";
+    c->other_ca_key = d + "other-ca.key";
+    c->stranger_crt = d + "stranger.crt";
+    c->stranger_key = d + "stranger.key";
     EXPECT_TRUE(WriteText(d + "server.ext", "subjectAltName=IP:127.0.0.1,DNS:localhost\n"));
     EXPECT_TRUE(WriteText(d + "client.ext", "extendedKeyUsage=clientAuth\n"));
     const std::string key = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
     const std::string commands[] = {
         "openssl req -x509 " + key + " -keyout " + c->ca_key + " -out " + c->ca_crt +
             " -days 3 -subj /CN=vistream-test-ca",
-        "openssl req -x509 " + key + " -keyout " + c->other_key + " -out " + c->other_ca_crt +
+        "openssl req -x509 " + key + " -keyout " + c->other_ca_key + " -out " + c->other_ca_crt +
             " -days 3 -subj /CN=another-ca",
         "openssl req " + key + " -keyout " + c->server_key + " -out " + d + "server.csr -subj /CN=localhost",
         "openssl x509 -req -in " + d + "server.csr -CA " + c->ca_crt + " -CAkey " + c->ca_key +
@@ -68,6 +71,9 @@ inline const TestCerts& Certs() {
         "openssl req " + key + " -keyout " + c->client_key + " -out " + d + "client.csr -subj /CN=vistream-client",
         "openssl x509 -req -in " + d + "client.csr -CA " + c->ca_crt + " -CAkey " + c->ca_key +
             " -CAcreateserial -days 3 -extfile " + d + "client.ext -out " + c->client_crt,
+        "openssl req " + key + " -keyout " + c->stranger_key + " -out " + d + "stranger.csr -subj /CN=stranger",
+        "openssl x509 -req -in " + d + "stranger.csr -CA " + c->other_ca_crt + " -CAkey " + c->other_ca_key +
+            " -CAcreateserial -days 3 -extfile " + d + "client.ext -out " + c->stranger_crt,
     };
     for (const std::string& command : commands) {
       const int rc = std::system((command + " >" + d + "openssl.log 2>&1").c_str());
