@@ -242,10 +242,14 @@ int main(int argc, char** argv) {
   g_log = &log;
   gpr_set_log_function(GrpcLog);
   LogProgress progress(&log);
-  log.Write(0, "security", {{"tls", tls.cert.empty() ? "off" : (tls.client_ca.empty() ? "on" : "mutual")},
-                            {"tenants", server_options.tokens == nullptr
-                                            ? std::string("no authentication")
-                                            : std::to_string(server_options.tokens->size())}});
+  const char* tls_mode = tls.cert.empty() ? "off" : (tls.client_ca.empty() ? "on" : "mutual");
+  if (server_options.tokens == nullptr) {
+    log.Write(0, "security", {{"tls", tls_mode}, {"tokens", "off"}});
+  } else {
+    log.Write(0, "security", {{"tls", tls_mode},
+                              {"tokens", server_options.tokens->path()},
+                              {"tenants", static_cast<uint64_t>(server_options.tokens->size())}});
+  }
   log.Write(0, "loading", {{"scene", scene_options.scene}});
   const auto load_start = std::chrono::steady_clock::now();
   absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
