@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <grpc/support/log.h>
+
 #include <CLI/CLI.hpp>
 #include <absl/strings/numbers.h>
 #include <absl/strings/str_format.h>
@@ -104,6 +106,12 @@ int main(int argc, char** argv) {
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
   app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
+  std::string tls_ca, tls_cert, tls_key, token_file;
+  app.add_option("--tls-ca", tls_ca, "PEM CA bundle that signed the server's certificate: connect with TLS");
+  app.add_option("--tls-cert", tls_cert, "PEM client certificate for a server that requires one (mutual TLS)");
+  app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert");
+  app.add_option("--token-file", token_file,
+                 "file holding the server's bearer token (never on the command line, where ps shows it)");
   // Bad options exit 2, in the vistream tool's form: "<option>: <what is wrong>", then the hint.
   auto bad_option = [](const std::string& message) {
     std::fprintf(stderr, "vistream-client: error: %s\nRun 'vistream-client --help' for the options.\n", message.c_str());
@@ -133,10 +141,20 @@ int main(int argc, char** argv) {
   }
   if (o.frames > 0 && !o.pose.has_value()) return bad_option("--frames: needs --pose");
   if (!o.path.empty() && o.pose.has_value()) return bad_option("--path: cannot be given with --pose");
+  if (absl::StatusOr<vistream::client::ChannelSecurity> security =
+          vistream::client::LoadChannelSecurity(tls_ca, tls_cert, tls_key, token_file);
+      security.ok()) {
+    o.security = *std::move(security);
+  } else {
+    return bad_option(std::string(security.status().message()));
+  }
   if (memory_mb >= 0.0) o.memory_budget_bytes = static_cast<uint64_t>(memory_mb * 1048576.0);
   if (triangle_budget >= 0.0) o.triangle_budget = static_cast<uint64_t>(triangle_budget);
   o.upload_budget_bytes = static_cast<uint64_t>(upload_mb * 1048576.0);
   o.use_masks = !no_masks;
+  // gRPC's own log lines (a failed TLS handshake, once per retry) say less than the error this
+  // client prints; GRPC_VERBOSITY in the environment brings them back.
+  if (std::getenv("GRPC_VERBOSITY") == nullptr) gpr_set_log_function([](gpr_log_func_args*) {});
   o.cancel = &g_stop;
   o.log = [](const std::string& line) { std::fprintf(stderr, "vistream-client: %s\n", line.c_str()); };
   struct sigaction sa {};

@@ -13,7 +13,7 @@ namespace vistream::client {
 
 namespace v1 = vistream::v1;
 
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address, const ChannelSecurity& security) {
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 30000);
   args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
@@ -22,7 +22,7 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  return grpc::CreateCustomChannel(address, ChannelCredentialsFor(security), args);
 }
 
 namespace {
@@ -62,21 +62,35 @@ absl::Status ToAbsl(const grpc::Status& s) {
 }  // namespace
 
 absl::StatusOr<v1::ServerStats> Probe(const std::string& address, double timeout_s,
-                                      const std::atomic<bool>* cancel) {
-  std::shared_ptr<grpc::Channel> channel = MakeChannel(address);
-  // Wait for a connection in short steps, so that a cancel is heard at once.
+                                      const std::atomic<bool>* cancel, const ChannelSecurity& security) {
+  std::shared_ptr<grpc::Channel> channel = MakeChannel(address, security);
+  // Wait for a connection in short steps, so that a cancel is heard at once. The first failed
+  // connect is looked at once: a TLS mismatch (DiagnoseTls) is final, no wait cures it.
   const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  bool diagnosed = false;
+  auto tls_failure = [&](const std::string& why) {
+    return absl::UnavailableError(absl::StrCat("cannot connect to the vistream server at ", address, ": ", why));
+  };
   while (!channel->WaitForConnected(After(0.2)) && std::chrono::steady_clock::now() < until) {
     if (cancel != nullptr && cancel->load()) return absl::CancelledError("stopped while connecting");
+    if (!diagnosed && channel->GetState(false) == GRPC_CHANNEL_TRANSIENT_FAILURE) {
+      diagnosed = true;
+      if (const std::string why = DiagnoseTls(address, security, 2.0); !why.empty()) return tls_failure(why);
+    }
   }
   auto stub = v1::Walkthrough::NewStub(channel);
   grpc::ClientContext context;
+  Authorize(security, &context);
   context.set_deadline(After(std::max(1.0, std::chrono::duration<double>(until - std::chrono::steady_clock::now()).count())));
   context.set_wait_for_ready(true);  // ride out a refused first connect; the deadline bounds it
   v1::ServerStats stats;
   const grpc::Status st = stub->GetStats(&context, v1::StatsRequest(), &stats);
   if (!st.ok()) {
+    if (st.error_code() == grpc::StatusCode::UNAUTHENTICATED) return ExplainRefusal(ToAbsl(st), security, address);
     if (st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED || st.error_code() == grpc::StatusCode::UNAVAILABLE) {
+      // A TLS server may take the connection and then drop it (mutual TLS without a client
+      // certificate): look again at the end.
+      if (const std::string why = DiagnoseTls(address, security, 2.0); !why.empty()) return tls_failure(why);
       return absl::UnavailableError(absl::StrFormat("no vistream server answers at %s (waited %.0f s)", address,
                                                     timeout_s));
     }
@@ -107,7 +121,7 @@ absl::StatusOr<std::string> PickScene(const v1::ServerStats& stats, const std::s
 }
 
 Connection::Connection(ConnectionOptions options)
-    : options_(std::move(options)), channel_(MakeChannel(options_.address)),
+    : options_(std::move(options)), channel_(MakeChannel(options_.address, options_.security)),
       stub_(v1::Walkthrough::NewStub(channel_)) {}
 
 Connection::~Connection() { (void)Stop(); }
@@ -187,7 +201,7 @@ void Connection::Run() {
       break;
     }
     if (Final(st.error_code())) {
-      final_status_ = ToAbsl(st);
+      final_status_ = ExplainRefusal(ToAbsl(st), options_.security, options_.address);
       inbox_.push_back(SessionEnded{final_status_});
       break;
     }
@@ -207,6 +221,7 @@ grpc::Status Connection::RunSession(bool* answered) {
     if (stop_) return grpc::Status(grpc::StatusCode::CANCELLED, "stopped");
   }
   grpc::ClientContext context;
+  Authorize(options_.security, &context);
   auto stream = stub_->Session(&context);
   v1::ClientMessage hello;
   {

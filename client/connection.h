@@ -24,6 +24,7 @@
 #include <glm/vec3.hpp>
 #include <grpcpp/grpcpp.h>
 
+#include "client/channel_security.h"
 #include "proto/walkthrough.grpc.pb.h"
 #include "scenes/mesh.h"
 
@@ -38,6 +39,7 @@ struct ConnectionOptions {
   uint64_t credit_window_bytes = uint64_t{8} << 20;  // encoded geometry in flight at most
   double connect_timeout_s = 10.0;     // per attempt
   double max_backoff_s = 4.0;          // reconnect back-off doubles from 0.25 s up to this
+  ChannelSecurity security;            // TLS and the bearer token (client/channel_security.h)
 };
 
 // One decoded object: scene-local metres (z up), triangle list as the server sent it.
@@ -66,15 +68,18 @@ struct ConnectionStats {
 };
 
 // A channel to `address` as every client session uses it: keepalive every 30 s, 64 MiB
-// messages, quick reconnects (250 ms to 2 s), its own connection (no subchannel sharing).
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
+// messages, quick reconnects (250 ms to 2 s), its own connection (no subchannel sharing); TLS
+// when security.tls_ca is set. (The token goes on each call: Authorize.)
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address, const ChannelSecurity& security = {});
 
 // Checks that `address` answers as a vistream server of this protocol version and returns the
 // scene it serves. Errors (naming the address): UNAVAILABLE when nothing answers within
-// `timeout_s`, FAILED_PRECONDITION when it speaks another protocol version, CANCELLED as soon
-// as `cancel` (may be null) is set.
+// `timeout_s`, or at once when a TLS handshake is what fails (saying why: DiagnoseTls),
+// FAILED_PRECONDITION when it speaks another protocol version, UNAUTHENTICATED when it wants a
+// token or refuses this one (ExplainRefusal), CANCELLED as soon as `cancel` (may be null) is set.
 absl::StatusOr<vistream::v1::ServerStats> Probe(const std::string& address, double timeout_s,
-                                                const std::atomic<bool>* cancel = nullptr);
+                                                const std::atomic<bool>* cancel = nullptr,
+                                                const ChannelSecurity& security = {});
 
 // The scene to ask for (Hello.scene) from what `stats` (Probe) says the server at `address`
 // serves: `wanted` when it is one of them, else its only scene. Errors: NOT_FOUND naming the

@@ -32,8 +32,8 @@ double SessionRecord::CompletedAfter(uint32_t cell, double t) const {
   return at == it->second.end() ? -1.0 : *at;
 }
 
-SessionStream::SessionStream(const std::string& address)
-    : channel_(MakeChannel(address)), stub_(v1::Walkthrough::NewStub(channel_)) {}
+SessionStream::SessionStream(const std::string& address, const ChannelSecurity& security)
+    : channel_(MakeChannel(address, security)), stub_(v1::Walkthrough::NewStub(channel_)), security_(security) {}
 
 SessionStream::~SessionStream() {
   if (stream_ != nullptr && !finished_) {
@@ -54,6 +54,7 @@ v1::Hello SessionStream::HelloFor(const std::string& scene, std::vector<uint32_t
 void SessionStream::OpenStream() {
   channel_->WaitForConnected(std::chrono::system_clock::now() +
                              std::chrono::milliseconds(static_cast<int64_t>(kConnectTimeoutS * 1000)));
+  Authorize(security_, &context_);
   stream_ = stub_->Session(&context_);
 }
 

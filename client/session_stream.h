@@ -19,6 +19,7 @@
 #include <glm/vec3.hpp>
 #include <grpcpp/grpcpp.h>
 
+#include "client/channel_security.h"
 #include "proto/walkthrough.grpc.pb.h"
 
 namespace vistream::client {
@@ -65,7 +66,8 @@ struct SessionRecord {
 
 class SessionStream {
  public:
-  explicit SessionStream(const std::string& address);
+  // `security`: TLS and the bearer token (client/channel_security.h); none by default.
+  explicit SessionStream(const std::string& address, const ChannelSecurity& security = {});
   ~SessionStream();
 
   // Opens the session and sends `hello`; with `read` false nothing is read (a stalled client).
@@ -105,6 +107,7 @@ class SessionStream {
 
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<vistream::v1::Walkthrough::Stub> stub_;
+  const ChannelSecurity security_;
   grpc::ClientContext context_;
   std::unique_ptr<grpc::ClientReaderWriter<vistream::v1::ClientMessage, vistream::v1::ServerMessage>> stream_;
   std::thread reader_;

@@ -101,7 +101,7 @@ class Loop {
 };
 
 absl::Status Loop::Prepare() {
-  absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s, opt_.cancel);
+  absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s, opt_.cancel, opt_.security);
   if (!stats.ok()) return stats.status();
   absl::StatusOr<std::string> scene = PickScene(*stats, opt_.scene, opt_.server);
   if (!scene.ok()) return scene.status();
@@ -223,6 +223,7 @@ absl::Status Loop::Prepare() {
   co.memory_budget_bytes = memory_budget_;
   co.triangle_budget = triangle_budget_;
   co.connect_timeout_s = opt_.connect_timeout_s;
+  co.security = opt_.security;
   store_ = std::make_unique<ObjectStore>(memory_budget_);
   if (opt_.draw_everything) return PreloadEverything();
   connection_ = std::make_unique<Connection>(co);

@@ -17,6 +17,7 @@
 #include <glm/vec3.hpp>
 
 #include "client/cell_margins.h"
+#include "client/channel_security.h"
 #include "scenes/scene.h"
 
 namespace vistream::client {
@@ -28,6 +29,7 @@ struct FixedPose {
 
 struct WalkthroughOptions {
   std::string server = "127.0.0.1:50051";
+  ChannelSecurity security;     // TLS and the bearer token (client/channel_security.h)
   bool headless = false;
   std::string scene;          // the server's scene to walk (ServerStats.scenes); empty: its only one
   std::string path;           // a walk of the scene's catalog entry; empty: the first (headless)

@@ -287,7 +287,7 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
       {"catalog", r.Folder(&c.catalog)},
       {"grace_s", r.Number(&c.grace_s, 0.0, 3600.0)},
       {"limits", r.Subtable({
-                     {"hello_timeout_s", r.Number(&c.hello_timeout_s, 0.0, 86400.0, true)},
+                     {"hello_timeout_s", r.Number(&c.hello_timeout_s, 0.0, 86400.0)},
                      {"max_pose_rate_hz", r.Number(&c.max_pose_rate_hz, 0.1, 100000.0)},
                      {"max_sessions_per_address", r.Whole(&c.max_sessions_per_address, 0, 100000)},
                      {"max_sessions_per_token", r.Whole(&c.max_sessions_per_token, 0, 100000)},

@@ -48,7 +48,7 @@ struct ServerConfig {
   double grace_s = 5.0;                    // seconds sessions get to end on SIGTERM
 
   // [limits]
-  double hello_timeout_s = 30.0;           // a stream without Hello by then ends DEADLINE_EXCEEDED
+  double hello_timeout_s = 30.0;           // a stream without Hello by then ends DEADLINE_EXCEEDED; 0: never
   double max_pose_rate_hz = 120.0;
   uint64_t max_sessions_per_address = 0;   // 0: no limit
   uint64_t max_sessions_per_token = 0;     // 0: no limit

@@ -32,6 +32,7 @@
 #include "server/link_model.h"
 #include "server/metrics.h"
 #include "server/metrics_http.h"
+#include "server/security.h"
 #include "server/served_scene.h"
 #include "server/service_metrics.h"
 #include "server/server_config.h"
@@ -76,6 +77,22 @@ void GrpcLog(gpr_log_func_args* args) {
 
 // A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
 using vistream::cli::FiniteRange;
+
+// SIGHUP re-reads the token file (main polls the flag); the sessions open stay open.
+std::atomic<bool> g_reload{false};
+
+void ReloadTokens(vistream::server::TokenStore* tokens, EventLog* log) {
+  if (tokens == nullptr) {
+    log->Write(0, "sighup_ignored", {{"reason", "no --tokens file to reload"}});
+    return;
+  }
+  if (const absl::Status st = tokens->Reload(); !st.ok()) {
+    log->Write(0, "tokens_reload_failed",
+               {{"error", std::string(st.message())}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+    return;
+  }
+  log->Write(0, "tokens_reloaded", {{"file", tokens->path()}, {"tenants", static_cast<uint64_t>(tokens->size())}});
+}
 
 }  // namespace
 
@@ -124,8 +141,8 @@ int main(int argc, char** argv) {
   app.add_option("--grace", cli.grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
   app.add_option("--hello-timeout", cli.hello_timeout_s,
-                 "seconds a new stream may take to send its Hello (then DEADLINE_EXCEEDED)")
-      ->check(FiniteRange(0.001, 86400))->capture_default_str();
+                 "seconds a new stream may take to send its Hello (then DEADLINE_EXCEEDED; 0: no limit)")
+      ->check(FiniteRange(0, 86400))->capture_default_str();
   app.add_option("--max-sessions-per-address", cli.max_sessions_per_address,
                  "sessions at once from one client address (0: no limit)")
       ->check(vistream::cli::WholeRange(0, 100000))->capture_default_str();
@@ -259,6 +276,33 @@ int main(int argc, char** argv) {
   server_options.listen = config.listen;
   server_options.max_sessions = config.max_sessions;
   server_options.limits.max_pose_rate_hz = config.max_pose_rate_hz;
+  server_options.hello_timeout_s = config.hello_timeout_s;
+  server_options.max_sessions_per_address = config.max_sessions_per_address;
+  server_options.max_sessions_per_token = config.max_sessions_per_token;
+  {
+    // TLS files and the token file are checked before any scene loads: a bad one exits 2,
+    // naming the key (and the configuration file) or the option.
+    const std::string in_file = config.path.empty() ? "" : config.path + ": ";
+    const vistream::server::TlsSettings tls{config.tls_cert, config.tls_key, config.tls_client_ca, config.tls_insecure};
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+        vistream::server::ServerCredentialsFor(tls, config.listen);
+    if (!credentials.ok()) {
+      std::fprintf(stderr, "vistream-server: error: %s%s\n", in_file.c_str(),
+                   std::string(credentials.status().message()).c_str());
+      return 2;
+    }
+    server_options.credentials = *std::move(credentials);
+    if (!config.tokens.empty()) {
+      absl::StatusOr<std::shared_ptr<vistream::server::TokenStore>> tokens =
+          vistream::server::TokenStore::Load(config.tokens);
+      if (!tokens.ok()) {
+        std::fprintf(stderr, "vistream-server: error: %s%s\n", given("--tokens") ? "--tokens: " : "auth.tokens: ",
+                     std::string(tokens.status().message()).c_str());
+        return 2;
+      }
+      server_options.tokens = *std::move(tokens);
+    }
+  }
 
   // SIGTERM and SIGINT only raise a flag (whichever thread takes them); main polls it.
   struct sigaction action {};
@@ -274,6 +318,10 @@ int main(int argc, char** argv) {
   sigemptyset(&action.sa_mask);
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+  struct sigaction hup {};
+  hup.sa_handler = [](int) { g_reload.store(true); };
+  sigemptyset(&hup.sa_mask);
+  sigaction(SIGHUP, &hup, nullptr);
 
   std::FILE* log_out = stderr;
   if (!config.log_file.empty()) {
@@ -288,6 +336,14 @@ int main(int argc, char** argv) {
   g_log = &log;
   gpr_set_log_function(GrpcLog);
   LogProgress progress(&log);
+  const char* tls_mode = config.tls_cert.empty() ? "off" : (config.tls_client_ca.empty() ? "on" : "mutual");
+  if (server_options.tokens == nullptr) {
+    log.Write(0, "security", {{"tls", tls_mode}, {"tokens", "off"}});
+  } else {
+    log.Write(0, "security", {{"tls", tls_mode},
+                              {"tokens", server_options.tokens->path()},
+                              {"tenants", static_cast<uint64_t>(server_options.tokens->size())}});
+  }
   if (!config.path.empty()) log.Write(0, "config", {{"file", config.path}, {"scenes", config.scenes.size()}});
 
   // One pool of PVS workers for every scene, shared round robin (server/pvs_scheduler.h).
@@ -406,7 +462,10 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}, {"scenes", scenes.size()}});
 
-  while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  while (!g_stop) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (g_reload.exchange(false)) ReloadTokens(server_options.tokens.get(), &log);
+  }
   log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(config.grace_s);

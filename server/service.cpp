@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
@@ -403,8 +404,10 @@ void SessionLink::End(const grpc::Status& status) {
 }
 
 WalkthroughService::WalkthroughService(std::vector<ServedScene*> scenes, const ServerOptions& options, EventLog* log)
-    : scenes_{std::move(scenes)}, options_(options), log_(log), start_s_(SteadySeconds()) {
+    : scenes_{std::move(scenes)}, options_(options), log_(log), start_s_(SteadySeconds()),
+      quota_(options.max_sessions_per_address, options.max_sessions_per_token) {
   if (options_.link.has_value()) timer_ = std::make_unique<LinkTimer>();
+  if (options_.hello_timeout_s > 0.0) hello_watchdog_ = std::make_unique<HelloWatchdog>(options_.hello_timeout_s);
 }
 
 WalkthroughService::~WalkthroughService() = default;
@@ -415,6 +418,20 @@ void WalkthroughService::WakeAt(double at_s, const std::shared_ptr<SessionLink>&
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService::Session(
     grpc::CallbackServerContext* context) {
+  // Security (server/security.h, server/admission.h): the token before any work.
+  std::string tenant;
+  if (options_.tokens != nullptr) {
+    absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata());
+    if (!t.ok()) {
+      if (log_ != nullptr) {
+        log_->Write(0, "session_refused",
+                    {{"peer", context->peer()}, {"reason", std::string(t.status().message())}});
+      }
+      return new RefusedReactor(ToGrpc(t.status()));
+    }
+    tenant = *std::move(t);
+  }
+  const std::string host = PeerHost(context->peer());
   std::lock_guard lock(mu_);
   if (draining_) {
     if (options_.metrics != nullptr) options_.metrics->SessionRefused("draining");
@@ -429,6 +446,12 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
         grpc::StatusCode::RESOURCE_EXHAUSTED,
         absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
   }
+  if (absl::Status q = quota_.Admit(host, tenant); !q.ok()) {
+    if (log_ != nullptr) {
+      log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", std::string(q.message())}});
+    }
+    return new RefusedReactor(ToGrpc(q));
+  }
   const uint64_t id = next_id_++;
   ++sessions_total_;
   auto link = std::make_shared<SessionLink>();
@@ -439,8 +462,21 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
       scenes_.scenes.size() == 1
           ? Session::Create(id, scenes_.scenes[0], options_.limits, log_, [link] { link->Pump(); }, std::move(seams))
           : Session::Create(id, &scenes_, options_.limits, log_, [link] { link->Pump(); }, std::move(seams));
-  sessions_[id] = Entry{session, link, context->peer()};
-  if (log_ != nullptr) log_->Write(id, "session_start", {{"peer", context->peer()}});
+  sessions_[id] = Entry{session, link, context->peer(), host, tenant};
+  if (log_ != nullptr) {
+    if (tenant.empty()) {
+      log_->Write(id, "session_start", {{"peer", context->peer()}});
+    } else {
+      log_->Write(id, "session_start", {{"peer", context->peer()}, {"tenant", tenant}});
+    }
+  }
+  if (hello_watchdog_ != nullptr) {
+    hello_watchdog_->Watch(session, [weak = std::weak_ptr<SessionLink>(link), t = options_.hello_timeout_s] {
+      if (std::shared_ptr<SessionLink> l = weak.lock(); l != nullptr) {
+        l->End(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED, absl::StrFormat("no Hello within %g s", t)));
+      }
+    });
+  }
   return new SessionReactor(this, session, link);
 }
 
@@ -451,6 +487,7 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
     auto it = sessions_.find(id);
     if (it == sessions_.end()) return;
     stats = it->second.session->Stats();
+    quota_.Release(it->second.host, it->second.tenant);
     bytes_sent_ended_ += stats.bytes_sent();
     if (!stats.scene().empty()) {
       SceneTotals& t = scene_totals_[stats.scene()];
@@ -496,8 +533,14 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
 
 grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerContext* context,
                                                        const v1::StatsRequest*, v1::ServerStats* response) {
-  *response = Stats();
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  if (options_.tokens != nullptr) {
+    if (absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata()); !t.ok()) {
+      reactor->Finish(ToGrpc(t.status()));
+      return reactor;
+    }
+  }
+  *response = Stats();
   reactor->Finish(grpc::Status::OK);
   return reactor;
 }
@@ -602,12 +645,17 @@ absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(std:
                                                    "(0: any free port), e.g. 127.0.0.1:50051"));
   }
   if (options.max_sessions == 0) return absl::InvalidArgumentError("--max-sessions must be at least 1");
+  if (!(options.hello_timeout_s >= 0.0 && options.hello_timeout_s < 1e9)) {
+    return absl::InvalidArgumentError("--hello-timeout must be a number of seconds from 0 (none) up");
+  }
   std::unique_ptr<WalkthroughServer> s(new WalkthroughServer());
   s->service_ = std::make_unique<WalkthroughService>(scenes, options, log);
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
+  builder.AddListeningPort(options.listen,
+                           options.credentials != nullptr ? options.credentials : grpc::InsecureServerCredentials(),
+                           &s->port_);
   builder.RegisterService(s->service_.get());
   size_t max_receive = options.max_receive_bytes;
   if (max_receive == 0) {

@@ -15,8 +15,10 @@
 #include <grpcpp/grpcpp.h>
 
 #include "proto/walkthrough.grpc.pb.h"
+#include "server/admission.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
+#include "server/security.h"
 #include "server/served_scene.h"
 #include "server/session.h"
 
@@ -40,6 +42,14 @@ struct ServerOptions {
   // Session n's uplink draws from link_seed + 2(n - 1), its downlink from one more (session 1
   // as `vistream simulate --seed link_seed`).
   uint64_t link_seed = 1;
+  // Security (server/security.h). Credentials: what ServerCredentialsFor gives; null: plaintext.
+  std::shared_ptr<grpc::ServerCredentials> credentials;
+  // Null: no authentication; else Session and GetStats need one of its tokens (UNAUTHENTICATED
+  // otherwise, before any work). Health is open either way.
+  std::shared_ptr<TokenStore> tokens;
+  size_t max_sessions_per_address = 0;  // sessions at once from one client IP address; 0: no limit
+  size_t max_sessions_per_token = 0;    // sessions at once per tenant; 0: no limit
+  double hello_timeout_s = 30.0;        // a stream without Hello this long ends DEADLINE_EXCEEDED; 0: never
 };
 
 // What one session's emulated link did (its session_end log line).
@@ -106,8 +116,11 @@ class WalkthroughService final
     std::shared_ptr<server::Session> session;
     std::shared_ptr<SessionLink> link;
     std::string peer;
+    std::string host, tenant;  // as counted by quota_
   };
   std::map<uint64_t, Entry> sessions_;
+  SessionQuota quota_;
+  std::unique_ptr<HelloWatchdog> hello_watchdog_;  // none without a Hello timeout
   std::unique_ptr<LinkTimer> timer_;  // with link emulation: wakes sessions when their link is due
 };
 

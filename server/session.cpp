@@ -127,6 +127,11 @@ absl::Status Session::OnMessage(const v1::ClientMessage& message, double now) {
   return absl::InvalidArgumentError("empty ClientMessage: expected hello, pose or credit");
 }
 
+bool Session::greeted() const {
+  std::lock_guard lock(mu_);
+  return hello_;
+}
+
 absl::Status Session::OnHello(const v1::Hello& hello) {
   if (hello_) return absl::FailedPreconditionError("second Hello: a session says Hello exactly once");
   if (hello.protocol_version() != v1::PROTOCOL_VERSION_CURRENT) {

@@ -138,7 +138,7 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
       {"grace_s = \"5\"", ":1: grace_s: expected a number, got a string"},
       {"grace_s = 4000", ":1: grace_s: 4000 is out of range (0 to 3600)"},
       {"grace_s = nan", ":1: grace_s: nan is out of range"},
-      {"[limits]\nhello_timeout_s = 0", ":2: limits.hello_timeout_s: 0 is out of range (above 0 to 86400)"},
+      {"[limits]\nhello_timeout_s = -1", ":2: limits.hello_timeout_s: -1 is out of range (0 to 86400)"},
       {"[limits]\nmax_pose_rate_hz = 0", ":2: limits.max_pose_rate_hz: 0 is out of range (0.1 to 100000)"},
       {"[limits]\nmax_sessions_per_address = -3", ":2: limits.max_sessions_per_address: -3 is out of range"},
       {"[limits]\nmax_sessions_per_token = true", ":2: limits.max_sessions_per_token: expected a whole number"},

@@ -1,0 +1,103 @@
+#include "server/admission.h"
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_replace.h>
+
+namespace vistream::server {
+
+std::string PeerHost(std::string_view peer) {
+  const std::string p = absl::StrReplaceAll(absl::string_view(peer.data(), peer.size()),
+                                            {{"%5B", "["}, {"%5D", "]"}, {"%5b", "["}, {"%5d", "]"}});
+  std::string_view rest(p);
+  if (rest.rfind("ipv4:", 0) == 0) {
+    rest.remove_prefix(5);
+    return std::string(rest.substr(0, rest.rfind(':')));
+  }
+  if (rest.rfind("ipv6:", 0) == 0) {
+    rest.remove_prefix(5);
+    if (!rest.empty() && rest.front() == '[') {
+      const size_t close = rest.find(']');
+      if (close != std::string_view::npos) return std::string(rest.substr(1, close - 1));
+    }
+    return std::string(rest.substr(0, rest.rfind(':')));
+  }
+  return p;
+}
+
+absl::Status SessionQuota::Admit(const std::string& host, const std::string& tenant) {
+  std::lock_guard lock(mu_);
+  if (per_address_ > 0 && by_host_[host] >= per_address_) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "too many sessions from ", host, ": at most ", per_address_,
+        " at once per client address (limits.max_sessions_per_address, --max-sessions-per-address)"));
+  }
+  if (per_tenant_ > 0 && !tenant.empty() && by_tenant_[tenant] >= per_tenant_) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "too many sessions for tenant '", tenant, "': at most ", per_tenant_,
+        " at once per token (limits.max_sessions_per_token, --max-sessions-per-token)"));
+  }
+  ++by_host_[host];
+  if (!tenant.empty()) ++by_tenant_[tenant];
+  return absl::OkStatus();
+}
+
+void SessionQuota::Release(const std::string& host, const std::string& tenant) {
+  std::lock_guard lock(mu_);
+  if (auto it = by_host_.find(host); it != by_host_.end() && --it->second == 0) by_host_.erase(it);
+  if (tenant.empty()) return;
+  if (auto it = by_tenant_.find(tenant); it != by_tenant_.end() && --it->second == 0) by_tenant_.erase(it);
+}
+
+size_t SessionQuota::sessions_from(const std::string& host) const {
+  std::lock_guard lock(mu_);
+  auto it = by_host_.find(host);
+  return it == by_host_.end() ? 0 : it->second;
+}
+
+size_t SessionQuota::sessions_of(const std::string& tenant) const {
+  std::lock_guard lock(mu_);
+  auto it = by_tenant_.find(tenant);
+  return it == by_tenant_.end() ? 0 : it->second;
+}
+
+HelloWatchdog::HelloWatchdog(double timeout_s) : timeout_s_(timeout_s), thread_([this] { Run(); }) {}
+
+HelloWatchdog::~HelloWatchdog() {
+  {
+    std::lock_guard lock(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  thread_.join();
+}
+
+void HelloWatchdog::Watch(std::weak_ptr<Session> session, std::function<void()> expire) {
+  const auto due = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                          std::chrono::duration<double>(timeout_s_));
+  {
+    std::lock_guard lock(mu_);
+    watched_.push_back(Watched{due, std::move(session), std::move(expire)});
+  }
+  cv_.notify_all();
+}
+
+void HelloWatchdog::Run() {
+  std::unique_lock lock(mu_);
+  while (!stop_) {
+    if (watched_.empty()) {
+      cv_.wait(lock);
+      continue;
+    }
+    if (const auto due = watched_.front().due; due > std::chrono::steady_clock::now()) {
+      cv_.wait_until(lock, due);
+      continue;
+    }
+    Watched w = std::move(watched_.front());
+    watched_.pop_front();
+    lock.unlock();
+    if (std::shared_ptr<Session> s = w.session.lock(); s != nullptr && !s->greeted()) w.expire();
+    lock.lock();
+  }
+}
+
+}  // namespace vistream::server
