@@ -18,6 +18,7 @@ PACKAGES=(
   libcairo2-dev gnuplot-nox fonts-dejavu-core   # figures: maps through Cairo, plots through gnuplot
   libtomlplusplus-dev   # the server's configuration file
   libcpp-httplib-dev prometheus   # the server's /metrics and /healthz; promtool checks the exposition in a test
+  libssl-dev openssl   # TLS: checking PEM files (server and client), certificates made by the tests and bench server --tls
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}

@@ -1,7 +1,9 @@
 // vistream bench server: N simulated clients walk random street-level paths in real time
 // through a real vistream-server on loopback, and report what a deployment cares about: cells
 // entered before their PVS and geometry arrived (late), crossing latency, PVS computations and
-// cache hits, bytes per crossing with and without meshoptimizer, and the server's RSS.
+// cache hits, bytes per crossing with and without meshoptimizer, and the server's RSS. With
+// --tls on (or both, side by side in one run) the server serves TLS with a certificate made for
+// the run by `openssl`, and every walker connects with its CA.
 
 #include <signal.h>
 #include <sys/prctl.h>
@@ -23,6 +25,8 @@
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
+#include "client/channel_security.h"
+#include "client/connection.h"
 #include "client/session_stream.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
@@ -45,7 +49,30 @@ struct BenchServerArgs {
   uint64_t seed = 1;
   std::string log;
   bool json = false;
+  std::string tls = "off";  // off | on | both
 };
+
+// A CA and a server certificate for 127.0.0.1 made with `openssl` in `dir`: the files' paths.
+struct RunCertificates {
+  std::string ca, cert, key;
+};
+
+absl::StatusOr<RunCertificates> MakeCertificates(const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  const std::string script = absl::StrFormat(
+      "set -e; cd '%s'; "
+      "openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.crt -days 2 -subj /CN=vistream-bench-ca; "
+      "openssl req -newkey rsa:2048 -nodes -keyout server.key -out server.csr -subj /CN=127.0.0.1; "
+      "printf 'subjectAltName=IP:127.0.0.1,DNS:localhost\n' > san.ext; "
+      "openssl x509 -req -in server.csr -CA ca.crt -CAkey ca.key -CAcreateserial -out server.crt -days 2 "
+      "-extfile san.ext",
+      dir);
+  const std::string command = "bash -c \"" + script + "\" >/dev/null 2>&1";
+  if (std::system(command.c_str()) != 0) {
+    return absl::UnavailableError("--tls: making a certificate with openssl failed (is `openssl` installed?)");
+  }
+  return RunCertificates{dir + "/ca.crt", dir + "/server.crt", dir + "/server.key"};
+}
 
 double SteadySeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -150,11 +177,11 @@ std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibi
   return s;
 }
 
-SessionResult RunSession(const std::string& address, const std::string& scene_name, const Streets& streets,
-                         const visibility::ViewcellGrid& grid, uint64_t seed, double speed, double seconds,
-                         const std::atomic<bool>& cancel) {
+SessionResult RunSession(const std::string& address, const client::ChannelSecurity& security,
+                         const std::string& scene_name, const Streets& streets, const visibility::ViewcellGrid& grid,
+                         uint64_t seed, double speed, double seconds, const std::atomic<bool>& cancel) {
   SessionResult out;
-  client::SessionStream s(address);
+  client::SessionStream s(address, security);
   s.set_keep_geometry(false);
   s.Start(client::SessionStream::HelloFor(scene_name));
   s.SendCredit(uint64_t{1} << 50);
@@ -267,9 +294,9 @@ uint64_t RssKiB(pid_t pid) {
   return 0;
 }
 
-int BenchServer(const BenchServerArgs& a) {
-  if (a.json) ToolProgress().set_quiet(true);
-  InstallCancelHandler();
+// One run: a server (TLS when `tls`), the walkers, their figures as JSON in `*j`. 0 or the
+// tool's exit code.
+int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
   // The server: the vistream-server beside this executable, on a free loopback port.
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe");
   const std::string server_bin = (self.parent_path() / "vistream-server").string();
@@ -277,6 +304,25 @@ int BenchServer(const BenchServerArgs& a) {
   const std::string log = a.log.empty() ? "/dev/null" : a.log;
   // Cells of the catalog entry's size unless --cell-size says otherwise, on both sides.
   const scenes::ViewcellSpec grid_spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
+  client::ChannelSecurity security;
+  std::vector<std::string> tls_args;
+  const std::string dir =
+      (std::filesystem::temp_directory_path() / ("vistream-bench-tls-" + std::to_string(getpid()))).string();
+  struct RemoveDir {  // the run's certificates go with it
+    std::string dir;
+    ~RemoveDir() {
+      std::error_code ignored;
+      std::filesystem::remove_all(dir, ignored);
+    }
+  } remove_dir{tls ? dir : ""};
+  if (tls) {
+    absl::StatusOr<RunCertificates> certs = MakeCertificates(dir);
+    if (!certs.ok()) return Fail(certs.status());
+    absl::StatusOr<client::ChannelSecurity> loaded = client::LoadChannelSecurity(certs->ca, "", "", "");
+    if (!loaded.ok()) return Fail(loaded.status());
+    security = *loaded;
+    tls_args = {"--tls-cert", certs->cert, "--tls-key", certs->key};
+  }
   int out[2];
   if (pipe(out) != 0) return Fail(absl::InternalError("pipe failed"));
   const pid_t pid = fork();
@@ -292,6 +338,7 @@ int BenchServer(const BenchServerArgs& a) {
                                      "--res", std::to_string(a.res),
                                      "--threads", std::to_string(a.threads),
                                      "--max-sessions", std::to_string(a.sessions + 8)};
+    args.insert(args.end(), tls_args.begin(), tls_args.end());
     std::vector<char*> argv;
     for (std::string& s : args) argv.push_back(s.data());
     argv.push_back(nullptr);
@@ -344,16 +391,19 @@ int BenchServer(const BenchServerArgs& a) {
     }
   });
   std::vector<SessionResult> results(a.sessions);
+  const double walk_start = SteadySeconds();
   {
     // Progress in seconds of the walk (start-up first, whose length depends on the server).
     const uint64_t total = static_cast<uint64_t>(std::ceil(a.seconds));
-    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h", a.sessions, a.speed_kmh), total);
+    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h%s", a.sessions, a.speed_kmh,
+                                                         tls ? " (TLS)" : ""),
+                              total);
     std::atomic<size_t> finished{0};
     std::vector<std::jthread> threads;
     for (size_t k = 0; k < a.sessions; ++k) {
       threads.emplace_back([&, k] {
-        results[k] = RunSession(address, scene->name, streets, *grid, a.seed * 1000003 + k, a.speed_kmh / 3.6,
-                                a.seconds, CancelFlag());
+        results[k] = RunSession(address, security, scene->name, streets, *grid, a.seed * 1000003 + k,
+                                a.speed_kmh / 3.6, a.seconds, CancelFlag());
         ++finished;
       });
     }
@@ -371,10 +421,11 @@ int BenchServer(const BenchServerArgs& a) {
     threads.clear();
     progress.Finish();
   }
+  const double walk_s = SteadySeconds() - walk_start;
   v1::ServerStats stats;
   grpc::Status stats_status;
   {
-    v1::Walkthrough::Stub stub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+    v1::Walkthrough::Stub stub(client::MakeChannel(address, security));
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
     stats_status = stub.GetStats(&ctx, v1::StatsRequest(), &stats);
@@ -404,8 +455,9 @@ int BenchServer(const BenchServerArgs& a) {
   }
   const double hits = static_cast<double>(stats.pvs_cache_hits());
   const double computed = static_cast<double>(stats.pvs_computed());
-  nlohmann::json j;
+  nlohmann::json& j = *result;
   j["scene"] = scene->name;
+  j["tls"] = tls;
   j["sessions"] = a.sessions;
   j["sessions_started"] = started;
   j["sessions_without_late_cells"] = without_late;
@@ -427,13 +479,14 @@ int BenchServer(const BenchServerArgs& a) {
   j["bytes_per_crossing_raw"] = crossings > 0 ? static_cast<double>(raw) / static_cast<double>(crossings) : 0.0;
   j["encoded_fraction"] = raw > 0 ? static_cast<double>(bytes) / static_cast<double>(raw) : 0.0;
   j["rss_mb"] = static_cast<double>(max_rss.load()) / 1024.0;
+  j["bytes_sent"] = stats.bytes_sent();
+  j["walk_s"] = walk_s;
+  j["bytes_per_s"] = walk_s > 0.0 ? static_cast<double>(stats.bytes_sent()) / walk_s : 0.0;
   j["server_exit_code"] = server_exit;
   if (!first_error.empty()) j["first_error"] = first_error;
-  if (a.json) {
-    std::printf("%s\n", j.dump(2).c_str());
-  } else {
-    std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2\n", scene->name.c_str(), a.sessions,
-                a.speed_kmh, a.seconds, grid->cell_size(), a.res);
+  if (!a.json) {
+    std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2%s\n", scene->name.c_str(), a.sessions,
+                a.speed_kmh, a.seconds, grid->cell_size(), a.res, tls ? ", TLS" : "");
     std::printf("  sessions started %llu, without a late cell %llu; cells entered %llu, late %llu\n",
                 static_cast<unsigned long long>(started), static_cast<unsigned long long>(without_late),
                 static_cast<unsigned long long>(entered), static_cast<unsigned long long>(late));
@@ -445,6 +498,8 @@ int BenchServer(const BenchServerArgs& a) {
     std::printf("  bytes per crossing %.0f encoded, %.0f raw (%.3f); server RSS %.0f MiB\n",
                 j["bytes_per_crossing"].get<double>(), j["bytes_per_crossing_raw"].get<double>(),
                 j["encoded_fraction"].get<double>(), j["rss_mb"].get<double>());
+    std::printf("  %.0f bytes/s sent (%llu bytes in %.1f s)\n", j["bytes_per_s"].get<double>(),
+                static_cast<unsigned long long>(stats.bytes_sent()), walk_s);
     if (!first_error.empty()) std::printf("  first session error: %s\n", first_error.c_str());
   }
   // A run whose server or sessions failed measured something else: say so and fail.
@@ -453,6 +508,39 @@ int BenchServer(const BenchServerArgs& a) {
     return Fail(absl::UnavailableError("the server's statistics are missing: " + stats_status.error_message()));
   }
   if (!first_error.empty()) return Fail(absl::UnavailableError("a session failed: " + first_error));
+  return 0;
+}
+
+int BenchServer(const BenchServerArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  InstallCancelHandler();
+  if (a.tls != "both") {
+    nlohmann::json j;
+    if (const int rc = RunOnce(a, a.tls == "on", &j); rc != 0) return rc;
+    if (a.json) std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  // Side by side in one run: plaintext, then TLS, the same walkers (same seed).
+  nlohmann::json plain, tls;
+  if (const int rc = RunOnce(a, false, &plain); rc != 0) return rc;
+  if (const int rc = RunOnce(a, true, &tls); rc != 0) return rc;
+  auto ratio = [](const nlohmann::json& x, const nlohmann::json& y, const char* key) {
+    const double d = y[key].get<double>();
+    return d > 0.0 ? x[key].get<double>() / d : 0.0;
+  };
+  nlohmann::json j;
+  j["runs"] = {plain, tls};
+  j["tls_over_plain"] = {{"bytes_per_s", ratio(tls, plain, "bytes_per_s")},
+                         {"crossing_p50_ms", ratio(tls, plain, "crossing_p50_ms")},
+                         {"crossing_p99_ms", ratio(tls, plain, "crossing_p99_ms")},
+                         {"rss_mb", ratio(tls, plain, "rss_mb")}};
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    std::printf("TLS over plaintext: bytes/s %.3f, crossing p50 %.3f, p99 %.3f, server RSS %.3f\n",
+                j["tls_over_plain"]["bytes_per_s"].get<double>(), j["tls_over_plain"]["crossing_p50_ms"].get<double>(),
+                j["tls_over_plain"]["crossing_p99_ms"].get<double>(), j["tls_over_plain"]["rss_mb"].get<double>());
+  }
   return 0;
 }
 
@@ -476,6 +564,11 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();
   c->add_option("--log", args->log, "write the server's log here");
   c->add_flag("--json", args->json, "print one JSON object");
+  c->add_option("--tls", args->tls,
+                "off | on | both: serve TLS (a certificate made for the run with openssl); both: plaintext and TLS "
+                "side by side, with their ratios")
+      ->check(CLI::IsMember({"off", "on", "both"}))
+      ->capture_default_str();
   c->callback([args, done] { done(BenchServer(*args)); });
 }
 
