@@ -40,7 +40,7 @@ struct RunResult {
   std::string out;     // stdout and stderr
 };
 
-RunResult Run(const std::string& command) {
+RunResult Shell(const std::string& command) {
   RunResult r;
   std::FILE* p = popen((command + " 2>&1").c_str(), "r");
   if (p == nullptr) return r;
@@ -178,23 +178,23 @@ class Package : public ::testing::Test {
 
     const Clock::time_point install_start = Clock::now();
     const RunResult install =
-        Run(std::string(CMAKE_COMMAND_PATH) + " --install " + Quote(VISTREAM_BUILD_DIR) + " --prefix " + Quote(prefix_));
+        Shell(std::string(CMAKE_COMMAND_PATH) + " --install " + Quote(VISTREAM_BUILD_DIR) + " --prefix " + Quote(prefix_));
     ASSERT_EQ(install.exit_code, 0) << install.out;
     std::printf("cmake --install: %.1f s\n", SecondsSince(install_start));
 
-    const RunResult arch = Run("dpkg --print-architecture");
+    const RunResult arch = Shell("dpkg --print-architecture");
     ASSERT_EQ(arch.exit_code, 0) << arch.out;
     deb_ = dir_ / "deb" / ("vistream_" VISTREAM_VERSION "_" + arch.out.substr(0, arch.out.find('\n')) + ".deb");
     // cpack's staging folder goes to -B as well, so the build folder is left as it was.
     const Clock::time_point pack_start = Clock::now();
-    const RunResult pack = Run("cd " + Quote(dir_) + " && " + CPACK_COMMAND_PATH + " -G DEB --config " +
+    const RunResult pack = Shell("cd " + Quote(dir_) + " && " + CPACK_COMMAND_PATH + " -G DEB --config " +
                                Quote(fs::path(VISTREAM_BUILD_DIR) / "CPackConfig.cmake") + " -B " + Quote(dir_ / "deb"));
     ASSERT_EQ(pack.exit_code, 0) << pack.out;
     ASSERT_TRUE(fs::exists(deb_)) << "no " << deb_ << "; cpack said:\n" << pack.out;
     std::printf("cpack -G DEB: %.1f s, %s: %.1f MB\n", SecondsSince(pack_start), deb_.filename().c_str(),
                 static_cast<double>(fs::file_size(deb_)) / 1e6);
 
-    const RunResult extract = Run("dpkg-deb -x " + Quote(deb_) + " " + Quote(root_));
+    const RunResult extract = Shell("dpkg-deb -x " + Quote(deb_) + " " + Quote(root_));
     ASSERT_EQ(extract.exit_code, 0) << extract.out;
   }
 
@@ -220,7 +220,7 @@ TEST_F(Package, InstallPutsTheIssuesFilesBelowThePrefixAndNothingElse) {
 }
 
 TEST_F(Package, DebIsNamedForTheVersionAndHoldsTheSameTreeUnderUsrAndEtc) {
-  const RunResult list = Run("dpkg-deb -c " + Quote(deb_));
+  const RunResult list = Shell("dpkg-deb -c " + Quote(deb_));
   ASSERT_EQ(list.exit_code, 0) << list.out;
   std::printf("%s (%ju bytes):\n%s", deb_.filename().c_str(), static_cast<uintmax_t>(fs::file_size(deb_)),
               list.out.c_str());
@@ -240,7 +240,7 @@ TEST_F(Package, DebIsNamedForTheVersionAndHoldsTheSameTreeUnderUsrAndEtc) {
 }
 
 TEST_F(Package, DependsAreTheDebianPackagesOfTheLinkedLibrariesAndAdduser) {
-  const RunResult depends = Run("dpkg-deb -f " + Quote(deb_) + " Depends");
+  const RunResult depends = Shell("dpkg-deb -f " + Quote(deb_) + " Depends");
   ASSERT_EQ(depends.exit_code, 0) << depends.out;
   std::printf("Depends: %s", depends.out.c_str());
   // "adduser, libabsl20220623 (>= 0~20220623.0-1), libc6 (>= 2.34), ..."
@@ -253,7 +253,7 @@ TEST_F(Package, DependsAreTheDebianPackagesOfTheLinkedLibrariesAndAdduser) {
     names.insert(name);
     EXPECT_FALSE(name.ends_with("-dev")) << name;
     // A real Debian package: the one this machine has installed under that name.
-    const RunResult installed = Run("dpkg-query -W -f='${Status}' " + name);
+    const RunResult installed = Shell("dpkg-query -W -f='${Status}' " + name);
     EXPECT_NE(installed.out.find("install ok installed"), std::string::npos) << name << ": " << installed.out;
   }
   EXPECT_TRUE(names.contains("adduser")) << depends.out;
@@ -268,22 +268,22 @@ TEST_F(Package, DependsAreTheDebianPackagesOfTheLinkedLibrariesAndAdduser) {
 }
 
 TEST_F(Package, ConfigurationIsAConffileAndTheMaintainerScriptsAreSound) {
-  const RunResult conffiles = Run("dpkg-deb -I " + Quote(deb_) + " conffiles");
+  const RunResult conffiles = Shell("dpkg-deb -I " + Quote(deb_) + " conffiles");
   ASSERT_EQ(conffiles.exit_code, 0) << conffiles.out;
   EXPECT_EQ(conffiles.out, "/etc/vistream/server.toml\n");
   const fs::path control = dir_ / "control";
-  const RunResult e = Run("dpkg-deb -e " + Quote(deb_) + " " + Quote(control));
+  const RunResult e = Shell("dpkg-deb -e " + Quote(deb_) + " " + Quote(control));
   ASSERT_EQ(e.exit_code, 0) << e.out;
   for (const char* script : {"postinst", "prerm", "postrm"}) {
     ASSERT_TRUE(fs::exists(control / script)) << script;
     EXPECT_NE(fs::status(control / script).permissions() & fs::perms::owner_exec, fs::perms::none) << script;
-    const RunResult syntax = Run("sh -n " + Quote(control / script));
+    const RunResult syntax = Shell("sh -n " + Quote(control / script));
     EXPECT_EQ(syntax.exit_code, 0) << script << ": " << syntax.out;
   }
   const std::string postinst = ReadFile(control / "postinst");
   EXPECT_NE(postinst.find("adduser --system"), std::string::npos);
   EXPECT_NE(postinst.find("[ -d /run/systemd/system ]"), std::string::npos) << "systemctl must wait for systemd";
-  const RunResult fields = Run("dpkg-deb -f " + Quote(deb_) + " Package Version Section Maintainer Description");
+  const RunResult fields = Shell("dpkg-deb -f " + Quote(deb_) + " Package Version Section Maintainer Description");
   ASSERT_EQ(fields.exit_code, 0) << fields.out;
   EXPECT_NE(fields.out.find("Package: vistream\n"), std::string::npos) << fields.out;
   EXPECT_NE(fields.out.find("Version: " VISTREAM_VERSION "\n"), std::string::npos) << fields.out;
@@ -292,7 +292,7 @@ TEST_F(Package, ConfigurationIsAConffileAndTheMaintainerScriptsAreSound) {
 TEST_F(Package, ProgramsInThePackageAreStripped) {
   for (const char* program : {"vistream", "vistream-server", "vistream-client"}) {
     const fs::path packaged = root_ / "usr/bin" / program;
-    const RunResult sections = Run("readelf -S --wide " + Quote(packaged));
+    const RunResult sections = Shell("readelf -S --wide " + Quote(packaged));
     ASSERT_EQ(sections.exit_code, 0) << sections.out;
     EXPECT_NE(sections.out.find(" .text "), std::string::npos) << program;
     EXPECT_EQ(sections.out.find(".debug_info"), std::string::npos) << program << " keeps its debug information";
@@ -322,7 +322,7 @@ TEST_F(Package, UnitIsCleanUnderSystemdAnalyzeVerify) {
     std::string copy = unit;
     copy.replace(copy.find("/usr/bin/vistream-server"), std::string("/usr/bin/vistream-server").size(), server);
     WriteFile(verify / "vistream-server.service", copy);
-    return Run("systemd-analyze verify " + Quote(verify / "vistream-server.service"));
+    return Shell("systemd-analyze verify " + Quote(verify / "vistream-server.service"));
   };
   const RunResult clean = checked((root_ / "usr/bin/vistream-server").string());
   EXPECT_EQ(clean.exit_code, 0) << clean.out;
@@ -340,12 +340,12 @@ TEST_F(Package, InstalledProgramsReadTheInstalledCatalog) {
             R"({"name": "only-installed", "source": {"generator": "streets", "seed": 3},
                 "viewcell": {"size_m": 16, "height_m": 2}})");
   const std::string vistream = "env -u VISTREAM_SCENES " + Quote(root_ / "usr/bin/vistream");
-  const RunResult only = Run(vistream + " scene info only-installed --json");
+  const RunResult only = Shell(vistream + " scene info only-installed --json");
   EXPECT_EQ(only.exit_code, 0) << only.out;
   EXPECT_NE(only.out.find(R"("name": "only-installed")"), std::string::npos) << only.out;
   fs::remove(root_ / "usr/share/vistream/scenes/only-installed.json");
   // monaco, whose OpenStreetMap extract the package carries.
-  const RunResult monaco = Run(vistream + " scene info monaco --json");
+  const RunResult monaco = Shell(vistream + " scene info monaco --json");
   EXPECT_EQ(monaco.exit_code, 0) << monaco.out;
   EXPECT_NE(monaco.out.find(R"("name": "monaco")"), std::string::npos) << monaco.out;
 }
