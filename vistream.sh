@@ -16,6 +16,8 @@ PACKAGES=(
   libcgal-dev libgmp-dev libmpfr-dev libmeshoptimizer-dev libosmium2-dev libgeographiclib-dev
   xvfb xauth
   libcairo2-dev gnuplot-nox fonts-dejavu-core   # figures: maps through Cairo, plots through gnuplot
+  libtomlplusplus-dev   # the server's configuration file
+  libcpp-httplib-dev prometheus   # the server's /metrics and /healthz; promtool checks the exposition in a test
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}

@@ -5,6 +5,7 @@
 
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_join.h>
 
 #include "scenes/geometry_codec.h"
 
@@ -88,6 +89,21 @@ absl::StatusOr<v1::ServerStats> Probe(const std::string& address, double timeout
                                                       static_cast<int>(v1::PROTOCOL_VERSION_CURRENT)));
   }
   return stats;
+}
+
+absl::StatusOr<std::string> PickScene(const v1::ServerStats& stats, const std::string& wanted,
+                                      const std::string& address) {
+  std::vector<std::string> served;
+  for (const v1::SceneStats& s : stats.scenes()) served.push_back(s.name());
+  if (served.empty()) served.push_back(stats.scene());  // a server of one scene that lists none
+  if (wanted.empty()) {
+    if (served.size() == 1) return served.front();
+    return absl::NotFoundError(absl::StrCat("the server at ", address, " serves ", served.size(),
+                                            " scenes: choose one with --scene (", absl::StrJoin(served, ", "), ")"));
+  }
+  if (std::find(served.begin(), served.end(), wanted) != served.end()) return wanted;
+  return absl::NotFoundError(absl::StrCat("the server at ", address, " does not serve scene '", wanted,
+                                          "'; it serves: ", absl::StrJoin(served, ", ")));
 }
 
 Connection::Connection(ConnectionOptions options)

@@ -76,6 +76,12 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
 absl::StatusOr<vistream::v1::ServerStats> Probe(const std::string& address, double timeout_s,
                                                 const std::atomic<bool>* cancel = nullptr);
 
+// The scene to ask for (Hello.scene) from what `stats` (Probe) says the server at `address`
+// serves: `wanted` when it is one of them, else its only scene. Errors: NOT_FOUND naming the
+// scenes when `wanted` is not served, or when it is empty and the server serves several.
+absl::StatusOr<std::string> PickScene(const vistream::v1::ServerStats& stats, const std::string& wanted,
+                                      const std::string& address);
+
 class Connection {
  public:
   explicit Connection(ConnectionOptions options);

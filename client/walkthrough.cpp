@@ -103,7 +103,9 @@ class Loop {
 absl::Status Loop::Prepare() {
   absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s, opt_.cancel);
   if (!stats.ok()) return stats.status();
-  sum_->scene = stats->scene();
+  absl::StatusOr<std::string> scene = PickScene(*stats, opt_.scene, opt_.server);
+  if (!scene.ok()) return scene.status();
+  sum_->scene = *scene;
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
   if (entry.ok()) entry_ = std::move(*entry);
 

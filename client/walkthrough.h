@@ -29,6 +29,7 @@ struct FixedPose {
 struct WalkthroughOptions {
   std::string server = "127.0.0.1:50051";
   bool headless = false;
+  std::string scene;          // the server's scene to walk (ServerStats.scenes); empty: its only one
   std::string path;           // a walk of the scene's catalog entry; empty: the first (headless)
   double speed_kmh = 0.0;     // 0: the walk's own speed
   double seconds = 0.0;       // stop after this much of the walk; 0: the whole walk

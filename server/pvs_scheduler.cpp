@@ -102,14 +102,13 @@ void PvsSchedulePolicy::Insert(const CellPvsPtr& pvs) {
   }
 }
 
-// PvsScheduler: the policy on a pool of worker threads.
+// PvsWorkerPool: the workers, shared round robin by the schedulers.
 
-PvsScheduler::PvsScheduler(Compute compute, unsigned threads, size_t cache_bytes, std::function<void(unsigned)> init)
-    : compute_(std::move(compute)), init_(std::move(init)), policy_(cache_bytes) {
-  for (unsigned w = 0; w < std::max(1u, threads); ++w) workers_.emplace_back([this, w] { WorkerLoop(w); });
+PvsWorkerPool::PvsWorkerPool(unsigned threads) : threads_(std::max(1u, threads)) {
+  for (unsigned w = 0; w < threads_; ++w) workers_.emplace_back([this, w] { WorkerLoop(w); });
 }
 
-PvsScheduler::~PvsScheduler() {
+PvsWorkerPool::~PvsWorkerPool() {
   {
     std::lock_guard lock(mu_);
     stopping_ = true;
@@ -118,11 +117,93 @@ PvsScheduler::~PvsScheduler() {
   workers_.clear();  // joins
 }
 
-CellPvsPtr PvsScheduler::Request(uint64_t requester, CellId cell, double deadline, Done done) {
+void PvsWorkerPool::Add(PvsScheduler* lane) {
   std::lock_guard lock(mu_);
+  lanes_.push_back(lane);
+}
+
+void PvsWorkerPool::Remove(PvsScheduler* lane) {
+  std::unique_lock lock(mu_);
+  std::erase(lanes_, lane);
+  next_lane_ = 0;
+  idle_.wait(lock, [&] { return lane->running_ == 0; });
+}
+
+void PvsWorkerPool::WorkerLoop(unsigned worker) {
+  std::unique_lock lock(mu_);
+  for (;;) {
+    PvsScheduler* lane = nullptr;
+    work_.wait(lock, [&] {
+      if (stopping_) return true;
+      for (size_t k = 0; k < lanes_.size(); ++k) {
+        PvsScheduler* l = lanes_[(next_lane_ + k) % lanes_.size()];
+        if (l->policy_.HasQueued()) {
+          lane = l;
+          next_lane_ = (next_lane_ + k + 1) % lanes_.size();
+          return true;
+        }
+      }
+      return false;
+    });
+    if (stopping_) return;
+    const CellId cell = *lane->policy_.StartNext();
+    ++lane->running_;
+    const bool init = lane->init_ && !lane->initialised_[worker];
+    lane->initialised_[worker] = 1;
+    lock.unlock();
+    if (init) lane->init_(worker);
+    const auto start = std::chrono::steady_clock::now();
+    auto pvs = std::make_shared<CellPvs>(lane->compute_(cell, worker));
+    pvs->cell = cell;
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    lock.lock();
+    std::vector<PvsSource::Done> done = lane->policy_.Finish(pvs, seconds);
+    const std::function<void(double)> observe = lane->observe_;
+    lock.unlock();
+    if (observe) observe(seconds);
+    for (PvsSource::Done& d : done) {
+      if (d) d(pvs);
+    }
+    lock.lock();
+    --lane->running_;
+    idle_.notify_all();
+  }
+}
+
+// PvsScheduler: the policy on a pool's workers.
+
+PvsScheduler::PvsScheduler(Compute compute, unsigned threads, size_t cache_bytes, std::function<void(unsigned)> init)
+    : compute_(std::move(compute)), init_(std::move(init)), own_pool_(std::make_unique<PvsWorkerPool>(threads)),
+      pool_(own_pool_.get()), mu_(pool_->mu_), policy_(cache_bytes), initialised_(pool_->threads(), 0) {
+  pool_->Add(this);
+}
+
+PvsScheduler::PvsScheduler(Compute compute, PvsWorkerPool* pool, size_t cache_bytes,
+                           std::function<void(unsigned)> init)
+    : compute_(std::move(compute)), init_(std::move(init)), pool_(pool), mu_(pool_->mu_), policy_(cache_bytes),
+      initialised_(pool_->threads(), 0) {
+  pool_->Add(this);
+}
+
+PvsScheduler::~PvsScheduler() {
+  pool_->Remove(this);
+  own_pool_.reset();  // joins its workers
+}
+
+void PvsScheduler::SetComputeObserver(std::function<void(double)> observe) {
+  std::lock_guard lock(mu_);
+  observe_ = std::move(observe);
+}
+
+CellPvsPtr PvsScheduler::Request(uint64_t requester, CellId cell, double deadline, Done done) {
   bool queued = false;
-  CellPvsPtr cached = policy_.Request(requester, cell, deadline, std::move(done), &queued);
-  if (queued) work_.notify_one();
+  CellPvsPtr cached;
+  {
+    std::lock_guard lock(mu_);
+    cached = policy_.Request(requester, cell, deadline, std::move(done), &queued);
+  }
+  // Every worker looks: the one that wakes may find another scheduler's job first.
+  if (queued) pool_->work_.notify_all();
   return cached;
 }
 
@@ -144,28 +225,6 @@ CellPvsPtr PvsScheduler::Cached(CellId cell) {
 SchedulerStats PvsScheduler::stats() const {
   std::lock_guard lock(mu_);
   return policy_.stats();
-}
-
-void PvsScheduler::WorkerLoop(unsigned worker) {
-  if (init_) init_(worker);
-  std::unique_lock lock(mu_);
-  for (;;) {
-    work_.wait(lock, [&] { return stopping_ || policy_.HasQueued(); });
-    if (stopping_) return;
-    const CellId cell = *policy_.StartNext();
-    lock.unlock();
-    const auto start = std::chrono::steady_clock::now();
-    auto pvs = std::make_shared<CellPvs>(compute_(cell, worker));
-    pvs->cell = cell;
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    lock.lock();
-    std::vector<Done> done = policy_.Finish(pvs, seconds);
-    lock.unlock();
-    for (Done& d : done) {
-      if (d) d(pvs);
-    }
-    lock.lock();
-  }
 }
 
 }  // namespace vistream::server

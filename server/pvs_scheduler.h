@@ -111,18 +111,60 @@ class PvsSchedulePolicy {
   SchedulerStats stats_;
 };
 
+class PvsScheduler;
+
+// Worker threads shared by the PvsSchedulers of every scene a server serves. A free worker
+// takes the earliest-deadline job of the next scheduler in turn that has one (round robin over
+// the schedulers, earliest deadline first within each), so a flood of requests on one scene
+// holds at most its turn of the workers while another scene waits: a job of the waiting scene
+// starts as soon as any worker is free.
+class PvsWorkerPool {
+ public:
+  // `threads` workers (at least one), started at once.
+  explicit PvsWorkerPool(unsigned threads);
+  // Stops the workers after their running jobs; schedulers must be gone first.
+  ~PvsWorkerPool();
+  PvsWorkerPool(const PvsWorkerPool&) = delete;
+  PvsWorkerPool& operator=(const PvsWorkerPool&) = delete;
+
+  unsigned threads() const { return threads_; }
+
+ private:
+  friend class PvsScheduler;
+  void Add(PvsScheduler* lane);
+  // Removes `lane`: no job of it starts afterwards; waits for its running ones.
+  void Remove(PvsScheduler* lane);
+  void WorkerLoop(unsigned worker);
+
+  const unsigned threads_;
+  std::mutex mu_;  // guards the lanes and every lane's policy
+  std::condition_variable work_;
+  std::condition_variable idle_;  // a lane's running job finished
+  std::vector<PvsScheduler*> lanes_;
+  size_t next_lane_ = 0;
+  bool stopping_ = false;
+  std::vector<std::jthread> workers_;  // last: start after the members above exist
+};
+
 class PvsScheduler : public PvsSource {
  public:
   // Computes one cell; called on a worker thread, concurrently from several. `worker` is the
   // worker's index in [0, threads).
   using Compute = std::function<CellPvs(CellId cell, unsigned worker)>;
 
-  // Starts `threads` workers (at least one). Compute may run per-thread set-up first (e.g. an
-  // OpenGL context): `init(worker)` runs once on each worker thread before any job.
+  // Starts `threads` workers of its own (at least one). Compute may run per-thread set-up
+  // first (e.g. an OpenGL context): `init(worker)` runs once on each worker thread before any
+  // job.
   PvsScheduler(Compute compute, unsigned threads, size_t cache_bytes,
                std::function<void(unsigned)> init = nullptr);
-  // Stops the workers; requests still waiting are dropped without calling their Done.
-  ~PvsScheduler();
+  // Runs on `pool`'s workers, shared with the other schedulers on it (not owned; it must
+  // outlive this scheduler); its own cache of `cache_bytes`. `init(worker)` runs on a worker
+  // thread before that worker's first job of this scheduler.
+  PvsScheduler(Compute compute, PvsWorkerPool* pool, size_t cache_bytes,
+               std::function<void(unsigned)> init = nullptr);
+  // Stops taking jobs (requests still waiting are dropped without calling their Done) and
+  // waits for the running ones.
+  ~PvsScheduler() override;
   PvsScheduler(const PvsScheduler&) = delete;
   PvsScheduler& operator=(const PvsScheduler&) = delete;
 
@@ -132,18 +174,23 @@ class PvsScheduler : public PvsSource {
   void CancelAll(uint64_t requester) override;
   CellPvsPtr Cached(CellId cell) override;
   SchedulerStats stats() const override;
+  unsigned threads() const { return pool_->threads(); }
+  // Called (on the worker, without a lock) with the seconds each computation took; set it
+  // before the first request.
+  void SetComputeObserver(std::function<void(double seconds)> observe);
 
  private:
-  void WorkerLoop(unsigned worker);
+  friend class PvsWorkerPool;
+  std::function<void(double)> observe_;  // guarded by mu_
 
   Compute compute_;
   std::function<void(unsigned)> init_;
-
-  mutable std::mutex mu_;
-  std::condition_variable work_;
-  bool stopping_ = false;
+  std::unique_ptr<PvsWorkerPool> own_pool_;  // the first constructor's
+  PvsWorkerPool* pool_;
+  std::mutex& mu_;                           // the pool's
   PvsSchedulePolicy policy_;
-  std::vector<std::jthread> workers_;
+  size_t running_ = 0;                       // jobs of this scheduler being computed
+  std::vector<char> initialised_;            // per worker: init_ ran there
 };
 
 }  // namespace vistream::server

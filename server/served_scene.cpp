@@ -22,6 +22,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene(options.scene, load);
   if (!loaded.ok()) return loaded.status();
   s->scene_ = std::move(loaded->scene);
+  s->name_ = options.name.empty() ? s->scene_.name : options.name;
   s->load_seconds_ = loaded->seconds;
   s->viewcell_ = loaded->viewcell;
   if (options.cell_size > 0.0) s->viewcell_.size_m = options.cell_size;
@@ -30,7 +31,9 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   s->grid_ = std::make_unique<visibility::ViewcellGrid>(*grid);
   const size_t objects = s->scene_.objects.size();
 
-  unsigned threads = options.threads != 0 ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  unsigned threads = options.pool != nullptr ? options.pool->threads()
+                    : options.threads != 0    ? options.threads
+                                              : std::max(1u, std::thread::hardware_concurrency());
   if (!options.pvs_file.empty()) {
     absl::StatusOr<visibility::PvsFile> f = visibility::LoadPvsFile(options.pvs_file, *s->grid_, s->scene_);
     if (!f.ok()) return f.status();
@@ -40,12 +43,15 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     s->tree_ = std::make_unique<visibility::KdTree>(visibility::KdTree::Build(s->scene_));
     s->computer_ = std::make_unique<visibility::PvsComputer>(s->scene_, *s->tree_);
     s->query_ = gl::QueryOptionsFor(options.res);
-    if (options.backend == "gl") threads = 1;  // one OpenGL context, current on its one worker
+    // One OpenGL context per worker, made current on that worker's thread (init below); alone,
+    // the scene has one worker.
+    if (options.backend == "gl" && options.pool == nullptr) threads = 1;
+    s->backends_.resize(threads);
     if (options.backend != "gl") {
       for (unsigned w = 0; w < threads; ++w) {
         absl::StatusOr<gl::PvsBackend> b = gl::PvsBackend::Create(options.backend);
         if (!b.ok()) return b.status();
-        s->backends_.push_back(std::make_unique<gl::PvsBackend>(std::move(*b)));
+        s->backends_[w] = std::make_unique<gl::PvsBackend>(std::move(*b));
       }
     }
     s->pvs_source_ = absl::StrFormat("dual ray space (%s, %u^2)", options.backend, options.res);
@@ -61,7 +67,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   s->epsilon_ = std::move(*eps);
 
   vistream::v1::SceneInfo& info = s->scene_info_;
-  info.set_name(s->scene_.name);
+  info.set_name(s->name_);
   SetVec(s->scene_.origin, info.mutable_origin());
   SetVec(s->scene_.bounds.min, info.mutable_bounds_min());
   SetVec(s->scene_.bounds.max, info.mutable_bounds_max());
@@ -80,17 +86,18 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   ServedScene* self = s.get();
   std::function<void(unsigned)> init;
   if (!options.pvs_file.empty()) {
-    threads = 1;  // lookups
+    if (options.pool == nullptr) threads = 1;  // lookups
   } else if (options.backend == "gl") {
-    // The context must be created on the thread that draws.
-    init = [self](unsigned) {
+    // The context must be created on the thread that draws: each worker makes its own.
+    init = [self](unsigned worker) {
       absl::StatusOr<gl::PvsBackend> b = gl::PvsBackend::Create("gl");
-      if (b.ok()) self->backends_.push_back(std::make_unique<gl::PvsBackend>(std::move(*b)));
+      if (b.ok()) self->backends_[worker] = std::make_unique<gl::PvsBackend>(std::move(*b));
     };
   }
-  s->scheduler_ = std::make_unique<PvsScheduler>(
-      [self](CellId cell, unsigned worker) { return self->ComputePvs(cell, worker); },
-      threads, options.cache_bytes, init);
+  auto compute = [self](CellId cell, unsigned worker) { return self->ComputePvs(cell, worker); };
+  s->scheduler_ = options.pool != nullptr
+                      ? std::make_unique<PvsScheduler>(compute, options.pool, options.cache_bytes, init)
+                      : std::make_unique<PvsScheduler>(compute, threads, options.cache_bytes, init);
   if (options.backend == "gl" && options.pvs_file.empty()) {
     // Fail at start-up, not on the first request, when there is no OpenGL.
     absl::StatusOr<gl::PvsBackend> probe = gl::PvsBackend::Create("gl");
@@ -106,7 +113,7 @@ CellPvs ServedScene::ComputePvs(CellId cell, unsigned worker) const {
     out.objects = file_->sets.Objects(cell);
     return out;
   }
-  if (worker >= backends_.size()) {
+  if (worker >= backends_.size() || backends_[worker] == nullptr) {
     // No backend on this worker (the OpenGL context failed): the CPU raster instead.
     out.objects = computer_->Compute(grid_->CellBox(cell), query_).objects;
     return out;

@@ -26,13 +26,17 @@ namespace vistream::server {
 
 struct ServedSceneOptions {
   std::string scene;        // catalog name, catalog .json or glTF file
+  std::string name;         // what Hello.scene names it; empty: the scene's own name
   std::string catalog_dir;  // empty: scenes::CatalogDir()
   double cell_size = 0.0;   // metres; 0: the catalog entry's
   uint32_t res = 128;       // the dual ray space's finest raster
   std::string backend = "cpu";  // cpu | gl | exact (see gl::PvsBackend)
   std::string pvs_file;     // serve these sets instead of computing them
-  unsigned threads = 0;     // PVS workers; 0: one per core (gl: always one)
+  unsigned threads = 0;     // PVS workers; 0: one per core (gl: always one); ignored with `pool`
   size_t cache_bytes = size_t{256} << 20;
+  // Workers shared with the server's other scenes (not owned; must outlive the scene); null:
+  // the scene starts `threads` workers of its own.
+  PvsWorkerPool* pool = nullptr;
 };
 
 class ServedScene {
@@ -42,6 +46,8 @@ class ServedScene {
   static absl::StatusOr<std::unique_ptr<ServedScene>> Create(const ServedSceneOptions& options,
                                                              const scenes::RunControl& run = {});
 
+  // What Hello.scene names (ServedSceneOptions::name, else the scene's own name).
+  const std::string& name() const { return name_; }
   const scenes::Scene& scene() const { return scene_; }
   const visibility::ViewcellGrid& grid() const { return *grid_; }
   const scenes::ViewcellSpec& viewcell() const { return viewcell_; }
@@ -63,12 +69,13 @@ class ServedScene {
  private:
   ServedScene() = default;
 
+  std::string name_;
   scenes::Scene scene_;
   scenes::ViewcellSpec viewcell_;
   std::unique_ptr<visibility::ViewcellGrid> grid_;
   std::unique_ptr<visibility::KdTree> tree_;
   std::unique_ptr<visibility::PvsComputer> computer_;
-  std::vector<std::unique_ptr<gl::PvsBackend>> backends_;  // one per worker
+  std::vector<std::unique_ptr<gl::PvsBackend>> backends_;  // one per worker (null: the CPU raster)
   visibility::CellQueryOptions query_;
   std::unique_ptr<visibility::PvsFile> file_;
   std::vector<scenes::EncodedMesh> geometry_;

@@ -1,6 +1,8 @@
-// vistream-server: serves one scene to walkthrough clients over gRPC (DESIGN.md, "Server and
-// client"). Prints one line on stdout when it is ready; logs one line per session event on
-// stderr. SIGTERM or SIGINT drains the sessions and exits 0.
+// vistream-server: serves the scenes of its configuration (a TOML file, --config, whose keys the
+// command-line options override; server/server_config.h) to walkthrough clients over gRPC
+// (DESIGN.md, "Server and client", "Deployment"). Prints one line on stdout when it is ready;
+// logs one line per event on stderr or to its log file. SIGTERM or SIGINT drains the sessions
+// and exits 0.
 
 #include <signal.h>
 
@@ -9,8 +11,12 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
+#include <memory>
+#include <vector>
 #include <thread>
 
 #include <grpc/support/log.h>
@@ -24,7 +30,11 @@
 #include "scenes/catalog.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
+#include "server/metrics.h"
+#include "server/metrics_http.h"
 #include "server/served_scene.h"
+#include "server/service_metrics.h"
+#include "server/server_config.h"
 #include "server/service.h"
 
 namespace {
@@ -59,7 +69,9 @@ EventLog* g_log = nullptr;
 // gRPC's own log lines go into the server's log.
 void GrpcLog(gpr_log_func_args* args) {
   if (g_log == nullptr || args == nullptr || args->message == nullptr) return;
-  g_log->Write(0, "grpc", {{"severity", gpr_log_severity_string(args->severity)}, {"message", args->message}});
+  const EventLog::Level level =
+      args->severity == GPR_LOG_SEVERITY_ERROR ? EventLog::Level::kError : EventLog::Level::kInfo;
+  g_log->Write(level, 0, "grpc", {{"severity", gpr_log_severity_string(args->severity)}, {"message", args->message}});
 }
 
 // A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
@@ -68,45 +80,75 @@ using vistream::cli::FiniteRange;
 }  // namespace
 
 int main(int argc, char** argv) {
-  vistream::server::ServedSceneOptions scene_options;
-  vistream::server::ServerOptions server_options;
+  // Command-line values: each overrides its configuration key when given (app.count > 0).
+  vistream::server::ServerConfig cli;
+  vistream::server::SceneConfig cli_scene;
+  std::string config_path, scene_option;
   bool json_log = false;
-  double cache_mb = 256;
-  double grace_s = 5;
   CLI::App app{"vistream-server: streams the visible part of a city to walkthrough clients over gRPC"};
-  app.add_option("--scene", scene_options.scene, "catalog name, catalog .json or .glb/.gltf file")->required();
-  app.add_option("--catalog", scene_options.catalog_dir, "folder of catalog entries (default: the source tree's scenes/)");
-  app.add_option("--listen", server_options.listen, "address to listen on, host:port (port 0: any free one)")
+  app.add_option("--config", config_path,
+                 "TOML configuration file (deploy/server.toml documents every key); options given here override its keys");
+  app.add_option("--scene", scene_option,
+                 "serve this one scene: catalog name, catalog .json or .glb/.gltf file (replaces the configuration's "
+                 "[[scenes]])");
+  app.add_option("--catalog", cli.catalog, "folder of catalog entries (default: the built-in catalog)");
+  app.add_option("--listen", cli.listen, "address to listen on, host:port (port 0: any free one)")
       ->capture_default_str()
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
-            const size_t colon = text.rfind(':');
-            int64_t port = -1;
-            if (colon == std::string::npos || colon == 0 ||
-                !vistream::cli::internal::ParseWhole(text.substr(colon + 1), &port) || port < 0 || port > 65535) {
+            if (!vistream::server::IsHostPort(text)) {
               return "'" + text + "' is not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:50051)";
             }
             return "";
           },
           "HOST:PORT"));
-  app.add_option("--threads", scene_options.threads, "PVS worker threads (0: one per core)")->capture_default_str();
-  app.add_option("--cell-size", scene_options.cell_size, "viewcell edge in metres (default: the catalog entry's)")
+  app.add_option("--threads", cli.threads, "PVS worker threads, shared by every scene (0: one per core)")
+      ->capture_default_str()
+      ->check(vistream::cli::WholeRange(0, 1024));
+  app.add_option("--cell-size", cli_scene.cell_size_m, "viewcell edge in metres (default: the catalog entry's)")
       ->check(FiniteRange(0.01, 1e6));
-  app.add_option("--res", scene_options.res, "finest dual-ray-space raster (power of two, 1 to 256)")
+  app.add_option("--res", cli_scene.res, "finest dual-ray-space raster (power of two, 1 to 256)")
       ->capture_default_str()
       ->check(vistream::cli::PowerOfTwo(1, 256));
-  app.add_option("--backend", scene_options.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
+  app.add_option("--backend", cli_scene.backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}))
       ->capture_default_str();
-  app.add_option("--pvs-file", scene_options.pvs_file,
-                 "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them");
-  app.add_option("--max-sessions", server_options.max_sessions, "sessions at once; more are refused")
+  app.add_option("--pvs-file", cli_scene.pvs_file,
+                 "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them "
+                 "(one scene only)");
+  app.add_option("--max-sessions", cli.max_sessions, "sessions at once; more are refused")
       ->check(vistream::cli::WholeRange(1, 100000))->capture_default_str();
-  app.add_option("--cache-mb", cache_mb, "PVS cache budget in MiB")->check(FiniteRange(1, 1e6))->capture_default_str();
-  app.add_option("--max-pose-rate", server_options.limits.max_pose_rate_hz, "poses per second a session may send")
+  app.add_option("--cache-mb", cli_scene.cache_mb, "PVS cache budget of each scene in MiB")
+      ->check(FiniteRange(1, 1e6))->capture_default_str();
+  app.add_option("--max-pose-rate", cli.max_pose_rate_hz, "poses per second a session may send")
       ->check(FiniteRange(0.1, 100000))->capture_default_str();
-  app.add_option("--grace", grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
+  app.add_option("--grace", cli.grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
+  app.add_option("--hello-timeout", cli.hello_timeout_s,
+                 "seconds a new stream may take to send its Hello (then DEADLINE_EXCEEDED)")
+      ->check(FiniteRange(0.001, 86400))->capture_default_str();
+  app.add_option("--max-sessions-per-address", cli.max_sessions_per_address,
+                 "sessions at once from one client address (0: no limit)")
+      ->check(vistream::cli::WholeRange(0, 100000))->capture_default_str();
+  app.add_option("--max-sessions-per-token", cli.max_sessions_per_token,
+                 "sessions at once per token (0: no limit)")
+      ->check(vistream::cli::WholeRange(0, 100000))->capture_default_str();
+  app.add_option("--tls-cert", cli.tls_cert, "PEM certificate chain: serve TLS (with --tls-key)");
+  app.add_option("--tls-key", cli.tls_key, "PEM private key of --tls-cert");
+  app.add_option("--tls-client-ca", cli.tls_client_ca,
+                 "PEM CA bundle: clients must present a certificate it signed (mutual TLS)");
+  app.add_flag("--insecure", cli.tls_insecure, "allow plaintext on an address that is not loopback");
+  app.add_option("--tokens", cli.tokens, "file of 'name token' lines: clients must send one as a bearer token");
+  app.add_option("--metrics-listen", cli.metrics_listen, "host:port of the HTTP /metrics and /healthz endpoint")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            if (!text.empty() && !vistream::server::IsHostPort(text)) {
+              return "'" + text + "' is not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:9464)";
+            }
+            return "";
+          },
+          "HOST:PORT"));
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
+  app.add_option("--log-file", cli.log_file, "append the log to this file instead of stderr");
   bool emulate_link = false;
   std::string link_option, time_scale_option;
   uint64_t link_seed = 1;
@@ -159,7 +201,64 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "vistream-server: error: --time-scale and --link-seed need --emulate-link or --link\n");
     return 2;
   }
-  scene_options.cache_bytes = static_cast<size_t>(cache_mb * (1 << 20));
+  // The configuration: the file's, then what the command line gives.
+  vistream::server::ServerConfig config;
+  if (!config_path.empty()) {
+    absl::StatusOr<vistream::server::ServerConfig> loaded = vistream::server::LoadServerConfig(config_path);
+    if (!loaded.ok()) {
+      std::fprintf(stderr, "vistream-server: error: %s\n", std::string(loaded.status().message()).c_str());
+      return 2;
+    }
+    config = std::move(*loaded);
+  }
+  const auto given = [&](const char* option) { return app.count(option) > 0; };
+  if (given("--catalog")) config.catalog = cli.catalog;
+  if (given("--listen")) config.listen = cli.listen;
+  if (given("--threads")) config.threads = cli.threads;
+  if (given("--max-sessions")) config.max_sessions = cli.max_sessions;
+  if (given("--max-pose-rate")) config.max_pose_rate_hz = cli.max_pose_rate_hz;
+  if (given("--grace")) config.grace_s = cli.grace_s;
+  if (given("--hello-timeout")) config.hello_timeout_s = cli.hello_timeout_s;
+  if (given("--max-sessions-per-address")) config.max_sessions_per_address = cli.max_sessions_per_address;
+  if (given("--max-sessions-per-token")) config.max_sessions_per_token = cli.max_sessions_per_token;
+  if (given("--tls-cert")) config.tls_cert = cli.tls_cert;
+  if (given("--tls-key")) config.tls_key = cli.tls_key;
+  if (given("--tls-client-ca")) config.tls_client_ca = cli.tls_client_ca;
+  if (given("--insecure")) config.tls_insecure = cli.tls_insecure;
+  if (given("--tokens")) config.tokens = cli.tokens;
+  if (given("--metrics-listen")) config.metrics_listen = cli.metrics_listen;
+  if (given("--json-log")) config.log_json = json_log;
+  if (given("--log-file")) config.log_file = cli.log_file;
+  if (given("--scene")) {
+    cli_scene.name = scene_option;
+    config.scenes = {cli_scene};
+  }
+  for (vistream::server::SceneConfig& sc : config.scenes) {
+    if (given("--cell-size")) sc.cell_size_m = cli_scene.cell_size_m;
+    if (given("--res")) sc.res = cli_scene.res;
+    if (given("--backend")) sc.backend = cli_scene.backend;
+    if (given("--cache-mb")) sc.cache_mb = cli_scene.cache_mb;
+    if (given("--pvs-file")) sc.pvs_file = cli_scene.pvs_file;
+  }
+  if (absl::Status st = vistream::server::CheckServerConfig(config); !st.ok()) {
+    std::fprintf(stderr, "vistream-server: error: %s\nRun 'vistream-server --help' for the options.\n",
+                 std::string(st.message()).c_str());
+    return 2;
+  }
+  if (given("--pvs-file") && config.scenes.size() > 1) {
+    std::fprintf(stderr, "vistream-server: error: --pvs-file: the configuration serves %zu scenes; give each its "
+                         "pvs_file in [[scenes]]\n", config.scenes.size());
+    return 2;
+  }
+  if (emulate_link && config.scenes.size() > 1) {
+    std::fprintf(stderr, "vistream-server: error: --emulate-link and --link serve one scene only (the link its "
+                         "catalog entry declares); this configuration serves %zu\n", config.scenes.size());
+    return 2;
+  }
+  vistream::server::ServerOptions server_options;
+  server_options.listen = config.listen;
+  server_options.max_sessions = config.max_sessions;
+  server_options.limits.max_pose_rate_hz = config.max_pose_rate_hz;
 
   // SIGTERM and SIGINT only raise a flag (whichever thread takes them); main polls it.
   struct sigaction action {};
@@ -176,40 +275,82 @@ int main(int argc, char** argv) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
-  EventLog log(stderr, json_log);
+  std::FILE* log_out = stderr;
+  if (!config.log_file.empty()) {
+    log_out = std::fopen(config.log_file.c_str(), "a");
+    if (log_out == nullptr) {
+      std::fprintf(stderr, "vistream-server: error: %s: cannot open the log file: %s\n", config.log_file.c_str(),
+                   std::strerror(errno));
+      return 1;
+    }
+  }
+  EventLog log(log_out, config.log_json);
   g_log = &log;
   gpr_set_log_function(GrpcLog);
   LogProgress progress(&log);
-  log.Write(0, "loading", {{"scene", scene_options.scene}});
-  const auto load_start = std::chrono::steady_clock::now();
-  absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
-      vistream::server::ServedScene::Create(scene_options, {&progress, &g_stop});
-  if (!scene.ok()) {
-    if (g_stop) return 0;
-    std::fprintf(stderr, "vistream-server: error: %s\n", std::string(scene.status().message()).c_str());
-    return 1;
+  if (!config.path.empty()) log.Write(0, "config", {{"file", config.path}, {"scenes", config.scenes.size()}});
+
+  // One pool of PVS workers for every scene, shared round robin (server/pvs_scheduler.h).
+  const unsigned threads = config.threads != 0 ? config.threads : std::max(1u, std::thread::hardware_concurrency());
+  vistream::server::PvsWorkerPool pool(threads);
+  std::vector<std::unique_ptr<vistream::server::ServedScene>> served;
+  for (const vistream::server::SceneConfig& sc : config.scenes) {
+    vistream::server::ServedSceneOptions o;
+    o.scene = sc.source();
+    o.name = sc.name;
+    o.catalog_dir = config.catalog;
+    o.cell_size = sc.cell_size_m;
+    o.res = sc.res;
+    o.backend = sc.backend;
+    o.pvs_file = sc.pvs_file;
+    o.cache_bytes = static_cast<size_t>(sc.cache_mb * (1 << 20));
+    o.pool = &pool;
+    log.Write(0, "loading", {{"scene", sc.name}, {"source", o.scene}});
+    const auto load_start = std::chrono::steady_clock::now();
+    absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =
+        vistream::server::ServedScene::Create(o, {&progress, &g_stop});
+    if (!scene.ok()) {
+      if (g_stop) return 0;
+      const std::string where = sc.line > 0 ? absl::StrFormat("%s:%d: scenes '%s': ", config.path, sc.line, sc.name)
+                                            : std::string();
+      std::fprintf(stderr, "vistream-server: error: %s%s\n", where.c_str(), std::string(scene.status().message()).c_str());
+      return 1;
+    }
+    if (g_stop) {  // stopped while preparing: nothing to drain
+      log.Write(0, "stopped", {});
+      return 0;
+    }
+    const vistream::server::ServedScene& s = **scene;
+    log.Write(0, "scene", {{"name", s.name()},
+                           {"prepare_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()},
+                           {"objects", static_cast<uint64_t>(s.scene().objects.size())},
+                           {"triangles", static_cast<uint64_t>(s.scene().TriangleCount())},
+                           {"cells", static_cast<uint64_t>(s.grid().CellCount())},
+                           {"pvs_source", s.pvs_source()},
+                           {"load_s", s.load_seconds()}});
+    served.push_back(std::move(*scene));
   }
-  if (g_stop) {  // stopped while preparing: nothing to drain
-    log.Write(0, "stopped", {});
-    return 0;
+  std::vector<vistream::server::ServedScene*> scenes;
+  std::vector<std::string> names;
+  for (const auto& s : served) {
+    scenes.push_back(s.get());
+    names.push_back(s->name());
   }
-  vistream::server::ServedScene& s = **scene;
-  const vistream::scenes::ViewcellSpec& band = s.viewcell();
-  server_options.limits.epsilon_size_m = band.epsilon_m;
-  log.Write(0, "scene", {{"name", s.scene().name},
-                         {"prepare_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()},
-                         {"objects", static_cast<uint64_t>(s.scene().objects.size())},
-                         {"triangles", static_cast<uint64_t>(s.scene().TriangleCount())},
-                         {"cells", static_cast<uint64_t>(s.grid().CellCount())},
-                         {"pvs_source", s.pvs_source()},
-                         {"load_s", s.load_seconds()}});
+  // Metrics: declared for every scene, fed by the schedulers, the sessions and (at each scrape)
+  // the service's statistics.
+  vistream::server::MetricsRegistry registry;
+  vistream::server::ServiceMetrics metrics(&registry, names);
+  for (vistream::server::ServedScene* s : scenes) s->scheduler().SetComputeObserver(metrics.PvsComputeObserver(s->name()));
+  server_options.metrics = &metrics;
+  // One scene: its catalog ε box (a session of several scenes takes its scene's at Hello).
+  server_options.limits.epsilon_size_m = scenes.front()->viewcell().epsilon_m;
   std::string link_line;
   if (emulate_link) {
     // The link the scene's catalog entry declares (a scene file without an entry: none).
     std::optional<vistream::scenes::LinkSpec> declared;
     std::string source = "the scene declares no link";
     if (absl::StatusOr<vistream::scenes::CatalogEntry> entry =
-            vistream::scenes::FindCatalogEntry(scene_options.scene, scene_options.catalog_dir);
+            vistream::scenes::FindCatalogEntry(config.scenes.front().source(), config.catalog);
         entry.ok() && entry->simulation.link.has_value()) {
       declared = entry->simulation.link;
       source = "declared by " + entry->name;
@@ -228,22 +369,52 @@ int main(int argc, char** argv) {
                           {"seed", link_seed}});
   }
   absl::StatusOr<std::unique_ptr<vistream::server::WalkthroughServer>> server =
-      vistream::server::WalkthroughServer::Start(&s, server_options, &log);
+      vistream::server::WalkthroughServer::Start(scenes, server_options, &log);
   if (!server.ok()) {
     std::fprintf(stderr, "vistream-server: error: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
-  std::printf("vistream-server: ready on %s: scene %s, %zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s%s\n",
-              (*server)->address().c_str(), s.scene().name.c_str(), s.grid().CellCount(), s.grid().cell_size(),
-              s.grid().nx(), s.grid().ny(), s.scene().objects.size(), s.pvs_source().c_str(), link_line.c_str());
+  metrics.Watch(&(*server)->service());
+  std::unique_ptr<vistream::server::MetricsHttpServer> http;
+  if (!config.metrics_listen.empty()) {
+    // /healthz answers 503 from the first stop signal on, while the sessions drain.
+    absl::StatusOr<std::unique_ptr<vistream::server::MetricsHttpServer>> started =
+        vistream::server::MetricsHttpServer::Start(config.metrics_listen, &registry, [] { return !g_stop.load(); });
+    if (!started.ok()) {
+      std::fprintf(stderr, "vistream-server: error: metrics.listen: %s\n", std::string(started.status().message()).c_str());
+      return 1;
+    }
+    http = std::move(*started);
+    log.Write(0, "metrics", {{"address", http->address()}, {"paths", "/metrics /healthz"}});
+  }
+  // One scene: "scene NAME, ..."; several: "N scenes: NAME (...); NAME (...)".
+  std::string what;
+  for (const vistream::server::ServedScene* s : scenes) {
+    const std::string one = absl::StrFormat("%zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s",
+                                            s->grid().CellCount(), s->grid().cell_size(), s->grid().nx(),
+                                            s->grid().ny(), s->scene().objects.size(), s->pvs_source());
+    if (scenes.size() == 1) {
+      what = absl::StrFormat("scene %s, %s", s->name(), one);
+    } else {
+      what += absl::StrFormat("%s%s (%s)", what.empty() ? absl::StrFormat("%zu scenes: ", scenes.size()) : "; ",
+                              s->name(), one);
+    }
+  }
+  const std::string metrics_line = http != nullptr ? "; metrics on http://" + http->address() + "/metrics" : "";
+  std::printf("vistream-server: ready on %s: %s%s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str(),
+              metrics_line.c_str());
   std::fflush(stdout);
-  log.Write(0, "ready", {{"address", (*server)->address()}});
+  log.Write(0, "ready", {{"address", (*server)->address()}, {"scenes", scenes.size()}});
 
   while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
                             {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
-  (*server)->Shutdown(grace_s);
+  (*server)->Shutdown(config.grace_s);
+  if (http != nullptr) http->Stop();  // its collector reads the service
+  server->reset();
+  served.clear();  // the scenes' schedulers leave the pool before it stops
   log.Write(0, "stopped", {});
   g_log = nullptr;
+  if (log_out != stderr) std::fclose(log_out);
   return 0;
 }

@@ -12,6 +12,8 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
+#include "server/service_metrics.h"
+
 namespace vistream::server {
 
 namespace {
@@ -400,8 +402,8 @@ void SessionLink::End(const grpc::Status& status) {
   if (reactor_ != nullptr) reactor_->EndWith(status);
 }
 
-WalkthroughService::WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log)
-    : scene_(scene), options_(options), log_(log), start_s_(SteadySeconds()) {
+WalkthroughService::WalkthroughService(std::vector<ServedScene*> scenes, const ServerOptions& options, EventLog* log)
+    : scenes_{std::move(scenes)}, options_(options), log_(log), start_s_(SteadySeconds()) {
   if (options_.link.has_value()) timer_ = std::make_unique<LinkTimer>();
 }
 
@@ -415,10 +417,14 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
     grpc::CallbackServerContext* context) {
   std::lock_guard lock(mu_);
   if (draining_) {
+    if (options_.metrics != nullptr) options_.metrics->SessionRefused("draining");
     return new RefusedReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
   if (sessions_.size() >= options_.max_sessions) {
-    if (log_ != nullptr) log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", "too many sessions"}});
+    if (options_.metrics != nullptr) options_.metrics->SessionRefused("too_many");
+    if (log_ != nullptr) {
+      log_->Write(EventLog::Level::kWarn, 0, "session_refused", {{"peer", context->peer()}, {"reason", "too many sessions"}});
+    }
     return new RefusedReactor(grpc::Status(
         grpc::StatusCode::RESOURCE_EXHAUSTED,
         absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
@@ -426,8 +432,13 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   const uint64_t id = next_id_++;
   ++sessions_total_;
   auto link = std::make_shared<SessionLink>();
+  // One scene: the session is bound to it (its Hello must name it); several: Hello picks.
+  SessionSeams seams;
+  if (options_.metrics != nullptr) options_.metrics->AddSessionSeams(&seams);
   std::shared_ptr<server::Session> session =
-      Session::Create(id, scene_, options_.limits, log_, [link] { link->Pump(); });
+      scenes_.scenes.size() == 1
+          ? Session::Create(id, scenes_.scenes[0], options_.limits, log_, [link] { link->Pump(); }, std::move(seams))
+          : Session::Create(id, &scenes_, options_.limits, log_, [link] { link->Pump(); }, std::move(seams));
   sessions_[id] = Entry{session, link, context->peer()};
   if (log_ != nullptr) log_->Write(id, "session_start", {{"peer", context->peer()}});
   return new SessionReactor(this, session, link);
@@ -441,12 +452,22 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
     if (it == sessions_.end()) return;
     stats = it->second.session->Stats();
     bytes_sent_ended_ += stats.bytes_sent();
+    if (!stats.scene().empty()) {
+      SceneTotals& t = scene_totals_[stats.scene()];
+      ++t.ended;
+      t.bytes_sent += stats.bytes_sent();
+      t.geometry_bytes_sent += stats.geometry_bytes_sent();
+    }
     sessions_.erase(it);
     ++ending_;
   }
   if (log_ != nullptr) {
-    log_->Write(id, "session_end",
-                {{"status", grpc::StatusCode(status.error_code()) == grpc::StatusCode::OK ? "OK" : "error"},
+    const grpc::StatusCode code = status.error_code();
+    if (options_.metrics != nullptr) options_.metrics->SessionEnded(stats.scene(), static_cast<int>(code));
+    const bool fine = code == grpc::StatusCode::OK || code == grpc::StatusCode::CANCELLED;
+    log_->Write(fine ? EventLog::Level::kInfo : EventLog::Level::kWarn, id, "session_end",
+                {{"scene", stats.scene()},
+                 {"status", grpc::StatusCode(status.error_code()) == grpc::StatusCode::OK ? "OK" : "error"},
                  {"code", static_cast<int>(status.error_code())},
                  {"message", status.error_message()},
                  {"seconds", stats.seconds()},
@@ -467,6 +488,7 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
                    {"uplink_mean_delay_ms", 1e3 * link->uplink_delay_sum_s / up},
                    {"max_in_link_bytes", link->max_in_link_bytes}});
     }
+    log_->ForgetSession(id);
   }
   std::lock_guard lock(mu_);
   --ending_;
@@ -497,25 +519,55 @@ size_t WalkthroughService::active_sessions() const {
 
 v1::ServerStats WalkthroughService::Stats() const {
   v1::ServerStats s;
-  s.set_scene(scene_->scene().name);
+  // Protocol version 1's single scene: the first (default) one.
+  s.set_scene(scenes_.scenes.front()->name());
   s.set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
-  s.set_pvs_source(scene_->pvs_source());
+  s.set_pvs_source(scenes_.scenes.front()->pvs_source());
   s.set_uptime_s(SteadySeconds() - start_s_);
-  const SchedulerStats sched = scene_->scheduler().stats();
-  s.set_pvs_computed(sched.computed);
-  s.set_pvs_cache_hits(sched.cache_hits);
-  s.set_pvs_dropped(sched.dropped);
-  s.set_cache_bytes(sched.cache_bytes);
-  s.set_pvs_compute_s(sched.compute_s);
+  std::map<std::string, v1::SceneStats*> by_name;
+  for (ServedScene* scene : scenes_.scenes) {
+    const SchedulerStats sched = scene->scheduler().stats();
+    s.set_pvs_computed(s.pvs_computed() + sched.computed);
+    s.set_pvs_cache_hits(s.pvs_cache_hits() + sched.cache_hits);
+    s.set_pvs_dropped(s.pvs_dropped() + sched.dropped);
+    s.set_cache_bytes(s.cache_bytes() + sched.cache_bytes);
+    s.set_pvs_compute_s(s.pvs_compute_s() + sched.compute_s);
+    v1::SceneStats* ss = s.add_scenes();
+    ss->set_name(scene->name());
+    ss->set_pvs_source(scene->pvs_source());
+    ss->set_pvs_computed(sched.computed);
+    ss->set_pvs_cache_hits(sched.cache_hits);
+    ss->set_pvs_dropped(sched.dropped);
+    ss->set_cache_bytes(sched.cache_bytes);
+    ss->set_pvs_compute_s(sched.compute_s);
+    ss->set_pvs_queued(sched.queued);
+    ss->set_object_count(static_cast<uint32_t>(scene->scene().objects.size()));
+    ss->set_cells(static_cast<uint32_t>(scene->grid().CellCount()));
+    by_name[scene->name()] = ss;
+  }
   std::lock_guard lock(mu_);
   s.set_sessions_active(sessions_.size());
   s.set_sessions_total(sessions_total_);
+  for (const auto& [name, t] : scene_totals_) {
+    if (auto it = by_name.find(name); it != by_name.end()) {
+      it->second->set_sessions_total(t.ended);
+      it->second->set_bytes_sent(t.bytes_sent);
+      it->second->set_geometry_bytes_sent(t.geometry_bytes_sent);
+    }
+  }
   uint64_t bytes = bytes_sent_ended_;
   for (const auto& [id, e] : sessions_) {
     v1::SessionStats* ss = s.add_sessions();
     *ss = e.session->Stats();
     ss->set_peer(e.peer);
     bytes += ss->bytes_sent();
+    if (auto it = by_name.find(ss->scene()); it != by_name.end()) {
+      v1::SceneStats* scene = it->second;
+      scene->set_sessions_active(scene->sessions_active() + 1);
+      scene->set_sessions_total(scene->sessions_total() + 1);
+      scene->set_bytes_sent(scene->bytes_sent() + ss->bytes_sent());
+      scene->set_geometry_bytes_sent(scene->geometry_bytes_sent() + ss->geometry_bytes_sent());
+    }
   }
   s.set_bytes_sent(bytes);
   return s;
@@ -524,6 +576,20 @@ v1::ServerStats WalkthroughService::Stats() const {
 absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(ServedScene* scene,
                                                                             const ServerOptions& options,
                                                                             EventLog* log) {
+  return Start(std::vector<ServedScene*>{scene}, options, log);
+}
+
+absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(std::vector<ServedScene*> scenes,
+                                                                            const ServerOptions& options,
+                                                                            EventLog* log) {
+  if (scenes.empty()) return absl::InvalidArgumentError("no scene to serve");
+  for (size_t a = 0; a < scenes.size(); ++a) {
+    for (size_t b = 0; b < a; ++b) {
+      if (scenes[a]->name() == scenes[b]->name()) {
+        return absl::InvalidArgumentError(absl::StrCat("two scenes are named '", scenes[a]->name(), "'"));
+      }
+    }
+  }
   // host:port with a port number in [0, 65535] (0: any free one); gRPC would take a port
   // modulo 2^16, or none at all, without a word.
   const size_t colon = options.listen.rfind(':');
@@ -537,14 +603,18 @@ absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(Serv
   }
   if (options.max_sessions == 0) return absl::InvalidArgumentError("--max-sessions must be at least 1");
   std::unique_ptr<WalkthroughServer> s(new WalkthroughServer());
-  s->service_ = std::make_unique<WalkthroughService>(scene, options, log);
+  s->service_ = std::make_unique<WalkthroughService>(scenes, options, log);
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());
   size_t max_receive = options.max_receive_bytes;
-  if (max_receive == 0) max_receive = (size_t{1} << 20) + 5 * scene->scene().objects.size();
+  if (max_receive == 0) {
+    size_t objects = 0;
+    for (const ServedScene* scene : scenes) objects = std::max(objects, scene->scene().objects.size());
+    max_receive = (size_t{1} << 20) + 5 * objects;
+  }
   builder.SetMaxReceiveMessageSize(static_cast<int>(std::min<size_t>(max_receive, 1u << 30)));
   // Keepalive: ping an idle client every 20 s, drop it after 10 s without an answer; accept
   // client pings no more often than every 10 s (clients must keep their interval above it).

@@ -22,6 +22,8 @@
 
 namespace vistream::server {
 
+class ServiceMetrics;
+
 struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
   size_t max_sessions = 256;
@@ -33,6 +35,8 @@ struct ServerOptions {
   // link, already time-scaled (server/link_model.h), on the steady clock, in both directions
   // (a model each way). None: written at once.
   std::optional<LinkParams> link;
+  // Server metrics (server/service_metrics.h; not owned, must outlive the server); null: none.
+  ServiceMetrics* metrics = nullptr;
   // Session n's uplink draws from link_seed + 2(n - 1), its downlink from one more (session 1
   // as `vistream simulate --seed link_seed`).
   uint64_t link_seed = 1;
@@ -60,7 +64,8 @@ class WalkthroughService final
     : public vistream::v1::Walkthrough::WithRawCallbackMethod_Session<
           vistream::v1::Walkthrough::WithCallbackMethod_GetStats<vistream::v1::Walkthrough::Service>> {
  public:
-  WalkthroughService(ServedScene* scene, const ServerOptions& options, EventLog* log);
+  // Serves `scenes` (not owned; at least one; distinct names): a session's Hello picks one.
+  WalkthroughService(std::vector<ServedScene*> scenes, const ServerOptions& options, EventLog* log);
   ~WalkthroughService() override;
 
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(grpc::CallbackServerContext* context) override;
@@ -81,7 +86,7 @@ class WalkthroughService final
   void WakeAt(double at_s, const std::shared_ptr<SessionLink>& link);
 
  private:
-  ServedScene* scene_;
+  SceneDirectory scenes_;
   ServerOptions options_;
   EventLog* log_;
   const double start_s_;
@@ -90,6 +95,12 @@ class WalkthroughService final
   uint64_t next_id_ = 1;
   uint64_t sessions_total_ = 0;
   uint64_t bytes_sent_ended_ = 0;  // of sessions that ended
+  struct SceneTotals {
+    uint64_t ended = 0;      // sessions of the scene that ended
+    uint64_t bytes_sent = 0;  // by them
+    uint64_t geometry_bytes_sent = 0;
+  };
+  std::map<std::string, SceneTotals> scene_totals_;  // by scene name
   size_t ending_ = 0;              // removed from sessions_, their end not yet logged
   struct Entry {
     std::shared_ptr<server::Session> session;
@@ -106,6 +117,9 @@ class WalkthroughServer {
   // Errors: UNAVAILABLE when the address cannot be bound (naming it).
   static absl::StatusOr<std::unique_ptr<WalkthroughServer>> Start(ServedScene* scene, const ServerOptions& options,
                                                                   EventLog* log);
+  // Serves every scene of `scenes` (not owned; at least one, distinct names).
+  static absl::StatusOr<std::unique_ptr<WalkthroughServer>> Start(std::vector<ServedScene*> scenes,
+                                                                  const ServerOptions& options, EventLog* log);
   ~WalkthroughServer();
 
   int port() const { return port_; }

@@ -34,22 +34,42 @@ absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
 
 }  // namespace
 
-std::shared_ptr<Session> Session::Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
-                                         std::function<void()> wake, SessionSeams seams) {
-  return std::shared_ptr<Session>(new Session(id, scene, limits, log, std::move(wake), std::move(seams)));
+ServedScene* SceneDirectory::Find(std::string_view name) const {
+  for (ServedScene* s : scenes) {
+    if (s->name() == name) return s;
+  }
+  return nullptr;
 }
 
-Session::Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
-                 std::function<void()> wake, SessionSeams seams)
+std::string SceneDirectory::Names() const {
+  std::string out;
+  for (const ServedScene* s : scenes) absl::StrAppend(&out, out.empty() ? "'" : ", '", s->name(), "'");
+  return out;
+}
+
+std::shared_ptr<Session> Session::Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
+                                         std::function<void()> wake, SessionSeams seams) {
+  return std::shared_ptr<Session>(new Session(id, scene, nullptr, limits, log, std::move(wake), std::move(seams)));
+}
+
+std::shared_ptr<Session> Session::Create(uint64_t id, const SceneDirectory* scenes, const SessionLimits& limits,
+                                         EventLog* log, std::function<void()> wake, SessionSeams seams) {
+  return std::shared_ptr<Session>(new Session(id, nullptr, scenes, limits, log, std::move(wake), std::move(seams)));
+}
+
+Session::Session(uint64_t id, ServedScene* scene, const SceneDirectory* directory, const SessionLimits& limits,
+                 EventLog* log, std::function<void()> wake, SessionSeams seams)
     : id_(id),
+      directory_(directory),
       scene_(scene),
       limits_(limits),
       log_(log),
       wake_(std::move(wake)),
       seams_(std::move(seams)),
-      pvs_(seams_.pvs != nullptr ? seams_.pvs : &scene->scheduler()),
-      masks_(seams_.masks != nullptr ? seams_.masks : &scene->masks()),
-      start_s_(Now()) {
+      pvs_(seams_.pvs != nullptr ? seams_.pvs : scene != nullptr ? &scene->scheduler() : nullptr),
+      masks_(seams_.masks != nullptr ? seams_.masks : scene != nullptr ? &scene->masks() : nullptr),
+      start_s_(Now()),
+      epsilon_size_m_(limits.epsilon_size_m) {
   stats_.set_session_id(id);
   stats_.set_cell_id(-1);
   pose_tokens_ = 2.0 * limits_.max_pose_rate_hz;
@@ -60,12 +80,24 @@ Session::~Session() { End(); }
 double Session::Now() const { return seams_.clock ? seams_.clock() : SteadySeconds(); }
 
 void Session::End() {
+  PvsSource* pvs = nullptr;
   {
     std::lock_guard lock(mu_);
     if (ended_) return;
     ended_ = true;
+    pvs = pvs_;
   }
-  pvs_->CancelAll(id_);
+  if (pvs != nullptr) pvs->CancelAll(id_);  // none before Hello picked a scene
+}
+
+ServedScene* Session::scene() const {
+  std::lock_guard lock(mu_);
+  return hello_ ? scene_ : nullptr;
+}
+
+bool Session::greeted() const {
+  std::lock_guard lock(mu_);
+  return hello_;
 }
 
 absl::Status Session::failure() const {
@@ -102,11 +134,21 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
                                                       " is not supported: this server speaks version ",
                                                       static_cast<int>(v1::PROTOCOL_VERSION_CURRENT)));
   }
-  const scenes::Scene& scene = scene_->scene();
-  if (hello.scene() != scene.name) {
+  if (directory_ != nullptr) {
+    ServedScene* picked = directory_->Find(hello.scene());
+    if (picked == nullptr) {
+      return absl::NotFoundError(absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves ",
+                                              directory_->Names()));
+    }
+    scene_ = picked;
+    pvs_ = &picked->scheduler();
+    masks_ = &picked->masks();
+    epsilon_size_m_ = picked->viewcell().epsilon_m;
+  } else if (hello.scene() != scene_->name()) {
     return absl::NotFoundError(
-        absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene.name, "'"));
+        absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene_->name(), "'"));
   }
+  const scenes::Scene& scene = scene_->scene();
   for (int k = 0; k < hello.held_objects_size(); ++k) {
     const uint32_t o = hello.held_objects(k);
     if (o >= scene.objects.size()) {
@@ -116,12 +158,15 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
   }
   hello_ = true;
+  stats_.set_scene(scene_->name());
   memory_budget_ = hello.memory_budget_bytes();
   v1::ServerMessage info;
   *info.mutable_scene_info() = scene_->scene_info();
   QueueControl(std::move(info));
   if (log_ != nullptr) {
-    log_->Write(id_, "hello", {{"held_objects", hello.held_objects_size()},
+    log_->SetScene(id_, scene_->name());
+    log_->Write(id_, "hello", {{"scene", scene_->name()},
+                               {"held_objects", hello.held_objects_size()},
                                {"memory_budget_bytes", static_cast<uint64_t>(memory_budget_)}});
   }
   return absl::OkStatus();
@@ -174,6 +219,7 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       stats_.set_cell_id(*cell);
       if (from.has_value()) {
         stats_.set_crossings(stats_.crossings() + 1);
+        if (seams_.late_cell && !Served(*cell)) seams_.late_cell(scene_->name());
         if (log_ != nullptr) {
           const visibility::CellCoord a = scene_->grid().Coord(*from), b = scene_->grid().Coord(*cell);
           log_->Write(id_, "crossing", {{"from", absl::StrCat(a.i, ",", a.j)}, {"to", absl::StrCat(b.i, ",", b.j)}});
@@ -182,6 +228,14 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       SetWanted(now);
       for (CellId c : before) {
         if (std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end()) left.push_back(c);
+      }
+      if (from.has_value() && seams_.crossing_served) {
+        Crossing crossing{now, {}};
+        for (CellId c : wanted_) {
+          if (std::find(before.begin(), before.end(), c) == before.end() && !Served(c)) crossing.cells.push_back(c);
+        }
+        crossings_.push_back(std::move(crossing));
+        NoteServedCrossings(now);
       }
       // Geometry the cells left behind needed stays with the client: it is evicted only when the
       // memory budget needs the room (MakeRoom: what no wanted cell needs first), so nothing is
@@ -388,7 +442,7 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
 void Session::MaybeRequestMask(double now) {
   const visibility::EpsilonSuperset* eps = seams_.epsilon_masks ? scene_->epsilon() : nullptr;
   if (eps == nullptr || !current_.has_value()) return;
-  const double half = 0.5 * limits_.epsilon_size_m;
+  const double half = 0.5 * epsilon_size_m_;
   if (std::abs(position_.x - anchor_.x) > half || std::abs(position_.y - anchor_.y) > half) {
     anchor_ = position_;
     anchor_s_ = now;
@@ -403,7 +457,7 @@ void Session::MaybeRequestMask(double now) {
   // touches z = 0 reaches under every occluder and so culls nothing.
   scenes::Aabb box;
   box.min = glm::dvec3(anchor_.x - half, anchor_.y - half, std::max(0.1, anchor_.z - half));
-  box.max = glm::dvec3(anchor_.x + half, anchor_.y + half, box.min.z + limits_.epsilon_size_m);
+  box.max = glm::dvec3(anchor_.x + half, anchor_.y + half, box.min.z + epsilon_size_m_);
   // Inside the current cell only: the mask narrows that cell's PVS, which holds for no eye
   // beyond it (a client lingering by a cell edge would otherwise miss what the next cell sees).
   const scenes::Aabb cell_box = scene_->grid().CellBox(*current_);
@@ -464,9 +518,30 @@ void Session::QueueControl(v1::ServerMessage message) {
   }
 }
 
+bool Session::Served(CellId cell) const {
+  if (emitted_.count(cell) == 0) return false;
+  auto it = pending_geometry_.find(cell);
+  if (it == pending_geometry_.end()) return true;
+  return std::all_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return sent_.count(o) > 0; });
+}
+
+void Session::NoteServedCrossings(double now) {
+  while (!crossings_.empty()) {
+    Crossing& c = crossings_.front();
+    // A cell the client turned away from no longer counts.
+    std::erase_if(c.cells, [&](CellId cell) {
+      return std::find(wanted_.begin(), wanted_.end(), cell) == wanted_.end() || Served(cell);
+    });
+    if (!c.cells.empty()) return;
+    seams_.crossing_served(scene_->name(), now - c.at_s);
+    crossings_.pop_front();
+  }
+}
+
 std::optional<v1::ServerMessage> Session::NextMessage() {
   std::lock_guard lock(mu_);
   if (ended_ || !failure_.ok()) return std::nullopt;
+  if (!crossings_.empty() && control_.empty()) NoteServedCrossings(Now());
   if (!control_.empty()) {
     Control c = std::move(control_.front());
     control_.pop_front();

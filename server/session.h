@@ -36,7 +36,8 @@ namespace vistream::server {
 struct SessionLimits {
   double max_pose_rate_hz = 120.0;             // sustained poses per second (bursts to twice that)
   size_t max_queued_bytes = size_t{8} << 20;   // bytes waiting to be written to the client
-  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog)
+  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog); a
+                                               // session whose Hello picks a scene uses that scene's
   double epsilon_dwell_s = 2.0;                // time inside it before a mask is computed (a walker
                                                // at 1 m/s leaves the box sooner)
 };
@@ -52,6 +53,20 @@ struct SessionSeams {
   // (ViewcellGrid::Neighbours'), not by the client's velocity.
   bool look_ahead = true;
   bool epsilon_masks = true;      // false: no ε-masks (the viewcell PVS only)
+  // Server metrics (empty: none), called under the session's lock (they must not call back):
+  // the cells a crossing made newly adjacent were served (their PVS lists and geometry handed to
+  // the transport) `seconds` after the crossing; a client entered a cell before it was served.
+  std::function<void(const std::string& scene, double seconds)> crossing_served;
+  std::function<void(const std::string& scene)> late_cell;
+};
+
+// The scenes a server serves, by the name a Hello gives (ServedScene::name()).
+struct SceneDirectory {
+  std::vector<ServedScene*> scenes;  // not owned; in the configuration's order
+  // Null when no scene has that name.
+  ServedScene* Find(std::string_view name) const;
+  // "'a', 'b'": for messages.
+  std::string Names() const;
 };
 
 class Session : public std::enable_shared_from_this<Session> {
@@ -60,9 +75,18 @@ class Session : public std::enable_shared_from_this<Session> {
   // worker thread (a PVS arrived); the transport then calls NextMessage(). `log` may be null.
   static std::shared_ptr<Session> Create(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log,
                                          std::function<void()> wake, SessionSeams seams = {});
+  // A session of a server of several scenes: its Hello picks one of `scenes` (not owned; it
+  // must outlive the session), and a scene it does not list ends it with NOT_FOUND naming
+  // those it does. The seams' pvs and masks must be null (each scene's own are used).
+  static std::shared_ptr<Session> Create(uint64_t id, const SceneDirectory* scenes, const SessionLimits& limits,
+                                         EventLog* log, std::function<void()> wake, SessionSeams seams = {});
   ~Session();
 
   uint64_t id() const { return id_; }
+  // The scene the session's Hello picked; null before it (a server of several scenes).
+  ServedScene* scene() const;
+  // Whether Hello has arrived.
+  bool greeted() const;
 
   // Handles one client message at `now` (seconds on the steady clock). A status other than OK
   // ends the session with it (the status names the message and what is wrong).
@@ -77,8 +101,8 @@ class Session : public std::enable_shared_from_this<Session> {
   vistream::v1::SessionStats Stats() const;
 
  private:
-  Session(uint64_t id, ServedScene* scene, const SessionLimits& limits, EventLog* log, std::function<void()> wake,
-          SessionSeams seams);
+  Session(uint64_t id, ServedScene* scene, const SceneDirectory* directory, const SessionLimits& limits,
+          EventLog* log, std::function<void()> wake, SessionSeams seams);
   double Now() const;
 
   absl::Status OnHello(const vistream::v1::Hello& hello);
@@ -91,17 +115,25 @@ class Session : public std::enable_shared_from_this<Session> {
   void Emit(CellId cell);                                    // lock held
   void MaybeRequestMask(double now);                         // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
+  // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
+  bool Served(CellId cell) const;                            // lock held
+  // Reports crossings whose new cells are all served now (SessionSeams::crossing_served).
+  void NoteServedCrossings(double now);                      // lock held
   double Deadline(CellId cell, double now) const;
 
   const uint64_t id_;
-  ServedScene* const scene_;
+  const SceneDirectory* const directory_;  // null: the scene is fixed at Create
+  // Set at Create, or by Hello from directory_ (under mu_, before any reader needs them: every
+  // other message is refused before Hello).
+  ServedScene* scene_;
   const SessionLimits limits_;
   EventLog* const log_;
   std::function<void()> wake_;
   const SessionSeams seams_;
-  PvsSource* const pvs_;
-  TaskRunner* const masks_;
+  PvsSource* pvs_;
+  TaskRunner* masks_;
   const double start_s_;
+  double epsilon_size_m_;  // limits_' for a fixed scene; the picked scene's catalog value otherwise
 
   mutable std::mutex mu_;
   bool ended_ = false;
@@ -139,6 +171,11 @@ class Session : public std::enable_shared_from_this<Session> {
   };
   std::deque<Control> control_;
   size_t control_bytes_ = 0;
+  struct Crossing {
+    double at_s;
+    std::vector<CellId> cells;  // newly adjacent, not yet served
+  };
+  std::deque<Crossing> crossings_;  // with SessionSeams::crossing_served only
 
   // ε-mask: the neighbourhood the client lingers in, and what was sent for it.
   glm::dvec3 anchor_{0.0};

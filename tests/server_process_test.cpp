@@ -5,13 +5,19 @@
 
 #include <cstdio>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+
+#include "client/connection.h"
 #include "client/session_stream.h"
+#include "tests/server_process_util.h"
 #include "tests/server_test_util.h"
+#include "tests/temp_dir.h"
 
 namespace vistream::server {
 namespace {
@@ -145,6 +151,106 @@ TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
   EXPECT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
   std::fclose(f);
+}
+
+// A configuration file written to the test's folder.
+std::string WriteConfig(const std::string& name, const std::string& text) {
+  const std::string path = vistream::testing::ProcessTempDir() + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+// A bad configuration fails before any scene loads: exit 2, "FILE:LINE: KEY: what".
+TEST(ServerProcess, ABadConfigurationExitsTwoNamingFileLineAndKeyBeforeAnySceneLoads) {
+  const std::string path = WriteConfig("bad.toml",
+                                       "[[scenes]]\n"
+                                       "name = \"no-such-scene\"\n"
+                                       "res = 100\n");
+  auto [rc, out] = RunServer("--config " + path);
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("vistream-server: error: " + path + ":3: scenes[1].res: 100 is not a power of two"),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(out.find("loading"), std::string::npos) << out;
+  std::tie(rc, out) = RunServer("--config /no/such.toml");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("vistream-server: error: /no/such.toml: cannot read"), std::string::npos) << out;
+  // Neither a configuration nor --scene: nothing to serve.
+  std::tie(rc, out) = RunServer("--listen 127.0.0.1:0");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("no scene to serve: give --scene NAME or [[scenes]] tables"), std::string::npos) << out;
+  // A configuration whose scenes are fine but with no scene at all.
+  std::tie(rc, out) = RunServer("--config " + WriteConfig("empty.toml", "threads = 1\n"));
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("no scene to serve"), std::string::npos) << out;
+  // Link emulation is for one scene.
+  const std::string two = WriteConfig("two.toml", "[[scenes]]\nname = \"a\"\n[[scenes]]\nname = \"b\"\n");
+  std::tie(rc, out) = RunServer("--config " + two + " --emulate-link");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("--emulate-link and --link serve one scene only"), std::string::npos) << out;
+  std::tie(rc, out) = RunServer("--config " + two + " --pvs-file x.pvs");
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("--pvs-file: the configuration serves 2 scenes"), std::string::npos) << out;
+}
+
+// The file's keys, overridden by the options given: --listen replaces `listen`, --scene the
+// [[scenes]], --res each scene's `res`; the keys not overridden hold (the log goes to its file
+// as JSON lines).
+TEST(ServerProcess, CommandLineOptionsOverrideTheConfigurationsKeys) {
+  const std::string log = vistream::testing::ProcessTempDir() + "/override.log";
+  const std::string path = WriteConfig("override.toml",
+                                       "listen = \"127.0.0.1:1\"\n"
+                                       "threads = 1\n"
+                                       "[log]\n"
+                                       "format = \"json\"\n"
+                                       "file = \"" + log + "\"\n"
+                                       "[[scenes]]\n"
+                                       "name = \"no-such-scene\"\n"
+                                       "res = 16\n");
+  std::string error;
+  std::unique_ptr<test::RunningServer> server = test::RunningServer::Start(
+      VISTREAM_SERVER_BIN, {"--config", path, "--listen", "127.0.0.1:0", "--scene", "city1", "--res", "32"}, &error);
+  ASSERT_NE(server, nullptr) << error;
+  EXPECT_NE(server->port(), 1);
+  EXPECT_NE(server->ready_line().find("scene city1, 560 viewcells"), std::string::npos) << server->ready_line();
+  EXPECT_NE(server->ready_line().find("dual ray space (cpu, 32^2)"), std::string::npos) << server->ready_line();
+  absl::StatusOr<v1::ServerStats> stats = client::Probe(server->address(), kWait);
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  EXPECT_EQ(stats->scene(), "city1");
+  EXPECT_EQ(server->Stop(SIGTERM), 0);
+  std::ifstream in(log);
+  std::string first;
+  ASSERT_TRUE(std::getline(in, first)) << "nothing logged to " << log;
+  EXPECT_EQ(first.rfind("{\"time\":", 0), 0u) << first;
+  EXPECT_NE(first.find("\"level\":\"info\""), std::string::npos) << first;
+}
+
+// Two scenes from one configuration file: one process serves both, and GetStats lists them.
+TEST(ServerProcess, OneProcessServesEveryConfiguredScene) {
+  const std::string path = WriteConfig("two_scenes.toml",
+                                       "listen = \"127.0.0.1:0\"\n"
+                                       "threads = 2\n"
+                                       "[[scenes]]\n"
+                                       "name = \"city1\"\n"
+                                       "cache_mb = 64\n"
+                                       "[[scenes]]\n"
+                                       "name = \"streets\"\n");
+  std::string error;
+  std::unique_ptr<test::RunningServer> server = test::RunningServer::Start(VISTREAM_SERVER_BIN, {"--config", path}, &error);
+  ASSERT_NE(server, nullptr) << error;
+  EXPECT_NE(server->ready_line().find("2 scenes: city1 (560 viewcells"), std::string::npos) << server->ready_line();
+  EXPECT_NE(server->ready_line().find("; streets ("), std::string::npos) << server->ready_line();
+  absl::StatusOr<v1::ServerStats> stats = client::Probe(server->address(), kWait);
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  ASSERT_EQ(stats->scenes_size(), 2);
+  EXPECT_EQ(stats->scenes(1).name(), "streets");
+  SessionStream c(server->address());
+  c.Start(SessionStream::HelloFor("streets"));
+  c.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(c.WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  EXPECT_EQ(c.Snapshot().info.name(), "streets");
+  EXPECT_TRUE(c.Finish().ok());
+  EXPECT_EQ(server->Stop(SIGTERM), 0);
 }
 
 }  // namespace

@@ -1,0 +1,75 @@
+#pragma once
+// What vistream-server exports on /metrics (server/metrics_http.h; README "Deploying"), named
+// by Prometheus's rules (base units, `_total` counters, histograms), every family `vistream_`:
+//
+//   vistream_sessions_active{scene}                 sessions open (scene "" before their Hello)
+//   vistream_sessions_ended_total{scene,code}       sessions ended, by gRPC status code name
+//   vistream_bytes_sent_total{scene}                serialized ServerMessage bytes
+//   vistream_geometry_bytes_sent_total{scene}       encoded geometry bytes among them
+//   vistream_pvs_computations_total{scene}          PVSs computed (or looked up in a PVS file)
+//   vistream_pvs_cache_hits_total{scene}            requests answered by the cache or a running job
+//   vistream_pvs_dropped_total{scene}               stale requests dropped before they started
+//   vistream_pvs_compute_seconds{scene}             histogram of one PVS computation's time
+//   vistream_crossing_served_seconds{scene}         histogram: crossing to its new cells' PVS and
+//                                                   geometry handed to the transport
+//   vistream_late_cells_total{scene}                cells a client entered before they were served
+//   vistream_pvs_queue_length{scene}                PVS requests waiting for a worker
+//   vistream_send_queue_bytes{scene}                bytes queued for clients
+//   vistream_pvs_cache_bytes{scene}                 the PVS cache's size
+//   vistream_sessions_refused_total{reason}         streams refused before a session started
+//   vistream_process_resident_memory_bytes          the process's resident memory
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "server/metrics.h"
+#include "server/session.h"
+
+namespace vistream::server {
+
+class WalkthroughService;
+
+class ServiceMetrics {
+ public:
+  // Declares every family above in `registry` (not owned) for `scenes` (their names).
+  ServiceMetrics(MetricsRegistry* registry, const std::vector<std::string>& scenes);
+
+  // Reads the live figures of `service` (not owned; it must outlive the registry's renders)
+  // before every render.
+  void Watch(const WalkthroughService* service);
+  // The session seams that report crossings served and late cells.
+  void AddSessionSeams(SessionSeams* seams);
+  // Observes each PVS computation of `scene`'s scheduler (PvsScheduler::SetComputeObserver).
+  std::function<void(double)> PvsComputeObserver(const std::string& scene);
+  void SessionEnded(const std::string& scene, int grpc_code);
+  // `reason`: a short word (draining, too_many, unauthenticated, per_address, per_token, ...).
+  void SessionRefused(const std::string& reason);
+
+ private:
+  struct PerScene {
+    Gauge* active;
+    Counter* bytes;
+    Counter* geometry_bytes;
+    Counter* computed;
+    Counter* cache_hits;
+    Counter* dropped;
+    Histogram* compute_s;
+    Histogram* crossing_s;
+    Counter* late;
+    Gauge* pvs_queue;
+    Gauge* send_queue;
+    Gauge* cache_bytes;
+    // What the counters fed from cumulative figures last saw.
+    uint64_t last_bytes = 0, last_geometry = 0, last_computed = 0, last_hits = 0, last_dropped = 0;
+  };
+  PerScene* Find(const std::string& scene);
+  void Collect(const WalkthroughService* service);
+
+  MetricsRegistry* registry_;
+  std::map<std::string, PerScene> scenes_;  // fixed after construction: read without a lock
+  Gauge* pre_hello_;                        // sessions_active{scene=""}
+};
+
+}  // namespace vistream::server
