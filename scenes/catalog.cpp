@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
@@ -245,9 +246,22 @@ absl::StatusOr<CatalogEntry> LoadCatalogEntry(const std::string& path) {
   return ParseCatalogEntry(text, path, fs::path(path).parent_path().string());
 }
 
+std::string CatalogDirFrom(const char* env, const fs::path& exe, const std::string& source_scenes) {
+  if (env != nullptr && *env != '\0') return env;
+  // Installed first: a program installed on the machine that built it (cmake --install, or the
+  // package) must read the catalog it was installed with, not the source tree it came from.
+  if (!exe.empty()) {
+    const fs::path installed = (exe.parent_path() / ".." / "share" / "vistream" / "scenes").lexically_normal();
+    std::error_code ec;
+    if (fs::is_directory(installed, ec)) return installed.string();
+  }
+  return source_scenes;
+}
+
 std::string CatalogDir() {
-  if (const char* env = std::getenv("VISTREAM_SCENES"); env != nullptr && *env != '\0') return env;
-  return std::string(VISTREAM_SOURCE_DIR) + "/scenes";
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  return CatalogDirFrom(std::getenv("VISTREAM_SCENES"), ec ? fs::path() : exe, std::string(VISTREAM_SOURCE_DIR) + "/scenes");
 }
 
 absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, const std::string& catalog_dir) {

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -80,8 +81,16 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
                                                const std::string& base_dir);
 absl::StatusOr<CatalogEntry> LoadCatalogEntry(const std::string& path);
 
-// The default catalog folder: $VISTREAM_SCENES if set, else the source tree's scenes/.
+// The default catalog folder: $VISTREAM_SCENES if set; else the installed catalog beside the
+// running program (`../share/vistream/scenes` from its folder, /proc/self/exe: /usr/bin/vistream
+// reads /usr/share/vistream/scenes) if that folder exists; else the source tree's scenes/ (a
+// build tree's programs). The result may not exist; FindCatalogEntry says so.
 std::string CatalogDir();
+// The lookup CatalogDir() makes, from its inputs: `env` ($VISTREAM_SCENES; null or empty: unset),
+// `exe` (the running program's path, links resolved; empty: unknown) and `source_scenes` (the
+// source tree's scenes/ folder). Returns `env`, else the installed folder if it exists, else
+// `source_scenes`.
+std::string CatalogDirFrom(const char* env, const std::filesystem::path& exe, const std::string& source_scenes);
 // `name_or_path`: a catalog name (london), looked up in `catalog_dir` (empty: CatalogDir()), or
 // a path to a .json file. Errors: NOT_FOUND naming the folder and its entries.
 absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, const std::string& catalog_dir = "");

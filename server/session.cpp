@@ -127,10 +127,6 @@ absl::Status Session::OnMessage(const v1::ClientMessage& message, double now) {
   return absl::InvalidArgumentError("empty ClientMessage: expected hello, pose or credit");
 }
 
-bool Session::greeted() const {
-  std::lock_guard lock(mu_);
-  return hello_;
-}
 
 absl::Status Session::OnHello(const v1::Hello& hello) {
   if (hello_) return absl::FailedPreconditionError("second Hello: a session says Hello exactly once");

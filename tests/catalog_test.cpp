@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -210,6 +211,39 @@ TEST(Catalog, UnknownNameListsTheKnownOnes) {
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.status().code(), absl::StatusCode::kNotFound);
   EXPECT_NE(e.status().message().find("london"), std::string::npos) << e.status();
+}
+
+TEST(Catalog, DefaultFolderIsTheEnvironmentThenTheInstalledCatalogThenTheSourceTree) {
+  // An installed tree: PREFIX/bin/vistream-server and PREFIX/share/vistream/scenes.
+  const std::filesystem::path prefix = vistream::testing::ProcessTempDir() + "/catalog_prefix";
+  const std::filesystem::path exe = prefix / "bin" / "vistream-server";
+  const std::string source = "/src/vistream/scenes";
+
+  // Nothing installed beside the program (a build tree's bin/): the source tree.
+  std::filesystem::create_directories(prefix / "bin");
+  EXPECT_EQ(CatalogDirFrom(nullptr, exe, source), source);
+  EXPECT_EQ(CatalogDirFrom("", exe, source), source);  // an empty variable is unset
+  EXPECT_EQ(CatalogDirFrom(nullptr, "", source), source);  // the program's path unknown
+
+  // Installed: PREFIX/share/vistream/scenes, even where the source tree still exists.
+  std::filesystem::create_directories(prefix / "share" / "vistream" / "scenes");
+  EXPECT_EQ(CatalogDirFrom(nullptr, exe, source), (prefix / "share" / "vistream" / "scenes").string());
+  // A file of that name is no catalog.
+  const std::filesystem::path other = vistream::testing::ProcessTempDir() + "/catalog_file_prefix";
+  std::filesystem::create_directories(other / "bin");
+  std::filesystem::create_directories(other / "share" / "vistream");
+  std::FILE* f = std::fopen((other / "share" / "vistream" / "scenes").c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  std::fclose(f);
+  EXPECT_EQ(CatalogDirFrom(nullptr, other / "bin" / "vistream", source), source);
+
+  // $VISTREAM_SCENES wins over both, existing or not (FindCatalogEntry says when it is missing).
+  EXPECT_EQ(CatalogDirFrom("/elsewhere/scenes", exe, source), "/elsewhere/scenes");
+
+  // This test program lives in the build tree: the compiled-in source tree's scenes/ (or the
+  // variable, when the run sets it).
+  const char* env = std::getenv("VISTREAM_SCENES");
+  EXPECT_EQ(CatalogDir(), env != nullptr && *env != '\0' ? std::string(env) : std::string(VISTREAM_SOURCE_DIR) + "/scenes");
 }
 
 TEST(Catalog, LoadSceneTakesNamesPathsAndAnotherCatalogFolder) {
