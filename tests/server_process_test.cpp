@@ -100,35 +100,12 @@ TEST(ServerProcess, MalformedLinkOptionsAreRefusedNamingThem) {
 
 // The executable: started on a free port, stopped with SIGTERM while sessions are open.
 TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
-  int out[2];
-  ASSERT_EQ(pipe(out), 0);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    dup2(out[1], STDOUT_FILENO);
-    close(out[0]);
-    execl(VISTREAM_SERVER_BIN, VISTREAM_SERVER_BIN, "--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  close(out[1]);
-  struct Reap {  // never leave the server running, whatever fails below
-    pid_t pid;
-    bool waited = false;
-    ~Reap() {
-      if (!waited) {
-        kill(pid, SIGKILL);
-        waitpid(pid, nullptr, 0);
-      }
-    }
-  } reap{pid};
-  std::FILE* f = fdopen(out[0], "r");
-  char line[1024] = {};
-  ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing";
-  const std::string ready(line);
-  const size_t at = ready.find("ready on ");
-  ASSERT_NE(at, std::string::npos) << ready;
-  const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
+  std::string error;
+  std::unique_ptr<test::RunningServer> server = test::RunningServer::Start(
+      VISTREAM_SERVER_BIN, {"--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1"}, &error);
+  ASSERT_NE(server, nullptr) << error;
+  const std::string& ready = server->ready_line();
+  const std::string address = server->address();
   EXPECT_NE(ready.find("560 viewcells"), std::string::npos) << ready;
   EXPECT_NE(ready.find("2128 objects"), std::string::npos) << ready;
   std::vector<std::unique_ptr<SessionStream>> clients;
@@ -139,18 +116,13 @@ TEST(ServerProcess, SigtermEndsOpenSessionsCleanlyAndExitsZero) {
     clients.back()->SendPose(Centre(4 + k, 4));
     ASSERT_TRUE(clients.back()->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
   }
-  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  ASSERT_EQ(kill(server->pid(), SIGTERM), 0);
   for (auto& c : clients) {
     const grpc::Status st = c->AwaitEnd(kWait);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAVAILABLE) << st.error_message();
     EXPECT_NE(st.error_message().find("shutting down"), std::string::npos) << st.error_message();
   }
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  reap.waited = true;
-  EXPECT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0);
-  std::fclose(f);
+  EXPECT_EQ(server->Stop(0), 0);  // it exits by itself
 }
 
 // A configuration file written to the test's folder.
