@@ -229,6 +229,27 @@ TEST(Cli, EpsilonRejectsBadPositions) {
   ExpectBadOption("epsilon --scene city1 --at 0,0,2 --size 3 --opt fastest", "--opt: fastest not in");
 }
 
+// bench server through a real vistream-server, plaintext and TLS side by side: the walkers are
+// served in both, over a certificate made for the run, and the ratios are given.
+TEST(Cli, BenchServerRunsPlaintextAndTlsSideBySide) {
+  const RunResult r = Vistream("bench server --scene city1 --sessions 2 --seconds 4 --threads 1 --tls both --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out.substr(r.out.find('{')));
+  ASSERT_EQ(j.at("runs").size(), 2u) << r.out;
+  EXPECT_FALSE(j["runs"][0].at("tls").get<bool>());
+  EXPECT_TRUE(j["runs"][1].at("tls").get<bool>());
+  for (const auto& run : j["runs"]) {
+    EXPECT_EQ(run.at("sessions_started").get<int>(), 2) << run;
+    EXPECT_EQ(run.at("server_exit_code").get<int>(), 0) << run;
+    EXPECT_GT(run.at("bytes_sent").get<double>(), 0.0) << run;
+    EXPECT_GT(run.at("bytes_per_s").get<double>(), 0.0) << run;
+    EXPECT_FALSE(run.contains("first_error")) << run;
+  }
+  EXPECT_GT(j.at("tls_over_plain").at("bytes_per_s").get<double>(), 0.0);
+  EXPECT_TRUE(j["tls_over_plain"].contains("crossing_p99_ms"));
+  ExpectBadOption("bench server --tls maybe", "--tls: maybe not in {off,on,both}");
+}
+
 TEST(Cli, BenchEpsilonReproducesBothTables) {
   const RunResult r = Vistream("bench epsilon --scene city2 --count 3 --opts none,paper,all --json");
   ASSERT_EQ(r.exit_code, 0) << r.out;
