@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -71,9 +72,15 @@ class Reader {
         std::vector<std::string> known;
         for (const Key& key : keys) known.emplace_back(key.name);
         const int line = k.source().begin.line != 0 ? static_cast<int>(k.source().begin.line) : LineOf(node);
+        // TOML puts every key after a [table] header into that table: a top-level key written
+        // below one lands there.
+        static const char* const kTopLevel[] = {"listen", "threads", "max_sessions", "catalog", "grace_s"};
+        const bool top_level = !prefix.empty() && std::find(std::begin(kTopLevel), std::end(kTopLevel), name) !=
+                                                      std::end(kTopLevel);
         return Error(line, dotted,
                      absl::StrCat("unknown key (", prefix.empty() ? "top level" : "[" + prefix + "]",
-                                  " keys: ", absl::StrJoin(known, ", "), ")"));
+                                  " keys: ", absl::StrJoin(known, ", "), ")",
+                                  top_level ? "; top-level keys go above the first [table] in the file" : ""));
       }
       if (absl::Status st = found->read(node, dotted); !st.ok()) return st;
     }
@@ -308,6 +315,8 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
   };
   if (absl::Status st = r.Table(root, "", keys); !st.ok()) return st;
   c.log_json = log_format == "json";
+  if (const toml::node* n = root.get("listen")) c.listen_line = LineOf(*n);
+  if (const toml::node* n = root.get("tls")) c.tls_line = LineOf(*n);
   // Pairs of keys that only work together.
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     const toml::node* tls = root.get("tls");

@@ -68,6 +68,9 @@ struct ServerConfig {
   std::string log_file;                    // empty: stderr
 
   std::vector<SceneConfig> scenes;
+
+  // Where the file set `listen` and the [tls] table (0: not in the file), for later errors.
+  int listen_line = 0, tls_line = 0;
 };
 
 // Reads and checks `path`. Errors: INVALID_ARGUMENT "PATH:LINE: KEY: what is wrong" for a

@@ -87,7 +87,7 @@ void ReloadTokens(vistream::server::TokenStore* tokens, EventLog* log) {
     return;
   }
   if (const absl::Status st = tokens->Reload(); !st.ok()) {
-    log->Write(0, "tokens_reload_failed",
+    log->Write(EventLog::Level::kError, 0, "tokens_reload_failed",
                {{"error", std::string(st.message())}, {"tenants", static_cast<uint64_t>(tokens->size())}});
     return;
   }
@@ -282,7 +282,13 @@ int main(int argc, char** argv) {
   {
     // TLS files and the token file are checked before any scene loads: a bad one exits 2,
     // naming the key (and the configuration file) or the option.
-    const std::string in_file = config.path.empty() ? "" : config.path + ": ";
+    // Errors name the file and line only for what the file set (options are named by the key,
+    // which is the option's name in the file).
+    const bool tls_from_cli = given("--tls-cert") || given("--tls-key") || given("--tls-client-ca") || given("--insecure");
+    const bool plaintext = config.tls_cert.empty();
+    const int line = plaintext ? (given("--listen") || given("--insecure") ? 0 : config.listen_line)
+                               : (tls_from_cli ? 0 : config.tls_line);
+    const std::string in_file = line > 0 ? absl::StrFormat("%s:%d: ", config.path, line) : "";
     const vistream::server::TlsSettings tls{config.tls_cert, config.tls_key, config.tls_client_ca, config.tls_insecure};
     absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
         vistream::server::ServerCredentialsFor(tls, config.listen);
@@ -345,6 +351,27 @@ int main(int argc, char** argv) {
                               {"tenants", static_cast<uint64_t>(server_options.tokens->size())}});
   }
   if (!config.path.empty()) log.Write(0, "config", {{"file", config.path}, {"scenes", config.scenes.size()}});
+
+  // A catalog name the file gives that the catalog does not have is a bad configuration (exit
+  // 2), found before any scene loads.
+  for (size_t k = 0; k < config.scenes.size(); ++k) {
+    const vistream::server::SceneConfig& sc = config.scenes[k];
+    if (sc.line == 0 || !sc.file.empty()) continue;
+    if (absl::StatusOr<vistream::scenes::CatalogEntry> e = vistream::scenes::FindCatalogEntry(sc.name, config.catalog);
+        !e.ok() && e.status().code() == absl::StatusCode::kNotFound) {
+      std::fprintf(stderr, "vistream-server: error: %s:%d: scenes[%zu].name: %s (or give the scene's file)\n",
+                   config.path.c_str(), sc.line, k + 1, std::string(e.status().message()).c_str());
+      return 2;
+    }
+  }
+  if (config.tls_cert.empty() && !vistream::server::IsLoopbackListen(config.listen)) {
+    log.Write(EventLog::Level::kWarn, 0, "insecure",
+              {{"listen", config.listen}, {"message", "plaintext on an address that is not loopback (tls.insecure)"}});
+  }
+  if (server_options.tokens != nullptr && server_options.tokens->size() == 0) {
+    log.Write(EventLog::Level::kWarn, 0, "no_tenants",
+              {{"tokens", server_options.tokens->path()}, {"message", "the token file lets nobody in"}});
+  }
 
   // One pool of PVS workers for every scene, shared round robin (server/pvs_scheduler.h).
   const unsigned threads = config.threads != 0 ? config.threads : std::max(1u, std::thread::hardware_concurrency());
@@ -457,8 +484,12 @@ int main(int argc, char** argv) {
     }
   }
   const std::string metrics_line = http != nullptr ? "; metrics on http://" + http->address() + "/metrics" : "";
-  std::printf("vistream-server: ready on %s: %s%s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str(),
-              metrics_line.c_str());
+  std::string security_line = config.tls_cert.empty() ? "" : config.tls_client_ca.empty() ? "; TLS" : "; mutual TLS";
+  if (server_options.tokens != nullptr) {
+    security_line += absl::StrFormat("; tokens (%zu tenants)", server_options.tokens->size());
+  }
+  std::printf("vistream-server: ready on %s: %s%s%s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str(),
+              security_line.c_str(), metrics_line.c_str());
   std::fflush(stdout);
   log.Write(0, "ready", {{"address", (*server)->address()}, {"scenes", scenes.size()}});
 

@@ -423,10 +423,7 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   if (options_.tokens != nullptr) {
     absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata());
     if (!t.ok()) {
-      if (log_ != nullptr) {
-        log_->Write(0, "session_refused",
-                    {{"peer", context->peer()}, {"reason", std::string(t.status().message())}});
-      }
+      Refused(context, "Session", "unauthenticated", std::string(t.status().message()));
       return new RefusedReactor(ToGrpc(t.status()));
     }
     tenant = *std::move(t);
@@ -434,22 +431,19 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   const std::string host = PeerHost(context->peer());
   std::lock_guard lock(mu_);
   if (draining_) {
-    if (options_.metrics != nullptr) options_.metrics->SessionRefused("draining");
+    Refused(context, "Session", "draining", "the server is shutting down");
     return new RefusedReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
   if (sessions_.size() >= options_.max_sessions) {
-    if (options_.metrics != nullptr) options_.metrics->SessionRefused("too_many");
-    if (log_ != nullptr) {
-      log_->Write(EventLog::Level::kWarn, 0, "session_refused", {{"peer", context->peer()}, {"reason", "too many sessions"}});
-    }
+    Refused(context, "Session", "too_many", "too many sessions");
     return new RefusedReactor(grpc::Status(
         grpc::StatusCode::RESOURCE_EXHAUSTED,
         absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
   }
   if (absl::Status q = quota_.Admit(host, tenant); !q.ok()) {
-    if (log_ != nullptr) {
-      log_->Write(0, "session_refused", {{"peer", context->peer()}, {"reason", std::string(q.message())}});
-    }
+    Refused(context, "Session", tenant.empty() || q.message().find("tenant") == absl::string_view::npos ? "per_address"
+                                                                                                      : "per_token",
+            std::string(q.message()));
     return new RefusedReactor(ToGrpc(q));
   }
   const uint64_t id = next_id_++;
@@ -536,6 +530,7 @@ grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerConte
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   if (options_.tokens != nullptr) {
     if (absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata()); !t.ok()) {
+      Refused(context, "GetStats", "unauthenticated", std::string(t.status().message()));
       reactor->Finish(ToGrpc(t.status()));
       return reactor;
     }
@@ -543,6 +538,15 @@ grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerConte
   *response = Stats();
   reactor->Finish(grpc::Status::OK);
   return reactor;
+}
+
+void WalkthroughService::Refused(grpc::CallbackServerContext* context, const char* call, const char* reason,
+                                 const std::string& message) {
+  if (options_.metrics != nullptr) options_.metrics->SessionRefused(reason);
+  if (log_ != nullptr) {
+    log_->Write(EventLog::Level::kWarn, 0, "refused",
+                {{"call", call}, {"peer", context->peer()}, {"reason", reason}, {"message", message}});
+  }
 }
 
 void WalkthroughService::Drain() {

@@ -89,6 +89,9 @@ class WalkthroughService final
   // `session_end` line is written).
   size_t active_sessions() const;
 
+  // A call refused before any work: logged (warn, "refused") and counted
+  // (vistream_sessions_refused_total{reason}).
+  void Refused(grpc::CallbackServerContext* context, const char* call, const char* reason, const std::string& message);
   // Called by a session's reactor when it is done; `link` is null without emulation.
   void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
   const ServerOptions& options() const { return options_; }

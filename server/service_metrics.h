@@ -16,7 +16,8 @@
 //   vistream_pvs_queue_length{scene}                PVS requests waiting for a worker
 //   vistream_send_queue_bytes{scene}                bytes queued for clients
 //   vistream_pvs_cache_bytes{scene}                 the PVS cache's size
-//   vistream_sessions_refused_total{reason}         streams refused before a session started
+//   vistream_sessions_refused_total{reason}         calls refused before any work (unauthenticated,
+//                                                   too_many, per_address, per_token, draining)
 //   vistream_process_resident_memory_bytes          the process's resident memory
 
 #include <map>

@@ -184,6 +184,10 @@ TEST(ServerConfig, UnknownKeysAreNamedWithTheKeysThatExist) {
       << e;
   e = ErrorOf("[[scenes]]\nname = \"a\"\nresolution = 64\n");
   EXPECT_NE(e.find(":3: scenes[1].resolution: unknown key ([scenes[1]] keys: name, file"), std::string::npos) << e;
+  // A top-level key written below a table lands in it: the message says where it belongs.
+  e = ErrorOf("[[scenes]]\nname = \"a\"\nlisten = \"0.0.0.0:50051\"\n");
+  EXPECT_NE(e.find(":3: scenes[1].listen: unknown key"), std::string::npos) << e;
+  EXPECT_NE(e.find("top-level keys go above the first [table] in the file"), std::string::npos) << e;
   e = ErrorOf("[metric]\nlisten = \"127.0.0.1:1\"\n");
   EXPECT_NE(e.find(":1: metric: unknown key"), std::string::npos) << e;
 }

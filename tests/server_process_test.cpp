@@ -147,6 +147,15 @@ TEST(ServerProcess, ABadConfigurationExitsTwoNamingFileLineAndKeyBeforeAnySceneL
   std::tie(rc, out) = RunServer("--config /no/such.toml");
   EXPECT_EQ(rc, 2) << out;
   EXPECT_NE(out.find("vistream-server: error: /no/such.toml: cannot read"), std::string::npos) << out;
+  // A scene name the catalog does not have: exit 2 before any scene loads (city1 is first).
+  const std::string unknown = WriteConfig("unknown_scene.toml",
+                                          "[[scenes]]\nname = \"city1\"\n[[scenes]]\nname = \"city9\"\n");
+  std::tie(rc, out) = RunServer("--config " + unknown);
+  EXPECT_EQ(rc, 2) << out;
+  EXPECT_NE(out.find("vistream-server: error: " + unknown + ":3: scenes[2].name: no scene 'city9' in the catalog"),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(out.find("loading"), std::string::npos) << out;
   // Neither a configuration nor --scene: nothing to serve.
   std::tie(rc, out) = RunServer("--listen 127.0.0.1:0");
   EXPECT_EQ(rc, 2) << out;
