@@ -236,6 +236,9 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
           if (std::find(before.begin(), before.end(), c) == before.end() && !Served(c)) crossing.cells.push_back(c);
         }
         crossings_.push_back(std::move(crossing));
+        // Bounded: a client that crosses back and forth and grants no credit keeps cells
+        // unserved; its oldest crossings are then not timed.
+        if (crossings_.size() > 64) crossings_.pop_front();
         NoteServedCrossings(now);
       }
       // Geometry the cells left behind needed stays with the client: it is evicted only when the
