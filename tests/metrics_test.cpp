@@ -185,13 +185,15 @@ TEST(Metrics, ConcurrentUpdatesFromSeveralThreadsAllCount) {
   });
   std::vector<std::thread> threads;
   for (int t = 0; t < kThreads; ++t) {
-    threads.emplace_back([&r, t] {
+    threads.emplace_back([&r, &renders, t] {
       // Every thread looks its children up itself, the first ones at the same time.
       Counter* c = r.GetCounter("vistream_t_total", "Events.", {{"scene", "london"}});
       Counter* mine =
           r.GetCounter("vistream_t_total", "Events.", {{"scene", "t" + std::to_string(t)}});
       Gauge* g = r.GetGauge("vistream_t_open", "Open.");
       Histogram* h = r.GetHistogram("vistream_t_seconds", "Times.", {1.0});
+      // Update only once the scraper is rendering, so that its renders meet the updates.
+      while (renders.load() == 0) std::this_thread::yield();
       for (int i = 0; i < kEach; ++i) {
         c->Add();
         mine->Add(2);
