@@ -21,6 +21,7 @@
 #include "client/connection.h"
 #include "client/session_stream.h"
 #include "server/security.h"
+#include "tests/server_process_util.h"
 #include "tests/server_test_util.h"
 #include "tests/temp_dir.h"
 #include "tests/tls_test_util.h"
@@ -329,15 +330,7 @@ TEST(SecurityLimits, AStreamWithoutHelloEndsDeadlineExceededAfterTheTimeout) {
 
 // ---- the vistream-server process ----
 
-std::pair<int, std::string> RunServer(const std::string& args) {
-  std::string out;
-  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " " + args + " 2>&1").c_str(), "r");
-  if (p == nullptr) return {-1, out};
-  char buf[1024];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using test::RunServer;
 
 TEST(SecurityProcess, BadSecurityOptionsExitTwoBeforeTheSceneLoads) {
   const std::string bad_tokens = TokensFile("bad-tokens", "alice\n");
@@ -369,38 +362,13 @@ TEST(SecurityProcess, SighupRevokesATokenWithoutDroppingItsOpenSession) {
   const std::string path =
       TokensFile("tokens-sighup", std::string("alice ") + kAliceToken + "\nbob " + kBobToken + "\n");
   const std::string log = TokensFile("server-sighup.log", "");
-  int out[2];
-  ASSERT_EQ(pipe(out), 0);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    dup2(out[1], STDOUT_FILENO);
-    close(out[0]);
-    const int err = open(log.c_str(), O_WRONLY | O_TRUNC);  // async-signal-safe, unlike freopen
-    dup2(err, STDERR_FILENO);
-    execl(VISTREAM_SERVER_BIN, VISTREAM_SERVER_BIN, "--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1",
-          "--tokens", path.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  close(out[1]);
-  struct Reap {  // never leave the server running, whatever fails below
-    pid_t pid;
-    bool waited = false;
-    ~Reap() {
-      if (!waited) {
-        kill(pid, SIGKILL);
-        waitpid(pid, nullptr, 0);
-      }
-    }
-  } reap{pid};
-  std::FILE* f = fdopen(out[0], "r");
-  char line[1024] = {};
-  ASSERT_NE(std::fgets(line, sizeof(line), f), nullptr) << "the server printed nothing: " << ReadText(log);
-  std::fclose(f);
-  const std::string ready(line);
-  const size_t at = ready.find("ready on ");
-  ASSERT_NE(at, std::string::npos) << ready;
-  const std::string address = ready.substr(at + 9, ready.find(':', ready.find(':', at + 9) + 1) - at - 9);
+  std::string error;
+  std::unique_ptr<test::RunningServer> server = test::RunningServer::Start(
+      VISTREAM_SERVER_BIN, {"--scene", "city1", "--listen", "127.0.0.1:0", "--threads", "1", "--tokens", path}, &error,
+      log);
+  ASSERT_NE(server, nullptr) << error << "; log: " << ReadText(log);
+  const std::string address = server->address();
+  const pid_t pid = server->pid();
 
   SessionStream open(address, Security("", kAliceToken));
   open.Start(SessionStream::HelloFor("city1"));
@@ -436,11 +404,7 @@ TEST(SecurityProcess, SighupRevokesATokenWithoutDroppingItsOpenSession) {
   EXPECT_EQ(text.find(kAliceToken), std::string::npos) << "the log shows a token";
   EXPECT_EQ(text.find(kBobToken), std::string::npos) << "the log shows a token";
   EXPECT_TRUE(open.Finish().ok());
-  ASSERT_EQ(kill(pid, SIGTERM), 0);
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  reap.waited = true;
-  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << status;
+  EXPECT_EQ(server->Stop(SIGTERM), 0);
 }
 
 }  // namespace

@@ -27,16 +27,7 @@ using client::SessionStream;
 using test::Centre;
 using test::kWait;
 
-// Runs the executable with `args`; its exit code (-1 if it did not exit) and its output.
-std::pair<int, std::string> RunServer(const std::string& args) {
-  std::string out;
-  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " " + args + " 2>&1").c_str(), "r");
-  if (p == nullptr) return {-1, out};
-  char buf[1024];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using test::RunServer;
 
 // Bad options exit 2 in the tool's form, naming the option, before any scene is looked for:
 // the scene named here does not exist, and the error is about the option all the same.

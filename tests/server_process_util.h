@@ -2,6 +2,7 @@
 // A vistream-server executable started by a test: its ready line, its address, and a stop that
 // never leaves it running (the destructor kills what the test did not stop).
 
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -9,9 +10,22 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace vistream::server::test {
+
+// Runs the vistream-server executable with `args` (a shell line's words) to its end: its exit
+// code (-1 if it did not exit) and everything it printed.
+inline std::pair<int, std::string> RunServer(const std::string& args) {
+  std::string out;
+  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " " + args + " 2>&1").c_str(), "r");
+  if (p == nullptr) return {-1, out};
+  char buf[1024];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
 
 class RunningServer {
  public:
@@ -27,8 +41,10 @@ class RunningServer {
     if (pid == 0) {
       dup2(out[1], STDOUT_FILENO);
       close(out[0]);
-      if (!log_path.empty()) {
-        if (std::FILE* log = std::fopen(log_path.c_str(), "w"); log != nullptr) dup2(fileno(log), STDERR_FILENO);
+      if (!log_path.empty()) {  // open(), not fopen(): async-signal-safe in the forked child
+        if (const int log = open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644); log >= 0) {
+          dup2(log, STDERR_FILENO);
+        }
       }
       std::vector<char*> argv{const_cast<char*>(binary.c_str())};
       for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
