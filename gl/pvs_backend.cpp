@@ -1,5 +1,9 @@
 #include "gl/pvs_backend.h"
 
+#include <algorithm>
+
+#include <absl/strings/str_cat.h>
+
 namespace vistream::gl {
 
 absl::StatusOr<PvsBackend> PvsBackend::Create(const std::string& name) {
@@ -34,6 +38,33 @@ std::vector<visibility::PvsResult> PvsBackend::ComputeBatch(const visibility::Pv
   std::vector<visibility::PvsResult> out;
   for (const scenes::Aabb& cell : cells) out.push_back(computer.Compute(cell, Options(options), &engine));
   return out;
+}
+
+absl::Status ComputeViewcellPvss(const PvsBackend& backend, const visibility::PvsComputer& computer,
+                                 const visibility::ViewcellGrid& grid, std::span<const visibility::CellId> cells,
+                                 const visibility::CellQueryOptions& options, const scenes::RunControl& run,
+                                 const std::string& label, const CellPvsSink& sink) {
+  for (visibility::CellId c : cells) {
+    if (c >= grid.CellCount()) {
+      return absl::OutOfRangeError(absl::StrCat("viewcell ", c, " is outside the grid of ", grid.CellCount(), " cells"));
+    }
+  }
+  scenes::Progress progress(run, label, cells.size());
+  constexpr size_t kChunk = 64;
+  std::vector<scenes::Aabb> boxes;
+  for (size_t first = 0; first < cells.size(); first += kChunk) {
+    if (progress.Cancelled()) return absl::CancelledError(absl::StrCat(label, ": stopped"));
+    const std::span<const visibility::CellId> chunk = cells.subspan(first, std::min(kChunk, cells.size() - first));
+    boxes.clear();
+    for (visibility::CellId c : chunk) boxes.push_back(grid.CellBox(c));
+    const std::vector<visibility::PvsResult> r = backend.ComputeBatch(computer, boxes, options);
+    for (size_t k = 0; k < chunk.size(); ++k) {
+      if (absl::Status st = sink(chunk[k], r[k]); !st.ok()) return st;
+    }
+    progress.Advance(chunk.size());
+  }
+  progress.Finish();
+  return absl::OkStatus();
 }
 
 }  // namespace vistream::gl

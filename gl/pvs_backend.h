@@ -4,6 +4,7 @@
 // CGAL's exact union test wherever it leaves a gap: the reference overestimation is measured
 // by).
 
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -12,7 +13,9 @@
 #include <absl/status/statusor.h>
 
 #include "gl/gl_planar_raster.h"
+#include "scenes/progress.h"
 #include "visibility/pvs.h"
+#include "visibility/viewcell_grid.h"
 
 namespace vistream::gl {
 
@@ -46,5 +49,20 @@ class PvsBackend {
   std::string name_;
   std::unique_ptr<gl::GlPlanarRaster> gl_;
 };
+
+// Receives one viewcell's PVS; an error stops ComputeViewcellPvss.
+using CellPvsSink = std::function<absl::Status(visibility::CellId cell, const visibility::PvsResult& pvs)>;
+
+// The PVS of each viewcell in `cells` (ids of `grid`; any subset, in any order), computed with
+// `backend` in chunks of 64 cells (ComputeBatch: every core for cpu and exact) and handed to
+// `sink` in the order of `cells`, chunk by chunk, so a caller can store them as they come. The
+// one loop behind `vistream pvs --all` (a whole grid or one shard of it, to a PVS file or a
+// PVS store) and the session fuzzer's PVS file. Progress: one unit per cell, under `label`.
+// Errors: CANCELLED when `run` is cancelled (checked between chunks; nothing more reaches the
+// sink), OUT_OF_RANGE for a cell id outside `grid`, or the sink's first error.
+absl::Status ComputeViewcellPvss(const PvsBackend& backend, const visibility::PvsComputer& computer,
+                                 const visibility::ViewcellGrid& grid, std::span<const visibility::CellId> cells,
+                                 const visibility::CellQueryOptions& options, const scenes::RunControl& run,
+                                 const std::string& label, const CellPvsSink& sink);
 
 }  // namespace vistream::gl

@@ -77,8 +77,12 @@ std::optional<CellId> PvsSchedulePolicy::StartNext() {
 }
 
 std::vector<PvsSchedulePolicy::Done> PvsSchedulePolicy::Finish(const CellPvsPtr& pvs, double seconds) {
-  ++stats_.computed;
-  stats_.compute_s += seconds;
+  if (pvs->from_store) {
+    ++stats_.store_hits;
+  } else {
+    ++stats_.computed;
+    stats_.compute_s += seconds;
+  }
   if (use_cache_) Insert(pvs);
   std::vector<Done> done;
   auto it = jobs_.find(pvs->cell);
@@ -160,7 +164,7 @@ void PvsWorkerPool::WorkerLoop(unsigned worker) {
     std::vector<PvsSource::Done> done = lane->policy_.Finish(pvs, seconds);
     const std::function<void(double)> observe = lane->observe_;
     lock.unlock();
-    if (observe) observe(seconds);
+    if (observe && !pvs->from_store) observe(seconds);
     for (PvsSource::Done& d : done) {
       if (d) d(pvs);
     }

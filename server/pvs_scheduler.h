@@ -27,12 +27,14 @@ struct CellPvs {
   CellId cell = 0;
   std::vector<uint32_t> objects;  // ascending object ids
   double compute_s = 0.0;         // worker time spent; 0 for a PVS file's sets
+  bool from_store = false;        // read from the shared PVS store (server/pvs_store.h), not computed
   size_t Bytes() const { return sizeof(CellPvs) + objects.size() * sizeof(uint32_t); }
 };
 using CellPvsPtr = std::shared_ptr<const CellPvs>;
 
 struct SchedulerStats {
-  uint64_t computed = 0;    // cells computed
+  uint64_t computed = 0;    // cells computed (or looked up in a PVS file)
+  uint64_t store_hits = 0;  // cells read from the shared PVS store instead
   uint64_t cache_hits = 0;  // requests answered from the cache or joined to a running job
   uint64_t dropped = 0;     // jobs dropped before they started (no one wanted them any more)
   uint64_t cache_bytes = 0;
@@ -175,8 +177,8 @@ class PvsScheduler : public PvsSource {
   CellPvsPtr Cached(CellId cell) override;
   SchedulerStats stats() const override;
   unsigned threads() const { return pool_->threads(); }
-  // Called (on the worker, without a lock) with the seconds each computation took; set it
-  // before the first request.
+  // Called (on the worker, without a lock) with the seconds each computation took (not for
+  // PVSs read from the store); set it before the first request.
   void SetComputeObserver(std::function<void(double seconds)> observe);
 
  private:

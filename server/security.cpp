@@ -7,7 +7,9 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <mutex>
+#include <string>
 
 #include <absl/strings/ascii.h>
 #include <absl/strings/str_cat.h>
@@ -286,6 +288,16 @@ absl::StatusOr<std::string> Authenticate(const TokenStore& tokens, const Metadat
   std::optional<std::string> tenant = tokens.TenantFor(*token);
   if (!tenant.has_value()) return absl::UnauthenticatedError("unknown token");
   return *std::move(tenant);
+}
+
+absl::StatusOr<std::string> ReadSecretLine(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot read: ", std::strerror(errno)));
+  std::string line;
+  std::getline(in, line);
+  const std::string trimmed(absl::StripAsciiWhitespace(line));
+  if (trimmed.empty()) return absl::InvalidArgumentError(absl::StrCat(path, ": the first line is empty"));
+  return trimmed;
 }
 
 }  // namespace vistream::server

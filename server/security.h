@@ -33,6 +33,11 @@ struct TlsSettings {
 // without brackets) or localhost.
 bool IsLoopbackListen(std::string_view listen);
 
+// The first line of `path` (a secret such as the PVS store's password), without its line end
+// or surrounding spaces. Errors: NOT_FOUND naming `path` (cannot read), INVALID_ARGUMENT when
+// the first line is empty.
+absl::StatusOr<std::string> ReadSecretLine(const std::string& path);
+
 // The credentials to serve `listen` with. TLS when tls.cert and tls.key are given: both files
 // are read and checked (PEM, the key matches the certificate, tls.client_ca a PEM bundle of at
 // least one certificate); with tls.client_ca, clients must present a certificate it verifies.

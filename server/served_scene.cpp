@@ -55,6 +55,12 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
       }
     }
     s->pvs_source_ = absl::StrFormat("dual ray space (%s, %u^2)", options.backend, options.res);
+    if (options.store != nullptr) {
+      s->store_ = options.store;
+      s->store_ns_ = PvsStoreNamespace(options.store->key_prefix(), scenes::SceneFingerprint(s->scene_), *s->grid_,
+                                       options.res, options.backend);
+      absl::StrAppend(&s->pvs_source_, " with the PVS store at ", options.store->address());
+    }
   }
 
   // Geometry, encoded once for every session.
@@ -94,7 +100,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
       if (b.ok()) self->backends_[worker] = std::make_unique<gl::PvsBackend>(std::move(*b));
     };
   }
-  auto compute = [self](CellId cell, unsigned worker) { return self->ComputePvs(cell, worker); };
+  auto compute = [self](CellId cell, unsigned worker) { return self->StoredOrComputedPvs(cell, worker); };
   s->scheduler_ = options.pool != nullptr
                       ? std::make_unique<PvsScheduler>(compute, options.pool, options.cache_bytes, init)
                       : std::make_unique<PvsScheduler>(compute, threads, options.cache_bytes, init);
@@ -122,6 +128,19 @@ CellPvs ServedScene::ComputePvs(CellId cell, unsigned worker) const {
   out.objects = r.objects;
   out.compute_s = r.ms / 1000.0;
   return out;
+}
+
+CellPvs ServedScene::StoredOrComputedPvs(CellId cell, unsigned worker) const {
+  if (store_ == nullptr) return ComputePvs(cell, worker);
+  CellPvs stored;
+  stored.cell = cell;
+  if (store_->Get(store_ns_, cell, scene_.objects.size(), &stored.objects) == PvsStore::Read::kHit) {
+    stored.from_store = true;
+    return stored;
+  }
+  CellPvs computed = ComputePvs(cell, worker);
+  store_->PutLater(store_ns_, cell, computed.objects);
+  return computed;
 }
 
 }  // namespace vistream::server

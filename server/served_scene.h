@@ -15,6 +15,7 @@
 #include "scenes/geometry_codec.h"
 #include "scenes/progress.h"
 #include "server/pvs_scheduler.h"
+#include "server/pvs_store.h"
 #include "server/task_queue.h"
 #include "visibility/epsilon_superset.h"
 #include "visibility/kdtree.h"
@@ -37,6 +38,9 @@ struct ServedSceneOptions {
   // Workers shared with the server's other scenes (not owned; must outlive the scene); null:
   // the scene starts `threads` workers of its own.
   PvsWorkerPool* pool = nullptr;
+  // The PVS store shared with other replicas (not owned; must outlive the scene); null: none.
+  // Not used with `pvs_file`.
+  PvsStore* store = nullptr;
 };
 
 class ServedScene {
@@ -62,6 +66,13 @@ class ServedScene {
   // The simulator calls it on its own thread with worker 0 (the CPU raster when that worker's
   // backend is OpenGL, whose context is current on the worker thread only).
   CellPvs ComputePvs(CellId cell, unsigned worker) const;
+  // The PVS of `cell` as a scheduler worker makes it: from the store when it holds a good
+  // entry (from_store set), else ComputePvs, written back to the store.
+  CellPvs StoredOrComputedPvs(CellId cell, unsigned worker) const;
+  // This scene's key space in the store (PvsStoreNamespace); empty without a store.
+  const std::string& store_namespace() const { return store_ns_; }
+  // The shared PVS store this scene uses; null: none.
+  PvsStore* store() const { return store_; }
   // "dual ray space (cpu, 128^2)" or "PVS file F (agvs)".
   const std::string& pvs_source() const { return pvs_source_; }
   double load_seconds() const { return load_seconds_; }
@@ -82,6 +93,8 @@ class ServedScene {
   std::unique_ptr<visibility::EpsilonSuperset> epsilon_;
   vistream::v1::SceneInfo scene_info_;
   std::string pvs_source_;
+  PvsStore* store_ = nullptr;
+  std::string store_ns_;
   double load_seconds_ = 0.0;
   std::unique_ptr<TaskQueue> masks_;
   std::unique_ptr<PvsScheduler> scheduler_;  // last: its workers read the members above

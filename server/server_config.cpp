@@ -274,6 +274,11 @@ bool IsHostPort(std::string_view text) {
   return host.find(':') == std::string_view::npos && host.find(' ') == std::string_view::npos;
 }
 
+bool IsStoreAddress(std::string_view text) {
+  if (text.rfind("unix:", 0) == 0) return text.size() > 5;
+  return IsHostPort(text) && !text.ends_with(":0");
+}
+
 absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std::string& path) {
   toml::table root;
   try {
@@ -307,6 +312,22 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
               })},
       {"auth", r.Subtable({{"tokens", r.ReadableFile(&c.tokens)}})},
       {"metrics", r.Subtable({{"listen", r.Address(&c.metrics_listen, true)}})},
+      {"store", r.Subtable({
+                    {"address", [&](const toml::node& n, const std::string& key) -> absl::Status {
+                       if (absl::Status st = r.String(&c.store_address)(n, key); !st.ok()) return st;
+                       if (!IsStoreAddress(c.store_address)) {
+                         return r.Error(LineOf(n), key, absl::StrCat("'", c.store_address,
+                                                                     "' is not host:port or unix:/path (e.g. 127.0.0.1:6379)"));
+                       }
+                       return absl::OkStatus();
+                     }},
+                    {"key_prefix", r.String(&c.store_key_prefix)},
+                    {"connect_timeout_ms", r.Number(&c.store_connect_timeout_ms, 0.0, 60000.0, true)},
+                    {"read_timeout_ms", r.Number(&c.store_read_timeout_ms, 0.0, 60000.0, true)},
+                    {"write_timeout_ms", r.Number(&c.store_write_timeout_ms, 0.0, 60000.0, true)},
+                    {"username", r.String(&c.store_username)},
+                    {"password_file", r.ReadableFile(&c.store_password_file)},
+                })},
       {"log", r.Subtable({
                   {"format", r.Choice(&log_format, {"text", "json"})},
                   {"file", r.WritableFile(&c.log_file)},
@@ -322,6 +343,12 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
     const toml::node* tls = root.get("tls");
     return r.Error(tls != nullptr ? LineOf(*tls) : 1, c.tls_cert.empty() ? "tls.cert" : "tls.key",
                    "tls.cert and tls.key go together (the certificate chain and its private key)");
+  }
+  if (c.store_address.empty() && root.get("store") != nullptr) {
+    return r.Error(LineOf(*root.get("store")), "store.address", "missing: where the Redis of the PVS store listens");
+  }
+  if (c.store_key_prefix.empty() || c.store_key_prefix.find_first_of(" \t") != std::string::npos) {
+    return r.Error(LineOf(*root.get("store")), "store.key_prefix", "expected a non-empty word without spaces");
   }
   if (!c.tls_client_ca.empty() && c.tls_cert.empty()) {
     return r.Error(LineOf(*root.get("tls")), "tls.client_ca",

@@ -8,6 +8,8 @@
 //   [tls]      cert, key, client_ca, insecure
 //   [auth]     tokens
 //   [metrics]  listen
+//   [store]    address, key_prefix, connect_timeout_ms, read_timeout_ms, write_timeout_ms,
+//              username, password_file
 //   [log]      format ("text" | "json"), file
 //   [[scenes]] name, file, pvs_file, cell_size_m, res, backend, cache_mb
 //
@@ -63,6 +65,15 @@ struct ServerConfig {
   // [metrics]
   std::string metrics_listen;              // host:port of /metrics and /healthz; empty: off
 
+  // [store]: the PVS store shared by replicas (server/pvs_store.h)
+  std::string store_address;               // Redis host:port or unix:PATH; empty: no store
+  std::string store_key_prefix = "vistream";
+  double store_connect_timeout_ms = 200.0;
+  double store_read_timeout_ms = 50.0;     // a read's deadline, well under a crossing's budget
+  double store_write_timeout_ms = 500.0;
+  std::string store_username;              // Redis 6 ACL user; empty: the default user
+  std::string store_password_file;         // the password on its first line; empty: no AUTH
+
   // [log]
   bool log_json = false;                   // format = "json"
   std::string log_file;                    // empty: stderr
@@ -84,6 +95,9 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
 
 // host:port with a port from 0 to 65535 (a host of at least one character, [::1] allowed).
 bool IsHostPort(std::string_view text);
+
+// A Redis address for the store: host:port (port 1 to 65535) or unix:PATH.
+bool IsStoreAddress(std::string_view text);
 
 // Checks what the configuration and the command line make together: at least one scene,
 // distinct scene names. Errors name the file.

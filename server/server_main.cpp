@@ -32,6 +32,7 @@
 #include "server/link_model.h"
 #include "server/metrics.h"
 #include "server/metrics_http.h"
+#include "server/pvs_store.h"
 #include "server/security.h"
 #include "server/served_scene.h"
 #include "server/service_metrics.h"
@@ -164,6 +165,21 @@ int main(int argc, char** argv) {
             return "";
           },
           "HOST:PORT"));
+  app.add_option("--store", cli.store_address,
+                 "Redis host:port or unix:PATH of the PVS store shared by replicas (README \"Beyond one machine\")")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            if (!vistream::server::IsStoreAddress(text)) {
+              return "'" + text + "' is not host:port or unix:/path (e.g. 127.0.0.1:6379)";
+            }
+            return "";
+          },
+          "HOST:PORT"));
+  app.add_option("--store-prefix", cli.store_key_prefix, "key prefix in the PVS store")->capture_default_str();
+  app.add_option("--store-read-timeout-ms", cli.store_read_timeout_ms,
+                 "a store read's deadline in ms (then the PVS is computed)")
+      ->check(FiniteRange(0.001, 60000))->capture_default_str();
+  app.add_option("--store-password-file", cli.store_password_file, "file whose first line is the store's password");
   app.add_flag("--json-log", json_log, "log JSON lines instead of text");
   app.add_option("--log-file", cli.log_file, "append the log to this file instead of stderr");
   bool emulate_link = false;
@@ -244,6 +260,10 @@ int main(int argc, char** argv) {
   if (given("--insecure")) config.tls_insecure = cli.tls_insecure;
   if (given("--tokens")) config.tokens = cli.tokens;
   if (given("--metrics-listen")) config.metrics_listen = cli.metrics_listen;
+  if (given("--store")) config.store_address = cli.store_address;
+  if (given("--store-prefix")) config.store_key_prefix = cli.store_key_prefix;
+  if (given("--store-read-timeout-ms")) config.store_read_timeout_ms = cli.store_read_timeout_ms;
+  if (given("--store-password-file")) config.store_password_file = cli.store_password_file;
   if (given("--json-log")) config.log_json = json_log;
   if (given("--log-file")) config.log_file = cli.log_file;
   if (given("--scene")) {
@@ -373,6 +393,39 @@ int main(int argc, char** argv) {
               {{"tokens", server_options.tokens->path()}, {"message", "the token file lets nobody in"}});
   }
 
+  // The PVS store shared with other replicas: before the pool, so that it outlives the workers
+  // that read it.
+  std::unique_ptr<vistream::server::PvsStore> store;
+  if (!config.store_address.empty()) {
+    vistream::server::PvsStoreOptions so;
+    so.address = config.store_address;
+    so.key_prefix = config.store_key_prefix;
+    so.connect_timeout_s = config.store_connect_timeout_ms / 1000.0;
+    so.read_timeout_s = config.store_read_timeout_ms / 1000.0;
+    so.write_timeout_s = config.store_write_timeout_ms / 1000.0;
+    so.username = config.store_username;
+    if (!config.store_password_file.empty()) {
+      absl::StatusOr<std::string> password = vistream::server::ReadSecretLine(config.store_password_file);
+      if (!password.ok()) {
+        std::fprintf(stderr, "vistream-server: error: %s: %s\n",
+                     given("--store-password-file") ? "--store-password-file" : "store.password_file",
+                     std::string(password.status().message()).c_str());
+        return 2;
+      }
+      so.password = *std::move(password);
+    }
+    absl::StatusOr<std::unique_ptr<vistream::server::PvsStore>> created = vistream::server::PvsStore::Create(
+        so, [&log](EventLog::Level level, std::string_view event, const std::string& detail) {
+          log.Write(level, 0, event, {{"detail", detail}});
+        });
+    if (!created.ok()) {
+      std::fprintf(stderr, "vistream-server: error: %s\n", std::string(created.status().message()).c_str());
+      return 2;
+    }
+    store = std::move(*created);
+    // Say now whether it answers; the server starts either way and uses it once it does.
+    (void)store->Connect();
+  }
   // One pool of PVS workers for every scene, shared round robin (server/pvs_scheduler.h).
   const unsigned threads = config.threads != 0 ? config.threads : std::max(1u, std::thread::hardware_concurrency());
   vistream::server::PvsWorkerPool pool(threads);
@@ -388,6 +441,7 @@ int main(int argc, char** argv) {
     o.pvs_file = sc.pvs_file;
     o.cache_bytes = static_cast<size_t>(sc.cache_mb * (1 << 20));
     o.pool = &pool;
+    o.store = sc.pvs_file.empty() ? store.get() : nullptr;
     log.Write(0, "loading", {{"scene", sc.name}, {"source", o.scene}});
     const auto load_start = std::chrono::steady_clock::now();
     absl::StatusOr<std::unique_ptr<vistream::server::ServedScene>> scene =

@@ -579,6 +579,7 @@ v1::ServerStats WalkthroughService::Stats() const {
     s.set_pvs_dropped(s.pvs_dropped() + sched.dropped);
     s.set_cache_bytes(s.cache_bytes() + sched.cache_bytes);
     s.set_pvs_compute_s(s.pvs_compute_s() + sched.compute_s);
+    s.set_pvs_store_hits(s.pvs_store_hits() + sched.store_hits);
     v1::SceneStats* ss = s.add_scenes();
     ss->set_name(scene->name());
     ss->set_pvs_source(scene->pvs_source());
@@ -587,7 +588,21 @@ v1::ServerStats WalkthroughService::Stats() const {
     ss->set_pvs_dropped(sched.dropped);
     ss->set_cache_bytes(sched.cache_bytes);
     ss->set_pvs_compute_s(sched.compute_s);
+    ss->set_pvs_store_hits(sched.store_hits);
     ss->set_pvs_queued(sched.queued);
+    if (const PvsStore* store = scene->store(); store != nullptr && !s.has_store()) {
+      const PvsStoreStats st = store->stats();
+      v1::StoreStats* out = s.mutable_store();
+      out->set_address(store->address());
+      out->set_up(st.up);
+      out->set_hits(st.hits);
+      out->set_misses(st.misses);
+      out->set_bad_entries(st.bad_entries);
+      out->set_unavailable(st.unavailable);
+      out->set_writes(st.writes);
+      out->set_writes_dropped(st.writes_dropped);
+      out->set_outages(st.outages);
+    }
     ss->set_object_count(static_cast<uint32_t>(scene->scene().objects.size()));
     ss->set_cells(static_cast<uint32_t>(scene->grid().CellCount()));
     by_name[scene->name()] = ss;

@@ -30,6 +30,7 @@ ServiceMetrics::ServiceMetrics(MetricsRegistry* registry, const std::vector<std:
         r.GetGauge("vistream_pvs_queue_length", "PVS requests waiting for a worker", l),
         r.GetGauge("vistream_send_queue_bytes", "Bytes queued for clients, not yet written", l),
         r.GetGauge("vistream_pvs_cache_bytes", "Bytes held by the PVS cache", l),
+        r.GetCounter("vistream_pvs_store_hits_total", "Viewcell PVSs read from the shared PVS store, not computed", l),
     };
     scenes_.emplace(name, p);
     // The codes seen most, so that the family shows before the first session ends.
@@ -78,6 +79,30 @@ void ServiceMetrics::Collect(const WalkthroughService* service) {
     p->pvs_queue->Set(static_cast<double>(s.pvs_queued()));
     p->cache_bytes->Set(static_cast<double>(s.cache_bytes()));
     p->send_queue->Set(static_cast<double>(queued[s.name()]));
+    feed(p->store_hits, s.pvs_store_hits(), &p->last_store_hits);
+  }
+  if (stats.has_store()) {
+    if (store_ == nullptr) {
+      MetricsRegistry& r = *registry_;
+      store_ = std::make_unique<StoreFamilies>(StoreFamilies{
+          r.GetGauge("vistream_pvs_store_up", "1 while the shared PVS store (Redis) answers, else 0"),
+          r.GetCounter("vistream_pvs_store_misses_total", "Store reads that found no entry"),
+          r.GetCounter("vistream_pvs_store_bad_entries_total", "Store entries refused by their checks, recomputed"),
+          r.GetCounter("vistream_pvs_store_unavailable_total",
+                       "Store reads and writes skipped or failed: the store down or too slow"),
+          r.GetCounter("vistream_pvs_store_writes_total", "Viewcell PVSs written back to the store"),
+          r.GetCounter("vistream_pvs_store_writes_dropped_total", "Write-backs lost: queue full or store down"),
+          r.GetCounter("vistream_pvs_store_outages_total", "Times the store went down"),
+      });
+    }
+    const v1::StoreStats& st = stats.store();
+    store_->up->Set(st.up() ? 1.0 : 0.0);
+    feed(store_->misses, st.misses(), &store_->last_misses);
+    feed(store_->bad, st.bad_entries(), &store_->last_bad);
+    feed(store_->unavailable, st.unavailable(), &store_->last_unavailable);
+    feed(store_->writes, st.writes(), &store_->last_writes);
+    feed(store_->writes_dropped, st.writes_dropped(), &store_->last_dropped);
+    feed(store_->outages, st.outages(), &store_->last_outages);
   }
 }
 

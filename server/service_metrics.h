@@ -18,6 +18,15 @@
 //   vistream_pvs_cache_bytes{scene}                 the PVS cache's size
 //   vistream_sessions_refused_total{reason}         calls refused before any work (unauthenticated,
 //                                                   too_many, per_address, per_token, draining)
+//   vistream_pvs_store_hits_total{scene}            PVSs read from the shared store, not computed
+//   vistream_pvs_store_up                           1 while the shared PVS store answers, else 0
+//   vistream_pvs_store_misses_total                 store reads that found no entry
+//   vistream_pvs_store_bad_entries_total            store entries refused by their checks (recomputed)
+//   vistream_pvs_store_unavailable_total            store reads and writes skipped or failed
+//   vistream_pvs_store_writes_total                 PVSs written back to the store
+//   vistream_pvs_store_writes_dropped_total         write-backs lost (queue full, store down)
+//   vistream_pvs_store_outages_total                times the store went down
+//   (the store families only with a store configured)
 //   vistream_process_resident_memory_bytes          the process's resident memory
 
 #include <map>
@@ -62,13 +71,23 @@ class ServiceMetrics {
     Gauge* pvs_queue;
     Gauge* send_queue;
     Gauge* cache_bytes;
+    Counter* store_hits;
     // What the counters fed from cumulative figures last saw.
-    uint64_t last_bytes = 0, last_geometry = 0, last_computed = 0, last_hits = 0, last_dropped = 0;
+    uint64_t last_bytes = 0, last_geometry = 0, last_computed = 0, last_hits = 0, last_dropped = 0,
+             last_store_hits = 0;
   };
   PerScene* Find(const std::string& scene);
   void Collect(const WalkthroughService* service);
 
+  struct StoreFamilies {
+    Gauge* up;
+    Counter *misses, *bad, *unavailable, *writes, *writes_dropped, *outages;
+    uint64_t last_misses = 0, last_bad = 0, last_unavailable = 0, last_writes = 0, last_dropped = 0,
+             last_outages = 0;
+  };
+
   MetricsRegistry* registry_;
+  std::unique_ptr<StoreFamilies> store_;    // declared at the first stats naming a store
   std::map<std::string, PerScene> scenes_;  // fixed after construction: read without a lock
   Gauge* pre_hello_;                        // sessions_active{scene=""}
 };

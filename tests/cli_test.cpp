@@ -106,7 +106,7 @@ TEST(Cli, PvsAllWritesEveryViewcellAsAPvsFile) {
   // A heatmap reads it back.
   EXPECT_EQ(Vistream("agvs heatmap --scene city1 --pvs " + file + " -o " + Tmp("all.png")).exit_code, 0);
   ExpectBadOption("pvs --scene city1", "--cell or --all: give --cell I,J (one viewcell) or --all -o FILE");
-  ExpectBadOption("pvs --scene city1 --all", "--all: writes a PVS file: give -o FILE");
+  ExpectBadOption("pvs --scene city1 --all", "--all: writes a PVS file or fills a PVS store: give -o FILE");
   ExpectBadOption("pvs --scene city1 --all --cell 1,1 -o " + file, "--cell: cannot be given with --all");
   ExpectRunTimeError("pvs --scene city1 --all -o /nonexistent/dir/x.pvs", "not a writable folder");
   ExpectBadOption("pvs --scene city1 --cell 1,1 -o " + file, "-o: writes the PVS file of --all; one viewcell prints");

@@ -63,6 +63,14 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
                            "tokens = \"tokens\"\n"
                            "[metrics]\n"
                            "listen = \"127.0.0.1:9464\"\n"
+                           "[store]\n"
+                           "address = \"10.0.0.5:6379\"\n"
+                           "key_prefix = \"city\"\n"
+                           "connect_timeout_ms = 300\n"
+                           "read_timeout_ms = 20\n"
+                           "write_timeout_ms = 900\n"
+                           "username = \"vistream\"\n"
+                           "password_file = \"a.pem\"\n"
                            "[log]\n"
                            "format = \"json\"\n"
                            "file = \"server.log\"\n"
@@ -94,6 +102,13 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
   EXPECT_TRUE(c->tls_insecure);
   EXPECT_EQ(c->tokens, dir + "/tokens");
   EXPECT_EQ(c->metrics_listen, "127.0.0.1:9464");
+  EXPECT_EQ(c->store_address, "10.0.0.5:6379");
+  EXPECT_EQ(c->store_key_prefix, "city");
+  EXPECT_EQ(c->store_connect_timeout_ms, 300.0);
+  EXPECT_EQ(c->store_read_timeout_ms, 20.0);
+  EXPECT_EQ(c->store_write_timeout_ms, 900.0);
+  EXPECT_EQ(c->store_username, "vistream");
+  EXPECT_EQ(c->store_password_file, dir + "/a.pem");
   EXPECT_TRUE(c->log_json);
   EXPECT_EQ(c->log_file, dir + "/server.log");
   ASSERT_EQ(c->scenes.size(), 2u);
@@ -101,7 +116,7 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
   EXPECT_EQ(c->scenes[0].source(), "london");
   EXPECT_EQ(c->scenes[0].cache_mb, 512.0);
   EXPECT_EQ(c->scenes[0].res, 128u);  // the default
-  EXPECT_EQ(c->scenes[0].line, 23);
+  EXPECT_EQ(c->scenes[0].line, 31);
   EXPECT_EQ(c->scenes[1].name, "town");
   EXPECT_EQ(c->scenes[1].source(), dir + "/a.pem");
   EXPECT_EQ(c->scenes[1].pvs_file, dir + "/a.pem");
@@ -119,6 +134,8 @@ TEST(ServerConfig, AnEmptyFileKeepsTheDefaultsButServesNothing) {
   EXPECT_EQ(c->hello_timeout_s, 30.0);
   EXPECT_FALSE(c->log_json);
   EXPECT_TRUE(c->metrics_listen.empty());
+  EXPECT_TRUE(c->store_address.empty());
+  EXPECT_EQ(c->store_read_timeout_ms, 50.0);
   const absl::Status st = CheckServerConfig(*c);
   EXPECT_FALSE(st.ok());
   EXPECT_NE(st.message().find("no scene to serve"), std::string::npos) << st;
@@ -150,6 +167,12 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
       {"[tls]\ninsecure = \"yes\"", ":2: tls.insecure: expected true or false, got a string"},
       {"[auth]\ntokens = \"nope\"", ":2: auth.tokens: " + Folder() + "/nope: no such file"},
       {"[metrics]\nlisten = \"9464\"", ":2: metrics.listen: '9464' is not host:port"},
+      {"[store]\naddress = \"redis\"", ":2: store.address: 'redis' is not host:port or unix:/path"},
+      {"[store]\naddress = \"h:0\"", ":2: store.address: 'h:0' is not host:port or unix:/path"},
+      {"[store]\nkey_prefix = \"a\"", ":1: store.address: missing"},
+      {"[store]\naddress = \"h:1\"\nkey_prefix = \"a b\"", ":1: store.key_prefix: expected a non-empty word"},
+      {"[store]\naddress = \"h:1\"\nread_timeout_ms = 0", ":3: store.read_timeout_ms: 0 is out of range (above 0"},
+      {"[store]\naddress = \"h:1\"\npassword_file = \"/no/pw\"", ":3: store.password_file: /no/pw: no such file"},
       {"[log]\nformat = \"xml\"", ":2: log.format: 'xml' is not one of text, json"},
       {"[log]\nfile = \"/no/such/dir/server.log\"", ":2: log.file: /no/such/dir: no such folder"},
       {"[log]\nfile = \"" + Folder() + "\"", ":2: log.file: " + Folder() + ": is a folder, not a file"},

@@ -1,11 +1,14 @@
-// vistream pvs: the potentially visible set of one viewcell.
+// vistream pvs: the potentially visible set of one viewcell, or of every one (a PVS file, or
+// the PVS store replicas share).
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/numbers.h>
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
 
@@ -15,6 +18,7 @@
 #include "tools/top_view_map.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
+#include "server/pvs_store.h"
 #include "visibility/pvs.h"
 #include "visibility/pvs_file.h"
 #include "visibility/viewcell_grid.h"
@@ -30,14 +34,39 @@ struct PvsArgs {
   uint32_t res = 128;
   int map_size = 2048;
   bool json = false;
+  std::string store, store_prefix = "vistream", shard;
 };
 
-// Every viewcell of the grid, written as a PVS file the server can serve (--pvs-file).
+// "K/N" with 0 <= K < N: the shard of --all this process computes (the cells whose id is K
+// modulo N, so that every shard gets a fair share of the dense centre and the empty edge).
+bool ParseShard(const std::string& text, uint32_t* k, uint32_t* n) {
+  const size_t slash = text.find('/');
+  if (slash == std::string::npos) return false;
+  uint64_t kk = 0, nn = 0;
+  if (!absl::SimpleAtoi(text.substr(0, slash), &kk) || !absl::SimpleAtoi(text.substr(slash + 1), &nn)) return false;
+  if (nn < 1 || nn > 100000 || kk >= nn) return false;
+  *k = static_cast<uint32_t>(kk);
+  *n = static_cast<uint32_t>(nn);
+  return true;
+}
+
+// Every viewcell of the grid (or one shard of it), written as a PVS file the server can serve
+// (--pvs-file) or into the PVS store replicas share (--store).
 int PvsAll(const PvsArgs& a) {
-  if (a.out.empty()) return BadOption("pvs", "--all", "writes a PVS file: give -o FILE");
+  if (a.out.empty() && a.store.empty()) {
+    return BadOption("pvs", "--all", "writes a PVS file or fills a PVS store: give -o FILE or --store ADDRESS");
+  }
   if (!a.map.empty()) return BadOption("pvs", "--map", "draws one viewcell: not with --all");
+  uint32_t shard = 0, shards = 1;
+  if (!a.shard.empty()) {
+    if (a.store.empty()) return BadOption("pvs", "--shard", "fills part of a PVS store: give --store ADDRESS");
+    if (!a.out.empty()) return BadOption("pvs", "--shard", "a PVS file holds every viewcell: not with -o");
+    if (!ParseShard(a.shard, &shard, &shards)) {
+      return BadOption("pvs", "--shard", "'" + a.shard + "' is not K/N with 0 <= K < N (e.g. 0/4 ... 3/4)");
+    }
+  }
   // Find out now, not after minutes of work, whether the file can be written.
-  {
+  if (!a.out.empty()) {
     const std::filesystem::path parent = std::filesystem::absolute(a.out).parent_path();
     std::error_code ec;
     if (!std::filesystem::is_directory(parent, ec) || access(parent.c_str(), W_OK) != 0) {
@@ -47,6 +76,21 @@ int PvsAll(const PvsArgs& a) {
     if (std::filesystem::is_directory(a.out, ec)) {
       return Fail(absl::InvalidArgumentError("-o " + a.out + " is a directory, not a file"));
     }
+  }
+  // ... and whether the store answers.
+  std::unique_ptr<server::PvsStore> store;
+  if (!a.store.empty()) {
+    server::PvsStoreOptions so;
+    so.address = a.store;
+    so.key_prefix = a.store_prefix;
+    so.connect_timeout_s = 5.0;
+    so.read_timeout_s = 10.0;
+    so.write_timeout_s = 10.0;
+    if (const char* password = std::getenv("VISTREAM_STORE_PASSWORD"); password != nullptr) so.password = password;
+    absl::StatusOr<std::unique_ptr<server::PvsStore>> created = server::PvsStore::Create(so);
+    if (!created.ok()) return BadOption("pvs", "--store", std::string(created.status().message()));
+    store = std::move(*created);
+    if (absl::Status st = store->Connect(); !st.ok()) return Fail(st);
   }
   InstallCancelHandler();
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
@@ -60,34 +104,64 @@ int PvsAll(const PvsArgs& a) {
   absl::StatusOr<gl::PvsBackend> backend = gl::PvsBackend::Create(a.backend);
   if (!backend.ok()) return Fail(backend.status());
   const visibility::CellQueryOptions options = gl::QueryOptionsFor(a.res);
-  visibility::GlobalPvs sets(grid->CellCount(), scene->objects.size());
-  double objects = 0;
-  {
-    scenes::Progress progress(ToolRun(), "pvs of every viewcell (" + a.backend + ")", grid->CellCount());
-    constexpr size_t kChunk = 64;
-    for (size_t first = 0; first < grid->CellCount(); first += kChunk) {
-      if (progress.Cancelled()) return Fail(absl::CancelledError("pvs --all stopped; nothing written"));
-      std::vector<scenes::Aabb> cells;
-      for (size_t c = first; c < std::min(grid->CellCount(), first + kChunk); ++c) {
-        cells.push_back(grid->CellBox(static_cast<visibility::CellId>(c)));
+
+  std::vector<visibility::CellId> cells;
+  for (size_t c = shard; c < grid->CellCount(); c += shards) cells.push_back(static_cast<visibility::CellId>(c));
+  const size_t shard_cells = cells.size();
+  std::string ns;
+  size_t skipped = 0;
+  if (store != nullptr) {
+    ns = server::PvsStoreNamespace(a.store_prefix, scenes::SceneFingerprint(*scene), *grid, a.res, a.backend);
+    if (a.out.empty()) {
+      // A run stopped half-way resumes: the cells already stored are not computed again.
+      absl::StatusOr<std::vector<bool>> stored = store->Exists(ns, cells);
+      if (!stored.ok()) return Fail(stored.status());
+      std::vector<visibility::CellId> missing;
+      for (size_t k = 0; k < cells.size(); ++k) {
+        if (!(*stored)[k]) missing.push_back(cells[k]);
       }
-      const std::vector<visibility::PvsResult> r = backend->ComputeBatch(computer, cells, options);
-      for (size_t k = 0; k < r.size(); ++k) {
-        sets.Assign(static_cast<visibility::CellId>(first + k), r[k].objects);
-        objects += static_cast<double>(r[k].objects.size());
-      }
-      progress.Advance(cells.size());
+      skipped = cells.size() - missing.size();
+      cells = std::move(missing);
     }
-    progress.Finish();
+  }
+  visibility::GlobalPvs sets(a.out.empty() ? 0 : grid->CellCount(), scene->objects.size());
+  double objects = 0;
+  std::vector<std::pair<visibility::CellId, std::string>> batch;
+  auto flush = [&]() -> absl::Status {
+    if (batch.empty()) return absl::OkStatus();
+    absl::Status st = store->Put(ns, batch);
+    batch.clear();
+    return st;
+  };
+  const std::string label = shards > 1 ? absl::StrFormat("pvs of viewcell shard %u/%u (%s)", shard, shards, a.backend)
+                                       : "pvs of every viewcell (" + a.backend + ")";
+  absl::Status computed = gl::ComputeViewcellPvss(
+      *backend, computer, *grid, cells, options, ToolRun(), label,
+      [&](visibility::CellId cell, const visibility::PvsResult& r) -> absl::Status {
+        objects += static_cast<double>(r.objects.size());
+        if (!a.out.empty()) sets.Assign(cell, r.objects);
+        if (store == nullptr) return absl::OkStatus();
+        batch.emplace_back(cell, visibility::EncodeCellRecord(cell, r.objects));
+        return batch.size() >= 64 ? flush() : absl::OkStatus();
+      });
+  if (computed.ok() && store != nullptr) computed = flush();
+  if (!computed.ok()) {
+    if (absl::IsCancelled(computed)) {
+      return Fail(absl::CancelledError(store != nullptr ? "pvs --all stopped; the cells stored so far stay (run it again to finish)"
+                                                        : "pvs --all stopped; nothing written"));
+    }
+    return Fail(computed);
   }
   visibility::PvsProvenance provenance;
   provenance.strategy = absl::StrFormat("dual-ray-space %s %u^2", a.backend, a.res);
   provenance.seconds = SecondsSince(t0);
-  if (absl::Status st = WriteFile(a.out, visibility::EncodePvsFile(visibility::MakePvsFile(*scene, *grid, sets, provenance)));
-      !st.ok()) {
-    return Fail(st);
+  if (!a.out.empty()) {
+    if (absl::Status st = WriteFile(a.out, visibility::EncodePvsFile(visibility::MakePvsFile(*scene, *grid, sets, provenance)));
+        !st.ok()) {
+      return Fail(st);
+    }
   }
-  const double mean = objects / static_cast<double>(grid->CellCount());
+  const double mean = cells.empty() ? 0.0 : objects / static_cast<double>(cells.size());
   if (a.json) {
     nlohmann::json j;
     j["scene"] = scene->name;
@@ -97,8 +171,21 @@ int PvsAll(const PvsArgs& a) {
     j["res"] = a.res;
     j["mean_pvs_objects"] = mean;
     j["seconds"] = provenance.seconds;
-    j["pvs_file"] = a.out;
+    if (!a.out.empty()) j["pvs_file"] = a.out;
+    if (store != nullptr) {
+      j["store"] = a.store;
+      j["store_namespace"] = ns;
+      j["shard"] = absl::StrFormat("%u/%u", shard, shards);
+      j["shard_cells"] = shard_cells;
+      j["cells_computed"] = cells.size();
+      j["cells_already_stored"] = skipped;
+    }
     std::printf("%s\n", j.dump(2).c_str());
+  } else if (store != nullptr) {
+    std::printf("%s: %zu of %zu viewcells of %g m (shard %u/%u), %zu computed and stored, %zu already stored, "
+                "%.1f objects per PVS on average, %.1f s; store %s%s%s\n",
+                scene->name.c_str(), shard_cells, grid->CellCount(), grid->cell_size(), shard, shards, cells.size(),
+                skipped, mean, provenance.seconds, a.store.c_str(), a.out.empty() ? "" : "; wrote ", a.out.c_str());
   } else {
     std::printf("%s: %zu viewcells of %g m, %.1f objects per PVS on average, %.1f s; wrote %s\n", scene->name.c_str(),
                 grid->CellCount(), grid->cell_size(), mean, provenance.seconds, a.out.c_str());
@@ -220,9 +307,17 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   CLI::App* c = app.add_subcommand("pvs", "potentially visible set of one viewcell, or of all (dual ray space)");
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->required();
   CLI::Option* cell = c->add_option("--cell", args->cell, "viewcell grid coordinates I,J");
-  c->add_flag("--all", args->all, "every viewcell of the grid, written to -o as a PVS file (vistream-server --pvs-file)")
+  c->add_flag("--all", args->all, "every viewcell of the grid, written to -o as a PVS file (vistream-server --pvs-file) or to --store")
       ->excludes(cell);
   c->add_option("-o,--out", args->out, "with --all: the PVS file to write");
+  c->add_option("--store", args->store,
+                "with --all: fill the PVS store replicas share (Redis host:port or unix:PATH; password from "
+                "$VISTREAM_STORE_PASSWORD); cells already stored are skipped");
+  c->add_option("--store-prefix", args->store_prefix, "with --store: the key prefix (as the servers' store.key_prefix)")
+      ->capture_default_str();
+  c->add_option("--shard", args->shard,
+                "with --store: K/N, compute only the viewcells whose id is K modulo N (0 <= K < N; N independent "
+                "processes fill the store together)");
   c->add_option("--cell-size", args->cell_size, "viewcell size in metres (default: the catalog's, else 100)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "finest raster resolution (a power of two, 1 to 256); exact: the raster tried before the exact test")

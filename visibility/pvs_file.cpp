@@ -1,11 +1,13 @@
 #include "visibility/pvs_file.h"
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 
 #include <absl/strings/str_cat.h>
+#include <zlib.h>
 
 #include "visibility/bytes.h"
 
@@ -114,6 +116,67 @@ absl::Status DecodeSets(ByteReader* in, GlobalPvs* sets) {
     sets->Assign(c, ids);
   }
   return absl::OkStatus();
+}
+
+namespace {
+constexpr char kCellMagic[4] = {'V', 'S', 'C', '1'};
+
+uint32_t Crc32(std::string_view bytes) {
+  return static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(bytes.data()), static_cast<uInt>(bytes.size())));
+}
+}  // namespace
+
+std::string EncodeCellRecord(CellId cell, std::span<const scenes::ObjectId> objects) {
+  ByteWriter w;
+  w.PutRaw(std::string_view(kCellMagic, sizeof(kCellMagic)));
+  w.Put<uint32_t>(cell);
+  w.Put<uint32_t>(static_cast<uint32_t>(objects.size()));
+  uint64_t next = 0;
+  for (scenes::ObjectId id : objects) {
+    w.PutVarint(id - next);
+    next = uint64_t{id} + 1;
+  }
+  w.Put<uint32_t>(Crc32(w.bytes()));
+  return std::move(w.bytes());
+}
+
+absl::StatusOr<std::vector<scenes::ObjectId>> DecodeCellRecord(std::string_view bytes, CellId cell,
+                                                                uint64_t scene_objects, const std::string& where) {
+  auto loss = [](const absl::Status& st) { return absl::DataLossError(st.message()); };
+  ByteReader r(bytes, where);
+  constexpr size_t kMin = sizeof(kCellMagic) + 3 * sizeof(uint32_t);
+  if (bytes.size() < kMin) return loss(r.Error(absl::StrCat("a record of ", bytes.size(), " bytes (at least ", kMin, ")")));
+  if (bytes.substr(0, sizeof(kCellMagic)) != std::string_view(kCellMagic, sizeof(kCellMagic))) {
+    return loss(r.Error("not a viewcell PVS record (no VSC1 magic)"));
+  }
+  uint32_t stored_crc = 0;
+  std::memcpy(&stored_crc, bytes.data() + bytes.size() - sizeof(uint32_t), sizeof(uint32_t));
+  const std::string_view body = bytes.substr(0, bytes.size() - sizeof(uint32_t));
+  if (Crc32(body) != stored_crc) return loss(r.Error("checksum mismatch"));
+  ByteReader in(body, where);
+  char magic[sizeof(kCellMagic)];
+  for (char& ch : magic) (void)in.Get(&ch, "the magic");
+  uint32_t got_cell = 0, count = 0;
+  if (absl::Status st = in.Get(&got_cell, "the cell"); !st.ok()) return loss(st);
+  if (absl::Status st = in.Get(&count, "the count"); !st.ok()) return loss(st);
+  if (got_cell != cell) return loss(in.Error(absl::StrCat("the record of cell ", got_cell, ", not of cell ", cell)));
+  if (count > scene_objects || count > in.remaining()) {
+    return loss(in.Error(absl::StrCat(count, " objects listed; the scene has ", scene_objects)));
+  }
+  std::vector<scenes::ObjectId> ids;
+  ids.reserve(count);
+  uint64_t next = 0;
+  for (uint32_t k = 0; k < count; ++k) {
+    uint64_t gap = 0;
+    if (absl::Status st = in.GetVarint(&gap, absl::StrCat("id ", k)); !st.ok()) return loss(st);
+    if (gap >= scene_objects || next + gap >= scene_objects) {
+      return loss(in.Error(absl::StrCat("id ", k, " is past the scene's ", scene_objects, " objects")));
+    }
+    ids.push_back(static_cast<scenes::ObjectId>(next + gap));
+    next = next + gap + 1;
+  }
+  if (!in.AtEnd()) return loss(in.Error(absl::StrCat(in.remaining(), " bytes after the last id")));
+  return ids;
 }
 
 std::string EncodePvsFile(const PvsFile& f) {

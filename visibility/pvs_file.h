@@ -11,8 +11,10 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <absl/status/statusor.h>
 
@@ -68,6 +70,16 @@ absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, 
 // that serves a precomputed file. Errors: NOT_FOUND (cannot open), DATA_LOSS / INVALID_ARGUMENT
 // from decoding, INVALID_ARGUMENT for a file made for another scene or grid; each names `path`.
 absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid& grid, const scenes::Scene& scene);
+
+// One viewcell's PVS as a shared store holds it (server/pvs_store.h; issue 33), checkable on
+// its own: "VSC1", u32 cell id, u32 object count, the ascending ids as varint gaps (as in the
+// file), u32 CRC-32 (zlib's) of every byte before it; little-endian, nothing may follow.
+std::string EncodeCellRecord(CellId cell, std::span<const scenes::ObjectId> objects);
+// Reads a record EncodeCellRecord wrote for `cell` of a scene of `scene_objects` objects.
+// Errors (DATA_LOSS, naming `where` and the byte offset): wrong magic, length or checksum,
+// another cell's record, ids not ascending or not below `scene_objects`, bytes after the end.
+absl::StatusOr<std::vector<scenes::ObjectId>> DecodeCellRecord(std::string_view bytes, CellId cell,
+                                                                uint64_t scene_objects, const std::string& where);
 
 // The per-cell lists of `sets` as ascending varint gaps, and back (shared with the sampler's
 // saved state).

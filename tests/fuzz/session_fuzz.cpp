@@ -17,6 +17,7 @@
 
 #include <unistd.h>
 
+#include "gl/pvs_backend.h"
 #include "scenes/catalog.h"
 #include "server/served_scene.h"
 #include "server/session.h"
@@ -37,11 +38,19 @@ server::ServedScene& Scene() {
       const visibility::ViewcellGrid grid = *visibility::ViewcellGrid::Create(s->scene.bounds, 50.0, 0.5, 2.0);
       const visibility::KdTree tree = visibility::KdTree::Build(s->scene);
       const visibility::PvsComputer computer(s->scene, tree);
-      std::vector<scenes::Aabb> cells;
-      for (visibility::CellId c = 0; c < grid.CellCount(); ++c) cells.push_back(grid.CellBox(c));
+      std::vector<visibility::CellId> cells(grid.CellCount());
+      for (visibility::CellId c = 0; c < grid.CellCount(); ++c) cells[c] = c;
       visibility::GlobalPvs sets(grid.CellCount(), s->scene.objects.size());
-      const std::vector<visibility::PvsResult> r = computer.ComputeBatch(cells, visibility::CellQueryOptions{});
-      for (visibility::CellId c = 0; c < grid.CellCount(); ++c) sets.Assign(c, r[c].objects);
+      const absl::StatusOr<gl::PvsBackend> cpu = gl::PvsBackend::Create("cpu");
+      if (!cpu.ok() || !gl::ComputeViewcellPvss(*cpu, computer, grid, cells, visibility::CellQueryOptions{}, {},
+                                                "session fuzz PVS file",
+                                                [&](visibility::CellId c, const visibility::PvsResult& r) {
+                                                  sets.Assign(c, r.objects);
+                                                  return absl::OkStatus();
+                                                })
+                            .ok()) {
+        std::abort();
+      }
       const std::string tmp = path + ".tmp" + std::to_string(::getpid());
       visibility::PvsProvenance provenance;
       provenance.strategy = "dual-ray-space cpu";
