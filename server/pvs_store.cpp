@@ -65,6 +65,14 @@ std::string ErrorOf(const redisContext* c) {
   return c->err != 0 ? std::string(c->errstr) : std::string("no reply");
 }
 
+// Whether the last command on `c` failed because the peer had closed the connection (a
+// restarted Redis), not because it did not answer in time.
+bool ClosedByPeer(const redisContext* c) {
+  if (c->err == REDIS_ERR_EOF) return true;
+  if (c->err != REDIS_ERR_IO) return false;
+  return std::strstr(c->errstr, "reset") != nullptr || std::strstr(c->errstr, "Broken pipe") != nullptr;
+}
+
 constexpr size_t kMaxIdle = 16;
 constexpr size_t kMaxOverwrite = 1024;
 constexpr size_t kWriteBatch = 64;
@@ -157,8 +165,9 @@ PvsStore::Context PvsStore::Dial(std::string* why) const {
   return c;
 }
 
-PvsStore::Context PvsStore::Acquire(std::string* why) {
+PvsStore::Context PvsStore::Acquire(std::string* why, bool* pooled) {
   std::unique_lock lock(mu_);
+  if (pooled != nullptr) *pooled = !idle_.empty();
   if (!idle_.empty()) {
     Context c = std::move(idle_.back());
     idle_.pop_back();
@@ -221,15 +230,23 @@ void PvsStore::MarkDownLocked(const std::string& why) {
 
 PvsStore::Read PvsStore::Get(const std::string& ns, visibility::CellId cell, uint64_t scene_objects,
                              std::vector<uint32_t>* objects) {
-  std::string why;
-  Context c = Acquire(&why);
-  if (c == nullptr) {
-    ++unavailable_;
-    return Read::kUnavailable;
-  }
   const std::string key = Key(ns, cell);
-  redisSetTimeout(c.get(), ToTimeval(options_.read_timeout_s));
-  Reply r(static_cast<redisReply*>(redisCommand(c.get(), "GET %b", key.data(), key.size())));
+  std::string why;
+  Context c;
+  Reply r;
+  // A pooled connection Redis closed (it restarted) fails at once: one more try on a new one,
+  // so that a restart costs no read. A timeout is not retried.
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    bool pooled = false;
+    c = Acquire(&why, &pooled);
+    if (c == nullptr) {
+      ++unavailable_;
+      return Read::kUnavailable;
+    }
+    redisSetTimeout(c.get(), ToTimeval(options_.read_timeout_s));
+    r.reset(static_cast<redisReply*>(redisCommand(c.get(), "GET %b", key.data(), key.size())));
+    if (r != nullptr || !pooled || !ClosedByPeer(c.get())) break;
+  }
   if (r == nullptr || r->type == REDIS_REPLY_ERROR) {
     // No answer in time, a lost connection, or an error reply (LOADING after a restart,
     // NOAUTH, ...): the store cannot answer now; back off rather than ask on every crossing.
@@ -325,9 +342,15 @@ void PvsStore::WriterLoop() {
     lock.unlock();
     std::string why;
     bool ok = false;
-    if (Context c = Acquire(&why); c != nullptr) {
+    for (int attempt = 0; attempt < 2; ++attempt) {  // as in Get: a closed pooled connection, once
+      bool pooled = false;
+      Context c = Acquire(&why, &pooled);
+      if (c == nullptr) break;
       ok = SendWrites(c.get(), batch, &why);
+      const bool retry = !ok && pooled && ClosedByPeer(c.get());
+      if (retry) continue;  // dropped without marking the store down
       Release(std::move(c), ok, why);
+      break;
     }
     if (ok) {
       writes_ += batch.size();

@@ -122,9 +122,9 @@ class PvsStore {
   using Clock = std::chrono::steady_clock;
 
   explicit PvsStore(PvsStoreOptions options, EventSink events);
-  // A connection from the pool, or a new one; null while the store is down and in back-off
-  // (`why` says so) or when connecting fails (then the store is marked down).
-  Context Acquire(std::string* why);
+  // A connection from the pool (`*pooled` true), or a new one; null while the store is down
+  // and in back-off (`why` says so) or when connecting fails (then the store is marked down).
+  Context Acquire(std::string* why, bool* pooled = nullptr);
   // Returns `c` to the pool, or (not `ok`) drops it and marks the store down for `why`.
   void Release(Context c, bool ok, const std::string& why);
   Context Dial(std::string* why) const;

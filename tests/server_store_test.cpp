@@ -32,7 +32,8 @@ using Clock = std::chrono::steady_clock;
 std::string Scrape(const std::string& ready_line) {
   const size_t at = ready_line.find("metrics on http://");
   if (at == std::string::npos) return "";
-  const std::string url = ready_line.substr(at + 15, ready_line.find_first_of(" \n", at + 15) - at - 15);
+  const size_t from = at + 11;  // past "metrics on "
+  const std::string url = ready_line.substr(from, ready_line.find_first_of(" \n", from) - from);
   std::string out;
   std::FILE* p = popen(("curl -s --max-time 5 " + url).c_str(), "r");
   if (p == nullptr) return out;
