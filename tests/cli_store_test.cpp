@@ -42,7 +42,9 @@ TEST(Cli, PvsAllShardsFillTheStoreWithExactlyTheSingleRunsSets) {
     EXPECT_EQ(j.at("shard_cells"), 280);
     EXPECT_EQ(j.at("cells_computed"), 280);
     EXPECT_EQ(j.at("cells_already_stored"), 0);
-    if (!ns.empty()) EXPECT_EQ(j.at("store_namespace"), ns);
+    if (!ns.empty()) {
+      EXPECT_EQ(j.at("store_namespace"), ns);
+    }
     ns = j.at("store_namespace").get<std::string>();
     stored += j.at("cells_computed").get<size_t>();
   }
