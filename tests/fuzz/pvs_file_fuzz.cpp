@@ -1,5 +1,5 @@
-// libFuzzer target: the PVS-file decoder (vistream-server --pvs-file, agvs heatmap --pvs) on
-// untrusted bytes. With VISTREAM_FUZZ_SEED_DIR=DIR it first writes a valid file there (a small
+// libFuzzer target: the PVS-file decoder (vistream-server --pvs-file, agvs heatmap --pvs) and
+// the store's viewcell record decoder on untrusted bytes. With VISTREAM_FUZZ_SEED_DIR=DIR it first writes a valid file there (a small
 // grid with a few sets), the seed CI starts from.
 #include <cstddef>
 #include <cstdint>
@@ -7,6 +7,7 @@
 #include <fstream>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "visibility/pvs_file.h"
 
@@ -37,6 +38,8 @@ std::string SeedFile() {
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   if (const char* dir = std::getenv("VISTREAM_FUZZ_SEED_DIR")) {
     std::ofstream(std::string(dir) + "/seed", std::ios::binary) << SeedFile();
+    std::ofstream(std::string(dir) + "/seed_record", std::ios::binary)
+        << vistream::visibility::EncodeCellRecord(3, std::vector<uint32_t>{0, 5, 6, 69});
   }
   return 0;
 }
@@ -46,5 +49,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // As LoadPvsFile reads it: for a scene of the seed's object count (a file for another is
   // refused before its sets are allocated).
   (void)vistream::visibility::DecodePvsFile(bytes, "fuzz.pvs", 70);
+  // The same bytes as one viewcell's record from the shared PVS store (server/pvs_store.h),
+  // for a scene of 70 objects: a record is checked before any of it is used.
+  (void)vistream::visibility::DecodeCellRecord(bytes, 3, 70, "fuzz:key:3");
   return 0;
 }
