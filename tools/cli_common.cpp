@@ -1,5 +1,6 @@
 #include "tools/cli_common.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -161,6 +162,12 @@ int Fail(const absl::Status& status) {
   }
   std::fprintf(stderr, "vistream: error: %s\n", std::string(status.message()).c_str());
   return 1;
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 }  // namespace vistream::tools

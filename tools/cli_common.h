@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <absl/status/statusor.h>
@@ -65,6 +66,8 @@ absl::Status WriteFile(const std::string& path, const std::string& bytes);
 
 // Seconds elapsed since `start`.
 double SecondsSince(std::chrono::steady_clock::time_point start);
+// The median of `v` (the mean of the middle two for an even count); 0 for none.
+double Median(std::vector<double> v);
 
 // Prints `status` as "vistream: error: ..." and returns the process exit code for it.
 int Fail(const absl::Status& status);

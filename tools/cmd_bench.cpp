@@ -64,12 +64,6 @@ struct Row {
   double singles_ms = 0, singles_median_ms = 0;
 };
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // The batch shape: the five cells a client crossing diagonally from (i - 1, j - 1) into (i, j)
 // comes to border (ViewcellGrid::NewlyAdjacent): (i + 1, j + 1), its edge neighbours (i, j + 1)
 // and (i + 1, j), and those beyond them, (i - 1, j + 1) and (i + 1, j - 1). A sampled cell
@@ -84,7 +78,7 @@ std::vector<scenes::Aabb> DiagonalCrossing(const visibility::ViewcellGrid& grid,
 }
 
 // ^C: the rows measured so far are in the CSV (written as they come).
-int Stopped() { return Fail(absl::CancelledError("table1 stopped; a --csv file keeps the rows measured")); }
+int Table1Stopped() { return Fail(absl::CancelledError("table1 stopped; a --csv file keeps the rows measured")); }
 
 // One --batch row: per sample, the five single calls (one core) and then the batch (two
 // threads), side by side; the batch's sets are checked against the single calls' and the
@@ -128,7 +122,7 @@ int BatchRow(const visibility::PvsComputer& computer, const visibility::Viewcell
     batch_ms.push_back(batch[0].ms);
     singles_ms.push_back(singles);
     progress->Advance();
-    if (progress->Cancelled()) return Stopped();
+    if (progress->Cancelled()) return Table1Stopped();
   }
   double sum = 0, singles_sum = 0;
   for (double m : batch_ms) sum += m;
@@ -205,7 +199,7 @@ int Table1(const Table1Args& a) {
               exact->Compute(computer, cell, visibility::CellQueryOptions{.max_res = 256}).objects);
         }
         progress.Advance();
-        if (progress.Cancelled()) return Stopped();
+        if (progress.Cancelled()) return Table1Stopped();
       }
     }
 
@@ -220,7 +214,7 @@ int Table1(const Table1Args& a) {
       exact_ms += r.ms;
       exact_objects += static_cast<double>(r.objects.size());
       progress.Advance();
-      if (progress.Cancelled()) return Stopped();
+      if (progress.Cancelled()) return Table1Stopped();
     }
     exact_json.push_back({{"cell_size", size},
                           {"ms", exact_ms / static_cast<double>(cells.size())},
@@ -245,7 +239,7 @@ int Table1(const Table1Args& a) {
           p_e += exact_occluded[k];
           p_c += occluded_area(r.objects);
           progress.Advance();
-          if (progress.Cancelled()) return Stopped();
+          if (progress.Cancelled()) return Table1Stopped();
         }
         const auto n = static_cast<double>(cells.size());
         double sum = 0;

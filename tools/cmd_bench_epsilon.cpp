@@ -77,12 +77,6 @@ struct Column {
   double visible_triangles = 0, total_triangles = 0, occluded_boxes = 0, total_boxes = 0, first_occluders = 0;
 };
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // This thread's CPU time in ms: unlike the wall-clock times, it leaves out the time the
 // thread waits for a core on a loaded machine.
 double ThreadCpuMs() {

@@ -24,7 +24,7 @@ namespace vistream::tools {
 namespace {
 
 // ^C: the check stops where it is and concludes nothing.
-int Stopped() { return Fail(absl::CancelledError("check-conservative stopped; nothing concluded")); }
+int CheckStopped() { return Fail(absl::CancelledError("check-conservative stopped; nothing concluded")); }
 
 struct CheckArgs {
   std::string scene;
@@ -75,7 +75,7 @@ int Check(const CheckArgs& a) {
   const visibility::RunLimits limits = a.samples > 0 ? visibility::RunLimits{0.0, 0.0, a.samples}
                                                      : visibility::RunLimits{a.seconds, 0.0, 0};
   sampler.Run(limits, ToolRun(), "agvs " + scene.name);
-  if (CancelFlag().load()) return Stopped();
+  if (CancelFlag().load()) return CheckStopped();
 
   // The dual-ray-space PVS of each checked cell.
   std::vector<Violation> violations;
@@ -112,7 +112,7 @@ int Check(const CheckArgs& a) {
         }
       }
       progress.Advance(n);
-      if (progress.Cancelled()) return Stopped();
+      if (progress.Cancelled()) return CheckStopped();
     }
     progress.Finish();
   }
@@ -138,7 +138,7 @@ int Check(const CheckArgs& a) {
         violations.push_back({"epsilon", b, h.object, static_cast<int64_t>(h.triangle), true, h.from, h.to});
       }
       progress.Advance();
-      if (progress.Cancelled()) return Stopped();
+      if (progress.Cancelled()) return CheckStopped();
     }
     progress.Finish();
   }
