@@ -20,6 +20,7 @@ PACKAGES=(
   libcpp-httplib-dev prometheus   # the server's /metrics and /healthz; promtool checks the exposition in a test
   libssl-dev openssl   # TLS: checking PEM files (server and client), certificates made by the tests and bench server --tls
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
+  haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}
