@@ -74,7 +74,7 @@ class Reader {
         const int line = k.source().begin.line != 0 ? static_cast<int>(k.source().begin.line) : LineOf(node);
         // TOML puts every key after a [table] header into that table: a top-level key written
         // below one lands there.
-        static const char* const kTopLevel[] = {"listen", "threads", "max_sessions", "catalog", "grace_s"};
+        static const char* const kTopLevel[] = {"listen", "threads", "max_sessions", "catalog", "grace_s", "drain_s"};
         const bool top_level = !prefix.empty() && std::find(std::begin(kTopLevel), std::end(kTopLevel), name) !=
                                                       std::end(kTopLevel);
         return Error(line, dotted,
@@ -298,6 +298,7 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
       {"max_sessions", r.Whole(&c.max_sessions, 1, 100000)},
       {"catalog", r.Folder(&c.catalog)},
       {"grace_s", r.Number(&c.grace_s, 0.0, 3600.0)},
+      {"drain_s", r.Number(&c.drain_s, 0.0, 3600.0)},
       {"limits", r.Subtable({
                      {"hello_timeout_s", r.Number(&c.hello_timeout_s, 0.0, 86400.0)},
                      {"max_pose_rate_hz", r.Number(&c.max_pose_rate_hz, 0.1, 100000.0)},

@@ -3,7 +3,7 @@
 // in deploy/server.toml) whose every key a command-line option may override. The shape of the
 // file is part of the interface (issue 32, README "Deploying"):
 //
-//   listen, threads, max_sessions, catalog, grace_s
+//   listen, threads, max_sessions, catalog, grace_s, drain_s
 //   [limits]   hello_timeout_s, max_pose_rate_hz, max_sessions_per_address, max_sessions_per_token
 //   [tls]      cert, key, client_ca, insecure
 //   [auth]     tokens
@@ -48,6 +48,11 @@ struct ServerConfig {
   uint64_t max_sessions = 256;             // sessions at once, all scenes together
   std::string catalog;                     // scene catalog folder; empty: scenes::CatalogDir()
   double grace_s = 5.0;                    // seconds sessions get to end on SIGTERM
+  // Seconds between the first SIGTERM and the end of the sessions: health says 503 and
+  // NOT_SERVING while every session, new ones too, is served on, so that a load balancer's
+  // checks take the replica out first (deploy/haproxy.cfg marks it DOWN within 2.5 s); ends
+  // early once no session is open. 0: end the sessions at once.
+  double drain_s = 5.0;
 
   // [limits]
   double hello_timeout_s = 30.0;           // a stream without Hello by then ends DEADLINE_EXCEEDED; 0: never

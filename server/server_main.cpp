@@ -2,7 +2,10 @@
 // command-line options override; server/server_config.h) to walkthrough clients over gRPC
 // (DESIGN.md, "Server and client", "Deployment"). Prints one line on stdout when it is ready;
 // logs one line per event on stderr or to its log file. SIGTERM or SIGINT drains the sessions
-// and exits 0.
+// and exits 0: health turns 503 at once, the sessions are served on for up to drain_s seconds
+// (a load balancer takes the replica out meanwhile), then they end with UNAVAILABLE (their
+// clients resume elsewhere) and the process exits within grace_s. A second signal stops it at
+// once (exit 1).
 
 #include <signal.h>
 
@@ -141,6 +144,11 @@ int main(int argc, char** argv) {
       ->check(FiniteRange(0.1, 100000))->capture_default_str();
   app.add_option("--grace", cli.grace_s, "seconds sessions get to end on shutdown")->check(FiniteRange(0, 3600))
       ->capture_default_str();
+  app.add_option("--drain", cli.drain_s,
+                 "seconds from SIGTERM to the end of the sessions: /healthz says 503 while they are served on, so "
+                 "that a load balancer takes this replica out first (0: end them at once)")
+      ->check(FiniteRange(0, 3600))
+      ->capture_default_str();
   app.add_option("--hello-timeout", cli.hello_timeout_s,
                  "seconds a new stream may take to send its Hello (then DEADLINE_EXCEEDED; 0: no limit)")
       ->check(FiniteRange(0, 86400))->capture_default_str();
@@ -251,6 +259,7 @@ int main(int argc, char** argv) {
   if (given("--max-sessions")) config.max_sessions = cli.max_sessions;
   if (given("--max-pose-rate")) config.max_pose_rate_hz = cli.max_pose_rate_hz;
   if (given("--grace")) config.grace_s = cli.grace_s;
+  if (given("--drain")) config.drain_s = cli.drain_s;
   if (given("--hello-timeout")) config.hello_timeout_s = cli.hello_timeout_s;
   if (given("--max-sessions-per-address")) config.max_sessions_per_address = cli.max_sessions_per_address;
   if (given("--max-sessions-per-token")) config.max_sessions_per_token = cli.max_sessions_per_token;
@@ -552,7 +561,12 @@ int main(int argc, char** argv) {
     if (g_reload.exchange(false)) ReloadTokens(server_options.tokens.get(), &log);
   }
   log.Write(0, "draining", {{"signal", g_signal == SIGTERM ? "SIGTERM" : "SIGINT"},
-                            {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
+                            {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())},
+                            {"drain_s", config.drain_s}});
+  // /healthz has said 503 since the signal (g_stop); sessions go on until a balancer has seen it.
+  const double held_s = (*server)->HoldDrain(config.drain_s);
+  log.Write(0, "ending_sessions", {{"held_s", held_s},
+                                   {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
   (*server)->Shutdown(config.grace_s);
   if (http != nullptr) http->Stop();  // its collector reads the service
   server->reset();

@@ -705,12 +705,27 @@ absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(std:
   return s;
 }
 
-void WalkthroughServer::Shutdown(double grace_s) {
-  if (shut_down_) return;
-  shut_down_ = true;
+void WalkthroughServer::StopServingHealth() {
   if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService(); health != nullptr) {
     health->SetServingStatus(false);
   }
+}
+
+double WalkthroughServer::HoldDrain(double drain_s) {
+  const auto start = std::chrono::steady_clock::now();
+  if (shut_down_) return 0.0;
+  StopServingHealth();
+  const auto until = start + std::chrono::microseconds(static_cast<int64_t>(std::max(0.0, drain_s) * 1e6));
+  while (service_->active_sessions() > 0 && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void WalkthroughServer::Shutdown(double grace_s) {
+  if (shut_down_) return;
+  shut_down_ = true;
+  StopServingHealth();
   service_->Drain();
   // Sessions end as soon as what is being written goes out; give them the grace to, then stop.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<int64_t>(grace_s * 1000));

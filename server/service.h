@@ -141,12 +141,20 @@ class WalkthroughServer {
   int port() const { return port_; }
   const std::string& address() const { return address_; }
   WalkthroughService& service() { return *service_; }
-  // Drains: health NOT_SERVING, every session ended with UNAVAILABLE, then the server stops,
-  // cancelling what has not finished after `grace_s` seconds.
+  // The first step of a drain, for load balancers: the standard health service says
+  // NOT_SERVING (vistream-server's /healthz says 503 from the signal on), while every session,
+  // and every new one, goes on being served for `drain_s` seconds, so that the balancer's
+  // health checks take this server out before its sessions end; returns early once no session
+  // is open (nothing left to protect). Returns the seconds waited. Shutdown follows.
+  double HoldDrain(double drain_s);
+  // Drains: health NOT_SERVING, every session ended with UNAVAILABLE (the client reconnects,
+  // through a balancer to another replica, and resumes with what it holds), then the server
+  // stops, cancelling what has not finished after `grace_s` seconds.
   void Shutdown(double grace_s);
 
  private:
   WalkthroughServer() = default;
+  void StopServingHealth();
   std::unique_ptr<WalkthroughService> service_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;

@@ -92,6 +92,7 @@ std::set<std::string> ExpectedTree() {
       "lib/systemd/system/vistream-server.service",
       "share/doc/vistream/README.md",
       "share/doc/vistream/tokens.example",
+      "share/doc/vistream/haproxy.cfg",
   };
   for (const fs::directory_entry& e : fs::directory_iterator(fs::path(VISTREAM_SOURCE_DIR) / "scenes")) {
     if (e.path().extension() == ".json") files.insert("share/vistream/scenes/" + e.path().filename().string());
@@ -309,12 +310,14 @@ TEST_F(Package, UnitIsCleanUnderSystemdAnalyzeVerify) {
                            "NoNewPrivileges=yes\n", "ProtectSystem=strict\n", "WantedBy=multi-user.target\n"}) {
     EXPECT_NE(unit.find(line), std::string::npos) << "no " << line;
   }
-  // systemd waits longer than the configured grace before it kills a draining server.
-  std::smatch timeout, grace;
+  // systemd waits longer than the configured drain and grace before it kills a draining server.
+  std::smatch timeout, grace, drain;
   const std::string toml = ReadFile(root_ / "etc/vistream/server.toml");
   ASSERT_TRUE(std::regex_search(unit, timeout, std::regex(R"(\nTimeoutStopSec=([0-9]+)s\n)")));
   ASSERT_TRUE(std::regex_search(toml, grace, std::regex(R"(\ngrace_s = ([0-9.]+)\n)")));
-  EXPECT_GE(std::stod(timeout[1]), std::stod(grace[1]) + 5) << "TimeoutStopSec " << timeout[1] << ", grace_s " << grace[1];
+  ASSERT_TRUE(std::regex_search(toml, drain, std::regex(R"(\ndrain_s = ([0-9.]+)\n)")));
+  EXPECT_GE(std::stod(timeout[1]), std::stod(drain[1]) + std::stod(grace[1]) + 5)
+      << "TimeoutStopSec " << timeout[1] << ", drain_s " << drain[1] << ", grace_s " << grace[1];
 
   const fs::path verify = dir_ / "verify";
   fs::create_directories(verify);

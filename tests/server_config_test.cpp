@@ -155,6 +155,8 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
       {"grace_s = \"5\"", ":1: grace_s: expected a number, got a string"},
       {"grace_s = 4000", ":1: grace_s: 4000 is out of range (0 to 3600)"},
       {"grace_s = nan", ":1: grace_s: nan is out of range"},
+      {"drain_s = \"5\"", ":1: drain_s: expected a number, got a string"},
+      {"drain_s = -1", ":1: drain_s: -1 is out of range (0 to 3600)"},
       {"[limits]\nhello_timeout_s = -1", ":2: limits.hello_timeout_s: -1 is out of range (0 to 86400)"},
       {"[limits]\nmax_pose_rate_hz = 0", ":2: limits.max_pose_rate_hz: 0 is out of range (0.1 to 100000)"},
       {"[limits]\nmax_sessions_per_address = -3", ":2: limits.max_sessions_per_address: -3 is out of range"},
@@ -197,6 +199,23 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
     EXPECT_EQ(error.rfind(file + ":", 0), 0u) << text << " -> " << error;
     EXPECT_NE(error.find(expected), std::string::npos) << text << " -> " << error << "\n expected: " << expected;
   }
+}
+
+// drain_s: seconds a SIGTERM'd server keeps serving behind a 503 /healthz (a balancer takes it
+// out meanwhile); 5 by default, 0 allowed (end the sessions at once), a top-level key.
+TEST(ServerConfig, DrainSecondsIsReadDefaultsToFiveAndBelongsAtTheTop) {
+  absl::StatusOr<ServerConfig> c = Parse("drain_s = 12.5\n");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->drain_s, 12.5);
+  c = Parse("drain_s = 0\n");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->drain_s, 0.0);
+  c = Parse("");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->drain_s, 5.0);
+  const std::string e = ErrorOf("[metrics]\nlisten = \"127.0.0.1:1\"\ndrain_s = 3\n");
+  EXPECT_NE(e.find(":3: metrics.drain_s: unknown key"), std::string::npos) << e;
+  EXPECT_NE(e.find("top-level keys go above the first [table] in the file"), std::string::npos) << e;
 }
 
 TEST(ServerConfig, UnknownKeysAreNamedWithTheKeysThatExist) {
