@@ -21,7 +21,7 @@ PACKAGES=(
   libssl-dev openssl   # TLS: checking PEM files (server and client), certificates made by the tests and bench server --tls
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
   libhiredis-dev redis-server   # the PVS store replicas share (Redis), and the real Redis its tests start
-  haproxy curl   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it; curl scrapes /metrics in tests
+  haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}

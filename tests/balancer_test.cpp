@@ -24,6 +24,7 @@
 #include "client/session_stream.h"
 #include "client/walkthrough.h"
 #include "tests/balancer_util.h"
+#include "tests/redis_test_util.h"
 #include "tests/temp_dir.h"
 
 namespace vistream::server {
@@ -39,12 +40,14 @@ constexpr double kWait = 60.0;  // seconds any one wait may take on a loaded 2-c
 double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 // Two replicas of the default scene (one PVS worker each: two replicas, HAProxy and a
-// rendering client share two cores) behind HAProxy; `drain` is each replica's --drain.
+// rendering client share two cores) behind HAProxy; `drain` is each replica's --drain; with
+// `store`, both share the PVS store at that Redis address.
 std::unique_ptr<test::Balancer> StartBalanced(const std::string& test_name, const std::string& drain,
-                                              std::string* error) {
+                                              std::string* error, const std::string& store = "") {
   test::BalancerOptions o;
   o.replicas = 2;
   o.replica_args = {"--scene", "default", "--threads", "1", "--drain", drain};
+  if (!store.empty()) o.replica_args.insert(o.replica_args.end(), {"--store", store});
   o.config_template = std::string(VISTREAM_SOURCE_DIR) + "/deploy/haproxy.cfg";
   o.haproxy = VISTREAM_HAPROXY;
   o.dir = testing::ProcessTempDir() + "/" + test_name;
@@ -226,9 +229,64 @@ TEST(Balancer, TheHelperStartsReplicasBehindHaproxyThatServeThroughIt) {
   EXPECT_TRUE(second.Finish().ok());
 }
 
+// Two replicas behind HAProxy sharing one real redis-server: the cells a walker's replica
+// computed are store hits on the other, for a second walker at the same place.
+TEST(Balancer, APvsComputedThroughOneReplicaIsAStoreHitThroughTheOther) {
+  std::string error;
+  std::unique_ptr<::vistream::test::RedisServer> redis = ::vistream::test::RedisServer::Start(&error);
+  ASSERT_NE(redis, nullptr) << error;
+  auto b = StartBalanced("balancer_store", "5", &error, redis->address());
+  ASSERT_NE(b, nullptr) << error;
+  auto open = [&](SessionStream& s) {
+    s.set_keep_geometry(false);
+    s.Start(SessionStream::HelloFor("default"));
+    s.SendCredit(uint64_t{1} << 40);
+    s.SendPose(glm::dvec3(509.4, 215.9, 1.7));
+    return s.WaitFor([](const client::SessionRecord& r) { return r.pvs.size() >= 9; }, kWait);
+  };
+  SessionStream first(b->address());
+  ASSERT_TRUE(open(first));
+  const int a = WaitForHolder(*b, kWait);
+  ASSERT_GE(a, 0);
+  absl::StatusOr<v1::ServerStats> sa = client::Probe(b->replica_address(a), kWait);
+  ASSERT_TRUE(sa.ok()) << sa.status();
+  const uint64_t computed = sa->pvs_computed();
+  EXPECT_GE(computed, 9u);
+  // Written back (in the background) before the second walker asks.
+  const Clock::time_point t0 = Clock::now();
+  while (sa->store().writes() < computed && Since(t0) < kWait) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    sa = client::Probe(b->replica_address(a), kWait);
+    ASSERT_TRUE(sa.ok()) << sa.status();
+  }
+  EXPECT_EQ(sa->store().writes(), computed);
+  // leastconn: the second walker, through the balancer, lands on the other replica.
+  SessionStream second(b->address());
+  ASSERT_TRUE(open(second));
+  const size_t other = 1 - a;
+  EXPECT_EQ(SessionsOn(*b, other), 1) << "the second walker is not on " << b->name(other);
+  absl::StatusOr<v1::ServerStats> sb = client::Probe(b->replica_address(other), kWait);
+  ASSERT_TRUE(sb.ok()) << sb.status();
+  EXPECT_EQ(sb->pvs_computed(), 0u);
+  EXPECT_EQ(sb->pvs_store_hits(), computed);
+  EXPECT_EQ(sb->store().hits(), computed);
+  EXPECT_EQ(sb->store().address(), redis->address());
+  // ... and its /metrics.
+  const std::string metrics = test::HttpBody(b->metrics_port(other), "/metrics");
+  EXPECT_NE(metrics.find("vistream_pvs_store_hits_total{scene=\"default\"} " + std::to_string(computed) + "\n"),
+            std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("vistream_pvs_computations_total{scene=\"default\"} 0\n"), std::string::npos) << metrics;
+  EXPECT_TRUE(first.Finish().ok());
+  EXPECT_TRUE(second.Finish().ok());
+}
+
 TEST(Balancer, AReplicaKilledMidWalkIsReplacedWithoutAStallOrAnObjectSentTwice) {
   std::string error;
-  auto b = StartBalanced("balancer_kill", "5", &error);
+  // With the store: the replica the walker moves to reads the cells the killed one computed.
+  std::unique_ptr<::vistream::test::RedisServer> redis = ::vistream::test::RedisServer::Start(&error);
+  ASSERT_NE(redis, nullptr) << error;
+  auto b = StartBalanced("balancer_kill", "5", &error, redis->address());
   ASSERT_NE(b, nullptr) << error;
   const WalkthroughOptions o = Walk(b->address(), 16.0);
   std::future<absl::StatusOr<WalkthroughSummary>> walk =
@@ -245,8 +303,11 @@ TEST(Balancer, AReplicaKilledMidWalkIsReplacedWithoutAStallOrAnObjectSentTwice) 
   ASSERT_TRUE(s.ok()) << s.status();
   ExpectSeamless(*s);
   // The walk went on on the other replica, which sent it the geometry of cells it entered
-  // after the move.
+  // after the move, and read the cells around it at the move from the store.
   ExpectServedTheWalker(*b, other);
+  absl::StatusOr<v1::ServerStats> so = client::Probe(b->replica_address(other), kWait);
+  ASSERT_TRUE(so.ok()) << so.status();
+  EXPECT_GE(so->pvs_store_hits(), 9u) << "the replica the walker moved to computed what the store held";
 }
 
 TEST(Balancer, ADrainingReplicaIsTakenOutBeforeItsSessionsEndAndItsWalkerResumesOnTheOther) {

@@ -33,52 +33,17 @@
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 
+#include "tests/loopback_util.h"
 #include "tests/server_process_util.h"
 
 namespace vistream::server::test {
 
-// A TCP port on 127.0.0.1 that was free a moment ago (bound to port 0, then closed).
-inline int FreeLoopbackPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return 0;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(a);
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) {
-    port = ntohs(a.sin_port);
-  }
-  close(fd);
-  return port;
-}
+using ::vistream::test::FreeLoopbackPort;
 
-// The HTTP status of GET http://127.0.0.1:PORT/PATH (HTTP/1.0); 0 when nothing answers.
-inline int HttpStatus(int port, const std::string& path) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return 0;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<uint16_t>(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  timeval timeout{5, 0};
-  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
-  std::string reply;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0) {
-    const std::string request = "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n";
-    if (write(fd, request.data(), request.size()) == static_cast<ssize_t>(request.size())) {
-      char buf[512];
-      for (ssize_t n; reply.size() < 64 && (n = read(fd, buf, sizeof(buf))) > 0;) {
-        reply.append(buf, static_cast<size_t>(n));
-      }
-    }
-  }
-  close(fd);
-  // "HTTP/1.1 200 OK"
-  const size_t space = reply.find(' ');
-  return reply.starts_with("HTTP/") && space != std::string::npos ? std::atoi(reply.c_str() + space + 1) : 0;
-}
+// The HTTP status of GET http://127.0.0.1:PORT/PATH; 0 when nothing answers.
+inline int HttpStatus(int port, const std::string& path) { return ::vistream::test::HttpGet(port, path).first; }
+// Its body.
+inline std::string HttpBody(int port, const std::string& path) { return ::vistream::test::HttpGet(port, path).second; }
 
 // The standard gRPC health service's answer for the whole server at `address`: "SERVING",
 // "NOT_SERVING", or the call's error ("UNAVAILABLE: ...").

@@ -7,7 +7,7 @@
 
 #include <chrono>
 #include <cmath>
-#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -16,6 +16,7 @@
 #include <gtest/gtest.h>
 
 #include "client/connection.h"
+#include "tests/loopback_util.h"
 #include "tests/redis_test_util.h"
 #include "tests/server_process_util.h"
 #include "tests/server_test_util.h"
@@ -28,19 +29,13 @@ using client::SessionRecord;
 using client::SessionStream;
 using Clock = std::chrono::steady_clock;
 
-// /metrics of a server whose ready line names it, fetched with curl; "" when it does not answer.
+// /metrics of a server whose ready line names it ("...; metrics on http://HOST:PORT/metrics");
+// "" when it does not answer.
 std::string Scrape(const std::string& ready_line) {
   const size_t at = ready_line.find("metrics on http://");
   if (at == std::string::npos) return "";
-  const size_t from = at + 11;  // past "metrics on "
-  const std::string url = ready_line.substr(from, ready_line.find_first_of(" \n", from) - from);
-  std::string out;
-  std::FILE* p = popen(("curl -s --max-time 5 " + url).c_str(), "r");
-  if (p == nullptr) return out;
-  char buf[4096];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
-  pclose(p);
-  return out;
+  const int port = std::atoi(ready_line.c_str() + ready_line.find(':', at + 18) + 1);
+  return ::vistream::test::HttpGet(port, "/metrics").second;
 }
 
 // The value of `series` (name and labels as rendered) in a /metrics text; NaN when absent.
