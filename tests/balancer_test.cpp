@@ -48,6 +48,7 @@ std::unique_ptr<test::Balancer> StartBalanced(const std::string& test_name, cons
   o.replicas = 2;
   o.replica_args = {"--scene", "default", "--threads", "1", "--drain", drain};
   if (!store.empty()) o.replica_args.insert(o.replica_args.end(), {"--store", store});
+  o.server_bin = VISTREAM_SERVER_BIN;
   o.config_template = std::string(VISTREAM_SOURCE_DIR) + "/deploy/haproxy.cfg";
   o.haproxy = VISTREAM_HAPROXY;
   o.dir = testing::ProcessTempDir() + "/" + test_name;

@@ -84,5 +84,39 @@ TEST(Cli, PvsAllStoreOptionsAreChecked) {
                      "the PVS store at 127.0.0.1:" + std::to_string(port) + " is unavailable");
 }
 
+// Two replicas behind a real HAProxy sharing a PVS store of the run's own, warmed first by the
+// same walks: the measured replicas compute nothing, and the JSON keeps today's keys.
+TEST(Cli, BenchServerWithReplicasBehindHaproxyAndAWarmStoreComputesNothing) {
+  const RunResult r = Vistream(
+      "bench server --scene city1 --sessions 4 --seconds 6 --replicas 2 --balancer haproxy --store redis --warm --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  for (const char* key : {"late_cells", "crossing_p50_ms", "crossing_p99_ms", "startup_p50_s", "bytes_sent",
+                          "sessions_started", "cache_hit_rate"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_EQ(j.at("replicas"), 2);
+  EXPECT_EQ(j.at("balancer"), "haproxy");
+  EXPECT_EQ(j.at("store"), "redis");
+  EXPECT_EQ(j.at("store_warm"), true);
+  EXPECT_EQ(j.at("sessions_started"), 4);
+  EXPECT_EQ(j.at("pvs_computations"), 0);
+  EXPECT_EQ(j.at("pvs_computations_per_replica"), nlohmann::json::array({0, 0}));
+  EXPECT_GE(j.at("store_hits").get<int>(), 4 * 9);
+  EXPECT_EQ(j.at("store_hit_rate"), 1.0);
+  ASSERT_EQ(j.at("per_replica").size(), 2u);
+  // leastconn spreads the four walkers over both replicas.
+  EXPECT_EQ(j.at("per_replica")[0].at("sessions_total"), 2);
+  EXPECT_EQ(j.at("per_replica")[1].at("sessions_total"), 2);
+  EXPECT_EQ(j.at("late_cells"), 0);
+}
+
+TEST(Cli, BenchServerReplicaOptionsAreChecked) {
+  ExpectBadOption("bench server --replicas 2", "--replicas: several replicas need a balancer in front");
+  ExpectBadOption("bench server --store nowhere", "--store: 'nowhere' is not none, redis or HOST:PORT");
+  ExpectBadOption("bench server --warm", "--warm: warms the PVS store: give --store");
+  ExpectBadOption("bench server --balancer nginx", "--balancer");
+}
+
 }  // namespace
 }  // namespace vistream::testing

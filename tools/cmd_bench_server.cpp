@@ -3,10 +3,11 @@
 // entered before their PVS and geometry arrived (late), crossing latency, PVS computations and
 // cache hits, bytes per crossing with and without meshoptimizer, and the server's RSS. With
 // --tls on (or both, side by side in one run) the server serves TLS with a certificate made for
-// the run by `openssl`, and every walker connects with its CA.
+// the run by `openssl`, and every walker connects with its CA. With --replicas N --balancer
+// haproxy the walkers go through a real HAProxy to N replicas; with --store they share a PVS
+// store in Redis, cold, or warmed first by the same walks (--warm).
 
 #include <signal.h>
-#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -28,8 +29,10 @@
 #include "client/channel_security.h"
 #include "client/connection.h"
 #include "client/session_stream.h"
+#include "server/server_config.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
+#include "tools/replica_set.h"
 #include "visibility/viewcell_grid.h"
 
 namespace vistream::tools {
@@ -50,7 +53,59 @@ struct BenchServerArgs {
   std::string log;
   bool json = false;
   std::string tls = "off";  // off | on | both
+  size_t replicas = 1;
+  std::string balancer = "none";  // none | haproxy
+  std::string store = "none";     // none | redis (a redis-server of the run's own) | HOST:PORT
+  bool warm = false;              // fill the store with the same walks first
 };
+
+// What the passes of one bench run share: the PVS store's address and key prefix (empty: no
+// store), and whether this pass only fills it.
+struct RunContext {
+  std::string store_address, store_prefix;
+  bool warmup = false;
+};
+
+// The replicas of one pass: one vistream-server, or N behind HAProxy (tools/replica_set.h).
+struct Replicas {
+  std::unique_ptr<RunningServer> single;
+  std::unique_ptr<Balancer> balanced;
+  std::string address;  // where the walkers connect
+  std::string dir;      // the balanced run's folder (configuration, logs), removed at the end
+
+  size_t size() const { return balanced != nullptr ? balanced->size() : 1; }
+  std::string replica_address(size_t k) const {
+    return balanced != nullptr ? balanced->replica_address(k) : single->address();
+  }
+  pid_t pid(size_t k) {
+    RunningServer* s = balanced != nullptr ? balanced->replica(k) : single.get();
+    return s != nullptr ? s->pid() : -1;
+  }
+  // SIGTERM to every replica, then HAProxy: the first non-zero exit code, else 0.
+  int Stop() {
+    int code = 0;
+    if (single != nullptr) code = single->Stop(SIGTERM);
+    for (size_t k = 0; balanced != nullptr && k < balanced->size(); ++k) {
+      const int c = balanced->StopReplica(k, SIGTERM);
+      if (code == 0) code = c;
+    }
+    balanced.reset();
+    std::error_code ignored;
+    if (!dir.empty()) std::filesystem::remove_all(dir, ignored);
+    return code;
+  }
+};
+
+// deploy/haproxy.cfg beside this executable: in the build tree (build/bin/../../deploy) or
+// installed (bin/../share/doc/vistream); empty if neither holds it.
+std::string HaproxyTemplate() {
+  const std::filesystem::path bin = std::filesystem::read_symlink("/proc/self/exe").parent_path();
+  for (const std::filesystem::path& p : {bin / "../../deploy/haproxy.cfg", bin / "../share/doc/vistream/haproxy.cfg"}) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(p, ec)) return std::filesystem::weakly_canonical(p).string();
+  }
+  return "";
+}
 
 // A CA and a server certificate for 127.0.0.1 made with `openssl` in `dir`: the files' paths.
 struct RunCertificates {
@@ -296,7 +351,7 @@ uint64_t RssKiB(pid_t pid) {
 
 // One run: a server (TLS when `tls`), the walkers, their figures as JSON in `*j`. 0 or the
 // tool's exit code.
-int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
+int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann::json* result) {
   // The server: the vistream-server beside this executable, on a free loopback port.
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe");
   const std::string server_bin = (self.parent_path() / "vistream-server").string();
@@ -323,34 +378,52 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
     security = *loaded;
     tls_args = {"--tls-cert", certs->cert, "--tls-key", certs->key};
   }
-  int out[2];
-  if (pipe(out) != 0) return Fail(absl::InternalError("pipe failed"));
-  const pid_t pid = fork();
-  if (pid < 0) return Fail(absl::InternalError("fork failed"));
-  if (pid == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGTERM);  // the server goes when the bench does, however it ends
-    dup2(out[1], STDOUT_FILENO);
-    std::FILE* err = std::fopen(log.c_str(), "w");
-    if (err != nullptr) dup2(fileno(err), STDERR_FILENO);
-    close(out[0]);
-    std::vector<std::string> args = {server_bin, "--scene", a.scene, "--listen", "127.0.0.1:0",
-                                     "--cell-size", absl::StrFormat("%.17g", grid_spec.size_m),
-                                     "--res", std::to_string(a.res),
-                                     "--threads", std::to_string(a.threads),
-                                     "--max-sessions", std::to_string(a.sessions + 8)};
-    args.insert(args.end(), tls_args.begin(), tls_args.end());
-    std::vector<char*> argv;
-    for (std::string& s : args) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    execv(server_bin.c_str(), argv.data());
-    _exit(127);
+  std::vector<std::string> args = {"--scene", a.scene,
+                                   "--cell-size", absl::StrFormat("%.17g", grid_spec.size_m),
+                                   "--res", std::to_string(a.res),
+                                   "--threads", std::to_string(a.threads),
+                                   "--max-sessions", std::to_string(a.sessions + 8),
+                                   "--drain", "0"};
+  args.insert(args.end(), tls_args.begin(), tls_args.end());
+  if (!run.store_address.empty()) args.insert(args.end(), {"--store", run.store_address, "--store-prefix", run.store_prefix});
+  Replicas replicas;
+  std::string start_error;
+  if (a.balancer == "haproxy") {
+    BalancerOptions o;
+    o.replicas = a.replicas;
+    o.replica_args = args;
+    o.server_bin = server_bin;
+    o.config_template = HaproxyTemplate();
+    if (o.config_template.empty()) {
+      return Fail(absl::NotFoundError("deploy/haproxy.cfg is neither in the build tree nor installed beside " +
+                                      self.string()));
+    }
+    replicas.dir = (std::filesystem::temp_directory_path() / ("vistream-bench-replicas-" + std::to_string(getpid())))
+                       .string();
+    o.dir = replicas.dir;
+    replicas.balanced = Balancer::Start(o, &start_error);
+    if (replicas.balanced != nullptr) replicas.address = replicas.balanced->address();
+  } else {
+    args.insert(args.end(), {"--listen", "127.0.0.1:0"});
+    replicas.single = RunningServer::Start(server_bin, args, &start_error, log);
+    if (replicas.single != nullptr) replicas.address = replicas.single->address();
   }
-  close(out[1]);
+  if (replicas.address.empty()) {
+    replicas.Stop();
+    return Fail(absl::UnavailableError(absl::StrFormat("vistream-server did not start: %s%s", start_error,
+                                                       a.log.empty() ? " (run with --log FILE to see why)" : "")));
+  }
   auto stop_server = [&] {
-    kill(pid, SIGTERM);
-    int status = 0;
-    waitpid(pid, &status, 0);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    if (!a.log.empty() && replicas.balanced != nullptr) {
+      // The replicas' logs beside --log: FILE.replica1, FILE.replica2, ...
+      for (size_t k = 0; k < replicas.size(); ++k) {
+        std::error_code ignored;
+        std::filesystem::copy_file(replicas.dir + "/" + replicas.balanced->name(k) + ".log",
+                                   a.log + "." + replicas.balanced->name(k),
+                                   std::filesystem::copy_options::overwrite_existing, ignored);
+      }
+    }
+    return replicas.Stop();
   };
 
   // Meanwhile the same scene here, for the walkers' streets and the grid.
@@ -364,29 +437,19 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
     stop_server();
     return Fail(grid.status());
   }
-  std::FILE* f = fdopen(out[0], "r");
-  char line[2048] = {};
-  if (std::fgets(line, sizeof(line), f) == nullptr) {
-    const int code = stop_server();
-    return Fail(absl::UnavailableError(absl::StrFormat("vistream-server exited (%d) before it was ready%s", code,
-                                                       a.log.empty() ? " (run with --log FILE to see why)" : "")));
+  const std::string address = replicas.address;
+  if (!a.json && !run.warmup) {
+    std::fprintf(stderr, "%s\n", replicas.balanced != nullptr
+                                     ? absl::StrFormat("%zu replicas behind HAProxy on %s", replicas.size(), address).c_str()
+                                     : replicas.single->ready_line().c_str());
   }
-  const std::string ready(line);
-  const size_t at = ready.find("ready on ");
-  const size_t colon = at == std::string::npos ? at : ready.find(':', ready.find(':', at + 9) + 1);
-  if (at == std::string::npos || colon == std::string::npos) {
-    stop_server();
-    return Fail(absl::InternalError("unexpected line from vistream-server: " + ready));
-  }
-  const std::string address = ready.substr(at + 9, colon - at - 9);
-  if (!a.json) std::fprintf(stderr, "%s", ready.c_str());
 
   const Streets streets(*scene, grid->Bounds(), 3.0);
   std::atomic<bool> sampling{true};
   std::atomic<uint64_t> max_rss{0};
   std::thread rss([&] {
     while (sampling) {
-      max_rss = std::max<uint64_t>(max_rss, RssKiB(pid));
+      for (size_t k = 0; k < replicas.size(); ++k) max_rss = std::max<uint64_t>(max_rss, RssKiB(replicas.pid(k)));
       std::this_thread::sleep_for(std::chrono::milliseconds(250));
     }
   });
@@ -395,8 +458,10 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
   {
     // Progress in seconds of the walk (start-up first, whose length depends on the server).
     const uint64_t total = static_cast<uint64_t>(std::ceil(a.seconds));
-    scenes::Progress progress(ToolRun(), absl::StrFormat("%zu sessions at %g km/h%s", a.sessions, a.speed_kmh,
-                                                         tls ? " (TLS)" : ""),
+    scenes::Progress progress(ToolRun(),
+                              absl::StrFormat("%s%zu sessions at %g km/h%s%s", run.warmup ? "warming the store: " : "",
+                                              a.sessions, a.speed_kmh, tls ? " (TLS)" : "",
+                                              a.replicas > 1 ? absl::StrFormat(", %zu replicas", a.replicas) : ""),
                               total);
     std::atomic<size_t> finished{0};
     std::vector<std::jthread> threads;
@@ -422,18 +487,26 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
     progress.Finish();
   }
   const double walk_s = SteadySeconds() - walk_start;
+  // Every replica's own figures (asked directly, not through the balancer), and their sum.
   v1::ServerStats stats;
   grpc::Status stats_status;
-  {
-    v1::Walkthrough::Stub stub(client::MakeChannel(address, security));
+  std::vector<v1::ServerStats> per_replica(replicas.size());
+  for (size_t k = 0; k < replicas.size(); ++k) {
+    v1::Walkthrough::Stub stub(client::MakeChannel(replicas.replica_address(k), security));
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-    stats_status = stub.GetStats(&ctx, v1::StatsRequest(), &stats);
+    const grpc::Status st = stub.GetStats(&ctx, v1::StatsRequest(), &per_replica[k]);
+    if (!st.ok() && stats_status.ok()) stats_status = st;
+    const v1::ServerStats& r = per_replica[k];
+    stats.set_pvs_computed(stats.pvs_computed() + r.pvs_computed());
+    stats.set_pvs_cache_hits(stats.pvs_cache_hits() + r.pvs_cache_hits());
+    stats.set_pvs_store_hits(stats.pvs_store_hits() + r.pvs_store_hits());
+    stats.set_bytes_sent(stats.bytes_sent() + r.bytes_sent());
+    stats.set_sessions_total(stats.sessions_total() + r.sessions_total());
   }
   sampling = false;
   rss.join();
   const int server_exit = stop_server();
-  std::fclose(f);
   if (CancelFlag().load()) return Fail(absl::CancelledError("bench server stopped"));
 
   uint64_t late = 0, entered = 0, crossings = 0, incomplete = 0, started = 0, without_late = 0, bytes = 0, raw = 0;
@@ -474,6 +547,26 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
   j["startup_p50_s"] = Percentile(startup_s, 0.5);
   j["pvs_computations"] = stats.pvs_computed();
   j["cache_hits"] = stats.pvs_cache_hits();
+  j["replicas"] = per_replica.size();
+  j["balancer"] = a.balancer;
+  j["store"] = a.store;
+  j["store_warm"] = a.warm;
+  j["store_hits"] = stats.pvs_store_hits();
+  {
+    const double store_hits = static_cast<double>(stats.pvs_store_hits());
+    j["store_hit_rate"] = store_hits + computed > 0 ? store_hits / (store_hits + computed) : 0.0;
+    nlohmann::json per = nlohmann::json::array(), computations = nlohmann::json::array();
+    for (const v1::ServerStats& r : per_replica) {
+      computations.push_back(r.pvs_computed());
+      per.push_back({{"sessions_total", r.sessions_total()},
+                     {"pvs_computations", r.pvs_computed()},
+                     {"store_hits", r.pvs_store_hits()},
+                     {"cache_hits", r.pvs_cache_hits()},
+                     {"bytes_sent", r.bytes_sent()}});
+    }
+    j["pvs_computations_per_replica"] = computations;
+    j["per_replica"] = per;
+  }
   j["cache_hit_rate"] = hits + computed > 0 ? hits / (hits + computed) : 0.0;
   j["bytes_per_crossing"] = crossings > 0 ? static_cast<double>(bytes) / static_cast<double>(crossings) : 0.0;
   j["bytes_per_crossing_raw"] = crossings > 0 ? static_cast<double>(raw) / static_cast<double>(crossings) : 0.0;
@@ -484,7 +577,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
   j["bytes_per_s"] = walk_s > 0.0 ? static_cast<double>(stats.bytes_sent()) / walk_s : 0.0;
   j["server_exit_code"] = server_exit;
   if (!first_error.empty()) j["first_error"] = first_error;
-  if (!a.json) {
+  if (!a.json && !run.warmup) {
     std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2%s\n", scene->name.c_str(), a.sessions,
                 a.speed_kmh, a.seconds, grid->cell_size(), a.res, tls ? ", TLS" : "");
     std::printf("  sessions started %llu, without a late cell %llu; cells entered %llu, late %llu\n",
@@ -495,6 +588,16 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
                 Percentile(crossing_ms, 0.5), Percentile(crossing_ms, 0.99), Percentile(startup_s, 0.5));
     std::printf("  PVS computations %llu, cache hits %llu (%.1f%%)\n", static_cast<unsigned long long>(computed),
                 static_cast<unsigned long long>(hits), 100.0 * j["cache_hit_rate"].get<double>());
+    if (a.replicas > 1 || a.store != "none") {
+      std::string per;
+      for (size_t k = 0; k < per_replica.size(); ++k) {
+        per += absl::StrFormat("%s%llu", k == 0 ? "" : ", ", static_cast<unsigned long long>(per_replica[k].pvs_computed()));
+      }
+      std::printf("  %zu replica%s (PVS computations %s); store %s%s: %llu hits (%.1f%% of PVSs not in a local cache)\n",
+                  per_replica.size(), per_replica.size() == 1 ? "" : "s", per.c_str(), a.store.c_str(),
+                  a.warm ? " (warmed)" : "", static_cast<unsigned long long>(stats.pvs_store_hits()),
+                  100.0 * j["store_hit_rate"].get<double>());
+    }
     std::printf("  bytes per crossing %.0f encoded, %.0f raw (%.3f); server RSS %.0f MiB\n",
                 j["bytes_per_crossing"].get<double>(), j["bytes_per_crossing_raw"].get<double>(),
                 j["encoded_fraction"].get<double>(), j["rss_mb"].get<double>());
@@ -513,17 +616,46 @@ int RunOnce(const BenchServerArgs& a, bool tls, nlohmann::json* result) {
 
 int BenchServer(const BenchServerArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
+  if (a.replicas > 1 && a.balancer != "haproxy") {
+    return BadOption("bench server", "--replicas", "several replicas need a balancer in front: add --balancer haproxy");
+  }
+  if (a.store != "none" && a.store != "redis" && !server::IsStoreAddress(a.store)) {
+    return BadOption("bench server", "--store", "'" + a.store + "' is not none, redis or HOST:PORT of a Redis");
+  }
+  if (a.warm && a.store == "none") return BadOption("bench server", "--warm", "warms the PVS store: give --store");
+  if (a.warm && a.tls == "both") return BadOption("bench server", "--warm", "one run at a time: not with --tls both");
   InstallCancelHandler();
+  // The store: a redis-server of the run's own (empty at the start: a cold store), or the one
+  // given, under a key prefix of this run's own (cold there too).
+  RunContext run;
+  std::unique_ptr<RedisServer> redis;
+  if (a.store == "redis") {
+    std::string error;
+    redis = RedisServer::Start(&error);
+    if (redis == nullptr) return Fail(absl::UnavailableError("--store redis: " + error));
+    run.store_address = redis->address();
+  } else if (a.store != "none") {
+    run.store_address = a.store;
+  }
+  if (!run.store_address.empty()) run.store_prefix = absl::StrFormat("vistream-bench-%d-%d", getpid(), time(nullptr));
+  if (a.warm) {
+    // The same walkers (same seed) once before, on replicas of their own: every cell the
+    // measured pass needs is then in the store, and none in the measured replicas' caches.
+    RunContext warmup = run;
+    warmup.warmup = true;
+    nlohmann::json ignored;
+    if (const int rc = RunOnce(a, a.tls == "on", warmup, &ignored); rc != 0) return rc;
+  }
   if (a.tls != "both") {
     nlohmann::json j;
-    if (const int rc = RunOnce(a, a.tls == "on", &j); rc != 0) return rc;
+    if (const int rc = RunOnce(a, a.tls == "on", run, &j); rc != 0) return rc;
     if (a.json) std::printf("%s\n", j.dump(2).c_str());
     return 0;
   }
   // Side by side in one run: plaintext, then TLS, the same walkers (same seed).
   nlohmann::json plain, tls;
-  if (const int rc = RunOnce(a, false, &plain); rc != 0) return rc;
-  if (const int rc = RunOnce(a, true, &tls); rc != 0) return rc;
+  if (const int rc = RunOnce(a, false, run, &plain); rc != 0) return rc;
+  if (const int rc = RunOnce(a, true, run, &tls); rc != 0) return rc;
   auto ratio = [](const nlohmann::json& x, const nlohmann::json& y, const char* key) {
     const double d = y[key].get<double>();
     return d > 0.0 ? x[key].get<double>() / d : 0.0;
@@ -569,6 +701,20 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
                 "side by side, with their ratios")
       ->check(CLI::IsMember({"off", "on", "both"}))
       ->capture_default_str();
+  c->add_option("--replicas", args->replicas, "vistream-server replicas (more than one: behind --balancer haproxy)")
+      ->check(WholeRange(1, 64))
+      ->capture_default_str();
+  c->add_option("--balancer", args->balancer,
+                "none | haproxy: the replicas behind a real HAProxy running deploy/haproxy.cfg (ports, stats socket "
+                "and check timers adapted), the walkers connecting through it")
+      ->check(CLI::IsMember({"none", "haproxy"}))
+      ->capture_default_str();
+  c->add_option("--store", args->store,
+                "none | redis | HOST:PORT: the replicas share a PVS store, in a redis-server of the run's own (empty "
+                "at the start) or in the Redis given (under a key prefix of the run's own)")
+      ->capture_default_str();
+  c->add_flag("--warm", args->warm,
+              "fill the store first with the same walks on replicas of their own; then measure on fresh replicas");
   c->callback([args, done] { done(BenchServer(*args)); });
 }
 
