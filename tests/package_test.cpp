@@ -23,10 +23,10 @@
 #include <string>
 #include <vector>
 
-#include <grpcpp/generic/generic_stub.h>
-#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "tests/grpc_health_util.h"
+#include "tests/loopback_util.h"
 #include "tests/temp_dir.h"
 
 namespace vistream {
@@ -104,69 +104,6 @@ std::set<std::string> ExpectedTree() {
 std::string PackagePath(const std::string& prefix_relative) {
   if (prefix_relative.starts_with("etc/") || prefix_relative.starts_with("lib/systemd/")) return prefix_relative;
   return "usr/" + prefix_relative;
-}
-
-// A TCP port on loopback that was free a moment ago.
-int FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(a);
-  if (fd < 0 || bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0 ||
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
-    if (fd >= 0) close(fd);
-    return -1;
-  }
-  close(fd);
-  return ntohs(a.sin_port);
-}
-
-// GET `path` from 127.0.0.1:`port` over HTTP/1.0: the whole response, or "" when none came.
-std::string HttpGet(int port, const std::string& path) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return "";
-  timeval timeout{10, 0};
-  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<uint16_t>(port));
-  std::string response;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0) {
-    const std::string request = "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n";
-    if (send(fd, request.data(), request.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(request.size())) {
-      char buf[4096];
-      for (ssize_t n; (n = recv(fd, buf, sizeof(buf), 0)) > 0;) response.append(buf, static_cast<size_t>(n));
-    }
-  }
-  close(fd);
-  return response;
-}
-
-// grpc.health.v1.Health/Check for the whole server: the status code and the reply's bytes
-// (SERVING is field 1 = 1: "\x08\x01").
-std::pair<grpc::StatusCode, std::string> HealthCheck(const std::string& address) {
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
-  grpc::GenericStub generic(channel);
-  grpc::CompletionQueue cq;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-  grpc::Slice empty_request;
-  auto call = generic.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", grpc::ByteBuffer(&empty_request, 1), &cq);
-  call->StartCall();
-  grpc::ByteBuffer reply;
-  grpc::Status status;
-  call->Finish(&reply, &status, reinterpret_cast<void*>(1));
-  void* tag = nullptr;
-  bool ok = false;
-  if (!cq.Next(&tag, &ok)) return {grpc::StatusCode::UNKNOWN, ""};
-  std::string bytes;
-  std::vector<grpc::Slice> slices;
-  if (status.ok() && reply.Dump(&slices).ok()) {
-    for (const grpc::Slice& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  }
-  return {status.error_code(), bytes};
 }
 
 class Package : public ::testing::Test {
@@ -357,7 +294,7 @@ TEST_F(Package, InstalledProgramsReadTheInstalledCatalog) {
 // a free one; the service's port from --listen, which overrides the key): ready, healthy over
 // gRPC and HTTP, metrics, and exit 0 on SIGTERM.
 TEST_F(Package, InstalledServerStartsFromTheExampleConfigurationAndAnswersHealth) {
-  const int metrics_port = FreePort();
+  const int metrics_port = ::vistream::test::FreeLoopbackPort();
   ASSERT_GT(metrics_port, 0);
   std::string config = ReadFile(prefix_ / "etc/vistream/server.toml");
   const std::string metrics_listen = "[metrics]\n";
@@ -416,13 +353,11 @@ TEST_F(Package, InstalledServerStartsFromTheExampleConfigurationAndAnswersHealth
   ASSERT_FALSE(address.empty()) << "not ready; stdout:\n" << output << "\nlog:\n" << ReadFile(log_path);
   std::printf("the installed server was ready in %.1f s: %s", SecondsSince(start), output.c_str());
 
-  const auto [code, health] = HealthCheck(address);
-  EXPECT_EQ(code, grpc::StatusCode::OK);
-  EXPECT_EQ(health, std::string("\x08\x01", 2)) << "not SERVING";
-  const std::string healthz = HttpGet(metrics_port, "/healthz");
-  EXPECT_TRUE(healthz.starts_with("HTTP/1.1 200") || healthz.starts_with("HTTP/1.0 200")) << healthz;
-  const std::string metrics = HttpGet(metrics_port, "/metrics");
-  EXPECT_TRUE(metrics.starts_with("HTTP/1.1 200") || metrics.starts_with("HTTP/1.0 200")) << metrics;
+  EXPECT_EQ(::vistream::test::GrpcHealth(address), "SERVING");
+  const auto [healthz_status, healthz] = ::vistream::test::HttpGet(metrics_port, "/healthz");
+  EXPECT_EQ(healthz_status, 200) << healthz;
+  const auto [metrics_status, metrics] = ::vistream::test::HttpGet(metrics_port, "/metrics");
+  EXPECT_EQ(metrics_status, 200) << metrics;
   EXPECT_NE(metrics.find("vistream_sessions_active"), std::string::npos) << metrics;
 
   ASSERT_EQ(kill(pid, SIGTERM), 0);
