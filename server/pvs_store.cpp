@@ -203,6 +203,11 @@ PvsStore::Context PvsStore::Acquire(std::string* why, bool* pooled) {
   return c;
 }
 
+void PvsStore::DropIdle() {
+  std::lock_guard lock(mu_);
+  idle_.clear();
+}
+
 void PvsStore::Release(Context c, bool ok, const std::string& why) {
   std::unique_lock lock(mu_);
   if (ok) {
@@ -246,6 +251,7 @@ PvsStore::Read PvsStore::Get(const std::string& ns, visibility::CellId cell, uin
     redisSetTimeout(c.get(), ToTimeval(options_.read_timeout_s));
     r.reset(static_cast<redisReply*>(redisCommand(c.get(), "GET %b", key.data(), key.size())));
     if (r != nullptr || !pooled || !ClosedByPeer(c.get())) break;
+    DropIdle();  // the others went with it: the retry dials
   }
   if (r == nullptr || r->type == REDIS_REPLY_ERROR) {
     // No answer in time, a lost connection, or an error reply (LOADING after a restart,
@@ -347,8 +353,10 @@ void PvsStore::WriterLoop() {
       Context c = Acquire(&why, &pooled);
       if (c == nullptr) break;
       ok = SendWrites(c.get(), batch, &why);
-      const bool retry = !ok && pooled && ClosedByPeer(c.get());
-      if (retry) continue;  // dropped without marking the store down
+      if (!ok && pooled && ClosedByPeer(c.get())) {
+        DropIdle();  // dropped without marking the store down; the retry dials
+        continue;
+      }
       Release(std::move(c), ok, why);
       break;
     }

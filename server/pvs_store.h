@@ -128,6 +128,8 @@ class PvsStore {
   // Returns `c` to the pool, or (not `ok`) drops it and marks the store down for `why`.
   void Release(Context c, bool ok, const std::string& why);
   Context Dial(std::string* why) const;
+  // Closes every pooled connection (one was found closed by Redis: a restart closed them all).
+  void DropIdle();
   void MarkDownLocked(const std::string& why);
   void WriterLoop();
   // Sends `batch` pipelined on `c` with the write deadline; false with `why` on an I/O error.

@@ -249,6 +249,33 @@ TEST(PvsStore, RedisStoppedTheCallsGoOnAtOnceThenTheStoreIsUsedAgainWhenItIsBack
   EXPECT_EQ(events.Count("store reconnected"), 1) << events.All();
 }
 
+TEST(PvsStore, ARedisRestartBetweenReadsCostsNoRead) {
+  std::unique_ptr<RedisServer> redis = StartRedis();
+  ASSERT_NE(redis, nullptr);
+  std::unique_ptr<PvsStore> store = MakeStore(redis->address());
+  const std::string ns = "test:pvs1:restart";
+  // Several connections in the pool: reads from four threads at once.
+  {
+    std::vector<std::jthread> readers;
+    for (int t = 0; t < 4; ++t) {
+      readers.emplace_back([&] {
+        std::vector<uint32_t> got;
+        for (int k = 0; k < 50; ++k) EXPECT_EQ(store->Get(ns, 1, 10, &got), PvsStore::Read::kMiss);
+      });
+    }
+  }
+  std::string error;
+  ASSERT_TRUE(redis->Restart(&error)) << error;
+  // Every pooled connection is closed now; the next read and write go on new ones at once.
+  std::vector<uint32_t> got;
+  EXPECT_EQ(store->Get(ns, 1, 10, &got), PvsStore::Read::kMiss);
+  store->PutLater(ns, 2, std::vector<uint32_t>{3});
+  store->Flush();
+  EXPECT_EQ(store->Get(ns, 2, 10, &got), PvsStore::Read::kHit);
+  EXPECT_EQ(store->stats().outages, 0u);
+  EXPECT_EQ(store->stats().unavailable, 0u);
+}
+
 TEST(PvsStore, AFrozenRedisNeverHoldsAReadPastItsDeadline) {
   std::unique_ptr<RedisServer> redis = StartRedis();
   ASSERT_NE(redis, nullptr);
