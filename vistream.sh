@@ -68,6 +68,12 @@ install_gltf_validator() {
 configure_and_build() {
   local extra=()
   [ "${CI:-}" = "true" ] && extra+=(-DVISTREAM_WERROR=ON)
+  # VISTREAM_DEBUG_INFO=0: RelWithDebInfo without -g (.ci/run: a third less compile time);
+  # =1: with it again (CMake's default, which an unset variable leaves as the folder has it).
+  case "${VISTREAM_DEBUG_INFO:-}" in
+    0) extra+=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -DNDEBUG") ;;
+    1) extra+=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g -DNDEBUG") ;;
+  esac
   if [ ! -f "$BUILD_DIR/build.ninja" ] || [ ${#extra[@]} -gt 0 ]; then
     cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE="$BUILD_TYPE" "${extra[@]}" >/dev/null
   fi
