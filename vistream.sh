@@ -21,6 +21,7 @@ PACKAGES=(
   libssl-dev openssl   # TLS: checking PEM files (server and client), certificates made by the tests and bench server --tls
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
   libhiredis-dev redis-server   # the PVS store replicas share (Redis), and the real Redis its tests start
+  stunnel4   # a TLS-only Redis reached through stunnel, as README "Beyond one machine" says (tested)
   haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}

@@ -4,6 +4,11 @@
 
 #include "server/pvs_store.h"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
@@ -16,6 +21,7 @@
 
 #include "server/served_scene.h"
 #include "tests/redis_test_util.h"
+#include "tests/tls_test_util.h"
 #include "tests/server_test_util.h"
 #include "visibility/pvs_file.h"
 
@@ -274,6 +280,76 @@ TEST(PvsStore, ARedisRestartBetweenReadsCostsNoRead) {
   EXPECT_EQ(store->Get(ns, 2, 10, &got), PvsStore::Read::kHit);
   EXPECT_EQ(store->stats().outages, 0u);
   EXPECT_EQ(store->stats().unavailable, 0u);
+}
+
+// A Redis that speaks only TLS and wants a password, reached as the README says: through a local
+// stunnel (Debian stunnel4) that verifies its certificate, with the password from the options.
+TEST(PvsStore, ATlsRedisWithAPasswordIsReachedThroughStunnel) {
+  const testing::TestCerts& certs = testing::Certs();
+  const int tls_port = ::vistream::test::FreeLoopbackPort();
+  std::string error;
+  std::unique_ptr<RedisServer> redis =
+      RedisServer::Start(&error, {"--tls-port", std::to_string(tls_port), "--tls-cert-file", certs.server_crt,
+                                  "--tls-key-file", certs.server_key, "--tls-ca-cert-file", certs.ca_crt,
+                                  "--tls-auth-clients", "no", "--requirepass", "s3cret"});
+  ASSERT_NE(redis, nullptr) << error;
+  const int local_port = ::vistream::test::FreeLoopbackPort();
+  const std::string conf = certs.dir + "/stunnel-redis.conf";
+  ASSERT_TRUE(testing::WriteText(conf, "foreground = yes\npid =\n[redis]\nclient = yes\naccept = 127.0.0.1:" +
+                                           std::to_string(local_port) + "\nconnect = 127.0.0.1:" +
+                                           std::to_string(tls_port) + "\nCAfile = " + certs.ca_crt +
+                                           "\nverifyChain = yes\ncheckHost = localhost\n"));
+  const pid_t stunnel = fork();
+  ASSERT_GE(stunnel, 0);
+  if (stunnel == 0) {
+    const int devnull = ::open("/dev/null", O_WRONLY);
+    if (devnull >= 0) dup2(devnull, STDERR_FILENO);
+    execlp("stunnel4", "stunnel4", conf.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  struct Reap {
+    pid_t pid;
+    ~Reap() {
+      kill(pid, SIGTERM);
+      waitpid(pid, nullptr, 0);
+    }
+  } reap{stunnel};
+  PvsStoreOptions o;
+  o.address = "127.0.0.1:" + std::to_string(local_port);
+  o.key_prefix = "test";
+  o.password = "s3cret";
+  o.connect_timeout_s = 2.0;
+  o.read_timeout_s = 2.0;
+  absl::StatusOr<std::unique_ptr<PvsStore>> store = PvsStore::Create(o);
+  ASSERT_TRUE(store.ok()) << store.status();
+  // stunnel may take a moment to listen.
+  ASSERT_TRUE(Eventually([&] {
+    absl::StatusOr<std::unique_ptr<PvsStore>> probe = PvsStore::Create(o);
+    return probe.ok() && (*probe)->Connect().ok();
+  })) << (waitpid(stunnel, nullptr, WNOHANG) == stunnel ? "stunnel4 exited (Debian stunnel4; ./vistream.sh installs it)"
+                                                         : "no PING through stunnel");
+  ASSERT_TRUE((*store)->Connect().ok());
+  const std::string ns = "test:pvs1:tls";
+  (*store)->PutLater(ns, 4, std::vector<uint32_t>{1, 9});
+  (*store)->Flush();
+  std::vector<uint32_t> got;
+  ASSERT_EQ((*store)->Get(ns, 4, 10, &got), PvsStore::Read::kHit);
+  EXPECT_EQ(got, (std::vector<uint32_t>{1, 9}));
+  // The wrong password is refused, naming AUTH (and not the password).
+  o.password = "wrong";
+  absl::StatusOr<std::unique_ptr<PvsStore>> wrong = PvsStore::Create(o);
+  ASSERT_TRUE(wrong.ok());
+  const absl::Status refused = (*wrong)->Connect();
+  EXPECT_EQ(refused.code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(refused.message().find("AUTH refused"), std::string::npos) << refused;
+  EXPECT_EQ(refused.message().find("wrong"), std::string::npos) << refused;
+  // Plaintext straight to the TLS port gets nothing.
+  o.address = "127.0.0.1:" + std::to_string(tls_port);
+  o.password = "s3cret";
+  o.read_timeout_s = 0.5;
+  absl::StatusOr<std::unique_ptr<PvsStore>> plain = PvsStore::Create(o);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE((*plain)->Connect().ok());
 }
 
 TEST(PvsStore, AFrozenRedisNeverHoldsAReadPastItsDeadline) {

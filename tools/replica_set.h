@@ -154,10 +154,12 @@ class RunningServer {
 // A redis-server (Debian's) on a free loopback port, without persistence.
 class RedisServer {
  public:
-  // Starts redis-server on 127.0.0.1 at a free port and waits until it answers PING. Null, with
+  // Starts redis-server on 127.0.0.1 at a free port and waits until it answers PING (or asks
+  // for a password). `more`: further redis-server options (a TLS port, requirepass). Null, with
   // why in `*error`, when redis-server is missing or does not come up.
-  static std::unique_ptr<RedisServer> Start(std::string* error) {
+  static std::unique_ptr<RedisServer> Start(std::string* error, std::vector<std::string> more = {}) {
     std::unique_ptr<RedisServer> r(new RedisServer());
+    r->more_ = std::move(more);
     r->port_ = FreeLoopbackPort();
     if (!r->Launch(error)) return nullptr;
     return r;
@@ -215,8 +217,13 @@ class RedisServer {
         dup2(devnull, STDOUT_FILENO);
         dup2(devnull, STDERR_FILENO);
       }
-      execlp("redis-server", "redis-server", "--port", port.c_str(), "--bind", "127.0.0.1", "--save", "",
-             "--appendonly", "no", "--daemonize", "no", "--protected-mode", "yes", static_cast<char*>(nullptr));
+      std::vector<std::string> args = {"redis-server", "--port", port, "--bind", "127.0.0.1", "--save", "",
+                                        "--appendonly", "no", "--daemonize", "no", "--protected-mode", "yes"};
+      args.insert(args.end(), more_.begin(), more_.end());
+      std::vector<char*> argv;
+      for (std::string& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execvp("redis-server", argv.data());
       _exit(127);
     }
     pid_ = pid;
@@ -229,7 +236,8 @@ class RedisServer {
                      : "redis-server exited at start on port " + port;
         return false;
       }
-      if (Cli("PING") == "PONG") return true;
+      const std::string ping = Cli("PING");
+      if (ping == "PONG" || ping.starts_with("NOAUTH")) return true;
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     *error = "redis-server did not answer PING on port " + port + " within 10 s";
@@ -239,6 +247,7 @@ class RedisServer {
 
   int port_ = 0;
   pid_t pid_ = -1;
+  std::vector<std::string> more_;
 };
 
 // The metrics port of a vistream-server ready line ("...; metrics on http://HOST:PORT/metrics").
