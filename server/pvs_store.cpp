@@ -162,6 +162,17 @@ PvsStore::Context PvsStore::Dial(std::string* why) const {
       return nullptr;
     }
   }
+  // Up only once Redis answers: a frozen one accepts the connection but not this, and one that
+  // wants a password says NOAUTH here.
+  Reply pong(static_cast<redisReply*>(redisCommand(c.get(), "PING")));
+  if (pong == nullptr) {
+    *why = absl::StrCat("PING: ", ErrorOf(c.get()));
+    return nullptr;
+  }
+  if (pong->type == REDIS_REPLY_ERROR) {
+    *why = absl::StrCat("PING refused: ", std::string(pong->str, pong->len));
+    return nullptr;
+  }
   return c;
 }
 
@@ -173,10 +184,10 @@ PvsStore::Context PvsStore::Acquire(std::string* why, bool* pooled) {
     idle_.pop_back();
     return c;
   }
-  const bool probe = !up_;
+  // Down after a failure (not merely before the first connection): one caller at a time tries
+  // again, once the back-off has passed; the rest go on without the store at once.
+  const bool probe = down_reported_;
   if (probe) {
-    // Down: one caller at a time tries again, once the back-off has passed; the rest go on
-    // without the store at once.
     if (dialing_ || Clock::now() < retry_at_) {
       *why = "down (reconnecting with back-off)";
       return nullptr;
@@ -374,12 +385,15 @@ void PvsStore::WriterLoop() {
 
 absl::Status PvsStore::Connect() {
   std::string why;
-  Context c = Acquire(&why);
-  if (c == nullptr) return absl::UnavailableError(Unavailable(why));
-  Reply r(static_cast<redisReply*>(redisCommand(c.get(), "PING")));
-  if (r == nullptr || r->type == REDIS_REPLY_ERROR) {
-    why = r == nullptr ? absl::StrCat("PING: ", ErrorOf(c.get())) : std::string(r->str, r->len);
-    Release(std::move(c), false, why);
+  Context c = Acquire(&why);  // a new connection has answered PING (Dial)
+  if (c == nullptr) {
+    // Redis answered but refused us: a configuration error, not an outage.
+    if (why.find("AUTH refused") != std::string::npos || why.find("NOAUTH") != std::string::npos ||
+        why.find("WRONGPASS") != std::string::npos) {
+      return absl::PermissionDeniedError(
+          absl::StrCat("the PVS store at ", options_.address, " refused this server: ", why,
+                       options_.password.empty() ? " (no password given)" : ""));
+    }
     return absl::UnavailableError(Unavailable(why));
   }
   Release(std::move(c), true, "");
@@ -421,6 +435,28 @@ absl::StatusOr<std::vector<bool>> PvsStore::Exists(const std::string& ns, std::s
   }
   Release(std::move(c), true, "");
   return out;
+}
+
+absl::Status PvsStore::Delete(const std::string& ns, std::span<const visibility::CellId> cells) {
+  std::string why;
+  Context c = Acquire(&why);
+  if (c == nullptr) return absl::UnavailableError(Unavailable(why));
+  redisSetTimeout(c.get(), ToTimeval(options_.write_timeout_s));
+  for (visibility::CellId cell : cells) {
+    const std::string key = Key(ns, cell);
+    redisAppendCommand(c.get(), "DEL %b", key.data(), key.size());
+  }
+  for (size_t k = 0; k < cells.size(); ++k) {
+    void* raw = nullptr;
+    if (redisGetReply(c.get(), &raw) != REDIS_OK || raw == nullptr) {
+      why = absl::StrCat("DEL: ", ErrorOf(c.get()));
+      Release(std::move(c), false, why);
+      return absl::UnavailableError(Unavailable(why));
+    }
+    freeReplyObject(raw);
+  }
+  Release(std::move(c), true, "");
+  return absl::OkStatus();
 }
 
 std::string PvsStore::Key(const std::string& ns, visibility::CellId cell) { return absl::StrCat(ns, ":", cell); }

@@ -83,8 +83,9 @@ class PvsStore {
   PvsStore(const PvsStore&) = delete;
   PvsStore& operator=(const PvsStore&) = delete;
 
-  // Connects now (a PING): OK, or UNAVAILABLE naming the address and what failed. For tools
-  // that cannot go on without the store.
+  // Connects now (a PING): OK; PERMISSION_DENIED when Redis answers but refuses (a wrong or
+  // missing password); else UNAVAILABLE naming the address and what failed. For tools that
+  // cannot go on without the store, and a server's start.
   absl::Status Connect();
 
   // The PVS of `cell` (a scene of `scene_objects` objects) under namespace `ns`, within the
@@ -103,6 +104,8 @@ class PvsStore {
   absl::Status Put(const std::string& ns, std::span<const std::pair<visibility::CellId, std::string>> records);
   // Which of `cells` have an entry under `ns` (pipelined EXISTS); for tools. Errors: UNAVAILABLE.
   absl::StatusOr<std::vector<bool>> Exists(const std::string& ns, std::span<const visibility::CellId> cells);
+  // Deletes the entries of `cells` under `ns` (pipelined DEL); for tools. Errors: UNAVAILABLE.
+  absl::Status Delete(const std::string& ns, std::span<const visibility::CellId> cells);
 
   // The key of `cell` under `ns`.
   static std::string Key(const std::string& ns, visibility::CellId cell);

@@ -349,7 +349,9 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
     return r.Error(LineOf(*root.get("store")), "store.address", "missing: where the Redis of the PVS store listens");
   }
   if (c.store_key_prefix.empty() || c.store_key_prefix.find_first_of(" \t") != std::string::npos) {
-    return r.Error(LineOf(*root.get("store")), "store.key_prefix", "expected a non-empty word without spaces");
+    const toml::node* prefix = root.at_path("store.key_prefix").node();
+    return r.Error(LineOf(prefix != nullptr ? *prefix : *root.get("store")), "store.key_prefix",
+                   "expected a non-empty word without spaces");
   }
   if (!c.tls_client_ca.empty() && c.tls_cert.empty()) {
     return r.Error(LineOf(*root.get("tls")), "tls.client_ca",

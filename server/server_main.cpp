@@ -183,7 +183,16 @@ int main(int argc, char** argv) {
             return "";
           },
           "HOST:PORT"));
-  app.add_option("--store-prefix", cli.store_key_prefix, "key prefix in the PVS store")->capture_default_str();
+  app.add_option("--store-prefix", cli.store_key_prefix, "key prefix in the PVS store")
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            if (text.empty() || text.find_first_of(" \t\r\n") != std::string::npos) {
+              return "'" + text + "' is not a non-empty word without spaces";
+            }
+            return "";
+          },
+          "WORD"));
   app.add_option("--store-read-timeout-ms", cli.store_read_timeout_ms,
                  "a store read's deadline in ms (then the PVS is computed)")
       ->check(FiniteRange(0.001, 60000))->capture_default_str();
@@ -269,6 +278,16 @@ int main(int argc, char** argv) {
   if (given("--insecure")) config.tls_insecure = cli.tls_insecure;
   if (given("--tokens")) config.tokens = cli.tokens;
   if (given("--metrics-listen")) config.metrics_listen = cli.metrics_listen;
+  if (config.store_address.empty() && !given("--store")) {
+    // Store options without a store would be ignored: say so.
+    for (const char* option : {"--store-prefix", "--store-read-timeout-ms", "--store-password-file"}) {
+      if (given(option)) {
+        std::fprintf(stderr, "vistream-server: error: %s: needs a PVS store: give --store HOST:PORT (or [store] "
+                             "address)\nRun 'vistream-server --help' for the options.\n", option);
+        return 2;
+      }
+    }
+  }
   if (given("--store")) config.store_address = cli.store_address;
   if (given("--store-prefix")) config.store_key_prefix = cli.store_key_prefix;
   if (given("--store-read-timeout-ms")) config.store_read_timeout_ms = cli.store_read_timeout_ms;
@@ -432,8 +451,12 @@ int main(int argc, char** argv) {
       return 2;
     }
     store = std::move(*created);
-    // Say now whether it answers; the server starts either way and uses it once it does.
-    (void)store->Connect();
+    // Say now whether it answers; the server starts either way and uses it once it does, but a
+    // Redis that refuses this server (password) is a configuration error.
+    if (absl::Status st = store->Connect(); absl::IsPermissionDenied(st)) {
+      std::fprintf(stderr, "vistream-server: error: %s\n", std::string(st.message()).c_str());
+      return 2;
+    }
   }
   // One pool of PVS workers for every scene, shared round robin (server/pvs_scheduler.h).
   const unsigned threads = config.threads != 0 ? config.threads : std::max(1u, std::thread::hardware_concurrency());

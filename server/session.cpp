@@ -359,7 +359,7 @@ void Session::OnCellReady(const CellPvsPtr& pvs, bool from_cache) {
   if (log_ != nullptr) {
     const visibility::CellCoord c = scene_->grid().Coord(pvs->cell);
     log_->Write(id_, "pvs", {{"cell", absl::StrCat(c.i, ",", c.j)},
-                             {"source", from_cache ? "cache" : "computed"},
+                             {"source", from_cache ? "cache" : pvs->from_store ? "store" : "computed"},
                              {"ms", from_cache ? 0.0 : pvs->compute_s * 1000.0},  // a cache hit costs none
                              {"objects", static_cast<uint64_t>(pvs->objects.size())}});
   }

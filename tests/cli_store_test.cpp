@@ -68,6 +68,17 @@ TEST(Cli, PvsAllShardsFillTheStoreWithExactlyTheSingleRunsSets) {
   ASSERT_EQ(again.exit_code, 0) << again.out;
   EXPECT_EQ(nlohmann::json::parse(again.out).at("cells_computed"), 0);
   EXPECT_EQ(nlohmann::json::parse(again.out).at("cells_already_stored"), 280);
+  // A corrupt entry under a real key is not taken for a stored cell: the rerun redoes it.
+  ASSERT_EQ(redis->Cli("SET " + ns + ":1 garbage"), "OK");
+  const RunResult repair =
+      Vistream("pvs --scene city1 --all --store " + redis->address() + " --store-prefix t --shard 1/2 --json");
+  ASSERT_EQ(repair.exit_code, 0) << repair.out;
+  EXPECT_NE(repair.out.find("1 stored entries failed their checks"), std::string::npos) << repair.out;
+  const nlohmann::json fixed = nlohmann::json::parse(repair.out.substr(repair.out.find('{')));
+  EXPECT_EQ(fixed.at("cells_computed"), 1);
+  std::vector<uint32_t> got;
+  ASSERT_EQ((*store)->Get(ns, 1, f->sets.object_count(), &got), server::PvsStore::Read::kHit);
+  EXPECT_EQ(got, f->sets.Objects(1));
 }
 
 TEST(Cli, PvsAllStoreOptionsAreChecked) {
@@ -78,6 +89,13 @@ TEST(Cli, PvsAllStoreOptionsAreChecked) {
   ExpectBadOption("pvs --scene city1 --all --store 127.0.0.1:1 -o " + Tmp("x.pvs") + " --shard 0/2",
                   "--shard: a PVS file holds every viewcell");
   ExpectBadOption("pvs --scene city1 --all --store nowhere", "--store: store address 'nowhere'");
+  ExpectBadOption("pvs --scene city1 --all --store 127.0.0.1:1 --store-prefix 'a b'",
+                  "--store-prefix: 'a b' is not a non-empty word");
+  ExpectBadOption("pvs --scene city1 --all -o " + Tmp("x.pvs") + " --store-prefix p",
+                  "--store-prefix: names keys in a PVS store: give --store");
+  ExpectBadOption("pvs --scene city1 --cell 1,1 --store 127.0.0.1:1", "--store: fills a PVS store with every viewcell");
+  ExpectBadOption("pvs --scene city1 --all --store 127.0.0.1:1 --store-password-file " + Tmp(""),
+                  "--store-password-file: " + Tmp("") + ": is a folder, not a file");
   // Nobody listens there: said before any work, naming the address.
   const int port = vistream::test::FreeLoopbackPort();
   ExpectRunTimeError("pvs --scene city1 --all --store 127.0.0.1:" + std::to_string(port),
@@ -116,6 +134,10 @@ TEST(Cli, BenchServerReplicaOptionsAreChecked) {
   ExpectBadOption("bench server --store nowhere", "--store: 'nowhere' is not none, redis or HOST:PORT");
   ExpectBadOption("bench server --warm", "--warm: warms the PVS store: give --store");
   ExpectBadOption("bench server --balancer nginx", "--balancer");
+  // A store nobody answers at: said before anything is measured.
+  const int port = vistream::test::FreeLoopbackPort();
+  ExpectRunTimeError("bench server --scene city1 --store 127.0.0.1:" + std::to_string(port),
+                     "the PVS store at 127.0.0.1:" + std::to_string(port) + " is unavailable");
 }
 
 }  // namespace

@@ -340,9 +340,16 @@ TEST(PvsStore, ATlsRedisWithAPasswordIsReachedThroughStunnel) {
   absl::StatusOr<std::unique_ptr<PvsStore>> wrong = PvsStore::Create(o);
   ASSERT_TRUE(wrong.ok());
   const absl::Status refused = (*wrong)->Connect();
-  EXPECT_EQ(refused.code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kPermissionDenied);
   EXPECT_NE(refused.message().find("AUTH refused"), std::string::npos) << refused;
   EXPECT_EQ(refused.message().find("wrong"), std::string::npos) << refused;
+  // No password at all: Redis says NOAUTH, also a refusal rather than an outage.
+  o.password.clear();
+  absl::StatusOr<std::unique_ptr<PvsStore>> none = PvsStore::Create(o);
+  ASSERT_TRUE(none.ok());
+  const absl::Status noauth = (*none)->Connect();
+  EXPECT_EQ(noauth.code(), absl::StatusCode::kPermissionDenied) << noauth;
+  EXPECT_NE(noauth.message().find("no password given"), std::string::npos) << noauth;
   // Plaintext straight to the TLS port gets nothing.
   o.address = "127.0.0.1:" + std::to_string(tls_port);
   o.password = "s3cret";

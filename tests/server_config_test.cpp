@@ -172,7 +172,7 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
       {"[store]\naddress = \"redis\"", ":2: store.address: 'redis' is not host:port or unix:/path"},
       {"[store]\naddress = \"h:0\"", ":2: store.address: 'h:0' is not host:port or unix:/path"},
       {"[store]\nkey_prefix = \"a\"", ":1: store.address: missing"},
-      {"[store]\naddress = \"h:1\"\nkey_prefix = \"a b\"", ":1: store.key_prefix: expected a non-empty word"},
+      {"[store]\naddress = \"h:1\"\nkey_prefix = \"a b\"", ":3: store.key_prefix: expected a non-empty word"},
       {"[store]\naddress = \"h:1\"\nread_timeout_ms = 0", ":3: store.read_timeout_ms: 0 is out of range (above 0"},
       {"[store]\naddress = \"h:1\"\npassword_file = \"/no/pw\"", ":3: store.password_file: /no/pw: no such file"},
       {"[log]\nformat = \"xml\"", ":2: log.format: 'xml' is not one of text, json"},

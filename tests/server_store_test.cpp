@@ -12,6 +12,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -93,7 +94,8 @@ TEST(ServerStore, WhatOneReplicaComputesTheOtherReadsAndRedisGoingAwayStopsNoWal
   ASSERT_NE(redis, nullptr) << error;
   const std::string log_a = testing::ProcessTempDir() + "/store_replica_a.log";
   std::unique_ptr<test::RunningServer> a = StartReplica(redis->address(), log_a);
-  std::unique_ptr<test::RunningServer> b = StartReplica(redis->address(), testing::ProcessTempDir() + "/store_replica_b.log");
+  std::unique_ptr<test::RunningServer> b =
+      StartReplica(redis->address(), testing::ProcessTempDir() + "/store_replica_b.log");
   ASSERT_NE(a, nullptr);
   ASSERT_NE(b, nullptr);
   EXPECT_NE(a->ready_line().find("with the PVS store at " + redis->address()), std::string::npos) << a->ready_line();
@@ -120,6 +122,10 @@ TEST(ServerStore, WhatOneReplicaComputesTheOtherReadsAndRedisGoingAwayStopsNoWal
   EXPECT_TRUE(sb.store().up());
   EXPECT_EQ(sb.store().address(), redis->address());
   EXPECT_EQ(sb.store().hits(), 9u);
+  // B's log says where each PVS came from.
+  const std::string log_b_path = testing::ProcessTempDir() + "/store_replica_b.log";
+  EXPECT_NE(ReadFile(log_b_path).find("source=store"), std::string::npos) << ReadFile(log_b_path);
+  EXPECT_EQ(ReadFile(log_b_path).find("source=computed"), std::string::npos) << ReadFile(log_b_path);
   const std::string metrics_b = Scrape(b->ready_line());
   EXPECT_EQ(Series(metrics_b, "vistream_pvs_store_hits_total{scene=\"city1\"}"), 9.0) << metrics_b;
   EXPECT_EQ(Series(metrics_b, "vistream_pvs_computations_total{scene=\"city1\"}"), 0.0) << metrics_b;
@@ -155,6 +161,25 @@ TEST(ServerStore, WhatOneReplicaComputesTheOtherReadsAndRedisGoingAwayStopsNoWal
   EXPECT_TRUE(on_b.Finish().ok());
   EXPECT_EQ(a->Stop(SIGTERM), 0);
   EXPECT_EQ(b->Stop(SIGTERM), 0);
+}
+
+// A Redis that refuses the server (a password it lacks) is a configuration error at start, and
+// store options without a store are named: both exit 2.
+TEST(ServerStore, ARedisThatRefusesTheServerAndStoreOptionsWithoutAStoreExitTwo) {
+  std::string error;
+  std::unique_ptr<::vistream::test::RedisServer> redis =
+      ::vistream::test::RedisServer::Start(&error, {"--requirepass", "s3cret"});
+  ASSERT_NE(redis, nullptr) << error;
+  auto [code, out] = test::RunServer("--scene city1 --listen 127.0.0.1:0 --store " + redis->address());
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("the PVS store at " + redis->address() + " refused this server"), std::string::npos) << out;
+  EXPECT_NE(out.find("(no password given)"), std::string::npos) << out;
+  std::tie(code, out) = test::RunServer("--scene city1 --store-prefix p");
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("--store-prefix: needs a PVS store"), std::string::npos) << out;
+  std::tie(code, out) = test::RunServer("--scene city1 --store 127.0.0.1:1 --store-prefix ''");
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_NE(out.find("--store-prefix"), std::string::npos) << out;
 }
 
 }  // namespace

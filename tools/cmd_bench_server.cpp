@@ -7,6 +7,7 @@
 // haproxy the walkers go through a real HAProxy to N replicas; with --store they share a PVS
 // store in Redis, cold, or warmed first by the same walks (--warm).
 
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -29,6 +30,7 @@
 #include "client/channel_security.h"
 #include "client/connection.h"
 #include "client/session_stream.h"
+#include "server/pvs_store.h"
 #include "server/server_config.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
@@ -63,6 +65,7 @@ struct BenchServerArgs {
 // store), and whether this pass only fills it.
 struct RunContext {
   std::string store_address, store_prefix;
+  std::string store_password_file;  // $VISTREAM_STORE_PASSWORD in a file of the run's own, for the replicas
   bool warmup = false;
 };
 
@@ -386,6 +389,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
                                    "--drain", "0"};
   args.insert(args.end(), tls_args.begin(), tls_args.end());
   if (!run.store_address.empty()) args.insert(args.end(), {"--store", run.store_address, "--store-prefix", run.store_prefix});
+  if (!run.store_password_file.empty()) args.insert(args.end(), {"--store-password-file", run.store_password_file});
   Replicas replicas;
   std::string start_error;
   if (a.balancer == "haproxy") {
@@ -503,6 +507,10 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     stats.set_pvs_store_hits(stats.pvs_store_hits() + r.pvs_store_hits());
     stats.set_bytes_sent(stats.bytes_sent() + r.bytes_sent());
     stats.set_sessions_total(stats.sessions_total() + r.sessions_total());
+    if (r.has_store()) {
+      stats.mutable_store()->set_outages(stats.store().outages() + r.store().outages());
+      stats.mutable_store()->set_unavailable(stats.store().unavailable() + r.store().unavailable());
+    }
   }
   sampling = false;
   rss.join();
@@ -552,6 +560,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   j["store"] = a.store;
   j["store_warm"] = a.warm;
   j["store_hits"] = stats.pvs_store_hits();
+  j["store_outages"] = stats.store().outages();
   {
     const double store_hits = static_cast<double>(stats.pvs_store_hits());
     j["store_hit_rate"] = store_hits + computed > 0 ? store_hits / (store_hits + computed) : 0.0;
@@ -611,6 +620,12 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     return Fail(absl::UnavailableError("the server's statistics are missing: " + stats_status.error_message()));
   }
   if (!first_error.empty()) return Fail(absl::UnavailableError("a session failed: " + first_error));
+  if (stats.store().outages() > 0) {
+    return Fail(absl::UnavailableError(absl::StrFormat(
+        "the PVS store at %s went down %llu times during the run (replicas' logs: --log FILE): these figures are "
+        "not those of a shared store",
+        run.store_address, static_cast<unsigned long long>(stats.store().outages()))));
+  }
   return 0;
 }
 
@@ -637,7 +652,37 @@ int BenchServer(const BenchServerArgs& a) {
   } else if (a.store != "none") {
     run.store_address = a.store;
   }
-  if (!run.store_address.empty()) run.store_prefix = absl::StrFormat("vistream-bench-%d-%d", getpid(), time(nullptr));
+  struct RemoveFile {  // the password file goes with the run
+    std::string path;
+    ~RemoveFile() {
+      if (!path.empty()) std::remove(path.c_str());
+    }
+  } password_file;
+  if (!run.store_address.empty()) {
+    run.store_prefix = absl::StrFormat("vistream-bench-%d-%d", getpid(), time(nullptr));
+    // The store answers (and takes the password, if one is given) before anything is measured:
+    // replicas that cannot reach it would measure a run without it.
+    server::PvsStoreOptions so;
+    so.address = run.store_address;
+    so.connect_timeout_s = 5.0;
+    so.read_timeout_s = 5.0;
+    if (const char* password = std::getenv("VISTREAM_STORE_PASSWORD"); password != nullptr && *password != 0) {
+      so.password = password;
+      password_file.path = (std::filesystem::temp_directory_path() /
+                            ("vistream-bench-store-" + std::to_string(getpid()) + ".password"))
+                               .string();
+      const int fd = ::open(password_file.path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+      if (fd < 0 || ::write(fd, so.password.data(), so.password.size()) != static_cast<ssize_t>(so.password.size())) {
+        if (fd >= 0) ::close(fd);
+        return Fail(absl::InternalError("cannot write " + password_file.path));
+      }
+      ::close(fd);
+      run.store_password_file = password_file.path;
+    }
+    absl::StatusOr<std::unique_ptr<server::PvsStore>> probe = server::PvsStore::Create(so);
+    if (!probe.ok()) return BadOption("bench server", "--store", std::string(probe.status().message()));
+    if (absl::Status st = (*probe)->Connect(); !st.ok()) return Fail(st);
+  }
   if (a.warm) {
     // The same walkers (same seed) once before, on replicas of their own: every cell the
     // measured pass needs is then in the store, and none in the measured replicas' caches.
@@ -711,7 +756,9 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
       ->capture_default_str();
   c->add_option("--store", args->store,
                 "none | redis | HOST:PORT: the replicas share a PVS store, in a redis-server of the run's own (empty "
-                "at the start) or in the Redis given (under a key prefix of the run's own)")
+                "at the start) or in the Redis given (password from $VISTREAM_STORE_PASSWORD; under a key prefix "
+                "vistream-bench-PID-TIME of the run's own, which stays there: delete it with redis-cli --scan "
+                "--pattern 'vistream-bench-*' | xargs redis-cli del)")
       ->capture_default_str();
   c->add_flag("--warm", args->warm,
               "fill the store first with the same walks on replicas of their own; then measure on fresh replicas");

@@ -19,6 +19,7 @@
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "server/pvs_store.h"
+#include "server/security.h"
 #include "visibility/pvs.h"
 #include "visibility/pvs_file.h"
 #include "visibility/viewcell_grid.h"
@@ -34,7 +35,7 @@ struct PvsArgs {
   uint32_t res = 128;
   int map_size = 2048;
   bool json = false;
-  std::string store, store_prefix = "vistream", shard;
+  std::string store, store_prefix = "vistream", shard, store_password_file;
 };
 
 // "K/N" with 0 <= K < N: the shard of --all this process computes (the cells whose id is K
@@ -58,6 +59,9 @@ int PvsAll(const PvsArgs& a) {
   }
   if (!a.map.empty()) return BadOption("pvs", "--map", "draws one viewcell: not with --all");
   uint32_t shard = 0, shards = 1;
+  if (!a.store.empty() && (a.store_prefix.empty() || a.store_prefix.find_first_of(" \t\r\n") != std::string::npos)) {
+    return BadOption("pvs", "--store-prefix", "'" + a.store_prefix + "' is not a non-empty word without spaces");
+  }
   if (!a.shard.empty()) {
     if (a.store.empty()) return BadOption("pvs", "--shard", "fills part of a PVS store: give --store ADDRESS");
     if (!a.out.empty()) return BadOption("pvs", "--shard", "a PVS file holds every viewcell: not with -o");
@@ -86,7 +90,13 @@ int PvsAll(const PvsArgs& a) {
     so.connect_timeout_s = 5.0;
     so.read_timeout_s = 10.0;
     so.write_timeout_s = 10.0;
-    if (const char* password = std::getenv("VISTREAM_STORE_PASSWORD"); password != nullptr) so.password = password;
+    if (!a.store_password_file.empty()) {
+      absl::StatusOr<std::string> password = server::ReadSecretLine(a.store_password_file);
+      if (!password.ok()) return BadOption("pvs", "--store-password-file", std::string(password.status().message()));
+      so.password = *std::move(password);
+    } else if (const char* password = std::getenv("VISTREAM_STORE_PASSWORD"); password != nullptr) {
+      so.password = password;
+    }
     absl::StatusOr<std::unique_ptr<server::PvsStore>> created = server::PvsStore::Create(so);
     if (!created.ok()) return BadOption("pvs", "--store", std::string(created.status().message()));
     store = std::move(*created);
@@ -113,12 +123,26 @@ int PvsAll(const PvsArgs& a) {
   if (store != nullptr) {
     ns = server::PvsStoreNamespace(a.store_prefix, scenes::SceneFingerprint(*scene), *grid, a.res, a.backend);
     if (a.out.empty()) {
-      // A run stopped half-way resumes: the cells already stored are not computed again.
-      absl::StatusOr<std::vector<bool>> stored = store->Exists(ns, cells);
-      if (!stored.ok()) return Fail(stored.status());
-      std::vector<visibility::CellId> missing;
-      for (size_t k = 0; k < cells.size(); ++k) {
-        if (!(*stored)[k]) missing.push_back(cells[k]);
+      // A run stopped half-way resumes: the cells already stored (and good: each entry is read
+      // and checked as a server would) are not computed again; bad ones are deleted and redone.
+      std::vector<visibility::CellId> missing, bad;
+      std::vector<uint32_t> ignored;
+      for (visibility::CellId c : cells) {
+        switch (store->Get(ns, c, scene->objects.size(), &ignored)) {
+          case server::PvsStore::Read::kHit: break;
+          case server::PvsStore::Read::kMiss: missing.push_back(c); break;
+          case server::PvsStore::Read::kBad:
+            missing.push_back(c);
+            bad.push_back(c);
+            break;
+          case server::PvsStore::Read::kUnavailable:
+            if (absl::Status st = store->Connect(); !st.ok()) return Fail(st);
+            return Fail(absl::UnavailableError("the PVS store at " + a.store + " stopped answering"));
+        }
+      }
+      if (!bad.empty()) {
+        if (absl::Status st = store->Delete(ns, bad); !st.ok()) return Fail(st);
+        std::fprintf(stderr, "pvs: %zu stored entries failed their checks; computing them again\n", bad.size());
       }
       skipped = cells.size() - missing.size();
       cells = std::move(missing);
@@ -182,10 +206,13 @@ int PvsAll(const PvsArgs& a) {
     }
     std::printf("%s\n", j.dump(2).c_str());
   } else if (store != nullptr) {
-    std::printf("%s: %zu of %zu viewcells of %g m (shard %u/%u), %zu computed and stored, %zu already stored, "
-                "%.1f objects per PVS on average, %.1f s; store %s%s%s\n",
-                scene->name.c_str(), shard_cells, grid->CellCount(), grid->cell_size(), shard, shards, cells.size(),
-                skipped, mean, provenance.seconds, a.store.c_str(), a.out.empty() ? "" : "; wrote ", a.out.c_str());
+    const std::string average = cells.empty() ? "" : absl::StrFormat(", %.1f objects per PVS on average", mean);
+    const std::string done = a.out.empty()
+                                 ? absl::StrFormat("%zu computed and stored, %zu already stored", cells.size(), skipped)
+                                 : absl::StrFormat("%zu computed, stored where the store had none", cells.size());
+    std::printf("%s: %zu of %zu viewcells of %g m (shard %u/%u), %s%s, %.1f s; store %s%s%s\n", scene->name.c_str(),
+                shard_cells, grid->CellCount(), grid->cell_size(), shard, shards, done.c_str(), average.c_str(),
+                provenance.seconds, a.store.c_str(), a.out.empty() ? "" : "; wrote ", a.out.c_str());
   } else {
     std::printf("%s: %zu viewcells of %g m, %.1f objects per PVS on average, %.1f s; wrote %s\n", scene->name.c_str(),
                 grid->CellCount(), grid->cell_size(), mean, provenance.seconds, a.out.c_str());
@@ -195,6 +222,13 @@ int PvsAll(const PvsArgs& a) {
 
 int Pvs(const PvsArgs& a) {
   if (a.json) ToolProgress().set_quiet(true);
+  if (a.store.empty()) {
+    if (a.store_prefix != "vistream") return BadOption("pvs", "--store-prefix", "names keys in a PVS store: give --store");
+    if (!a.store_password_file.empty()) {
+      return BadOption("pvs", "--store-password-file", "is the PVS store's: give --store");
+    }
+  }
+  if (!a.store.empty() && !a.all) return BadOption("pvs", "--store", "fills a PVS store with every viewcell: give --all");
   if (a.all) return PvsAll(a);
   if (a.cell.empty()) return BadOption("pvs", "--cell or --all", "give --cell I,J (one viewcell) or --all -o FILE");
   if (!a.out.empty()) return BadOption("pvs", "-o", "writes the PVS file of --all; one viewcell prints");
@@ -315,6 +349,9 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
                 "$VISTREAM_STORE_PASSWORD); cells already stored are skipped");
   c->add_option("--store-prefix", args->store_prefix, "with --store: the key prefix (as the servers' store.key_prefix)")
       ->capture_default_str();
+  c->add_option("--store-password-file", args->store_password_file,
+                "with --store: a file whose first line is the store's password (as the servers' store.password_file; "
+                "else $VISTREAM_STORE_PASSWORD)");
   c->add_option("--shard", args->shard,
                 "with --store: K/N, compute only the viewcells whose id is K modulo N (0 <= K < N; N independent "
                 "processes fill the store together)");
