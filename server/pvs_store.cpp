@@ -413,50 +413,42 @@ absl::Status PvsStore::Put(const std::string& ns, std::span<const std::pair<visi
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::vector<bool>> PvsStore::Exists(const std::string& ns, std::span<const visibility::CellId> cells) {
+absl::StatusOr<std::vector<long long>> PvsStore::PerKey(const char* verb, const std::string& ns,
+                                                         std::span<const visibility::CellId> cells) {
   std::string why;
   Context c = Acquire(&why);
   if (c == nullptr) return absl::UnavailableError(Unavailable(why));
   redisSetTimeout(c.get(), ToTimeval(options_.write_timeout_s));
+  const std::string format = absl::StrCat(verb, " %b");
   for (visibility::CellId cell : cells) {
     const std::string key = Key(ns, cell);
-    redisAppendCommand(c.get(), "EXISTS %b", key.data(), key.size());
+    redisAppendCommand(c.get(), format.c_str(), key.data(), key.size());
   }
-  std::vector<bool> out;
+  std::vector<long long> out;
   for (size_t k = 0; k < cells.size(); ++k) {
     void* raw = nullptr;
     if (redisGetReply(c.get(), &raw) != REDIS_OK || raw == nullptr) {
-      why = absl::StrCat("EXISTS: ", ErrorOf(c.get()));
+      why = absl::StrCat(verb, ": ", ErrorOf(c.get()));
       Release(std::move(c), false, why);
       return absl::UnavailableError(Unavailable(why));
     }
     Reply r(static_cast<redisReply*>(raw));
-    out.push_back(r->type == REDIS_REPLY_INTEGER && r->integer > 0);
+    out.push_back(r->type == REDIS_REPLY_INTEGER ? r->integer : 0);
   }
   Release(std::move(c), true, "");
   return out;
 }
 
+absl::StatusOr<std::vector<bool>> PvsStore::Exists(const std::string& ns, std::span<const visibility::CellId> cells) {
+  absl::StatusOr<std::vector<long long>> counts = PerKey("EXISTS", ns, cells);
+  if (!counts.ok()) return counts.status();
+  std::vector<bool> out;
+  for (long long n : *counts) out.push_back(n > 0);
+  return out;
+}
+
 absl::Status PvsStore::Delete(const std::string& ns, std::span<const visibility::CellId> cells) {
-  std::string why;
-  Context c = Acquire(&why);
-  if (c == nullptr) return absl::UnavailableError(Unavailable(why));
-  redisSetTimeout(c.get(), ToTimeval(options_.write_timeout_s));
-  for (visibility::CellId cell : cells) {
-    const std::string key = Key(ns, cell);
-    redisAppendCommand(c.get(), "DEL %b", key.data(), key.size());
-  }
-  for (size_t k = 0; k < cells.size(); ++k) {
-    void* raw = nullptr;
-    if (redisGetReply(c.get(), &raw) != REDIS_OK || raw == nullptr) {
-      why = absl::StrCat("DEL: ", ErrorOf(c.get()));
-      Release(std::move(c), false, why);
-      return absl::UnavailableError(Unavailable(why));
-    }
-    freeReplyObject(raw);
-  }
-  Release(std::move(c), true, "");
-  return absl::OkStatus();
+  return PerKey("DEL", ns, cells).status();
 }
 
 std::string PvsStore::Key(const std::string& ns, visibility::CellId cell) { return absl::StrCat(ns, ":", cell); }

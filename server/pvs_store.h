@@ -135,6 +135,10 @@ class PvsStore {
   void DropIdle();
   void MarkDownLocked(const std::string& why);
   void WriterLoop();
+  // `verb KEY` for the key of each of `cells`, pipelined: each integer reply (0 for another
+  // kind). Errors: UNAVAILABLE.
+  absl::StatusOr<std::vector<long long>> PerKey(const char* verb, const std::string& ns,
+                                                std::span<const visibility::CellId> cells);
   // Sends `batch` pipelined on `c` with the write deadline; false with `why` on an I/O error.
   bool SendWrites(redisContext* c, const std::vector<Pending>& batch, std::string* why);
   void Event(EventLog::Level level, std::string_view event, const std::string& detail) const;
