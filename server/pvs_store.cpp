@@ -11,6 +11,7 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
+#include "server/server_config.h"
 #include "visibility/pvs_file.h"
 
 namespace vistream::server {
@@ -28,8 +29,10 @@ struct Endpoint {
   int port = 0;
 };
 
-// "host:port", "[v6]:port" or "unix:/path"; nullopt when it is none of them.
+// "host:port", "[v6]:port" or "unix:/path" split; nullopt when it is none of them (IsStoreAddress,
+// the configuration's check, decides).
 std::optional<Endpoint> ParseAddress(const std::string& address) {
+  if (!IsStoreAddress(address)) return std::nullopt;
   Endpoint e;
   if (address.rfind("unix:", 0) == 0) {
     e.unix_path = address.substr(5);
@@ -104,7 +107,7 @@ absl::StatusOr<std::unique_ptr<PvsStore>> PvsStore::Create(const PvsStoreOptions
       return absl::InvalidArgumentError(absl::StrCat("store ", name, " ", value, " s: expected a positive number"));
     }
   }
-  if (options.key_prefix.empty() || options.key_prefix.find_first_of(" \t\r\n") != std::string::npos) {
+  if (!IsStoreKeyPrefix(options.key_prefix)) {
     return absl::InvalidArgumentError(absl::StrCat("store key prefix '", options.key_prefix,
                                                    "': expected a non-empty word without spaces"));
   }

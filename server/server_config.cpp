@@ -279,6 +279,10 @@ bool IsStoreAddress(std::string_view text) {
   return IsHostPort(text) && !text.ends_with(":0");
 }
 
+bool IsStoreKeyPrefix(std::string_view text) {
+  return !text.empty() && text.find_first_of(" \t\r\n") == std::string_view::npos;
+}
+
 absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std::string& path) {
   toml::table root;
   try {
@@ -348,7 +352,7 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
   if (c.store_address.empty() && root.get("store") != nullptr) {
     return r.Error(LineOf(*root.get("store")), "store.address", "missing: where the Redis of the PVS store listens");
   }
-  if (c.store_key_prefix.empty() || c.store_key_prefix.find_first_of(" \t") != std::string::npos) {
+  if (!IsStoreKeyPrefix(c.store_key_prefix)) {
     const toml::node* prefix = root.at_path("store.key_prefix").node();
     return r.Error(LineOf(prefix != nullptr ? *prefix : *root.get("store")), "store.key_prefix",
                    "expected a non-empty word without spaces");

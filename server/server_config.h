@@ -103,6 +103,8 @@ bool IsHostPort(std::string_view text);
 
 // A Redis address for the store: host:port (port 1 to 65535) or unix:PATH.
 bool IsStoreAddress(std::string_view text);
+// A key prefix for the store: a non-empty word without white space.
+bool IsStoreKeyPrefix(std::string_view text);
 
 // Checks what the configuration and the command line make together: at least one scene,
 // distinct scene names. Errors name the file.

@@ -187,7 +187,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
-            if (text.empty() || text.find_first_of(" \t\r\n") != std::string::npos) {
+            if (!vistream::server::IsStoreKeyPrefix(text)) {
               return "'" + text + "' is not a non-empty word without spaces";
             }
             return "";

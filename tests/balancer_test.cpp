@@ -94,6 +94,16 @@ int WaitForHolder(test::Balancer& b, double timeout_s) {
   return -1;
 }
 
+// Opens a session of the default scene through `s`'s address with a pose on its central square,
+// and waits until `cells` viewcell PVSs have arrived.
+bool OpenOnTheSquare(SessionStream& s, size_t cells) {
+  s.set_keep_geometry(false);
+  s.Start(SessionStream::HelloFor("default"));
+  s.SendCredit(uint64_t{1} << 40);
+  s.SendPose(glm::dvec3(509.4, 215.9, 1.7));
+  return s.WaitFor([cells](const client::SessionRecord& r) { return r.pvs.size() >= cells; }, kWait);
+}
+
 void ExpectSeamless(const WalkthroughSummary& s) {
   std::printf("%s", client::SummaryText(s).c_str());
   EXPECT_GE(s.reconnects, 1u) << "the walker never left its replica";
@@ -217,13 +227,7 @@ TEST(Balancer, TheHelperStartsReplicasBehindHaproxyThatServeThroughIt) {
   EXPECT_EQ(stats->scene(), "default");
   // Two sessions at once: leastconn puts one on each replica.
   SessionStream first(b->address()), second(b->address());
-  for (SessionStream* s : {&first, &second}) {
-    s->set_keep_geometry(false);
-    s->Start(SessionStream::HelloFor("default"));
-    s->SendCredit(uint64_t{1} << 40);
-    s->SendPose(glm::dvec3(509.4, 215.9, 1.7));
-    ASSERT_TRUE(s->WaitFor([](const client::SessionRecord& r) { return !r.pvs.empty(); }, kWait));
-  }
+  for (SessionStream* s : {&first, &second}) ASSERT_TRUE(OpenOnTheSquare(*s, 1));
   EXPECT_EQ(SessionsOn(*b, 0), 1);
   EXPECT_EQ(SessionsOn(*b, 1), 1);
   EXPECT_TRUE(first.Finish().ok());
@@ -238,15 +242,8 @@ TEST(Balancer, APvsComputedThroughOneReplicaIsAStoreHitThroughTheOther) {
   ASSERT_NE(redis, nullptr) << error;
   auto b = StartBalanced("balancer_store", "5", &error, redis->address());
   ASSERT_NE(b, nullptr) << error;
-  auto open = [&](SessionStream& s) {
-    s.set_keep_geometry(false);
-    s.Start(SessionStream::HelloFor("default"));
-    s.SendCredit(uint64_t{1} << 40);
-    s.SendPose(glm::dvec3(509.4, 215.9, 1.7));
-    return s.WaitFor([](const client::SessionRecord& r) { return r.pvs.size() >= 9; }, kWait);
-  };
   SessionStream first(b->address());
-  ASSERT_TRUE(open(first));
+  ASSERT_TRUE(OpenOnTheSquare(first, 9));
   const int a = WaitForHolder(*b, kWait);
   ASSERT_GE(a, 0);
   absl::StatusOr<v1::ServerStats> sa = client::Probe(b->replica_address(a), kWait);
@@ -263,7 +260,7 @@ TEST(Balancer, APvsComputedThroughOneReplicaIsAStoreHitThroughTheOther) {
   EXPECT_EQ(sa->store().writes(), computed);
   // leastconn: the second walker, through the balancer, lands on the other replica.
   SessionStream second(b->address());
-  ASSERT_TRUE(open(second));
+  ASSERT_TRUE(OpenOnTheSquare(second, 9));
   const size_t other = 1 - a;
   EXPECT_EQ(SessionsOn(*b, other), 1) << "the second walker is not on " << b->name(other);
   absl::StatusOr<v1::ServerStats> sb = client::Probe(b->replica_address(other), kWait);
@@ -338,11 +335,7 @@ TEST(Balancer, ADrainingReplicaIsTakenOutBeforeItsSessionsEndAndItsWalkerResumes
   EXPECT_EQ(SessionsOn(*b, holder), 1) << "the session ended before HAProxy took its replica out";
   // A session opened now lands on the other replica.
   SessionStream fresh(b->address());
-  fresh.set_keep_geometry(false);
-  fresh.Start(SessionStream::HelloFor("default"));
-  fresh.SendCredit(uint64_t{1} << 40);
-  fresh.SendPose(glm::dvec3(509.4, 215.9, 1.7));
-  ASSERT_TRUE(fresh.WaitFor([](const client::SessionRecord& r) { return !r.pvs.empty(); }, kWait));
+  ASSERT_TRUE(OpenOnTheSquare(fresh, 1));
   EXPECT_EQ(SessionsOn(*b, other), 1) << "the new session is not on " << b->name(other);
   EXPECT_EQ(SessionsOn(*b, holder), 1) << "the new session went to the draining replica";
   const double checked_s = Since(sigterm);

@@ -22,6 +22,7 @@
 #include "tests/server_process_util.h"
 #include "tests/server_test_util.h"
 #include "tests/temp_dir.h"
+#include "tools/replica_set.h"
 
 namespace vistream::server {
 namespace {
@@ -33,10 +34,8 @@ using Clock = std::chrono::steady_clock;
 // /metrics of a server whose ready line names it ("...; metrics on http://HOST:PORT/metrics");
 // "" when it does not answer.
 std::string Scrape(const std::string& ready_line) {
-  const size_t at = ready_line.find("metrics on http://");
-  if (at == std::string::npos) return "";
-  const int port = std::atoi(ready_line.c_str() + ready_line.find(':', at + 18) + 1);
-  return ::vistream::test::HttpGet(port, "/metrics").second;
+  const int port = tools::MetricsPortOf(ready_line);
+  return port == 0 ? "" : ::vistream::test::HttpGet(port, "/metrics").second;
 }
 
 // The value of `series` (name and labels as rendered) in a /metrics text; NaN when absent.

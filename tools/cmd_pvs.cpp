@@ -20,6 +20,7 @@
 #include "scenes/progress.h"
 #include "server/pvs_store.h"
 #include "server/security.h"
+#include "server/server_config.h"
 #include "visibility/pvs.h"
 #include "visibility/pvs_file.h"
 #include "visibility/viewcell_grid.h"
@@ -59,7 +60,7 @@ int PvsAll(const PvsArgs& a) {
   }
   if (!a.map.empty()) return BadOption("pvs", "--map", "draws one viewcell: not with --all");
   uint32_t shard = 0, shards = 1;
-  if (!a.store.empty() && (a.store_prefix.empty() || a.store_prefix.find_first_of(" \t\r\n") != std::string::npos)) {
+  if (!a.store.empty() && !server::IsStoreKeyPrefix(a.store_prefix)) {
     return BadOption("pvs", "--store-prefix", "'" + a.store_prefix + "' is not a non-empty word without spaces");
   }
   if (!a.shard.empty()) {
