@@ -59,8 +59,8 @@ class ServedScene {
   const scenes::EncodedMesh& geometry(uint32_t object) const { return geometry_[object]; }
   const visibility::EpsilonSuperset* epsilon() const { return epsilon_.get(); }
   PvsScheduler& scheduler() { return *scheduler_; }
-  // Where ε-masks are computed.
-  TaskQueue& masks() { return *masks_; }
+  // Where ε-masks are computed: idle-priority threads, one per core.
+  MaskQueue& masks() { return *masks_; }
   // Computes (or, with a PVS file, looks up) the PVS of `cell` as scheduler worker `worker`
   // does, on the calling thread; compute_s is the backend's own time (0 for a file's sets).
   // The simulator calls it on its own thread with worker 0 (the CPU raster when that worker's
@@ -96,7 +96,7 @@ class ServedScene {
   PvsStore* store_ = nullptr;
   std::string store_ns_;
   double load_seconds_ = 0.0;
-  std::unique_ptr<TaskQueue> masks_;
+  std::unique_ptr<MaskQueue> masks_;
   std::unique_ptr<PvsScheduler> scheduler_;  // last: its workers read the members above
 };
 

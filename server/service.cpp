@@ -590,6 +590,11 @@ v1::ServerStats WalkthroughService::Stats() const {
     ss->set_pvs_compute_s(sched.compute_s);
     ss->set_pvs_store_hits(sched.store_hits);
     ss->set_pvs_queued(sched.queued);
+    const TaskStats masks = scene->masks().stats();
+    ss->set_epsilon_masks_computed(masks.computed);
+    ss->set_epsilon_mask_compute_s(masks.cpu_s);
+    s.set_epsilon_masks_computed(s.epsilon_masks_computed() + masks.computed);
+    s.set_epsilon_mask_compute_s(s.epsilon_mask_compute_s() + masks.cpu_s);
     if (const PvsStore* store = scene->store(); store != nullptr && !s.has_store()) {
       const PvsStoreStats st = store->stats();
       v1::StoreStats* out = s.mutable_store();

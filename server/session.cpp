@@ -7,10 +7,13 @@
 #include <limits>
 #include <unordered_map>
 
+#include <glm/geometric.hpp>
+
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
 #include "server/wire.h"
+#include "visibility/mask_codec.h"
 
 namespace vistream::server {
 
@@ -70,6 +73,9 @@ Session::Session(uint64_t id, ServedScene* scene, const SceneDirectory* director
       masks_(seams_.masks != nullptr ? seams_.masks : scene != nullptr ? &scene->masks() : nullptr),
       start_s_(Now()),
       epsilon_size_m_(limits.epsilon_size_m) {
+  ChainOptions chain = limits.chain;
+  chain.standing_size_m = epsilon_size_m_;
+  chain_ = NeighbourhoodChain(chain);
   stats_.set_session_id(id);
   stats_.set_cell_id(-1);
   pose_tokens_ = 2.0 * limits_.max_pose_rate_hz;
@@ -145,6 +151,9 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     pvs_ = &picked->scheduler();
     masks_ = &picked->masks();
     epsilon_size_m_ = picked->viewcell().epsilon_m;
+    ChainOptions chain = limits_.chain;
+    chain.standing_size_m = epsilon_size_m_;
+    chain_ = NeighbourhoodChain(chain);
   } else if (hello.scene() != scene_->name()) {
     return absl::NotFoundError(
         absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene_->name(), "'"));
@@ -159,6 +168,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
   }
   hello_ = true;
+  masks_on_ = hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr;
   stats_.set_scene(scene_->name());
   memory_budget_ = hello.memory_budget_bytes();
   v1::ServerMessage info;
@@ -244,13 +254,10 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       // Geometry the cells left behind needed stays with the client: it is evicted only when the
       // memory budget needs the room (MakeRoom: what no wanted cell needs first), so nothing is
       // sent twice unless the budget forced it out (DESIGN.md: never sent twice in a session).
-      anchor_ = p;
-      anchor_s_ = now;
-      mask_requested_ = false;
     } else if (seams_.look_ahead && Turned()) {
       SetWanted(now);  // the cells ahead are others now: re-rank requests and geometry
     }
-    MaybeRequestMask(now);
+    UpdateMasks(now);
   }
   for (CellId c : left) pvs_->Cancel(id_, c);
   return absl::OkStatus();
@@ -314,6 +321,11 @@ void Session::SetWanted(double now) {
   std::erase_if(requested_, unwanted);
   std::erase_if(emitted_, unwanted);
   std::erase_if(pending_geometry_, [&](const auto& entry) { return unwanted(entry.first); });
+  if (unwanted(mask_objects_cell_)) {
+    mask_objects_.clear();
+  } else {
+    mask_objects_rank_ = static_cast<size_t>(std::find(wanted_.begin(), wanted_.end(), mask_objects_cell_) - wanted_.begin());
+  }
   std::erase_if(control_, [&](const Control& c) {
     if (!c.cell.has_value() || !unwanted(*c.cell)) return false;
     control_bytes_ -= c.bytes;
@@ -376,6 +388,7 @@ void Session::EmitReady() {
   for (CellId c : wanted_) {
     if (emitted_.count(c) == 0 && received_.count(c) > 0) Emit(c);
   }
+  PostMasks();
 }
 
 void Session::Emit(CellId cell) {
@@ -443,72 +456,136 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
   return m;
 }
 
-void Session::MaybeRequestMask(double now) {
-  const visibility::EpsilonSuperset* eps = seams_.epsilon_masks ? scene_->epsilon() : nullptr;
-  if (eps == nullptr || !current_.has_value()) return;
-  const double half = 0.5 * epsilon_size_m_;
-  if (std::abs(position_.x - anchor_.x) > half || std::abs(position_.y - anchor_.y) > half) {
-    anchor_ = position_;
-    anchor_s_ = now;
-    mask_requested_ = false;
+void Session::UpdateMasks(double now) {
+  if (!masks_on_ || !current_.has_value()) return;
+  const double v = std::hypot(velocity_.x, velocity_.y);
+  if (v >= chain_.options().standing_speed_mps) {
+    // The turn rate: the heading's change since the last moving pose, smoothed.
+    const double heading = std::atan2(velocity_.y, velocity_.x);
+    const double dt = now - heading_s_;
+    if (heading_s_ >= 0.0 && dt > 1e-3 && dt < 1.0) {
+      const double d = std::remainder(heading - heading_, 2.0 * M_PI);
+      turn_rate_ = 0.5 * turn_rate_ + 0.5 * d / dt;
+    } else {
+      turn_rate_ = 0.0;
+    }
+    heading_ = heading;
+    heading_s_ = now;
+  } else {
+    turn_rate_ = 0.0;
+    heading_s_ = -1.0;
+  }
+  // Poses come at up to a few dozen a second: the chain moves every quarter metre or second.
+  if (chain_s_ >= 0.0 && glm::length(position_ - chain_eye_) < 0.25 && now - chain_s_ < 0.25) return;
+  chain_eye_ = position_;
+  chain_s_ = now;
+  const NeighbourhoodChain::Update u = chain_.Advance(
+      position_, velocity_, turn_rate_, scene_->grid(),
+      [this](CellId c) { return std::find(wanted_.begin(), wanted_.end(), c) != wanted_.end(); });
+  for (uint64_t id : u.removed) DropMask(id);
+  for (const Neighbourhood& n : u.added) {
+    PlannedMask& p = planned_[n.id];
+    p.n = n;
+    p.deadline = now + (v >= chain_.options().standing_speed_mps ? n.along_m / v : 0.0);
+  }
+  PostMasks();
+}
+
+void Session::DropMask(uint64_t id) {
+  // A posted computation finds its entry gone and stops (or its delivery does).
+  if (planned_.erase(id) > 0) {
+    stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
     return;
   }
-  if (mask_requested_ || now - anchor_s_ < limits_.epsilon_dwell_s) return;
-  auto it = received_.find(*current_);
-  if (it == received_.end()) return;
-  mask_requested_ = true;
-  // The box around where the client lingers, its floor kept above the ground: a box that
-  // touches z = 0 reaches under every occluder and so culls nothing.
-  scenes::Aabb box;
-  box.min = glm::dvec3(anchor_.x - half, anchor_.y - half, std::max(0.1, anchor_.z - half));
-  box.max = glm::dvec3(anchor_.x + half, anchor_.y + half, box.min.z + epsilon_size_m_);
-  // Inside the current cell only: the mask narrows that cell's PVS, which holds for no eye
-  // beyond it (a client lingering by a cell edge would otherwise miss what the next cell sees).
-  const scenes::Aabb cell_box = scene_->grid().CellBox(*current_);
-  box.min.x = std::max(box.min.x, cell_box.min.x);
-  box.min.y = std::max(box.min.y, cell_box.min.y);
-  box.max.x = std::min(box.max.x, cell_box.max.x);
-  box.max.y = std::min(box.max.y, cell_box.max.y);
-  const uint64_t generation = ++mask_generation_;
-  std::weak_ptr<Session> weak = weak_from_this();
-  CellPvsPtr pvs = it->second;
-  const CellId cell = *current_;
-  // The work computes the mask; what it returns queues it (the simulator charges the work's
-  // time before delivering).
-  masks_->Post([weak, box, pvs, generation, cell, eps]() -> std::function<void()> {
-    if (weak.expired()) return nullptr;
-    const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
-    v1::ServerMessage m;
-    v1::EpsilonMask* mask = m.mutable_epsilon_mask();
-    SetVec(box.min, mask->mutable_box_min());
-    SetVec(box.max, mask->mutable_box_max());
-    size_t t = 0;
-    for (scenes::ObjectId o : r.objects) {
-      v1::ObjectTriangles* ot = mask->add_objects();
-      ot->set_object_id(o);
-      const uint32_t base = eps->TriangleId(o, 0);
-      const size_t n = eps->scene().objects[o].mesh.TriangleCount();
-      std::string bits((n + 7) / 8, '\0');
-      while (t < r.triangles.size() && eps->ObjectOfTriangle(r.triangles[t]) < o) ++t;
-      for (; t < r.triangles.size() && eps->ObjectOfTriangle(r.triangles[t]) == o; ++t) {
-        const uint32_t k = r.triangles[t] - base;
-        bits[k / 8] = static_cast<char>(bits[k / 8] | (1 << (k % 8)));
-      }
-      ot->set_visible(std::move(bits));
-    }
-    return [weak, generation, cell, m = std::move(m)]() mutable {
-      std::shared_ptr<Session> s = weak.lock();
-      if (s == nullptr) return;
-      {
-        std::lock_guard lock(s->mu_);
-        // Stale if the client moved on while it was computed.
-        if (s->ended_ || generation != s->mask_generation_ || !s->current_.has_value() || *s->current_ != cell) return;
-        s->QueueControl(std::move(m));
-        s->stats_.set_epsilon_masks(s->stats_.epsilon_masks() + 1);
-      }
-      if (s->wake_) s->wake_();
-    };
-  });
+  auto it = std::find_if(ready_masks_.begin(), ready_masks_.end(), [&](const ReadyMask& m) { return m.id == id; });
+  if (it != ready_masks_.end()) {
+    ready_masks_.erase(it);
+    stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
+  }
+}
+
+void Session::PostMasks() {
+  if (!masks_on_) return;
+  const visibility::EpsilonSuperset* eps = scene_->epsilon();
+  for (auto& [id, p] : planned_) {
+    // A mask narrows its cell's PVS, whose list the client must have first.
+    if (p.posted || emitted_.count(p.n.cell) == 0) continue;
+    auto it = received_.find(p.n.cell);
+    if (it == received_.end()) continue;
+    p.posted = true;
+    std::weak_ptr<Session> weak = weak_from_this();
+    CellPvsPtr pvs = it->second;
+    const scenes::Aabb box = p.n.box;
+    const uint64_t key = id;
+    // The work computes the mask; what it returns queues it (the simulator charges the work's
+    // time before delivering).
+    masks_->Post(
+        [weak, key, box, pvs, eps]() -> std::function<void()> {
+          {
+            std::shared_ptr<Session> s = weak.lock();
+            if (s == nullptr) return nullptr;
+            std::lock_guard lock(s->mu_);
+            if (s->ended_ || s->planned_.count(key) == 0) return nullptr;  // the path moved on
+          }
+          const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
+          v1::ServerMessage m;
+          v1::EpsilonMask* mask = m.mutable_epsilon_mask();
+          mask->set_cell_id(pvs->cell);
+          SetVec(box.min, mask->mutable_neighbourhood_min());
+          SetVec(box.max, mask->mutable_neighbourhood_max());
+          mask->set_triangles(visibility::EncodeMaskRuns(
+              std::span<const uint32_t>(r.triangles), [eps](uint32_t t) { return eps->ObjectOfTriangle(t); },
+              [eps](uint32_t o) { return eps->TriangleId(o, 0); }));
+          mask->set_object_count(static_cast<uint32_t>(r.objects.size()));
+          mask->set_triangle_count(r.triangles.size());
+          std::vector<uint32_t> objects(r.objects.begin(), r.objects.end());
+          return [weak, key, m = std::move(m), objects = std::move(objects)]() mutable {
+            std::shared_ptr<Session> s = weak.lock();
+            if (s == nullptr) return;
+            {
+              std::lock_guard lock(s->mu_);
+              auto plan = s->planned_.find(key);
+              if (s->ended_ || plan == s->planned_.end()) return;  // dropped while it was computed
+              ReadyMask ready{key, plan->second.n.cell, plan->second.deadline, std::move(m), std::move(objects)};
+              s->planned_.erase(plan);
+              auto at = std::upper_bound(s->ready_masks_.begin(), s->ready_masks_.end(), ready.deadline,
+                                         [](double d, const ReadyMask& other) { return d < other.deadline; });
+              s->ready_masks_.insert(at, std::move(ready));
+            }
+            if (s->wake_) s->wake_();
+          };
+        },
+        p.deadline);
+  }
+}
+
+std::optional<v1::ServerMessage> Session::SendObject(uint32_t o, size_t rank, bool* sent) {
+  *sent = false;
+  const scenes::EncodedMesh& g = scene_->geometry(o);
+  if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) {
+    // Room is made by evicting what the client needs later than this cell (the Evict goes
+    // first, the object right after it); without such objects it waits for the next crossing.
+    return MakeRoom(g.RawBytes(), rank);
+  }
+  v1::ServerMessage m;
+  v1::ObjectGeometry* geo = m.mutable_geometry();
+  geo->set_object_id(o);
+  geo->set_vertex_count(g.vertex_count);
+  geo->set_index_count(g.index_count);
+  geo->set_vertices(g.vertices);
+  geo->set_indices(g.indices);
+  const scenes::Aabb& b = scene_->scene().objects[o].bounds;
+  SetVec(b.min, geo->mutable_bounds_min());
+  SetVec(b.max, geo->mutable_bounds_max());
+  sent_.insert(o);
+  held_bytes_ += g.RawBytes();
+  const size_t bytes = m.ByteSizeLong();
+  credit_ -= static_cast<int64_t>(g.EncodedBytes());
+  stats_.set_objects_sent(stats_.objects_sent() + 1);
+  stats_.set_geometry_bytes_sent(stats_.geometry_bytes_sent() + g.EncodedBytes());
+  stats_.set_bytes_sent(stats_.bytes_sent() + bytes);
+  *sent = true;
+  return m;
 }
 
 void Session::QueueControl(v1::ServerMessage message) {
@@ -554,6 +631,46 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     return std::move(c.message);
   }
   if (credit_ <= 0 || !current_.has_value()) return std::nullopt;
+  // ε-first: the objects the last mask sent needs, then the next mask, soonest reached first.
+  while (!mask_objects_.empty()) {
+    const uint32_t o = mask_objects_.front();
+    if (sent_.count(o) > 0) {
+      mask_objects_.pop_front();
+      continue;
+    }
+    bool sent = false;
+    std::optional<v1::ServerMessage> m = SendObject(o, mask_objects_rank_, &sent);
+    if (sent || !m.has_value()) mask_objects_.pop_front();  // sent, or no room: its cell's turn
+    if (m.has_value()) return m;                           // the object, or an Evict before it
+  }
+  while (!ready_masks_.empty()) {
+    ReadyMask mask = std::move(ready_masks_.front());
+    ready_masks_.erase(ready_masks_.begin());
+    auto w = std::find(wanted_.begin(), wanted_.end(), mask.cell);
+    if (w == wanted_.end() || emitted_.count(mask.cell) == 0) {
+      stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
+      continue;  // the client turned away from its cell
+    }
+    v1::EpsilonMask* e = mask.message.mutable_epsilon_mask();
+    e->set_mask_id(next_mask_id_++);
+    mask_objects_cell_ = mask.cell;
+    mask_objects_rank_ = static_cast<size_t>(w - wanted_.begin());
+    for (uint32_t o : mask.objects) {
+      if (sent_.count(o) == 0) mask_objects_.push_back(o);
+    }
+    credit_ -= static_cast<int64_t>(e->triangles().size());
+    stats_.set_epsilon_masks(stats_.epsilon_masks() + 1);
+    stats_.set_epsilon_mask_bytes(stats_.epsilon_mask_bytes() + e->triangles().size());
+    stats_.set_bytes_sent(stats_.bytes_sent() + mask.message.ByteSizeLong());
+    if (log_ != nullptr) {
+      const visibility::CellCoord c = scene_->grid().Coord(mask.cell);
+      log_->Write(id_, "mask", {{"cell", absl::StrCat(c.i, ",", c.j)},
+                                {"objects", static_cast<uint64_t>(e->object_count())},
+                                {"triangles", static_cast<uint64_t>(e->triangle_count())},
+                                {"bytes", static_cast<uint64_t>(e->triangles().size())}});
+    }
+    return std::move(mask.message);
+  }
   // Geometry: the current cell's first, then the others in the order they will be reached.
   for (size_t rank = 0; rank < wanted_.size(); ++rank) {
     const CellId c = wanted_[rank];
@@ -564,34 +681,10 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       const uint32_t o = q.front();
       q.pop_front();
       if (sent_.count(o) > 0) continue;
-      const scenes::EncodedMesh& g = scene_->geometry(o);
-      if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) {
-        // Room is made by evicting what the client needs later than this cell (the Evict goes
-        // first, the object right after it); without such objects it waits for the next
-        // crossing.
-        if (std::optional<v1::ServerMessage> evict = MakeRoom(g.RawBytes(), rank)) {
-          q.push_front(o);
-          return evict;
-        }
-        continue;
-      }
-      v1::ServerMessage m;
-      v1::ObjectGeometry* geo = m.mutable_geometry();
-      geo->set_object_id(o);
-      geo->set_vertex_count(g.vertex_count);
-      geo->set_index_count(g.index_count);
-      geo->set_vertices(g.vertices);
-      geo->set_indices(g.indices);
-      const scenes::Aabb& b = scene_->scene().objects[o].bounds;
-      SetVec(b.min, geo->mutable_bounds_min());
-      SetVec(b.max, geo->mutable_bounds_max());
-      sent_.insert(o);
-      held_bytes_ += g.RawBytes();
-      const size_t bytes = m.ByteSizeLong();
-      credit_ -= static_cast<int64_t>(g.EncodedBytes());
-      stats_.set_objects_sent(stats_.objects_sent() + 1);
-      stats_.set_geometry_bytes_sent(stats_.geometry_bytes_sent() + g.EncodedBytes());
-      stats_.set_bytes_sent(stats_.bytes_sent() + bytes);
+      bool sent = false;
+      std::optional<v1::ServerMessage> m = SendObject(o, rank, &sent);
+      if (!m.has_value()) continue;  // no room: it waits for the next crossing
+      if (!sent) q.push_front(o);    // the Evict goes first, the object right after it
       return m;
     }
   }

@@ -8,8 +8,16 @@
 // geometry, in the order the client will reach them (its velocity); on each crossing the up to
 // five newly adjacent cells likewise. Geometry is sent once: the client keeps what cells left
 // behind needed until its memory budget needs the room, and then an Evict hint names what it
-// may drop (what no wanted cell needs first, then what is needed latest). Control messages (PVS lists, Evict, ε-masks) go before geometry; geometry of
-// the current cell before any neighbour's, and only while the client's credit is positive.
+// may drop (what no wanted cell needs first, then what is needed latest). Control messages (PVS
+// lists, Evict) go first; then, within the client's credit, ε-masks of the neighbourhoods ahead
+// (server/neighbourhood_chain.h), soonest reached first, each followed by the objects it needs
+// that the client lacks (ε-first geometry); then the rest of the PVSs' geometry, the current
+// cell's before any neighbour's.
+//
+// ε-masks (issue 34; Cohen-Or & Zadicario 1998): only for a client whose Hello asks for them. A
+// mask is computed (on the scene's MaskQueue, by when the eye reaches its box) once its cell's
+// PVS list has been handed out; a box the predicted path leaves before its mask is sent is
+// dropped, computed or not.
 
 #include <cstdint>
 #include <deque>
@@ -28,6 +36,7 @@
 
 #include "proto/walkthrough.pb.h"
 #include "server/event_log.h"
+#include "server/neighbourhood_chain.h"
 #include "server/served_scene.h"
 
 namespace vistream::server {
@@ -36,10 +45,10 @@ namespace vistream::server {
 struct SessionLimits {
   double max_pose_rate_hz = 120.0;             // sustained poses per second (bursts to twice that)
   size_t max_queued_bytes = size_t{8} << 20;   // bytes waiting to be written to the client
-  double epsilon_size_m = 4.0;                 // edge of the ε-mask neighbourhood (catalog); a
-                                               // session whose Hello picks a scene uses that scene's
-  double epsilon_dwell_s = 2.0;                // time inside it before a mask is computed (a walker
-                                               // at 1 m/s leaves the box sooner)
+  double epsilon_size_m = 4.0;                 // edge of a standing client's ε-neighbourhood (catalog);
+                                               // a session whose Hello picks a scene uses that scene's
+  // The neighbourhoods ahead of a walker (standing_size_m is epsilon_size_m).
+  ChainOptions chain;
 };
 
 // What a session runs on: in the server the scene's threaded scheduler and ε-mask queue and the
@@ -113,7 +122,14 @@ class Session : public std::enable_shared_from_this<Session> {
   void OnCellReady(const CellPvsPtr& pvs, bool from_cache);  // lock held
   void EmitReady();                                          // lock held
   void Emit(CellId cell);                                    // lock held
-  void MaybeRequestMask(double now);                         // lock held
+  // Moves the chain of neighbourhoods along with the client; posts the masks it can.
+  void UpdateMasks(double now);                              // lock held
+  void PostMasks();                                          // lock held
+  void DropMask(uint64_t id);                                // lock held
+  // Geometry of `o` for the wire (or the Evict that must go before it; none when it cannot be
+  // sent within the memory budget), charged to the credit; `rank`: the position in wanted_ of
+  // the cell it is sent for.
+  std::optional<vistream::v1::ServerMessage> SendObject(uint32_t o, size_t rank, bool* sent);  // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
   // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
   bool Served(CellId cell) const;                            // lock held
@@ -177,11 +193,31 @@ class Session : public std::enable_shared_from_this<Session> {
   };
   std::deque<Crossing> crossings_;  // with SessionSeams::crossing_served only
 
-  // ε-mask: the neighbourhood the client lingers in, and what was sent for it.
-  glm::dvec3 anchor_{0.0};
-  double anchor_s_ = 0.0;
-  bool mask_requested_ = false;
-  uint64_t mask_generation_ = 0;
+  // ε-masks along the path.
+  bool masks_on_ = false;                      // the Hello asked for them and the scene has the engine
+  NeighbourhoodChain chain_;
+  glm::dvec3 chain_eye_{0.0};                  // where the chain was last advanced
+  double chain_s_ = -1.0;
+  double heading_ = 0.0, heading_s_ = -1.0;    // the last moving pose's heading, for the turn rate
+  double turn_rate_ = 0.0;                     // rad/s, smoothed
+  struct PlannedMask {
+    Neighbourhood n;
+    double deadline = 0.0;  // when the eye reaches it (session clock)
+    bool posted = false;
+  };
+  std::map<uint64_t, PlannedMask> planned_;    // by neighbourhood id: not computed yet
+  struct ReadyMask {
+    uint64_t id = 0;
+    CellId cell = 0;
+    double deadline = 0.0;
+    vistream::v1::ServerMessage message;
+    std::vector<uint32_t> objects;             // its objects, ascending
+  };
+  std::vector<ReadyMask> ready_masks_;         // computed, not sent: soonest reached first
+  std::deque<uint32_t> mask_objects_;          // the last mask sent's objects, to go next
+  CellId mask_objects_cell_ = 0;               // that mask's cell
+  size_t mask_objects_rank_ = 0;               // its place in wanted_
+  uint32_t next_mask_id_ = 1;
 
   vistream::v1::SessionStats stats_;
 };

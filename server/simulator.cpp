@@ -164,18 +164,24 @@ void SimulatedScheduler::Dispatch(const std::function<void(CellId, double)>& on_
 // SimulatedTaskRunner
 
 void SimulatedTaskRunner::Dispatch() {
-  if (busy_ || waiting_.empty()) return;
-  Work work = std::move(waiting_.front());
-  waiting_.pop_front();
-  const double start = WallSeconds();
-  std::function<void()> deliver = work();
-  const double seconds = fixed_s_.has_value() ? *fixed_s_ : WallSeconds() - start;
-  busy_ = true;
-  ++ran_;
-  queue_->At(queue_->now() + seconds, [this, deliver = std::move(deliver)] {
-    busy_ = false;
-    if (deliver) deliver();
-  });
+  while (!busy_ && !waiting_.empty() && (!may_start_ || may_start_())) {
+    Work work = std::move(waiting_.begin()->second);
+    waiting_.erase(waiting_.begin());
+    const double start = WallSeconds();
+    std::function<void()> deliver = work();
+    if (!deliver) {
+      ++dropped_;
+      continue;  // stale: no time spent
+    }
+    const double seconds = fixed_s_.has_value() ? *fixed_s_ : WallSeconds() - start;
+    busy_ = true;
+    ++ran_;
+    busy_s_ += seconds;
+    queue_->At(queue_->now() + seconds, [this, deliver = std::move(deliver)] {
+      busy_ = false;
+      deliver();
+    });
+  }
 }
 
 // The radius scheme's R
@@ -540,7 +546,8 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   };
   const unsigned workers = opt_.workers != 0 ? opt_.workers : std::max(1u, std::thread::hardware_concurrency());
   sched_ = std::make_unique<SimulatedScheduler>(&q_, compute, workers, opt_.cache_bytes, opt_.scheme != Scheme::kPlain);
-  masks_ = std::make_unique<SimulatedTaskRunner>(&q_, opt_.fixed_compute_s);
+  masks_ = std::make_unique<SimulatedTaskRunner>(&q_, opt_.fixed_compute_s,
+                                                 [this] { return sched_->has_free_worker(); });
 
   SessionLimits limits;
   limits.epsilon_size_m = entry.viewcell.epsilon_m;
@@ -565,6 +572,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   v1::ClientMessage hello;
   hello.mutable_hello()->set_scene(scene_.scene().name);
   hello.mutable_hello()->set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
+  hello.mutable_hello()->set_epsilon_masks(opt_.scheme == Scheme::kPvsEps);
   if (sim.client.has_value() && sim.client->memory_mb.has_value()) {
     hello.mutable_hello()->set_memory_budget_bytes(static_cast<uint64_t>(*sim.client->memory_mb * 1048576.0));
   }

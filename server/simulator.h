@@ -113,6 +113,8 @@ class SimulatedScheduler : public PvsSource {
   // Starts waiting jobs on the free workers at queue->now(). `on_start(cell, seconds)` hears of
   // each job started (may be empty).
   void Dispatch(const std::function<void(CellId, double)>& on_start);
+  // Whether a simulated worker is free (no PVS job waits for it after Dispatch).
+  bool has_free_worker() const { return busy_ < workers_; }
 
  private:
   EventQueue* queue_;
@@ -121,21 +123,30 @@ class SimulatedScheduler : public PvsSource {
   PvsSchedulePolicy policy_;
 };
 
-// ε-masks on one simulated worker, first in first out: the work runs when the worker is free,
-// its delivery its measured time (or `fixed_s`) later.
+// ε-masks on one simulated worker, earliest deadline first, as MaskQueue runs them: a job
+// starts only when `may_start` says so (the simulator: while a PVS worker is free, as the
+// server's idle-priority mask threads run only on cores the PVS workers leave), and delivers its
+// measured time (or `fixed_s`) later. A job whose work returns no delivery (stale) costs nothing.
 class SimulatedTaskRunner : public TaskRunner {
  public:
-  SimulatedTaskRunner(EventQueue* queue, std::optional<double> fixed_s) : queue_(queue), fixed_s_(fixed_s) {}
-  void Post(Work work) override { waiting_.push_back(std::move(work)); }
+  SimulatedTaskRunner(EventQueue* queue, std::optional<double> fixed_s, std::function<bool()> may_start = nullptr)
+      : queue_(queue), fixed_s_(fixed_s), may_start_(std::move(may_start)) {}
+  void Post(Work work, double deadline) override { waiting_.emplace(std::pair{deadline, seq_++}, std::move(work)); }
+  // Starts the earliest waiting job if the worker is free (and may_start allows).
   void Dispatch();
-  uint64_t ran() const { return ran_; }
+  uint64_t ran() const { return ran_; }        // jobs that computed a mask
+  uint64_t dropped() const { return dropped_; }  // jobs found stale
+  double busy_s() const { return busy_s_; }     // simulated seconds spent computing
 
  private:
   EventQueue* queue_;
   std::optional<double> fixed_s_;
-  std::deque<Work> waiting_;
+  std::function<bool()> may_start_;
+  std::map<std::pair<double, uint64_t>, Work> waiting_;
+  uint64_t seq_ = 0;
   bool busy_ = false;
-  uint64_t ran_ = 0;
+  uint64_t ran_ = 0, dropped_ = 0;
+  double busy_s_ = 0.0;
 };
 
 struct SimulationOptions {

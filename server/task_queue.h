@@ -1,12 +1,16 @@
 #pragma once
-// Where a session's small background jobs (ε-masks) run: TaskQueue, a worker thread, in the
-// server; the simulator's own runner on simulated time (server/simulator.h).
+// Where ε-masks are computed: MaskQueue, worker threads that run only when the CPU would
+// otherwise idle, in the server; the simulator's own runner on simulated time
+// (server/simulator.h). Both take the job whose result is wanted soonest first.
 
 #include <condition_variable>
-#include <deque>
+#include <cstdint>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <thread>
+#include <utility>
+#include <vector>
 
 namespace vistream::server {
 
@@ -14,56 +18,53 @@ class TaskRunner {
  public:
   // A job in two steps: the work (run off the caller's thread, or at a simulated time, whose
   // length the simulator measures), which returns what delivers its result (run right after
-  // it by TaskQueue, or when the simulated work ends). The delivery may be empty.
+  // it by MaskQueue, or when the simulated work ends). Work that finds its result no longer
+  // wanted returns an empty delivery at once: it is counted as dropped, not as computed.
   using Work = std::function<std::function<void()>()>;
   virtual ~TaskRunner() = default;
-  virtual void Post(Work work) = 0;
+  // `deadline`: when the result is wanted, in seconds on the poster's clock; the earliest
+  // deadline runs first (ties in the order posted).
+  virtual void Post(Work work, double deadline) = 0;
 };
 
-// A worker thread, first in first out. Bounded: when more than `capacity` jobs wait, the
-// oldest is dropped (its owner asks again if it still cares).
-class TaskQueue : public TaskRunner {
- public:
-  explicit TaskQueue(size_t capacity = 64) : capacity_(capacity), thread_([this] { Loop(); }) {}
-  ~TaskQueue() {
-    {
-      std::lock_guard lock(mu_);
-      stopping_ = true;
-    }
-    cv_.notify_all();
-  }
-  TaskQueue(const TaskQueue&) = delete;
-  TaskQueue& operator=(const TaskQueue&) = delete;
+struct TaskStats {
+  uint64_t computed = 0;  // works that delivered a result
+  uint64_t dropped = 0;   // works that found themselves stale, or pushed out of a full queue
+  double cpu_s = 0.0;     // CPU time of the works that delivered (thread CPU time)
+  uint64_t queued = 0;
+};
 
-  void Post(Work task) override {
-    {
-      std::lock_guard lock(mu_);
-      if (tasks_.size() >= capacity_) tasks_.pop_front();
-      tasks_.push_back(std::move(task));
-    }
-    cv_.notify_one();
-  }
+// Worker threads at the SCHED_IDLE policy (Linux): the kernel runs them only on cores that
+// nothing else wants, so the PVS workers and the transport never wait for a mask. Bounded: when
+// more than `capacity` jobs wait, the one with the latest deadline is dropped (its owner asks
+// again if it still cares).
+class MaskQueue : public TaskRunner {
+ public:
+  // `threads` workers (at least one); `idle_priority` false: ordinary threads (tests).
+  explicit MaskQueue(unsigned threads, size_t capacity = 4096, bool idle_priority = true);
+  ~MaskQueue() override;
+  MaskQueue(const MaskQueue&) = delete;
+  MaskQueue& operator=(const MaskQueue&) = delete;
+
+  void Post(Work work, double deadline) override;
+  TaskStats stats() const;
+  // Whether the workers got the SCHED_IDLE policy (false: the kernel refused; they run at the
+  // ordinary policy, lowest nice value they may set).
+  bool idle_priority() const;
 
  private:
-  void Loop() {
-    std::unique_lock lock(mu_);
-    for (;;) {
-      cv_.wait(lock, [&] { return stopping_ || !tasks_.empty(); });
-      if (stopping_) return;
-      Work task = std::move(tasks_.front());
-      tasks_.pop_front();
-      lock.unlock();
-      if (std::function<void()> deliver = task()) deliver();
-      lock.lock();
-    }
-  }
+  void Loop();
 
-  size_t capacity_;
-  std::mutex mu_;
+  const size_t capacity_;
+  const bool want_idle_;
+  mutable std::mutex mu_;
   std::condition_variable cv_;
   bool stopping_ = false;
-  std::deque<Work> tasks_;
-  std::jthread thread_;  // last: starts after the members it reads
+  uint64_t seq_ = 0;
+  std::map<std::pair<double, uint64_t>, Work> tasks_;  // by (deadline, order posted)
+  TaskStats stats_;
+  bool idle_ok_ = true;
+  std::vector<std::jthread> threads_;  // last: start after the members they read
 };
 
 }  // namespace vistream::server

@@ -78,7 +78,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   server::ServedScene& scene = Scene();
   if (size == 0) return 0;
   server::SessionLimits limits;
-  limits.epsilon_dwell_s = 0.0;  // masks at once, so that the fuzzer reaches them
   std::shared_ptr<server::Session> session = server::Session::Create(1, &scene, limits, nullptr, nullptr);
   double now = 1000.0;
   auto drain = [&] {
@@ -91,6 +90,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     vistream::v1::ClientMessage hello;
     hello.mutable_hello()->set_scene("city1");
     hello.mutable_hello()->set_protocol_version(vistream::v1::PROTOCOL_VERSION_CURRENT);
+    hello.mutable_hello()->set_epsilon_masks(true);  // ε-masks along the fuzzed path
     if (!session->OnMessage(hello, now).ok()) std::abort();  // a valid Hello is accepted
     if (flags & 2) {
       vistream::v1::ClientMessage credit;

@@ -1,0 +1,108 @@
+#include "visibility/mask_codec.h"
+
+#include <algorithm>
+
+#include <absl/strings/str_cat.h>
+
+#include "visibility/bytes.h"
+
+namespace vistream::visibility {
+
+namespace mask_codec_internal {
+
+void AppendObject(std::string* out, uint32_t gap, std::span<const uint32_t> indices) {
+  // Runs of consecutive indices: (hidden before it, its length).
+  std::vector<std::pair<uint32_t, uint32_t>> runs;
+  uint32_t next = 0;  // the first triangle index not yet coded
+  size_t k = 0;
+  while (k < indices.size()) {
+    const uint32_t start = indices[k];
+    uint32_t end = start + 1;
+    ++k;
+    while (k < indices.size() && indices[k] == end) {
+      ++end;
+      ++k;
+    }
+    runs.emplace_back(start - next, end - start);
+    next = end;
+  }
+  if (runs.empty()) return;
+  ByteWriter w;
+  w.PutVarint(gap);
+  w.PutVarint(runs.size());
+  for (const auto& [hidden, visible] : runs) {
+    w.PutVarint(hidden);
+    w.PutVarint(visible);
+  }
+  out->append(w.bytes());
+}
+
+}  // namespace mask_codec_internal
+
+std::string EncodeMaskRuns(std::span<const MaskObject> objects) {
+  std::string out;
+  std::vector<uint32_t> indices;
+  int64_t previous = -1;
+  for (const MaskObject& m : objects) {
+    indices.clear();
+    for (size_t t = 0; t < m.bits.size() * 8; ++t) {
+      if (MaskBit(m.bits, t)) indices.push_back(static_cast<uint32_t>(t));
+    }
+    if (indices.empty()) continue;
+    mask_codec_internal::AppendObject(&out, static_cast<uint32_t>(m.object - previous - 1), indices);
+    previous = m.object;
+  }
+  return out;
+}
+
+absl::StatusOr<DecodedMask> DecodeMaskRuns(std::string_view bytes, uint32_t object_count, uint64_t max_triangles) {
+  ByteReader in(bytes, "ε-mask triangles");
+  DecodedMask out;
+  int64_t previous = -1;
+  uint64_t spanned = 0;  // triangle indices every object's runs reach, summed: within max_triangles
+  while (!in.AtEnd()) {
+    const size_t at = in.offset();
+    const std::string what = absl::StrCat("object ", out.objects.size());
+    uint64_t gap = 0, pairs = 0;
+    if (absl::Status st = in.GetVarint(&gap, what + " id"); !st.ok()) return st;
+    const uint64_t id = static_cast<uint64_t>(previous + 1) + std::min<uint64_t>(gap, object_count);
+    if (id >= object_count) {
+      return absl::InvalidArgumentError(absl::StrCat("ε-mask triangles at byte ", at, ": ", what, " id ", id,
+                                                     " is past the scene's ", object_count, " objects"));
+    }
+    if (absl::Status st = in.GetVarint(&pairs, what + " run pairs"); !st.ok()) return st;
+    if (pairs == 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("ε-mask triangles at byte ", at, ": object ", id, " has no run pairs"));
+    }
+    MaskObject m;
+    m.object = static_cast<uint32_t>(id);
+    uint64_t next = 0;
+    for (uint64_t p = 0; p < pairs; ++p) {
+      uint64_t hidden = 0, visible = 0;
+      const std::string pair = absl::StrCat("object ", id, " run pair ", p);
+      if (absl::Status st = in.GetVarint(&hidden, pair + " hidden"); !st.ok()) return st;
+      if (absl::Status st = in.GetVarint(&visible, pair + " visible"); !st.ok()) return st;
+      if (visible == 0) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("ε-mask triangles at byte ", in.offset(), ": ", pair, " has no visible triangle"));
+      }
+      if (hidden > max_triangles || visible > max_triangles || spanned + next + hidden + visible > max_triangles) {
+        return absl::InvalidArgumentError(absl::StrCat("ε-mask triangles at byte ", in.offset(), ": ", pair,
+                                                       " takes the mask past ", max_triangles,
+                                                       " triangles (more than the scene has)"));
+      }
+      const uint64_t start = next + hidden, end = start + visible;
+      m.bits.resize((end + 7) / 8, 0);
+      for (uint64_t t = start; t < end; ++t) m.bits[t / 8] = static_cast<uint8_t>(m.bits[t / 8] | (1u << (t % 8)));
+      out.triangles += visible;
+      next = end;
+    }
+    spanned += next;
+    out.objects.push_back(std::move(m));
+    previous = static_cast<int64_t>(id);
+  }
+  return out;
+}
+
+}  // namespace vistream::visibility

@@ -1,0 +1,83 @@
+#pragma once
+// The wire form of an ε-mask's triangle sets (proto/walkthrough.proto EpsilonMask.triangles):
+// run-length coded, so that a mask of a few hundred objects, most of whose triangles are
+// either all seen or all hidden, takes a few bytes an object.
+//
+// Layout, objects in ascending id order, every number an unsigned LEB128 varint:
+//   per object: id gap (id - previous id - 1; the first object's id itself), run pairs k >= 1,
+//   then k pairs (hidden, visible): `hidden` triangles not in the set, then `visible` (>= 1)
+//   triangles in it. Triangles past the last pair are not in the set. An object is listed only
+//   with at least one visible triangle, so every encoding is canonical.
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+namespace vistream::visibility {
+
+// One object of a mask: bit t of `bits` (little-endian within bytes) set: triangle t may be
+// visible from the neighbourhood. Bits past the end are clear.
+struct MaskObject {
+  uint32_t object = 0;
+  std::vector<uint8_t> bits;
+};
+
+// Bit t of `bits` (false past its end).
+inline bool MaskBit(const std::vector<uint8_t>& bits, size_t t) {
+  return t / 8 < bits.size() && ((bits[t / 8] >> (t % 8)) & 1u) != 0;
+}
+
+// `objects` in ascending id order, distinct; objects without a set bit are left out.
+std::string EncodeMaskRuns(std::span<const MaskObject> objects);
+
+// The same from the sorted dense triangle ids of a visibility::EpsilonResult: `object_of(t)`
+// and `first_triangle(o)` map them to objects and triangle indices (EpsilonSuperset's
+// ObjectOfTriangle and TriangleId(o, 0)). Equal to EncodeMaskRuns of the same sets.
+template <typename ObjectOf, typename FirstTriangle>
+std::string EncodeMaskRuns(std::span<const uint32_t> sorted_triangles, ObjectOf object_of,
+                           FirstTriangle first_triangle);
+
+struct DecodedMask {
+  std::vector<MaskObject> objects;  // ascending ids, each with at least one set bit
+  uint64_t triangles = 0;           // set bits over every object
+};
+
+// Decodes EncodeMaskRuns' bytes. `object_count`: the scene's objects (ids must be below it);
+// `max_triangles`: a bound on the triangles every object's runs reach, summed over the objects
+// (the scene's triangle count: no real mask exceeds it; it bounds what decoding allocates). INVALID_ARGUMENT naming the byte offset and what is wrong: a truncated or
+// over-long varint, an id past the scene or out of order, no run pairs, an empty visible run,
+// runs past max_triangles.
+absl::StatusOr<DecodedMask> DecodeMaskRuns(std::string_view bytes, uint32_t object_count, uint64_t max_triangles);
+
+// ---- implementation of the template ----
+
+namespace mask_codec_internal {
+// Appends one object's runs: its set triangle indices, ascending (distinct).
+void AppendObject(std::string* out, uint32_t gap, std::span<const uint32_t> indices);
+}  // namespace mask_codec_internal
+
+template <typename ObjectOf, typename FirstTriangle>
+std::string EncodeMaskRuns(std::span<const uint32_t> sorted_triangles, ObjectOf object_of,
+                           FirstTriangle first_triangle) {
+  std::string out;
+  std::vector<uint32_t> indices;
+  int64_t previous = -1;
+  size_t k = 0;
+  while (k < sorted_triangles.size()) {
+    const uint32_t o = object_of(sorted_triangles[k]);
+    const uint32_t base = first_triangle(o);
+    indices.clear();
+    for (; k < sorted_triangles.size() && object_of(sorted_triangles[k]) == o; ++k) {
+      indices.push_back(sorted_triangles[k] - base);
+    }
+    mask_codec_internal::AppendObject(&out, static_cast<uint32_t>(o - previous - 1), indices);
+    previous = o;
+  }
+  return out;
+}
+
+}  // namespace vistream::visibility
