@@ -42,7 +42,9 @@ std::vector<glm::dvec3> NeighbourhoodChain::PredictPath(const glm::dvec3& eye, c
   const double v = std::hypot(velocity.x, velocity.y);
   if (v < opt_.standing_speed_mps || !std::isfinite(v)) return path;
   const double omega = std::isfinite(turn_rad_s) ? std::clamp(turn_rad_s, -opt_.max_turn_rad_s, opt_.max_turn_rad_s) : 0.0;
-  const double reach = std::clamp(v * opt_.horizon_s, opt_.min_horizon_m, opt_.max_horizon_m);
+  // The horizon and one box beyond it: a box started before the horizon gets its full length.
+  const double reach = std::clamp(v * opt_.horizon_s, opt_.min_horizon_m, opt_.max_horizon_m) +
+                       std::clamp(v * opt_.box_seconds, opt_.min_length_m, opt_.max_length_m);
   const double heading = std::atan2(velocity.y, velocity.x);
   glm::dvec3 p = eye;
   for (double s = 0.0; s + opt_.step_m <= reach + 1e-9; s += opt_.step_m) {
@@ -96,10 +98,12 @@ NeighbourhoodChain::Update NeighbourhoodChain::Advance(const glm::dvec3& eye, co
   const double v = std::hypot(velocity.x, velocity.y);
   const double length = std::clamp(v * opt_.box_seconds, opt_.min_length_m, opt_.max_length_m);
   const size_t per_box = std::max<size_t>(1, static_cast<size_t>(std::lround(length / opt_.step_m)));
+  const size_t horizon = static_cast<size_t>(
+      std::lround(std::clamp(v * opt_.horizon_s, opt_.min_horizon_m, opt_.max_horizon_m) / opt_.step_m));
   size_t k = 0;
   for (;;) {
     while (k < path.size() && Covered(path[k])) ++k;
-    if (k >= path.size()) break;
+    if (k >= path.size() || k > horizon) break;  // boxes start within the horizon
     const visibility::CellId cell = *grid.CellAt(glm::dvec2(path[k].x, path[k].y));
     if (!allowed(cell)) break;
     // From the point before (the boxes then share a stretch of path), through the points of

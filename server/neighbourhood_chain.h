@@ -67,8 +67,8 @@ class NeighbourhoodChain {
   const std::vector<Neighbourhood>& boxes() const { return boxes_; }
   const ChainOptions& options() const { return opt_; }
 
-  // The predicted eye positions every step_m along the path, from the eye (index 0) to the
-  // horizon or the first point off the grid (exposed for tests).
+  // The predicted eye positions every step_m along the path, from the eye (index 0) to one
+  // box length past the horizon, or to the last point on the grid (exposed for tests).
   std::vector<glm::dvec3> PredictPath(const glm::dvec3& eye, const glm::dvec3& velocity, double turn_rad_s,
                                       const visibility::ViewcellGrid& grid) const;
 

@@ -321,6 +321,7 @@ void Session::SetWanted(double now) {
   std::erase_if(requested_, unwanted);
   std::erase_if(emitted_, unwanted);
   std::erase_if(pending_geometry_, [&](const auto& entry) { return unwanted(entry.first); });
+  std::erase_if(last_sent_mask_, [&](const auto& entry) { return unwanted(entry.first); });
   if (unwanted(mask_objects_cell_)) {
     mask_objects_.clear();
   } else {
@@ -527,26 +528,34 @@ void Session::PostMasks() {
             std::lock_guard lock(s->mu_);
             if (s->ended_ || s->planned_.count(key) == 0) return nullptr;  // the path moved on
           }
+          const double start = SteadySeconds();
           const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
+          const double ms = (SteadySeconds() - start) * 1000.0;
           v1::ServerMessage m;
           v1::EpsilonMask* mask = m.mutable_epsilon_mask();
           mask->set_cell_id(pvs->cell);
           SetVec(box.min, mask->mutable_neighbourhood_min());
           SetVec(box.max, mask->mutable_neighbourhood_max());
-          mask->set_triangles(visibility::EncodeMaskRuns(
-              std::span<const uint32_t>(r.triangles), [eps](uint32_t t) { return eps->ObjectOfTriangle(t); },
-              [eps](uint32_t o) { return eps->TriangleId(o, 0); }));
           mask->set_object_count(static_cast<uint32_t>(r.objects.size()));
           mask->set_triangle_count(r.triangles.size());
-          std::vector<uint32_t> objects(r.objects.begin(), r.objects.end());
-          return [weak, key, m = std::move(m), objects = std::move(objects)]() mutable {
+          // The sets per object (the triangles are sorted by dense id: object by object).
+          std::vector<visibility::MaskObject> sets;
+          for (uint32_t t : r.triangles) {
+            const uint32_t o = eps->ObjectOfTriangle(t);
+            if (sets.empty() || sets.back().object != o) sets.push_back(visibility::MaskObject{o, {}});
+            const uint32_t k = t - eps->TriangleId(o, 0);
+            std::vector<uint8_t>& bits = sets.back().bits;
+            if (bits.size() <= k / 8) bits.resize(k / 8 + 1, 0);
+            bits[k / 8] = static_cast<uint8_t>(bits[k / 8] | (1u << (k % 8)));
+          }
+          return [weak, key, ms, m = std::move(m), sets = std::move(sets)]() mutable {
             std::shared_ptr<Session> s = weak.lock();
             if (s == nullptr) return;
             {
               std::lock_guard lock(s->mu_);
               auto plan = s->planned_.find(key);
               if (s->ended_ || plan == s->planned_.end()) return;  // dropped while it was computed
-              ReadyMask ready{key, plan->second.n.cell, plan->second.deadline, std::move(m), std::move(objects)};
+              ReadyMask ready{key, plan->second.n.cell, plan->second.deadline, ms, std::move(m), std::move(sets)};
               s->planned_.erase(plan);
               auto at = std::upper_bound(s->ready_masks_.begin(), s->ready_masks_.end(), ready.deadline,
                                          [](double d, const ReadyMask& other) { return d < other.deadline; });
@@ -653,11 +662,22 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     }
     v1::EpsilonMask* e = mask.message.mutable_epsilon_mask();
     e->set_mask_id(next_mask_id_++);
+    // The sets, or their difference from the last mask of the cell, whichever is shorter.
+    std::string bytes = visibility::EncodeMaskRuns(mask.sets);
+    if (auto last = last_sent_mask_.find(mask.cell); last != last_sent_mask_.end()) {
+      std::string delta = visibility::EncodeMaskDelta(last->second.sets, mask.sets);
+      if (delta.size() < bytes.size()) {
+        bytes = std::move(delta);
+        e->set_base_mask_id(last->second.id);
+      }
+    }
+    e->set_triangles(std::move(bytes));
     mask_objects_cell_ = mask.cell;
     mask_objects_rank_ = static_cast<size_t>(w - wanted_.begin());
-    for (uint32_t o : mask.objects) {
-      if (sent_.count(o) == 0) mask_objects_.push_back(o);
+    for (const visibility::MaskObject& o : mask.sets) {
+      if (sent_.count(o.object) == 0) mask_objects_.push_back(o.object);
     }
+    last_sent_mask_[mask.cell] = SentMask{e->mask_id(), std::move(mask.sets)};
     credit_ -= static_cast<int64_t>(e->triangles().size());
     stats_.set_epsilon_masks(stats_.epsilon_masks() + 1);
     stats_.set_epsilon_mask_bytes(stats_.epsilon_mask_bytes() + e->triangles().size());
@@ -667,7 +687,9 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       log_->Write(id_, "mask", {{"cell", absl::StrCat(c.i, ",", c.j)},
                                 {"objects", static_cast<uint64_t>(e->object_count())},
                                 {"triangles", static_cast<uint64_t>(e->triangle_count())},
-                                {"bytes", static_cast<uint64_t>(e->triangles().size())}});
+                                {"bytes", static_cast<uint64_t>(e->triangles().size())},
+                                {"delta", e->base_mask_id() != 0 ? "yes" : "no"},
+                                {"ms", mask.compute_ms}});
     }
     return std::move(mask.message);
   }

@@ -38,6 +38,7 @@
 #include "server/event_log.h"
 #include "server/neighbourhood_chain.h"
 #include "server/served_scene.h"
+#include "visibility/mask_codec.h"
 
 namespace vistream::server {
 
@@ -210,14 +211,20 @@ class Session : public std::enable_shared_from_this<Session> {
     uint64_t id = 0;
     CellId cell = 0;
     double deadline = 0.0;
-    vistream::v1::ServerMessage message;
-    std::vector<uint32_t> objects;             // its objects, ascending
+    double compute_ms = 0.0;                   // wall time of the computation
+    vistream::v1::ServerMessage message;       // all but the triangles and base_mask_id
+    std::vector<visibility::MaskObject> sets;  // its triangle sets, objects ascending
   };
   std::vector<ReadyMask> ready_masks_;         // computed, not sent: soonest reached first
   std::deque<uint32_t> mask_objects_;          // the last mask sent's objects, to go next
   CellId mask_objects_cell_ = 0;               // that mask's cell
   size_t mask_objects_rank_ = 0;               // its place in wanted_
   uint32_t next_mask_id_ = 1;
+  struct SentMask {
+    uint32_t id = 0;
+    std::vector<visibility::MaskObject> sets;
+  };
+  std::map<CellId, SentMask> last_sent_mask_;  // per wanted cell: the base of the next one's delta
 
   vistream::v1::SessionStats stats_;
 };

@@ -105,4 +105,69 @@ absl::StatusOr<DecodedMask> DecodeMaskRuns(std::string_view bytes, uint32_t obje
   return out;
 }
 
+namespace {
+
+// a XOR b, trailing zero bytes trimmed.
+std::vector<uint8_t> Xor(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  std::vector<uint8_t> out(std::max(a.size(), b.size()), 0);
+  for (size_t k = 0; k < out.size(); ++k) {
+    out[k] = static_cast<uint8_t>((k < a.size() ? a[k] : 0) ^ (k < b.size() ? b[k] : 0));
+  }
+  while (!out.empty() && out.back() == 0) out.pop_back();
+  return out;
+}
+
+uint64_t Popcount(const std::vector<uint8_t>& bits) {
+  uint64_t n = 0;
+  for (uint8_t b : bits) n += static_cast<uint64_t>(__builtin_popcount(b));
+  return n;
+}
+
+}  // namespace
+
+std::string EncodeMaskDelta(std::span<const MaskObject> base, std::span<const MaskObject> current) {
+  std::vector<MaskObject> diff;
+  size_t i = 0, j = 0;
+  static const std::vector<uint8_t> kNone;
+  while (i < base.size() || j < current.size()) {
+    const bool take_base = j == current.size() || (i < base.size() && base[i].object <= current[j].object);
+    const bool take_current = i == base.size() || (j < current.size() && current[j].object <= base[i].object);
+    MaskObject d;
+    d.object = take_base ? base[i].object : current[j].object;
+    d.bits = Xor(take_base ? base[i].bits : kNone, take_current ? current[j].bits : kNone);
+    if (take_base) ++i;
+    if (take_current) ++j;
+    if (!d.bits.empty()) diff.push_back(std::move(d));
+  }
+  return EncodeMaskRuns(diff);
+}
+
+absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_view delta, uint32_t object_count,
+                                           uint64_t max_triangles) {
+  absl::StatusOr<DecodedMask> d = DecodeMaskRuns(delta, object_count, max_triangles);
+  if (!d.ok()) return d.status();
+  DecodedMask out;
+  size_t i = 0, j = 0;
+  uint64_t spanned = 0;
+  static const std::vector<uint8_t> kNone;
+  while (i < base.objects.size() || j < d->objects.size()) {
+    const bool take_base = j == d->objects.size() || (i < base.objects.size() && base.objects[i].object <= d->objects[j].object);
+    const bool take_delta = i == base.objects.size() || (j < d->objects.size() && d->objects[j].object <= base.objects[i].object);
+    MaskObject m;
+    m.object = take_base ? base.objects[i].object : d->objects[j].object;
+    m.bits = Xor(take_base ? base.objects[i].bits : kNone, take_delta ? d->objects[j].bits : kNone);
+    if (take_base) ++i;
+    if (take_delta) ++j;
+    if (m.bits.empty()) continue;
+    spanned += 8 * m.bits.size();
+    if (spanned > max_triangles + 8 * (out.objects.size() + 1)) {
+      return absl::InvalidArgumentError(absl::StrCat("ε-mask delta: object ", m.object, " takes the mask past ",
+                                                     max_triangles, " triangles (more than the scene has)"));
+    }
+    out.triangles += Popcount(m.bits);
+    out.objects.push_back(std::move(m));
+  }
+  return out;
+}
+
 }  // namespace vistream::visibility

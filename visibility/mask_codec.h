@@ -53,6 +53,16 @@ struct DecodedMask {
 // runs past max_triangles.
 absl::StatusOr<DecodedMask> DecodeMaskRuns(std::string_view bytes, uint32_t object_count, uint64_t max_triangles);
 
+// Masks along a path differ little from one box to the next: the later can go as its
+// difference from the earlier. EncodeMaskDelta codes, per object, the XOR of the two bit sets
+// (objects whose sets are equal are left out) exactly as EncodeMaskRuns codes a set; both
+// arguments ascending and distinct (DecodedMask::objects).
+std::string EncodeMaskDelta(std::span<const MaskObject> base, std::span<const MaskObject> current);
+// `base` with such a delta applied: the XOR per object, objects left without a set bit removed.
+// Errors as DecodeMaskRuns's, and INVALID_ARGUMENT when the result would pass max_triangles.
+absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_view delta, uint32_t object_count,
+                                           uint64_t max_triangles);
+
 // ---- implementation of the template ----
 
 namespace mask_codec_internal {
