@@ -341,7 +341,8 @@ absl::Status Loop::Startup() {
   // ahead are ranked first; the simulator models the same (server/simulator.cpp).
   const glm::dvec3 velocity = walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0);
   std::optional<uint32_t> ahead;
-  bool ahead_known = !walk_.has_value();
+  // Drawing everything, no PVS list ever comes: what is preloaded is all there is to wait for.
+  bool ahead_known = !walk_.has_value() || opt_.draw_everything;
   auto ahead_complete = [&] {
     if (!ahead_known && store_->has_scene_info()) {
       const GridInfo& g = store_->grid();

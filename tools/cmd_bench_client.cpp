@@ -115,7 +115,7 @@ int BenchClient(const BenchClientArgs& a) {
   // results[0] drew with masks, results[1] the same walk without.
   const client::WalkthroughSummary& with = results[0];
   const client::WalkthroughSummary& without = results[1];
-  auto ratio = [](double a, double b) { return b > 0.0 ? a / b : 0.0; };
+  auto ratio = [](double x, double y) { return y > 0.0 ? x / y : 0.0; };
   out["masks_against_pvs"] = {{"fps_with_masks", with.fps},
                               {"fps_without_masks", without.fps},
                               {"fps_ratio", ratio(with.fps, without.fps)},
