@@ -63,7 +63,7 @@ using Event = std::variant<vistream::v1::SceneInfo, vistream::v1::ViewcellPvs, R
 struct ConnectionStats {
   uint64_t bytes_received = 0;   // serialized ServerMessage bytes
   uint64_t geometry_bytes = 0;   // encoded geometry
-  uint64_t mask_bytes = 0;       // ε-masks' run-length triangle bytes (EpsilonMask.triangles), credited as geometry
+  uint64_t mask_bytes = 0;       // ε-masks' run-length triangle bytes (EpsilonMask.triangles): credit consumed
   uint64_t masks_received = 0;
   uint64_t objects_received = 0;
   uint64_t duplicates = 0;       // geometry received for an object already held

@@ -89,7 +89,8 @@ const std::vector<uint8_t>* EpsilonMaskSet::Bits(uint32_t object) const {
 
 void ObjectStore::AddMask(const v1::EpsilonMask& m) {
   if (failure_.has_value()) return;  // nothing after bad data is trusted
-  const std::string what = absl::StrCat("the server sent a malformed ε-mask (mask ", m.mask_id(), ", cell ", m.cell_id(), ")");
+  const std::string what =
+      absl::StrCat("the server sent a malformed ε-mask (mask ", m.mask_id(), ", cell ", m.cell_id(), ")");
   if (!scene_info_.has_value()) {
     failure_ = absl::StrCat(what, ": it arrived before the scene's description");
     bad_data_ = true;

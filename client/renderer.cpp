@@ -244,8 +244,8 @@ Renderer::MaskedIndices& Renderer::MaskedFor(Gpu& g, const StoredObject& o, cons
     slot = &g.masked.emplace_back();
     gl_.GenBuffers(1, &slot->ibo);
   } else {
-    slot = &*std::min_element(g.masked.begin(), g.masked.end(),
-                              [](const MaskedIndices& a, const MaskedIndices& b) { return a.last_frame < b.last_frame; });
+    auto older = [](const MaskedIndices& a, const MaskedIndices& b) { return a.last_frame < b.last_frame; };
+    slot = &*std::min_element(g.masked.begin(), g.masked.end(), older);
   }
   std::vector<uint32_t> indices;
   const std::vector<uint32_t>& all = o.data.mesh.indices;

@@ -206,7 +206,8 @@ absl::Status Loop::Prepare() {
   if (!opt_.frame_log.empty()) {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
     if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
-    std::fprintf(frame_log_, "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked,hole,"
+    std::fprintf(frame_log_,
+                 "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked,hole,"
                  "triangles_without_masks,mask_id\n");
   }
   if (!opt_.cell_log.empty()) {
@@ -519,7 +520,8 @@ absl::Status Loop::Walkthrough() {
       // What is held: a hole frame draws it, and a PVS-only client would have.
       for (const auto& [id, o] : store_->objects()) everything.push_back(id);
     }
-    const std::vector<uint32_t>* without_masks = opt_.draw_everything ? &everything_ : p->complete ? p->pvs : &everything;
+    const std::vector<uint32_t>* without_masks =
+        opt_.draw_everything ? &everything_ : p->complete ? p->pvs : &everything;
     const std::vector<uint32_t>* set = use_mask != nullptr ? &use_mask->object_ids : without_masks;
     const bool check = ids_ != nullptr && (t >= next_check || last);
     drawn.clear();
@@ -787,8 +789,9 @@ std::string SummaryText(const WalkthroughSummary& s) {
                         "  masks: %d received, %d of %d frames masked, %d hole frames; without masks %.0f triangles "
                         "a frame (%.1f%% of it drawn)\n",
                         s.masks_received, s.frames_masked, s.frames, s.hole_frames, s.mean_triangles_without_masks,
-                        s.mean_triangles_without_masks > 0 ? 100.0 * s.mean_triangles_drawn / s.mean_triangles_without_masks
-                                                           : 0.0);
+                        s.mean_triangles_without_masks > 0
+                            ? 100.0 * s.mean_triangles_drawn / s.mean_triangles_without_masks
+                            : 0.0);
   if (s.verified) {
     absl::StrAppendFormat(&out, "  pixel error: %d of %d pixels in %d checked frames\n", s.pixel_error,
                           s.checked_pixels, s.checked_frames);

@@ -69,6 +69,7 @@ int BenchClient(const BenchClientArgs& a) {
   out["scene"] = a.scene;
   out["size"] = a.size;
   std::vector<client::WalkthroughSummary> results;
+  server::TaskStats masks_with;  // the server's mask queue during the mode with masks
   for (const Mode& m : modes) {
     client::WalkthroughOptions o;
     o.server = "127.0.0.1:" + std::to_string((*server)->port());
@@ -84,12 +85,19 @@ int BenchClient(const BenchClientArgs& a) {
     o.local_scene = &(*served)->scene();
     o.log = [&](const std::string& line) { std::fprintf(stderr, "  %s: %s\n", m.name, line.c_str()); };
     std::fprintf(stderr, "bench client: %s ...\n", m.name);
+    const server::TaskStats masks_before = (*served)->masks().stats();
     absl::StatusOr<client::WalkthroughSummary> s = client::RunWalkthrough(o);
+    const server::TaskStats masks_after = (*served)->masks().stats();
     if (!s.ok()) {
       std::fprintf(stderr, "vistream: error: %s: %s\n", m.name, std::string(s.status().message()).c_str());
       return 1;
     }
     results.push_back(*s);
+    if (m.masks) {
+      masks_with.computed = masks_after.computed - masks_before.computed;
+      masks_with.dropped = masks_after.dropped - masks_before.dropped;
+      masks_with.cpu_s = masks_after.cpu_s - masks_before.cpu_s;
+    }
     const double share = s->scene_triangles > 0 ? s->mean_triangles_drawn / static_cast<double>(s->scene_triangles) : 0;
     out["modes"][m.name] = {{"frames", s->frames},
                             {"fps", s->fps},
@@ -104,6 +112,11 @@ int BenchClient(const BenchClientArgs& a) {
                             {"frames_masked", s->frames_masked},
                             {"hole_frames", s->hole_frames},
                             {"masks_received", s->masks_received},
+                            // The server's mask queue over the mode (idle-priority threads: a
+                            // client drawing flat out on the same cores leaves them little).
+                            {"server_masks_computed", masks_after.computed - masks_before.computed},
+                            {"server_masks_dropped", masks_after.dropped - masks_before.dropped},
+                            {"server_mask_cpu_s", masks_after.cpu_s - masks_before.cpu_s},
                             {"bytes_received", s->bytes_received}};
     if (!out.contains("path")) {
       out["path"] = s->path;
@@ -150,12 +163,14 @@ int BenchClient(const BenchClientArgs& a) {
   }
   std::printf(
       "with masks against without: %.1f against %.1f fps (x%.2f), frame time p99 %.2f against %.2f ms (x%.2f), "
-      "%.0f against %.0f triangles a frame (%.1f%%); %llu of %llu frames masked, %llu hole frames\n",
+      "%.0f against %.0f triangles a frame (%.1f%%); %llu of %llu frames masked, %llu hole frames (the server computed "
+      "%llu masks in %.1f s of CPU, dropped %llu)\n",
       with.fps, without.fps, ratio(with.fps, without.fps), with.frame_ms_p99, without.frame_ms_p99,
       ratio(with.frame_ms_p99, without.frame_ms_p99), with.mean_triangles_drawn, without.mean_triangles_drawn,
       100.0 * ratio(with.mean_triangles_drawn, without.mean_triangles_drawn),
       static_cast<unsigned long long>(with.frames_masked), static_cast<unsigned long long>(with.frames),
-      static_cast<unsigned long long>(with.hole_frames));
+      static_cast<unsigned long long>(with.hole_frames), static_cast<unsigned long long>(masks_with.computed),
+      masks_with.cpu_s, static_cast<unsigned long long>(masks_with.dropped));
   return 0;
 }
 
