@@ -1,20 +1,25 @@
 // The thin client's ε-masks (issue 34): the object store decodes the server's run-length masks,
 // keeps those of the nine cells around the eye (at most 64) and picks, for an eye, the mask a
-// frame may draw; and a walker on city1 at 6 km/h through a real server on loopback draws
-// masked frames, no hole frame and no pixel error.
+// frame may draw; a walker on city1 at 6 km/h through a real server on loopback draws masked
+// frames, no hole frame and no pixel error; mask bytes are credit consumed (a 2 KB window keeps
+// flowing); without masks the server sends none.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "client/connection.h"
 #include "client/object_store.h"
 #include "client/walkthrough.h"
+#include "scenes/catalog.h"
+#include "scenes/walk.h"
 #include "server/served_scene.h"
 #include "server/service.h"
 #include "tests/temp_dir.h"
@@ -336,6 +341,53 @@ TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
   EXPECT_EQ(j["hole_frames"], s->hole_frames);
   EXPECT_EQ(j["frames_masked"], s->frames_masked);
   EXPECT_DOUBLE_EQ(j["mean_triangles_without_masks"].get<double>(), s->mean_triangles_without_masks);
+}
+
+TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiving) {
+  // A 2 KB credit window: masks the client did not count as consumed would leak that much
+  // credit after a few masks, and the server would send nothing more.
+  server::ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
+      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(entry->walks.front(), 6.0 / 3.6);
+  ASSERT_TRUE(walk.ok()) << walk.status();
+  ConnectionOptions co;
+  co.address = "127.0.0.1:" + std::to_string((*server)->port());
+  co.scene = "city1";
+  co.credit_window_bytes = 2048;
+  co.epsilon_masks = true;
+  co.pose_rate_hz = 20.0;
+  Connection connection(co);
+  connection.Start();
+  const double duration_s = 40.0;
+  uint64_t masks_early = 0, objects_early = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (;;) {
+    const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (t > duration_s) break;
+    const scenes::WalkPose pose = walk->At(t);
+    connection.SetPose(pose.eye, pose.velocity, pose.yaw_rad, 0.0, t);
+    (void)connection.Take();
+    if (t < 0.75 * duration_s) {
+      masks_early = connection.stats().masks_received;
+      objects_early = connection.stats().objects_received;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  const ConnectionStats stats = connection.stats();
+  EXPECT_TRUE(connection.Stop().ok());
+  std::printf("masks %llu (%llu bytes), objects %llu (%llu geometry bytes); in the first 3/4: %llu masks, %llu objects\n",
+              static_cast<unsigned long long>(stats.masks_received), static_cast<unsigned long long>(stats.mask_bytes),
+              static_cast<unsigned long long>(stats.objects_received),
+              static_cast<unsigned long long>(stats.geometry_bytes), static_cast<unsigned long long>(masks_early),
+              static_cast<unsigned long long>(objects_early));
+  EXPECT_GT(stats.mask_bytes, 3 * co.credit_window_bytes) << "few mask bytes: credit leaked, or too few masks to show a leak";
+  EXPECT_GT(stats.masks_received, masks_early) << "masks stopped coming: credit leaked";
+  EXPECT_GT(stats.objects_received, objects_early) << "geometry stopped coming: credit leaked";
 }
 
 TEST(ClientMasks, WithoutMasksTheServerSendsNoneAndBothTriangleCountsAgree) {
