@@ -234,6 +234,7 @@ grpc::Status Connection::RunSession(bool* answered) {
     h->set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
     h->set_memory_budget_bytes(options_.memory_budget_bytes);
     h->set_triangle_budget(options_.triangle_budget);
+    h->set_epsilon_masks(options_.epsilon_masks);
     h->mutable_held_objects()->Add(held_.begin(), held_.end());
   }
   v1::ClientMessage credit;
@@ -304,9 +305,17 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
       case v1::ServerMessage::kPvs:
         event = std::move(*m.mutable_pvs());
         break;
-      case v1::ServerMessage::kEpsilonMask:
+      case v1::ServerMessage::kEpsilonMask: {
+        // The server charged the mask's triangle bytes to the credit: they are consumed, as
+        // geometry is, or the credit would leak away and the session stall for good.
+        const uint64_t mask_bytes = m.epsilon_mask().triangles().size();
+        std::lock_guard lock(mu_);
+        ++stats_.masks_received;
+        stats_.mask_bytes += mask_bytes;
+        consumed_since_grant_ += mask_bytes;
         event = std::move(*m.mutable_epsilon_mask());
         break;
+      }
       case v1::ServerMessage::kEvict: {
         std::lock_guard lock(mu_);
         for (uint32_t o : m.evict().object_ids()) held_.erase(o);

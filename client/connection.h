@@ -2,7 +2,8 @@
 // The thin client's network side (DESIGN.md "Server and client"): one thread that keeps a
 // walkthrough session open, reconnecting with back-off after a dropped connection and telling
 // the server on resume what it holds (Hello.held_objects); it sends the latest pose at a steady
-// rate with its velocity, grants byte credit as geometry arrives, and decodes what the server
+// rate with its velocity, grants byte credit as geometry and ε-masks arrive (a mask costs its
+// run-length triangle bytes, as the server charges it), and decodes what the server
 // sends (meshoptimizer geometry, PVS lists, ε-masks, eviction hints) into events. The render
 // loop takes the events with Take(), which never waits on the network: the lock it shares
 // with the network thread is held only to append or swap a vector.
@@ -36,7 +37,8 @@ struct ConnectionOptions {
   uint64_t memory_budget_bytes = 0;    // Hello: decoded bytes the client may hold; 0 unlimited
   uint64_t triangle_budget = 0;        // Hello: triangles per frame; 0 unlimited
   double pose_rate_hz = 10.0;          // poses sent per second (the server allows 120)
-  uint64_t credit_window_bytes = uint64_t{8} << 20;  // encoded geometry in flight at most
+  uint64_t credit_window_bytes = uint64_t{8} << 20;  // encoded geometry and mask bytes in flight at most
+  bool epsilon_masks = false;          // Hello: the client draws ε-masks (the server sends none otherwise)
   double connect_timeout_s = 10.0;     // per attempt
   double max_backoff_s = 4.0;          // reconnect back-off doubles from 0.25 s up to this
   ChannelSecurity security;            // TLS and the bearer token (client/channel_security.h)
@@ -61,6 +63,8 @@ using Event = std::variant<vistream::v1::SceneInfo, vistream::v1::ViewcellPvs, R
 struct ConnectionStats {
   uint64_t bytes_received = 0;   // serialized ServerMessage bytes
   uint64_t geometry_bytes = 0;   // encoded geometry
+  uint64_t mask_bytes = 0;       // ε-masks' run-length triangle bytes (EpsilonMask.triangles): credit consumed
+  uint64_t masks_received = 0;
   uint64_t objects_received = 0;
   uint64_t duplicates = 0;       // geometry received for an object already held
   uint64_t reconnects = 0;       // sessions after the first that the server answered
@@ -133,7 +137,7 @@ class Connection {
   bool have_pose_ = false;
   vistream::v1::Pose pose_;
   std::set<uint32_t> held_;            // received and not evicted: Hello.held_objects on resume
-  uint64_t consumed_since_grant_ = 0;  // encoded geometry bytes since the last Credit
+  uint64_t consumed_since_grant_ = 0;  // encoded geometry and mask bytes since the last Credit
   bool reader_done_ = false;
   grpc::ClientContext* context_ = nullptr;  // of the session in progress, for Stop/Drop
   ConnectionStats stats_;

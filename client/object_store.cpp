@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
+
+#include <absl/strings/str_cat.h>
 
 namespace vistream::client {
 
@@ -58,16 +61,9 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
         ++evicted_by_server_;
       }
     } else if (auto* m = std::get_if<v1::EpsilonMask>(&e)) {
-      EpsilonMaskSet set;
-      set.box_min = {m->box_min().x(), m->box_min().y(), m->box_min().z()};
-      set.box_max = {m->box_max().x(), m->box_max().y(), m->box_max().z()};
-      set.generation = ++mask_generation_;
-      for (const v1::ObjectTriangles& t : m->objects()) {
-        set.visible[t.object_id()].assign(t.visible().begin(), t.visible().end());
-      }
-      mask_ = std::move(set);
+      AddMask(*m);
     } else if (auto* ended = std::get_if<SessionEnded>(&e)) {
-      failure_ = std::string(ended->status.message());
+      if (!failure_.has_value()) failure_ = std::string(ended->status.message());
     }
   }
   max_held_bytes_ = std::max(max_held_bytes_, held_bytes_);
@@ -81,7 +77,86 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       return std::max(std::abs(i - ci), std::abs(j - cj)) >= 3;
     });
   }
+  KeepMasksNear(current_cell);
   return EnforceBudget(current_cell);
+}
+
+const std::vector<uint8_t>* EpsilonMaskSet::Bits(uint32_t object) const {
+  auto it = std::lower_bound(objects.begin(), objects.end(), object,
+                             [](const visibility::MaskObject& m, uint32_t id) { return m.object < id; });
+  return it != objects.end() && it->object == object ? &it->bits : nullptr;
+}
+
+void ObjectStore::AddMask(const v1::EpsilonMask& m) {
+  if (failure_.has_value()) return;  // nothing after bad data is trusted
+  const std::string what =
+      absl::StrCat("the server sent a malformed ε-mask (mask ", m.mask_id(), ", cell ", m.cell_id(), ")");
+  if (!scene_info_.has_value()) {
+    failure_ = absl::StrCat(what, ": it arrived before the scene's description");
+    bad_data_ = true;
+    return;
+  }
+  absl::StatusOr<visibility::DecodedMask> decoded =
+      visibility::DecodeMaskRuns(m.triangles(), scene_info_->object_count(), scene_info_->triangle_count());
+  if (!decoded.ok()) {
+    failure_ = absl::StrCat(what, ": ", decoded.status().message());
+    bad_data_ = true;
+    return;
+  }
+  EpsilonMaskSet set;
+  set.mask_id = m.mask_id();
+  set.key = next_mask_key_++;
+  set.cell = m.cell_id();
+  set.box_min = {m.neighbourhood_min().x(), m.neighbourhood_min().y(), m.neighbourhood_min().z()};
+  set.box_max = {m.neighbourhood_max().x(), m.neighbourhood_max().y(), m.neighbourhood_max().z()};
+  set.triangles = decoded->triangles;
+  set.objects = std::move(decoded->objects);
+  set.object_ids.reserve(set.objects.size());
+  for (const visibility::MaskObject& o : set.objects) set.object_ids.push_back(o.object);
+  // A mask id seen again comes from a new session (ids start again at 1): the new one replaces it.
+  if (auto it = masks_.find(set.mask_id); it != masks_.end()) DropMask(it);
+  masks_.emplace(set.mask_id, std::move(set));
+}
+
+void ObjectStore::DropMask(std::map<uint32_t, EpsilonMaskSet>::iterator it) {
+  dropped_masks_.push_back(it->second.key);
+  masks_.erase(it);
+}
+
+void ObjectStore::KeepMasksNear(std::optional<uint32_t> current_cell) {
+  if (current_cell.has_value() && scene_info_.has_value()) {
+    const std::vector<uint32_t> near = grid_.Neighbourhood(*current_cell);
+    for (auto it = masks_.begin(); it != masks_.end();) {
+      auto next = std::next(it);
+      if (std::find(near.begin(), near.end(), it->second.cell) == near.end()) DropMask(it);
+      it = next;
+    }
+  }
+  while (masks_.size() > kMaxMasks) {
+    auto oldest = std::min_element(masks_.begin(), masks_.end(),
+                                   [](const auto& a, const auto& b) { return a.second.key < b.second.key; });
+    DropMask(oldest);
+  }
+}
+
+MaskChoice ObjectStore::ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready) const {
+  MaskChoice choice;
+  for (const auto& [id, m] : masks_) {
+    if (!m.Contains(eye)) continue;
+    choice.in_box = true;
+    if (choice.mask != nullptr && choice.mask->triangles <= m.triangles) continue;
+    const bool usable = std::all_of(m.object_ids.begin(), m.object_ids.end(), [&](uint32_t o) {
+      return objects_.count(o) > 0 && (!ready || ready(o));
+    });
+    if (usable) choice.mask = &m;
+  }
+  return choice;
+}
+
+std::vector<uint64_t> ObjectStore::TakeDroppedMasks() {
+  std::vector<uint64_t> out;
+  out.swap(dropped_masks_);
+  return out;
 }
 
 std::vector<uint32_t> ObjectStore::EnforceBudget(std::optional<uint32_t> current_cell) {

@@ -1,7 +1,12 @@
 #pragma once
 // The client's local copy of what the server streamed (DESIGN.md "Server and client"): decoded
-// objects within a memory budget, the PVS list of each viewcell it was sent, and the latest
-// ε-mask. The render loop owns it and feeds it the connection's events; nothing here waits.
+// objects within a memory budget, the PVS list of each viewcell it was sent, and the ε-masks of
+// the neighbourhoods around the eye. The render loop owns it and feeds it the connection's
+// events; nothing here waits.
+//
+// Masks: kept while their cell is the current cell or one of its eight neighbours, at most
+// kMaxMasks (the oldest dropped first). A mask holds for its box forever (the scene is static);
+// a frame may draw it once every object it lists is held (ChooseMask).
 //
 // Memory: the server keeps the client within Hello.memory_budget_bytes by the same accounting
 // (24 bytes a vertex, 4 an index) and sends Evict hints for objects outside the current and
@@ -10,9 +15,11 @@
 // objects of adjacent cells only; never the current cell's.
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -20,6 +27,7 @@
 
 #include "client/connection.h"
 #include "proto/walkthrough.pb.h"
+#include "visibility/mask_codec.h"
 
 namespace vistream::client {
 
@@ -43,16 +51,29 @@ inline bool TriangleVisible(const std::vector<uint8_t>& bits, size_t t) {
   return t / 8 < bits.size() && ((bits[t / 8] >> (t % 8)) & 1u) != 0;
 }
 
-// An ε-mask decoded: per object, which triangles may be seen from anywhere in the box.
+// An ε-mask decoded (proto EpsilonMask): which triangles of its cell's PVS may be seen from
+// anywhere in its neighbourhood box. Objects with no such triangle are not listed.
 struct EpsilonMaskSet {
-  glm::dvec3 box_min{0.0}, box_max{0.0};
-  uint64_t generation = 0;  // increases with every mask received
-  std::unordered_map<uint32_t, std::vector<uint8_t>> visible;  // bit t of object's triangle t
+  uint32_t mask_id = 0;  // the server's id (session-unique: a new session starts again from 1)
+  uint64_t key = 0;      // the store's own id, unique over its life (renderer caches key on it)
+  uint32_t cell = 0;     // the viewcell whose PVS it narrows
+  glm::dvec3 box_min{0.0}, box_max{0.0};  // the neighbourhood, scene-local metres
+  std::vector<visibility::MaskObject> objects;  // ascending ids, each with a set bit
+  std::vector<uint32_t> object_ids;             // the same ids, to draw
+  uint64_t triangles = 0;                       // set bits over all objects
 
   bool Contains(const glm::dvec3& p) const {
     return p.x >= box_min.x && p.x <= box_max.x && p.y >= box_min.y && p.y <= box_max.y && p.z >= box_min.z &&
            p.z <= box_max.z;
   }
+  // The triangle bits of `object` (bit t: its triangle t may be seen); null if it has none.
+  const std::vector<uint8_t>* Bits(uint32_t object) const;
+};
+
+// The mask a frame may draw (ObjectStore::ChooseMask).
+struct MaskChoice {
+  const EpsilonMaskSet* mask = nullptr;  // none: no held mask is usable for the eye
+  bool in_box = false;                   // the eye is inside the box of some held mask
 };
 
 struct StoredObject {
@@ -81,7 +102,19 @@ class ObjectStore {
   const std::map<uint32_t, std::vector<uint32_t>>& pvs_lists() const { return pvs_; }
   // Whether `cell`'s PVS list and every object on it are held.
   bool CellComplete(uint32_t cell) const;
-  const std::optional<EpsilonMaskSet>& mask() const { return mask_; }
+
+  // At most this many masks are held.
+  static constexpr size_t kMaxMasks = 64;
+  // Every mask held, by the server's mask id.
+  const std::map<uint32_t, EpsilonMaskSet>& masks() const { return masks_; }
+  // The mask a frame at `eye` (scene-local metres) may draw: among held masks whose box holds
+  // the eye and all of whose objects are held and pass `ready` (the renderer's Uploaded; none:
+  // held is enough), the one with the fewest triangles (ties: the lower mask id). Also whether
+  // the eye is in any held mask's box at all.
+  MaskChoice ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready = {}) const;
+  // Keys (EpsilonMaskSet::key) of masks dropped or replaced since the last call: the renderer
+  // frees what it built for them.
+  std::vector<uint64_t> TakeDroppedMasks();
 
   // Ids removed since the last call (by Evict hints, budget, or replaced): the renderer frees
   // their GPU buffers.
@@ -94,23 +127,32 @@ class ObjectStore {
   uint64_t budget() const { return budget_; }
   uint64_t evicted_by_server() const { return evicted_by_server_; }
   uint64_t evicted_by_budget() const { return evicted_by_budget_; }
+  // Why nothing more can be trusted: the session ended for good (its status), or the server sent
+  // data that does not decode ("mask 7 (cell 12): ..." with the decoder's message). None: fine.
   std::optional<std::string> failure() const { return failure_; }
+  // Whether failure() is bad data from the server rather than the session's end.
+  bool failure_is_bad_data() const { return bad_data_; }
 
  private:
   void Remove(uint32_t id);
   std::vector<uint32_t> EnforceBudget(std::optional<uint32_t> current_cell);
+  void AddMask(const vistream::v1::EpsilonMask& m);
+  void DropMask(std::map<uint32_t, EpsilonMaskSet>::iterator it);
+  void KeepMasksNear(std::optional<uint32_t> current_cell);
 
   uint64_t budget_;
   std::optional<vistream::v1::SceneInfo> scene_info_;
   GridInfo grid_;
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
-  std::optional<EpsilonMaskSet> mask_;
-  uint64_t mask_generation_ = 0;
+  std::map<uint32_t, EpsilonMaskSet> masks_;  // by mask id
+  uint64_t next_mask_key_ = 1;
+  std::vector<uint64_t> dropped_masks_;
   std::vector<uint32_t> removed_, added_;
   uint64_t held_bytes_ = 0, max_held_bytes_ = 0;
   uint64_t evicted_by_server_ = 0, evicted_by_budget_ = 0;
   std::optional<std::string> failure_;
+  bool bad_data_ = false;
 };
 
 }  // namespace vistream::client

@@ -166,7 +166,8 @@ void Renderer::Free(Gpu& g) {
   gl_.DeleteVertexArrays(1, &g.vao);
   gl_.DeleteBuffers(1, &g.vbo);
   gl_.DeleteBuffers(1, &g.ibo);
-  if (g.masked_ibo != 0) gl_.DeleteBuffers(1, &g.masked_ibo);
+  for (MaskedIndices& m : g.masked) gl_.DeleteBuffers(1, &m.ibo);
+  g.masked.clear();
 }
 
 void Renderer::Upload(uint32_t id, const StoredObject& o) {
@@ -199,6 +200,16 @@ uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, 
     pending_.erase(id);
   }
   for (uint32_t id : store.TakeAdded()) pending_.insert(id);
+  if (const std::vector<uint64_t> dropped = store.TakeDroppedMasks(); !dropped.empty()) {
+    const std::set<uint64_t> keys(dropped.begin(), dropped.end());
+    for (auto& [id, g] : gpu_) {
+      std::erase_if(g.masked, [&](MaskedIndices& m) {
+        if (keys.count(m.mask_key) == 0) return false;
+        gl_.DeleteBuffers(1, &m.ibo);
+        return true;
+      });
+    }
+  }
   uint64_t uploaded = 0;
   bool any = false;
   auto take = [&](uint32_t id) {
@@ -220,7 +231,22 @@ uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, 
   return uploaded;
 }
 
-void Renderer::BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits, uint64_t generation) {
+Renderer::MaskedIndices& Renderer::MaskedFor(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits,
+                                             uint64_t mask_key, uint64_t frame) {
+  for (MaskedIndices& m : g.masked) {
+    if (m.mask_key == mask_key) {
+      m.last_frame = frame;
+      return m;
+    }
+  }
+  MaskedIndices* slot = nullptr;
+  if (g.masked.size() < kMaskedPerObject) {
+    slot = &g.masked.emplace_back();
+    gl_.GenBuffers(1, &slot->ibo);
+  } else {
+    auto older = [](const MaskedIndices& a, const MaskedIndices& b) { return a.last_frame < b.last_frame; };
+    slot = &*std::min_element(g.masked.begin(), g.masked.end(), older);
+  }
   std::vector<uint32_t> indices;
   const std::vector<uint32_t>& all = o.data.mesh.indices;
   const size_t triangles = all.size() / 3;
@@ -230,13 +256,14 @@ void Renderer::BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_
                      all.begin() + static_cast<std::ptrdiff_t>(3 * t + 3));
     }
   }
-  if (g.masked_ibo == 0) gl_.GenBuffers(1, &g.masked_ibo);
   gl_.BindVertexArray(0);
-  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.masked_ibo);
+  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, slot->ibo);
   gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(indices.size() * sizeof(uint32_t)),
                  indices.data(), GL_STATIC_DRAW);
-  g.masked_count = static_cast<uint32_t>(indices.size());
-  g.mask_generation = generation;
+  slot->mask_key = mask_key;
+  slot->count = static_cast<uint32_t>(indices.size());
+  slot->last_frame = frame;
+  return *slot;
 }
 
 FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
@@ -284,16 +311,18 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     Gpu& g = it->second;
     bool masked = false;
     uint32_t count = g.index_count;
+    unsigned masked_ibo = 0;
     if (mask != nullptr) {
-      auto bits = mask->visible.find(id);
-      if (bits == mask->visible.end()) continue;  // no triangle of it can be seen from the box
-      if (g.mask_generation != mask->generation) BuildMask(g, *o, bits->second, mask->generation);
+      const std::vector<uint8_t>* bits = mask->Bits(id);
+      if (bits == nullptr) continue;  // no triangle of it can be seen from the box
+      const MaskedIndices& m = MaskedFor(g, *o, *bits, mask->key, frame);
       masked = true;
-      count = g.masked_count;
+      count = m.count;
+      masked_ibo = m.ibo;
     }
     if (count == 0) continue;
     gl_.BindVertexArray(g.vao);
-    if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.masked_ibo);
+    if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, masked_ibo);
     const glm::vec3 c = ObjectColour(id);
     gl_.Uniform3f(loc_colour_, c.x, c.y, c.z);
     gl_.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(count), GL_UNSIGNED_INT, nullptr);
@@ -305,6 +334,21 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
   }
   gl_.BindVertexArray(0);
   return stats;
+}
+
+uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera,
+                                  const std::vector<uint32_t>& objects) const {
+  const scenes::ViewFrustum frustum(camera.eye, camera.Forward(), camera.Up(), camera.fov_y_rad,
+                                    static_cast<double>(camera.width) / static_cast<double>(camera.height));
+  uint64_t triangles = 0;
+  for (uint32_t id : objects) {
+    auto it = gpu_.find(id);
+    if (it == gpu_.end()) continue;
+    const StoredObject* o = store.Find(id);
+    if (o == nullptr || !frustum.MayOverlap(o->data.bounds_min, o->data.bounds_max)) continue;
+    triangles += it->second.index_count / 3;
+  }
+  return triangles;
 }
 
 void Renderer::Finish() { gl_.Finish(); }

@@ -1,6 +1,6 @@
 #pragma once
 // The client's renderer (OpenGL 3.3 core, GLM): draws a viewcell's PVS from the object store,
-// narrowed by the ε-mask while the eye is inside its box, with view-frustum culling; flat
+// or an ε-mask's triangles while the eye is inside its box, with view-frustum culling; flat
 // per-face shading under a sun, a ground plane and a sky colour. Each object goes to the GPU
 // once (its own buffers), within a per-frame upload budget so that a burst of arrivals never
 // makes a frame hitch. The same renderer serves the window and the off-screen front ends: GL
@@ -66,7 +66,7 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
-  // Frees the buffers of objects the store dropped and uploads objects it gained: those in
+  // Frees the buffers of objects (and masks) the store dropped and uploads objects it gained: those in
   // `first` before any other, at most `budget_bytes` of vertex and index data a call (at least
   // one object, so that an object larger than the budget still goes up). Returns bytes uploaded.
   uint64_t Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes);
@@ -76,8 +76,13 @@ class Renderer {
   // Draws `objects` (ids; those not uploaded are skipped) as seen by `camera`; with `mask`, only
   // the masked triangles of masked objects (objects the mask lists no triangle of are not
   // drawn). `drawn`, if given, receives what was drawn. `frame` stamps the objects' last use.
+  // The masked index lists are built on first use and kept per object for the last few masks
+  // (by EpsilonMaskSet::key), so that frames switching between masks build nothing.
   FrameStats Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
                   const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn);
+  // The triangles Draw would draw of `objects` without a mask (uploaded, in the view frustum),
+  // counted without drawing.
+  uint64_t CountTriangles(const ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects) const;
   // Waits until the frame is drawn (for frame timing).
   void Finish();
   // The last frame as RGB bytes, top row first (width x height x 3). Errors: GL failing.
@@ -93,19 +98,28 @@ class Renderer {
   absl::Status Resize(int width, int height);
 
  private:
+  // An object's triangles of one mask, as an index buffer.
+  struct MaskedIndices {
+    uint64_t mask_key = 0;  // EpsilonMaskSet::key
+    unsigned ibo = 0;
+    uint32_t count = 0;
+    uint64_t last_frame = 0;
+  };
+  static constexpr size_t kMaskedPerObject = 4;  // masks' index lists kept per object
   struct Gpu {
     unsigned vao = 0, vbo = 0, ibo = 0;
     uint32_t index_count = 0;
-    unsigned masked_ibo = 0;
-    uint32_t masked_count = 0;
-    uint64_t mask_generation = 0;  // of masked_ibo; 0: none built
+    std::vector<MaskedIndices> masked;  // at most kMaskedPerObject, the least recently drawn replaced
   };
   Renderer(gl::GlContext* context, const gl::GlFunctions& gl) : context_(context), gl_(gl) {}
   absl::Status Init(bool offscreen);
   absl::Status MakeFramebuffer();
   void Free(Gpu& g);
   void Upload(uint32_t id, const StoredObject& o);
-  void BuildMask(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits, uint64_t generation);
+  // The masked index list of `o` for `mask_key`, built (or rebuilt over the least recently used
+  // one) from `bits` when missing.
+  MaskedIndices& MaskedFor(Gpu& g, const StoredObject& o, const std::vector<uint8_t>& bits, uint64_t mask_key,
+                           uint64_t frame);
 
   gl::GlContext* context_;
   gl::GlFunctions gl_;

@@ -150,7 +150,8 @@ void SessionStream::ReadLoop() {
         break;
       case v1::ServerMessage::kEpsilonMask:
         r.masks.push_back(m.epsilon_mask());
-        r.order.emplace_back('M', 0);
+        r.mask_bytes += m.epsilon_mask().triangles().size();
+        r.order.emplace_back('M', m.epsilon_mask().mask_id());
         break;
       case v1::ServerMessage::BODY_NOT_SET:
         break;

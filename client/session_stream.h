@@ -28,7 +28,7 @@ struct SessionRecord {
   bool scene_info = false;
   vistream::v1::SceneInfo info;
   // Every message kind in arrival order: 'S' scene info, 'P' PVS, 'G' geometry, 'E' evict,
-  // 'M' ε-mask; with the cell or object id.
+  // 'M' ε-mask; with the cell, object or mask id.
   std::vector<std::pair<char, uint32_t>> order;
   std::map<uint32_t, std::vector<uint32_t>> pvs;  // latest list per cell
   std::vector<uint32_t> pvs_order;                // cells in arrival order
@@ -37,6 +37,7 @@ struct SessionRecord {
   uint64_t duplicates = 0;                        // geometry received while held
   uint64_t geometry_bytes = 0;
   std::vector<vistream::v1::EpsilonMask> masks;
+  uint64_t mask_bytes = 0;  // the masks' run-length triangle bytes: credit they consumed
   std::vector<uint32_t> evicted;
   uint64_t raw_geometry_bytes = 0;  // what the geometry received would be unencoded
   bool ended = false;

@@ -62,7 +62,8 @@ class Loop {
   // Takes the network's events into the store and uploads within `upload_budget`.
   absl::StatusOr<Pumped> Pump(const glm::dvec3& eye, uint64_t upload_budget);
   absl::Status Screenshot(double t);
-  absl::Status Verify(const std::vector<DrawnObject>& drawn);
+  // Compares what was drawn (`mask`: the mask the frame drew, or none) with the full scene.
+  absl::Status Verify(const std::vector<DrawnObject>& drawn, const EpsilonMaskSet* mask);
   void Log(const std::string& line) const {
     if (opt_.log) opt_.log(line);
   }
@@ -205,7 +206,9 @@ absl::Status Loop::Prepare() {
   if (!opt_.frame_log.empty()) {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
     if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
-    std::fprintf(frame_log_, "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked\n");
+    std::fprintf(frame_log_,
+                 "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked,hole,"
+                 "triangles_without_masks,mask_id\n");
   }
   if (!opt_.cell_log.empty()) {
     cell_log_ = std::fopen(opt_.cell_log.c_str(), "w");
@@ -224,6 +227,7 @@ absl::Status Loop::Prepare() {
   co.triangle_budget = triangle_budget_;
   co.connect_timeout_s = opt_.connect_timeout_s;
   co.security = opt_.security;
+  co.epsilon_masks = opt_.use_masks;
   store_ = std::make_unique<ObjectStore>(memory_budget_);
   if (opt_.draw_everything) return PreloadEverything();
   connection_ = std::make_unique<Connection>(co);
@@ -287,6 +291,10 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
   const std::vector<uint32_t> dropped = store_->Apply(std::move(events), p.cell);
   if (!dropped.empty()) connection_->Forget(dropped);
   if (store_->failure().has_value()) {
+    if (store_->failure_is_bad_data()) {
+      return absl::DataLossError(absl::StrCat("the server at ", opt_.server, " sent what this client cannot use: ",
+                                              *store_->failure()));
+    }
     return absl::UnavailableError(absl::StrCat("the server at ", opt_.server, " ended the session: ", *store_->failure()));
   }
   if (!had_info && store_->has_scene_info()) {
@@ -334,7 +342,8 @@ absl::Status Loop::Startup() {
   // ahead are ranked first; the simulator models the same (server/simulator.cpp).
   const glm::dvec3 velocity = walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0);
   std::optional<uint32_t> ahead;
-  bool ahead_known = !walk_.has_value();
+  // Drawing everything, no PVS list ever comes: what is preloaded is all there is to wait for.
+  bool ahead_known = !walk_.has_value() || opt_.draw_everything;
   auto ahead_complete = [&] {
     if (!ahead_known && store_->has_scene_info()) {
       const GridInfo& g = store_->grid();
@@ -404,18 +413,14 @@ absl::Status Loop::Screenshot(double t) {
   return absl::OkStatus();
 }
 
-absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn) {
+absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMaskSet* mask) {
   std::vector<uint8_t> flags(ids_->triangle_count(), 0);
-  const std::optional<EpsilonMaskSet>& mask = store_->mask();
   for (const DrawnObject& d : drawn) {
     if (d.id >= full_scene_->objects.size()) continue;
     const uint64_t first = ids_->FirstTriangle(d.id);
     const size_t n = full_scene_->objects[d.id].mesh.TriangleCount();
     const std::vector<uint8_t>* bits = nullptr;
-    if (d.masked && mask.has_value()) {
-      auto it = mask->visible.find(d.id);
-      if (it != mask->visible.end()) bits = &it->second;
-    }
+    if (d.masked && mask != nullptr) bits = mask->Bits(d.id);
     for (size_t t = 0; t < n; ++t) {
       flags[first + t] = bits == nullptr || TriangleVisible(*bits, t) ? 1 : 0;
     }
@@ -452,6 +457,8 @@ absl::Status Loop::Walkthrough() {
   bool was_connected = true;
   double lost_at = 0.0;
   std::optional<uint32_t> stalled_in;  // the cell a stall was last reported for
+  std::optional<uint32_t> holed_in;    // the cell a hole frame was last reported for
+  uint64_t triangles_without = 0;      // over the frames: what the viewcell PVS alone would draw
   absl::Status gave_up;  // the server lost for longer than --give-up: the walk ends with it
   for (;;) {
     const double begin = Now();
@@ -500,23 +507,41 @@ absl::Status Loop::Walkthrough() {
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
     ObserveCells(t, p->cell, !p->complete);
-    std::vector<uint32_t> everything;
-    const std::vector<uint32_t>* set = opt_.draw_everything ? &everything_ : p->pvs;
-    if (!p->complete) {
-      // A stall: draw what is held.
-      for (const auto& [id, o] : store_->objects()) everything.push_back(id);
-      set = &everything;
+    // The frame rule: the eye's mask once all its objects are here (a masked frame); else the
+    // viewcell's PVS once complete; else what is held (a hole frame).
+    MaskChoice choice;
+    if (opt_.use_masks && !opt_.draw_everything) {
+      choice = store_->ChooseMask(camera_.eye, [this](uint32_t id) { return renderer_->Uploaded(id); });
     }
-    const std::optional<EpsilonMaskSet>& mask = store_->mask();
-    const EpsilonMaskSet* use_mask =
-        opt_.use_masks && p->complete && mask.has_value() && mask->Contains(camera_.eye) ? &*mask : nullptr;
+    const EpsilonMaskSet* use_mask = choice.mask;
+    const bool hole = use_mask == nullptr && !p->complete;
+    std::vector<uint32_t> everything;
+    if (!p->complete) {
+      // What is held: a hole frame draws it, and a PVS-only client would have.
+      for (const auto& [id, o] : store_->objects()) everything.push_back(id);
+    }
+    const std::vector<uint32_t>* without_masks =
+        opt_.draw_everything ? &everything_ : p->complete ? p->pvs : &everything;
+    const std::vector<uint32_t>* set = use_mask != nullptr ? &use_mask->object_ids : without_masks;
     const bool check = ids_ != nullptr && (t >= next_check || last);
     drawn.clear();
     const FrameStats fs = renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr);
     renderer_->Finish();
+    // What the PVS alone would have drawn (counted, not drawn: out of the frame time).
+    const uint64_t triangles_without_masks =
+        use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
     const double end = Now();
     ++sum_->frames;
     frame_ms.push_back((end - begin) * 1000.0);
+    if (hole) {
+      ++sum_->hole_frames;
+      if (p->cell != holed_in && p->cell.has_value()) {
+        holed_in = p->cell;
+        Log(absl::StrFormat("hole frame at %.0f s: %s", t,
+                            choice.in_box ? "the eye's masks lack objects and its viewcell's PVS is incomplete"
+                                          : "the eye is in no mask's box and its viewcell's PVS is incomplete"));
+      }
+    }
     if (!p->complete) {
       if (p->cell != stalled_in && p->cell.has_value()) {
         stalled_in = p->cell;
@@ -538,6 +563,7 @@ absl::Status Loop::Walkthrough() {
     }
     prev_end = end;
     triangles += fs.triangles_drawn;
+    triangles_without += triangles_without_masks;
     objects += fs.objects_drawn;
     sum_->max_triangles_drawn = std::max(sum_->max_triangles_drawn, fs.triangles_drawn);
     if (memory_budget_ != 0 && store_->held_bytes() > memory_budget_) ++sum_->frames_over_memory_budget;
@@ -553,15 +579,17 @@ absl::Status Loop::Walkthrough() {
       while (next_shot <= t) next_shot += opt_.every_s;
     }
     if (check) {
-      if (absl::Status s = Verify(drawn); !s.ok()) return s;
+      if (absl::Status s = Verify(drawn, use_mask); !s.ok()) return s;
       while (next_check <= t) next_check += opt_.every_s;
     }
     if (frame_log_ != nullptr) {
-      std::fprintf(frame_log_, "%llu,%.3f,%.2f,%.2f,%lld,%d,%u,%llu,%.3f,%llu,%d\n",
+      std::fprintf(frame_log_, "%llu,%.3f,%.2f,%.2f,%lld,%d,%u,%llu,%.3f,%llu,%d,%d,%llu,%u\n",
                    static_cast<unsigned long long>(sum_->frames), t, camera_.eye.x, camera_.eye.y,
                    p->cell.has_value() ? static_cast<long long>(*p->cell) : -1LL, p->complete ? 0 : 1,
                    fs.objects_drawn, static_cast<unsigned long long>(fs.triangles_drawn), frame_ms.back(),
-                   static_cast<unsigned long long>(store_->held_bytes()), fs.mask_used ? 1 : 0);
+                   static_cast<unsigned long long>(store_->held_bytes()), fs.mask_used ? 1 : 0, hole ? 1 : 0,
+                   static_cast<unsigned long long>(triangles_without_masks),
+                   use_mask != nullptr ? use_mask->mask_id : 0u);
     }
     if (walk_.has_value() && t >= next_progress * 0.1 * walk_limit_s_ && next_progress <= 9) {
       Log(absl::StrFormat("walk %d%%: %.0f of %.0f s, %d frames, %d stalls, %.1f MB held", next_progress * 10,
@@ -579,9 +607,11 @@ absl::Status Loop::Walkthrough() {
           cell = absl::StrCat(*p->cell % static_cast<uint32_t>(g.nx), ",", *p->cell / static_cast<uint32_t>(g.nx));
         }
         input_->SetTitle(absl::StrFormat(
-            "vistream %s | %.0f fps | cell %s | PVS %d | held %d objects, %.1f MB | drawn %d tris | stalls %d",
-            sum_->scene, fps, cell, p->pvs != nullptr ? p->pvs->size() : 0, store_->objects().size(),
-            store_->held_bytes() / 1e6, fs.triangles_drawn, sum_->stalls));
+            "vistream %s | %.0f fps | cell %s | %s | PVS %d | held %d objects, %.1f MB | drawn %d tris (PVS %d) | "
+            "stalls %d, holes %d",
+            sum_->scene, fps, cell, use_mask != nullptr ? "masked" : hole ? "HOLE" : "PVS",
+            p->pvs != nullptr ? p->pvs->size() : 0, store_->objects().size(), store_->held_bytes() / 1e6,
+            fs.triangles_drawn, triangles_without_masks, sum_->stalls, sum_->hole_frames));
         last_title = end;
       }
       if (input_->ShouldClose()) last = true;
@@ -603,6 +633,7 @@ absl::Status Loop::Walkthrough() {
   if (sum_->frames > 0) {
     sum_->mean_triangles_drawn = static_cast<double>(triangles) / static_cast<double>(sum_->frames);
     sum_->mean_objects_drawn = static_cast<double>(objects) / static_cast<double>(sum_->frames);
+    sum_->mean_triangles_without_masks = static_cast<double>(triangles_without) / static_cast<double>(sum_->frames);
   }
   sum_->cells_visited = cells.size();
   return gave_up;
@@ -686,6 +717,7 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["duplicates"] = s.duplicates;
   j["reconnects"] = s.reconnects;
   j["mean_triangles_drawn"] = s.mean_triangles_drawn;
+  j["mean_triangles_without_masks"] = s.mean_triangles_without_masks;
   j["max_triangles_drawn"] = s.max_triangles_drawn;
   j["mean_objects_drawn"] = s.mean_objects_drawn;
   j["scene_triangles"] = s.scene_triangles;
@@ -708,6 +740,7 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["checked_pixels"] = s.checked_pixels;
   j["masks_received"] = s.masks_received;
   j["frames_masked"] = s.frames_masked;
+  j["hole_frames"] = s.hole_frames;
   j["cells_visited"] = s.cells_visited;
   j["startup_s"] = s.startup_s;
   j["walk_s"] = s.walk_s;
@@ -748,10 +781,17 @@ std::string SummaryText(const WalkthroughSummary& s) {
                         s.memory_budget_bytes > 0
                             ? absl::StrFormat(" of a %.2f MiB budget", s.memory_budget_bytes / 1048576.0)
                             : std::string());
-  absl::StrAppendFormat(&out, "  drawn: %.0f triangles a frame on average (%.3f%% of the scene's %d), %d frames masked\n",
+  absl::StrAppendFormat(&out, "  drawn: %.0f triangles a frame on average (%.3f%% of the scene's %d)\n",
                         s.mean_triangles_drawn,
                         s.scene_triangles > 0 ? 100.0 * s.mean_triangles_drawn / s.scene_triangles : 0.0,
-                        s.scene_triangles, s.frames_masked);
+                        s.scene_triangles);
+  absl::StrAppendFormat(&out,
+                        "  masks: %d received, %d of %d frames masked, %d hole frames; without masks %.0f triangles "
+                        "a frame (%.1f%% of it drawn)\n",
+                        s.masks_received, s.frames_masked, s.frames, s.hole_frames, s.mean_triangles_without_masks,
+                        s.mean_triangles_without_masks > 0
+                            ? 100.0 * s.mean_triangles_drawn / s.mean_triangles_without_masks
+                            : 0.0);
   if (s.verified) {
     absl::StrAppendFormat(&out, "  pixel error: %d of %d pixels in %d checked frames\n", s.pixel_error,
                           s.checked_pixels, s.checked_frames);

@@ -2,9 +2,12 @@
 // The thin client's main loop (DESIGN.md "Server and client"), shared by its two front ends:
 // a GLFW window (WASD and mouse, or following a walk) and a headless OSMesa run that follows a
 // walk from the scene catalog. Each frame takes what the network thread decoded, uploads within
-// a budget, and draws the current viewcell's PVS (narrowed by the ε-mask inside its box); it
-// never waits for the server. A stall is a frame drawn inside a viewcell whose PVS geometry
-// has not fully arrived (list, objects, and their upload).
+// a budget, and draws, never waiting for the server: the ε-mask of a neighbourhood the eye is
+// in once every object it lists is uploaded (a masked frame: those objects, only their masked
+// triangles; of several, the one with the fewest triangles); else the current viewcell's PVS
+// once it is complete; else what is held (a hole frame). A stall is a frame drawn inside a
+// viewcell whose PVS geometry has not fully arrived (list, objects, and their upload), masked
+// or not.
 
 #include <atomic>
 #include <cstdint>
@@ -46,7 +49,7 @@ struct WalkthroughOptions {
   std::optional<uint64_t> triangle_budget;      // none: the catalog's client.triangle_budget
   uint64_t upload_budget_bytes = uint64_t{4} << 20;  // GPU uploads per frame
   double max_fps = 60.0;        // 0: as fast as it draws
-  bool use_masks = true;        // false: draw the viewcell PVS whole (a baseline)
+  bool use_masks = true;        // false: ask for no ε-mask and draw the viewcell PVS whole (a baseline)
   // A baseline: no server geometry; the whole scene (loaded locally, or local_scene) is
   // uploaded before the walk and drawn every frame with frustum culling.
   bool draw_everything = false;
@@ -79,6 +82,10 @@ struct WalkthroughSummary {
   bool verified = false;
   uint64_t pixel_error = 0, checked_frames = 0, checked_pixels = 0;
   uint64_t masks_received = 0, frames_masked = 0, cells_visited = 0;
+  uint64_t hole_frames = 0;  // neither a usable mask nor the complete viewcell PVS
+  // The same frames' viewcell PVS after view-frustum culling (what a PVS-only client would
+  // draw: on a stall, what is held); equal to mean_triangles_drawn without masks.
+  double mean_triangles_without_masks = 0.0;
   double startup_s = 0.0, walk_s = 0.0, distance_m = 0.0;
   // Arrival margins (client/cell_margins.h), walk-clock seconds, over the viewcells entered
   // after the start cell (the walk waits for that one).

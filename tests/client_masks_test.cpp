@@ -1,0 +1,418 @@
+// The thin client's ε-masks (issue 34): the object store decodes the server's run-length masks,
+// keeps those of the nine cells around the eye (at most 64) and picks, for an eye, the mask a
+// frame may draw; a walker on city1 at 6 km/h through a real server on loopback draws masked
+// frames, no hole frame and no pixel error; mask bytes are credit consumed (a 2 KB window keeps
+// flowing); without masks the server sends none.
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "client/connection.h"
+#include "client/object_store.h"
+#include "client/walkthrough.h"
+#include "scenes/catalog.h"
+#include "scenes/walk.h"
+#include "server/served_scene.h"
+#include "server/service.h"
+#include "tests/temp_dir.h"
+#include "visibility/mask_codec.h"
+
+namespace vistream::client {
+namespace {
+
+namespace v1 = vistream::v1;
+
+// Five cells of 10 m in a row (x from 0 to 50), a 2 m band from z = 0; 10 objects, 100 triangles.
+v1::SceneInfo RowOfCells() {
+  v1::SceneInfo info;
+  info.set_name("row");
+  info.set_object_count(10);
+  info.set_triangle_count(100);
+  v1::ViewcellGrid* grid = info.mutable_grid();
+  grid->set_cell_size_m(10);
+  grid->set_nx(5);
+  grid->set_ny(1);
+  grid->set_height_m(2);
+  return info;
+}
+
+ReceivedObject Object(uint32_t id) {
+  ReceivedObject o;
+  o.id = id;
+  o.raw_bytes = 100;
+  return o;
+}
+
+// A mask over `objects` (id and its set triangle indices) for the box [lo, hi] in `cell`.
+v1::EpsilonMask Mask(uint32_t mask_id, uint32_t cell, glm::dvec3 lo, glm::dvec3 hi,
+                     const std::vector<std::pair<uint32_t, std::vector<uint32_t>>>& objects) {
+  std::vector<visibility::MaskObject> sets;
+  uint64_t triangles = 0;
+  for (const auto& [id, set] : objects) {
+    visibility::MaskObject m;
+    m.object = id;
+    for (uint32_t t : set) {
+      if (m.bits.size() <= t / 8) m.bits.resize(t / 8 + 1, 0);
+      m.bits[t / 8] = static_cast<uint8_t>(m.bits[t / 8] | (1u << (t % 8)));
+    }
+    triangles += set.size();
+    sets.push_back(std::move(m));
+  }
+  v1::EpsilonMask m;
+  m.set_mask_id(mask_id);
+  m.set_cell_id(cell);
+  m.mutable_neighbourhood_min()->set_x(lo.x);
+  m.mutable_neighbourhood_min()->set_y(lo.y);
+  m.mutable_neighbourhood_min()->set_z(lo.z);
+  m.mutable_neighbourhood_max()->set_x(hi.x);
+  m.mutable_neighbourhood_max()->set_y(hi.y);
+  m.mutable_neighbourhood_max()->set_z(hi.z);
+  m.set_triangles(visibility::EncodeMaskRuns(sets));
+  m.set_object_count(static_cast<uint32_t>(sets.size()));
+  m.set_triangle_count(triangles);
+  return m;
+}
+
+// A box in cell `cell` of RowOfCells: x from 10 cell + a to 10 cell + b, all of y, z 0..2.
+v1::EpsilonMask MaskIn(uint32_t mask_id, uint32_t cell, double a, double b,
+                       const std::vector<std::pair<uint32_t, std::vector<uint32_t>>>& objects) {
+  return Mask(mask_id, cell, {10.0 * cell + a, 0.0, 0.0}, {10.0 * cell + b, 10.0, 2.0}, objects);
+}
+
+std::vector<uint32_t> HeldMaskIds(const ObjectStore& store) {
+  std::vector<uint32_t> ids;
+  for (const auto& [id, m] : store.masks()) ids.push_back(id);
+  return ids;
+}
+
+TEST(ObjectStoreMasks, AMaskIsDecodedWithItsCellBoxObjectsAndTriangleBits) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(RowOfCells());
+  events.emplace_back(Mask(3, 1, {11, 2, 0.5}, {15, 4, 1.1}, {{2, {0, 9}}, {7, {4}}}));
+  store.Apply(std::move(events), 1u);
+  ASSERT_FALSE(store.failure().has_value()) << *store.failure();
+  ASSERT_EQ(store.masks().size(), 1u);
+  const EpsilonMaskSet& m = store.masks().at(3);
+  EXPECT_EQ(m.mask_id, 3u);
+  EXPECT_EQ(m.cell, 1u);
+  EXPECT_EQ(m.triangles, 3u);
+  EXPECT_EQ(m.object_ids, (std::vector<uint32_t>{2, 7}));
+  EXPECT_TRUE(m.Contains({13, 3, 0.8}));
+  EXPECT_FALSE(m.Contains({13, 3, 1.5}));  // above the box
+  EXPECT_FALSE(m.Contains({16, 3, 0.8}));
+  ASSERT_NE(m.Bits(2), nullptr);
+  EXPECT_TRUE(TriangleVisible(*m.Bits(2), 0));
+  EXPECT_FALSE(TriangleVisible(*m.Bits(2), 1));
+  EXPECT_TRUE(TriangleVisible(*m.Bits(2), 9));
+  EXPECT_FALSE(TriangleVisible(*m.Bits(2), 10));
+  ASSERT_NE(m.Bits(7), nullptr);
+  EXPECT_TRUE(TriangleVisible(*m.Bits(7), 4));
+  EXPECT_EQ(m.Bits(3), nullptr);  // not in the mask: nothing of it drawn
+}
+
+TEST(ObjectStoreMasks, BadMaskBytesAreTheStoresFailureNamingTheMaskAndWhatIsWrong) {
+  struct Case {
+    std::string bytes, says;
+  };
+  // An id past the scene's 10 objects; a varint cut short.
+  std::string past = Mask(1, 0, {0, 0, 0}, {1, 1, 1}, {{12, {0}}}).triangles();
+  const std::vector<Case> cases = {{past, "object"}, {std::string("\x80", 1), "truncated"}};
+  for (const Case& c : cases) {
+    ObjectStore store(0);
+    v1::EpsilonMask bad = Mask(9, 0, {0, 0, 0}, {1, 1, 1}, {});
+    bad.set_triangles(c.bytes);
+    std::vector<Event> events;
+    events.emplace_back(RowOfCells());
+    events.emplace_back(bad);
+    store.Apply(std::move(events), 0u);
+    ASSERT_TRUE(store.failure().has_value());
+    EXPECT_TRUE(store.failure_is_bad_data());
+    EXPECT_NE(store.failure()->find("mask 9"), std::string::npos) << *store.failure();
+    EXPECT_NE(store.failure()->find(c.says), std::string::npos) << *store.failure();
+    EXPECT_TRUE(store.masks().empty());
+  }
+  // Before the scene's description nothing can be decoded: the same failure, saying so.
+  ObjectStore early(0);
+  std::vector<Event> events;
+  events.emplace_back(Mask(4, 0, {0, 0, 0}, {1, 1, 1}, {{1, {0}}}));
+  early.Apply(std::move(events), std::nullopt);
+  ASSERT_TRUE(early.failure().has_value());
+  EXPECT_NE(early.failure()->find("mask 4"), std::string::npos) << *early.failure();
+}
+
+TEST(ObjectStoreMasks, MasksOfCellsBeyondTheNineAroundTheEyeAreDroppedAndTheRendererTold) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(RowOfCells());
+  for (uint32_t cell = 0; cell < 5; ++cell) events.emplace_back(MaskIn(cell + 1, cell, 1, 9, {{1, {0}}}));
+  store.Apply(std::move(events), 0u);  // the eye in cell 0: cells 0 and 1 around it
+  EXPECT_EQ(HeldMaskIds(store), (std::vector<uint32_t>{1, 2}));
+  std::vector<uint64_t> dropped = store.TakeDroppedMasks();
+  EXPECT_EQ(dropped.size(), 3u);
+  EXPECT_TRUE(store.TakeDroppedMasks().empty());
+  // The eye moves to cell 2: cell 0's mask goes, cell 1's stays.
+  store.Apply({}, 2u);
+  EXPECT_EQ(HeldMaskIds(store), (std::vector<uint32_t>{2}));
+  dropped = store.TakeDroppedMasks();
+  ASSERT_EQ(dropped.size(), 1u);
+  // An eye outside the grid keeps what is held.
+  store.Apply({}, std::nullopt);
+  EXPECT_EQ(HeldMaskIds(store), (std::vector<uint32_t>{2}));
+}
+
+TEST(ObjectStoreMasks, AtMost64MasksAreHeldTheOldestDroppedFirst) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(RowOfCells());
+  for (uint32_t id = 1; id <= 70; ++id) events.emplace_back(MaskIn(id, 0, 1, 9, {{id % 10, {0}}}));
+  store.Apply(std::move(events), 0u);
+  ASSERT_EQ(store.masks().size(), ObjectStore::kMaxMasks);
+  EXPECT_EQ(store.masks().begin()->first, 7u);
+  EXPECT_EQ(store.masks().rbegin()->first, 70u);
+  EXPECT_EQ(store.TakeDroppedMasks().size(), 6u);
+  // One more: mask 7 goes.
+  events.clear();
+  events.emplace_back(MaskIn(71, 0, 1, 9, {{1, {0}}}));
+  store.Apply(std::move(events), 0u);
+  EXPECT_EQ(store.masks().size(), ObjectStore::kMaxMasks);
+  EXPECT_EQ(store.masks().count(7), 0u);
+  EXPECT_EQ(store.masks().count(71), 1u);
+}
+
+TEST(ObjectStoreMasks, AMaskIdSeenAgainIsANewSessionsMaskAndReplacesTheOld) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(RowOfCells());
+  events.emplace_back(MaskIn(1, 0, 1, 3, {{1, {0}}}));
+  store.Apply(std::move(events), 0u);
+  const uint64_t old_key = store.masks().at(1).key;
+  events.clear();
+  events.emplace_back(MaskIn(1, 0, 5, 9, {{2, {0, 1}}}));
+  store.Apply(std::move(events), 0u);
+  ASSERT_EQ(store.masks().size(), 1u);
+  EXPECT_EQ(store.masks().at(1).object_ids, (std::vector<uint32_t>{2}));
+  EXPECT_NE(store.masks().at(1).key, old_key);  // the renderer builds nothing on the old one's
+  EXPECT_EQ(store.TakeDroppedMasks(), (std::vector<uint64_t>{old_key}));
+}
+
+TEST(ObjectStoreMasks, TheUsableMaskHoldsTheEyeHasEveryObjectReadyAndTheFewestTriangles) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(RowOfCells());
+  events.emplace_back(MaskIn(1, 1, 0, 6, {{1, {0, 1, 2}}, {2, {0, 1}}}));  // 5 triangles
+  events.emplace_back(MaskIn(2, 1, 2, 8, {{3, {0, 1}}}));                // 2 triangles, object 3
+  events.emplace_back(MaskIn(3, 1, 7, 10, {{1, {0}}}));                 // 1 triangle, elsewhere
+  events.emplace_back(Object(1));
+  events.emplace_back(Object(2));
+  store.Apply(std::move(events), 1u);
+  const glm::dvec3 eye(14, 5, 1);  // in masks 1 and 2
+  MaskChoice c = store.ChooseMask(eye);
+  EXPECT_TRUE(c.in_box);
+  ASSERT_NE(c.mask, nullptr);
+  EXPECT_EQ(c.mask->mask_id, 1u) << "mask 2 lacks object 3";
+  // Object 3 arrives: mask 2 has fewer triangles.
+  events.clear();
+  events.emplace_back(Object(3));
+  store.Apply(std::move(events), 1u);
+  c = store.ChooseMask(eye);
+  ASSERT_NE(c.mask, nullptr);
+  EXPECT_EQ(c.mask->mask_id, 2u);
+  // Not uploaded yet (the renderer's say): mask 1 again.
+  c = store.ChooseMask(eye, [](uint32_t id) { return id != 3; });
+  ASSERT_NE(c.mask, nullptr);
+  EXPECT_EQ(c.mask->mask_id, 1u);
+  // In mask 2's box only, with object 3 not ready: in a box, no usable mask.
+  c = store.ChooseMask({16.5, 5, 1}, [](uint32_t id) { return id != 3; });
+  EXPECT_TRUE(c.in_box);
+  EXPECT_EQ(c.mask, nullptr);
+  // Above the boxes, or in a cell without masks: in no box, no mask.
+  c = store.ChooseMask({14, 5, 2.5});
+  EXPECT_FALSE(c.in_box);
+  EXPECT_EQ(c.mask, nullptr);
+  c = store.ChooseMask({41, 5, 1});
+  EXPECT_FALSE(c.in_box);
+  EXPECT_EQ(c.mask, nullptr);
+  // An object the server evicts makes its masks unusable.
+  events.clear();
+  v1::Evict evict;
+  evict.add_object_ids(3);
+  events.emplace_back(evict);
+  store.Apply(std::move(events), 1u);
+  c = store.ChooseMask(eye);
+  ASSERT_NE(c.mask, nullptr);
+  EXPECT_EQ(c.mask->mask_id, 1u);
+}
+
+// city1 as the server's tests serve it (50 m viewcells), shared by the tests here.
+server::ServedScene& City1() {
+  static server::ServedScene* scene = [] {
+    server::ServedSceneOptions o;
+    o.scene = "city1";
+    o.threads = 2;
+    absl::StatusOr<std::unique_ptr<server::ServedScene>> s = server::ServedScene::Create(o);
+    EXPECT_TRUE(s.ok()) << s.status();
+    return s->release();
+  }();
+  return *scene;
+}
+
+// The frame log's lines as fields, the header first.
+std::vector<std::vector<std::string>> ReadCsv(const std::string& path) {
+  std::vector<std::vector<std::string>> rows;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) {
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    rows.push_back(std::move(f));
+  }
+  return rows;
+}
+
+TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
+  server::ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
+      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  WalkthroughOptions o;
+  o.server = "127.0.0.1:" + std::to_string((*server)->port());
+  o.headless = true;
+  o.width = 320;
+  o.height = 180;
+  o.max_fps = 30.0;  // leave the 2-core machine to the server
+  o.speed_kmh = 6.0;
+  o.seconds = 90.0;  // 150 m of lot-lines: four viewcells
+  o.verify = true;
+  o.every_s = 3.0;
+  o.local_scene = &City1().scene();
+  o.frame_log = (std::filesystem::path(vistream::testing::ProcessTempDir()) / "city1_masks_frames.csv").string();
+  o.log = [](const std::string& line) { std::printf("client: %s\n", line.c_str()); };
+  absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
+  ASSERT_TRUE(s.ok()) << s.status();
+  std::printf("%s", SummaryText(*s).c_str());
+  std::printf("figures: frames %llu, frames_masked %llu (%.1f%%), hole_frames %llu, stalls %llu, masks_received %llu, "
+              "mean triangles %.0f with masks, %.0f without, pixel_error %llu in %llu checked frames\n",
+              static_cast<unsigned long long>(s->frames), static_cast<unsigned long long>(s->frames_masked),
+              s->frames > 0 ? 100.0 * static_cast<double>(s->frames_masked) / static_cast<double>(s->frames) : 0.0,
+              static_cast<unsigned long long>(s->hole_frames), static_cast<unsigned long long>(s->stalls),
+              static_cast<unsigned long long>(s->masks_received), s->mean_triangles_drawn,
+              s->mean_triangles_without_masks, static_cast<unsigned long long>(s->pixel_error),
+              static_cast<unsigned long long>(s->checked_frames));
+  EXPECT_GT(s->frames, 1000u);
+  EXPECT_GT(s->masks_received, 0u);
+  EXPECT_GT(static_cast<double>(s->frames_masked), 0.95 * static_cast<double>(s->frames));
+  EXPECT_EQ(s->hole_frames, 0u);
+  EXPECT_EQ(s->pixel_error, 0u);
+  EXPECT_GE(s->checked_frames, 20u);
+  EXPECT_LT(s->mean_triangles_drawn, s->mean_triangles_without_masks);
+
+  // The frame log: the new columns at the end, consistent with the summary.
+  const std::vector<std::vector<std::string>> rows = ReadCsv(o.frame_log);
+  ASSERT_EQ(rows.size(), s->frames + 1);
+  const std::vector<std::string>& header = rows.front();
+  ASSERT_EQ(header.size(), 14u);
+  EXPECT_EQ(header[10], "masked");
+  EXPECT_EQ(header[11], "hole");
+  EXPECT_EQ(header[12], "triangles_without_masks");
+  EXPECT_EQ(header[13], "mask_id");
+  uint64_t masked = 0, holes = 0;
+  for (size_t k = 1; k < rows.size(); ++k) {
+    ASSERT_EQ(rows[k].size(), 14u) << "line " << k;
+    const bool is_masked = rows[k][10] == "1";
+    masked += is_masked ? 1 : 0;
+    holes += rows[k][11] == "1" ? 1 : 0;
+    EXPECT_EQ(is_masked, rows[k][13] != "0") << "line " << k << ": a masked frame names its mask";
+    // Masked triangles are a subset of the PVS's.
+    EXPECT_LE(std::stoull(rows[k][7]), std::stoull(rows[k][12])) << "line " << k;
+  }
+  EXPECT_EQ(masked, s->frames_masked);
+  EXPECT_EQ(holes, s->hole_frames);
+  nlohmann::json j = nlohmann::json::parse(SummaryJson(*s));
+  EXPECT_EQ(j["hole_frames"], s->hole_frames);
+  EXPECT_EQ(j["frames_masked"], s->frames_masked);
+  EXPECT_DOUBLE_EQ(j["mean_triangles_without_masks"].get<double>(), s->mean_triangles_without_masks);
+}
+
+TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiving) {
+  // A 2 KB credit window: masks the client did not count as consumed would leak that much
+  // credit after a few masks, and the server would send nothing more.
+  server::ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
+      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(entry->walks.front(), 6.0 / 3.6);
+  ASSERT_TRUE(walk.ok()) << walk.status();
+  ConnectionOptions co;
+  co.address = "127.0.0.1:" + std::to_string((*server)->port());
+  co.scene = "city1";
+  co.credit_window_bytes = 2048;
+  co.epsilon_masks = true;
+  co.pose_rate_hz = 20.0;
+  Connection connection(co);
+  connection.Start();
+  const double duration_s = 40.0;
+  uint64_t masks_early = 0, objects_early = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (;;) {
+    const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (t > duration_s) break;
+    const scenes::WalkPose pose = walk->At(t);
+    connection.SetPose(pose.eye, pose.velocity, pose.yaw_rad, 0.0, t);
+    (void)connection.Take();
+    if (t < 0.75 * duration_s) {
+      masks_early = connection.stats().masks_received;
+      objects_early = connection.stats().objects_received;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  const ConnectionStats stats = connection.stats();
+  EXPECT_TRUE(connection.Stop().ok());
+  std::printf("masks %llu (%llu bytes), objects %llu (%llu geometry bytes); in the first 3/4: %llu masks, %llu objects\n",
+              static_cast<unsigned long long>(stats.masks_received), static_cast<unsigned long long>(stats.mask_bytes),
+              static_cast<unsigned long long>(stats.objects_received),
+              static_cast<unsigned long long>(stats.geometry_bytes), static_cast<unsigned long long>(masks_early),
+              static_cast<unsigned long long>(objects_early));
+  EXPECT_GT(stats.mask_bytes, 3 * co.credit_window_bytes) << "few mask bytes: credit leaked, or too few masks to show a leak";
+  EXPECT_GT(stats.masks_received, masks_early) << "masks stopped coming: credit leaked";
+  EXPECT_GT(stats.objects_received, objects_early) << "geometry stopped coming: credit leaked";
+}
+
+TEST(ClientMasks, WithoutMasksTheServerSendsNoneAndBothTriangleCountsAgree) {
+  server::ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
+      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  WalkthroughOptions o;
+  o.server = "127.0.0.1:" + std::to_string((*server)->port());
+  o.headless = true;
+  o.width = 160;
+  o.height = 90;
+  o.max_fps = 30.0;
+  o.speed_kmh = 6.0;
+  o.seconds = 15.0;
+  o.use_masks = false;  // Hello.epsilon_masks false
+  absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_GT(s->frames, 100u);
+  EXPECT_EQ(s->masks_received, 0u);
+  EXPECT_EQ(s->frames_masked, 0u);
+  EXPECT_DOUBLE_EQ(s->mean_triangles_without_masks, s->mean_triangles_drawn);
+  EXPECT_EQ(s->hole_frames, s->stalls);  // no mask: every stall is a hole
+}
+
+}  // namespace
+}  // namespace vistream::client
