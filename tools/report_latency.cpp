@@ -99,7 +99,7 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
       "set logscale x 2\n", "set xtics (", tics, ")\n", "set lmargin 12\n", "set rmargin 25\n", "set xlabel ", GnuplotQuote(xlabel), "\n",
       "set key outside right top box\n",
       eps.empty() ? "set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived)'\n"
-                  : "set title 'Stalled time (frames drawn before their viewcell's PVS geometry arrived) and hole "
+                  : "set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived) and hole "
                     "frames (neither an ε-mask nor the PVS ready)'\n",
       "set ylabel 'time (% of the walk)'\n", "set yrange [0:*]\n",
       eps.empty() ? "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalled time'\n"
