@@ -96,16 +96,16 @@ GnuplotPlot SweepPlot(const std::string& png, const std::string& title, const st
   }
   plot.script = absl::StrCat(
       "set multiplot layout 2,1 title ", GnuplotQuote(title), " font ',15'\n", "set grid lc rgb '#d0d0d0'\n",
-      "set logscale x 2\n", "set xtics (", tics, ")\n", "set lmargin 12\n", "set rmargin 25\n", "set xlabel ", GnuplotQuote(xlabel), "\n",
+      "set logscale x 2\n", "set xtics (", tics, ")\n", "set lmargin 12\n", (eps.empty() ? "set rmargin 25\n" : "set rmargin 30\n"), "set xlabel ", GnuplotQuote(xlabel), "\n",
       "set key outside right top box\n",
       eps.empty() ? "set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived)'\n"
-                  : "set title 'Stalled time (frames drawn before the PVS geometry of their viewcell arrived) and hole "
-                    "frames (neither an ε-mask nor the PVS ready)'\n",
+                  : "set title 'Stalls (frames before the PVS of their viewcell arrived) and holes (stalls no ε-mask covered)'\n",
       "set ylabel 'time (% of the walk)'\n", "set yrange [0:*]\n",
       eps.empty() ? "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalled time'\n"
-                  : "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalled time (pvs)', "
-                    "'sweep.dat' using 1:5 with linespoints lw 2 pt 5 lc rgb '#ff7f0e' title 'hole frames (pvs+eps)'\n",
-      "set title 'Arrival margin (time from a PVS completing to the client entering its cell)'\n",
+                  : "plot 'sweep.dat' using 1:2 with linespoints lw 2 pt 7 lc rgb '#d62728' title 'stalls (pvs)', "
+                    "'sweep.dat' using 1:5 with linespoints lw 2 pt 5 lc rgb '#ff7f0e' title 'holes (pvs+eps)'\n",
+      eps.empty() ? "set title 'Arrival margin (time from a PVS completing to the client entering its cell)'\n"
+                  : "set title 'Arrival margin, scheme pvs (time from a PVS completing to the client entering its cell)'\n",
       "set ylabel 'margin (s)'\n", "set yrange [*:*]\n", "set key outside right top box\n",
       "plot 'sweep.dat' using 1:3 with linespoints lw 2 pt 7 lc rgb '#1f77b4' title 'minimum margin', "
       "'sweep.dat' using 1:4 with linespoints lw 2 pt 5 lc rgb '#2ca02c' title 'mean margin', "
@@ -235,7 +235,7 @@ void TrianglesAlongTheWalk(Page& page, const LatencyPlan& plan, const std::strin
       "'triangles.dat' using 1:3 with lines lw 2 lc rgb '#ff7f0e' title 'pvs+eps (ε-masks)'\n",
       "set title ", GnuplotQuote(absl::StrCat("pvs+eps: frames drawn with an ε-mask, and hole frames (share of the "
                                               "frames in each ", bin_words, ")")),
-      "\n", "set ylabel 'frames (%)'\n", "set yrange [0:105]\n",
+      "\n", "set ylabel 'frames (%)'\n", "set yrange [-3:105]\n",
       "plot 'triangles.dat' using 1:4 with lines lw 2 lc rgb '#2ca02c' title 'masked frames', "
       "'triangles.dat' using 1:5 with lines lw 2 lc rgb '#d62728' title 'hole frames'\n",
       "unset multiplot\n");
