@@ -396,8 +396,12 @@ void Run::Receive(const v1::ServerMessage& m) {
       }
       if (opt_.log != nullptr) {
         const visibility::CellCoord c = scene_.grid().Coord(mask.cell);
+        const scenes::Aabb& b = mask.box;
         Log("mask_arrival", {{"t_s", t}, {"mask_id", static_cast<uint64_t>(mask.id)}, {"cell", absl::StrCat(c.i, ",", c.j)},
-                             {"objects", static_cast<uint64_t>(mask.objects.size())}, {"triangles", mask.triangles}});
+                             {"box", absl::StrFormat("%.2f,%.2f,%.2f,%.2f,%.2f,%.2f", b.min.x, b.min.y, b.min.z, b.max.x,
+                                                     b.max.y, b.max.z)},
+                             {"objects", static_cast<uint64_t>(mask.objects.size())}, {"triangles", mask.triangles},
+                             {"bytes", static_cast<uint64_t>(e.triangles().size())}});
       }
       masks_held_.push_back(std::move(mask));
       KeepMasks();
