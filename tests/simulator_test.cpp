@@ -344,7 +344,10 @@ TEST_F(SimulatorTest, TheRadiusSetIsComputedOnceAndChargedTheSameSecondsEveryTim
 
 TEST_F(SimulatorTest, SpeedSearchBracketsTheFirstStall) {
   // A slow link so that stalls start at a walking speed; fixed compute times: deterministic.
+  // Scheme pvs: the search's mechanics, without computing every probe's ε-masks (pvs+eps's
+  // hole search: HoleSearchFindsTheHighestSpeedWithoutAHoleFrame).
   SimulationOptions o = Options(*london_);
+  o.scheme = Scheme::kPvs;
   absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("100k,200", o.link);
   ASSERT_TRUE(slow.ok());
   o.link = *slow;
