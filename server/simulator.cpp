@@ -22,6 +22,7 @@
 #include "server/session.h"
 #include "server/simulated_holdings.h"
 #include "server/wire.h"
+#include "visibility/mask_codec.h"
 
 namespace vistream::server {
 
@@ -249,11 +250,28 @@ class Run {
 
   // The client.
   SimulatedHoldings holdings_;
-  struct Mask {
+  uint64_t holdings_generation_ = 0;  // bumped whenever an object arrives or is dropped
+  // An ε-mask as the client holds it (client/: the masks of its cell and the 8 around it, at
+  // most kMaxMasks, the oldest dropped first).
+  struct HeldMask {
+    uint32_t id = 0;
+    CellId cell = 0;
     scenes::Aabb box;
-    std::unordered_map<uint32_t, uint64_t> triangles;  // visible triangles per object
+    std::vector<std::pair<uint32_t, uint64_t>> objects;  // ascending ids, visible triangles of each
+    uint64_t triangles = 0;                               // over every object
+    double arrival_s = 0.0;
+    bool used = false;  // drawn on some frame
+    // When it became drawable (FrameCeil of the latest arrival among it and its objects), if
+    // every object is held; valid while holdings_generation_ equals checked.
+    std::optional<double> ready_s;
+    uint64_t checked = std::numeric_limits<uint64_t>::max();
   };
-  std::optional<Mask> mask_;
+  std::deque<HeldMask> masks_held_;  // in arrival order
+  // Drops the masks of cells other than the client's and the 8 around it, then the oldest over kMaxMasks.
+  void KeepMasks();
+  // Whether `m` can be drawn at `t` (it and every object it names arrived and were uploaded).
+  bool MaskReady(HeldMask& m, double t);
+  void Consume(uint64_t bytes);  // bytes charged to the credit were consumed: grant them back
   uint64_t consumed_since_grant_ = 0;
   std::optional<double> walk_t0_;  // when the walk started (the first viewcell complete)
   std::optional<CellId> start_cell_;
@@ -277,12 +295,18 @@ class Run {
   uint64_t triangle_every_ = 1;    // frames between two triangle counts (10 Hz)
   uint64_t triangle_samples_ = 0;
   double triangles_sum_ = 0.0;
+  double triangles_without_sum_ = 0.0;
   double crossing_compute_s_ = 0.0;
   bool crossed_ = false;
 };
 
 constexpr uint64_t kCreditWindow = uint64_t{8} << 20;  // client/connection.h credit_window_bytes
 constexpr double kPosePeriod = 0.1;                   // 10 Hz
+constexpr size_t kMaxMasks = 64;                      // ε-masks the client holds at most
+
+bool Inside(const glm::dvec3& e, const scenes::Aabb& b) {
+  return e.x >= b.min.x && e.x <= b.max.x && e.y >= b.min.y && e.y <= b.max.y && e.z >= b.min.z && e.z <= b.max.z;
+}
 
 void Run::SendUp(v1::ClientMessage m, const char* what) {
   const size_t bytes = m.ByteSizeLong();
@@ -327,20 +351,15 @@ void Run::Receive(const v1::ServerMessage& m) {
       const v1::ObjectGeometry& g = m.geometry();
       if (holdings_.Receive(g.object_id(), t, g.index_count() / 3)) ++r_.distinct_objects;
       if (pending_) missing_.erase(g.object_id());
+      ++holdings_generation_;
       const uint64_t encoded = g.vertices().size() + g.indices().size();
       r_.geometry_bytes += encoded;
       ++r_.objects_received;
-      // The client's grant (client/connection.cpp): what it consumed, once half the window is.
-      consumed_since_grant_ += encoded;
-      if (consumed_since_grant_ >= kCreditWindow / 2) {
-        v1::ClientMessage c;
-        c.mutable_credit()->set_bytes(consumed_since_grant_);
-        consumed_since_grant_ = 0;
-        SendUp(std::move(c), "credit");
-      }
+      Consume(encoded);
       break;
     }
     case v1::ServerMessage::kEvict:
+      ++holdings_generation_;
       for (uint32_t o : m.evict().object_ids()) {
         holdings_.Evict(o);
         if (pending_ && pending_list_) {
@@ -351,16 +370,41 @@ void Run::Receive(const v1::ServerMessage& m) {
       break;
     case v1::ServerMessage::kEpsilonMask: {
       const v1::EpsilonMask& e = m.epsilon_mask();
-      Mask mask;
-      mask.box.min = ToVec(e.box_min());
-      mask.box.max = ToVec(e.box_max());
-      for (const v1::ObjectTriangles& ot : e.objects()) {
-        uint64_t n = 0;
-        for (char c : ot.visible()) n += static_cast<uint64_t>(std::popcount(static_cast<unsigned char>(c)));
-        mask.triangles[ot.object_id()] = n;
-      }
-      mask_ = std::move(mask);
       ++r_.masks;
+      r_.mask_bytes += e.triangles().size();
+      Consume(e.triangles().size());  // a mask costs credit like geometry (proto EpsilonMask)
+      const scenes::Scene& sc = scene_.scene();
+      absl::StatusOr<visibility::DecodedMask> d = visibility::DecodeMaskRuns(
+          e.triangles(), static_cast<uint32_t>(sc.objects.size()), r_.scene_triangles);
+      if (!d.ok()) {
+        failure_ = absl::InternalError(
+            absl::StrCat("the simulated client cannot decode ε-mask ", e.mask_id(), ": ", d.status().message()));
+        break;
+      }
+      HeldMask mask;
+      mask.id = e.mask_id();
+      mask.cell = e.cell_id();
+      mask.box.min = ToVec(e.neighbourhood_min());
+      mask.box.max = ToVec(e.neighbourhood_max());
+      mask.arrival_s = t;
+      mask.triangles = d->triangles;
+      mask.objects.reserve(d->objects.size());
+      for (const visibility::MaskObject& o : d->objects) {
+        uint64_t n = 0;
+        for (uint8_t byte : o.bits) n += static_cast<uint64_t>(std::popcount(byte));
+        mask.objects.emplace_back(o.object, n);
+      }
+      if (opt_.log != nullptr) {
+        const visibility::CellCoord c = scene_.grid().Coord(mask.cell);
+        const scenes::Aabb& b = mask.box;
+        Log("mask_arrival", {{"t_s", t}, {"mask_id", static_cast<uint64_t>(mask.id)}, {"cell", absl::StrCat(c.i, ",", c.j)},
+                             {"box", absl::StrFormat("%.2f,%.2f,%.2f,%.2f,%.2f,%.2f", b.min.x, b.min.y, b.min.z, b.max.x,
+                                                     b.max.y, b.max.z)},
+                             {"objects", static_cast<uint64_t>(mask.objects.size())}, {"triangles", mask.triangles},
+                             {"bytes", static_cast<uint64_t>(e.triangles().size())}});
+      }
+      masks_held_.push_back(std::move(mask));
+      KeepMasks();
       break;
     }
     default:
@@ -390,6 +434,48 @@ void Run::Receive(const v1::ServerMessage& m) {
   }
 }
 
+void Run::Consume(uint64_t bytes) {
+  // The client's grant (client/connection.cpp): what it consumed, once half the window is.
+  consumed_since_grant_ += bytes;
+  if (consumed_since_grant_ >= kCreditWindow / 2) {
+    v1::ClientMessage c;
+    c.mutable_credit()->set_bytes(consumed_since_grant_);
+    consumed_since_grant_ = 0;
+    SendUp(std::move(c), "credit");
+  }
+}
+
+void Run::KeepMasks() {
+  const std::optional<CellId> at = cell_.has_value() ? cell_ : start_cell_;
+  if (at.has_value()) {
+    const visibility::CellCoord c = scene_.grid().Coord(*at);
+    std::erase_if(masks_held_, [&](const HeldMask& m) {
+      const visibility::CellCoord mc = scene_.grid().Coord(m.cell);
+      return std::abs(mc.i - c.i) > 1 || std::abs(mc.j - c.j) > 1;
+    });
+  }
+  while (masks_held_.size() > kMaxMasks) masks_held_.pop_front();
+}
+
+bool Run::MaskReady(HeldMask& m, double t) {
+  if (m.checked != holdings_generation_) {
+    m.checked = holdings_generation_;
+    double latest = m.arrival_s;
+    m.ready_s.reset();
+    bool all = true;
+    for (const auto& [o, n] : m.objects) {
+      const SimulatedHoldings::Held* h = holdings_.Of(o);
+      if (h == nullptr) {
+        all = false;
+        break;
+      }
+      latest = std::max(latest, h->arrival_s);
+    }
+    if (all) m.ready_s = FrameCeil(latest);
+  }
+  return m.ready_s.has_value() && *m.ready_s <= t + 1e-9;
+}
+
 void Run::CloseRecord(double t) {
   if (r_.cells.empty() || !pending_) return;
   CellRecord& rec = r_.cells.back();
@@ -411,6 +497,7 @@ void Run::Frame(double t) {
     crossed_ = true;
     crossing_compute_s_ = 0.0;
     cell_ = cell;
+    KeepMasks();
     CellRecord rec;
     rec.cell = *cell;
     rec.entered_s = t;
@@ -449,41 +536,61 @@ void Run::Frame(double t) {
     ++r_.stalls;
     r_.stall_s += r_.frame_s;
   }
+  // The mask drawn: of the held masks whose box the eye is in and whose objects are all here,
+  // the one with the fewest triangles.
+  HeldMask* mask = nullptr;
+  bool in_unready = false;
+  for (HeldMask& m : masks_held_) {
+    if (!Inside(pose.eye, m.box)) continue;
+    if (!MaskReady(m, t)) {
+      in_unready = true;
+    } else if (mask == nullptr || m.triangles < mask->triangles) {
+      mask = &m;
+    }
+  }
+  const bool hole = mask == nullptr && !complete;
+  if (mask != nullptr) {
+    ++r_.frames_masked;
+    if (!mask->used) ++r_.masks_used;
+    mask->used = true;
+  } else if (in_unready) {
+    ++r_.frames_in_unready_mask;
+  }
+  if (hole) ++r_.hole_frames;
   // Triangles drawn, counted on frames 10 times a second (the mean over every frame, sampled).
   if (opt_.count_triangles && (r_.frames - 1) % triangle_every_ == 0) {
-    // What the renderer draws: the cell's PVS (its mask's triangles while inside the mask's
-    // box), or during a stall everything held; culled against the view frustum.
+    // What the renderer draws, culled against the view frustum: the mask's triangles; else the
+    // cell's PVS; else (a hole) everything held. Without masks: the PVS, or during a stall
+    // everything held.
     const scenes::ViewFrustum frustum = RendererFrustum(pose.eye, pose.yaw_rad);
     const auto& objects = scene_.scene().objects;
-    uint64_t tris = 0;
+    auto seen = [&](uint32_t o) { return frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max); };
+    uint64_t without = 0;
     if (complete && cell_.has_value()) {
-      const Mask* mask = nullptr;
-      if (mask_.has_value() && opt_.scheme == Scheme::kPvsEps) {
-        const scenes::Aabb& b = mask_->box;
-        const glm::dvec3& e = pose.eye;
-        if (e.x >= b.min.x && e.x <= b.max.x && e.y >= b.min.y && e.y <= b.max.y && e.z >= b.min.z && e.z <= b.max.z) {
-          mask = &*mask_;
-        }
-      }
       for (uint32_t o : *holdings_.ListOf(*cell_)) {
         const SimulatedHoldings::Held* h = holdings_.Of(o);
-        if (h == nullptr || !frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) continue;
-        if (mask != nullptr) {
-          auto m = mask->triangles.find(o);
-          if (m != mask->triangles.end()) tris += m->second;
-        } else {
-          tris += h->triangles;
-        }
+        if (h != nullptr && seen(o)) without += h->triangles;
       }
     } else {
       for (uint32_t o = 0; o < holdings_.IdBound(); ++o) {
         const SimulatedHoldings::Held* h = holdings_.Of(o);
-        if (h != nullptr && frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max)) tris += h->triangles;
+        if (h != nullptr && seen(o)) without += h->triangles;
+      }
+    }
+    uint64_t tris = without;
+    if (mask != nullptr) {
+      tris = 0;
+      for (const auto& [o, n] : mask->objects) {
+        if (seen(o)) tris += n;
       }
     }
     triangles_sum_ += static_cast<double>(tris);
+    triangles_without_sum_ += static_cast<double>(without);
     ++triangle_samples_;
     r_.max_triangles_drawn = std::max(r_.max_triangles_drawn, tris);
+    const double sample_t = std::min(walk_t, walk_.duration_s());
+    r_.triangle_samples.push_back(SimulationResult::TriangleSample{sample_t, sample_t * walk_.speed_mps(), tris,
+                                                                   without, mask != nullptr, hole});
   }
   if (last) {
     CloseRecord(t);
@@ -606,6 +713,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   }
   if (!failure_.ok()) return failure_;
   if (crossed_) r_.compute_s_per_crossing.push_back(crossing_compute_s_);
+  r_.masks_dropped = session_->Stats().epsilon_masks_dropped();
   session_->End();
 
   const SchedulerStats s = sched_->stats();
@@ -617,6 +725,10 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   r_.walk_s = walk_.duration_s();
   r_.sim_s = q_.now();
   r_.mean_triangles_drawn = triangle_samples_ > 0 ? triangles_sum_ / static_cast<double>(triangle_samples_) : 0.0;
+  r_.mean_triangles_without_masks =
+      triangle_samples_ > 0 ? triangles_without_sum_ / static_cast<double>(triangle_samples_) : 0.0;
+  r_.masks_computed = masks_->ran();
+  r_.mask_compute_s = masks_->busy_s();
   double sum = 0.0;
   size_t n = 0;
   r_.min_margin_s = 0.0;
@@ -658,7 +770,8 @@ absl::StatusOr<SimulationResult> Simulate(ServedScene& scene, const scenes::Cata
 
 absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::CatalogEntry& entry,
                                          const SimulationOptions& options, double lo_mps, double hi_mps,
-                                         double precision, const scenes::RunControl& run) {
+                                         double precision, const scenes::RunControl& run,
+                                         SpeedCriterion criterion) {
   if (!(lo_mps > 0.0 && hi_mps > lo_mps && precision > 0.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("speed search: bracket [", lo_mps, ", ", hi_mps, "] m/s or precision ", precision, " is invalid"));
@@ -672,8 +785,9 @@ absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::Catal
     opt.count_triangles = false;
     absl::StatusOr<SimulationResult> r = Simulate(scene, entry, opt, run);
     if (!r.ok()) return r.status();
-    out.runs.emplace_back(speed, r->stalls);
-    return r->stalls;
+    const uint64_t bad = criterion == SpeedCriterion::kNoHole ? r->hole_frames : r->stalls;
+    out.runs.emplace_back(speed, bad);
+    return bad;
   };
   auto finish = [&](double max_mps, double stall_mps) -> absl::StatusOr<SpeedSearch> {
     out.max_speed_mps = max_mps;

@@ -10,6 +10,12 @@
 // nothing else: an entry without a link gets an ideal one; without client.frame_ms frames are
 // counted at 60 Hz but geometry needs no upload frame.
 //
+// ε-masks (scheme pvs+eps): the session plans and sends them as the server does (its chain of
+// neighbourhoods, computed on one simulated mask worker that runs only while a PVS worker is
+// free); the modelled client holds them as the real one (client/: by mask_id, those of its cell
+// and the 8 around it, at most 64, the oldest dropped first), grants their bytes back as credit
+// like geometry's, and draws one whenever its eye is in its box and its objects are here.
+//
 // Units: seconds of simulated time (0 = the client opens its session), metres in the scene's
 // local frame (z up), bytes.
 
@@ -39,7 +45,7 @@ namespace vistream::server {
 
 // What the server streams for a viewcell.
 enum class Scheme {
-  kPvsEps,  // "pvs+eps": the viewcell PVS, narrowed by ε-masks while the client lingers (the server's)
+  kPvsEps,  // "pvs+eps": the viewcell PVS, narrowed by ε-masks along the walk (the server's)
   kPvs,     // "pvs": the viewcell PVS without ε-masks
   kRadius,  // "radius": no visibility: every object within R metres of the cell
   kPlain,   // "plain": the paper's: no shared cache, neighbours in a fixed grid order
@@ -207,6 +213,36 @@ struct SimulationResult {
   uint64_t pvs_computed = 0;     // jobs the simulated scheduler ran (paid for)
   uint64_t pvs_cache_hits = 0;
   uint64_t masks = 0;            // ε-masks received
+  // ε-masks (scheme pvs+eps; issue 34). Every walking frame is drawn one of three ways, as the
+  // client draws it: *masked* (the eye inside the box of a held mask whose objects have all
+  // arrived and been uploaded: that mask's triangles, the mask with the fewest when several),
+  // else the viewcell's PVS when it is complete, else a *hole* (what is held). A hole frame is
+  // also a stall, so hole_frames <= stalls; a masked frame may be a stall too. Counted on every
+  // frame.
+  uint64_t frames_masked = 0;
+  uint64_t hole_frames = 0;
+  // Frames not masked whose eye was inside a held mask's box all the same (its objects had not
+  // all arrived): misses of ε-first geometry rather than of the chain of neighbourhoods.
+  uint64_t frames_in_unready_mask = 0;
+  uint64_t mask_bytes = 0;       // EpsilonMask.triangles bytes received (charged to the credit)
+  uint64_t masks_used = 0;       // masks drawn on at least one frame
+  uint64_t masks_computed = 0;   // ε-mask computations run by the simulated mask worker
+  uint64_t masks_dropped = 0;    // neighbourhoods the session gave up before their mask was sent
+  double mask_compute_s = 0.0;   // simulated seconds the mask worker spent computing
+  // Per sampled frame (10 Hz), triangles drawn after view-frustum culling: with masks as drawn
+  // (mean_triangles_drawn), and what the PVS-only client would have drawn on the same frames:
+  // the viewcell PVS, or on a hole frame (and any stall) what is held. Equal for every scheme
+  // but pvs+eps.
+  double mean_triangles_without_masks = 0.0;
+  struct TriangleSample {
+    double t_s = 0.0;        // since the walk started
+    double along_m = 0.0;    // metres along the walk
+    uint64_t triangles = 0;  // drawn
+    uint64_t triangles_without_masks = 0;
+    bool masked = false;
+    bool hole = false;
+  };
+  std::vector<TriangleSample> triangle_samples;  // empty when count_triangles is false
   uint64_t jitter_draws = 0;     // messages delayed by a jitter draw > 0
   uint64_t lost_segments = 0;
   double radius_m = 0.0;         // the radius scheme's R
@@ -236,13 +272,19 @@ absl::StatusOr<SimulationResult> Simulate(ServedScene& scene, const scenes::Cata
 absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEntry& entry, const std::string& path,
                                     PvsMemo* memo);
 
+// What a speed search looks for: the highest speed without a stall, or without a hole frame
+// (SimulationResult::hole_frames; the same as a stall for every scheme but pvs+eps).
+enum class SpeedCriterion { kNoStall, kNoHole };
+
 struct SpeedSearch {
+  // For kNoHole read "hole frames" for "stalls" throughout.
   double max_speed_mps = 0.0;  // the highest speed found with zero stalls (0: none in the bracket)
   double stall_speed_mps = 0.0;  // the lowest speed found with stalls (0: none in the bracket)
   SimulationResult at_max;     // the run at max_speed_mps (none found: the run at stall_speed_mps)
   std::vector<std::pair<double, uint64_t>> runs;  // (speed m/s, stalls) of every run, in order
 };
-// Bisection (on the logarithm of the speed) for the highest speed with zero stalls in
+// Bisection (on the logarithm of the speed) for the highest speed with zero stalls (or hole
+// frames, `criterion`) in
 // [lo_mps, hi_mps], until stall_speed <= max_speed * (1 + precision). If hi_mps has no stalls it
 // is the answer (stall_speed_mps 0). The first lower end tried is options.speed_mps (0: the
 // walk's own speed), and lo_mps only if that stalls (a slow walk costs the most to simulate:
@@ -251,6 +293,7 @@ struct SpeedSearch {
 // still listed in `runs`). Errors as Simulate's.
 absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::CatalogEntry& entry,
                                          const SimulationOptions& options, double lo_mps, double hi_mps,
-                                         double precision, const scenes::RunControl& run = {});
+                                         double precision, const scenes::RunControl& run = {},
+                                         SpeedCriterion criterion = SpeedCriterion::kNoStall);
 
 }  // namespace vistream::server

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -335,12 +336,49 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
                         "Command: `vistream bench table1 --scene default"}) {
     EXPECT_NE(md.find(s), std::string::npos) << s;
   }
-  // The latency section: the simulator's sweeps, one command each, and their plots.
-  for (const char* s : {"| speed | stalls |", "| bandwidth | stalls |", "| scheme | stalls |",
-                        "Command: `vistream simulate --scene default --path avenue-and-back-streets --scheme pvs --speeds ",
+  // The latency section: the simulator's sweeps, one command each, and their plots; the schemes
+  // and speeds with masked frames, hole frames and triangles drawn with and without masks.
+  for (const char* s : {"| speed, scheme | stalls |", "| bandwidth | stalls |", "| scheme | stalls |",
+                        "| mean triangles drawn | masked frames % | hole frames | mean triangles without masks |",
+                        "Command: `vistream simulate --scene default --path avenue-and-back-streets --schemes pvs,pvs+eps "
+                        "--speeds ",
+                        " km/h, pvs+eps |", "max speed without a hole frame, km/h",
                         "(latency_speed_default.png)", "(latency_bandwidth_default.png)", "(latency_bytes_default.png)",
+                        "(latency_triangles_default.png)", "Triangles drawn per frame along the walk at 6 km/h",
                         "Machine load: the report's processes used "}) {
     EXPECT_NE(md.find(s), std::string::npos) << s;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir + "/latency_triangles_default.series")) << "the raw series is not kept";
+  {
+    // The triangles plot reads on its own: a title, both axes labelled with units, a legend
+    // naming both schemes; its kept data has pvs+eps frames drawn with masks and fewer triangles.
+    std::ifstream gp(dir + "/latency_triangles_default.gp");
+    const std::string script((std::istreambuf_iterator<char>(gp)), std::istreambuf_iterator<char>());
+    for (const char* s : {"set multiplot layout 2,1 title 'default: triangles drawn per frame along",
+                          "set xlabel 'distance along the walk (m)'", "set ylabel 'triangles per frame'",
+                          "set ylabel 'frames (%)'", "title 'pvs (viewcell PVS)'", "title 'pvs+eps (ε-masks)'",
+                          "title 'masked frames'", "title 'hole frames'", "set key"}) {
+      EXPECT_NE(script.find(s), std::string::npos) << s;
+    }
+    std::ifstream dat(dir + "/latency_triangles_default.triangles.dat");
+    ASSERT_TRUE(dat);
+    std::string line;
+    double pvs_sum = 0, eps_sum = 0, masked_max = 0;
+    size_t bins = 0;
+    while (std::getline(dat, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream f(line);
+      std::string x, pvs, eps, masked, holes;
+      ASSERT_TRUE(f >> x >> pvs >> eps >> masked >> holes) << line;
+      if (pvs == "NaN" || eps == "NaN") continue;
+      pvs_sum += std::stod(pvs);
+      eps_sum += std::stod(eps);
+      masked_max = std::max(masked_max, std::stod(masked));
+      ++bins;
+    }
+    EXPECT_GT(bins, 50u);
+    EXPECT_GT(masked_max, 0.0);
+    EXPECT_LT(eps_sum, pvs_sum);
   }
   EXPECT_EQ(md.find("this build has no `vistream simulate`"), std::string::npos);
   ASSERT_TRUE(j.at("cpu_share").is_number());
@@ -354,7 +392,8 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
   } plots[] = {{"table1_default", 1200, 1000},
                {"latency_speed_default", 1100, 900},
                {"latency_bandwidth_default", 1100, 900},
-               {"latency_bytes_default", 1000, 650}};
+               {"latency_bytes_default", 1000, 650},
+               {"latency_triangles_default", 1200, 900}};
   for (const auto& p : plots) {
     std::ifstream gp(dir + "/" + p.name + ".gp");
     const std::string script((std::istreambuf_iterator<char>(gp)), std::istreambuf_iterator<char>());
@@ -368,7 +407,7 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
     EXPECT_EQ(png.height(), p.height) << p.name;
   }
   const auto& images = j.at("images");
-  EXPECT_GE(images.size(), 6u);
+  EXPECT_GE(images.size(), 7u);
   for (const auto& name : images) {
     EXPECT_NE(md.find("](" + name.get<std::string>() + ")"), std::string::npos) << name;
     const Png png(dir + "/" + name.get<std::string>());

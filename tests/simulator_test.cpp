@@ -10,7 +10,9 @@
 #include <fstream>
 #include <memory>
 #include <set>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -89,6 +91,97 @@ TEST_F(SimulatorTest, City1AtSixKmhOnItsDeclaredLinkNeverStalls) {
   EXPECT_GT(r.bytes, r.geometry_bytes);  // framing, headers and control messages on top
   EXPECT_GT(r.mean_triangles_drawn, 0.0);
   EXPECT_LT(r.mean_triangles_drawn, static_cast<double>(r.scene_triangles));
+}
+
+// ε-masks along the walk (issue 34): the session plans neighbourhoods ahead of the walker and
+// sends their masks before the geometry they need; the modelled client draws a mask whenever its
+// eye is in a held mask's box whose objects are all here. Fixed compute charges: the same
+// figures on every machine.
+TEST_F(SimulatorTest, City1WalkerAtSixKmhDrawsMasksAlongTheWay) {
+  SimulationOptions o = Options(*city1_);
+  o.fixed_compute_s = 0.01;
+  o.scheme = Scheme::kPvsEps;
+  const SimulationResult r = Run(*city1_, o);
+  ASSERT_GT(r.frames, 1000u);
+  EXPECT_GT(r.masks, 0u);
+  EXPECT_GT(r.mask_bytes, 0u);
+  EXPECT_GE(r.masks_computed, r.masks) << "every mask received was computed";
+  EXPECT_GT(r.masks_used, 0u);
+  EXPECT_LE(r.masks_used, r.masks);
+  EXPECT_GT(r.frames_masked, 0u);
+  EXPECT_LE(r.frames_masked + r.frames_in_unready_mask, r.frames);
+  // A hole is a stall that no mask covered.
+  EXPECT_LE(r.hole_frames, r.stalls);
+  EXPECT_GT(r.mask_compute_s, 0.0);
+  EXPECT_NEAR(r.mask_compute_s, 0.01 * static_cast<double>(r.masks_computed), 1e-9);
+  // Masks narrow the PVS: fewer triangles drawn on the same frames.
+  EXPECT_GT(r.mean_triangles_without_masks, 0.0);
+  EXPECT_LT(r.mean_triangles_drawn, r.mean_triangles_without_masks);
+  // The series: one sample every tenth of a second's worth of frames, whose means are the run's;
+  // a masked sample draws at most what the PVS would, a hole sample is never masked and draws
+  // the same.
+  ASSERT_FALSE(r.triangle_samples.empty());
+  const double every = std::round(0.1 / r.frame_s);
+  EXPECT_NEAR(static_cast<double>(r.triangle_samples.size()), std::ceil(static_cast<double>(r.frames) / every), 1.0);
+  double with = 0.0, without = 0.0;
+  size_t masked = 0;
+  for (const SimulationResult::TriangleSample& x : r.triangle_samples) {
+    with += static_cast<double>(x.triangles);
+    without += static_cast<double>(x.triangles_without_masks);
+    masked += x.masked ? 1 : 0;
+    EXPECT_FALSE(x.masked && x.hole);
+    if (x.hole) {
+      EXPECT_EQ(x.triangles, x.triangles_without_masks);
+    }
+    if (x.masked) {
+      EXPECT_LE(x.triangles, x.triangles_without_masks) << "at " << x.along_m << " m";
+    }
+    EXPECT_NEAR(x.along_m, x.t_s * r.speed_mps, 1e-6);
+  }
+  const double n = static_cast<double>(r.triangle_samples.size());
+  EXPECT_NEAR(with / n, r.mean_triangles_drawn, 1e-6 * r.mean_triangles_drawn);
+  EXPECT_NEAR(without / n, r.mean_triangles_without_masks, 1e-6 * r.mean_triangles_without_masks);
+  EXPECT_GT(masked, 0u);
+  // The share of masked samples is the share of masked frames, within sampling.
+  EXPECT_NEAR(static_cast<double>(masked) / n, static_cast<double>(r.frames_masked) / static_cast<double>(r.frames),
+              0.02);
+}
+
+TEST_F(SimulatorTest, ThePvsSchemeDrawsNoMaskAndItsHolesAreItsStalls) {
+  for (const char* link : {"", "5k,200"}) {
+    SimulationOptions o = Options(*city1_);
+    o.fixed_compute_s = 0.01;
+    o.scheme = Scheme::kPvs;
+    if (*link != '\0') {
+      absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption(link, o.link);
+      ASSERT_TRUE(slow.ok()) << slow.status();
+      o.link = *slow;
+    }
+    const SimulationResult r = Run(*city1_, o);
+    EXPECT_EQ(r.masks, 0u) << link;
+    EXPECT_EQ(r.mask_bytes, 0u) << link;
+    EXPECT_EQ(r.masks_computed, 0u) << link;
+    EXPECT_EQ(r.frames_masked, 0u) << link;
+    EXPECT_EQ(r.frames_in_unready_mask, 0u) << link;
+    EXPECT_EQ(r.hole_frames, r.stalls) << link;
+    EXPECT_EQ(r.mean_triangles_drawn, r.mean_triangles_without_masks) << link;
+    EXPECT_GT(r.mean_triangles_drawn, 0.0) << link;
+  }
+}
+
+// On a link too slow for the walk, cells stall; masks sent ahead of the geometry (ε-first)
+// cover some of those frames, so holes are fewer than stalls, and never more.
+TEST_F(SimulatorTest, OnASlowLinkMasksCoverSomeStalls) {
+  SimulationOptions o = Options(*city1_);
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("20k,200", o.link);
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  o.link = *slow;
+  o.fixed_compute_s = 0.01;
+  o.scheme = Scheme::kPvsEps;
+  const SimulationResult r = Run(*city1_, o);
+  EXPECT_GT(r.stalls, 0u);
+  EXPECT_LE(r.hole_frames, r.stalls);
+  EXPECT_GT(r.frames_masked, 0u);
 }
 
 TEST_F(SimulatorTest, LondonCityAtSixKmhOverOneMbitNeverStalls) {
@@ -251,7 +344,10 @@ TEST_F(SimulatorTest, TheRadiusSetIsComputedOnceAndChargedTheSameSecondsEveryTim
 
 TEST_F(SimulatorTest, SpeedSearchBracketsTheFirstStall) {
   // A slow link so that stalls start at a walking speed; fixed compute times: deterministic.
+  // Scheme pvs: the search's mechanics, without computing every probe's ε-masks (pvs+eps's
+  // hole search: HoleSearchFindsTheHighestSpeedWithoutAHoleFrame).
   SimulationOptions o = Options(*london_);
+  o.scheme = Scheme::kPvs;
   absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("100k,200", o.link);
   ASSERT_TRUE(slow.ok());
   o.link = *slow;
@@ -269,12 +365,58 @@ TEST_F(SimulatorTest, SpeedSearchBracketsTheFirstStall) {
   EXPECT_EQ(Run(*london_, o).stalls, 0u);
 }
 
+// The search for the highest speed without a hole frame: for pvs (no masks, every stall a hole)
+// the stall search's answer; for pvs+eps a speed whose run has no hole frame, just below one
+// whose run has some (a narrow bracket on a slow link: a few runs).
+TEST_F(SimulatorTest, HoleSearchFindsTheHighestSpeedWithoutAHoleFrame) {
+  SimulationOptions o = Options(*city1_);
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("5k,200", o.link);
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  o.link = *slow;
+  o.fixed_compute_s = 0.01;
+  o.scheme = Scheme::kPvs;
+  o.count_triangles = false;
+  absl::StatusOr<SpeedSearch> stall = FindMaxSpeed(*city1_->scene, city1_->entry, o, 1.0 / 3.6, 60.0 / 3.6, 0.05);
+  absl::StatusOr<SpeedSearch> hole =
+      FindMaxSpeed(*city1_->scene, city1_->entry, o, 1.0 / 3.6, 60.0 / 3.6, 0.05, {}, SpeedCriterion::kNoHole);
+  ASSERT_TRUE(stall.ok()) << stall.status();
+  ASSERT_TRUE(hole.ok()) << hole.status();
+  EXPECT_EQ(hole->max_speed_mps, stall->max_speed_mps);
+  EXPECT_EQ(hole->stall_speed_mps, stall->stall_speed_mps);
+  EXPECT_EQ(hole->runs, stall->runs);
+
+  absl::StatusOr<scenes::LinkSpec> link = ParseLinkOption("20k,200", o.link);
+  ASSERT_TRUE(link.ok()) << link.status();
+  o.link = *link;
+  o.scheme = Scheme::kPvsEps;
+  o.speed_mps = 4.0 / 3.6;
+  absl::StatusOr<SpeedSearch> eps =
+      FindMaxSpeed(*city1_->scene, city1_->entry, o, 3.0 / 3.6, 8.0 / 3.6, 0.25, {}, SpeedCriterion::kNoHole);
+  ASSERT_TRUE(eps.ok()) << eps.status();
+  ASSERT_GT(eps->max_speed_mps, 0.0);
+  ASSERT_GT(eps->stall_speed_mps, eps->max_speed_mps) << "8 km/h has hole frames on 20 kbit/s";
+  EXPECT_EQ(eps->at_max.hole_frames, 0u);
+  EXPECT_GT(eps->at_max.frames_masked, 0u);
+  for (const auto& [mps, holes] : eps->runs) {
+    if (mps <= eps->max_speed_mps) {
+      EXPECT_EQ(holes, 0u) << mps * 3.6 << " km/h";
+    }
+    if (mps >= eps->stall_speed_mps) {
+      EXPECT_GT(holes, 0u) << mps * 3.6 << " km/h";
+    }
+  }
+}
+
 TEST_F(SimulatorTest, SameSeedSameResult) {
   SimulationOptions o = Options(*city1_, 20.0);
   o.fixed_compute_s = 0.02;
   const SimulationResult a = Run(*city1_, o), b = Run(*city1_, o);
   EXPECT_EQ(a.bytes, b.bytes);
   EXPECT_EQ(a.stalls, b.stalls);
+  EXPECT_EQ(a.frames_masked, b.frames_masked);
+  EXPECT_EQ(a.hole_frames, b.hole_frames);
+  EXPECT_EQ(a.masks, b.masks);
+  EXPECT_EQ(a.mean_triangles_without_masks, b.mean_triangles_without_masks);
   EXPECT_EQ(a.cells.size(), b.cells.size());
   EXPECT_EQ(a.min_margin_s, b.min_margin_s);
   EXPECT_EQ(a.mean_margin_s, b.mean_margin_s);
@@ -314,7 +456,7 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --speed ''", "--speed: empty: leave the option out for the default");
   ExpectBadOption("simulate --scene city1 --link ''", "--link: empty");
   ExpectBadOption("simulate --scene city1 --path ''", "--path: empty");
-  for (const char* option : {"--speeds", "--bandwidths", "--scheme", "--schemes", "--log"}) {
+  for (const char* option : {"--speeds", "--bandwidths", "--scheme", "--schemes", "--log", "--series"}) {
     ExpectBadOption(std::string("simulate --scene city1 ") + option + " ''", std::string(option) + ": empty");
   }
   ExpectBadOption("simulate --scene city1 --link 1M,40,3", "--link: '1M,40,3': more than two fields");
@@ -418,6 +560,52 @@ TEST(SimulateCli, LinkNoneIsIdealAndALogThatCannotBeWrittenFails) {
   ExpectRunTimeError(base + " --log /dev/full", "--log /dev/full: writing the log failed");
 }
 
+// --series: every sampled frame of each run, a block per run in the runs' order; the text
+// output names masked and hole frames and both triangle means.
+TEST(SimulateCli, SeriesHasABlockPerRunAndTextNamesMaskedAndHoleFrames) {
+  const std::string series = vistream::testing::Tmp("simulate.series");
+  const vistream::testing::RunResult r = Vistream("simulate --scene " + LondonSmallPath() +
+                                                  " --res 32 --compute-ms 20 --speed 24 --schemes pvs,pvs+eps --series " +
+                                                  series);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("masked frames: 0 of "), std::string::npos) << "pvs draws no mask: " << r.out;
+  EXPECT_NE(r.out.find("hole frames: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" with masks, "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("ε-masks: "), std::string::npos) << "pvs+eps's mask figures: " << r.out;
+  std::ifstream in(series);
+  ASSERT_TRUE(in) << series;
+  std::string line;
+  std::vector<std::string> heads;
+  std::vector<size_t> samples;
+  std::vector<size_t> masked;
+  while (std::getline(in, line)) {
+    if (line.rfind("# run ", 0) == 0) {
+      heads.push_back(line);
+      samples.push_back(0);
+      masked.push_back(0);
+      continue;
+    }
+    if (line.empty() || line[0] == '#') continue;
+    ASSERT_FALSE(heads.empty()) << line;
+    std::istringstream f(line);
+    double along = 0, t = 0, tris = 0, without = 0;
+    int m = -1, hole = -1;
+    ASSERT_TRUE(f >> along >> t >> tris >> without >> m >> hole) << line;
+    EXPECT_TRUE(m == 0 || m == 1) << line;
+    EXPECT_TRUE(hole == 0 || hole == 1) << line;
+    ++samples.back();
+    masked.back() += static_cast<size_t>(m);
+  }
+  ASSERT_EQ(heads.size(), 2u);
+  EXPECT_NE(heads[0].find("scheme pvs,"), std::string::npos) << heads[0];
+  EXPECT_NE(heads[1].find("scheme pvs+eps,"), std::string::npos) << heads[1];
+  EXPECT_GT(samples[0], 100u);
+  EXPECT_EQ(samples[0], samples[1]) << "the same walk at the same speed";
+  EXPECT_EQ(masked[0], 0u);
+  EXPECT_GT(masked[1], 0u);
+  ExpectRunTimeError("simulate --scene city1 --series /nonexistent/dir/x.series", "--series /nonexistent/dir/x.series: cannot write it");
+}
+
 TEST(SimulateCli, UnknownPathIsARunTimeErrorNamingTheWalks) {
   ExpectRunTimeError("simulate --scene city1 --path nowhere", "scene 'city1' has no walk 'nowhere'; its walks: lot-lines");
 }
@@ -433,10 +621,21 @@ TEST(SimulateCli, JsonHasTheFigures) {
   for (const char* key : {"stalls", "stall_s", "stalled_cells", "min_margin_s", "mean_margin_s", "bytes",
                           "geometry_bytes", "mean_triangles_drawn", "scene_triangles", "triangles_pct",
                           "compute_ms_per_crossing", "cells_entered", "crossings", "scheme", "speed_kmh", "link",
-                          "path", "path_m", "sim_s", "wall_s", "startup_s"}) {
+                          "path", "path_m", "sim_s", "wall_s", "startup_s", "frames", "masks", "frames_masked",
+                          "hole_frames", "mean_triangles_without_masks", "masked_frames_pct", "mask_bytes",
+                          "masks_computed", "masks_dropped", "masks_received", "masks_used", "mask_compute_s",
+                          "frames_in_unready_mask", "triangles_with_over_without_masks"}) {
     EXPECT_TRUE(j.contains(key)) << key;
   }
   EXPECT_EQ(j["scheme"], "pvs+eps");
+  EXPECT_GT(j["frames_masked"].get<uint64_t>(), 0u);
+  EXPECT_NEAR(j["masked_frames_pct"].get<double>(),
+              100.0 * j["frames_masked"].get<double>() / j["frames"].get<double>(), 1e-9);
+  EXPECT_LE(j["hole_frames"].get<uint64_t>(), j["stalls"].get<uint64_t>());
+  EXPECT_GT(j["mask_bytes"].get<uint64_t>(), 0u);
+  EXPECT_EQ(j["masks_received"], j["masks"]);
+  EXPECT_LT(j["mean_triangles_drawn"].get<double>(), j["mean_triangles_without_masks"].get<double>());
+  EXPECT_NE(r.out.find("% masked"), std::string::npos) << "the progress line names them: " << r.out;
   EXPECT_NEAR(j["speed_kmh"].get<double>(), 12.0, 1e-9);
   EXPECT_EQ(j["link"]["described"], "1 Mbit/s, 200 ms, jitter 20 ms, loss 1%");
   EXPECT_EQ(j["compute"], "fixed 20 ms");

@@ -1,5 +1,6 @@
 // vistream simulate: the discrete-event simulator (server/simulator.h): stalls, arrival margins,
-// bytes and triangles drawn along a catalog walk, over the scene's declared link.
+// bytes, masked and hole frames and triangles drawn along a catalog walk, over the scene's
+// declared link.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -31,7 +32,7 @@ constexpr double kMinSearchKmh = 1.0, kMaxSearchKmh = 500.0, kSearchPrecision = 
 constexpr double kMinKmh = kMinSearchKmh, kMaxKmh = 1000.0;
 
 struct SimulateArgs {
-  std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log;
+  std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log, series;
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -78,6 +79,22 @@ nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, 
   j["pvs_cache_hits"] = r.pvs_cache_hits;
   j["masks"] = r.masks;
   j["frames"] = r.frames;
+  // ε-masks: how the frames were drawn (masked, from the PVS, holes), what the masks saved, and
+  // what they cost.
+  j["frames_masked"] = r.frames_masked;
+  j["masked_frames_pct"] = r.frames > 0 ? 100.0 * static_cast<double>(r.frames_masked) / static_cast<double>(r.frames) : 0.0;
+  j["hole_frames"] = r.hole_frames;
+  j["frames_in_unready_mask"] = r.frames_in_unready_mask;
+  j["mean_triangles_without_masks"] = r.mean_triangles_without_masks;
+  j["triangles_with_over_without_masks"] =
+      r.mean_triangles_without_masks > 0.0 ? r.mean_triangles_drawn / r.mean_triangles_without_masks : 1.0;
+  j["masks_received"] = r.masks;
+  j["masks_used"] = r.masks_used;
+  j["mask_bytes"] = r.mask_bytes;
+  j["masks_computed"] = r.masks_computed;
+  j["masks_dropped"] = r.masks_dropped;
+  j["mask_compute_s"] = r.mask_compute_s;
+  j["mask_compute_ms_mean"] = r.masks_computed > 0 ? 1000.0 * r.mask_compute_s / static_cast<double>(r.masks_computed) : 0.0;
   j["frame_ms"] = r.frame_s * 1000.0;
   j["frame_declared"] = r.frame_declared;
   j["jitter_draws"] = r.jitter_draws;
@@ -120,6 +137,19 @@ void PrintText(const nlohmann::json& j) {
               j["compute_ms_per_crossing"]["max"].get<double>(),
               static_cast<unsigned long long>(j["pvs_computed"].get<uint64_t>()),
               static_cast<unsigned long long>(j["pvs_cache_hits"].get<uint64_t>()));
+  std::printf("  masked frames: %llu of %llu (%.1f%%), hole frames: %llu; triangles drawn per frame: mean %.0f with "
+              "masks, %.0f without (%.3f)\n",
+              static_cast<unsigned long long>(j["frames_masked"].get<uint64_t>()),
+              static_cast<unsigned long long>(j["frames"].get<uint64_t>()), j["masked_frames_pct"].get<double>(),
+              static_cast<unsigned long long>(j["hole_frames"].get<uint64_t>()), j["mean_triangles_drawn"].get<double>(),
+              j["mean_triangles_without_masks"].get<double>(), j["triangles_with_over_without_masks"].get<double>());
+  if (j["masks_received"].get<uint64_t>() > 0 || j["masks_computed"].get<uint64_t>() > 0) {
+    std::printf("  ε-masks: %llu received (%.1f kB), %llu drawn; %llu computed (%.1f ms each, %.1f s in all), %llu dropped\n",
+                static_cast<unsigned long long>(j["masks_received"].get<uint64_t>()), j["mask_bytes"].get<double>() / 1e3,
+                static_cast<unsigned long long>(j["masks_used"].get<uint64_t>()),
+                static_cast<unsigned long long>(j["masks_computed"].get<uint64_t>()), j["mask_compute_ms_mean"].get<double>(),
+                j["mask_compute_s"].get<double>(), static_cast<unsigned long long>(j["masks_dropped"].get<uint64_t>()));
+  }
   if (j.contains("radius_m")) std::printf("  radius: %.1f m (the smallest with no hole on this walk)\n", j["radius_m"].get<double>());
   std::printf("  walk: %.0f m in %.0f s of simulated time\n", j["path_m"].get<double>(), j["sim_s"].get<double>());
 }
@@ -246,6 +276,29 @@ int Simulate(const SimulateArgs& a) {
       if (f != nullptr) std::fclose(f);
     }
   } closer{log_file};
+  std::FILE* series_file = nullptr;
+  if (!a.series.empty()) {
+    series_file = std::fopen(a.series.c_str(), "w");
+    if (series_file == nullptr) return Fail(absl::NotFoundError(absl::StrCat("--series ", a.series, ": cannot write it")));
+    std::fprintf(series_file,
+                 "# vistream simulate --series: every sampled frame (10 Hz) of each run, one block per run in the "
+                 "order of the runs (gnuplot: index K), blocks separated by two blank lines.\n"
+                 "# columns: metres along the walk, seconds since the walk started, triangles drawn, triangles the "
+                 "PVS-only client would draw, masked (1/0), hole (1/0)\n");
+  }
+  Closer series_closer{series_file};
+  size_t series_blocks = 0;
+  auto write_series = [&](const server::SimulationResult& r, server::Scheme scheme) {
+    if (series_file == nullptr) return;
+    std::fprintf(series_file, "%s# run %zu: scheme %s, %.6g km/h, %s\n", series_blocks > 0 ? "\n\n" : "", series_blocks,
+                 std::string(server::SchemeName(scheme)).c_str(), r.speed_mps * 3.6,
+                 r.link_declared ? r.link.Describe().c_str() : "ideal link");
+    for (const server::SimulationResult::TriangleSample& t : r.triangle_samples) {
+      std::fprintf(series_file, "%.3f %.3f %llu %llu %d %d\n", t.along_m, t.t_s, static_cast<unsigned long long>(t.triangles),
+                   static_cast<unsigned long long>(t.triangles_without_masks), t.masked ? 1 : 0, t.hole ? 1 : 0);
+    }
+    ++series_blocks;
+  };
 
   const auto start = std::chrono::steady_clock::now();
   server::ServedSceneOptions so;
@@ -291,16 +344,35 @@ int Simulate(const SimulateArgs& a) {
                                                                    kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
       if (!s.ok()) return Fail(s.status());
       j = ToJson(s->at_max, scheme, opt.path, a.link == "none");
+      write_series(s->at_max, scheme);
+      auto kmh_or_null = [](double mps) { return mps > 0.0 ? nlohmann::json(mps * 3.6) : nlohmann::json(); };
       // Null when even the search's bottom stalls (then the run shown is the one there).
-      j["max_speed_kmh"] = s->max_speed_mps > 0.0 ? nlohmann::json(s->max_speed_mps * 3.6) : nlohmann::json();
-      j["stall_speed_kmh"] = s->stall_speed_mps > 0.0 ? nlohmann::json(s->stall_speed_mps * 3.6) : nlohmann::json();
+      j["max_speed_kmh"] = kmh_or_null(s->max_speed_mps);
+      j["stall_speed_kmh"] = kmh_or_null(s->stall_speed_mps);
       nlohmann::json probes = nlohmann::json::array();
       for (const auto& [mps, stalls] : s->runs) probes.push_back({{"speed_kmh", mps * 3.6}, {"stalls", stalls}});
       j["search"] = {{"bracket_kmh", {kMinSearchKmh, kMaxSearchKmh}}, {"precision", kSearchPrecision}, {"runs", probes}};
+      // The highest speed without a hole frame: with ε-masks a search of its own, from the
+      // highest without a stall up (a hole frame is a stall); without masks every stall is a
+      // hole, so the same speed.
+      j["max_speed_no_hole_kmh"] = j["max_speed_kmh"];
+      j["hole_speed_kmh"] = j["stall_speed_kmh"];
+      if (scheme == server::Scheme::kPvsEps && s->stall_speed_mps > 0.0) {
+        const double lo = std::max(kMinSearchKmh / 3.6, s->max_speed_mps);
+        absl::StatusOr<server::SpeedSearch> h = server::FindMaxSpeed(
+            **scene, *entry, opt, lo, kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun(), server::SpeedCriterion::kNoHole);
+        if (!h.ok()) return Fail(h.status());
+        j["max_speed_no_hole_kmh"] = kmh_or_null(h->max_speed_mps);
+        j["hole_speed_kmh"] = kmh_or_null(h->stall_speed_mps);
+        nlohmann::json hole_probes = nlohmann::json::array();
+        for (const auto& [mps, holes] : h->runs) hole_probes.push_back({{"speed_kmh", mps * 3.6}, {"hole_frames", holes}});
+        j["search"]["hole_runs"] = hole_probes;
+      }
     } else {
       absl::StatusOr<server::SimulationResult> r = server::Simulate(**scene, *entry, opt, ToolRun());
       if (!r.ok()) return Fail(r.status());
       j = ToJson(*r, scheme, opt.path, a.link == "none");
+      write_series(*r, scheme);
     }
     j["scene"] = entry->name;
     j["cell_size_m"] = (*scene)->grid().cell_size();
@@ -308,10 +380,11 @@ int Simulate(const SimulateArgs& a) {
     j["seed"] = a.seed;
     j["compute"] = opt.fixed_compute_s.has_value() ? absl::StrFormat("fixed %g ms", a.compute_ms) : "measured";
     j["wall_s"] = SecondsSince(t0);
-    std::fprintf(stderr, "simulate: %s at %.1f km/h: %llu stalls, %.2f MB, %.1f s\n",
+    std::fprintf(stderr, "simulate: %s at %.1f km/h: %llu stalls, %llu hole frames, %.1f%% masked, %.2f MB, %.1f s\n",
                  std::string(server::SchemeName(scheme)).c_str(), j["speed_kmh"].get<double>(),
-                 static_cast<unsigned long long>(j["stalls"].get<uint64_t>()), j["bytes"].get<double>() / 1e6,
-                 j["wall_s"].get<double>());
+                 static_cast<unsigned long long>(j["stalls"].get<uint64_t>()),
+                 static_cast<unsigned long long>(j["hole_frames"].get<uint64_t>()), j["masked_frames_pct"].get<double>(),
+                 j["bytes"].get<double>() / 1e6, j["wall_s"].get<double>());
     runs.push_back(j);
   }
   // The log is written as the runs go: its errors (a full disk) show when it is closed.
@@ -321,6 +394,14 @@ int Simulate(const SimulateArgs& a) {
     const int closed = std::fclose(log_file);
     closer.f = nullptr;
     if (failed || closed != 0) return Fail(absl::DataLossError(absl::StrCat("--log ", a.log, ": writing the log failed")));
+  }
+  if (series_file != nullptr) {
+    const bool failed = std::ferror(series_file) != 0;
+    const int closed = std::fclose(series_file);
+    series_closer.f = nullptr;
+    if (failed || closed != 0) {
+      return Fail(absl::DataLossError(absl::StrCat("--series ", a.series, ": writing the series failed")));
+    }
   }
   auto print_run = [&](const nlohmann::json& j) {
     PrintText(j);
@@ -333,6 +414,17 @@ int Simulate(const SimulateArgs& a) {
       std::printf("  highest speed with zero stalls: %.1f km/h (bisection in [%g, %g] km/h to %g%%, %zu run(s))\n",
                   j["max_speed_kmh"].get<double>(), kMinSearchKmh, kMaxSearchKmh, 100.0 * kSearchPrecision,
                   j["search"]["runs"].size());
+    }
+    if (search && j["search"].contains("hole_runs")) {
+      if (j["max_speed_no_hole_kmh"].is_null()) {
+        std::printf("  hole frames even at %g km/h: no speed without a hole frame\n", kMinSearchKmh);
+      } else if (j["hole_speed_kmh"].is_null()) {
+        std::printf("  no hole frame up to %g km/h, the search's top (%zu run(s))\n", kMaxSearchKmh,
+                    j["search"]["hole_runs"].size());
+      } else {
+        std::printf("  highest speed with zero hole frames: %.1f km/h (%zu run(s))\n",
+                    j["max_speed_no_hole_kmh"].get<double>(), j["search"]["hole_runs"].size());
+      }
     }
   };
   if (runs.size() == 1) {
@@ -375,8 +467,8 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
   const CLI::Option* path = c->add_option("--path", args->path, "the entry's walk (default: its first)");
   const CLI::Option* speed = c->add_option("--speed", args->speed,
-                "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls (bisection in "
-                "[1, 500] km/h to 1%)");
+                "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls, and for "
+                "pvs+eps also the highest with zero hole frames (bisection in [1, 500] km/h to 1%)");
   const CLI::Option* speeds = c->add_option("--speeds", args->speeds,
                 "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
                 "whose PVSs serve them all");
@@ -401,9 +493,13 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(FiniteRange(0.0, 1e7));
   const CLI::Option* log = c->add_option(
       "--log", args->log, "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
+  const CLI::Option* series = c->add_option(
+      "--series", args->series,
+      "write every sampled frame (10 Hz) of each run: metres along the walk, seconds, triangles drawn, triangles "
+      "without masks, masked, hole; one whitespace-separated block per run (gnuplot's index)");
   args->texts = {{path, &args->path},         {speed, &args->speed},   {speeds, &args->speeds},
                  {link, &args->link},         {bandwidths, &args->bandwidths}, {scheme, &args->scheme},
-                 {schemes, &args->schemes},   {log, &args->log}};
+                 {schemes, &args->schemes},   {log, &args->log},       {series, &args->series}};
   c->add_flag("--json", args->json, "print one JSON object");
   c->callback([args, done] { done(Simulate(*args)); });
 }
