@@ -46,6 +46,7 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
     if (auto* info = std::get_if<v1::SceneInfo>(&e)) {
       scene_info_ = std::move(*info);
       grid_ = GridInfo::From(scene_info_->grid());
+      mask_bases_.Clear();  // a session starts here; its masks number from 1 again
     } else if (auto* pvs = std::get_if<v1::ViewcellPvs>(&e)) {
       pvs_[pvs->cell_id()].assign(pvs->object_ids().begin(), pvs->object_ids().end());
     } else if (auto* object = std::get_if<ReceivedObject>(&e)) {
@@ -96,8 +97,8 @@ void ObjectStore::AddMask(const v1::EpsilonMask& m) {
     bad_data_ = true;
     return;
   }
-  absl::StatusOr<visibility::DecodedMask> decoded =
-      visibility::DecodeMaskRuns(m.triangles(), scene_info_->object_count(), scene_info_->triangle_count());
+  absl::StatusOr<visibility::DecodedMask> decoded = mask_bases_.Decode(
+      m.cell_id(), m.mask_id(), m.base_mask_id(), m.triangles(), scene_info_->object_count(), scene_info_->triangle_count());
   if (!decoded.ok()) {
     failure_ = absl::StrCat(what, ": ", decoded.status().message());
     bad_data_ = true;

@@ -146,6 +146,7 @@ class ObjectStore {
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
   std::map<uint32_t, EpsilonMaskSet> masks_;  // by mask id
+  visibility::MaskBases mask_bases_;          // the latest mask of each cell: deltas' bases
   uint64_t next_mask_key_ = 1;
   std::vector<uint64_t> dropped_masks_;
   std::vector<uint32_t> removed_, added_;

@@ -267,6 +267,7 @@ class Run {
     uint64_t checked = std::numeric_limits<uint64_t>::max();
   };
   std::deque<HeldMask> masks_held_;  // in arrival order
+  visibility::MaskBases mask_bases_;  // the latest mask of each cell: deltas' bases
   // Drops the masks of cells other than the client's and the 8 around it, then the oldest over kMaxMasks.
   void KeepMasks();
   // Whether `m` can be drawn at `t` (it and every object it names arrived and were uploaded).
@@ -374,8 +375,9 @@ void Run::Receive(const v1::ServerMessage& m) {
       r_.mask_bytes += e.triangles().size();
       Consume(e.triangles().size());  // a mask costs credit like geometry (proto EpsilonMask)
       const scenes::Scene& sc = scene_.scene();
-      absl::StatusOr<visibility::DecodedMask> d = visibility::DecodeMaskRuns(
-          e.triangles(), static_cast<uint32_t>(sc.objects.size()), r_.scene_triangles);
+      absl::StatusOr<visibility::DecodedMask> d = mask_bases_.Decode(
+          e.cell_id(), e.mask_id(), e.base_mask_id(), e.triangles(), static_cast<uint32_t>(sc.objects.size()),
+          r_.scene_triangles);
       if (!d.ok()) {
         failure_ = absl::InternalError(
             absl::StrCat("the simulated client cannot decode ε-mask ", e.mask_id(), ": ", d.status().message()));
@@ -401,7 +403,8 @@ void Run::Receive(const v1::ServerMessage& m) {
                              {"box", absl::StrFormat("%.2f,%.2f,%.2f,%.2f,%.2f,%.2f", b.min.x, b.min.y, b.min.z, b.max.x,
                                                      b.max.y, b.max.z)},
                              {"objects", static_cast<uint64_t>(mask.objects.size())}, {"triangles", mask.triangles},
-                             {"bytes", static_cast<uint64_t>(e.triangles().size())}});
+                             {"bytes", static_cast<uint64_t>(e.triangles().size())},
+                             {"delta", e.base_mask_id() != 0 ? "yes" : "no"}});
       }
       masks_held_.push_back(std::move(mask));
       KeepMasks();

@@ -175,5 +175,30 @@ TEST(MaskCodec, ADeltaPastTheSceneIsRefused) {
   EXPECT_EQ(big.status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+
+TEST(MaskBases, DeltasApplyToTheLatestMaskOfTheirCellOnly) {
+  const std::vector<MaskObject> a{{2, Bits({0, 1})}}, b{{2, Bits({1})}, {4, Bits({3})}}, c{{4, Bits({3, 4})}};
+  MaskBases bases(2);
+  ASSERT_TRUE(bases.Decode(10, 1, 0, EncodeMaskRuns(a), 6, 100).ok());
+  const absl::StatusOr<DecodedMask> got = bases.Decode(10, 2, 1, EncodeMaskDelta(a, b), 6, 100);
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->triangles, 2u);
+  // Mask 1 is no longer the cell's latest: a delta against it is refused, naming both.
+  const absl::StatusOr<DecodedMask> stale = bases.Decode(10, 3, 1, EncodeMaskDelta(a, c), 6, 100);
+  ASSERT_FALSE(stale.ok());
+  EXPECT_EQ(stale.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(stale.status().message().find("the cell's latest mask is 2"), std::string::npos) << stale.status();
+  // Against another cell's mask: refused.
+  EXPECT_FALSE(bases.Decode(11, 4, 2, EncodeMaskDelta(b, c), 6, 100).ok());
+  // Two cells held: a third pushes out the least recently received.
+  ASSERT_TRUE(bases.Decode(11, 5, 0, EncodeMaskRuns(c), 6, 100).ok());
+  ASSERT_TRUE(bases.Decode(12, 6, 0, EncodeMaskRuns(c), 6, 100).ok());
+  EXPECT_EQ(bases.size(), 2u);
+  const absl::StatusOr<DecodedMask> gone = bases.Decode(10, 7, 2, EncodeMaskDelta(b, c), 6, 100);
+  ASSERT_FALSE(gone.ok());
+  EXPECT_NE(gone.status().message().find("no mask of that cell is held"), std::string::npos) << gone.status();
+  EXPECT_TRUE(bases.Decode(11, 8, 5, EncodeMaskDelta(c, a), 6, 100).ok());
+}
+
 }  // namespace
 }  // namespace vistream::visibility

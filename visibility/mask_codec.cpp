@@ -170,4 +170,34 @@ absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_
   return out;
 }
 
+absl::StatusOr<DecodedMask> MaskBases::Decode(uint32_t cell, uint32_t mask_id, uint32_t base_mask_id,
+                                              std::string_view bytes, uint32_t object_count, uint64_t max_triangles) {
+  auto it = bases_.find(cell);
+  absl::StatusOr<DecodedMask> d;
+  if (base_mask_id == 0) {
+    d = DecodeMaskRuns(bytes, object_count, max_triangles);
+  } else if (it == bases_.end() || it->second.mask_id != base_mask_id) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("ε-mask ", mask_id, " of cell ", cell, " is a delta against mask ", base_mask_id, ", but ",
+                     it == bases_.end() ? std::string("no mask of that cell is held")
+                                        : absl::StrCat("the cell's latest mask is ", it->second.mask_id)));
+  } else {
+    d = ApplyMaskDelta(it->second.mask, bytes, object_count, max_triangles);
+  }
+  if (!d.ok()) return d.status();
+  if (it == bases_.end()) {
+    order_.push_back(cell);
+    it = bases_.emplace(cell, Base{0, {}, std::prev(order_.end())}).first;
+  } else {
+    order_.splice(order_.end(), order_, it->second.order);
+  }
+  it->second.mask_id = mask_id;
+  it->second.mask = *d;
+  while (bases_.size() > max_cells_) {
+    bases_.erase(order_.front());
+    order_.pop_front();
+  }
+  return d;
+}
+
 }  // namespace vistream::visibility

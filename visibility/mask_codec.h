@@ -10,6 +10,8 @@
 //   with at least one visible triangle, so every encoding is canonical.
 
 #include <cstdint>
+#include <list>
+#include <map>
 #include <span>
 #include <string>
 #include <string_view>
@@ -62,6 +64,37 @@ std::string EncodeMaskDelta(std::span<const MaskObject> base, std::span<const Ma
 // Errors as DecodeMaskRuns's, and INVALID_ARGUMENT when the result would pass max_triangles.
 absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_view delta, uint32_t object_count,
                                            uint64_t max_triangles);
+
+// The receiving side of EpsilonMask.base_mask_id: the latest mask of each cell, so that a
+// delta against it can be applied (client/object_store and the simulator's client model).
+// Holds the last `max_cells` cells that received a mask (least recently received dropped
+// first); the server deltas only against cells it still wants, a few dozen at most.
+class MaskBases {
+ public:
+  explicit MaskBases(size_t max_cells = 256) : max_cells_(max_cells) {}
+  // Decodes the bytes of mask `mask_id` of `cell`: the sets when `base_mask_id` is 0, else a
+  // delta against the held mask of the cell, which must be mask `base_mask_id`. The result
+  // becomes the cell's base. Errors: DecodeMaskRuns's and ApplyMaskDelta's, and
+  // FAILED_PRECONDITION when the base is not held (naming the cell, the base held if any).
+  absl::StatusOr<DecodedMask> Decode(uint32_t cell, uint32_t mask_id, uint32_t base_mask_id, std::string_view bytes,
+                                     uint32_t object_count, uint64_t max_triangles);
+  // Forgets every base (a new session numbers masks from 1 again).
+  void Clear() {
+    bases_.clear();
+    order_.clear();
+  }
+  size_t size() const { return bases_.size(); }
+
+ private:
+  struct Base {
+    uint32_t mask_id = 0;
+    DecodedMask mask;
+    std::list<uint32_t>::iterator order;
+  };
+  size_t max_cells_;
+  std::map<uint32_t, Base> bases_;  // by cell
+  std::list<uint32_t> order_;       // cells, least recently received first
+};
 
 // ---- implementation of the template ----
 
