@@ -15,6 +15,7 @@
 #include <set>
 #include <thread>
 
+#include <glm/geometric.hpp>
 #include <grpcpp/generic/generic_stub.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -24,6 +25,7 @@
 #include "scenes/catalog.h"
 #include "server/link_model.h"
 #include "server/service.h"
+#include "visibility/mask_codec.h"
 #include "visibility/pvs_file.h"
 #include "client/session_stream.h"
 #include "tests/server_test_util.h"
@@ -599,64 +601,152 @@ TEST(Server, ServesAPvsFileInsteadOfComputing) {
   EXPECT_NE(other.message().find(path), std::string::npos) << other;
 }
 
-TEST(Server, AClientThatLingersGetsAnEpsilonMaskOfItsBox) {
+// A session whose Hello asks for ε-masks (a credit window as large as Connect's).
+std::unique_ptr<SessionStream> ConnectWithMasks(WalkthroughServer& server) {
+  auto c = std::make_unique<SessionStream>(server.address());
+  v1::Hello hello = SessionStream::HelloFor("city1");
+  hello.set_epsilon_masks(true);
+  c->Start(hello, true);
+  c->SendCredit(uint64_t{1} << 40);
+  return c;
+}
+
+// A mask's sets, decoded in arrival order (deltas applied as a client does).
+std::vector<visibility::DecodedMask> DecodeAll(const std::vector<v1::EpsilonMask>& masks) {
+  visibility::MaskBases bases;
+  std::vector<visibility::DecodedMask> out;
+  for (const v1::EpsilonMask& m : masks) {
+    absl::StatusOr<visibility::DecodedMask> d =
+        bases.Decode(m.cell_id(), m.mask_id(), m.base_mask_id(), m.triangles(),
+                     static_cast<uint32_t>(City1().scene().objects.size()), City1().scene().TriangleCount());
+    EXPECT_TRUE(d.ok()) << d.status();
+    out.push_back(d.ok() ? *std::move(d) : visibility::DecodedMask{});
+  }
+  return out;
+}
+
+TEST(Server, AStandingClientGetsAnEpsilonMaskOfTheBoxAroundIt) {
   auto server = StartServer();
-  auto client = Connect(*server);
+  auto client = ConnectWithMasks(*server);
   const glm::dvec3 p = Centre(12, 9);
   const CellId here = Cell(12, 9);
   ASSERT_TRUE(client->SendPose(p));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
-  // Standing still (a little sway) for longer than the dwell.
-  for (int k = 0; k < 40; ++k) {
-    client->SendPose(p + glm::dvec3(0.1 * std::sin(k), 0.1 * std::cos(k), 0.0));
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_TRUE(client->WaitFor([](const SessionRecord& r) { return !r.masks.empty(); }, kWait));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here) && !r.masks.empty(); }, kWait));
   const SessionRecord r = client->Snapshot();
   const v1::EpsilonMask& m = r.masks.front();
-  EXPECT_LE(m.box_min().x(), p.x);
-  EXPECT_GE(m.box_max().x(), p.x);
-  EXPECT_LE(m.box_min().y(), p.y);
-  EXPECT_GE(m.box_max().y(), p.y);
-  EXPECT_GE(m.box_min().z(), 0.1);  // above the ground
-  EXPECT_NEAR(m.box_max().x() - m.box_min().x(), 4.0, 1e-9);
+  EXPECT_EQ(m.cell_id(), here);
+  EXPECT_LE(m.neighbourhood_min().x(), p.x);
+  EXPECT_GE(m.neighbourhood_max().x(), p.x);
+  EXPECT_LE(m.neighbourhood_min().y(), p.y);
+  EXPECT_GE(m.neighbourhood_max().y(), p.y);
+  EXPECT_LE(m.neighbourhood_min().z(), p.z);
+  EXPECT_GE(m.neighbourhood_max().z(), p.z);
+  EXPECT_NEAR(m.neighbourhood_max().x() - m.neighbourhood_min().x(), 4.0, 1e-9);  // ChainOptions::standing_size_m
+  // Its PVS came first; its sets lie inside the PVS and hide part of it.
+  const auto pvs_at = std::find(r.order.begin(), r.order.end(), std::make_pair('P', here));
+  const auto mask_at = std::find(r.order.begin(), r.order.end(), std::make_pair('M', m.mask_id()));
+  EXPECT_LT(pvs_at, mask_at);
+  const visibility::DecodedMask d = DecodeAll(r.masks).front();
   const std::vector<uint32_t>& pvs = r.pvs.at(here);
-  uint64_t visible = 0, total = 0;
+  uint64_t total = 0;
   for (uint32_t o : pvs) total += City1().scene().objects[o].mesh.TriangleCount();
-  for (const v1::ObjectTriangles& ot : m.objects()) {
-    EXPECT_TRUE(std::binary_search(pvs.begin(), pvs.end(), ot.object_id())) << ot.object_id();
-    const size_t n = City1().scene().objects[ot.object_id()].mesh.TriangleCount();
-    EXPECT_EQ(ot.visible().size(), (n + 7) / 8);
-    uint64_t bits = 0;
-    for (unsigned char b : ot.visible()) bits += static_cast<uint64_t>(__builtin_popcount(b));
-    EXPECT_GT(bits, 0u);
-    visible += bits;
+  for (const visibility::MaskObject& o : d.objects) {
+    EXPECT_TRUE(std::binary_search(pvs.begin(), pvs.end(), o.object)) << o.object;
+    EXPECT_LE(o.bits.size(), (City1().scene().objects[o.object].mesh.TriangleCount() + 7) / 8);
   }
-  EXPECT_GT(visible, 0u);
-  EXPECT_LT(visible, total);
-  std::printf("mask: %llu of the PVS's %llu triangles\n", static_cast<unsigned long long>(visible),
-              static_cast<unsigned long long>(total));
+  EXPECT_EQ(d.objects.size(), m.object_count());
+  EXPECT_EQ(d.triangles, m.triangle_count());
+  EXPECT_GT(d.triangles, 0u);
+  EXPECT_LT(d.triangles, total);
+  std::printf("mask: %llu of the PVS's %llu triangles, %zu bytes\n", static_cast<unsigned long long>(d.triangles),
+              static_cast<unsigned long long>(total), m.triangles().size());
   EXPECT_TRUE(client->Finish().ok());
 }
 
 TEST(Server, AnEpsilonMaskNeverReachesPastTheCellWhosePvsItNarrows) {
   auto server = StartServer();
-  auto client = Connect(*server);
+  auto client = ConnectWithMasks(*server);
   const CellId here = Cell(12, 9);
   const scenes::Aabb cell = City1().grid().CellBox(here);
   const glm::dvec3 p(cell.max.x - 0.5, cell.min.y + 0.5, Centre(12, 9).z);  // by a corner
   ASSERT_TRUE(client->SendPose(p));
-  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
-  for (int k = 0; k < 30; ++k) {
-    client->SendPose(p);
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
   ASSERT_TRUE(client->WaitFor([](const SessionRecord& r) { return !r.masks.empty(); }, kWait));
   const v1::EpsilonMask m = client->Snapshot().masks.front();
-  EXPECT_LE(m.box_max().x(), cell.max.x);
-  EXPECT_GE(m.box_min().y(), cell.min.y);
-  EXPECT_NEAR(m.box_max().x() - m.box_min().x(), 2.5, 1e-9);  // 2 m to the left of the eye, 0.5 to the edge
-  EXPECT_NEAR(m.box_max().y() - m.box_min().y(), 2.5, 1e-9);
+  EXPECT_EQ(m.cell_id(), here);
+  EXPECT_LE(m.neighbourhood_max().x(), cell.max.x);
+  EXPECT_GE(m.neighbourhood_min().y(), cell.min.y);
+  EXPECT_NEAR(m.neighbourhood_max().x() - m.neighbourhood_min().x(), 2.5, 1e-9);  // 2 m to the left, 0.5 to the edge
+  EXPECT_NEAR(m.neighbourhood_max().y() - m.neighbourhood_min().y(), 2.5, 1e-9);
+  EXPECT_TRUE(client->Finish().ok());
+}
+
+TEST(Server, AClientThatDoesNotAskForMasksGetsNone) {
+  auto server = StartServer();
+  auto client = Connect(*server);
+  const CellId here = Cell(12, 9);
+  ASSERT_TRUE(client->SendPose(Centre(12, 9)));
+  ASSERT_TRUE(client->WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(here)); }, kWait));
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // a mask takes tens of ms
+  EXPECT_TRUE(client->Snapshot().masks.empty());
+  // The same place with masks asked for gets one: the wait above was long enough.
+  auto with = ConnectWithMasks(*server);
+  ASSERT_TRUE(with->SendPose(Centre(12, 9)));
+  EXPECT_TRUE(with->WaitFor([](const SessionRecord& r) { return !r.masks.empty(); }, kWait));
+  EXPECT_TRUE(client->Finish().ok());
+  EXPECT_TRUE(with->Finish().ok());
+}
+
+// A walker down a street: masks of the boxes ahead arrive before the eye gets there, each after
+// its cell's PVS; every box lies in its cell and no mask lists an object outside that PVS.
+TEST(Server, AWalkerGetsTheMasksOfTheBoxesAheadBeforeItReachesThem) {
+  auto server = StartServer();
+  auto client = ConnectWithMasks(*server);
+  const visibility::ViewcellGrid& g = City1().grid();
+  // Along row 9 of city1's grid from cell 10 to 13 at 6 km/h, poses at 20 Hz (sped up 4x: the
+  // server predicts from the velocity sent, which is the true one).
+  const glm::dvec3 start = Centre(10, 9), end = Centre(13, 9);
+  const double v = 6.0 / 3.6;
+  const glm::dvec3 velocity = glm::normalize(end - start) * v;
+  const int steps = static_cast<int>(glm::length(end - start) / v * 20.0);
+  std::vector<std::pair<glm::dvec3, size_t>> poses;  // where, and how many masks were in
+  for (int k = 0; k <= steps; ++k) {
+    const glm::dvec3 eye = start + (end - start) * (static_cast<double>(k) / steps);
+    ASSERT_TRUE(client->SendPose(eye, velocity));
+    poses.emplace_back(eye, client->Snapshot().masks.size());
+    std::this_thread::sleep_for(std::chrono::milliseconds(12));
+  }
+  const SessionRecord r = client->Snapshot();
+  ASSERT_GE(r.masks.size(), 3u);
+  const std::vector<visibility::DecodedMask> decoded = DecodeAll(r.masks);
+  size_t ahead = 0;
+  for (size_t k = 0; k < r.masks.size(); ++k) {
+    const v1::EpsilonMask& m = r.masks[k];
+    const scenes::Aabb box{glm::dvec3(m.neighbourhood_min().x(), m.neighbourhood_min().y(), m.neighbourhood_min().z()),
+                           glm::dvec3(m.neighbourhood_max().x(), m.neighbourhood_max().y(), m.neighbourhood_max().z())};
+    const scenes::Aabb cell = g.CellBox(m.cell_id());
+    EXPECT_GE(box.min.x, cell.min.x - 1e-9);
+    EXPECT_LE(box.max.x, cell.max.x + 1e-9);
+    EXPECT_GE(box.min.y, cell.min.y - 1e-9);
+    EXPECT_LE(box.max.y, cell.max.y + 1e-9);
+    const auto pvs_at = std::find(r.order.begin(), r.order.end(), std::make_pair('P', m.cell_id()));
+    const auto mask_at = std::find(r.order.begin(), r.order.end(), std::make_pair('M', m.mask_id()));
+    EXPECT_LT(pvs_at, mask_at) << "mask " << m.mask_id();
+    const std::vector<uint32_t>& pvs = r.pvs.at(m.cell_id());
+    for (const visibility::MaskObject& o : decoded[k].objects) {
+      EXPECT_TRUE(std::binary_search(pvs.begin(), pvs.end(), o.object)) << "mask " << m.mask_id() << " object " << o.object;
+    }
+    // The first pose inside the box: the mask had arrived by then.
+    for (const auto& [eye, held] : poses) {
+      if (eye.x < box.min.x || eye.x > box.max.x || eye.y < box.min.y || eye.y > box.max.y) continue;
+      if (held > k) ++ahead;
+      break;
+    }
+  }
+  // The very first box is the one the eye starts in; the others were sent ahead.
+  EXPECT_GE(ahead + 1, r.masks.size() * 3 / 4) << ahead << " of " << r.masks.size() << " ahead";
+  std::printf("%zu masks, %zu arrived before the eye reached their box; %llu deltas\n", r.masks.size(), ahead,
+              static_cast<unsigned long long>(std::count_if(r.masks.begin(), r.masks.end(),
+                                                            [](const v1::EpsilonMask& m) { return m.base_mask_id() != 0; })));
   EXPECT_TRUE(client->Finish().ok());
 }
 

@@ -173,7 +173,9 @@ TEST_F(SimulatorTest, ThePvsSchemeDrawsNoMaskAndItsHolesAreItsStalls) {
 // cover some of those frames, so holes are fewer than stalls, and never more.
 TEST_F(SimulatorTest, OnASlowLinkMasksCoverSomeStalls) {
   SimulationOptions o = Options(*city1_);
-  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("20k,200", o.link);
+  // 15 kbit/s: at 6 km/h some cells' geometry comes late (1,878 stalled frames measured), the
+  // masks of the boxes ahead and their objects in time (no hole).
+  absl::StatusOr<scenes::LinkSpec> slow = ParseLinkOption("15k,200", o.link);
   ASSERT_TRUE(slow.ok()) << slow.status();
   o.link = *slow;
   o.fixed_compute_s = 0.01;
@@ -385,7 +387,7 @@ TEST_F(SimulatorTest, HoleSearchFindsTheHighestSpeedWithoutAHoleFrame) {
   EXPECT_EQ(hole->stall_speed_mps, stall->stall_speed_mps);
   EXPECT_EQ(hole->runs, stall->runs);
 
-  absl::StatusOr<scenes::LinkSpec> link = ParseLinkOption("20k,200", o.link);
+  absl::StatusOr<scenes::LinkSpec> link = ParseLinkOption("15k,200", o.link);
   ASSERT_TRUE(link.ok()) << link.status();
   o.link = *link;
   o.scheme = Scheme::kPvsEps;
@@ -394,7 +396,7 @@ TEST_F(SimulatorTest, HoleSearchFindsTheHighestSpeedWithoutAHoleFrame) {
       FindMaxSpeed(*city1_->scene, city1_->entry, o, 3.0 / 3.6, 8.0 / 3.6, 0.25, {}, SpeedCriterion::kNoHole);
   ASSERT_TRUE(eps.ok()) << eps.status();
   ASSERT_GT(eps->max_speed_mps, 0.0);
-  ASSERT_GT(eps->stall_speed_mps, eps->max_speed_mps) << "8 km/h has hole frames on 20 kbit/s";
+  ASSERT_GT(eps->stall_speed_mps, eps->max_speed_mps) << "8 km/h has hole frames on 15 kbit/s";
   EXPECT_EQ(eps->at_max.hole_frames, 0u);
   EXPECT_GT(eps->at_max.frames_masked, 0u);
   for (const auto& [mps, holes] : eps->runs) {
