@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "scenes/catalog.h"
+#include "server/event_log.h"
 #include "server/served_scene.h"
 #include "tests/cli_test_util.h"
 
@@ -184,6 +185,76 @@ TEST_F(SimulatorTest, OnASlowLinkMasksCoverSomeStalls) {
   EXPECT_GT(r.stalls, 0u);
   EXPECT_LE(r.hole_frames, r.stalls);
   EXPECT_GT(r.frames_masked, 0u);
+}
+
+// The PVS jobs of a run, from its event log, in start order: simulated seconds, and cell; and
+// when the walk started.
+struct PvsJobs {
+  std::vector<std::pair<double, std::string>> jobs;
+  double walk_start_s = 0.0;
+};
+PvsJobs PvsJobsOf(const std::string& log) {
+  PvsJobs out;
+  std::istringstream in(log);
+  for (std::string line; std::getline(in, line);) {
+    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_object()) continue;
+    if (j.value("event", "") == "walk_start") out.walk_start_s = j.value("t_s", 0.0);
+    if (j.value("event", "") == "compute") out.jobs.emplace_back(j.value("t_s", 0.0), j.value("cell", ""));
+  }
+  return out;
+}
+
+// Masks never delay a PVS (issue 34): a fast walker with one PVS worker whose deadlines are
+// tight, and masks that take as long as a PVS, so that many wait and go stale. Its PVS jobs
+// start in the same order as without masks: those before the walk at the same times, those
+// during it at the same times counted from the walk's start, within one pose period (poses go
+// at 10 Hz from the session's start; the walk starts when the first cell is complete, which
+// the masks' bytes move).
+TEST_F(SimulatorTest, MasksNeverDelayAPvsJob) {
+  PvsJobs runs[2];
+  SimulationResult results[2];
+  for (int k = 0; k < 2; ++k) {
+    SimulationOptions o = Options(*city1_, 60.0);
+    o.workers = 1;
+    o.fixed_compute_s = 0.25;
+    o.count_triangles = false;
+    o.scheme = k == 0 ? Scheme::kPvs : Scheme::kPvsEps;
+    char* buffer = nullptr;
+    size_t size = 0;
+    std::FILE* f = open_memstream(&buffer, &size);
+    ASSERT_NE(f, nullptr);
+    EventLog log(f, true);
+    o.log = &log;
+    results[k] = Run(*city1_, o);
+    std::fclose(f);
+    runs[k] = PvsJobsOf(std::string(buffer, size));
+    std::free(buffer);
+  }
+  const auto& without = runs[0].jobs;
+  const auto& with = runs[1].jobs;
+  ASSERT_GT(without.size(), 20u);
+  EXPECT_GT(results[1].masks_computed, 20u);
+  EXPECT_GT(results[1].masks_dropped, 0u) << "no mask waited long enough to go stale: nothing was pending";
+  ASSERT_EQ(with.size(), without.size());
+  size_t during = 0;
+  for (size_t j = 0; j < without.size(); ++j) {
+    EXPECT_EQ(with[j].second, without[j].second) << "job " << j;
+    const bool before = without[j].first < runs[0].walk_start_s;
+    EXPECT_EQ(with[j].first < runs[1].walk_start_s, before) << "job " << j;
+    if (before) {
+      // (The Hello asking for masks is 2 bytes longer on the uplink: microseconds.)
+      EXPECT_NEAR(with[j].first, without[j].first, 1e-3) << "job " << j << ", cell " << without[j].second;
+    } else {
+      ++during;
+      EXPECT_NEAR(with[j].first - runs[1].walk_start_s, without[j].first - runs[0].walk_start_s, 0.1 + 1e-6)
+          << "job " << j << ", cell " << without[j].second;
+    }
+  }
+  EXPECT_GT(during, 20u);
+  std::printf("%zu PVS jobs (%zu during the walk); with masks: %llu computed, %llu dropped\n", without.size(), during,
+              static_cast<unsigned long long>(results[1].masks_computed),
+              static_cast<unsigned long long>(results[1].masks_dropped));
 }
 
 TEST_F(SimulatorTest, LondonCityAtSixKmhOverOneMbitNeverStalls) {
