@@ -21,6 +21,7 @@
 #include <mutex>
 #include <random>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <CLI/CLI.hpp>
@@ -59,6 +60,7 @@ struct BenchServerArgs {
   std::string balancer = "none";  // none | haproxy
   std::string store = "none";     // none | redis (a redis-server of the run's own) | HOST:PORT
   bool warm = false;              // fill the store with the same walks first
+  std::string masks = "on";       // on | off: the walkers' Hello.epsilon_masks (issue 34)
 };
 
 // What the passes of one bench run share: the PVS store's address and key prefix (empty: no
@@ -227,6 +229,7 @@ struct SessionResult {
   uint64_t cells_entered = 0, late_cells = 0, crossings = 0, incomplete_crossings = 0;
   std::vector<double> crossing_ms;
   uint64_t geometry_bytes = 0, raw_geometry_bytes = 0;  // after start-up
+  uint64_t masks = 0, mask_bytes = 0;                   // ε-masks received, their triangle bytes
 };
 
 std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibility::CellId c) {
@@ -237,11 +240,13 @@ std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibi
 
 SessionResult RunSession(const std::string& address, const client::ChannelSecurity& security,
                          const std::string& scene_name, const Streets& streets, const visibility::ViewcellGrid& grid,
-                         uint64_t seed, double speed, double seconds, const std::atomic<bool>& cancel) {
+                         uint64_t seed, double speed, double seconds, bool masks, const std::atomic<bool>& cancel) {
   SessionResult out;
   client::SessionStream s(address, security);
   s.set_keep_geometry(false);
-  s.Start(client::SessionStream::HelloFor(scene_name));
+  v1::Hello hello = client::SessionStream::HelloFor(scene_name);
+  hello.set_epsilon_masks(masks);
+  s.Start(hello);
   s.SendCredit(uint64_t{1} << 50);
   Walker walker(streets, seed, speed);
   const double eye = grid.base_z() + 1.2;
@@ -333,9 +338,29 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
   }
   out.geometry_bytes = end.geometry_bytes - at_start.geometry_bytes;
   out.raw_geometry_bytes = end.raw_geometry_bytes - at_start.raw_geometry_bytes;
+  out.masks = end.masks.size();
+  out.mask_bytes = end.mask_bytes;
   const grpc::Status st = s.Finish();
   if (!st.ok() && out.error.empty()) out.error = st.error_message();
   return out;
+}
+
+// CPU seconds (user + system) the process has used; 0 when /proc says nothing.
+double CpuSeconds(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(in, line)) return 0.0;
+  // Fields after the command's closing parenthesis: state is field 3, utime 14, stime 15.
+  const size_t close = line.rfind(')');
+  if (close == std::string::npos) return 0.0;
+  std::istringstream rest(line.substr(close + 2));
+  std::string field;
+  double utime = 0.0, stime = 0.0;
+  for (int k = 3; k <= 15 && rest >> field; ++k) {
+    if (k == 14) utime = std::strtod(field.c_str(), nullptr);
+    if (k == 15) stime = std::strtod(field.c_str(), nullptr);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
 }
 
 uint64_t RssKiB(pid_t pid) {
@@ -458,6 +483,8 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     }
   });
   std::vector<SessionResult> results(a.sessions);
+  double cpu_start = 0.0;
+  for (size_t k = 0; k < replicas.size(); ++k) cpu_start += CpuSeconds(replicas.pid(k));
   const double walk_start = SteadySeconds();
   {
     // Progress in seconds of the walk (start-up first, whose length depends on the server).
@@ -472,7 +499,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     for (size_t k = 0; k < a.sessions; ++k) {
       threads.emplace_back([&, k] {
         results[k] = RunSession(address, security, scene->name, streets, *grid, a.seed * 1000003 + k,
-                                a.speed_kmh / 3.6, a.seconds, CancelFlag());
+                                a.speed_kmh / 3.6, a.seconds, a.masks == "on", CancelFlag());
         ++finished;
       });
     }
@@ -491,6 +518,8 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     progress.Finish();
   }
   const double walk_s = SteadySeconds() - walk_start;
+  double server_cpu_s = -cpu_start;
+  for (size_t k = 0; k < replicas.size(); ++k) server_cpu_s += CpuSeconds(replicas.pid(k));
   // Every replica's own figures (asked directly, not through the balancer), and their sum.
   v1::ServerStats stats;
   grpc::Status stats_status;
@@ -507,6 +536,8 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     stats.set_pvs_store_hits(stats.pvs_store_hits() + r.pvs_store_hits());
     stats.set_bytes_sent(stats.bytes_sent() + r.bytes_sent());
     stats.set_sessions_total(stats.sessions_total() + r.sessions_total());
+    stats.set_epsilon_masks_computed(stats.epsilon_masks_computed() + r.epsilon_masks_computed());
+    stats.set_epsilon_mask_compute_s(stats.epsilon_mask_compute_s() + r.epsilon_mask_compute_s());
     if (r.has_store()) {
       stats.mutable_store()->set_outages(stats.store().outages() + r.store().outages());
       stats.mutable_store()->set_unavailable(stats.store().unavailable() + r.store().unavailable());
@@ -518,6 +549,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   if (CancelFlag().load()) return Fail(absl::CancelledError("bench server stopped"));
 
   uint64_t late = 0, entered = 0, crossings = 0, incomplete = 0, started = 0, without_late = 0, bytes = 0, raw = 0;
+  uint64_t masks = 0, mask_bytes = 0;
   std::vector<double> crossing_ms, startup_s;
   std::string first_error;
   for (const SessionResult& r : results) {
@@ -533,6 +565,8 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     crossing_ms.insert(crossing_ms.end(), r.crossing_ms.begin(), r.crossing_ms.end());
     bytes += r.geometry_bytes;
     raw += r.raw_geometry_bytes;
+    masks += r.masks;
+    mask_bytes += r.mask_bytes;
   }
   const double hits = static_cast<double>(stats.pvs_cache_hits());
   const double computed = static_cast<double>(stats.pvs_computed());
@@ -585,6 +619,19 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   j["walk_s"] = walk_s;
   j["bytes_per_s"] = walk_s > 0.0 ? static_cast<double>(stats.bytes_sent()) / walk_s : 0.0;
   j["server_exit_code"] = server_exit;
+  // ε-masks (issue 34): what the walkers received, and the server's CPU for them: seconds, and
+  // their share of the server's CPU and of every core over the walk (start-up included).
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  j["masks"] = a.masks;
+  j["masks_received"] = masks;
+  j["mask_bytes"] = mask_bytes;
+  j["masks_computed"] = stats.epsilon_masks_computed();
+  j["mask_cpu_s"] = stats.epsilon_mask_compute_s();
+  j["server_cpu_s"] = server_cpu_s;
+  j["mask_cpu_share_of_server"] = server_cpu_s > 0.0 ? stats.epsilon_mask_compute_s() / server_cpu_s : 0.0;
+  j["mask_cpu_share_of_cores"] = walk_s > 0.0 ? stats.epsilon_mask_compute_s() / (walk_s * cores) : 0.0;
+  j["server_cpu_share_of_cores"] = walk_s > 0.0 ? server_cpu_s / (walk_s * cores) : 0.0;
+  j["cores"] = cores;
   if (!first_error.empty()) j["first_error"] = first_error;
   if (!a.json && !run.warmup) {
     std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2%s\n", scene->name.c_str(), a.sessions,
@@ -612,6 +659,13 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
                 j["encoded_fraction"].get<double>(), j["rss_mb"].get<double>());
     std::printf("  %.0f bytes/s sent (%llu bytes in %.1f s)\n", j["bytes_per_s"].get<double>(),
                 static_cast<unsigned long long>(stats.bytes_sent()), walk_s);
+    std::printf("  ε-masks %s: %llu received (%llu bytes), %llu computed in %.1f CPU s: %.1f%% of the server's %.1f "
+                "CPU s, %.1f%% of %u cores (the server used %.1f%%)\n",
+                a.masks.c_str(), static_cast<unsigned long long>(masks), static_cast<unsigned long long>(mask_bytes),
+                static_cast<unsigned long long>(stats.epsilon_masks_computed()), stats.epsilon_mask_compute_s(),
+                100.0 * j["mask_cpu_share_of_server"].get<double>(), server_cpu_s,
+                100.0 * j["mask_cpu_share_of_cores"].get<double>(), cores,
+                100.0 * j["server_cpu_share_of_cores"].get<double>());
     if (!first_error.empty()) std::printf("  first session error: %s\n", first_error.c_str());
   }
   // A run whose server or sessions failed measured something else: say so and fail.
@@ -741,6 +795,9 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();
   c->add_option("--log", args->log, "write the server's log here");
   c->add_flag("--json", args->json, "print one JSON object");
+  c->add_option("--masks", args->masks, "on | off: whether the walkers ask for ε-masks (Hello.epsilon_masks)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
   c->add_option("--tls", args->tls,
                 "off | on | both: serve TLS (a certificate made for the run with openssl); both: plaintext and TLS "
                 "side by side, with their ratios")
