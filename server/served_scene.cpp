@@ -88,7 +88,8 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   g->set_base_z_m(s->grid_->base_z());
   g->set_height_m(s->grid_->height());
 
-  s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()));
+  s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()), 4096,
+                                          options.idle_priority_masks);
   ServedScene* self = s.get();
   std::function<void(unsigned)> init;
   if (!options.pvs_file.empty()) {

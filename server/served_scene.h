@@ -41,6 +41,10 @@ struct ServedSceneOptions {
   // The PVS store shared with other replicas (not owned; must outlive the scene); null: none.
   // Not used with `pvs_file`.
   PvsStore* store = nullptr;
+  // ε-mask threads at SCHED_IDLE, so that they never take CPU from PVS work (server/task_queue.h).
+  // False: ordinary threads, for tests whose machine other work shares, where idle threads
+  // would wait for it (what they test is which masks are sent and drawn, not their priority).
+  bool idle_priority_masks = true;
 };
 
 class ServedScene {

@@ -199,6 +199,21 @@ TEST(EpsilonSuperset, EveryTriangleASampleSeesIsInTheSuperset) {
   EXPECT_GT(checked, 100000u);
 }
 
+// Whether the box's ground outline stays a centimetre clear of every building and no
+// footprint corner lies inside it: the box is in the open.
+bool OutsideEveryBuilding(const Scene& s, const Aabb& box) {
+  const glm::dvec2 c[4] = {{box.min.x, box.min.y}, {box.max.x, box.min.y}, {box.max.x, box.max.y}, {box.min.x, box.max.y}};
+  for (int k = 0; k < 4; ++k) {
+    if (!testing::SegmentClearOfOccluders(s, c[k], c[(k + 1) % 4], 0.01)) return false;
+  }
+  for (const scenes::Occluder25D& oc : s.occluders) {
+    for (const glm::dvec2& v : oc.footprint) {
+      if (v.x >= box.min.x && v.x <= box.max.x && v.y >= box.min.y && v.y <= box.max.y) return false;
+    }
+  }
+  return true;
+}
+
 // The same check over the scenes that showed false occlusion in the viewcell PVS: terraced
 // districts with party walls, closes and turned blocks, on the 1/256 m grid and off it, with
 // neighbourhoods in the streets and closes, a centimetre from the walls.
@@ -221,15 +236,7 @@ TEST(EpsilonSuperset, EveryTriangleASampleSeesIsInTheSupersetInTerracedStreets) 
       const Aabb box{lo, lo + glm::dvec3(size)};
       // Outside every building, by a centimetre at least (a box inside a solid sees nothing
       // the oracle could judge).
-      const glm::dvec2 c[4] = {{box.min.x, box.min.y}, {box.max.x, box.min.y}, {box.max.x, box.max.y}, {box.min.x, box.max.y}};
-      bool clear = true;
-      for (int k = 0; k < 4; ++k) clear &= testing::SegmentClearOfOccluders(s, c[k], c[(k + 1) % 4], 0.01);
-      for (const scenes::Occluder25D& oc : s.occluders) {
-        for (const glm::dvec2& v : oc.footprint) {
-          clear &= !(v.x >= box.min.x && v.x <= box.max.x && v.y >= box.min.y && v.y <= box.max.y);
-        }
-      }
-      if (!clear) continue;
+      if (!OutsideEveryBuilding(s, box)) continue;
       ++boxes;
       ++here;
       for (const char* column : {"paper", "all"}) {
@@ -243,9 +250,7 @@ TEST(EpsilonSuperset, EveryTriangleASampleSeesIsInTheSupersetInTerracedStreets) 
     }
   }
   EXPECT_EQ(boxes, 80u);
-  // A box stretched along a street of a 180 m town still hides something (30% measured with
-  // these seeds: such a box looks down whole streets).
-  EXPECT_GT(hidden, total / 4) << hidden << " of " << total;
+  EXPECT_GT(hidden, total / 2) << hidden << " of " << total;
   EXPECT_GT(checked, 100000u);
 }
 
@@ -271,16 +276,8 @@ TEST(EpsilonSuperset, EveryTriangleASampleSeesIsInTheSupersetOfAPathNeighbourhoo
       const double lateral = rng.Uniform(0.5, 1.5);
       const Aabb box{glm::dvec3(std::min(a.x, b.x) - lateral, std::min(a.y, b.y) - lateral, eye - 0.3),
                      glm::dvec3(std::max(a.x, b.x) + lateral, std::max(a.y, b.y) + lateral, eye + 0.3)};
-      // In the street: the box's outline and the path clear of every building by a centimetre.
-      const glm::dvec2 c[4] = {{box.min.x, box.min.y}, {box.max.x, box.min.y}, {box.max.x, box.max.y}, {box.min.x, box.max.y}};
-      bool clear = testing::SegmentClearOfOccluders(s, a, b, 0.01);
-      for (int k = 0; k < 4; ++k) clear &= testing::SegmentClearOfOccluders(s, c[k], c[(k + 1) % 4], 0.01);
-      for (const scenes::Occluder25D& oc : s.occluders) {
-        for (const glm::dvec2& v : oc.footprint) {
-          clear &= !(v.x >= box.min.x && v.x <= box.max.x && v.y >= box.min.y && v.y <= box.max.y);
-        }
-      }
-      if (!clear) continue;
+      // In the street: the box and the path clear of every building by a centimetre.
+      if (!OutsideEveryBuilding(s, box) || !testing::SegmentClearOfOccluders(s, a, b, 0.01)) continue;
       ++boxes;
       ++here;
       const EpsilonResult r = eps->Compute(box, Options("all"));

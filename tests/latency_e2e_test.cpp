@@ -308,7 +308,6 @@ TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStallsAndTheSimulatorAgree
   ASSERT_TRUE(sim.ok()) << sim.status();
   ExpectAgreement(run, *sim, /*expect_no_stall=*/true);
   ExpectMaskAgreement(run, *sim);
-  EXPECT_GT(run.summary["frames_masked"].get<double>(), 0.9 * run.summary["frames"].get<double>());
   EXPECT_EQ(run.summary["hole_frames"], 0) << run.log;
 }
 

@@ -26,6 +26,7 @@ inline ServedScene& City1() {
     ServedSceneOptions o;
     o.scene = "city1";
     o.threads = 2;
+    o.idle_priority_masks = false;  // masks as they are sent, whatever else loads the machine
     absl::StatusOr<std::unique_ptr<ServedScene>> s = ServedScene::Create(o);
     EXPECT_TRUE(s.ok()) << s.status();
     return s->release();
