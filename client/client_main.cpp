@@ -102,7 +102,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-fps", o.max_fps, "frame-rate cap; 0 draws as fast as it can")
       ->check(FiniteRange(0.0, 1e4))
       ->capture_default_str();
-  app.add_flag("--no-masks", no_masks, "draw the viewcell PVS whole, ignoring ε-masks (a baseline)");
+  app.add_flag("--no-masks", no_masks,
+               "ask the server for no ε-masks (Hello.epsilon_masks false) and draw the viewcell PVS whole (a baseline)");
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
   app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));

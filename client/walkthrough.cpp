@@ -368,9 +368,12 @@ absl::Status Loop::Startup() {
       objects_seen = n;
       last_arrival = Now();
     }
-    // The list is here but its geometry stopped coming: the server keeps the memory budget
-    // (geometry needs no computing). Walk on; frames in such cells count as stalls.
-    if (p->pvs != nullptr && memory_budget_ != 0 && Now() - last_arrival > 3.0) {
+    // The list is here but its geometry stopped coming while the store is at least half full:
+    // the server keeps the memory budget (it sends until the next object would not fit).
+    // Walk on; frames in such cells count as stalls. Below half the budget the link is only
+    // slow (an object of a few kB takes seconds at tens of kbit/s): keep waiting.
+    if (p->pvs != nullptr && memory_budget_ != 0 && Now() - last_arrival > 3.0 &&
+        2 * store_->held_bytes() >= memory_budget_) {
       sum_->startup_s = Now() - session_start_;
       Log(absl::StrFormat("the first viewcell's PVS (%d objects) does not fit the %.1f MiB memory budget: walking "
                           "on with %d of them after %.1f s",
@@ -538,8 +541,9 @@ absl::Status Loop::Walkthrough() {
       if (p->cell != holed_in && p->cell.has_value()) {
         holed_in = p->cell;
         Log(absl::StrFormat("hole frame at %.0f s: %s", t,
-                            choice.in_box ? "the eye's masks lack objects and its viewcell's PVS is incomplete"
-                                          : "the eye is in no mask's box and its viewcell's PVS is incomplete"));
+                            !opt_.use_masks ? "its viewcell's PVS is incomplete (no ε-masks asked for)"
+                            : choice.in_box ? "the eye's masks lack objects and its viewcell's PVS is incomplete"
+                                            : "the eye is in no mask's box and its viewcell's PVS is incomplete"));
       }
     }
     if (!p->complete) {

@@ -504,7 +504,9 @@ void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const L
                  {"seconds", stats.seconds()},
                  {"crossings", stats.crossings()},
                  {"objects_sent", stats.objects_sent()},
-                 {"bytes_sent", stats.bytes_sent()}});
+                 {"bytes_sent", stats.bytes_sent()},
+                 {"epsilon_masks", stats.epsilon_masks()},
+                 {"epsilon_mask_bytes", stats.epsilon_mask_bytes()}});
     if (link != nullptr) {
       const double n = std::max<double>(1.0, static_cast<double>(link->messages));
       const double up = std::max<double>(1.0, static_cast<double>(link->uplink_messages));

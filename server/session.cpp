@@ -178,7 +178,8 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     log_->SetScene(id_, scene_->name());
     log_->Write(id_, "hello", {{"scene", scene_->name()},
                                {"held_objects", hello.held_objects_size()},
-                               {"memory_budget_bytes", static_cast<uint64_t>(memory_budget_)}});
+                               {"memory_budget_bytes", static_cast<uint64_t>(memory_budget_)},
+                               {"epsilon_masks", masks_on_ ? "yes" : "no"}});
   }
   return absl::OkStatus();
 }
