@@ -36,8 +36,8 @@ struct TaskStats {
 
 // Worker threads at the SCHED_IDLE policy (Linux): the kernel runs them only on cores that
 // nothing else wants, so the PVS workers and the transport never wait for a mask. Bounded: when
-// more than `capacity` jobs wait, the one with the latest deadline is dropped (its owner asks
-// again if it still cares).
+// more than `capacity` jobs wait, the one with the latest deadline is dropped, counted and not
+// run (a session's box whose job was dropped gets no mask: the client draws the PVS there).
 class MaskQueue : public TaskRunner {
  public:
   // `threads` workers (at least one); `idle_priority` false: ordinary threads (tests).
