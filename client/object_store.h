@@ -46,11 +46,6 @@ struct GridInfo {
   bool InBand(double z) const { return z >= base_z && z <= base_z + height; }
 };
 
-// Whether bit `t` of a mask's little-endian triangle bits is set (false past its end).
-inline bool TriangleVisible(const std::vector<uint8_t>& bits, size_t t) {
-  return t / 8 < bits.size() && ((bits[t / 8] >> (t % 8)) & 1u) != 0;
-}
-
 // An ε-mask decoded (proto EpsilonMask): which triangles of its cell's PVS may be seen from
 // anywhere in its neighbourhood box. Objects with no such triangle are not listed.
 struct EpsilonMaskSet {

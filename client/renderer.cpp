@@ -251,7 +251,7 @@ Renderer::MaskedIndices& Renderer::MaskedFor(Gpu& g, const StoredObject& o, cons
   const std::vector<uint32_t>& all = o.data.mesh.indices;
   const size_t triangles = all.size() / 3;
   for (size_t t = 0; t < triangles; ++t) {
-    if (TriangleVisible(bits, t)) {
+    if (visibility::MaskBit(bits, t)) {
       indices.insert(indices.end(), all.begin() + static_cast<std::ptrdiff_t>(3 * t),
                      all.begin() + static_cast<std::ptrdiff_t>(3 * t + 3));
     }

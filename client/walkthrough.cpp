@@ -425,7 +425,7 @@ absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMa
     const std::vector<uint8_t>* bits = nullptr;
     if (d.masked && mask != nullptr) bits = mask->Bits(d.id);
     for (size_t t = 0; t < n; ++t) {
-      flags[first + t] = bits == nullptr || TriangleVisible(*bits, t) ? 1 : 0;
+      flags[first + t] = bits == nullptr || visibility::MaskBit(*bits, t) ? 1 : 0;
     }
   }
   const glm::dvec3 forward = camera_.Forward(), up = camera_.Up();

@@ -9,13 +9,13 @@
 
 namespace vistream::server {
 
-namespace {
-
 double ThreadCpuSeconds() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
+
+namespace {
 
 // SCHED_IDLE for the calling thread; false if the kernel refused (it then gets nice 19).
 bool LowerCallingThread() {

@@ -27,6 +27,9 @@ class TaskRunner {
   virtual void Post(Work work, double deadline) = 0;
 };
 
+// CPU seconds the calling thread has used (CLOCK_THREAD_CPUTIME_ID): what TaskStats::cpu_s sums.
+double ThreadCpuSeconds();
+
 struct TaskStats {
   uint64_t computed = 0;  // works that delivered a result
   uint64_t dropped = 0;   // works that found themselves stale, or pushed out of a full queue

@@ -110,12 +110,12 @@ TEST(ObjectStoreMasks, AMaskIsDecodedWithItsCellBoxObjectsAndTriangleBits) {
   EXPECT_FALSE(m.Contains({13, 3, 1.5}));  // above the box
   EXPECT_FALSE(m.Contains({16, 3, 0.8}));
   ASSERT_NE(m.Bits(2), nullptr);
-  EXPECT_TRUE(TriangleVisible(*m.Bits(2), 0));
-  EXPECT_FALSE(TriangleVisible(*m.Bits(2), 1));
-  EXPECT_TRUE(TriangleVisible(*m.Bits(2), 9));
-  EXPECT_FALSE(TriangleVisible(*m.Bits(2), 10));
+  EXPECT_TRUE(visibility::MaskBit(*m.Bits(2), 0));
+  EXPECT_FALSE(visibility::MaskBit(*m.Bits(2), 1));
+  EXPECT_TRUE(visibility::MaskBit(*m.Bits(2), 9));
+  EXPECT_FALSE(visibility::MaskBit(*m.Bits(2), 10));
   ASSERT_NE(m.Bits(7), nullptr);
-  EXPECT_TRUE(TriangleVisible(*m.Bits(7), 4));
+  EXPECT_TRUE(visibility::MaskBit(*m.Bits(7), 4));
   EXPECT_EQ(m.Bits(3), nullptr);  // not in the mask: nothing of it drawn
 }
 
@@ -281,23 +281,37 @@ std::vector<std::vector<std::string>> ReadCsv(const std::string& path) {
   return rows;
 }
 
+// A server for `scene` on a free loopback port, and the address to reach it at.
+struct LoopbackServer {
+  std::unique_ptr<server::WalkthroughServer> server;
+  std::string address;
+};
+absl::StatusOr<LoopbackServer> StartOnLoopback(server::ServedScene* scene) {
+  server::ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> started = server::WalkthroughServer::Start(scene, so, nullptr);
+  if (!started.ok()) return started.status();
+  const std::string address = "127.0.0.1:" + std::to_string((*started)->port());
+  return LoopbackServer{*std::move(started), address};
+}
+
 // A walker along a catalog walk through a real server on loopback, every frame's set checked
 // every `every_s` against the full scene's object ids (--verify).
 struct MaskedWalk {
-  server::ServedScene* scene = nullptr;
+  MaskedWalk(server::ServedScene* s, double walk_kmh, double walk_seconds, double check_every_s, std::string catalog = {})
+      : scene(s), catalog_dir(std::move(catalog)), kmh(walk_kmh), seconds(walk_seconds), every_s(check_every_s) {}
+  server::ServedScene* scene;
   std::string catalog_dir;  // empty: the built-in catalog
-  double kmh = 6.0, seconds = 20.0, every_s = 2.0;
+  double kmh, seconds, every_s;
   std::string frame_log;    // empty: none
   bool use_masks = true;    // false: Hello.epsilon_masks false
   bool verify = true;
 };
 absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
-  server::ServerOptions so;
-  so.listen = "127.0.0.1:0";
-  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server = server::WalkthroughServer::Start(w.scene, so, nullptr);
+  absl::StatusOr<LoopbackServer> server = StartOnLoopback(w.scene);
   if (!server.ok()) return server.status();
   WalkthroughOptions o;
-  o.server = "127.0.0.1:" + std::to_string((*server)->port());
+  o.server = server->address;
   o.headless = true;
   o.width = 320;
   o.height = 180;
@@ -327,7 +341,7 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
 }
 
 TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
-  MaskedWalk w{&City1(), "", 6.0, 60.0, 3.0};  // 100 m of lot-lines: three viewcells
+  MaskedWalk w(&City1(), 6.0, 60.0, 3.0);  // 100 m of lot-lines: three viewcells
   w.frame_log = (std::filesystem::path(vistream::testing::ProcessTempDir()) / "city1_masks_frames.csv").string();
   absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(w);
   ASSERT_TRUE(s.ok()) << s.status();
@@ -370,17 +384,14 @@ TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
 TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiving) {
   // A 2 KB credit window: masks the client did not count as consumed would leak that much
   // credit after a few masks, and the server would send nothing more.
-  server::ServerOptions so;
-  so.listen = "127.0.0.1:0";
-  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
-      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  absl::StatusOr<LoopbackServer> server = StartOnLoopback(&City1());
   ASSERT_TRUE(server.ok()) << server.status();
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
   ASSERT_TRUE(entry.ok()) << entry.status();
   absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(entry->walks.front(), 6.0 / 3.6);
   ASSERT_TRUE(walk.ok()) << walk.status();
   ConnectionOptions co;
-  co.address = "127.0.0.1:" + std::to_string((*server)->port());
+  co.address = server->address;
   co.scene = "city1";
   co.credit_window_bytes = 2048;
   co.epsilon_masks = true;
@@ -415,7 +426,7 @@ TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiv
 }
 
 TEST(ClientMasks, WithoutMasksTheServerSendsNoneAndBothTriangleCountsAgree) {
-  MaskedWalk w{&City1(), "", 6.0, 15.0, 3.0};
+  MaskedWalk w(&City1(), 6.0, 15.0, 3.0);
   w.use_masks = false;  // Hello.epsilon_masks false
   w.verify = false;
   absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(w);
@@ -429,7 +440,7 @@ TEST(ClientMasks, WithoutMasksTheServerSendsNoneAndBothTriangleCountsAgree) {
 
 TEST(ClientMasks, ACity1WalkerAt60KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
   // 330 m of lot-lines: seven viewcells, a corner.
-  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks({&City1(), "", 60.0, 20.0, 1.0});
+  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(&City1(), 60.0, 20.0, 1.0));
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_GT(s->frames, 300u);
   EXPECT_GT(static_cast<double>(s->frames_masked), 0.80 * static_cast<double>(s->frames));
@@ -454,7 +465,7 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesWithoutHolesOrPix
   absl::StatusOr<std::unique_ptr<server::ServedScene>> town = server::ServedScene::Create(so);
   ASSERT_TRUE(town.ok()) << town.status();
   for (const double kmh : {6.0, 60.0}) {
-    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks({town->get(), dir, kmh, kmh < 10 ? 40.0 : 20.0, 2.0});
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(town->get(), kmh, kmh < 10 ? 40.0 : 20.0, 2.0, dir));
     ASSERT_TRUE(s.ok()) << s.status();
     EXPECT_GT(s->frames, 300u) << kmh;
     EXPECT_GT(static_cast<double>(s->frames_masked), (kmh < 10 ? 0.95 : 0.80) * static_cast<double>(s->frames)) << kmh;
@@ -479,7 +490,7 @@ TEST(ClientMasks, AWalkerWhoTurnsACornerFallsBackToThePvsWithoutAHole) {
              "waypoints": [[-500, 280], [-500, 300], [-500, 285], [-500, 300], [-500, 350], [-420, 350]]}])");
     std::ofstream(dir + "/city1.json") << j.dump(2);
   }
-  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks({&City1(), dir, 60.0, 10.0, 0.5});
+  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(&City1(), 60.0, 10.0, 0.5, dir));
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_GT(s->frames, 200u);
   EXPECT_GT(s->masks_received, 4u);
@@ -498,13 +509,10 @@ TEST(ClientMasks, AWalkerWhoTurnsACornerFallsBackToThePvsWithoutAHole) {
 // hole (client/walkthrough.cpp: a hole is no usable mask and an incomplete PVS); the server
 // drops the old chain and the mask of a box around the new eye follows.
 TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
-  server::ServerOptions so;
-  so.listen = "127.0.0.1:0";
-  absl::StatusOr<std::unique_ptr<server::WalkthroughServer>> server =
-      server::WalkthroughServer::Start(&City1(), so, nullptr);
+  absl::StatusOr<LoopbackServer> server = StartOnLoopback(&City1());
   ASSERT_TRUE(server.ok()) << server.status();
   ConnectionOptions co;
-  co.address = "127.0.0.1:" + std::to_string((*server)->port());
+  co.address = server->address;
   co.scene = "city1";
   co.epsilon_masks = true;
   co.pose_rate_hz = 20.0;

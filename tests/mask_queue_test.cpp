@@ -2,8 +2,6 @@
 // costing nothing, and threads that yield every core to ordinary work (the PVS workers).
 #include "server/task_queue.h"
 
-#include <time.h>
-
 #include <atomic>
 #include <chrono>
 #include <future>
@@ -60,12 +58,6 @@ TEST(MaskQueue, AFullQueueDropsTheLatestDeadline) {
   EXPECT_EQ(q.stats().dropped, 2u);  // the 9 pushed out, the first job's empty delivery
 }
 
-double ThreadCpu() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
 // While ordinary threads keep every core busy (the PVS workers in the server), a mask thread
 // gets next to no CPU; it runs once they are done.
 TEST(MaskQueue, ItsThreadsGetNoCpuWhileOrdinaryThreadsWantEveryCore) {
@@ -88,20 +80,20 @@ TEST(MaskQueue, ItsThreadsGetNoCpuWhileOrdinaryThreadsWantEveryCore) {
   // processes load it too).
   std::atomic<double> control_cpu{-1.0};
   std::jthread control([&] {
-    const double c0 = ThreadCpu();
+    const double c0 = ThreadCpuSeconds();
     while (!busy_done) {
     }
-    control_cpu = ThreadCpu() - c0;
+    control_cpu = ThreadCpuSeconds() - c0;
   });
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   const auto posted = std::chrono::steady_clock::now();
   q.Post([&]() -> std::function<void()> {
     started = true;
-    const double c0 = ThreadCpu();
+    const double c0 = ThreadCpuSeconds();
     while (!busy_done) {
     }
-    cpu_while_busy = ThreadCpu() - c0;
-    return [&] { finished.set_value(ThreadCpu()); };
+    cpu_while_busy = ThreadCpuSeconds() - c0;
+    return [&] { finished.set_value(ThreadCpuSeconds()); };
   }, 0.0);
   busy.clear();  // joins: about 1.4 s of every core taken
   const double busy_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - posted).count();
