@@ -5,7 +5,10 @@
 // vistream files keep the scene origin as the translation of one root node whose extras hold
 // {"vistream": {"origin": true}}, objects as its child nodes (one mesh each) and occluders in
 // each object node's extras: {"vistream": {"occluders": [{"footprint": [x0, y0, x1, y1, ...],
-// "height": h}]}} in the node's frame, z-up metres, standing on the ground.
+// "height": h}]}} in the node's frame, z-up metres, standing on the ground. The origin node's
+// extras may name the coordinate reference system ({"vistream": {"origin": true, "crs":
+// "EPSG:28992"}}, Scene::crs); terrain objects' nodes say {"vistream": {"terrain": true}}
+// (Scene::terrain).
 
 #include <string>
 #include <string_view>

@@ -59,6 +59,7 @@ struct PendingObject {
   std::vector<glm::dvec3> normals;    // world, z-up, unit
   std::vector<uint32_t> indices;
   std::vector<Occluder25D> occluders;  // world footprints, z-up
+  bool terrain = false;                // extras.vistream.terrain
 };
 
 class GltfImporter {
@@ -114,6 +115,9 @@ class GltfImporter {
         origin_node_ = index;
         origin_ = ZupFromGltf(glm::dvec3(local[3]));
         name_ = node.name;
+        const tinygltf::Value& crs = VistreamExtra(node, "crs");
+        if (crs.IsString()) crs_ = crs.Get<std::string>();
+        else if (crs.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(NodeName(index), ": extras.vistream.crs is not a string; ignored"));
       }
     }
     if (node.mesh >= 0) ImportMesh(index, world);
@@ -127,13 +131,15 @@ class GltfImporter {
     const auto& v = node.extras.Get("vistream");
     return v.IsObject() && v.Has("origin") && v.Get("origin").IsBool() && v.Get("origin").Get<bool>();
   }
-  static const tinygltf::Value& Occluders(const tinygltf::Node& node) {
+  // extras.vistream.KEY of `node`; a null value when absent.
+  static const tinygltf::Value& VistreamExtra(const tinygltf::Node& node, const char* key) {
     static const tinygltf::Value kNone;
     if (!node.extras.IsObject() || !node.extras.Has("vistream")) return kNone;
     const auto& v = node.extras.Get("vistream");
-    if (!v.IsObject() || !v.Has("occluders")) return kNone;
-    return v.Get("occluders");
+    if (!v.IsObject() || !v.Has(key)) return kNone;
+    return v.Get(key);
   }
+  static const tinygltf::Value& Occluders(const tinygltf::Node& node) { return VistreamExtra(node, "occluders"); }
 
   void ImportMesh(int node_index, const glm::dmat4& gltf_world) {
     const tinygltf::Node& node = model_.nodes[node_index];
@@ -247,6 +253,9 @@ class GltfImporter {
       Warn(absl::StrCat(what, ": no triangles; skipped"));
       return;
     }
+    const tinygltf::Value& terrain = VistreamExtra(node, "terrain");
+    if (terrain.IsBool()) obj.terrain = terrain.Get<bool>();
+    else if (terrain.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.terrain is not a boolean; ignored"));
     pending_.push_back(std::move(obj));
   }
 
@@ -311,6 +320,7 @@ class GltfImporter {
       origin_ = glm::dvec3(std::round(box.Centre().x), std::round(box.Centre().y), 0.0);
     }
     scene.origin = origin_;
+    scene.crs = crs_;
     scene.name = name_.empty() ? fs::path(file_).stem().string() : name_;
     for (auto& o : pending_) {
       Mesh mesh;
@@ -320,6 +330,7 @@ class GltfImporter {
       for (const auto& n : o.normals) mesh.normals.emplace_back(glm::vec3(n));
       mesh.indices = std::move(o.indices);
       const ObjectId id = scene.AddObject(std::move(o.name), std::move(mesh));
+      if (o.terrain) scene.terrain.push_back(id);
       for (auto& oc : o.occluders) {
         for (auto& p : oc.footprint) p -= glm::dvec2(origin_);
         oc.object = id;
@@ -338,6 +349,7 @@ class GltfImporter {
   int origin_node_ = -1;
   glm::dvec3 origin_{0.0};
   std::string name_;
+  std::string crs_;
 };
 
 // External buffers and images may only come from the glTF file's own folder (or below);

@@ -90,8 +90,9 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
   root.name = scene.name.empty() ? "vistream" : scene.name;
   const glm::dvec3 origin = GltfFromZup(scene.origin);
   root.translation = {origin.x, origin.y, origin.z};
-  root.extras = tinygltf::Value(tinygltf::Value::Object{
-      {"vistream", tinygltf::Value(tinygltf::Value::Object{{"origin", tinygltf::Value(true)}})}});
+  tinygltf::Value::Object root_extras{{"origin", tinygltf::Value(true)}};
+  if (!scene.crs.empty()) root_extras.emplace("crs", tinygltf::Value(scene.crs));
+  root.extras = tinygltf::Value(tinygltf::Value::Object{{"vistream", tinygltf::Value(std::move(root_extras))}});
   model.nodes.push_back(root);
 
   std::vector<std::vector<const Occluder25D*>> occluders(scene.objects.size());
@@ -138,6 +139,10 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
     tinygltf::Node node;
     node.name = o.name;
     node.mesh = static_cast<int>(model.meshes.size() - 1);
+    tinygltf::Value::Object extras;
+    if (std::binary_search(scene.terrain.begin(), scene.terrain.end(), o.id)) {
+      extras.emplace("terrain", tinygltf::Value(true));
+    }
     if (!occluders[o.id].empty()) {
       tinygltf::Value::Array list;
       for (const Occluder25D* oc : occluders[o.id]) {
@@ -149,8 +154,10 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
         list.emplace_back(tinygltf::Value::Object{{"footprint", tinygltf::Value(std::move(fp))},
                                                   {"height", tinygltf::Value(oc->height)}});
       }
-      node.extras = tinygltf::Value(tinygltf::Value::Object{
-          {"vistream", tinygltf::Value(tinygltf::Value::Object{{"occluders", tinygltf::Value(std::move(list))}})}});
+      extras.emplace("occluders", tinygltf::Value(std::move(list)));
+    }
+    if (!extras.empty()) {
+      node.extras = tinygltf::Value(tinygltf::Value::Object{{"vistream", tinygltf::Value(std::move(extras))}});
     }
     model.nodes.push_back(std::move(node));
     model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));

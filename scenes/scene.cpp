@@ -102,6 +102,16 @@ absl::Status ValidateScene(const Scene& scene, const std::string& where) {
       }
     }
   }
+  for (size_t i = 0; i < scene.terrain.size(); ++i) {
+    if (scene.terrain[i] >= scene.objects.size()) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": terrain object ", scene.terrain[i],
+                                                     " does not exist"));
+    }
+    if (i > 0 && scene.terrain[i] <= scene.terrain[i - 1]) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": terrain object ids are not sorted and distinct at ", scene.terrain[i]));
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -160,6 +170,12 @@ uint64_t SceneFingerprint(const Scene& scene) {
     d.Add(oc.height);
     d.Add(uint64_t{oc.footprint.size()});
     d.Add(oc.footprint.data(), oc.footprint.size() * sizeof(glm::dvec2));
+  }
+  // Terrain decides the viewcells' bands; scenes without it keep the digests they always had.
+  if (!scene.terrain.empty()) {
+    d.Add(uint64_t{0x7465727261696eULL});  // "terrain"
+    d.Add(uint64_t{scene.terrain.size()});
+    d.Add(scene.terrain.data(), scene.terrain.size() * sizeof(ObjectId));
   }
   return d.value();
 }

@@ -41,6 +41,12 @@ struct Scene {
   std::vector<Object> objects;
   std::vector<Occluder25D> occluders;
   Aabb bounds;  // union of object bounds
+  // The coordinate reference system of `origin` ("EPSG:28992"); empty when unknown (generated
+  // scenes, glTF files that do not say). Imports keep the source's.
+  std::string crs;
+  // Objects whose meshes are the terrain's surface (sorted ids): the ground is solid beneath
+  // them, and viewcells follow them. Empty: flat ground at z = 0.
+  std::vector<ObjectId> terrain;
 
   size_t TriangleCount() const;
   size_t VertexCount() const;
@@ -50,11 +56,11 @@ struct Scene {
 
 // Checks the invariants every consumer relies on: at least one object, dense ids, finite
 // coordinates, indices in range, normals per position, finite occluders referencing existing
-// objects. `where` names the source (a file path) in the message.
+// objects, terrain ids sorted, distinct and existing. `where` names the source (a file path) in the message.
 absl::Status ValidateScene(const Scene& scene, const std::string& where);
 
 // A 64-bit digest of what visibility depends on: every object's mesh (positions, indices) and
-// every occluder (object, footprint, height), in order. Two scenes that differ anywhere in
+// every occluder (object, footprint, height), in order, and the terrain's ids. Two scenes that differ anywhere in
 // those differ here (but for a 2^-64 chance); the name and origin do not count. Never 0.
 uint64_t SceneFingerprint(const Scene& scene);
 
