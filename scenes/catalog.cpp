@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "scenes/city_generator.h"
+#include "scenes/city_import.h"
 #include "scenes/gltf_io.h"
 
 namespace vistream::scenes {
@@ -98,8 +99,8 @@ class Reader {
 
 SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
   SceneSource s;
-  if (int{r.Has("generator")} + int{r.Has("gltf")} + int{r.Has("osm")} != 1) {
-    r.Fail(r.Key(""), "needs exactly one of 'generator', 'gltf' or 'osm'");
+  if (int{r.Has("generator")} + int{r.Has("gltf")} + int{r.Has("osm")} + int{r.Has("city")} != 1) {
+    r.Fail(r.Key(""), "needs exactly one of 'generator', 'gltf', 'osm' or 'city'");
   }
   if (r.Has("generator")) {
     s.kind = SceneSource::Kind::kGenerator;
@@ -121,10 +122,30 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
     }
     s.seed = r.Unsigned("seed", 1);
   } else if (r.Has("gltf")) {
-    r.Allow({"gltf"});
+    r.Allow({"gltf", "occluders"});
     s.kind = SceneSource::Kind::kGltf;
     const fs::path p(r.String("gltf"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
+    if (r.Has("occluders")) {
+      const std::string how = r.String("occluders");
+      if (how != "synthesize" && how != "file") {
+        r.Fail(r.Key("occluders"), absl::StrCat("'", how, "' is not 'file' (the file's own) or 'synthesize' (from closed meshes)"));
+      }
+      s.synthesize_occluders = how == "synthesize";
+    }
+  } else if (r.Has("city")) {
+    r.Allow({"city", "lod"});
+    s.kind = SceneSource::Kind::kCity;
+    const fs::path p(r.String("city"));
+    s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
+    if (!IsCityModelPath(s.path)) {
+      r.Fail(r.Key("city"), "not a city model file name (CityGML: .gml or .xml; CityJSON: .json or .city.json)");
+    }
+    if (r.Has("lod")) {
+      const double lod = r.Number("lod", 0.0, 4.0);
+      if (lod != std::floor(lod)) r.Fail(r.Key("lod"), "a level of detail is a whole number (0 to 4)");
+      s.lod = static_cast<int>(lod);
+    }
   } else {
     r.Allow({"osm", "bbox", "storey_m", "max_height_m"});
     s.kind = SceneSource::Kind::kOsm;
@@ -292,7 +313,18 @@ std::vector<std::string> CatalogNames(const std::string& catalog_dir) {
 
 absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& run,
                                  std::vector<std::string>* warnings) {
-  if (entry.source.kind == SceneSource::Kind::kGltf) return LoadGltf(entry.source.path, warnings);
+  if (entry.source.kind == SceneSource::Kind::kGltf) {
+    absl::StatusOr<Scene> scene = LoadGltf(entry.source.path, warnings);
+    if (scene.ok() && entry.source.synthesize_occluders) AddSynthesizedOccluders(&*scene, /*replace=*/true, {}, run);
+    if (scene.ok() && run.Cancelled()) return absl::CancelledError(absl::StrCat(entry.file, ": cancelled"));
+    return scene;
+  }
+  if (entry.source.kind == SceneSource::Kind::kCity) {
+    CityImportOptions options;
+    options.lod = entry.source.lod;
+    options.name = entry.name;
+    return ImportCity(entry.source.path, options, nullptr, run);
+  }
   if (entry.source.kind == SceneSource::Kind::kOsm) {
     OsmImportOptions options;
     options.bbox = entry.source.bbox;

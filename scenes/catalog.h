@@ -21,16 +21,18 @@
 namespace vistream::scenes {
 
 struct SceneSource {
-  enum class Kind { kGenerator, kGltf, kOsm };
+  enum class Kind { kGenerator, kGltf, kOsm, kCity };
   Kind kind = Kind::kGenerator;
   std::string generator;  // kGenerator: city1, city2, london, streets
   uint64_t seed = 1;
   double width_m = 0.0;  // 0: generator default
   double depth_m = 0.0;
-  std::string path;  // kGltf, kOsm: absolute, resolved against the catalog file's folder
+  std::string path;  // kGltf, kOsm, kCity: absolute, resolved against the catalog file's folder
   std::optional<GeoBox> bbox;  // kOsm: keep only buildings inside
   double storey_m = 3.0;       // kOsm
   double max_height_m = OsmImportOptions{}.max_height_m;  // kOsm
+  std::optional<int> lod;           // kCity: the LoD to draw ("lod"); none: each object's highest
+  bool synthesize_occluders = false;  // kGltf ("occluders": "synthesize"): occluders from closed meshes
 };
 
 struct ViewcellSpec {

@@ -1,10 +1,12 @@
-// vistream scene generate | import-osm | info | map
+// vistream scene generate | import-osm | import-city | occluders | info | map
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
 #include <map>
+
+#include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_cat.h>
@@ -16,6 +18,7 @@
 #include "tools/top_view_map.h"
 #include "scenes/catalog.h"
 #include "scenes/city_generator.h"
+#include "scenes/city_import.h"
 #include "scenes/gltf_io.h"
 #include "scenes/osm_import.h"
 #include "scenes/progress.h"
@@ -172,6 +175,195 @@ int ImportOsm(const ImportArgs& a) {
   return 0;
 }
 
+// The process's peak resident memory so far, MiB (getrusage).
+double PeakRssMib() {
+  struct rusage usage {};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
+
+nlohmann::json CountsJson(const std::map<std::string, uint64_t>& counts) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [k, n] : counts) j[k] = n;
+  return j;
+}
+
+void PrintCounts(const char* title, uint64_t total, const std::map<std::string, uint64_t>& counts) {
+  std::printf("%s: %llu\n", title, static_cast<unsigned long long>(total));
+  for (const auto& [reason, n] : counts) std::printf("  %-48s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
+}
+
+// Removes an output a cancelled command did not finish.
+int CancelledWhileSaving(const std::string& output, const char* what) {
+  std::error_code ec;
+  std::filesystem::remove(output, ec);
+  return Fail(absl::CancelledError(absl::StrCat(what, " cancelled (while saving)")));
+}
+
+struct ImportCityArgs {
+  std::string input, output, name;
+  std::optional<int> lod;
+  double terrain_tile_m = 100.0;
+  bool keep_going = false;
+  bool json = false;
+};
+
+int ImportCity(const ImportCityArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  scenes::CityImportOptions options;
+  options.lod = a.lod;
+  options.name = a.name;
+  options.keep_going = a.keep_going;
+  options.terrain_tile_m = a.terrain_tile_m;
+  scenes::CityImportSummary sum;
+  absl::StatusOr<scenes::Scene> scene = scenes::ImportCity(a.input, options, &sum, ToolRun());
+  if (!scene.ok() && a.json) {
+    const nlohmann::json j = {{"input", a.input},
+                              {"error", std::string(scene.status().message())},
+                              {"skipped", sum.Skipped()},
+                              {"skipped_by_reason", CountsJson(sum.skipped)}};
+    std::printf("%s\n", j.dump(2).c_str());
+  }
+  if (!scene.ok()) return Fail(scene.status());
+  const auto save_start = std::chrono::steady_clock::now();
+  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
+  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "city import");
+  const double save_s = SecondsSince(save_start);
+  const double share = sum.buildings_drawn == 0 ? 0.0 : static_cast<double>(sum.buildings_with_occluder) / sum.buildings_drawn;
+  const double volume_share = sum.solid_volume_m3 > 0.0 ? sum.occluder_volume_m3 / sum.solid_volume_m3 : 0.0;
+  if (a.json) {
+    const nlohmann::json j = {
+        {"input", a.input},
+        {"output", a.output},
+        {"scene", scene->name},
+        {"format", sum.format},
+        {"crs", sum.crs},
+        {"lod", a.lod ? nlohmann::json(*a.lod) : nlohmann::json("highest")},
+        {"lods", CountsJson(sum.lods)},
+        {"city_objects", sum.city_objects},
+        {"objects_by_type", CountsJson(sum.objects_by_type)},
+        {"objects", sum.objects},
+        {"buildings", sum.buildings},
+        {"building_parts", sum.building_parts},
+        {"buildings_drawn", sum.buildings_drawn},
+        {"buildings_with_occluder", sum.buildings_with_occluder},
+        {"occluder_share", share},
+        {"surfaces", sum.surfaces},
+        {"triangles", sum.triangles},
+        {"solids", sum.solids},
+        {"occluders", sum.occluders},
+        {"without_occluder", CountsJson(sum.without_occluder)},
+        {"solid_volume_m3", sum.solid_volume_m3},
+        {"occluder_volume_m3", sum.occluder_volume_m3},
+        {"occluder_volume_share", volume_share},
+        {"terrain",
+         {{"objects", sum.terrain_objects},
+          {"triangles", sum.terrain_triangles},
+          {"tiles", sum.terrain_tiles},
+          {"occluders", sum.terrain_occluders},
+          {"min_z", sum.terrain_min_z},
+          {"max_z", sum.terrain_max_z},
+          {"relief_m", sum.terrain_max_z - sum.terrain_min_z}}},
+        {"repaired", sum.Repaired()},
+        {"repaired_by_reason", CountsJson(sum.repaired)},
+        {"skipped", sum.Skipped()},
+        {"skipped_by_reason", CountsJson(sum.skipped)},
+        {"origin", {scene->origin.x, scene->origin.y, scene->origin.z}},
+        {"bounds_min", {scene->bounds.min.x, scene->bounds.min.y, scene->bounds.min.z}},
+        {"bounds_max", {scene->bounds.max.x, scene->bounds.max.y, scene->bounds.max.z}},
+        {"read_s", sum.read_s},
+        {"build_s", sum.build_s},
+        {"save_s", save_s},
+        {"peak_rss_mib", PeakRssMib()},
+    };
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("imported %s (%s, %s): %llu city objects, %llu scene objects, %llu triangles, %llu occluders; "
+              "read in %.2f s, built in %.2f s, saved %s in %.2f s; peak memory %.0f MiB\n",
+              scene->name.c_str(), sum.format.c_str(), sum.crs.empty() ? "no CRS" : sum.crs.c_str(),
+              static_cast<unsigned long long>(sum.city_objects), static_cast<unsigned long long>(sum.objects),
+              static_cast<unsigned long long>(sum.triangles), static_cast<unsigned long long>(sum.occluders), sum.read_s,
+              sum.build_s, a.output.c_str(), save_s, PeakRssMib());
+  std::printf("buildings: %llu, parts: %llu; drawn %llu, of them %llu with an occluder (%.1f%%); occluders hold %.1f%% of "
+              "the closed solids' volume (%.0f of %.0f m³)\n",
+              static_cast<unsigned long long>(sum.buildings), static_cast<unsigned long long>(sum.building_parts),
+              static_cast<unsigned long long>(sum.buildings_drawn),
+              static_cast<unsigned long long>(sum.buildings_with_occluder), 100.0 * share, 100.0 * volume_share,
+              sum.occluder_volume_m3, sum.solid_volume_m3);
+  if (sum.terrain_objects > 0) {
+    std::printf("terrain: %llu triangles in %llu tiles, %llu occluders, heights %.2f to %.2f m (relief %.2f m)\n",
+                static_cast<unsigned long long>(sum.terrain_triangles), static_cast<unsigned long long>(sum.terrain_tiles),
+                static_cast<unsigned long long>(sum.terrain_occluders), sum.terrain_min_z, sum.terrain_max_z,
+                sum.terrain_max_z - sum.terrain_min_z);
+  } else {
+    std::printf("terrain: none (flat ground at the lowest point, %.2f m)\n", scene->origin.z);
+  }
+  std::printf("by type:");
+  for (const auto& [type, n] : sum.objects_by_type) std::printf(" %s %llu", type.c_str(), static_cast<unsigned long long>(n));
+  std::printf("\nLoD drawn:");
+  for (const auto& [lod, n] : sum.lods) std::printf(" %s (%llu)", lod.c_str(), static_cast<unsigned long long>(n));
+  std::printf("\n");
+  uint64_t without = 0;
+  for (const auto& [reason, n] : sum.without_occluder) without += n;
+  PrintCounts("solids without an occluder", without, sum.without_occluder);
+  PrintCounts("repaired", sum.Repaired(), sum.repaired);
+  PrintCounts("skipped", sum.Skipped(), sum.skipped);
+  std::printf("origin: %s (%.0f, %.0f, %.3f)\n", sum.crs.empty() ? "unknown CRS" : sum.crs.c_str(), scene->origin.x,
+              scene->origin.y, scene->origin.z);
+  return 0;
+}
+
+struct OccludersArgs {
+  std::string input, output;
+  bool keep = false;
+  bool json = false;
+};
+
+int Occluders(const OccludersArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  std::vector<std::string> warnings;
+  absl::StatusOr<scenes::Scene> scene = scenes::LoadGltf(a.input, &warnings);
+  if (!scene.ok()) return Fail(scene.status());
+  if (!a.json) {
+    for (const std::string& w : warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
+  }
+  const size_t before = scene->occluders.size();
+  const auto start = std::chrono::steady_clock::now();
+  const scenes::OccluderSynthesisSummary sum = scenes::AddSynthesizedOccluders(&*scene, /*replace=*/!a.keep, {}, ToolRun());
+  if (ToolRun().Cancelled()) return Fail(absl::CancelledError("occluder synthesis cancelled"));
+  const double synth_s = SecondsSince(start);
+  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
+  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "occluder synthesis");
+  const double volume_share = sum.solid_volume_m3 > 0.0 ? sum.occluder_volume_m3 / sum.solid_volume_m3 : 0.0;
+  if (a.json) {
+    const nlohmann::json j = {{"input", a.input},
+                              {"output", a.output},
+                              {"objects", scene->objects.size()},
+                              {"objects_considered", sum.objects},
+                              {"objects_with_occluder", sum.objects_with_occluder},
+                              {"occluders_before", before},
+                              {"occluders_synthesized", sum.occluders},
+                              {"occluders", scene->occluders.size()},
+                              {"without_occluder", CountsJson(sum.without_occluder)},
+                              {"solid_volume_m3", sum.solid_volume_m3},
+                              {"occluder_volume_m3", sum.occluder_volume_m3},
+                              {"occluder_volume_share", volume_share},
+                              {"synthesis_s", synth_s}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s: %llu of %llu objects considered got occluders (%llu prisms; %zu before, %s); occluders hold %.1f%% of "
+              "the closed meshes' volume; %.2f s; saved %s\n",
+              a.input.c_str(), static_cast<unsigned long long>(sum.objects_with_occluder),
+              static_cast<unsigned long long>(sum.objects), static_cast<unsigned long long>(sum.occluders), before,
+              a.keep ? "kept" : "replaced", 100.0 * volume_share, synth_s, a.output.c_str());
+  uint64_t without = 0;
+  for (const auto& [reason, n] : sum.without_occluder) without += n;
+  PrintCounts("objects without an occluder", without, sum.without_occluder);
+  return 0;
+}
+
 struct InfoArgs {
   std::string file;
   bool json = false;
@@ -306,6 +498,29 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)");
   o->add_flag("--json", imp->json, "print the summary as one JSON object");
   o->callback([imp, done] { done(ImportOsm(*imp)); });
+
+  auto city = std::make_shared<ImportCityArgs>();
+  CLI::App* c = scene->add_subcommand(
+      "import-city", "import a 3D city model (CityGML .gml/.xml, CityJSON .json/.city.json): buildings, parts, terrain, "
+                     "with occluders synthesized from the solids");
+  c->add_option("IN", city->input, "CityGML 1.0/2.0 (.gml, .xml) or CityJSON 0.x-2.0 (.json, .city.json)")->required();
+  c->add_option("-o,--output", city->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  c->add_option("--lod", city->lod, "level of detail to draw (its integer part: 1, 2); default: each object's highest")
+      ->check(WholeRange(0, 4));
+  c->add_option("--name", city->name, "the scene's name (default: the file name up to its first dot)");
+  c->add_option("--terrain-tile", city->terrain_tile_m, "edge of the terrain's tiles in metres (each tile an object)")
+      ->check(FiniteRange(1.0, 100000.0));
+  c->add_flag("--keep-going", city->keep_going, "leave out objects with malformed geometry (counted) instead of failing");
+  c->add_flag("--json", city->json, "print the summary as one JSON object");
+  c->callback([city, done] { done(ImportCity(*city)); });
+
+  auto occ = std::make_shared<OccludersArgs>();
+  CLI::App* oc = scene->add_subcommand("occluders", "synthesize occluders from a glTF scene's closed meshes");
+  oc->add_option("IN", occ->input, ".glb or .gltf file")->required();
+  oc->add_option("-o,--output", occ->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  oc->add_flag("--keep", occ->keep, "keep the file's occluders (synthesize only for objects without); default: replace them");
+  oc->add_flag("--json", occ->json, "print the summary as one JSON object");
+  oc->callback([occ, done] { done(Occluders(*occ)); });
 
   auto info = std::make_shared<InfoArgs>();
   CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");

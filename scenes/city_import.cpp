@@ -1,0 +1,632 @@
+#include "scenes/city_import.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <unordered_map>
+#include <utility>
+
+#include <absl/strings/ascii.h>
+#include <absl/strings/match.h>
+#include <absl/strings/numbers.h>
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_join.h>
+#include <glm/geometric.hpp>
+
+#include "scenes/mesh.h"
+#include "scenes/polygon.h"
+
+namespace vistream::scenes {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// "2.2" -> 2.2; the integer part is the LoD `--lod` selects. None for text that is not a
+// number from 0 to 4.x.
+std::optional<double> ParseLod(const std::string& text) {
+  double v = 0.0;
+  if (!absl::SimpleAtod(text, &v) || !(v >= 0.0) || !(v < 5.0)) return std::nullopt;
+  return v;
+}
+
+bool IsBuilding(const std::string& type) { return type == "Building" || type == "BuildingPart"; }
+bool IsTerrain(const std::string& type) { return type == "TINRelief"; }
+
+// The geometries of `o` drawn at the chosen LoD: those whose LoD text is the best one
+// (highest, or highest with integer part `lod`). Empty when none qualifies.
+std::vector<const CityGeometry*> ChooseGeometries(const CityObject& o, std::optional<int> lod,
+                                                  std::map<std::string, uint64_t>* skipped, std::string* chosen) {
+  std::optional<double> best;
+  std::string best_text;
+  for (const CityGeometry& g : o.geometries) {
+    const std::optional<double> v = ParseLod(g.lod);
+    if (!v) {
+      ++(*skipped)[absl::StrCat("geometry with an unreadable LoD ('", g.lod.substr(0, 16), "')")];
+      continue;
+    }
+    if (lod && static_cast<int>(*v) != *lod) continue;
+    if (!best || *v > *best) {
+      best = v;
+      best_text = g.lod;
+    }
+  }
+  std::vector<const CityGeometry*> out;
+  if (!best) return out;
+  for (const CityGeometry& g : o.geometries) {
+    const std::optional<double> v = ParseLod(g.lod);
+    if (v && *v == *best) out.push_back(&g);
+  }
+  *chosen = best_text;
+  return out;
+}
+
+// Every surface of a geometry, solids' shells included, with the solid it belongs to (-1 for
+// surfaces of surface geometries).
+template <typename Fn>
+void ForEachSurface(const CityGeometry& g, Fn&& fn) {
+  for (size_t s = 0; s < g.solids.size(); ++s) {
+    for (const auto& shell : g.solids[s].shells) {
+      for (const CitySurface& surface : shell) fn(surface, static_cast<int>(s));
+    }
+  }
+  for (const CitySurface& surface : g.surfaces) fn(surface, -1);
+}
+
+// A triangulated polygon in scene-local double coordinates.
+struct Triangulated {
+  std::vector<std::array<glm::dvec3, 3>> triangles;
+  glm::dvec3 normal{0.0};  // unit, the ring's (Newell's) orientation
+};
+
+// Removes consecutive duplicates (the closing point too) of a 3D ring; returns how many.
+size_t DropDuplicates(std::vector<glm::dvec3>* ring) {
+  size_t dropped = 0;
+  std::vector<glm::dvec3> out;
+  out.reserve(ring->size());
+  for (const glm::dvec3& p : *ring) {
+    if (!out.empty() && out.back() == p) {
+      ++dropped;
+      continue;
+    }
+    out.push_back(p);
+  }
+  while (out.size() > 1 && out.front() == out.back()) {
+    out.pop_back();
+    ++dropped;
+  }
+  *ring = std::move(out);
+  return dropped;
+}
+
+glm::dvec3 NewellNormal(const std::vector<glm::dvec3>& ring) {
+  glm::dvec3 n(0.0);
+  for (size_t i = 0; i < ring.size(); ++i) {
+    const glm::dvec3& a = ring[i];
+    const glm::dvec3& b = ring[(i + 1) % ring.size()];
+    n.x += (a.y - b.y) * (a.z + b.z);
+    n.y += (a.z - b.z) * (a.x + b.x);
+    n.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return n;
+}
+
+// Triangulates one polygon (local coordinates). On failure returns the reason.
+absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, const glm::dvec3& origin,
+                                                std::map<std::string, uint64_t>* repaired) {
+  auto local = [&](const std::vector<glm::dvec3>& ring) {
+    std::vector<glm::dvec3> out;
+    out.reserve(ring.size());
+    for (const glm::dvec3& p : ring) out.push_back(p - origin);
+    return out;
+  };
+  std::vector<glm::dvec3> outer = local(surface.outer);
+  if (size_t d = DropDuplicates(&outer); d > 0) (*repaired)["duplicate points dropped"] += d;
+  if (outer.size() < 3) return absl::InvalidArgumentError("a ring of fewer than 3 distinct points");
+  const glm::dvec3 n = NewellNormal(outer);
+  const double len = glm::length(n);
+  if (!(len > 0.0)) return absl::InvalidArgumentError("a polygon without area");
+  Triangulated out;
+  out.normal = n / len;
+  // Project on the plane of the dominant axis; keep the 2D -> 3D correspondence.
+  const glm::dvec3 an = glm::abs(n);
+  const int drop = an.z >= an.x && an.z >= an.y ? 2 : (an.y >= an.x ? 1 : 0);
+  const int u = drop == 0 ? 1 : 0, v = drop == 2 ? 1 : 2;
+  // Seen along +axis the (u, v) plane is counter-clockwise for a positive normal component
+  // when (u, v) is (x, y), (z, x) or (y, z); with (x, z) for drop == 1 the sign flips.
+  const bool flip = (n[drop] < 0.0) != (drop == 1);
+  std::map<std::pair<double, double>, glm::dvec3> lift;
+  auto project = [&](const std::vector<glm::dvec3>& ring) {
+    Ring r;
+    r.reserve(ring.size());
+    for (const glm::dvec3& p : ring) {
+      r.emplace_back(p[u], p[v]);
+      lift.emplace(std::make_pair(p[u], p[v]), p);
+    }
+    return r;
+  };
+  if (outer.size() == 3 && surface.holes.empty()) {
+    // A triangle (TIN patches): nothing to triangulate.
+    out.triangles.push_back({outer[0], outer[1], outer[2]});
+    return out;
+  }
+  PolygonWithHoles poly;
+  poly.outer = project(outer);
+  RingRepairs rr = CleanRing(&poly.outer);
+  if (SignedArea(poly.outer) < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
+  for (const auto& hole3 : surface.holes) {
+    std::vector<glm::dvec3> h = local(hole3);
+    if (size_t d = DropDuplicates(&h); d > 0) (*repaired)["duplicate points dropped"] += d;
+    Ring r = project(h);
+    const RingRepairs hr = CleanRing(&r);
+    rr.duplicate_points += hr.duplicate_points;
+    rr.spikes += hr.spikes;
+    if (r.size() < 3) {
+      ++(*repaired)["degenerate inner rings dropped"];
+      continue;
+    }
+    if (SignedArea(r) > 0.0) std::reverse(r.begin(), r.end());
+    poly.holes.push_back(std::move(r));
+  }
+  if (rr.duplicate_points > 0) (*repaired)["duplicate points dropped"] += rr.duplicate_points;
+  if (rr.spikes > 0) (*repaired)["spikes removed"] += rr.spikes;
+  absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(poly);
+  if (!tris.ok()) return tris.status();
+  out.triangles.reserve(tris->size());
+  for (const Triangle2& t : *tris) {
+    std::array<glm::dvec3, 3> t3;
+    for (int k = 0; k < 3; ++k) {
+      auto it = lift.find({t[k].x, t[k].y});
+      if (it == lift.end()) return absl::InternalError("a triangle corner that is not a ring point");
+      t3[k] = it->second;
+    }
+    if (flip) std::swap(t3[1], t3[2]);
+    out.triangles.push_back(t3);
+  }
+  return out;
+}
+
+// Terrain triangles in a grid, for the ground's lowest height under a box.
+class GroundIndex {
+ public:
+  GroundIndex(const std::vector<std::array<glm::dvec3, 3>>& triangles, double cell) : cell_(cell), tris_(triangles) {
+    for (const auto& t : tris_) {
+      for (const auto& p : t) box_.Extend(p);
+    }
+    if (tris_.empty()) return;
+    nx_ = std::max(1, static_cast<int>(std::ceil((box_.max.x - box_.min.x) / cell_)));
+    ny_ = std::max(1, static_cast<int>(std::ceil((box_.max.y - box_.min.y) / cell_)));
+    cells_.resize(static_cast<size_t>(nx_) * ny_);
+    for (uint32_t k = 0; k < tris_.size(); ++k) {
+      int i0, j0, i1, j1;
+      Range(TriBox(tris_[k]), &i0, &j0, &i1, &j1);
+      for (int j = j0; j <= j1; ++j) {
+        for (int i = i0; i <= i1; ++i) cells_[static_cast<size_t>(j) * nx_ + i].push_back(k);
+      }
+    }
+  }
+
+  // A height at or below the terrain everywhere inside the xy box: the lowest vertex of the
+  // terrain triangles meeting it, or 0 (the flat ground beyond the terrain) when a corner of
+  // the box lies on no terrain triangle or none meets it.
+  double LowestUnder(const Aabb& box) const {
+    if (tris_.empty()) return 0.0;
+    for (const glm::dvec2& c : {glm::dvec2(box.min.x, box.min.y), glm::dvec2(box.max.x, box.min.y),
+                                glm::dvec2(box.min.x, box.max.y), glm::dvec2(box.max.x, box.max.y)}) {
+      if (!Covered(c)) return 0.0;
+    }
+    int i0, j0, i1, j1;
+    Range(box, &i0, &j0, &i1, &j1);
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) {
+        for (uint32_t k : cells_[static_cast<size_t>(j) * nx_ + i]) {
+          const Aabb tb = TriBox(tris_[k]);
+          // Triangles that only touch the box's border add nothing: the surface there is
+          // also the height of a triangle reaching inside.
+          if (tb.max.x <= box.min.x || tb.min.x >= box.max.x || tb.max.y <= box.min.y || tb.min.y >= box.max.y) continue;
+          lowest = std::min(lowest, tb.min.z);
+        }
+      }
+    }
+    return std::isfinite(lowest) ? lowest : 0.0;
+  }
+
+ private:
+  static Aabb TriBox(const std::array<glm::dvec3, 3>& t) {
+    Aabb b;
+    for (const auto& p : t) b.Extend(p);
+    return b;
+  }
+  void Range(const Aabb& b, int* i0, int* j0, int* i1, int* j1) const {
+    auto clampi = [](double v, int n) { return std::clamp(static_cast<int>(std::floor(v)), 0, n - 1); };
+    *i0 = clampi((b.min.x - box_.min.x) / cell_, nx_);
+    *i1 = clampi((b.max.x - box_.min.x) / cell_, nx_);
+    *j0 = clampi((b.min.y - box_.min.y) / cell_, ny_);
+    *j1 = clampi((b.max.y - box_.min.y) / cell_, ny_);
+  }
+  bool Covered(const glm::dvec2& p) const {
+    if (p.x < box_.min.x || p.x > box_.max.x || p.y < box_.min.y || p.y > box_.max.y) return false;
+    int i0, j0, i1, j1;
+    Aabb b;
+    b.Extend(glm::dvec3(p, 0.0));
+    Range(b, &i0, &j0, &i1, &j1);
+    for (uint32_t k : cells_[static_cast<size_t>(j0) * nx_ + i0]) {
+      const auto& t = tris_[k];
+      auto side = [&](const glm::dvec3& a, const glm::dvec3& c) {
+        return (c.x - a.x) * (p.y - a.y) - (c.y - a.y) * (p.x - a.x);
+      };
+      const double d1 = side(t[0], t[1]), d2 = side(t[1], t[2]), d3 = side(t[2], t[0]);
+      if ((d1 >= 0 && d2 >= 0 && d3 >= 0) || (d1 <= 0 && d2 <= 0 && d3 <= 0)) return true;
+    }
+    return false;
+  }
+
+  double cell_;
+  const std::vector<std::array<glm::dvec3, 3>>& tris_;
+  Aabb box_;
+  int nx_ = 0, ny_ = 0;
+  std::vector<std::vector<uint32_t>> cells_;
+};
+
+// Appends triangles (local double) to a flat-shaded mesh with `normal`.
+void AppendTriangles(const std::vector<std::array<glm::dvec3, 3>>& tris, const glm::dvec3& normal, Mesh* mesh) {
+  const glm::vec3 n(normal);
+  for (const auto& t : tris) {
+    for (const glm::dvec3& p : t) {
+      mesh->indices.push_back(static_cast<uint32_t>(mesh->positions.size()));
+      mesh->positions.emplace_back(glm::vec3(p));
+      mesh->normals.push_back(n);
+    }
+  }
+}
+
+// A solid's triangles as SynthesizeOccluders takes them: the mesh's single-precision
+// positions, so that the prisms are inside the geometry that is drawn and checked.
+SolidMesh SolidFromTriangles(const std::vector<std::array<glm::dvec3, 3>>& tris) {
+  Mesh mesh;
+  AppendTriangles(tris, glm::dvec3(0.0, 0.0, 1.0), &mesh);
+  return SolidMeshFromMesh(mesh);
+}
+
+}  // namespace
+
+uint64_t CityImportSummary::Skipped() const {
+  uint64_t n = 0;
+  for (const auto& [reason, k] : skipped) n += k;
+  return n;
+}
+
+uint64_t CityImportSummary::Repaired() const {
+  uint64_t n = 0;
+  for (const auto& [reason, k] : repaired) n += k;
+  return n;
+}
+
+absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& name,
+                                     const CityImportOptions& options, CityImportSummary* summary_out,
+                                     const RunControl& run) {
+  const auto start = std::chrono::steady_clock::now();
+  CityImportSummary local_summary;
+  CityImportSummary& sum = summary_out != nullptr ? *summary_out : local_summary;
+  sum.format = model.format;
+  sum.crs = model.crs;
+  for (const auto& [reason, n] : model.skipped) sum.skipped[reason] += n;
+  for (const auto& [reason, n] : model.repaired) sum.repaired[reason] += n;
+  if (options.lod && (*options.lod < 0 || *options.lod > 4)) {
+    return absl::InvalidArgumentError(absl::StrCat("--lod ", *options.lod, " is not a level of detail (0 to 4)"));
+  }
+  if (!(options.terrain_tile_m > 0.0) || !std::isfinite(options.terrain_tile_m)) {
+    return absl::InvalidArgumentError("the terrain tile size must be a positive number of metres");
+  }
+
+  // 1. What each object draws.
+  struct Chosen {
+    const CityObject* object;
+    std::vector<const CityGeometry*> geometries;
+  };
+  std::vector<Chosen> chosen;
+  std::vector<Chosen> terrain;
+  sum.city_objects = model.objects.size();
+  for (const CityObject& o : model.objects) {
+    ++sum.objects_by_type[o.type];
+    if (o.type == "Building") ++sum.buildings;
+    if (o.type == "BuildingPart") ++sum.building_parts;
+    if (o.geometries.empty()) continue;
+    std::string lod_text;
+    const bool is_terrain = IsTerrain(o.type);
+    std::vector<const CityGeometry*> g =
+        ChooseGeometries(o, is_terrain ? std::nullopt : options.lod, &sum.skipped, &lod_text);
+    if (g.empty()) {
+      if (options.lod) ++sum.skipped[absl::StrCat("no LoD ", *options.lod, " geometry")];
+      continue;
+    }
+    ++sum.lods[lod_text];
+    (is_terrain ? terrain : chosen).push_back({&o, std::move(g)});
+  }
+
+  // 2. The frame: origin at the rounded centre, z at the ground level.
+  Aabb world;
+  Aabb terrain_box;
+  for (const auto* list : {&chosen, &terrain}) {
+    for (const Chosen& c : *list) {
+      for (const CityGeometry* g : c.geometries) {
+        ForEachSurface(*g, [&](const CitySurface& s, int) {
+          for (const glm::dvec3& p : s.outer) {
+            world.Extend(p);
+            if (list == &terrain) terrain_box.Extend(p);
+          }
+        });
+      }
+    }
+  }
+  if (world.Empty()) {
+    std::vector<std::string> reasons;
+    for (const auto& [reason, n] : sum.skipped) reasons.push_back(absl::StrCat(reason, ": ", n));
+    return absl::InvalidArgumentError(
+        absl::StrCat("no city object with geometry to draw (", model.objects.size(), " objects read",
+                     reasons.empty() ? "" : "; skipped: " + absl::StrJoin(reasons, ", "), ")"));
+  }
+  const glm::dvec3 origin(std::round(world.Centre().x), std::round(world.Centre().y),
+                          terrain_box.Empty() ? world.min.z : terrain_box.min.z);
+  if (!terrain_box.Empty()) {
+    sum.terrain_min_z = terrain_box.min.z;
+    sum.terrain_max_z = terrain_box.max.z;
+  }
+
+  Scene scene;
+  scene.name = name;
+  scene.origin = origin;
+  scene.crs = model.crs;
+
+  // 3. Terrain: its triangles, tiled.
+  std::vector<std::array<glm::dvec3, 3>> terrain_tris;
+  for (const Chosen& c : terrain) {
+    ++sum.terrain_objects;
+    for (const CityGeometry* g : c.geometries) {
+      ForEachSurface(*g, [&](const CitySurface& s, int) {
+        absl::StatusOr<Triangulated> t = TriangulateSurface(s, origin, &sum.repaired);
+        if (!t.ok()) {
+          ++sum.skipped[absl::StrCat("terrain polygon not triangulated: ", t.status().message())];
+          return;
+        }
+        ++sum.surfaces;
+        for (auto tri : t->triangles) {
+          // Terrain faces up: wind every triangle counter-clockwise from above.
+          const double cross = (tri[1].x - tri[0].x) * (tri[2].y - tri[0].y) - (tri[1].y - tri[0].y) * (tri[2].x - tri[0].x);
+          if (cross == 0.0) {
+            ++sum.repaired["vertical terrain triangles dropped"];
+            continue;
+          }
+          if (cross < 0.0) std::swap(tri[1], tri[2]);
+          // The single-precision positions the mesh will hold.
+          for (auto& p : tri) p = glm::dvec3(glm::vec3(p));
+          terrain_tris.push_back(tri);
+        }
+      });
+    }
+  }
+  sum.terrain_triangles = terrain_tris.size();
+  const GroundIndex ground(terrain_tris, 25.0);
+
+  // 4. Objects.
+  Progress progress(run, "building the city", chosen.size() + 1);
+  for (const Chosen& c : chosen) {
+    if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
+    const CityObject& o = *c.object;
+    Mesh mesh;
+    // Per solid (index within the geometry list), its triangles; surfaces of surface
+    // geometries of buildings are gathered as one candidate solid.
+    std::vector<std::vector<std::array<glm::dvec3, 3>>> solids;
+    std::vector<bool> solid_complete;
+    std::vector<std::array<glm::dvec3, 3>> surface_shell;
+    bool surface_shell_complete = true, has_surface_shell = false;
+    for (const CityGeometry* g : c.geometries) {
+      const size_t first = solids.size();
+      solids.resize(first + g->solids.size());
+      solid_complete.resize(first + g->solids.size(), true);
+      ForEachSurface(*g, [&](const CitySurface& s, int solid) {
+        absl::StatusOr<Triangulated> t = TriangulateSurface(s, origin, &sum.repaired);
+        if (!t.ok()) {
+          ++sum.skipped[absl::StrCat("polygon not triangulated: ", t.status().message())];
+          if (solid >= 0) solid_complete[first + solid] = false;
+          else surface_shell_complete = false;
+          return;
+        }
+        ++sum.surfaces;
+        AppendTriangles(t->triangles, t->normal, &mesh);
+        if (solid >= 0) {
+          solids[first + solid].insert(solids[first + solid].end(), t->triangles.begin(), t->triangles.end());
+        } else if (IsBuilding(o.type)) {
+          has_surface_shell = true;
+          surface_shell.insert(surface_shell.end(), t->triangles.begin(), t->triangles.end());
+        }
+      });
+    }
+    if (mesh.indices.empty()) {
+      ++sum.skipped["object without a drawable polygon"];
+      progress.Advance();
+      continue;
+    }
+    const ObjectId id = scene.AddObject(o.id, std::move(mesh));
+    const Aabb box = scene.objects[id].bounds;
+    const double ground_z = ground.LowestUnder(box);
+    bool got_occluder = false;
+    auto synthesize = [&](const std::vector<std::array<glm::dvec3, 3>>& tris, bool complete) {
+      ++sum.solids;
+      if (!complete) {
+        ++sum.without_occluder["a polygon could not be triangulated"];
+        return;
+      }
+      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(tris), ground_z, options.synthesis);
+      if (r.defect != SolidDefect::kNone) {
+        ++sum.without_occluder[SolidDefectName(r.defect)];
+        return;
+      }
+      sum.solid_volume_m3 += r.solid_volume_m3;
+      sum.occluder_volume_m3 += r.occluder_volume_m3;
+      if (r.occluders.empty()) {
+        ++sum.without_occluder["no prism large enough"];
+        return;
+      }
+      got_occluder = true;
+      for (Occluder25D& oc : r.occluders) {
+        oc.object = id;
+        scene.occluders.push_back(std::move(oc));
+      }
+    };
+    for (size_t s = 0; s < solids.size(); ++s) synthesize(solids[s], solid_complete[s]);
+    if (has_surface_shell) synthesize(surface_shell, surface_shell_complete);
+    if (IsBuilding(o.type)) {
+      ++sum.buildings_drawn;
+      sum.buildings_with_occluder += got_occluder;
+    }
+    progress.Advance();
+  }
+
+  // 5. Terrain tiles: objects and their occluders.
+  if (!terrain_tris.empty()) {
+    const std::string terrain_name = terrain.size() == 1 ? terrain.front().object->id : "terrain";
+    std::map<std::pair<int64_t, int64_t>, std::vector<std::array<glm::dvec3, 3>>> tiles;
+    for (const auto& t : terrain_tris) {
+      const glm::dvec3 c = (t[0] + t[1] + t[2]) / 3.0;
+      tiles[{static_cast<int64_t>(std::floor(c.x / options.terrain_tile_m)),
+             static_cast<int64_t>(std::floor(c.y / options.terrain_tile_m))}]
+          .push_back(t);
+    }
+    for (const auto& [key, tris] : tiles) {
+      if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
+      Mesh mesh;
+      for (const auto& t : tris) {
+        const glm::dvec3 n = glm::normalize(glm::cross(t[1] - t[0], t[2] - t[0]));
+        AppendTriangles({t}, n, &mesh);
+      }
+      const ObjectId id = scene.AddObject(absl::StrCat(terrain_name, "/tile ", key.first, ",", key.second), std::move(mesh));
+      scene.terrain.push_back(id);
+      ++sum.terrain_tiles;
+      for (Occluder25D& oc : TerrainOccluders(tris, options.terrain_quantum_m, options.terrain_levels)) {
+        oc.object = id;
+        scene.occluders.push_back(std::move(oc));
+        ++sum.terrain_occluders;
+      }
+    }
+  }
+  progress.Advance();
+  progress.Finish();
+
+  if (scene.objects.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("no city object could be drawn (", model.objects.size(),
+                                                   " objects read; ", sum.Skipped(), " skipped)"));
+  }
+  NormalizeOccluders(&scene);
+  sum.objects = scene.objects.size();
+  sum.triangles = scene.TriangleCount();
+  sum.occluders = scene.occluders.size();
+  sum.build_s = SecondsSince(start);
+  return scene;
+}
+
+bool IsCityModelPath(std::string_view path) {
+  const std::string lower = absl::AsciiStrToLower(std::string(path));
+  return absl::EndsWith(lower, ".gml") || absl::EndsWith(lower, ".xml") || absl::EndsWith(lower, ".json");
+}
+
+absl::StatusOr<Scene> ImportCity(const std::string& path, const CityImportOptions& options,
+                                 CityImportSummary* summary, const RunControl& run) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::string lower = absl::AsciiStrToLower(path);
+  CityReadOptions read;
+  read.keep_going = options.keep_going;
+  absl::StatusOr<CityModel> model;
+  if (absl::EndsWith(lower, ".gml") || absl::EndsWith(lower, ".xml")) {
+    model = ReadCityGml(path, read, run);
+  } else if (absl::EndsWith(lower, ".json")) {
+    model = ReadCityJson(path, read, run);
+  } else {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": not a city model file name (CityGML: .gml or .xml; CityJSON: .json or .city.json)"));
+  }
+  if (!model.ok()) return model.status();
+  const double read_s = SecondsSince(start);
+  std::string name = options.name;
+  if (name.empty()) {
+    name = fs::path(path).filename().string();
+    name = name.substr(0, name.find('.'));
+  }
+  absl::StatusOr<Scene> scene = BuildCityScene(*model, name, options, summary, run);
+  if (summary != nullptr) summary->read_s = read_s;
+  if (!scene.ok()) return absl::Status(scene.status().code(), absl::StrCat(path, ": ", scene.status().message()));
+  return scene;
+}
+
+OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, const OccluderSynthesisOptions& options,
+                                                 const RunControl& run) {
+  OccluderSynthesisSummary sum;
+  std::vector<bool> has(scene->objects.size(), false);
+  for (const Occluder25D& oc : scene->occluders) has[oc.object] = true;
+  if (replace) {
+    scene->occluders.clear();
+    std::fill(has.begin(), has.end(), false);
+  }
+  std::vector<bool> is_terrain(scene->objects.size(), false);
+  std::vector<std::array<glm::dvec3, 3>> terrain_tris;
+  for (ObjectId t : scene->terrain) {
+    is_terrain[t] = true;
+    const Mesh& m = scene->objects[t].mesh;
+    for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+      terrain_tris.push_back({glm::dvec3(m.positions[m.indices[k]]), glm::dvec3(m.positions[m.indices[k + 1]]),
+                              glm::dvec3(m.positions[m.indices[k + 2]])});
+    }
+  }
+  const GroundIndex ground(terrain_tris, 25.0);
+  Progress progress(run, "synthesizing occluders", scene->objects.size());
+  for (Object& o : scene->objects) {
+    if (progress.Cancelled()) break;
+    progress.Advance();
+    if (has[o.id]) continue;
+    ++sum.objects;
+    std::vector<Occluder25D> made;
+    if (is_terrain[o.id]) {
+      std::vector<std::array<glm::dvec3, 3>> tris;
+      for (size_t k = 0; k + 2 < o.mesh.indices.size(); k += 3) {
+        tris.push_back({glm::dvec3(o.mesh.positions[o.mesh.indices[k]]), glm::dvec3(o.mesh.positions[o.mesh.indices[k + 1]]),
+                        glm::dvec3(o.mesh.positions[o.mesh.indices[k + 2]])});
+      }
+      made = TerrainOccluders(tris);
+    } else {
+      OccluderSynthesis r = SynthesizeOccluders(SolidMeshFromMesh(o.mesh), ground.LowestUnder(o.bounds), options);
+      if (r.defect != SolidDefect::kNone) {
+        ++sum.without_occluder[SolidDefectName(r.defect)];
+        continue;
+      }
+      sum.solid_volume_m3 += r.solid_volume_m3;
+      sum.occluder_volume_m3 += r.occluder_volume_m3;
+      made = std::move(r.occluders);
+    }
+    if (made.empty()) {
+      ++sum.without_occluder["no prism large enough"];
+      continue;
+    }
+    ++sum.objects_with_occluder;
+    for (Occluder25D& oc : made) {
+      oc.object = o.id;
+      scene->occluders.push_back(std::move(oc));
+      ++sum.occluders;
+    }
+  }
+  progress.Finish();
+  std::stable_sort(scene->occluders.begin(), scene->occluders.end(),
+                   [](const Occluder25D& a, const Occluder25D& b) { return a.object < b.object; });
+  NormalizeOccluders(scene);
+  return sum;
+}
+
+}  // namespace vistream::scenes

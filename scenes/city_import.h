@@ -1,0 +1,120 @@
+#pragma once
+// 3D city models (CityGML 1.0/2.0, CityJSON 0.x/1.0/1.1/2.0) as vistream scenes: the readers
+// (scenes/city_model.h) give city objects with geometry per level of detail; this builder
+// picks the level of detail, triangulates the polygons, tiles the terrain, and synthesizes
+// the occluders (scenes/occluder_synthesis.h). DESIGN.md "City models and terrain".
+//
+// Objects: every city object with geometry at the chosen LoD is one scene object named by its
+// id (gml:id, CityJSON key); a Building whose BuildingParts carry the geometry and that has
+// none of its own gives no object. The terrain (TINRelief) is cut into square tiles of
+// `terrain_tile_m` (by triangle centroid), each an object named "<id>/tile <i>,<j>" and listed
+// in Scene::terrain, so that a PVS holds only the terrain that can be seen.
+//
+// Level of detail: each object's highest (by the file's LoD text, "2.2" above "2"), or with
+// `lod` the geometry whose LoD has that integer part; objects without it are skipped and
+// counted ("no LoD <n> geometry"), but terrain keeps its highest (it is the ground).
+//
+// Frame: the scene origin is the file's CRS coordinates of the bounds' centre, rounded to
+// whole metres in x and y, and z at the ground level: the terrain's lowest point, or without
+// terrain the lowest point of all geometry. Scene::crs is the file's.
+//
+// Polygons: rings cleaned (consecutive duplicate points, spikes), projected on the plane of
+// their dominant normal axis and triangulated with holes (CGAL's constrained Delaunay
+// triangulation, scenes/polygon.h, as the OSM import does); triangles wound to face the way
+// the polygon's ring does (outward for solids as the specifications require). A polygon that
+// cannot be triangulated (a self-crossing ring, a hole outside its ring, no area) is left out
+// and counted; its object is kept.
+//
+// Occluders: each solid of an object (and each closed MultiSurface/CompositeSurface of a
+// Building or BuildingPart) through SynthesizeOccluders with the ground under it: the
+// terrain's lowest height under the object's xy box (0 without terrain). Terrain tiles get
+// TerrainOccluders. Solids without occluders are counted by SolidDefectName.
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+
+#include "scenes/city_model.h"
+#include "scenes/occluder_synthesis.h"
+#include "scenes/progress.h"
+#include "scenes/scene.h"
+
+namespace vistream::scenes {
+
+struct CityImportOptions {
+  std::optional<int> lod;        // 0..4: the integer part of the LoD to use; none: each object's highest
+  std::string name;              // the scene's name; default: the file name up to its first dot
+  bool keep_going = false;       // CityReadOptions::keep_going
+  double terrain_tile_m = 100.0;  // edge of the terrain's tiles, > 0
+  double terrain_quantum_m = 1.0;  // TerrainOccluders' height steps
+  int terrain_levels = 16;         // TerrainOccluders' tiers per tile
+  OccluderSynthesisOptions synthesis;
+};
+
+struct CityImportSummary {
+  std::string format;  // CityModel::format
+  std::string crs;
+  uint64_t city_objects = 0;                        // read from the file
+  std::map<std::string, uint64_t> objects_by_type;  // city objects read, by type
+  std::map<std::string, uint64_t> lods;             // LoD text chosen -> objects drawn with it
+  uint64_t objects = 0;          // scene objects (terrain tiles included)
+  uint64_t buildings = 0;        // Building objects in the file
+  uint64_t building_parts = 0;   // BuildingPart objects in the file
+  // Building and BuildingPart objects drawn (with geometry at the chosen LoD), and how many of
+  // them got at least one occluder.
+  uint64_t buildings_drawn = 0, buildings_with_occluder = 0;
+  uint64_t surfaces = 0;   // polygons triangulated
+  uint64_t triangles = 0;  // in the scene
+  uint64_t solids = 0;     // given to the synthesis
+  uint64_t occluders = 0;  // all, terrain included
+  // Solids (and closed surfaces of buildings) that gave no occluder, by reason.
+  std::map<std::string, uint64_t> without_occluder;
+  double solid_volume_m3 = 0.0;     // of the closed solids
+  double occluder_volume_m3 = 0.0;  // of their occluders above the ground
+  // Terrain: TINRelief objects, their triangles, the tiles made of them, their occluders, and
+  // the relief's lowest and highest heights (the file's CRS, metres).
+  uint64_t terrain_objects = 0, terrain_triangles = 0, terrain_tiles = 0, terrain_occluders = 0;
+  double terrain_min_z = 0.0, terrain_max_z = 0.0;
+  std::map<std::string, uint64_t> skipped;   // the reader's and the builder's, by reason
+  std::map<std::string, uint64_t> repaired;  // likewise
+  double read_s = 0.0, build_s = 0.0;
+
+  uint64_t Skipped() const;
+  uint64_t Repaired() const;
+};
+
+// Builds the scene of a city model; `name` is the scene's name. Errors: INVALID_ARGUMENT when
+// nothing drawable is left (with the skip reasons), or `options` out of range; CANCELLED when
+// run's flag was raised. `summary` is filled on every path after reading.
+absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& name,
+                                     const CityImportOptions& options, CityImportSummary* summary = nullptr,
+                                     const RunControl& run = {});
+
+// Whether `path` names a city model: .gml or .xml (CityGML), .json (CityJSON, also .city.json).
+bool IsCityModelPath(std::string_view path);
+
+// Reads `path` (CityGML by .gml/.xml, CityJSON by .json) and builds its scene. Errors: the
+// reader's (NOT_FOUND, INVALID_ARGUMENT naming the file and the object), BuildCityScene's.
+absl::StatusOr<Scene> ImportCity(const std::string& path, const CityImportOptions& options,
+                                 CityImportSummary* summary = nullptr, const RunControl& run = {});
+
+// Occluders for a scene without them (a glTF model): every object whose mesh is closed gets
+// SynthesizeOccluders' prisms on flat ground (ground_z 0; with Scene::terrain, the terrain's
+// lowest height under the object), replacing the objects' occluders if `replace`, else only
+// objects that have none. Terrain objects get TerrainOccluders. Returns the counts like
+// CityImportSummary's occluders, without_occluder, volumes.
+struct OccluderSynthesisSummary {
+  uint64_t objects = 0;                // considered
+  uint64_t objects_with_occluder = 0;  // that got at least one
+  uint64_t occluders = 0;
+  std::map<std::string, uint64_t> without_occluder;
+  double solid_volume_m3 = 0.0, occluder_volume_m3 = 0.0;
+};
+OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, const OccluderSynthesisOptions& options = {},
+                                                 const RunControl& run = {});
+
+}  // namespace vistream::scenes
