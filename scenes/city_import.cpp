@@ -457,6 +457,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       continue;
     }
     const ObjectId id = scene.AddObject(o.id, std::move(mesh));
+    scene.objects[id].type = o.type;
     const Aabb box = scene.objects[id].bounds;
     const double ground_z = ground.LowestUnder(box);
     bool got_occluder = false;
@@ -511,6 +512,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       }
       const ObjectId id = scene.AddObject(absl::StrCat(terrain_name, "/tile ", key.first, ",", key.second), std::move(mesh));
       scene.terrain.push_back(id);
+      scene.objects[id].type = "TINRelief";
       ++sum.terrain_tiles;
       for (Occluder25D& oc : TerrainOccluders(tris, options.terrain_quantum_m, options.terrain_levels)) {
         oc.object = id;
@@ -627,6 +629,51 @@ OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, con
                    [](const Occluder25D& a, const Occluder25D& b) { return a.object < b.object; });
   NormalizeOccluders(scene);
   return sum;
+}
+
+OcclusionStats ComputeOcclusionStats(const Scene& scene) {
+  OcclusionStats st;
+  std::vector<bool> is_terrain(scene.objects.size(), false);
+  for (ObjectId t : scene.terrain) is_terrain[t] = true;
+  std::vector<double> occluder_volume(scene.objects.size(), 0.0);
+  std::vector<bool> has(scene.objects.size(), false);
+  for (const Occluder25D& oc : scene.occluders) {
+    if (is_terrain[oc.object]) {
+      ++st.terrain_occluders;
+      continue;
+    }
+    ++st.occluders;
+    has[oc.object] = true;
+    const double base = scene.objects[oc.object].bounds.min.z;
+    occluder_volume[oc.object] += std::abs(SignedArea(oc.footprint)) * std::max(0.0, oc.height - base);
+  }
+  Aabb terrain_box;
+  for (const Object& o : scene.objects) {
+    ++st.objects_by_type[o.type.empty() ? "object" : o.type];
+    if (is_terrain[o.id]) {
+      ++st.terrain_objects;
+      st.terrain_triangles += o.mesh.TriangleCount();
+      terrain_box.Extend(o.bounds);
+      continue;
+    }
+    ++st.non_terrain_objects;
+    if (!has[o.id]) continue;
+    ++st.objects_with_occluder;
+    st.occluder_volume_m3 += occluder_volume[o.id];
+    double six_v = 0.0;  // six times the signed volume, relative to the object's box corner
+    const glm::dvec3 c = o.bounds.min;
+    const Mesh& m = o.mesh;
+    for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+      const glm::dvec3 a = glm::dvec3(m.positions[m.indices[k]]) - c;
+      const glm::dvec3 b = glm::dvec3(m.positions[m.indices[k + 1]]) - c;
+      const glm::dvec3 d = glm::dvec3(m.positions[m.indices[k + 2]]) - c;
+      six_v += glm::dot(a, glm::cross(b, d));
+    }
+    st.solid_volume_m3 += std::abs(six_v) / 6.0;
+  }
+  st.terrain_min_z = scene.origin.z + (terrain_box.Empty() ? 0.0 : terrain_box.min.z);
+  st.terrain_max_z = scene.origin.z + (terrain_box.Empty() ? 0.0 : terrain_box.max.z);
+  return st;
 }
 
 }  // namespace vistream::scenes

@@ -117,4 +117,20 @@ struct OccluderSynthesisSummary {
 OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, const OccluderSynthesisOptions& options = {},
                                                  const RunControl& run = {});
 
+// What a scene holds and how much of it occludes: `vistream scene info`, `scene map` and the
+// report show it. Volumes in m³; heights in the scene's CRS (origin.z added).
+struct OcclusionStats {
+  std::map<std::string, uint64_t> objects_by_type;  // Object::type ("" counted as "object")
+  uint64_t objects_with_occluder = 0;               // non-terrain objects with at least one occluder
+  uint64_t non_terrain_objects = 0;
+  uint64_t occluders = 0, terrain_occluders = 0;
+  // Of the non-terrain objects with occluders: their meshes' enclosed volume (divergence
+  // theorem, meaningful for closed meshes, which the synthesis requires) and their occluders'
+  // volume above each object's lowest point.
+  double solid_volume_m3 = 0.0, occluder_volume_m3 = 0.0;
+  uint64_t terrain_objects = 0, terrain_triangles = 0;
+  double terrain_min_z = 0.0, terrain_max_z = 0.0;  // world heights; equal when there is no terrain
+};
+OcclusionStats ComputeOcclusionStats(const Scene& scene);
+
 }  // namespace vistream::scenes

@@ -8,7 +8,7 @@
 // "height": h}]}} in the node's frame, z-up metres, standing on the ground. The origin node's
 // extras may name the coordinate reference system ({"vistream": {"origin": true, "crs":
 // "EPSG:28992"}}, Scene::crs); terrain objects' nodes say {"vistream": {"terrain": true}}
-// (Scene::terrain).
+// (Scene::terrain); an object's source type is {"vistream": {"type": "BuildingPart"}}.
 
 #include <string>
 #include <string_view>

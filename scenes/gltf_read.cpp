@@ -60,6 +60,7 @@ struct PendingObject {
   std::vector<uint32_t> indices;
   std::vector<Occluder25D> occluders;  // world footprints, z-up
   bool terrain = false;                // extras.vistream.terrain
+  std::string type;                    // extras.vistream.type
 };
 
 class GltfImporter {
@@ -256,6 +257,9 @@ class GltfImporter {
     const tinygltf::Value& terrain = VistreamExtra(node, "terrain");
     if (terrain.IsBool()) obj.terrain = terrain.Get<bool>();
     else if (terrain.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.terrain is not a boolean; ignored"));
+    const tinygltf::Value& type = VistreamExtra(node, "type");
+    if (type.IsString()) obj.type = type.Get<std::string>();
+    else if (type.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.type is not a string; ignored"));
     pending_.push_back(std::move(obj));
   }
 
@@ -331,6 +335,7 @@ class GltfImporter {
       mesh.indices = std::move(o.indices);
       const ObjectId id = scene.AddObject(std::move(o.name), std::move(mesh));
       if (o.terrain) scene.terrain.push_back(id);
+      scene.objects[id].type = std::move(o.type);
       for (auto& oc : o.occluders) {
         for (auto& p : oc.footprint) p -= glm::dvec2(origin_);
         oc.object = id;

@@ -140,6 +140,7 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
     node.name = o.name;
     node.mesh = static_cast<int>(model.meshes.size() - 1);
     tinygltf::Value::Object extras;
+    if (!o.type.empty()) extras.emplace("type", tinygltf::Value(o.type));
     if (std::binary_search(scene.terrain.begin(), scene.terrain.end(), o.id)) {
       extras.emplace("terrain", tinygltf::Value(true));
     }

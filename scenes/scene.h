@@ -24,6 +24,9 @@ struct Object {
   std::string name;
   Mesh mesh;
   Aabb bounds;  // of mesh.positions, in double
+  // What the source calls it: a city model's object type ("Building", "BuildingPart",
+  // "TINRelief", "Road", ...); empty where the source has none (generated, OSM, plain glTF).
+  std::string type;
 };
 
 // A vertical prism standing on the ground: a simple polygon footprint (counter-clockwise in

@@ -385,6 +385,8 @@ int Info(const InfoArgs& a) {
   for (const auto& [id, n] : per_object) tiered += n > 1;
   const auto& b = scene->bounds;
   const double area_km2 = (b.max.x - b.min.x) * (b.max.y - b.min.y) / 1e6;
+  const scenes::OcclusionStats st = scenes::ComputeOcclusionStats(*scene);
+  const double occluding_share = st.solid_volume_m3 > 0.0 ? st.occluder_volume_m3 / st.solid_volume_m3 : 0.0;
   if (a.json) {
     nlohmann::json j;
     j["name"] = scene->name;
@@ -397,6 +399,19 @@ int Info(const InfoArgs& a) {
     j["origin"] = {scene->origin.x, scene->origin.y, scene->origin.z};
     j["area_km2"] = area_km2;
     j["load_s"] = load_s;
+    j["crs"] = scene->crs;
+    j["objects_by_type"] = CountsJson(st.objects_by_type);
+    j["objects_with_occluder"] = st.objects_with_occluder;
+    j["non_terrain_objects"] = st.non_terrain_objects;
+    j["solid_volume_m3"] = st.solid_volume_m3;
+    j["occluder_volume_m3"] = st.occluder_volume_m3;
+    j["occluder_volume_share"] = occluding_share;
+    j["terrain"] = {{"objects", st.terrain_objects},
+                    {"triangles", st.terrain_triangles},
+                    {"occluders", st.terrain_occluders},
+                    {"min_z", st.terrain_min_z},
+                    {"max_z", st.terrain_max_z},
+                    {"relief_m", st.terrain_max_z - st.terrain_min_z}};
     j["kd"] = {{"nodes", tree.nodes().size()}, {"leaves", tree.LeafCount()}, {"depth", tree.depth()},
                {"leaf_size", a.leaf_size}, {"build_ms", kd_ms}};
     std::printf("%s\n", j.dump(2).c_str());
@@ -406,12 +421,27 @@ int Info(const InfoArgs& a) {
   std::printf("objects     %zu (%zu with several occluders: stacked or rows)\n", scene->objects.size(), tiered);
   std::printf("triangles   %zu\n", scene->TriangleCount());
   std::printf("vertices    %zu\n", scene->VertexCount());
-  std::printf("occluders   %zu\n", scene->occluders.size());
+  std::printf("occluders   %zu (%llu of terrain); %llu of %llu objects occlude, with %.0f of their %.0f m³ (%.1f%%)\n",
+              scene->occluders.size(), static_cast<unsigned long long>(st.terrain_occluders),
+              static_cast<unsigned long long>(st.objects_with_occluder),
+              static_cast<unsigned long long>(st.non_terrain_objects), st.occluder_volume_m3, st.solid_volume_m3,
+              100.0 * occluding_share);
+  if (st.objects_by_type.size() > 1 || !st.objects_by_type.count("object")) {
+    std::printf("types      ");
+    for (const auto& [type, n] : st.objects_by_type) std::printf(" %s %llu", type.c_str(), static_cast<unsigned long long>(n));
+    std::printf("\n");
+  }
+  if (st.terrain_objects > 0) {
+    std::printf("terrain     %llu objects, %llu triangles, heights %.2f to %.2f m (relief %.2f m)\n",
+                static_cast<unsigned long long>(st.terrain_objects), static_cast<unsigned long long>(st.terrain_triangles),
+                st.terrain_min_z, st.terrain_max_z, st.terrain_max_z - st.terrain_min_z);
+  }
   std::printf("bounds      min (%.2f, %.2f, %.2f)  max (%.2f, %.2f, %.2f)  [scene-local m]\n", b.min.x,
               b.min.y, b.min.z, b.max.x, b.max.y, b.max.z);
   std::printf("extent      %.0f x %.0f m, %.2f km², height %.1f m\n", b.max.x - b.min.x, b.max.y - b.min.y,
               area_km2, b.max.z - b.min.z);
-  std::printf("origin      (%.3f, %.3f, %.3f)\n", scene->origin.x, scene->origin.y, scene->origin.z);
+  std::printf("origin      (%.3f, %.3f, %.3f)%s%s\n", scene->origin.x, scene->origin.y, scene->origin.z,
+              scene->crs.empty() ? "" : " in ", scene->crs.c_str());
   std::printf("loaded in   %.2f s\n", load_s);
   std::printf("kd-tree     %zu nodes, %zu leaves (<= %u objects), depth %u, built in %.1f ms\n",
               tree.nodes().size(), tree.LeafCount(), a.leaf_size, tree.depth(), kd_ms);
@@ -433,8 +463,40 @@ int Map(const MapArgs& a) {
     if (auto entry = scenes::FindCatalogEntry(a.file); entry.ok()) walks = entry->walks;
   }
   TopViewMap map(scene->bounds, a.size, Rgb{245, 243, 238});
+  std::vector<bool> is_terrain(scene->objects.size(), false), occludes(scene->objects.size(), false);
+  for (scenes::ObjectId t : scene->terrain) is_terrain[t] = true;
   std::vector<const scenes::Occluder25D*> order;
-  for (const auto& oc : scene->occluders) order.push_back(&oc);
+  for (const auto& oc : scene->occluders) {
+    if (is_terrain[oc.object]) continue;  // terrain tiers would hide the buildings
+    order.push_back(&oc);
+    occludes[oc.object] = true;
+  }
+  // Terrain underneath: its triangles shaded from low (light) to high (dark) ground.
+  double ground_lo = INFINITY, ground_hi = -INFINITY;
+  for (scenes::ObjectId t : scene->terrain) {
+    ground_lo = std::min(ground_lo, scene->objects[t].bounds.min.z);
+    ground_hi = std::max(ground_hi, scene->objects[t].bounds.max.z);
+  }
+  auto shade = [&](double z) {
+    const double f = ground_hi > ground_lo ? (z - ground_lo) / (ground_hi - ground_lo) : 0.0;
+    return Rgb{static_cast<uint8_t>(225 - 90 * f), static_cast<uint8_t>(232 - 80 * f), static_cast<uint8_t>(205 - 95 * f)};
+  };
+  auto fill_mesh = [&](const scenes::Mesh& m, auto colour_of) {
+    for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+      const glm::vec3 p0 = m.positions[m.indices[k]], p1 = m.positions[m.indices[k + 1]], p2 = m.positions[m.indices[k + 2]];
+      const glm::dvec2 tri[3] = {glm::dvec2(p0), glm::dvec2(p1), glm::dvec2(p2)};
+      map.FillPolygon(tri, colour_of((p0.z + p1.z + p2.z) / 3.0), /*antialias=*/false);
+    }
+  };
+  for (scenes::ObjectId t : scene->terrain) fill_mesh(scene->objects[t].mesh, shade);
+  // Objects that do not occlude (open solids, raised parts, surfaces, furniture), in grey.
+  const Rgb no_occluder{170, 170, 178};
+  size_t grey = 0;
+  for (const scenes::Object& o : scene->objects) {
+    if (is_terrain[o.id] || occludes[o.id]) continue;
+    fill_mesh(o.mesh, [&](double) { return no_occluder; });
+    ++grey;
+  }
   std::sort(order.begin(), order.end(), [](auto* x, auto* y) { return x->height < y->height; });
   const double top = std::max(1.0, scene->bounds.max.z);
   // Where a footprint is a few pixels, smoothed edges blend every building into its
@@ -460,6 +522,11 @@ int Map(const MapArgs& a) {
                absl::StrFormat("%zu objects, %zu footprints, %.0f x %.0f m, tallest %.1f m", scene->objects.size(),
                                order.size(), b.max.x - b.min.x, b.max.y - b.min.y, b.max.z));
   for (const scenes::WalkPath& w : walks) map.AddLegend(walk_colour, "walk '" + w.name + "'", Swatch::kLine);
+  if (grey > 0) map.AddLegend(no_occluder, absl::StrFormat("object without an occluder (%zu)", grey));
+  if (!scene->terrain.empty()) {
+    map.AddLegend(shade(ground_lo), absl::StrFormat("terrain, low (%.1f m)", scene->origin.z + ground_lo));
+    map.AddLegend(shade(ground_hi), absl::StrFormat("terrain, high (%.1f m)", scene->origin.z + ground_hi));
+  }
   if (outlines) {
     map.AddLegend(outline, "building footprint edge", Swatch::kOutline);
   } else {
