@@ -1,0 +1,227 @@
+// The city import end to end: the hand-made shapes (tests/citymodel) read from CityJSON and
+// from CityGML give the same scene, with the object, triangle and occluder counts worked out by
+// hand in tests/citymodel/README.md; Den Haag read from both formats gives the same scene.
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "scenes/city_import.h"
+#include "scenes/gltf_io.h"
+#include "scenes/mesh.h"
+#include "tests/test_util.h"
+
+namespace vistream::scenes {
+namespace {
+
+const std::string kShapes = std::string(VISTREAM_SOURCE_DIR) + "/tests/citymodel/";
+const std::string kData = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/";
+
+const Object* Find(const Scene& scene, const std::string& name) {
+  for (const Object& o : scene.objects) {
+    if (o.name == name) return &o;
+  }
+  return nullptr;
+}
+
+// Occluder volume of one object above height `base` (scene-local), footprints' areas times
+// the heights above it.
+double OccluderVolume(const Scene& scene, const std::string& name, double base) {
+  const Object* o = Find(scene, name);
+  if (o == nullptr) return -1.0;
+  double v = 0.0;
+  for (const Occluder25D& oc : scene.occluders) {
+    if (oc.object == o->id) v += std::abs(SignedArea(oc.footprint)) * std::max(0.0, oc.height - base);
+  }
+  return v;
+}
+
+size_t OccluderCount(const Scene& scene, const std::string& name) {
+  const Object* o = Find(scene, name);
+  size_t n = 0;
+  for (const Occluder25D& oc : scene.occluders) n += o != nullptr && oc.object == o->id;
+  return n;
+}
+
+class ShapesTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(ShapesTest, ObjectsTrianglesAndOccludersAsWorkedOutByHand) {
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + GetParam(), {}, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->crs, "EPSG:28992");
+  // World box x 85000..85160, y 445990..446054; the terrain's lowest point is z 0.
+  EXPECT_EQ(scene->origin, glm::dvec3(85080.0, 446022.0, 0.0));
+
+  // 12 city objects with geometry (the building "stacked" has none) and one terrain tile.
+  EXPECT_EQ(sum.city_objects, 14u);
+  EXPECT_EQ(scene->objects.size(), 13u);
+  EXPECT_EQ(Find(*scene, "stacked"), nullptr);
+  const std::map<std::string, size_t> triangles = {
+      {"gabled", 16},      // 5 quads, 2 pentagons
+      {"tower", 28},       // 10 quads, the podium roof a square with a square hole (8)
+      {"stacked-base", 12}, {"stacked-top", 12},
+      {"overhang", 20},    // 6 quads, 2 L-shaped hexagons (4 each)
+      {"open", 10},        // 5 quads
+      {"courtyard", 32},   // floor and roof with a hole (8 each), 8 walls
+      {"slope", 12},       {"lamp", 12}, {"lamp2", 12}, {"garden", 2}, {"bridge", 12},
+      {"terrain/tile 0,-1", 18},
+  };
+  size_t total = 0;
+  for (const auto& [name, n] : triangles) {
+    const Object* o = Find(*scene, name);
+    ASSERT_NE(o, nullptr) << name;
+    EXPECT_EQ(o->mesh.TriangleCount(), n) << name;
+    total += n;
+  }
+  EXPECT_EQ(scene->TriangleCount(), total);
+  EXPECT_EQ(sum.triangles, total);
+  EXPECT_EQ(Find(*scene, "stacked-base")->type, "BuildingPart");
+  EXPECT_EQ(Find(*scene, "garden")->type, "LandUse");
+  ASSERT_EQ(scene->terrain.size(), 1u);
+  EXPECT_EQ(scene->objects[scene->terrain[0]].name, "terrain/tile 0,-1");
+  EXPECT_EQ(sum.terrain_triangles, 18u);
+  EXPECT_NEAR(sum.terrain_max_z - sum.terrain_min_z, 5.0, 1e-9);
+
+  // The lamps: one template placed at two points.
+  const Aabb lamp = Find(*scene, "lamp")->bounds, lamp2 = Find(*scene, "lamp2")->bounds;
+  EXPECT_NEAR(lamp.min.x, 85125.0 - 0.1 - 85080.0, 1e-4);
+  EXPECT_NEAR(lamp2.min.y - lamp.min.y, 10.0, 1e-4);
+  EXPECT_NEAR(lamp.max.z, 4.0, 1e-4);
+
+  // Occluders: volumes above the ground of each solid, as the README works them out.
+  EXPECT_EQ(sum.buildings_drawn, 8u);  // gabled tower stacked-base stacked-top overhang open courtyard slope
+  EXPECT_EQ(sum.buildings_with_occluder, 6u);
+  EXPECT_EQ(sum.solids, 9u);  // the buildings and the bridge
+  EXPECT_EQ(sum.without_occluder["raised above the ground"], 2u) << "stacked-top and the bridge";
+  EXPECT_EQ(sum.without_occluder["open"], 1u);
+  const double gabled = OccluderVolume(*scene, "gabled", 0.0);
+  EXPECT_GE(gabled, 10.0 * 8.0 * 6.0 - 1e-6) << "at least the prism up to the eaves";
+  EXPECT_LE(gabled, 10.0 * 8.0 * 6.0 + 0.5 * 8.0 * 3.0 * 10.0 + 1e-6) << "never more than the solid";
+  EXPECT_NEAR(OccluderVolume(*scene, "tower", 0.0), 400.0 * 5.0 + 64.0 * 25.0, 1e-6);
+  EXPECT_NEAR(OccluderVolume(*scene, "stacked-base", 0.0), 400.0, 1e-6);
+  EXPECT_EQ(OccluderCount(*scene, "stacked-top"), 0u);
+  EXPECT_NEAR(OccluderVolume(*scene, "overhang", 0.0), 10.0 * 6.0 * 6.0, 1e-6) << "nothing under the overhang";
+  EXPECT_EQ(OccluderCount(*scene, "open"), 0u);
+  EXPECT_NEAR(OccluderVolume(*scene, "courtyard", 0.0), (400.0 - 64.0) * 10.0, 1e-6) << "the courtyard stays open";
+  // The slope's floor (z 1) lies below the terrain under it (1.667 to 3.333): its prism
+  // stands on the ground and reaches the roof.
+  EXPECT_NEAR(OccluderVolume(*scene, "slope", 0.0), 100.0 * 10.0, 1e-3);
+  EXPECT_EQ(OccluderCount(*scene, "bridge"), 0u);
+  EXPECT_EQ(OccluderCount(*scene, "garden"), 0u);
+  EXPECT_EQ(OccluderCount(*scene, "lamp"), 0u);
+  // Terrain: prisms under the two higher columns of squares, none higher than the ground.
+  EXPECT_GT(sum.terrain_occluders, 0u);
+  for (const Occluder25D& oc : scene->occluders) {
+    if (oc.object != scene->terrain[0]) continue;
+    for (const glm::dvec2& p : oc.footprint) {
+      const double ground = (p.x + 85080.0 - 85130.0) / 30.0 * 5.0;
+      EXPECT_LE(oc.height, ground + 1e-6) << "a terrain prism above the ground at x " << p.x;
+    }
+  }
+  EXPECT_TRUE(ValidateScene(*scene, GetParam()).ok());
+}
+
+INSTANTIATE_TEST_SUITE_P(BothFormats, ShapesTest,
+                         ::testing::Values("shapes.city.json", "shapes_v1_1.city.json", "shapes_v1_0.city.json",
+                                           "shapes.gml"),
+                         [](const auto& info) {
+                           std::string n = info.param;
+                           for (char& c : n) c = std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+                           return n;
+                         });
+
+TEST(CityImport, LodOneDrawsOnlyWhatHasLodOne) {
+  CityImportOptions options;
+  options.lod = 1;
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + "shapes.city.json", options, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  // LoD1: courtyard, lamps, garden, bridge; the terrain keeps its LoD 2.
+  EXPECT_NE(Find(*scene, "courtyard"), nullptr);
+  EXPECT_EQ(Find(*scene, "gabled"), nullptr);
+  EXPECT_EQ(sum.skipped["no LoD 1 geometry"], 8u);
+  EXPECT_EQ(scene->terrain.size(), 1u);
+  EXPECT_EQ(sum.lods["1"], 5u);
+  options.lod = 3;
+  absl::StatusOr<Scene> none = ImportCity(kShapes + "shapes.city.json", options, &sum);
+  ASSERT_FALSE(none.ok());
+  EXPECT_NE(none.status().message().find("no LoD 3 geometry"), std::string::npos) << none.status();
+}
+
+TEST(CityImport, SavedAndLoadedTheSceneKeepsCrsTerrainAndTypes) {
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + "shapes.city.json", {});
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const std::string path = testing::TempDir() + "/shapes.glb";
+  ASSERT_TRUE(SaveGltf(*scene, path).ok());
+  absl::StatusOr<Scene> back = LoadGltf(path);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->crs, "EPSG:28992");
+  EXPECT_EQ(back->terrain, scene->terrain);
+  EXPECT_EQ(back->objects.size(), scene->objects.size());
+  for (size_t i = 0; i < back->objects.size(); ++i) EXPECT_EQ(back->objects[i].type, scene->objects[i].type);
+  EXPECT_EQ(back->occluders.size(), scene->occluders.size());
+  EXPECT_EQ(SceneFingerprint(*back), SceneFingerprint(*scene));
+}
+
+TEST(CityImport, UnknownExtensionAndEmptyModelAreErrors) {
+  absl::StatusOr<Scene> s = ImportCity(kShapes + "README.md", {});
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.status().message().find("not a city model file name"), std::string::npos) << s.status();
+  CityModel empty;
+  empty.objects.push_back({"b1", "Building", "", {}});
+  CityImportSummary sum;
+  absl::StatusOr<Scene> e = BuildCityScene(empty, "empty", {}, &sum);
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.status().message().find("no city object with geometry"), std::string::npos) << e.status();
+}
+
+TEST(CityImport, SynthesizedOccludersForAGltfSceneWithoutThem) {
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + "shapes.city.json", {});
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const size_t before = scene->occluders.size();
+  Scene bare = *scene;
+  bare.occluders.clear();
+  const OccluderSynthesisSummary sum = AddSynthesizedOccluders(&bare, /*replace=*/true);
+  // The same solids, from the meshes: the same prisms.
+  EXPECT_EQ(bare.occluders.size(), before);
+  EXPECT_EQ(sum.objects_with_occluder, 7u) << "6 buildings and the terrain tile";
+  EXPECT_NEAR(OccluderVolume(bare, "tower", 0.0), 3600.0, 1e-6);
+}
+
+// The same tile of Den Haag from CityGML 1.0 and from its CityJSON conversion: the same
+// objects (ids from gml:id and the CityObjects keys), triangles and occluders.
+TEST(CityImport, DenHaagFromCityGmlAndCityJsonIsTheSameScene) {
+  CityImportSummary gs, js;
+  absl::StatusOr<Scene> g = ImportCity(kData + "denhaag_01.gml", {}, &gs);
+  ASSERT_TRUE(g.ok()) << g.status();
+  absl::StatusOr<Scene> j = ImportCity(kData + "denhaag_01.city.json", {}, &js);
+  ASSERT_TRUE(j.ok()) << j.status();
+  EXPECT_EQ(g->crs, "EPSG:28992");
+  EXPECT_EQ(j->crs, "EPSG:28992");
+  std::map<std::string, const Object*> by_name;
+  for (const Object& o : j->objects) by_name[o.name] = &o;
+  size_t same = 0;
+  for (const Object& o : g->objects) {
+    auto it = by_name.find(o.name);
+    if (it == by_name.end()) {
+      ADD_FAILURE() << "object " << o.name << " of the CityGML file is not in the CityJSON one";
+      continue;
+    }
+    EXPECT_EQ(o.mesh.TriangleCount(), it->second->mesh.TriangleCount()) << o.name;
+    ++same;
+  }
+  EXPECT_EQ(same, j->objects.size());
+  EXPECT_EQ(g->TriangleCount(), j->TriangleCount());
+  EXPECT_EQ(g->occluders.size(), j->occluders.size());
+  EXPECT_EQ(gs.buildings_with_occluder, js.buildings_with_occluder);
+  EXPECT_NEAR(gs.occluder_volume_m3, js.occluder_volume_m3, 1e-6 * js.occluder_volume_m3);
+  EXPECT_EQ(js.building_parts, 1653u);
+  EXPECT_EQ(js.buildings, 844u);
+  EXPECT_GT(js.buildings_with_occluder, js.buildings_drawn / 2) << "most parts stand on the ground and occlude";
+}
+
+}  // namespace
+}  // namespace vistream::scenes
