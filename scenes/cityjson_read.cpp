@@ -11,7 +11,7 @@
 //   numbers without it (1.0 and 0.x); any JSON number is taken either way. Each vertex is
 //   transformed once, up front; a coordinate that is not finite after the transform is an
 //   error only where a ring uses it (it is that object's malformed geometry).
-// - City objects keep the file's order (read from the parse, since nlohmann::json sorts an
+// - City objects keep the file's order (recorded by a SAX pass, as nlohmann::json sorts an
 //   object's keys), their "type" as written ("+Extension" types too), and their parent from
 //   "parents"[0] (1.0 and later) or "parent" (0.x, Den Haag's 0.8).
 // - "lod" is a number in 1.0 and 0.x and a string from 1.1; either is kept as its text ("2",
@@ -163,6 +163,34 @@ struct ParsedGeometry {
   std::string skip_reason;
 };
 
+// SAX events (nlohmann::json_sax) in, the keys of the top-level "CityObjects" member out.
+struct CityObjectsOrder {
+  std::vector<std::string> ids;
+  int depth = 0;
+  bool in_city_objects = false;
+
+  bool null() { return true; }
+  bool boolean(bool) { return true; }
+  bool number_integer(Json::number_integer_t) { return true; }
+  bool number_unsigned(Json::number_unsigned_t) { return true; }
+  bool number_float(Json::number_float_t, const Json::string_t&) { return true; }
+  bool string(Json::string_t&) { return true; }
+  bool binary(Json::binary_t&) { return true; }
+  bool start_object(size_t) { return ++depth, true; }
+  bool end_object() { return --depth, true; }
+  bool start_array(size_t) { return ++depth, true; }
+  bool end_array() { return --depth, true; }
+  bool key(Json::string_t& k) {
+    if (depth == 1) {
+      in_city_objects = k == "CityObjects";
+    } else if (depth == 2 && in_city_objects) {
+      ids.push_back(k);
+    }
+    return true;
+  }
+  bool parse_error(size_t, const std::string&, const Json::exception&) { return false; }
+};
+
 struct ObjectCounts {
   std::map<std::string, uint64_t> skipped;
   std::map<std::string, uint64_t> repaired;
@@ -195,21 +223,14 @@ class Reader {
   }
 
   absl::StatusOr<CityModel> ReadDocument(std::string_view bytes) {
-    // nlohmann::json keeps an object's members sorted by key; the parse callback records the
-    // order in which CityObjects' ids appear, so that the model (and the ids a scene gives its
-    // objects) follow the file.
-    std::vector<std::string> order;
-    bool in_city_objects = false;
-    const Json doc = Json::parse(bytes, [&](int depth, Json::parse_event_t event, Json& parsed) {
-      if (event == Json::parse_event_t::key) {
-        if (depth == 1) {
-          in_city_objects = parsed.is_string() && parsed.get_ref<const std::string&>() == "CityObjects";
-        } else if (depth == 2 && in_city_objects && parsed.is_string()) {
-          order.push_back(parsed.get<std::string>());
-        }
-      }
-      return true;
-    });
+    const Json doc = Json::parse(bytes);
+    // nlohmann::json keeps an object's members sorted by key; a second, SAX-only pass over the
+    // bytes records the order in which CityObjects' ids appear, so that the model (and the ids
+    // a scene gives its objects) follow the file. (nlohmann's parse callback would do it in one
+    // pass, but its parser scans the whole parent object at every object's end: quadratic in
+    // the number of city objects.)
+    CityObjectsOrder order;
+    Json::sax_parse(bytes, &order);
     const JsonPath root;
     if (!doc.is_object()) return Invalid(name_, root, Expected("a JSON object (CityJSON)", doc));
 
@@ -243,7 +264,7 @@ class Reader {
     in_order.reserve(objects->size());
     {
       std::unordered_set<std::string_view> seen;
-      for (const std::string& id : order) {
+      for (const std::string& id : order.ids) {
         if (!seen.insert(id).second) continue;
         const auto it = objects->find(id);
         if (it != objects->end()) in_order.push_back(it);
