@@ -106,15 +106,17 @@ absl::Status Invalid(const std::string& name, const JsonPath& path, const std::s
                                                   : absl::StrCat(name, ": ", where, ": ", what));
 }
 
+// A value as an error message shows it: a primitive as JSON, cut short; an array or object by
+// its type only (dumping one recurses as deep as it nests, and a hostile file nests deep).
 std::string Shown(const Json& j) {
+  if (!j.is_primitive()) return j.type_name();
   std::string s = j.dump(-1, ' ', false, Json::error_handler_t::replace);
   if (s.size() > 40) s = s.substr(0, 37) + "...";
   return s;
 }
 
 std::string Expected(const std::string& what, const Json& got) {
-  return absl::StrCat("expected ", what, ", got ", got.type_name(), got.is_primitive() ? " " : "",
-                      got.is_primitive() ? Shown(got) : "");
+  return absl::StrCat("expected ", what, ", got ", got.type_name(), got.is_primitive() ? " " + Shown(got) : "");
 }
 
 std::string Point(const glm::dvec3& p) { return absl::StrCat("(", p.x, ", ", p.y, ", ", p.z, ")"); }

@@ -439,6 +439,19 @@ TEST(CityJson, WrongJsonTypesInAnObjectNameTheirPlace) {
   }
 }
 
+TEST(CityJson, DeeplyNestedValuesAreRejectedWithoutRecursion) {
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  Json doc = Cube();
+  const std::string cube = doc.dump();
+  // "type" and a ring's vertex index nested 100,000 deep: rejected, naming only their JSON type.
+  std::string bytes = cube;
+  bytes.replace(bytes.find("\"CityJSON\""), 10, deep);
+  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"), "x.city.json: type: array is not \"CityJSON\"");
+  bytes = cube;
+  bytes.replace(bytes.find("[[[[0,3,2,1]"), 12, "[[[[" + deep + ",3,2,1]");
+  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"), "boundaries[0][0][0][0]: expected a vertex index, got array");
+}
+
 TEST(CityJson, KeepGoingLeavesMalformedObjectsOutAndCountsThem) {
   Json doc = Cube();
   doc["CityObjects"]["a-bad"] = doc["CityObjects"]["b12"];
