@@ -36,6 +36,10 @@
 // template reference) fail it too unless CityReadOptions::keep_going: then the object is left
 // out and counted in skipped["malformed geometry"]. No exception leaves the reader.
 
+#include <absl/status/status.h>
+#include <absl/status/statusor.h>
+#include <absl/strings/str_cat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -44,17 +48,13 @@
 #include <iterator>
 #include <map>
 #include <new>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <unordered_set>
 #include <utility>
 #include <vector>
-
-#include <absl/status/status.h>
-#include <absl/status/statusor.h>
-#include <absl/strings/str_cat.h>
-#include <nlohmann/json.hpp>
 
 #include "scenes/city_model.h"
 #include "scenes/progress.h"
@@ -72,10 +72,10 @@ constexpr char kClosedRing[] = "ring closed by repeating its first point";
 // keep each step of a stored path in a variable of its own (a chain of temporaries dangles).
 struct JsonPath {
   const JsonPath* parent = nullptr;
-  std::string_view key;      // a member name, or
-  size_t index = 0;          // an array index when key is empty and is_index
+  std::string_view key;  // a member name, or
+  size_t index = 0;      // an array index when key is empty and is_index
   bool is_index = false;
-  bool quoted = false;       // ["key"] rather than .key (city object ids)
+  bool quoted = false;  // ["key"] rather than .key (city object ids)
 
   JsonPath Member(std::string_view k) const { return JsonPath{this, k, 0, false, false}; }
   JsonPath Quoted(std::string_view k) const { return JsonPath{this, k, 0, false, true}; }
@@ -90,8 +90,9 @@ struct JsonPath {
       if (p.is_index) {
         absl::StrAppend(&out, "[", p.index, "]");
       } else if (p.quoted) {
-        absl::StrAppend(&out, "[", Json(std::string(p.key)).dump(-1, ' ', false, Json::error_handler_t::replace),
-                        "]");
+        absl::StrAppend(
+            &out, "[",
+            Json(std::string(p.key)).dump(-1, ' ', false, Json::error_handler_t::replace), "]");
       } else if (!p.key.empty()) {
         absl::StrAppend(&out, out.empty() ? "" : ".", std::string(p.key));
       }
@@ -116,7 +117,8 @@ std::string Shown(const Json& j) {
 }
 
 std::string Expected(const std::string& what, const Json& got) {
-  return absl::StrCat("expected ", what, ", got ", got.type_name(), got.is_primitive() ? " " + Shown(got) : "");
+  return absl::StrCat("expected ", what, ", got ", got.type_name(),
+                      got.is_primitive() ? " " + Shown(got) : "");
 }
 
 std::string Point(const glm::dvec3& p) { return absl::StrCat("(", p.x, ", ", p.y, ", ", p.z, ")"); }
@@ -142,7 +144,9 @@ bool KnownVersion(std::string_view version) {
   return (n[0] == 1 && (n[1] == 0 || n[1] == 1)) || (n[0] == 2 && n[1] == 0);
 }
 
-bool TransformRequired(std::string_view version) { return !(version.starts_with("0.") || version.starts_with("1.0")); }
+bool TransformRequired(std::string_view version) {
+  return !(version.starts_with("0.") || version.starts_with("1.0"));
+}
 
 // "urn:ogc:def:crs:EPSG::28992", "https://www.opengis.net/def/crs/EPSG/0/7415", "EPSG:7415"
 // -> "EPSG:<code>"; other text as it is (a compound URN with a comma, an OGC CRS, ...).
@@ -155,7 +159,8 @@ std::string NormaliseCrs(const std::string& text) {
   while (end > 0 && (text[end - 1] == '/' || text[end - 1] == ' ')) --end;
   size_t begin = end;
   while (begin > 0 && text[begin - 1] >= '0' && text[begin - 1] <= '9') --begin;
-  if (begin == end || begin <= epsg + 4 || (text[begin - 1] != ':' && text[begin - 1] != '/')) return text;
+  if (begin == end || begin <= epsg + 4 || (text[begin - 1] != ':' && text[begin - 1] != '/'))
+    return text;
   return absl::StrCat("EPSG:", text.substr(begin, end - begin));
 }
 
@@ -208,7 +213,8 @@ class Reader {
       return ReadDocument(bytes);
     } catch (const Json::exception& e) {
       // Parse errors land here; the rest of the reader checks types before every access.
-      return absl::InvalidArgumentError(absl::StrCat(name_, ": not valid JSON: ", std::string(Stripped(e.what()))));
+      return absl::InvalidArgumentError(
+          absl::StrCat(name_, ": not valid JSON: ", std::string(Stripped(e.what()))));
     } catch (const std::bad_alloc&) {
       return absl::ResourceExhaustedError(absl::StrCat(name_, ": out of memory reading the file"));
     }
@@ -240,14 +246,18 @@ class Reader {
     if (type == doc.end()) return Invalid(name_, root, "no \"type\": not a CityJSON file");
     if (!type->is_string() || type->get_ref<const std::string&>() != "CityJSON") {
       return Invalid(name_, root.Member("type"),
-                     absl::StrCat(Shown(*type), " is not \"CityJSON\" (CityJSONFeature streams are not read)"));
+                     absl::StrCat(Shown(*type),
+                                  " is not \"CityJSON\" (CityJSONFeature streams are not read)"));
     }
     const auto version = doc.find("version");
-    if (version == doc.end()) return Invalid(name_, root, "no \"version\": unknown CityJSON version");
+    if (version == doc.end())
+      return Invalid(name_, root, "no \"version\": unknown CityJSON version");
     if (!version->is_string() || !KnownVersion(version->get_ref<const std::string&>())) {
-      return Invalid(name_, root.Member("version"),
-                     absl::StrCat("CityJSON version ", Shown(*version),
-                                  " is not one this reader knows (1.0, 1.1, 2.0, and 0.6 to 0.9 as encoded like 1.0)"));
+      return Invalid(
+          name_, root.Member("version"),
+          absl::StrCat(
+              "CityJSON version ", Shown(*version),
+              " is not one this reader knows (1.0, 1.1, 2.0, and 0.6 to 0.9 as encoded like 1.0)"));
     }
     const std::string& version_text = version->get_ref<const std::string&>();
     CityModel model;
@@ -259,7 +269,8 @@ class Reader {
 
     const auto objects = doc.find("CityObjects");
     if (objects == doc.end()) return Invalid(name_, root, "no \"CityObjects\"");
-    if (!objects->is_object()) return Invalid(name_, root.Member("CityObjects"), Expected("an object", *objects));
+    if (!objects->is_object())
+      return Invalid(name_, root.Member("CityObjects"), Expected("an object", *objects));
 
     // File order; an id given twice keeps its first place (and the value JSON keeps: the last).
     std::vector<Json::const_iterator> in_order;
@@ -311,7 +322,8 @@ class Reader {
     const JsonPath path = root.Member("metadata");
     if (!metadata->is_object()) return Invalid(name_, path, Expected("an object", *metadata));
     if (const auto rs = metadata->find("referenceSystem"); rs != metadata->end()) {
-      if (!rs->is_string()) return Invalid(name_, path.Member("referenceSystem"), Expected("a string", *rs));
+      if (!rs->is_string())
+        return Invalid(name_, path.Member("referenceSystem"), Expected("a string", *rs));
       *crs = NormaliseCrs(rs->get<std::string>());
       return absl::OkStatus();
     }
@@ -329,23 +341,26 @@ class Reader {
 
   // Three numbers, finite: a transform's scale or translate.
   absl::Status ReadTriple(const Json& j, const JsonPath& path, glm::dvec3* out) {
-    if (!j.is_array() || j.size() != 3) return Invalid(name_, path, Expected("an array of 3 numbers", j));
+    if (!j.is_array() || j.size() != 3)
+      return Invalid(name_, path, Expected("an array of 3 numbers", j));
     for (size_t i = 0; i < 3; ++i) {
       if (!j[i].is_number()) return Invalid(name_, path.At(i), Expected("a number", j[i]));
       (*out)[static_cast<glm::length_t>(i)] = j[i].get<double>();
-      if (!std::isfinite((*out)[static_cast<glm::length_t>(i)])) return Invalid(name_, path.At(i), "not finite");
+      if (!std::isfinite((*out)[static_cast<glm::length_t>(i)]))
+        return Invalid(name_, path.At(i), "not finite");
     }
     return absl::OkStatus();
   }
 
   // An array of [x, y, z] numbers into `out`, mapped by scale and translate.
-  absl::Status ReadPoints(const Json& j, const JsonPath& path, const glm::dvec3& scale, const glm::dvec3& translate,
-                          std::vector<glm::dvec3>* out) {
+  absl::Status ReadPoints(const Json& j, const JsonPath& path, const glm::dvec3& scale,
+                          const glm::dvec3& translate, std::vector<glm::dvec3>* out) {
     if (!j.is_array()) return Invalid(name_, path, Expected("an array of [x, y, z]", j));
     out->reserve(j.size());
     for (size_t v = 0; v < j.size(); ++v) {
       const Json& p = j[v];
-      if (!p.is_array() || p.size() != 3) return Invalid(name_, path.At(v), Expected("[x, y, z]", p));
+      if (!p.is_array() || p.size() != 3)
+        return Invalid(name_, path.At(v), Expected("[x, y, z]", p));
       glm::dvec3 q;
       for (size_t i = 0; i < 3; ++i) {
         if (!p[i].is_number()) return Invalid(name_, path.At(v).At(i), Expected("a number", p[i]));
@@ -364,11 +379,14 @@ class Reader {
       if (!t->is_object()) return Invalid(name_, path, Expected("an object", *t));
       const auto s = t->find("scale");
       const auto tr = t->find("translate");
-      if (s == t->end() || tr == t->end()) return Invalid(name_, path, "needs \"scale\" and \"translate\"");
+      if (s == t->end() || tr == t->end())
+        return Invalid(name_, path, "needs \"scale\" and \"translate\"");
       if (absl::Status st = ReadTriple(*s, path.Member("scale"), &scale); !st.ok()) return st;
-      if (absl::Status st = ReadTriple(*tr, path.Member("translate"), &translate); !st.ok()) return st;
+      if (absl::Status st = ReadTriple(*tr, path.Member("translate"), &translate); !st.ok())
+        return st;
     } else if (TransformRequired(version)) {
-      return Invalid(name_, root, absl::StrCat("no \"transform\": CityJSON ", version, " requires one"));
+      return Invalid(name_, root,
+                     absl::StrCat("no \"transform\": CityJSON ", version, " requires one"));
     }
     const auto v = doc.find("vertices");
     if (v == doc.end()) return Invalid(name_, root, "no \"vertices\"");
@@ -385,16 +403,18 @@ class Reader {
     if (templates == gt->end() || tv == gt->end()) {
       return Invalid(name_, path, "needs \"templates\" and \"vertices-templates\"");
     }
-    if (!templates->is_array()) return Invalid(name_, path.Member("templates"), Expected("an array", *templates));
+    if (!templates->is_array())
+      return Invalid(name_, path.Member("templates"), Expected("an array", *templates));
     templates_ = &*templates;
     template_cache_.resize(templates->size());
-    return ReadPoints(*tv, path.Member("vertices-templates"), glm::dvec3(1.0), glm::dvec3(0.0), &template_vertices_);
+    return ReadPoints(*tv, path.Member("vertices-templates"), glm::dvec3(1.0), glm::dvec3(0.0),
+                      &template_vertices_);
   }
 
   // ---- one city object ----
 
-  absl::Status ReadObject(const std::string& id, const Json& j, const JsonPath& path, CityObject* out,
-                          ObjectCounts* counts) {
+  absl::Status ReadObject(const std::string& id, const Json& j, const JsonPath& path,
+                          CityObject* out, ObjectCounts* counts) {
     if (!j.is_object()) return Invalid(name_, path, Expected("a city object", j));
     out->id = id;
     const auto type = j.find("type");
@@ -402,22 +422,28 @@ class Reader {
     if (!type->is_string()) return Invalid(name_, path.Member("type"), Expected("a string", *type));
     out->type = type->get<std::string>();
     if (const auto parents = j.find("parents"); parents != j.end()) {
-      if (!parents->is_array()) return Invalid(name_, path.Member("parents"), Expected("an array of ids", *parents));
+      if (!parents->is_array())
+        return Invalid(name_, path.Member("parents"), Expected("an array of ids", *parents));
       if (!parents->empty()) {
-        if (!(*parents)[0].is_string()) return Invalid(name_, path.Member("parents").At(0), Expected("an id", (*parents)[0]));
+        if (!(*parents)[0].is_string())
+          return Invalid(name_, path.Member("parents").At(0), Expected("an id", (*parents)[0]));
         out->parent = (*parents)[0].get<std::string>();
       }
     } else if (const auto parent = j.find("parent"); parent != j.end()) {  // 0.x
-      if (!parent->is_string()) return Invalid(name_, path.Member("parent"), Expected("an id", *parent));
+      if (!parent->is_string())
+        return Invalid(name_, path.Member("parent"), Expected("an id", *parent));
       out->parent = parent->get<std::string>();
     }
     const auto geometry = j.find("geometry");
     if (geometry == j.end()) return absl::OkStatus();
     const JsonPath gpath = path.Member("geometry");
-    if (!geometry->is_array()) return Invalid(name_, gpath, Expected("an array of geometries", *geometry));
+    if (!geometry->is_array())
+      return Invalid(name_, gpath, Expected("an array of geometries", *geometry));
     for (size_t g = 0; g < geometry->size(); ++g) {
       ParsedGeometry parsed;
-      if (absl::Status s = ReadGeometry((*geometry)[g], gpath.At(g), out->type, &parsed, counts); !s.ok()) return s;
+      if (absl::Status s = ReadGeometry((*geometry)[g], gpath.At(g), out->type, &parsed, counts);
+          !s.ok())
+        return s;
       if (parsed.geometry) {
         out->geometries.push_back(*std::move(parsed.geometry));
       } else {
@@ -427,8 +453,8 @@ class Reader {
     return absl::OkStatus();
   }
 
-  absl::Status ReadGeometry(const Json& j, const JsonPath& path, const std::string& object_type, ParsedGeometry* out,
-                            ObjectCounts* counts) {
+  absl::Status ReadGeometry(const Json& j, const JsonPath& path, const std::string& object_type,
+                            ParsedGeometry* out, ObjectCounts* counts) {
     if (!j.is_object()) return Invalid(name_, path, Expected("a geometry object", j));
     const auto type = j.find("type");
     if (type == j.end()) return Invalid(name_, path, "no \"type\"");
@@ -457,7 +483,8 @@ class Reader {
     } else if (t == "MultiSurface") {
       g.type = CityGeometryType::kMultiSurface;
     } else if (t == "CompositeSurface") {
-      g.type = object_type == "TINRelief" ? CityGeometryType::kTin : CityGeometryType::kCompositeSurface;
+      g.type =
+          object_type == "TINRelief" ? CityGeometryType::kTin : CityGeometryType::kCompositeSurface;
     } else if (t == "MultiPoint" || t == "MultiLineString") {
       out->skip_reason = t + " geometry";
       return absl::OkStatus();
@@ -495,33 +522,42 @@ class Reader {
     return absl::OkStatus();
   }
 
-  absl::Status ReadInstance(const Json& j, const JsonPath& path, ParsedGeometry* out, ObjectCounts* counts) {
+  absl::Status ReadInstance(const Json& j, const JsonPath& path, ParsedGeometry* out,
+                            ObjectCounts* counts) {
     const auto tmpl = j.find("template");
     if (tmpl == j.end()) return Invalid(name_, path, "no \"template\"");
-    if (!tmpl->is_number_unsigned()) return Invalid(name_, path.Member("template"), Expected("a template index", *tmpl));
+    if (!tmpl->is_number_unsigned())
+      return Invalid(name_, path.Member("template"), Expected("a template index", *tmpl));
     const uint64_t index = tmpl->get<uint64_t>();
     const size_t count = templates_ == nullptr ? 0 : templates_->size();
     if (index >= count) {
-      return Invalid(name_, path.Member("template"),
-                     absl::StrCat("template ", index, " is out of range (", count, " geometry templates)"));
+      return Invalid(
+          name_, path.Member("template"),
+          absl::StrCat("template ", index, " is out of range (", count, " geometry templates)"));
     }
     const auto boundaries = j.find("boundaries");
     if (boundaries == j.end()) return Invalid(name_, path, "no \"boundaries\"");
     if (!boundaries->is_array() || boundaries->size() != 1) {
-      return Invalid(name_, path.Member("boundaries"), Expected("[the reference point's vertex index]", *boundaries));
+      return Invalid(name_, path.Member("boundaries"),
+                     Expected("[the reference point's vertex index]", *boundaries));
     }
     glm::dvec3 reference;
     const Rings rings{this, vertices_, "vertices", counts};
-    if (absl::Status s = rings.Vertex((*boundaries)[0], path.Member("boundaries").At(0), &reference); !s.ok()) return s;
+    if (absl::Status s =
+            rings.Vertex((*boundaries)[0], path.Member("boundaries").At(0), &reference);
+        !s.ok())
+      return s;
     const auto matrix = j.find("transformationMatrix");
     if (matrix == j.end()) return Invalid(name_, path, "no \"transformationMatrix\"");
     if (!matrix->is_array() || matrix->size() != 16) {
-      return Invalid(name_, path.Member("transformationMatrix"), Expected("an array of 16 numbers", *matrix));
+      return Invalid(name_, path.Member("transformationMatrix"),
+                     Expected("an array of 16 numbers", *matrix));
     }
     double m[16];
     for (size_t i = 0; i < 16; ++i) {
       const Json& e = (*matrix)[i];
-      if (!e.is_number()) return Invalid(name_, path.Member("transformationMatrix").At(i), Expected("a number", e));
+      if (!e.is_number())
+        return Invalid(name_, path.Member("transformationMatrix").At(i), Expected("a number", e));
       m[i] = e.get<double>();
     }
 
@@ -542,8 +578,8 @@ class Reader {
       } else if (tt->get_ref<const std::string&>() == "GeometryInstance") {
         entry.status = Invalid(name_, tpath, "a template cannot be a GeometryInstance");
       } else {
-        entry.status = ReadPlainGeometry(tj, tpath, "", template_vertices_, "template vertices", &entry.geometry,
-                                         &entry.counts);
+        entry.status = ReadPlainGeometry(tj, tpath, "", template_vertices_, "template vertices",
+                                         &entry.geometry, &entry.counts);
       }
     }
     if (!entry.status.ok()) {
@@ -561,7 +597,8 @@ class Reader {
     // Row-major: x' = m[0] x + m[1] y + m[2] z + m[3], ...; then the reference point.
     bool finite = true;
     auto place = [&](glm::dvec3& p) {
-      const glm::dvec3 q(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+      const glm::dvec3 q(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+                         m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
                          m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]);
       p = q + reference;
       finite = finite && std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
@@ -580,7 +617,8 @@ class Reader {
     }
     if (!finite) {
       return Invalid(name_, path.Member("transformationMatrix"),
-                     absl::StrCat("template ", index, " placed at ", Point(reference), " has coordinates that are not finite"));
+                     absl::StrCat("template ", index, " placed at ", Point(reference),
+                                  " has coordinates that are not finite"));
     }
     out->geometry = std::move(g);
     return absl::OkStatus();
@@ -593,11 +631,14 @@ class Reader {
     const char* verts_name;
     ObjectCounts* counts;
 
-    absl::Status Fail(const JsonPath& path, const std::string& what) const { return Invalid(reader->name_, path, what); }
+    absl::Status Fail(const JsonPath& path, const std::string& what) const {
+      return Invalid(reader->name_, path, what);
+    }
 
     // A non-empty array, `each` called on every element.
     template <typename Each>
-    absl::Status Array(const Json& j, const JsonPath& path, const std::string& of, Each&& each) const {
+    absl::Status Array(const Json& j, const JsonPath& path, const std::string& of,
+                       Each&& each) const {
       if (!j.is_array()) return Fail(path, Expected(absl::StrCat("an array of ", of), j));
       if (j.empty()) return Fail(path, absl::StrCat("empty: no ", of));
       for (size_t i = 0; i < j.size(); ++i) {
@@ -610,11 +651,13 @@ class Reader {
       if (!j.is_number_unsigned()) return Fail(path, Expected("a vertex index", j));
       const uint64_t i = j.get<uint64_t>();
       if (i >= verts.size()) {
-        return Fail(path, absl::StrCat("vertex index ", i, " is out of range (", verts.size(), " ", verts_name, ")"));
+        return Fail(path, absl::StrCat("vertex index ", i, " is out of range (", verts.size(), " ",
+                                       verts_name, ")"));
       }
       *out = verts[i];
       if (!std::isfinite(out->x) || !std::isfinite(out->y) || !std::isfinite(out->z)) {
-        return Fail(path, absl::StrCat("vertex ", i, " is not finite after the transform: ", Point(*out)));
+        return Fail(
+            path, absl::StrCat("vertex ", i, " is not finite after the transform: ", Point(*out)));
       }
       return absl::OkStatus();
     }
@@ -630,8 +673,9 @@ class Reader {
         ++counts->repaired[std::string(kClosedRing)];
       }
       if (out->size() < 3) {
-        return Fail(path, absl::StrCat("ring of ", out->size(), out->size() == 1 ? " point" : " points",
-                                       " (at least 3 needed)"));
+        return Fail(path,
+                    absl::StrCat("ring of ", out->size(), out->size() == 1 ? " point" : " points",
+                                 " (at least 3 needed)"));
       }
       return absl::OkStatus();
     }
@@ -645,7 +689,8 @@ class Reader {
       });
     }
 
-    absl::Status Shell(const Json& j, const JsonPath& path, const std::string& of, std::vector<CitySurface>* out) const {
+    absl::Status Shell(const Json& j, const JsonPath& path, const std::string& of,
+                       std::vector<CitySurface>* out) const {
       if (j.is_array()) out->reserve(j.size());
       return Array(j, path, of, [&](const Json& e, const JsonPath& p) {
         out->emplace_back();
@@ -687,7 +732,8 @@ absl::StatusOr<CityModel> ReadCityJsonFromMemory(std::string_view bytes, const s
 absl::StatusOr<CityModel> ReadCityJson(const std::string& path, const CityReadOptions& options,
                                        const RunControl& run) {
   std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  if (!std::filesystem::exists(path, ec))
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
   if (std::filesystem::is_directory(path, ec)) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": is a folder, not a CityJSON file"));
   }

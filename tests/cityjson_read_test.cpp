@@ -59,9 +59,11 @@ void ExpectPoint(const glm::dvec3& got, const glm::dvec3& want, const std::strin
   EXPECT_NEAR(got.z, want.z, 1e-9) << what;
 }
 
-void ExpectRing(const std::vector<glm::dvec3>& got, const std::vector<glm::dvec3>& want, const std::string& what) {
+void ExpectRing(const std::vector<glm::dvec3>& got, const std::vector<glm::dvec3>& want,
+                const std::string& what) {
   ASSERT_EQ(got.size(), want.size()) << what;
-  for (size_t i = 0; i < got.size(); ++i) ExpectPoint(got[i], want[i], what + " point " + std::to_string(i));
+  for (size_t i = 0; i < got.size(); ++i)
+    ExpectPoint(got[i], want[i], what + " point " + std::to_string(i));
 }
 
 std::vector<size_t> OuterSizes(const std::vector<CitySurface>& surfaces) {
@@ -79,7 +81,8 @@ std::vector<size_t> HoleCounts(const std::vector<CitySurface>& surfaces) {
 // The one exterior shell of an object's one Solid.
 const std::vector<CitySurface>& Shell(const CityObject& o) {
   static const std::vector<CitySurface> kNone;
-  if (o.geometries.size() != 1 || o.geometries[0].solids.size() != 1 || o.geometries[0].solids[0].shells.size() != 1) {
+  if (o.geometries.size() != 1 || o.geometries[0].solids.size() != 1 ||
+      o.geometries[0].solids[0].shells.size() != 1) {
     ADD_FAILURE() << o.id << ": not one solid of one shell";
     return kNone;
   }
@@ -134,15 +137,23 @@ TEST(CityJson, ShapesKeepTheirIdsTypesAndParentsInFileOrder) {
   EXPECT_EQ(m.crs, "EPSG:28992");
   std::vector<std::string> ids;
   for (const CityObject& o : m.objects) ids.push_back(o.id);
-  EXPECT_EQ(ids, (std::vector<std::string>{"gabled", "tower", "stacked", "stacked-base", "stacked-top", "overhang",
-                                           "open", "courtyard", "slope", "terrain", "lamp", "lamp2", "garden",
-                                           "bridge"}));
-  const std::map<std::string, std::string> types = {
-      {"gabled", "Building"},      {"tower", "Building"},        {"stacked", "Building"},
-      {"stacked-base", "BuildingPart"}, {"stacked-top", "BuildingPart"}, {"overhang", "Building"},
-      {"open", "Building"},        {"courtyard", "Building"},    {"slope", "Building"},
-      {"terrain", "TINRelief"},    {"lamp", "CityFurniture"},    {"lamp2", "CityFurniture"},
-      {"garden", "LandUse"},       {"bridge", "Bridge"}};
+  EXPECT_EQ(ids, (std::vector<std::string>{"gabled", "tower", "stacked", "stacked-base",
+                                           "stacked-top", "overhang", "open", "courtyard", "slope",
+                                           "terrain", "lamp", "lamp2", "garden", "bridge"}));
+  const std::map<std::string, std::string> types = {{"gabled", "Building"},
+                                                    {"tower", "Building"},
+                                                    {"stacked", "Building"},
+                                                    {"stacked-base", "BuildingPart"},
+                                                    {"stacked-top", "BuildingPart"},
+                                                    {"overhang", "Building"},
+                                                    {"open", "Building"},
+                                                    {"courtyard", "Building"},
+                                                    {"slope", "Building"},
+                                                    {"terrain", "TINRelief"},
+                                                    {"lamp", "CityFurniture"},
+                                                    {"lamp2", "CityFurniture"},
+                                                    {"garden", "LandUse"},
+                                                    {"bridge", "Bridge"}};
   for (const CityObject& o : m.objects) {
     EXPECT_EQ(o.type, types.at(o.id)) << o.id;
     EXPECT_EQ(o.parent, o.id.starts_with("stacked-") ? "stacked" : "") << o.id;
@@ -163,7 +174,8 @@ TEST(CityJson, GabledRoofIsOneSolidOfSevenFacesInTheSharedOrder) {
   EXPECT_EQ(OuterSizes(shell), (std::vector<size_t>{4, 4, 5, 4, 5, 4, 4}));
   EXPECT_EQ(HoleCounts(shell), (std::vector<size_t>(7, 0)));
   ExpectRing(shell[0].outer, {P(0, 0, 0), P(0, 8, 0), P(10, 8, 0), P(10, 0, 0)}, "floor");
-  ExpectRing(shell[2].outer, {P(10, 0, 0), P(10, 8, 0), P(10, 8, 6), P(10, 4, 9), P(10, 0, 6)}, "east gable");
+  ExpectRing(shell[2].outer, {P(10, 0, 0), P(10, 8, 0), P(10, 8, 6), P(10, 4, 9), P(10, 0, 6)},
+             "east gable");
   ExpectRing(shell[5].outer, {P(0, 0, 6), P(10, 0, 6), P(10, 4, 9), P(0, 4, 9)}, "south roof");
 }
 
@@ -174,8 +186,10 @@ TEST(CityJson, TowerStandsInThePodiumRoofsHole) {
   EXPECT_EQ(HoleCounts(shell), (std::vector<size_t>{0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0}));
   ASSERT_EQ(shell.size(), 11u);
   ExpectRing(shell[9].outer, {P(20, 0, 5), P(40, 0, 5), P(40, 20, 5), P(20, 20, 5)}, "podium roof");
-  ExpectRing(shell[9].holes[0], {P(26, 6, 5), P(26, 14, 5), P(34, 14, 5), P(34, 6, 5)}, "podium roof's hole");
-  ExpectRing(shell[10].outer, {P(26, 6, 30), P(34, 6, 30), P(34, 14, 30), P(26, 14, 30)}, "tower roof");
+  ExpectRing(shell[9].holes[0], {P(26, 6, 5), P(26, 14, 5), P(34, 14, 5), P(34, 6, 5)},
+             "podium roof's hole");
+  ExpectRing(shell[10].outer, {P(26, 6, 30), P(34, 6, 30), P(34, 14, 30), P(26, 14, 30)},
+             "tower roof");
 }
 
 TEST(CityJson, StackedPartsCarryTheGeometryAndTheBuildingNone) {
@@ -193,8 +207,8 @@ TEST(CityJson, StackedPartsCarryTheGeometryAndTheBuildingNone) {
 TEST(CityJson, OverhangOpenCourtyardSlopeGardenAndBridge) {
   const CityModel m = Read(Shapes("shapes.city.json"));
   EXPECT_EQ(OuterSizes(Shell(Get(m, "overhang"))), (std::vector<size_t>{4, 4, 4, 6, 4, 4, 6, 4}));
-  ExpectRing(Shell(Get(m, "overhang"))[1].outer, {P(70, 6, 3), P(70, 10, 3), P(80, 10, 3), P(80, 6, 3)},
-             "overhang's underside");
+  ExpectRing(Shell(Get(m, "overhang"))[1].outer,
+             {P(70, 6, 3), P(70, 10, 3), P(80, 10, 3), P(80, 6, 3)}, "overhang's underside");
   EXPECT_EQ(OuterSizes(Shell(Get(m, "open"))), (std::vector<size_t>(5, 4)));
 
   const CityObject& courtyard = Get(m, "courtyard");
@@ -204,12 +218,14 @@ TEST(CityJson, OverhangOpenCourtyardSlopeGardenAndBridge) {
   EXPECT_EQ(OuterSizes(c), (std::vector<size_t>(10, 4)));
   EXPECT_EQ(HoleCounts(c), (std::vector<size_t>{1, 0, 0, 0, 0, 0, 0, 0, 0, 1}));
   ASSERT_EQ(c.size(), 10u);
-  ExpectRing(c[0].holes[0], {P(106, 6, 0), P(114, 6, 0), P(114, 14, 0), P(106, 14, 0)}, "courtyard in the floor");
+  ExpectRing(c[0].holes[0], {P(106, 6, 0), P(114, 6, 0), P(114, 14, 0), P(106, 14, 0)},
+             "courtyard in the floor");
   // The courtyard's south wall faces north, into the courtyard.
-  ExpectRing(c[5].outer, {P(106, 6, 0), P(106, 6, 10), P(114, 6, 10), P(114, 6, 0)}, "courtyard's south wall");
+  ExpectRing(c[5].outer, {P(106, 6, 0), P(106, 6, 10), P(114, 6, 10), P(114, 6, 0)},
+             "courtyard's south wall");
 
-  ExpectRing(Shell(Get(m, "slope"))[0].outer, {P(140, 0, 1), P(140, 10, 1), P(150, 10, 1), P(150, 0, 1)},
-             "slope's floor");
+  ExpectRing(Shell(Get(m, "slope"))[0].outer,
+             {P(140, 0, 1), P(140, 10, 1), P(150, 10, 1), P(150, 0, 1)}, "slope's floor");
 
   const CityObject& garden = Get(m, "garden");
   ASSERT_EQ(garden.geometries.size(), 1u);
@@ -217,13 +233,15 @@ TEST(CityJson, OverhangOpenCourtyardSlopeGardenAndBridge) {
   EXPECT_EQ(garden.geometries[0].lod, "1");
   EXPECT_TRUE(garden.geometries[0].solids.empty());
   ASSERT_EQ(garden.geometries[0].surfaces.size(), 1u);
-  ExpectRing(garden.geometries[0].surfaces[0].outer, {P(0, 30, 0), P(10, 30, 0), P(10, 40, 0), P(0, 40, 0)}, "garden");
+  ExpectRing(garden.geometries[0].surfaces[0].outer,
+             {P(0, 30, 0), P(10, 30, 0), P(10, 40, 0), P(0, 40, 0)}, "garden");
 
   const CityObject& bridge = Get(m, "bridge");
   ASSERT_EQ(bridge.geometries.size(), 1u);
   EXPECT_EQ(bridge.geometries[0].type, CityGeometryType::kSolid);
   EXPECT_EQ(bridge.geometries[0].lod, "1");
-  ExpectRing(Shell(bridge)[0].outer, {P(0, 50, 3), P(0, 54, 3), P(20, 54, 3), P(20, 50, 3)}, "deck's underside");
+  ExpectRing(Shell(bridge)[0].outer, {P(0, 50, 3), P(0, 54, 3), P(20, 54, 3), P(20, 50, 3)},
+             "deck's underside");
 }
 
 TEST(CityJson, TinReliefsCompositeSurfaceIsATin) {
@@ -233,8 +251,10 @@ TEST(CityJson, TinReliefsCompositeSurfaceIsATin) {
   EXPECT_EQ(t.geometries[0].type, CityGeometryType::kTin);
   EXPECT_EQ(t.geometries[0].lod, "2");
   EXPECT_EQ(OuterSizes(t.geometries[0].surfaces), (std::vector<size_t>(18, 3)));
-  ExpectRing(t.geometries[0].surfaces[0].outer, {P(130, -10, 0), P(140, -10, 1.667), P(140, 0, 1.667)}, "triangle 0");
-  ExpectRing(t.geometries[0].surfaces[17].outer, {P(150, 10, 3.333), P(160, 20, 5), P(150, 20, 3.333)}, "triangle 17");
+  ExpectRing(t.geometries[0].surfaces[0].outer,
+             {P(130, -10, 0), P(140, -10, 1.667), P(140, 0, 1.667)}, "triangle 0");
+  ExpectRing(t.geometries[0].surfaces[17].outer,
+             {P(150, 10, 3.333), P(160, 20, 5), P(150, 20, 3.333)}, "triangle 17");
 }
 
 TEST(CityJson, TemplateInstancesArePlacedAtTheirReferencePoints) {
@@ -247,10 +267,14 @@ TEST(CityJson, TemplateInstancesArePlacedAtTheirReferencePoints) {
     EXPECT_EQ(g.lod, "1") << id;
     EXPECT_EQ(OuterSizes(g.surfaces), (std::vector<size_t>(6, 4))) << id;
     ASSERT_EQ(g.surfaces.size(), 6u);
-    ExpectRing(g.surfaces[0].outer, {P(124.9, y - 0.1, 0), P(124.9, y + 0.1, 0), P(125.1, y + 0.1, 0), P(125.1, y - 0.1, 0)},
-               id + " base");
-    ExpectRing(g.surfaces[5].outer, {P(124.9, y - 0.1, 4), P(125.1, y - 0.1, 4), P(125.1, y + 0.1, 4), P(124.9, y + 0.1, 4)},
-               id + " top");
+    ExpectRing(
+        g.surfaces[0].outer,
+        {P(124.9, y - 0.1, 0), P(124.9, y + 0.1, 0), P(125.1, y + 0.1, 0), P(125.1, y - 0.1, 0)},
+        id + " base");
+    ExpectRing(
+        g.surfaces[5].outer,
+        {P(124.9, y - 0.1, 4), P(125.1, y - 0.1, 4), P(125.1, y + 0.1, 4), P(124.9, y + 0.1, 4)},
+        id + " top");
   }
 }
 
@@ -273,15 +297,20 @@ Json Cube(const std::string& version = "2.0") {
   doc["transform"] = {{"scale", {0.001, 0.001, 0.001}}, {"translate", {85000.0, 446000.0, 0.0}}};
   doc["vertices"] = Json::array();
   for (int z : {0, 1}) {
-    for (auto [x, y] : {std::pair{0, 0}, {1, 0}, {1, 1}, {0, 1}}) doc["vertices"].push_back({x * 1000, y * 1000, z * 1000});
+    for (auto [x, y] : {std::pair{0, 0}, {1, 0}, {1, 1}, {0, 1}})
+      doc["vertices"].push_back({x * 1000, y * 1000, z * 1000});
   }
-  const Json shell = {{{0, 3, 2, 1}}, {{0, 1, 5, 4}}, {{1, 2, 6, 5}}, {{2, 3, 7, 6}}, {{3, 0, 4, 7}}, {{4, 5, 6, 7}}};
-  doc["CityObjects"]["b12"] = {{"type", "Building"},
-                               {"geometry", {{{"type", "Solid"}, {"lod", "1"}, {"boundaries", {shell}}}}}};
+  const Json shell = {{{0, 3, 2, 1}}, {{0, 1, 5, 4}}, {{1, 2, 6, 5}},
+                      {{2, 3, 7, 6}}, {{3, 0, 4, 7}}, {{4, 5, 6, 7}}};
+  doc["CityObjects"]["b12"] = {
+      {"type", "Building"},
+      {"geometry", {{{"type", "Solid"}, {"lod", "1"}, {"boundaries", {shell}}}}}};
   return doc;
 }
 
-Json& Boundaries(Json& doc, const std::string& id = "b12") { return doc["CityObjects"][id]["geometry"][0]["boundaries"]; }
+Json& Boundaries(Json& doc, const std::string& id = "b12") {
+  return doc["CityObjects"][id]["geometry"][0]["boundaries"];
+}
 
 absl::StatusOr<CityModel> ReadDoc(const Json& doc, const CityReadOptions& options = {}) {
   return ReadCityJsonFromMemory(doc.dump(), "x.city.json", options);
@@ -291,7 +320,8 @@ absl::StatusOr<CityModel> ReadDoc(const Json& doc, const CityReadOptions& option
 void ExpectInvalid(const absl::StatusOr<CityModel>& m, const std::string& want) {
   ASSERT_FALSE(m.ok()) << "wanted an error holding: " << want;
   EXPECT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument) << m.status();
-  EXPECT_NE(m.status().message().find(want), std::string::npos) << m.status().message() << "\nwanted: " << want;
+  EXPECT_NE(m.status().message().find(want), std::string::npos)
+      << m.status().message() << "\nwanted: " << want;
 }
 
 TEST(CityJson, CubeReadsAndTransformsItsVertices) {
@@ -310,7 +340,8 @@ TEST(CityJson, TruncatedJsonIsRejectedAtEveryLength) {
     const absl::StatusOr<CityModel> m = ReadCityJsonFromMemory(bytes.substr(0, n), "x.city.json");
     ASSERT_FALSE(m.ok()) << n;
     EXPECT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument) << n;
-    EXPECT_TRUE(std::string(m.status().message()).starts_with("x.city.json: not valid JSON: ")) << m.status();
+    EXPECT_TRUE(std::string(m.status().message()).starts_with("x.city.json: not valid JSON: "))
+        << m.status();
   }
   const std::string shapes = Slurp(Shapes("shapes.city.json"));
   ExpectInvalid(ReadCityJsonFromMemory(shapes.substr(0, shapes.size() / 2), "shapes.city.json"),
@@ -323,12 +354,14 @@ TEST(CityJson, WrongTypeIsRejected) {
   ExpectInvalid(ReadDoc(doc), "x.city.json: type: \"CityJSONFeature\" is not \"CityJSON\"");
   doc.erase("type");
   ExpectInvalid(ReadDoc(doc), "x.city.json: no \"type\"");
-  ExpectInvalid(ReadCityJsonFromMemory("[1, 2]", "x.city.json"), "x.city.json: expected a JSON object");
+  ExpectInvalid(ReadCityJsonFromMemory("[1, 2]", "x.city.json"),
+                "x.city.json: expected a JSON object");
 }
 
 TEST(CityJson, UnknownVersionsAreRejectedNamingTheVersion) {
   for (const char* v : {"3.0", "0.2", "1.2", "2", "", "v2.0", "2.0.x"}) {
-    ExpectInvalid(ReadDoc(Cube(v)), std::string("x.city.json: version: CityJSON version \"") + v + "\" is not one");
+    ExpectInvalid(ReadDoc(Cube(v)),
+                  std::string("x.city.json: version: CityJSON version \"") + v + "\" is not one");
   }
   Json doc = Cube();
   doc["version"] = 2.0;
@@ -358,7 +391,8 @@ TEST(CityJson, VertexIndexOutOfRangeNamesObjectAndPath) {
   Json doc = Cube();
   Boundaries(doc)[0][3][0][2] = 8;
   ExpectInvalid(ReadDoc(doc),
-                "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries[0][3][0][2]: vertex index 8 is out of range "
+                "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries[0][3][0][2]: vertex "
+                "index 8 is out of range "
                 "(8 vertices)");
   Boundaries(doc)[0][3][0][2] = -1;
   ExpectInvalid(ReadDoc(doc), "boundaries[0][3][0][2]: expected a vertex index, got number -1");
@@ -369,20 +403,24 @@ TEST(CityJson, VertexIndexOutOfRangeNamesObjectAndPath) {
 TEST(CityJson, EmptySolidShellSurfaceAndRingAreRejected) {
   Json doc = Cube();
   Boundaries(doc) = Json::array();
-  ExpectInvalid(ReadDoc(doc), "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries: empty: no shells");
+  ExpectInvalid(ReadDoc(doc),
+                "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries: empty: no shells");
   Boundaries(doc) = Json::array({Json::array()});
   ExpectInvalid(ReadDoc(doc), "CityObjects[\"b12\"].geometry[0].boundaries[0]: empty: no surfaces");
   doc = Cube();
   Boundaries(doc)[0][1] = Json::array();
   ExpectInvalid(ReadDoc(doc), "CityObjects[\"b12\"].geometry[0].boundaries[0][1]: empty: no rings");
   Boundaries(doc)[0][1] = Json::array({Json::array()});
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"b12\"].geometry[0].boundaries[0][1][0]: ring of 0 points");
+  ExpectInvalid(ReadDoc(doc),
+                "CityObjects[\"b12\"].geometry[0].boundaries[0][1][0]: ring of 0 points");
 }
 
 TEST(CityJson, RingOfTwoPointsIsRejectedAlsoAfterDroppingItsClosingPoint) {
   Json doc = Cube();
   Boundaries(doc)[0][2][0] = {1, 2};
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"b12\"].geometry[0].boundaries[0][2][0]: ring of 2 points (at least 3 needed)");
+  ExpectInvalid(
+      ReadDoc(doc),
+      "CityObjects[\"b12\"].geometry[0].boundaries[0][2][0]: ring of 2 points (at least 3 needed)");
   Boundaries(doc)[0][2][0] = {1, 2, 1};
   ExpectInvalid(ReadDoc(doc), "boundaries[0][2][0]: ring of 2 points");
 }
@@ -394,13 +432,15 @@ TEST(CityJson, RepeatedClosingPointIsDroppedAndCounted) {
   absl::StatusOr<CityModel> m = ReadDoc(doc);
   ASSERT_TRUE(m.ok()) << m.status();
   EXPECT_EQ(OuterSizes(Shell(m->objects[0])), (std::vector<size_t>(6, 4)));
-  EXPECT_EQ(m->repaired, (std::map<std::string, uint64_t>{{"ring closed by repeating its first point", 2}}));
+  EXPECT_EQ(m->repaired,
+            (std::map<std::string, uint64_t>{{"ring closed by repeating its first point", 2}}));
 }
 
 TEST(CityJson, NonNumberCoordinateIsRejectedNamingTheVertex) {
   Json doc = Cube();
   doc["vertices"][3][1] = "1000";
-  ExpectInvalid(ReadDoc(doc), "x.city.json: vertices[3][1]: expected a number, got string \"1000\"");
+  ExpectInvalid(ReadDoc(doc),
+                "x.city.json: vertices[3][1]: expected a number, got string \"1000\"");
   doc["vertices"][3] = {1, 2};
   ExpectInvalid(ReadDoc(doc), "x.city.json: vertices[3]: expected [x, y, z], got array");
 }
@@ -409,27 +449,42 @@ TEST(CityJson, InfiniteCoordinateAfterTransformIsRejectedWhereUsed) {
   Json doc = Cube();
   doc["transform"]["scale"] = {1e300, 1e300, 1e300};
   doc["vertices"][2] = {1, 1e10, 0};
-  ExpectInvalid(ReadDoc(doc), "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries[0][0][0][2]: vertex 2 is not "
-                              "finite after the transform");
+  ExpectInvalid(
+      ReadDoc(doc),
+      "x.city.json: CityObjects[\"b12\"].geometry[0].boundaries[0][0][0][2]: vertex 2 is not "
+      "finite after the transform");
   doc["transform"]["translate"] = {1.7e308, 0, 0};
   doc["transform"]["scale"] = {1, 1, 1};
   doc["vertices"][2] = {1e308, 1, 0};
-  ExpectInvalid(ReadDoc(doc), "boundaries[0][0][0][2]: vertex 2 is not finite after the transform: (inf");
+  ExpectInvalid(ReadDoc(doc),
+                "boundaries[0][0][0][2]: vertex 2 is not finite after the transform: (inf");
 }
 
 TEST(CityJson, WrongJsonTypesInAnObjectNameTheirPlace) {
   const std::vector<std::pair<std::function<void(Json&)>, std::string>> cases = {
-      {[](Json& d) { d["CityObjects"]["b12"]["geometry"] = "none"; }, "CityObjects[\"b12\"].geometry: expected an array"},
+      {[](Json& d) { d["CityObjects"]["b12"]["geometry"] = "none"; },
+       "CityObjects[\"b12\"].geometry: expected an array"},
       {[](Json& d) { d["CityObjects"]["b12"]["geometry"][0]["lod"] = true; },
        "CityObjects[\"b12\"].geometry[0].lod: expected a level of detail, got boolean true"},
-      {[](Json& d) { d["CityObjects"]["b12"]["geometry"][0].erase("lod"); }, "CityObjects[\"b12\"].geometry[0]: no \"lod\""},
-      {[](Json& d) { d["CityObjects"]["b12"]["type"] = 3; }, "CityObjects[\"b12\"].type: expected a string, got number 3"},
-      {[](Json& d) { d["CityObjects"]["b12"]["parents"] = "p"; }, "CityObjects[\"b12\"].parents: expected an array of ids"},
-      {[](Json& d) { d["CityObjects"]["b12"] = Json::array(); }, "CityObjects[\"b12\"]: expected a city object, got array"},
-      {[](Json& d) { Boundaries(d)[0][0] = 7; }, "boundaries[0][0]: expected an array of rings, got number 7"},
-      {[](Json& d) { Boundaries(d) = {{{{{0, 1, 2}}}}}; }, "boundaries[0][0][0][0]: expected a vertex index, got array"},
-      {[](Json& d) { d["CityObjects"] = Json::array(); }, "x.city.json: CityObjects: expected an object, got array"},
-      {[](Json& d) { d["metadata"] = {{"referenceSystem", 28992}}; },
+      {[](Json& d) { d["CityObjects"]["b12"]["geometry"][0].erase("lod"); },
+       "CityObjects[\"b12\"].geometry[0]: no \"lod\""},
+      {[](Json& d) { d["CityObjects"]["b12"]["type"] = 3; },
+       "CityObjects[\"b12\"].type: expected a string, got number 3"},
+      {[](Json& d) { d["CityObjects"]["b12"]["parents"] = "p"; },
+       "CityObjects[\"b12\"].parents: expected an array of ids"},
+      {[](Json& d) { d["CityObjects"]["b12"] = Json::array(); },
+       "CityObjects[\"b12\"]: expected a city object, got array"},
+      {[](Json& d) { Boundaries(d)[0][0] = 7; },
+       "boundaries[0][0]: expected an array of rings, got number 7"},
+      {[](Json& d) {
+         Boundaries(d) = {{{{{0, 1, 2}}}}};
+       },
+       "boundaries[0][0][0][0]: expected a vertex index, got array"},
+      {[](Json& d) { d["CityObjects"] = Json::array(); },
+       "x.city.json: CityObjects: expected an object, got array"},
+      {[](Json& d) {
+         d["metadata"] = {{"referenceSystem", 28992}};
+       },
        "x.city.json: metadata.referenceSystem: expected a string, got number 28992"},
   };
   for (const auto& [mutate, want] : cases) {
@@ -446,10 +501,12 @@ TEST(CityJson, DeeplyNestedValuesAreRejectedWithoutRecursion) {
   // "type" and a ring's vertex index nested 100,000 deep: rejected, naming only their JSON type.
   std::string bytes = cube;
   bytes.replace(bytes.find("\"CityJSON\""), 10, deep);
-  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"), "x.city.json: type: array is not \"CityJSON\"");
+  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"),
+                "x.city.json: type: array is not \"CityJSON\"");
   bytes = cube;
   bytes.replace(bytes.find("[[[[0,3,2,1]"), 12, "[[[[" + deep + ",3,2,1]");
-  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"), "boundaries[0][0][0][0]: expected a vertex index, got array");
+  ExpectInvalid(ReadCityJsonFromMemory(bytes, "x.city.json"),
+                "boundaries[0][0][0][0]: expected a vertex index, got array");
 }
 
 TEST(CityJson, KeepGoingLeavesMalformedObjectsOutAndCountsThem) {
@@ -465,7 +522,8 @@ TEST(CityJson, KeepGoingLeavesMalformedObjectsOutAndCountsThem) {
   absl::StatusOr<CityModel> m = ReadDoc(doc, options);
   ASSERT_TRUE(m.ok()) << m.status();
   ASSERT_EQ(m->objects.size(), 2u);
-  EXPECT_EQ(m->objects[0].id, "b12");  // nlohmann::json::dump writes keys sorted: a-bad, b12, c-bad, d-good
+  EXPECT_EQ(m->objects[0].id,
+            "b12");  // nlohmann::json::dump writes keys sorted: a-bad, b12, c-bad, d-good
   EXPECT_EQ(m->objects[1].id, "d-good");
   EXPECT_EQ(m->skipped, (std::map<std::string, uint64_t>{{"malformed geometry", 2}}));
 }
@@ -481,8 +539,8 @@ TEST(CityJson, PointsAndLinesAndUnknownGeometriesAreSkippedAndCounted) {
   ASSERT_TRUE(m.ok()) << m.status();
   EXPECT_EQ(m->objects[0].geometries.size(), 1u);
   EXPECT_EQ(m->skipped, (std::map<std::string, uint64_t>{{"MultiPoint geometry", 1},
-                                                          {"MultiLineString geometry", 2},
-                                                          {"geometry with unknown type", 1}}));
+                                                         {"MultiLineString geometry", 2},
+                                                         {"geometry with unknown type", 1}}));
 }
 
 TEST(CityJson, MultiAndCompositeSolidsAndSurfaces) {
@@ -573,8 +631,10 @@ TEST(CityJson, TransformationMatrixIsRowMajorThenTranslatedByTheReferencePoint) 
   EXPECT_EQ(lamp.geometries[0].lod, "2");
   ASSERT_EQ(lamp.geometries[0].surfaces.size(), 1u);
   const glm::dvec3 ref = P(1, 1, 1);
-  ExpectRing(lamp.geometries[0].surfaces[0].outer,
-             {ref + glm::dvec3(10, 22, 30), ref + glm::dvec3(8, 20, 30), ref + glm::dvec3(10, 20, 32)}, "placed");
+  ExpectRing(
+      lamp.geometries[0].surfaces[0].outer,
+      {ref + glm::dvec3(10, 22, 30), ref + glm::dvec3(8, 20, 30), ref + glm::dvec3(10, 20, 32)},
+      "placed");
 }
 
 TEST(CityJson, BadTemplateReferencesNameTheInstanceAndTheTemplate) {
@@ -583,25 +643,38 @@ TEST(CityJson, BadTemplateReferencesNameTheInstanceAndTheTemplate) {
       {"templates", {{{"type", "MultiSurface"}, {"lod", "2"}, {"boundaries", {{{0, 1, 5}}}}}}},
       {"vertices-templates", {{1.0, 0.0, 0.0}, {0.0, 1.0, 0.0}, {0.0, 0.0, 1.0}}}};
   const Json identity = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-  doc["CityObjects"]["lamp"] = {
-      {"type", "CityFurniture"},
-      {"geometry", {{{"type", "GeometryInstance"}, {"template", 0}, {"boundaries", {6}}, {"transformationMatrix", identity}}}}};
-  ExpectInvalid(ReadDoc(doc), "x.city.json: CityObjects[\"lamp\"].geometry[0]: template 0: "
-                              "geometry-templates.templates[0].boundaries[0][0][2]: vertex index 5 is out of range (3 "
-                              "template vertices)");
+  doc["CityObjects"]["lamp"] = {{"type", "CityFurniture"},
+                                {"geometry",
+                                 {{{"type", "GeometryInstance"},
+                                   {"template", 0},
+                                   {"boundaries", {6}},
+                                   {"transformationMatrix", identity}}}}};
+  ExpectInvalid(
+      ReadDoc(doc),
+      "x.city.json: CityObjects[\"lamp\"].geometry[0]: template 0: "
+      "geometry-templates.templates[0].boundaries[0][0][2]: vertex index 5 is out of range (3 "
+      "template vertices)");
   doc["CityObjects"]["lamp"]["geometry"][0]["template"] = 1;
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"lamp\"].geometry[0].template: template 1 is out of range (1 geometry templates)");
+  ExpectInvalid(ReadDoc(doc),
+                "CityObjects[\"lamp\"].geometry[0].template: template 1 is out of range (1 "
+                "geometry templates)");
   doc["CityObjects"]["lamp"]["geometry"][0]["template"] = 0;
   doc["CityObjects"]["lamp"]["geometry"][0]["boundaries"] = {8};
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"lamp\"].geometry[0].boundaries[0]: vertex index 8 is out of range (8 vertices)");
+  ExpectInvalid(ReadDoc(doc),
+                "CityObjects[\"lamp\"].geometry[0].boundaries[0]: vertex index 8 is out of range "
+                "(8 vertices)");
   doc["CityObjects"]["lamp"]["geometry"][0]["boundaries"] = {6};
   doc["CityObjects"]["lamp"]["geometry"][0]["transformationMatrix"] = {1, 0, 0};
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"lamp\"].geometry[0].transformationMatrix: expected an array of 16 numbers");
+  ExpectInvalid(
+      ReadDoc(doc),
+      "CityObjects[\"lamp\"].geometry[0].transformationMatrix: expected an array of 16 numbers");
   doc["CityObjects"]["lamp"]["geometry"][0]["transformationMatrix"] = identity;
-  doc["CityObjects"]["lamp"]["geometry"][0]["transformationMatrix"][0] = 1e308;  // 1e308 x + 1e308: inf at x = 1
+  doc["CityObjects"]["lamp"]["geometry"][0]["transformationMatrix"][0] =
+      1e308;  // 1e308 x + 1e308: inf at x = 1
   doc["CityObjects"]["lamp"]["geometry"][0]["transformationMatrix"][3] = 1e308;
   doc["geometry-templates"]["templates"][0]["boundaries"] = {{{0, 1, 2}}};
-  ExpectInvalid(ReadDoc(doc), "CityObjects[\"lamp\"].geometry[0].transformationMatrix: template 0 placed at");
+  ExpectInvalid(ReadDoc(doc),
+                "CityObjects[\"lamp\"].geometry[0].transformationMatrix: template 0 placed at");
 }
 
 TEST(CityJson, MissingFileIsNotFound) {
@@ -614,7 +687,9 @@ TEST(CityJson, MissingFileIsNotFound) {
 class CountingSink : public ProgressSink {
  public:
   void Start(std::string_view, uint64_t total) override { total_ = total; }
-  void Update(std::string_view, uint64_t done, uint64_t, double, std::string_view) override { last_ = done; }
+  void Update(std::string_view, uint64_t done, uint64_t, double, std::string_view) override {
+    last_ = done;
+  }
   void End(std::string_view, double, bool completed) override {
     ended_ = true;
     completed_ = completed;
@@ -626,7 +701,8 @@ class CountingSink : public ProgressSink {
 TEST(CityJson, ReportsProgressPerObjectAndStopsWhenCancelled) {
   CountingSink sink;
   std::atomic<bool> cancel{false};
-  absl::StatusOr<CityModel> m = ReadCityJson(Shapes("shapes.city.json"), {}, RunControl{&sink, &cancel});
+  absl::StatusOr<CityModel> m =
+      ReadCityJson(Shapes("shapes.city.json"), {}, RunControl{&sink, &cancel});
   ASSERT_TRUE(m.ok()) << m.status();
   EXPECT_EQ(sink.total_, 14u);
   EXPECT_EQ(sink.last_, 14u);
@@ -654,12 +730,16 @@ TEST(CityJson, DenHaagHasItsBuildingsPartsAndTerrain) {
   if (!fs::exists(path)) GTEST_SKIP() << path << " is absent";
   const auto start = std::chrono::steady_clock::now();
   const CityModel m = Read(path);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   RecordProperty("seconds", std::to_string(seconds));
   EXPECT_EQ(m.format, "CityJSON 0.8");
-  EXPECT_EQ(m.crs, "");  // its metadata holds only geographicalExtent (the README's EPSG:28992 is not in the file)
-  EXPECT_EQ(CountTypes(m), (std::map<std::string, size_t>{{"Building", 844}, {"BuildingPart", 1653}, {"TINRelief", 1}}));
-  EXPECT_EQ(m.objects.front().id, "GUID_DBDABF53-7DD5-4C2F-BE7F-51F29A0CBA16_1");  // file order, not sorted
+  EXPECT_EQ(m.crs, "");  // its metadata holds only geographicalExtent (the README's EPSG:28992 is
+                         // not in the file)
+  EXPECT_EQ(CountTypes(m), (std::map<std::string, size_t>{
+                               {"Building", 844}, {"BuildingPart", 1653}, {"TINRelief", 1}}));
+  EXPECT_EQ(m.objects.front().id,
+            "GUID_DBDABF53-7DD5-4C2F-BE7F-51F29A0CBA16_1");  // file order, not sorted
   std::set<std::string> buildings;
   size_t with_geometry = 0, parts_with_parent = 0, surfaces = 0;
   for (const CityObject& o : m.objects) {
@@ -678,12 +758,14 @@ TEST(CityJson, DenHaagHasItsBuildingsPartsAndTerrain) {
   EXPECT_EQ(parts_with_parent, 1653u);  // 0.8 writes "parent": "<id>"
   EXPECT_EQ(with_geometry, 337u);       // the other 507 buildings are carried by their parts
   EXPECT_EQ(surfaces, 16209u);
-  EXPECT_EQ(m.repaired, (std::map<std::string, uint64_t>{{"ring closed by repeating its first point", 5}}));
+  EXPECT_EQ(m.repaired,
+            (std::map<std::string, uint64_t>{{"ring closed by repeating its first point", 5}}));
   EXPECT_TRUE(m.skipped.empty());
 
   // The terrain: 5,595 triangles, 16,785 corners (the README's "16,785 vertices") on 3,059
   // distinct points.
-  const auto tin = std::find_if(m.objects.begin(), m.objects.end(), [](const CityObject& o) { return o.type == "TINRelief"; });
+  const auto tin = std::find_if(m.objects.begin(), m.objects.end(),
+                                [](const CityObject& o) { return o.type == "TINRelief"; });
   ASSERT_NE(tin, m.objects.end());
   EXPECT_EQ(tin->id, "tin_01_Component_1");
   ASSERT_EQ(tin->geometries.size(), 1u);
@@ -709,18 +791,19 @@ TEST(CityJson, DelftHasItsObjectsByType) {
   EXPECT_EQ(m.format, "CityJSON 2.0");
   EXPECT_EQ(m.crs, "EPSG:7415");
   EXPECT_EQ(CountTypes(m), (std::map<std::string, size_t>{{"Building", 160},
-                                                           {"Road", 143},
-                                                           {"LandUse", 81},
-                                                           {"PlantCover", 126},
-                                                           {"WaterBody", 3},
-                                                           {"Bridge", 3},
-                                                           {"GenericCityObject", 54}}));
+                                                          {"Road", 143},
+                                                          {"LandUse", 81},
+                                                          {"PlantCover", 126},
+                                                          {"WaterBody", 3},
+                                                          {"Bridge", 3},
+                                                          {"GenericCityObject", 54}}));
   EXPECT_EQ(m.objects.front().id, "b0a8da4cc-2d2a-11e6-9a38-393caa90be70");
   for (const CityObject& o : m.objects) {
     ASSERT_EQ(o.geometries.size(), 1u) << o.id;
     EXPECT_EQ(o.geometries[0].lod, "1") << o.id;
     // Buildings are LoD1 solids; everything else, bridges too, LoD1 surfaces.
-    EXPECT_EQ(o.geometries[0].type, o.type == "Building" ? CityGeometryType::kSolid : CityGeometryType::kMultiSurface)
+    EXPECT_EQ(o.geometries[0].type,
+              o.type == "Building" ? CityGeometryType::kSolid : CityGeometryType::kMultiSurface)
         << o.id;
   }
   EXPECT_TRUE(m.skipped.empty());
@@ -742,9 +825,10 @@ TEST(CityJson, DenHaagSubsetHasFourBuildingsWithEightParts) {
       EXPECT_EQ(g.lod, "2");
     }
   }
-  EXPECT_EQ(parts, (std::map<std::string, size_t>{{"GUID_13974D93-CB4F-4B5A-AB1E-577DD9928CF2", 3},
-                                                   {"GUID_8CE54418-E2F7-49A7-9A8D-C3D172BA62C4", 2},
-                                                   {"GUID_DBDABF53-7DD5-4C2F-BE7F-51F29A0CBA16", 3}}));
+  EXPECT_EQ(parts,
+            (std::map<std::string, size_t>{{"GUID_13974D93-CB4F-4B5A-AB1E-577DD9928CF2", 3},
+                                           {"GUID_8CE54418-E2F7-49A7-9A8D-C3D172BA62C4", 2},
+                                           {"GUID_DBDABF53-7DD5-4C2F-BE7F-51F29A0CBA16", 3}}));
   EXPECT_TRUE(Get(m, "GUID_8CE54418-E2F7-49A7-9A8D-C3D172BA62C4").geometries.empty());
   EXPECT_EQ(Get(m, "GUID_3D7D60B9-8F3A-4D3B-A3E5-CD9B5565A5B2").geometries.size(), 1u);  // no parts
 }
