@@ -252,9 +252,9 @@ TEST(CityJson, TinReliefsCompositeSurfaceIsATin) {
   EXPECT_EQ(t.geometries[0].lod, "2");
   EXPECT_EQ(OuterSizes(t.geometries[0].surfaces), (std::vector<size_t>(18, 3)));
   ExpectRing(t.geometries[0].surfaces[0].outer,
-             {P(130, -10, 0), P(140, -10, 1.667), P(140, 0, 1.667)}, "triangle 0");
+             {P(130, -10, 0), P(140, -10, 5.0 / 3), P(140, 0, 5.0 / 3)}, "triangle 0");
   ExpectRing(t.geometries[0].surfaces[17].outer,
-             {P(150, 10, 3.333), P(160, 20, 5), P(150, 20, 3.333)}, "triangle 17");
+             {P(150, 10, 10.0 / 3), P(160, 20, 5), P(150, 20, 10.0 / 3)}, "triangle 17");
 }
 
 TEST(CityJson, TemplateInstancesArePlacedAtTheirReferencePoints) {

@@ -10,7 +10,9 @@ from fractions import Fraction
 
 X0, Y0 = 85000, 446000          # the README's offsets: objects are given relative to these
 TRANSLATE = [84990.0, 445980.0, 0.0]
-SCALE = 0.001                   # millimetres: every coordinate below is a whole number of them
+# x and y in millimetres; z in thirds of a millimetre, so that the terrain's heights 5/3 and 10/3
+# (README: rising linearly from 0 to 5 over three 10 m squares) are whole numbers too.
+SCALE = [Fraction(1, 1000), Fraction(1, 1000), Fraction(1, 3000)]
 
 
 def P(x, y, z):
@@ -130,8 +132,8 @@ def closed_box(name, *a):
 
 def terrain():
     xs, ys = [130, 140, 150, 160], [-10, 0, 10, 20]
-    # Height 0 at x 85130 rising to 5 at x 85160, on the millimetre grid: 0, 1.667, 3.333, 5.
-    z = {130: Fraction(0), 140: Fraction(1667, 1000), 150: Fraction(3333, 1000), 160: Fraction(5)}
+    # Height 0 at x 85130 rising linearly to 5 at x 85160: 0, 5/3, 10/3, 5.
+    z = {130: Fraction(0), 140: Fraction(5, 3), 150: Fraction(10, 3), 160: Fraction(5)}
     tris = []
     for j in range(3):
         for i in range(3):
@@ -226,7 +228,7 @@ def write(path, version, transform):
 
     if transform:
         def enc(p):
-            q = [(p[i] - Fraction(TRANSLATE[i]).limit_denominator()) / Fraction(1, 1000) for i in range(3)]
+            q = [(p[i] - Fraction(TRANSLATE[i]).limit_denominator()) / SCALE[i] for i in range(3)]
             assert all(c.denominator == 1 for c in q), p
             return [int(c) for c in q]
     else:
@@ -236,7 +238,7 @@ def write(path, version, transform):
            else 'https://www.opengis.net/def/crs/EPSG/0/28992')
     doc = {'type': 'CityJSON', 'version': version}
     if transform:
-        doc['transform'] = {'scale': [SCALE] * 3, 'translate': TRANSLATE}
+        doc['transform'] = {'scale': [float(c) for c in SCALE], 'translate': TRANSLATE}
     doc['metadata'] = {'referenceSystem': crs}
     doc['CityObjects'] = city_objects
     doc['vertices'] = [enc(p) for p in vertices]
