@@ -22,6 +22,7 @@ PACKAGES=(
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
   libhiredis-dev redis-server   # the PVS store replicas share (Redis), and the real Redis its tests start
   stunnel4   # a TLS-only Redis reached through stunnel, as README "Beyond one machine" says (tested)
+  libcitygml-dev   # the CityGML reader (scenes/citygml_read.cpp)
   haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
