@@ -134,7 +134,8 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
       s.synthesize_occluders = how == "synthesize";
     }
   } else if (r.Has("city")) {
-    r.Allow({"city", "lod"});
+    r.Allow({"city", "lod", "crs"});
+    if (r.Has("crs")) s.crs = r.String("crs");
     s.kind = SceneSource::Kind::kCity;
     const fs::path p(r.String("city"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
@@ -322,6 +323,7 @@ absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& ru
   if (entry.source.kind == SceneSource::Kind::kCity) {
     CityImportOptions options;
     options.lod = entry.source.lod;
+    options.crs = entry.source.crs;
     options.name = entry.name;
     return ImportCity(entry.source.path, options, nullptr, run);
   }

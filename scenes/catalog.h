@@ -32,6 +32,7 @@ struct SceneSource {
   double storey_m = 3.0;       // kOsm
   double max_height_m = OsmImportOptions{}.max_height_m;  // kOsm
   std::optional<int> lod;           // kCity: the LoD to draw ("lod"); none: each object's highest
+  std::string crs;                  // kCity: the CRS when the file names none ("crs")
   bool synthesize_occluders = false;  // kGltf ("occluders": "synthesize"): occluders from closed meshes
 };
 

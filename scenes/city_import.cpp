@@ -318,7 +318,11 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   CityImportSummary local_summary;
   CityImportSummary& sum = summary_out != nullptr ? *summary_out : local_summary;
   sum.format = model.format;
-  sum.crs = model.crs;
+  sum.crs = model.crs.empty() ? options.crs : model.crs;
+  if (!options.crs.empty() && !model.crs.empty() && options.crs != model.crs) {
+    return absl::InvalidArgumentError(absl::StrCat("the file's coordinate reference system is ", model.crs,
+                                                   ", not ", options.crs, " as the import was told"));
+  }
   for (const auto& [reason, n] : model.skipped) sum.skipped[reason] += n;
   for (const auto& [reason, n] : model.repaired) sum.repaired[reason] += n;
   if (options.lod && (*options.lod < 0 || *options.lod > 4)) {
@@ -385,7 +389,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   Scene scene;
   scene.name = name;
   scene.origin = origin;
-  scene.crs = model.crs;
+  scene.crs = sum.crs;
 
   // 3. Terrain: its triangles, tiled.
   std::vector<std::array<glm::dvec3, 3>> terrain_tris;

@@ -49,6 +49,9 @@ struct CityImportOptions {
   std::optional<int> lod;        // 0..4: the integer part of the LoD to use; none: each object's highest
   std::string name;              // the scene's name; default: the file name up to its first dot
   bool keep_going = false;       // CityReadOptions::keep_going
+  // The CRS to record when the file names none ("EPSG:28992"); a file that names another one
+  // is an error (INVALID_ARGUMENT naming both). Empty: the file's, or none.
+  std::string crs;
   double terrain_tile_m = 100.0;  // edge of the terrain's tiles, > 0
   double terrain_quantum_m = 1.0;  // TerrainOccluders' height steps
   int terrain_levels = 16;         // TerrainOccluders' tiers per tile

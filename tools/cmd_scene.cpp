@@ -201,7 +201,7 @@ int CancelledWhileSaving(const std::string& output, const char* what) {
 }
 
 struct ImportCityArgs {
-  std::string input, output, name;
+  std::string input, output, name, crs;
   std::optional<int> lod;
   double terrain_tile_m = 100.0;
   bool keep_going = false;
@@ -214,6 +214,7 @@ int ImportCity(const ImportCityArgs& a) {
   options.lod = a.lod;
   options.name = a.name;
   options.keep_going = a.keep_going;
+  options.crs = a.crs;
   options.terrain_tile_m = a.terrain_tile_m;
   scenes::CityImportSummary sum;
   absl::StatusOr<scenes::Scene> scene = scenes::ImportCity(a.input, options, &sum, ToolRun());
@@ -575,6 +576,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--lod", city->lod, "level of detail to draw (its integer part: 1, 2); default: each object's highest")
       ->check(WholeRange(0, 4));
   c->add_option("--name", city->name, "the scene's name (default: the file name up to its first dot)");
+  c->add_option("--crs", city->crs, "the coordinate reference system when the file names none (EPSG:28992)");
   c->add_option("--terrain-tile", city->terrain_tile_m, "edge of the terrain's tiles in metres (each tile an object)")
       ->check(FiniteRange(1.0, 100000.0));
   c->add_flag("--keep-going", city->keep_going, "leave out objects with malformed geometry (counted) instead of failing");
