@@ -217,7 +217,7 @@ TEST_F(CityGmlShapes, TerrainIsATinOfEighteenTriangles) {
   EXPECT_EQ(g.type, CityGeometryType::kTin);
   EXPECT_EQ(g.lod, "2");
   const double xs[] = {130, 140, 150, 160}, ys[] = {-10, 0, 10, 20};
-  auto z = [](double x) { return x == 130 ? 0.0 : x == 140 ? 1.667 : x == 150 ? 3.333 : 5.0; };
+  auto z = [](double x) { return x == 130 ? 0.0 : x == 140 ? 5.0 / 3.0 : x == 150 ? 10.0 / 3.0 : 5.0; };
   std::vector<CitySurface> want;
   for (int j = 0; j < 3; ++j) {
     for (int i = 0; i < 3; ++i) {

@@ -135,8 +135,9 @@ def closed_box(name, *a):
 
 def terrain():
     xs, ys = [130, 140, 150, 160], [-10, 0, 10, 20]
-    # Height 0 at x 85130 rising to 5 at x 85160, on the millimetre grid: 0, 1.667, 3.333, 5.
-    z = {130: Fraction(0), 140: Fraction(1667, 1000), 150: Fraction(3333, 1000), 160: Fraction(5)}
+    # Height 0 at x 85130 rising linearly to 5 at x 85160: 0, 5/3, 10/3, 5 (written as the
+    # shortest decimal text of the nearest double, as the CityJSON files' 1/3000 m scale gives).
+    z = {130: Fraction(0), 140: Fraction(5, 3), 150: Fraction(10, 3), 160: Fraction(5)}
     tris = []
     for j in range(3):
         for i in range(3):
@@ -187,8 +188,11 @@ PARTS = {
 
 
 def num(c):
-    # Exact decimal text of a Fraction with a power-of-ten denominator (millimetres at most).
+    # Exact decimal text of a Fraction with a power-of-ten denominator (millimetres at most); others
+    # (the terrain's thirds) as the double nearest.
     f = Fraction(c)
+    if (f * 1000).denominator != 1:
+        return repr(float(f))  # thirds: the double nearest, in the shortest text that reads back to it
     s = f'{float(f):.3f}'.rstrip('0').rstrip('.')
     assert Fraction(s) == f, (c, s)
     return s
