@@ -73,11 +73,14 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
 // repeat them per face). For glTF objects and city objects triangulated by the builder.
 SolidMesh SolidMeshFromMesh(const Mesh& mesh);
 
-// Terrain as occluders: the ground below a terrain surface is solid, so each terrain triangle
-// stands on a prism up to its lowest vertex. Triangles (scene-local metres, z above the
-// scene's ground level 0) are coarsened into at most `levels` tiers of heights rounded down to
-// multiples of `quantum_m`, each tier the union of the triangles at or above its level; the
-// result stays inside the ground. Footprints simple and counter-clockwise, `object` 0.
+// Terrain as occluders: the ground below a terrain surface is solid, so over the part of a
+// terrain triangle where the surface is at or above a height, a prism up to that height lies
+// in the ground. Triangles (scene-local metres, z above the scene's ground level 0) give at
+// most `levels` tiers at multiples of `quantum_m` above 0, chosen for the most volume; each
+// tier covers the part of the tile where the surface is at or above its level (cut along the
+// contour exactly, not only whole triangles: more ground, and far fewer convex pieces than
+// triangles), split into convex pieces. Footprints simple and counter-clockwise, `object` 0.
+// About 0.1 s for 2,000 triangles.
 std::vector<Occluder25D> TerrainOccluders(const std::vector<std::array<glm::dvec3, 3>>& triangles,
                                           double quantum_m = 1.0, int levels = 16);
 
