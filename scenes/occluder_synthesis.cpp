@@ -200,11 +200,18 @@ std::vector<glm::dvec2> PartAtLevel(const Part& part, double level) {
 
 // One margin for all parts: the threshold at a level is then the same number for every part,
 // so neighbouring parts whose tops meet along an edge are cut at the same exact points there
-// (and round to the same doubles, and merge).
+// (and round to the same doubles, and merge). All but the near-vertical: a sliver of a face
+// standing almost upright (a gable's top in double) would lower every tier by its margin, so
+// parts with a margin over a nanometre keep their own.
 void ShareMargin(std::vector<Part>* parts) {
+  constexpr double kMostShared = 1e-9;
   double margin = 0.0;
-  for (const Part& part : *parts) margin = std::max(margin, part.margin);
-  for (Part& part : *parts) part.margin = margin;
+  for (const Part& part : *parts) {
+    if (part.margin <= kMostShared) margin = std::max(margin, part.margin);
+  }
+  for (Part& part : *parts) {
+    if (part.margin <= kMostShared) part.margin = margin;
+  }
 }
 
 double DivergenceVolume(const SolidMesh& s) {

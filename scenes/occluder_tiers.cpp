@@ -135,7 +135,8 @@ std::vector<std::vector<glm::dvec2>> MergeConvexPieces(std::vector<std::vector<g
     poly.push_back(std::move(r));
   }
   const size_t n = poly.size();
-  std::vector<bool> alive(n, true);
+  std::vector<bool> alive(n, true), convex(n);
+  for (size_t i = 0; i < n; ++i) convex[i] = ConvexCcw(poly[i]);
   std::unordered_map<EdgeKey, size_t, EdgeKeyHash> owner;
   owner.reserve(4 * n);
   auto for_edges = [&](size_t i, auto&& f) {
@@ -170,12 +171,23 @@ std::vector<std::vector<glm::dvec2>> MergeConvexPieces(std::vector<std::vector<g
           ps = (ps + np - 1) % np;
           ++m;
         }
+        // Two convex pieces on either side of their shared chain: the union is convex when
+        // it turns left (or goes straight on) where the chain was, at both of its ends.
+        auto turns_left = [](const glm::dvec2& x, const glm::dvec2& y, const glm::dvec2& z) {
+          const int o = Orient(x, y, z);
+          return o > 0 || (o == 0 && glm::dot(y - x, z - y) > 0.0);
+        };
+        if (convex[i] && convex[j] &&
+            !(turns_left(q[(qs + nq - 1) % nq], p[(ps + m) % np], p[(ps + m + 1) % np]) &&
+              turns_left(p[(ps + np - 1) % np], p[ps], q[(qs + m + 1) % nq]))) {
+          continue;
+        }
         // p from the chain's end around to its start, then q past the chain.
         std::vector<glm::dvec2> merged;
         merged.reserve(np + nq - 2 * m);
         for (size_t k = m; k <= np; ++k) merged.push_back(p[(ps + k) % np]);
         for (size_t k = m + 1; k < nq; ++k) merged.push_back(q[(qs + k) % nq]);
-        if (!ConvexCcw(merged)) continue;
+        if (!(convex[i] && convex[j]) && !ConvexCcw(merged)) continue;
         for (const size_t x : {i, j}) {
           for_edges(x, [&](const EdgeKey& k) {
             const auto o = owner.find(k);
@@ -185,6 +197,7 @@ std::vector<std::vector<glm::dvec2>> MergeConvexPieces(std::vector<std::vector<g
         poly[i] = std::move(merged);
         poly[j].clear();
         alive[j] = false;
+        convex[i] = true;
         for_edges(i, [&](const EdgeKey& k) { owner.emplace(k, i); });
         changed = true;
         e = static_cast<size_t>(-1);  // the piece changed: walk its edges again
