@@ -240,6 +240,29 @@ class GroundIndex {
     return std::isfinite(lowest) ? lowest : 0.0;
   }
 
+  // The ground under the xy box for SynthesizeOccluders: the terrain triangles meeting it,
+  // flat at 0 elsewhere.
+  GroundSurface Under(const Aabb& box) const {
+    GroundSurface g;
+    if (tris_.empty()) return g;
+    int i0, j0, i1, j1;
+    Range(box, &i0, &j0, &i1, &j1);
+    std::vector<uint32_t> ids;
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) {
+        for (uint32_t k : cells_[static_cast<size_t>(j) * nx_ + i]) {
+          const Aabb tb = TriBox(tris_[k]);
+          if (tb.max.x < box.min.x || tb.min.x > box.max.x || tb.max.y < box.min.y || tb.min.y > box.max.y) continue;
+          ids.push_back(k);
+        }
+      }
+    }
+    std::sort(ids.begin(), ids.end());
+    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+    for (uint32_t k : ids) g.triangles.push_back(tris_[k]);
+    return g;
+  }
+
  private:
   static Aabb TriBox(const std::array<glm::dvec3, 3>& t) {
     Aabb b;
@@ -464,6 +487,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     scene.objects[id].type = o.type;
     const Aabb box = scene.objects[id].bounds;
     const double ground_z = ground.LowestUnder(box);
+    const GroundSurface under = ground.Under(box);
     bool got_occluder = false;
     auto synthesize = [&](const std::vector<std::array<glm::dvec3, 3>>& tris, bool complete) {
       ++sum.solids;
@@ -471,7 +495,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
         ++sum.without_occluder["a polygon could not be triangulated"];
         return;
       }
-      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(tris), ground_z, options.synthesis);
+      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(tris), ground_z, under, options.synthesis);
       if (r.defect != SolidDefect::kNone) {
         ++sum.without_occluder[SolidDefectName(r.defect)];
         return;
@@ -608,7 +632,8 @@ OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, con
       }
       made = TerrainOccluders(tris);
     } else {
-      OccluderSynthesis r = SynthesizeOccluders(SolidMeshFromMesh(o.mesh), ground.LowestUnder(o.bounds), options);
+      OccluderSynthesis r =
+          SynthesizeOccluders(SolidMeshFromMesh(o.mesh), ground.LowestUnder(o.bounds), ground.Under(o.bounds), options);
       if (r.defect != SolidDefect::kNone) {
         ++sum.without_occluder[SolidDefectName(r.defect)];
         continue;

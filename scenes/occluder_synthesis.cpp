@@ -289,6 +289,13 @@ SolidMesh SolidMeshFromMesh(const Mesh& mesh) {
 
 OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
                                       const OccluderSynthesisOptions& options) {
+  GroundSurface flat;
+  flat.flat_z = ground_z;
+  return SynthesizeOccluders(solid, ground_z, flat, options);
+}
+
+OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z, const GroundSurface& ground,
+                                      const OccluderSynthesisOptions& options) {
   OccluderSynthesis out;
   const SolidMesh s = Weld(solid.vertices, solid.triangles);
   if (s.triangles.empty()) {
@@ -309,7 +316,6 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
   // largest coordinate; a plane's height there moves by at most its slope times that.
   double extent = 1.0;
   for (const glm::dvec3& p : s.vertices) extent = std::max({extent, std::abs(p.x), std::abs(p.y)});
-  const double rounding = std::ldexp(extent, -50);
 
   // The triangulation of every projected edge: each of its faces lies in one region where
   // the same faces stand above one another, in the same order (no two faces cross).
@@ -329,6 +335,57 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
       if (edges.insert({&*a, &*b}).second) ct.insert_constraint(a, b);
     }
   }
+  // The terrain triangles under the solid: their edges cut the regions too, so that the
+  // ground is one plane over each region.
+  struct GroundTriangle {
+    std::array<Point2, 3> corner;
+    CGAL::Orientation orientation;
+    Plane plane;
+  };
+  std::vector<GroundTriangle> ground_tris;
+  {
+    glm::dvec2 lo(kInf), hi(-kInf);
+    for (const glm::dvec3& p : s.vertices) {
+      lo = glm::min(lo, glm::dvec2(p));
+      hi = glm::max(hi, glm::dvec2(p));
+    }
+    for (const auto& t : ground.triangles) {
+      const glm::dvec2 tlo = glm::min(glm::dvec2(t[0]), glm::min(glm::dvec2(t[1]), glm::dvec2(t[2])));
+      const glm::dvec2 thi = glm::max(glm::dvec2(t[0]), glm::max(glm::dvec2(t[1]), glm::dvec2(t[2])));
+      if (thi.x < lo.x || tlo.x > hi.x || thi.y < lo.y || tlo.y > hi.y) continue;
+      GroundTriangle g;
+      for (int i = 0; i < 3; ++i) g.corner[i] = Point2(t[i].x, t[i].y);
+      g.orientation = CGAL::orientation(g.corner[0], g.corner[1], g.corner[2]);
+      if (g.orientation == CGAL::COLLINEAR) continue;  // a vertical triangle: no ground of its own
+      g.plane = PlaneOf(t[0], t[1], t[2]);
+      for (int i = 0; i < 3; ++i) {
+        for (const glm::dvec3& p : t) extent = std::max({extent, std::abs(p.x), std::abs(p.y)});
+        ct.insert_constraint(g.corner[i], g.corner[(i + 1) % 3]);
+      }
+      ground_tris.push_back(std::move(g));
+    }
+  }
+  // The ground's plane over a region, from a point strictly inside it: the lowest terrain
+  // triangle containing it; none where no terrain lies.
+  auto ground_at = [&](const Point2& p) -> const Plane* {
+    const Plane* best = nullptr;
+    FT best_z = 0;
+    for (const GroundTriangle& g : ground_tris) {
+      bool inside = true;
+      for (int i = 0; i < 3 && inside; ++i) {
+        const CGAL::Orientation o = CGAL::orientation(g.corner[i], g.corner[(i + 1) % 3], p);
+        inside = o == g.orientation || o == CGAL::COLLINEAR;
+      }
+      if (!inside) continue;
+      const FT z = g.plane.At(p);
+      if (best == nullptr || z < best_z) {
+        best = &g.plane;
+        best_z = z;
+      }
+    }
+    return best;
+  };
+  const double rounding = std::ldexp(extent, -50);  // the terrain's corners counted in `extent`
 
   // The non-vertical triangles: their planes, orientations and boxes in xy.
   struct Face {
@@ -410,9 +467,16 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
     // The part of the face whose bottom is at or below the ground (planes are affine: the
     // clip is exact, and within a face no other face crosses them).
     const Plane& bottom = planes[stack[0]];
-    const FT ground(Below(ground_z, bottom.slope * rounding));
     std::vector<FT> f(3);
-    for (int i = 0; i < 3; ++i) f[i] = ground - bottom.At(q[i]);
+    const Plane* terrain = ground_tris.empty() ? nullptr : ground_at(CGAL::centroid(q[0], q[1], q[2]));
+    if (terrain != nullptr) {
+      // Both planes move when the footprint's points are rounded: keep the margin of both.
+      const FT margin(Above(0.0, (bottom.slope + terrain->slope) * rounding));
+      for (int i = 0; i < 3; ++i) f[i] = terrain->At(q[i]) - margin - bottom.At(q[i]);
+    } else {
+      const FT flat(Below(ground.flat_z, bottom.slope * rounding));
+      for (int i = 0; i < 3; ++i) f[i] = flat - bottom.At(q[i]);
+    }
     Part part;
     part.polygon = ClipExact(q, f);
     for (const Point2& p : part.polygon) part.approx.push_back(Approx(p));

@@ -81,6 +81,22 @@ struct OccluderSynthesis {
 OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z,
                                       const OccluderSynthesisOptions& options = {});
 
+// The ground under a solid when it is terrain: solid below the surface of `triangles` (a TIN:
+// scene-local metres, not overlapping in xy; those that do not reach the solid's xy box may be
+// left out), and below `flat_z` wherever no triangle lies.
+struct GroundSurface {
+  std::vector<std::array<glm::dvec3, 3>> triangles;
+  double flat_z = 0.0;
+};
+
+// Occluders for one solid standing on terrain: a region carries a prism where the solid's
+// bottom lies at or below the ground's surface at every point (the terrain triangles' edges
+// cut the regions, so that the test is exact there too); `ground_z` is the lowest ground under
+// the solid, from which tiers are measured (min_height_m, occluder_volume_m3). Real city models
+// float their floors a few centimetres above the terrain's low side: only the rest occludes.
+OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z, const GroundSurface& ground,
+                                      const OccluderSynthesisOptions& options = {});
+
 // A mesh's triangles as a solid: positions welded where they are equal (flat-shaded meshes
 // repeat them per face), triangles with no area (exactly collinear corners) or out-of-range
 // indices dropped. For glTF objects and city objects triangulated by the builder.

@@ -127,8 +127,8 @@ TEST_P(ShapesTest, ObjectsTrianglesAndOccludersAsWorkedOutByHand) {
 INSTANTIATE_TEST_SUITE_P(BothFormats, ShapesTest,
                          ::testing::Values("shapes.city.json", "shapes_v1_1.city.json", "shapes_v1_0.city.json",
                                            "shapes.gml"),
-                         [](const auto& info) {
-                           std::string n = info.param;
+                         [](const ::testing::TestParamInfo<std::string>& param_info) {
+                           std::string n = param_info.param;
                            for (char& c : n) c = std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
                            return n;
                          });
