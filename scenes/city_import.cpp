@@ -130,6 +130,15 @@ absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, cons
   };
   std::vector<glm::dvec3> outer = local(surface.outer);
   if (size_t d = DropDuplicates(&outer); d > 0) (*repaired)["duplicate points dropped"] += d;
+  // Every ring from its least point: the same polygon triangulates the same way whichever
+  // vertex a file starts it at (a rectangle has two Delaunay diagonals).
+  auto least_first = [](std::vector<glm::dvec3>* ring) {
+    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+      return a.x != b.x ? a.x < b.x : (a.y != b.y ? a.y < b.y : a.z < b.z);
+    };
+    std::rotate(ring->begin(), std::min_element(ring->begin(), ring->end(), less), ring->end());
+  };
+  least_first(&outer);
   if (outer.size() < 3) return absl::InvalidArgumentError("a ring of fewer than 3 distinct points");
   const glm::dvec3 n = NewellNormal(outer);
   const double len = glm::length(n);
@@ -165,6 +174,7 @@ absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, cons
   for (const auto& hole3 : surface.holes) {
     std::vector<glm::dvec3> h = local(hole3);
     if (size_t d = DropDuplicates(&h); d > 0) (*repaired)["duplicate points dropped"] += d;
+    if (!h.empty()) least_first(&h);
     Ring r = project(h);
     const RingRepairs hr = CleanRing(&r);
     rr.duplicate_points += hr.duplicate_points;
@@ -441,6 +451,21 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       });
     }
   }
+  // In a fixed order (by least corner), so that a TIN listed in any order gives the same tiles.
+  for (auto& t : terrain_tris) {
+    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+      return a.x != b.x ? a.x < b.x : (a.y != b.y ? a.y < b.y : a.z < b.z);
+    };
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end(), less), t.end());
+  }
+  std::sort(terrain_tris.begin(), terrain_tris.end(), [](const auto& a, const auto& b) {
+    for (int i = 0; i < 3; ++i) {
+      if (a[i].x != b[i].x) return a[i].x < b[i].x;
+      if (a[i].y != b[i].y) return a[i].y < b[i].y;
+      if (a[i].z != b[i].z) return a[i].z < b[i].z;
+    }
+    return false;
+  });
   sum.terrain_triangles = terrain_tris.size();
   const GroundIndex ground(terrain_tris, 25.0);
 

@@ -357,6 +357,20 @@ class Reader {
                           const glm::dvec3& translate, std::vector<glm::dvec3>* out) {
     if (!j.is_array()) return Invalid(name_, path, Expected("an array of [x, y, z]", j));
     out->reserve(j.size());
+    // A scale of 1/D for a whole D (0.001: millimetres) and a translate on that grid: the
+    // coordinate is the integer n = v + translate·D over D, computed as one correctly rounded
+    // division, the double nearest the decimal the file stands for, the same double a CityGML
+    // reader parses from the same decimal text (so both formats give the same geometry).
+    int64_t divisor[3] = {0, 0, 0}, offset[3] = {0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+      const double d = 1.0 / scale[k];
+      const double t = translate[k] * std::round(d);
+      if (std::isfinite(d) && d >= 1.0 && d <= 1e9 && std::abs(d - std::round(d)) <= 1e-9 * d &&
+          std::abs(t) < 0x1p52 && std::abs(t - std::round(t)) <= 1e-6) {
+        divisor[k] = static_cast<int64_t>(std::round(d));
+        offset[k] = static_cast<int64_t>(std::round(t));
+      }
+    }
     for (size_t v = 0; v < j.size(); ++v) {
       const Json& p = j[v];
       if (!p.is_array() || p.size() != 3)
@@ -365,7 +379,12 @@ class Reader {
       for (size_t i = 0; i < 3; ++i) {
         if (!p[i].is_number()) return Invalid(name_, path.At(v).At(i), Expected("a number", p[i]));
         const auto k = static_cast<glm::length_t>(i);
-        q[k] = p[i].get<double>() * scale[k] + translate[k];
+        const double raw = p[i].get<double>();
+        if (divisor[i] != 0 && p[i].is_number_integer() && std::abs(raw) < 0x1p52) {
+          q[k] = static_cast<double>(p[i].get<int64_t>() + offset[i]) / static_cast<double>(divisor[i]);
+        } else {
+          q[k] = raw * scale[k] + translate[k];
+        }
       }
       out->push_back(q);
     }

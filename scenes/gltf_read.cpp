@@ -60,6 +60,9 @@ struct PendingObject {
   std::vector<uint32_t> indices;
   std::vector<Occluder25D> occluders;  // world footprints, z-up
   bool terrain = false;                // extras.vistream.terrain
+  // The node's frame is the origin node's: its occluders are kept as written, already
+  // scene-local (exact doubles: nothing added and taken away again).
+  bool occluders_local = false;
   std::string type;                    // extras.vistream.type
 };
 
@@ -115,6 +118,7 @@ class GltfImporter {
       else {
         origin_node_ = index;
         origin_ = ZupFromGltf(glm::dvec3(local[3]));
+        origin_world_ = kZupFromGltf * world;
         name_ = node.name;
         const tinygltf::Value& crs = VistreamExtra(node, "crs");
         if (crs.IsString()) crs_ = crs.Get<std::string>();
@@ -267,6 +271,7 @@ class GltfImporter {
                        PendingObject* obj) {
     const tinygltf::Value& list = Occluders(node);
     if (list.Type() == tinygltf::NULL_TYPE) return;
+    obj->occluders_local = origin_node_ >= 0 && world == origin_world_;
     const std::string where = absl::StrCat(what, ": extras.vistream.occluders");
     if (!list.IsArray()) throw LoadError{absl::StrCat(where, ": expected an array")};
     // The node's transform (z-up in, z-up out) must keep prisms vertical and on the ground.
@@ -296,12 +301,16 @@ class GltfImporter {
       for (size_t i = 0; i < fp.ArrayLen(); i += 2) {
         const tinygltf::Value &x = fp.Get(static_cast<int>(i)), &y = fp.Get(static_cast<int>(i + 1));
         if (!x.IsNumber() || !y.IsNumber()) throw LoadError{absl::StrCat(ow, ".footprint[", i, "]: not a number")};
+        if (obj->occluders_local) {
+          out.footprint.emplace_back(x.GetNumberAsDouble(), y.GetNumberAsDouble());
+          continue;
+        }
         const glm::dvec3 p = glm::dvec3(m * glm::dvec4(x.GetNumberAsDouble(), y.GetNumberAsDouble(), 0.0, 1.0));
         out.footprint.emplace_back(p.x, p.y);
       }
       // Where the prism's foot lands, relative to the scene origin (visited before objects).
-      const double base = m[3][2] - origin_.z;
-      const double top = base + m[2][2] * h.GetNumberAsDouble();
+      const double base = obj->occluders_local ? 0.0 : m[3][2] - origin_.z;
+      const double top = obj->occluders_local ? h.GetNumberAsDouble() : base + m[2][2] * h.GetNumberAsDouble();
       if (base > 1e-6 * (1.0 + std::abs(top))) {
         Warn(absl::StrCat(ow, ": the prism does not stand on the ground (z = ", base, "); occluder dropped"));
         continue;
@@ -337,6 +346,11 @@ class GltfImporter {
       if (o.terrain) scene.terrain.push_back(id);
       scene.objects[id].type = std::move(o.type);
       for (auto& oc : o.occluders) {
+        if (o.occluders_local) {
+          oc.object = id;
+          scene.occluders.push_back(std::move(oc));
+          continue;
+        }
         for (auto& p : oc.footprint) p -= glm::dvec2(origin_);
         oc.object = id;
         scene.occluders.push_back(std::move(oc));
@@ -353,6 +367,7 @@ class GltfImporter {
   std::vector<PendingObject> pending_;
   int origin_node_ = -1;
   glm::dvec3 origin_{0.0};
+  glm::dmat4 origin_world_{1.0};  // the origin node's world matrix, z-up (as ImportMesh's `world`)
   std::string name_;
   std::string crs_;
 };

@@ -76,8 +76,12 @@ SolidMesh Weld(const std::vector<glm::dvec3>& vertices, const std::vector<Triang
                         Ik::Point_3(c.x, c.y, c.z))) {
       continue;
     }
+    // Each triangle from its least vertex, the list sorted: the same solid gives the same
+    // triangulation of its projected edges however its faces were listed.
+    std::rotate(w.begin(), std::min_element(w.begin(), w.end()), w.end());
     out.triangles.push_back(w);
   }
+  std::sort(out.triangles.begin(), out.triangles.end());
   return out;
 }
 

@@ -4,9 +4,12 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <tuple>
+#include <algorithm>
 #include <string>
 
 #include <gtest/gtest.h>
+#include <glm/common.hpp>
 
 #include "scenes/city_import.h"
 #include "scenes/gltf_io.h"
@@ -26,14 +29,43 @@ const Object* Find(const Scene& scene, const std::string& name) {
   return nullptr;
 }
 
-// Occluder volume of one object above height `base` (scene-local), footprints' areas times
-// the heights above it.
+bool InsidePolygon(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
+  bool in = false;
+  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    if ((poly[i].y > p.y) != (poly[j].y > p.y) &&
+        p.x < (poly[j].x - poly[i].x) * (p.y - poly[i].y) / (poly[j].y - poly[i].y) + poly[i].x) {
+      in = !in;
+    }
+  }
+  return in;
+}
+
+// Volume of the union of one object's occluder prisms above height `base` (scene-local):
+// the highest prism over the centre of every 5 cm square (exact for footprints on that grid).
 double OccluderVolume(const Scene& scene, const std::string& name, double base) {
   const Object* o = Find(scene, name);
   if (o == nullptr) return -1.0;
-  double v = 0.0;
+  std::vector<const Occluder25D*> mine;
+  glm::dvec2 lo(1e300), hi(-1e300);
   for (const Occluder25D& oc : scene.occluders) {
-    if (oc.object == o->id) v += std::abs(SignedArea(oc.footprint)) * std::max(0.0, oc.height - base);
+    if (oc.object != o->id) continue;
+    mine.push_back(&oc);
+    for (const glm::dvec2& p : oc.footprint) {
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+  }
+  if (mine.empty()) return 0.0;
+  const double step = 0.05;
+  double v = 0.0;
+  for (double x = std::floor(lo.x / step) * step + step / 2; x < hi.x; x += step) {
+    for (double y = std::floor(lo.y / step) * step + step / 2; y < hi.y; y += step) {
+      double top = base;
+      for (const Occluder25D* oc : mine) {
+        if (oc->height > top && InsidePolygon(oc->footprint, {x, y})) top = oc->height;
+      }
+      v += (top - base) * step * step;
+    }
   }
   return v;
 }
@@ -98,14 +130,14 @@ TEST_P(ShapesTest, ObjectsTrianglesAndOccludersAsWorkedOutByHand) {
   EXPECT_EQ(sum.without_occluder["raised above the ground"], 2u) << "stacked-top and the bridge";
   EXPECT_EQ(sum.without_occluder["open"], 1u);
   const double gabled = OccluderVolume(*scene, "gabled", 0.0);
-  EXPECT_GE(gabled, 10.0 * 8.0 * 6.0 - 1e-6) << "at least the prism up to the eaves";
-  EXPECT_LE(gabled, 10.0 * 8.0 * 6.0 + 0.5 * 8.0 * 3.0 * 10.0 + 1e-6) << "never more than the solid";
-  EXPECT_NEAR(OccluderVolume(*scene, "tower", 0.0), 400.0 * 5.0 + 64.0 * 25.0, 1e-6);
-  EXPECT_NEAR(OccluderVolume(*scene, "stacked-base", 0.0), 400.0, 1e-6);
+  EXPECT_GE(gabled, 10.0 * 8.0 * 6.0 - 1e-3) << "at least the prism up to the eaves";
+  EXPECT_LE(gabled, 10.0 * 8.0 * 6.0 + 0.5 * 8.0 * 3.0 * 10.0 + 1e-3) << "never more than the solid";
+  EXPECT_NEAR(OccluderVolume(*scene, "tower", 0.0), 400.0 * 5.0 + 64.0 * 25.0, 1e-3);
+  EXPECT_NEAR(OccluderVolume(*scene, "stacked-base", 0.0), 400.0, 1e-3);
   EXPECT_EQ(OccluderCount(*scene, "stacked-top"), 0u);
-  EXPECT_NEAR(OccluderVolume(*scene, "overhang", 0.0), 10.0 * 6.0 * 6.0, 1e-6) << "nothing under the overhang";
+  EXPECT_NEAR(OccluderVolume(*scene, "overhang", 0.0), 10.0 * 6.0 * 6.0, 1e-3) << "nothing under the overhang";
   EXPECT_EQ(OccluderCount(*scene, "open"), 0u);
-  EXPECT_NEAR(OccluderVolume(*scene, "courtyard", 0.0), (400.0 - 64.0) * 10.0, 1e-6) << "the courtyard stays open";
+  EXPECT_NEAR(OccluderVolume(*scene, "courtyard", 0.0), (400.0 - 64.0) * 10.0, 1e-3) << "the courtyard stays open";
   // The slope's floor (z 1) lies below the terrain under it (1.667 to 3.333): its prism
   // stands on the ground and reaches the roof.
   EXPECT_NEAR(OccluderVolume(*scene, "slope", 0.0), 100.0 * 10.0, 1e-3);
@@ -142,13 +174,17 @@ TEST(CityImport, LodOneDrawsOnlyWhatHasLodOne) {
   // LoD1: courtyard, lamps, garden, bridge; the terrain keeps its LoD 2.
   EXPECT_NE(Find(*scene, "courtyard"), nullptr);
   EXPECT_EQ(Find(*scene, "gabled"), nullptr);
-  EXPECT_EQ(sum.skipped["no LoD 1 geometry"], 8u);
+  // gabled tower stacked-base stacked-top overhang open slope ("stacked" has no geometry).
+  EXPECT_EQ(sum.skipped["no LoD 1 geometry"], 7u);
   EXPECT_EQ(scene->terrain.size(), 1u);
   EXPECT_EQ(sum.lods["1"], 5u);
+  // No object has LoD 3: only the ground is left.
   options.lod = 3;
-  absl::StatusOr<Scene> none = ImportCity(kShapes + "shapes.city.json", options, &sum);
-  ASSERT_FALSE(none.ok());
-  EXPECT_NE(none.status().message().find("no LoD 3 geometry"), std::string::npos) << none.status();
+  CityImportSummary sum3;
+  absl::StatusOr<Scene> ground = ImportCity(kShapes + "shapes.city.json", options, &sum3);
+  ASSERT_TRUE(ground.ok()) << ground.status();
+  EXPECT_EQ(ground->objects.size(), ground->terrain.size()) << "terrain tiles only";
+  EXPECT_EQ(sum3.skipped["no LoD 3 geometry"], 12u);
 }
 
 TEST(CityImport, SavedAndLoadedTheSceneKeepsCrsTerrainAndTypes) {
@@ -162,7 +198,16 @@ TEST(CityImport, SavedAndLoadedTheSceneKeepsCrsTerrainAndTypes) {
   EXPECT_EQ(back->terrain, scene->terrain);
   EXPECT_EQ(back->objects.size(), scene->objects.size());
   for (size_t i = 0; i < back->objects.size(); ++i) EXPECT_EQ(back->objects[i].type, scene->objects[i].type);
-  EXPECT_EQ(back->occluders.size(), scene->occluders.size());
+  ASSERT_EQ(back->occluders.size(), scene->occluders.size());
+  for (size_t i = 0; i < back->objects.size(); ++i) {
+    EXPECT_EQ(back->objects[i].mesh.positions, scene->objects[i].mesh.positions) << scene->objects[i].name;
+    EXPECT_EQ(back->objects[i].mesh.indices, scene->objects[i].mesh.indices) << scene->objects[i].name;
+  }
+  for (size_t i = 0; i < back->occluders.size(); ++i) {
+    EXPECT_EQ(back->occluders[i].object, scene->occluders[i].object) << i;
+    EXPECT_EQ(back->occluders[i].height, scene->occluders[i].height) << i;
+    EXPECT_EQ(back->occluders[i].footprint, scene->occluders[i].footprint) << i;
+  }
   EXPECT_EQ(SceneFingerprint(*back), SceneFingerprint(*scene));
 }
 
@@ -205,11 +250,15 @@ TEST(CityImport, SynthesizedOccludersForAGltfSceneWithoutThem) {
   // The same solids, from the meshes: the same prisms.
   EXPECT_EQ(bare.occluders.size(), before);
   EXPECT_EQ(sum.objects_with_occluder, 7u) << "6 buildings and the terrain tile";
-  EXPECT_NEAR(OccluderVolume(bare, "tower", 0.0), 3600.0, 1e-6);
+  EXPECT_NEAR(OccluderVolume(bare, "tower", 0.0), 3600.0, 1e-3);
 }
 
 // The same tile of Den Haag from CityGML 1.0 and from its CityJSON conversion: the same
-// objects (ids from gml:id and the CityObjects keys), triangles and occluders.
+// objects (ids from gml:id and the CityObjects keys), types and triangle counts, and the same
+// occluders up to the conversion's own error: it moved about half the coordinates by a
+// millimetre (457787.426 in the CityGML file is 457787.425 in the CityJSON one: its integer
+// vertices were truncated, not rounded), so where a floor meets the terrain within a
+// millimetre one file's part occludes and the other's does not.
 TEST(CityImport, DenHaagFromCityGmlAndCityJsonIsTheSameScene) {
   CityImportSummary gs, js;
   absl::StatusOr<Scene> g = ImportCity(kData + "denhaag_01.gml", {}, &gs);
@@ -218,26 +267,45 @@ TEST(CityImport, DenHaagFromCityGmlAndCityJsonIsTheSameScene) {
   ASSERT_TRUE(j.ok()) << j.status();
   EXPECT_EQ(g->crs, "EPSG:28992");
   EXPECT_EQ(j->crs, "") << "the CityJSON 0.8 conversion names no reference system";
+  EXPECT_EQ(g->origin, j->origin);
   std::map<std::string, const Object*> by_name;
   for (const Object& o : j->objects) by_name[o.name] = &o;
-  size_t same = 0;
+  std::vector<double> gv(g->objects.size(), 0.0), jv(j->objects.size(), 0.0);
+  for (const Occluder25D& oc : g->occluders) gv[oc.object] += std::abs(SignedArea(oc.footprint)) * oc.height;
+  for (const Occluder25D& oc : j->occluders) jv[oc.object] += std::abs(SignedArea(oc.footprint)) * oc.height;
+  size_t same = 0, volume_differs = 0, occludes_differs = 0;
   for (const Object& o : g->objects) {
     auto it = by_name.find(o.name);
     if (it == by_name.end()) {
       ADD_FAILURE() << "object " << o.name << " of the CityGML file is not in the CityJSON one";
       continue;
     }
-    EXPECT_EQ(o.mesh.TriangleCount(), it->second->mesh.TriangleCount()) << o.name;
     ++same;
+    const Object& k = *it->second;
+    EXPECT_EQ(o.mesh.TriangleCount(), k.mesh.TriangleCount()) << o.name;
+    EXPECT_EQ(o.type, k.type) << o.name;
+    EXPECT_NEAR(o.bounds.min.x, k.bounds.min.x, 0.0015) << o.name;
+    EXPECT_NEAR(o.bounds.max.z, k.bounds.max.z, 0.0015) << o.name;
+    occludes_differs += (gv[o.id] > 0.0) != (jv[k.id] > 0.0);
+    volume_differs += std::abs(gv[o.id] - jv[k.id]) > 0.01 * std::max(gv[o.id], jv[k.id]) + 1.0;
   }
+  std::printf("Den Haag: %zu objects in both; occluding in one file only: %zu; occluder volume more than 1%% apart: %zu; "
+              "buildings with an occluder %llu (CityGML) and %llu (CityJSON) of %llu; occluder volume %.0f and %.0f m³\n",
+              same, occludes_differs, volume_differs, static_cast<unsigned long long>(gs.buildings_with_occluder),
+              static_cast<unsigned long long>(js.buildings_with_occluder),
+              static_cast<unsigned long long>(js.buildings_drawn), gs.occluder_volume_m3, js.occluder_volume_m3);
+  EXPECT_LE(occludes_differs, same / 100);
   EXPECT_EQ(same, j->objects.size());
   EXPECT_EQ(g->TriangleCount(), j->TriangleCount());
-  EXPECT_EQ(g->occluders.size(), j->occluders.size());
-  EXPECT_EQ(gs.buildings_with_occluder, js.buildings_with_occluder);
-  EXPECT_NEAR(gs.occluder_volume_m3, js.occluder_volume_m3, 1e-6 * js.occluder_volume_m3);
+  EXPECT_NEAR(static_cast<double>(gs.buildings_with_occluder), static_cast<double>(js.buildings_with_occluder),
+              0.01 * static_cast<double>(js.buildings_drawn));
+  EXPECT_NEAR(gs.occluder_volume_m3, js.occluder_volume_m3, 1e-3 * js.occluder_volume_m3);
   EXPECT_EQ(js.building_parts, 1653u);
   EXPECT_EQ(js.buildings, 844u);
-  EXPECT_GT(js.buildings_with_occluder, js.buildings_drawn / 2) << "most parts stand on the ground and occlude";
+  EXPECT_EQ(gs.building_parts, 1653u);
+  EXPECT_EQ(gs.buildings, 844u);
+  EXPECT_EQ(js.terrain_triangles, 5595u);
+  EXPECT_GT(js.buildings_with_occluder, 9 * js.buildings_drawn / 10) << "most parts stand on the ground and occlude";
 }
 
 }  // namespace
