@@ -103,7 +103,7 @@ TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   EXPECT_NE(bad_box.message().find("key 'source.bbox'"), std::string::npos) << bad_box;
   const absl::Status two = ParseError(
       R"({"name": "t", "source": {"osm": "x.osm", "gltf": "x.glb"}, "viewcell": {"size_m": 50, "height_m": 2}})");
-  EXPECT_NE(two.message().find("exactly one of 'generator', 'gltf' or 'osm'"), std::string::npos) << two;
+  EXPECT_NE(two.message().find("exactly one of 'generator', 'gltf', 'osm' or 'city'"), std::string::npos) << two;
   const absl::Status unknown = ParseError(
       R"({"name": "t", "source": {"osm": "x.osm", "seed": 3}, "viewcell": {"size_m": 50, "height_m": 2}})");
   EXPECT_NE(unknown.message().find("unknown key"), std::string::npos) << unknown;
