@@ -457,7 +457,8 @@ DerivedWalks DeriveFreeSpaceWalks(const Scene& scene, const FreeSpaceOptions& op
     const auto& fp = oc.footprint;
     for (size_t k = 1; k + 1 < fp.size(); ++k) tris.push_back({fp[0], fp[k], fp[k + 1]});
   }
-  const double clearance = options.clearance_m;
+  // A millimetre more, so that rounding in anyone's distance computation keeps clearance_m.
+  const double clearance = options.clearance_m + 1e-3;
   Obstacles obstacles(std::move(tris), 16.0);
 
   DerivedWalks none;
