@@ -72,7 +72,8 @@ int main(int argc, char** argv) {
   app.add_option("--server", o.server, "host:port of vistream-server")->capture_default_str();
   app.add_flag("--headless", o.headless, "draw off-screen (OSMesa) along a walk instead of opening a window");
   app.add_option("--scene", o.scene, "the scene to walk, when the server serves several (its only one otherwise)");
-  app.add_option("--path", o.path, "walk of the scene's catalog entry to follow (headless: default its first)");
+  app.add_option("--path", o.path, "walk to follow: one of the scene's catalog entry, or one the server sends from the scene's "
+                 "data (\"street 1\"); headless: default the first; a name neither has lists them all");
   app.add_option("--speed", o.speed_kmh, "walking speed in km/h (default: the walk's)")->check(FiniteRange(0.01, 10000));
   app.add_option("--seconds", o.seconds, "stop after this many seconds of the walk (default: all of it)")
       ->check(FiniteRange(0.01, 1e7));

@@ -56,6 +56,13 @@ class Loop {
 
  private:
   absl::Status Prepare();
+  // Follows the walk named opt_.path (empty: the first) of walks_; NOT_FOUND listing walks_
+  // when there is none such.
+  absl::Status ChooseWalk();
+  // The window without a walk: starts where the first walk starts, if there is one.
+  void StartAtFirstWalk();
+  // SceneInfo arrived: the server's walks join walks_; a pending walk is chosen.
+  absl::Status OnSceneInfo(const v1::SceneInfo& info);
   absl::Status Startup();
   absl::Status PreloadEverything();
   absl::Status Walkthrough();
@@ -79,6 +86,9 @@ class Loop {
   const WalkthroughOptions& opt_;
   WalkthroughSummary* sum_;
   std::optional<scenes::CatalogEntry> entry_;
+  absl::Status catalog_status_;          // why entry_ is none
+  std::vector<scenes::WalkPath> walks_;  // the catalog entry's, then the server's (SceneInfo.paths)
+  bool walk_pending_ = false;            // following a walk not chosen yet (ChooseWalk)
   std::optional<scenes::Walk> walk_;
   double walk_limit_s_ = 0.0;
   uint64_t memory_budget_ = 0, triangle_budget_ = 0;
@@ -101,6 +111,76 @@ class Loop {
   uint64_t masks_seen_ = 0;
 };
 
+absl::Status Loop::ChooseWalk() {
+  const scenes::WalkPath* path = nullptr;
+  std::vector<std::string> names;
+  for (const scenes::WalkPath& w : walks_) {
+    names.push_back(w.name);
+    if (path == nullptr && (w.name == opt_.path || opt_.path.empty())) path = &w;
+  }
+  if (path == nullptr) {
+    if (walks_.empty() && !entry_.has_value()) {
+      return absl::NotFoundError(absl::StrCat("the server's scene '", sum_->scene,
+                                              "' has no entry in the scene catalog (", catalog_status_.message(),
+                                              ") and the server sends no walks: there is no walk to follow; give "
+                                              "--pose instead"));
+    }
+    return absl::NotFoundError(
+        opt_.path.empty()
+            ? absl::StrCat("scene '", sum_->scene, "'", entry_.has_value() ? absl::StrCat(" (", entry_->file, ")") : "",
+                           " has no walks")
+            : absl::StrCat("scene '", sum_->scene, "' has no walk '", opt_.path, "'; its walks: ",
+                           absl::StrJoin(names, ", ")));
+  }
+  const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(*path, speed);
+  if (!walk.ok()) return walk.status();
+  walk_ = std::move(*walk);
+  walk_pending_ = false;
+  walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
+  sum_->path = path->name;
+  sum_->speed_kmh = speed * 3.6;
+  const scenes::WalkPose start = walk_->At(0.0);
+  camera_.eye = start.eye;
+  camera_.yaw_rad = start.yaw_rad;
+  have_start_ = true;
+  return absl::OkStatus();
+}
+
+void Loop::StartAtFirstWalk() {
+  if (have_start_ || walks_.empty()) return;
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(walks_.front(), walks_.front().speed_mps);
+  if (walk.ok()) {
+    camera_.eye = walk->At(0.0).eye;
+    camera_.yaw_rad = walk->At(0.0).yaw_rad;
+    have_start_ = true;
+  }
+}
+
+absl::Status Loop::OnSceneInfo(const v1::SceneInfo& info) {
+  // The server's walks at the speed and eye height of the catalog's first walk, else the defaults.
+  const scenes::WalkPath defaults = walks_.empty() ? scenes::WalkPath{} : walks_.front();
+  for (int k = 0; k < info.paths_size(); ++k) {
+    const v1::ScenePathInfo& p = info.paths(k);
+    const bool taken = std::any_of(walks_.begin(), walks_.end(), [&](const scenes::WalkPath& w) { return w.name == p.name(); });
+    bool finite = true;
+    for (double v : p.xy()) finite = finite && std::isfinite(v);
+    if (taken || p.name().empty() || p.xy_size() < 4 || p.xy_size() % 2 != 0 || !finite) {
+      if (!taken) Log(absl::StrCat("the server's walk ", k, " ('", p.name(), "') is not a named polyline: ignored"));
+      continue;
+    }
+    scenes::WalkPath w;
+    w.name = p.name();
+    w.speed_mps = defaults.speed_mps;
+    w.eye_height_m = defaults.eye_height_m;
+    for (int i = 0; i + 1 < p.xy_size(); i += 2) w.waypoints.emplace_back(p.xy(i), p.xy(i + 1));
+    walks_.push_back(std::move(w));
+  }
+  if (walk_pending_) return ChooseWalk();
+  if (!opt_.pose.has_value()) StartAtFirstWalk();
+  return absl::OkStatus();
+}
+
 absl::Status Loop::Prepare() {
   absl::StatusOr<v1::ServerStats> stats = Probe(opt_.server, opt_.connect_timeout_s, opt_.cancel, opt_.security);
   if (!stats.ok()) return stats.status();
@@ -110,49 +190,26 @@ absl::Status Loop::Prepare() {
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
   if (entry.ok()) entry_ = std::move(*entry);
 
+  // The walks: the catalog entry's now; the server's own (SceneInfo.paths) join them when
+  // SceneInfo arrives. A walk the catalog has is chosen now, any other then (ChooseWalk).
+  if (entry_.has_value()) walks_ = entry_->walks;
+  else catalog_status_ = entry.status();
   const bool follow = !opt_.pose.has_value() && (opt_.headless || !opt_.path.empty());
   if (follow) {
-    if (!entry_.has_value()) {
-      return absl::NotFoundError(absl::StrCat("the server's scene '", sum_->scene,
-                                              "' has no entry in the scene catalog (", entry.status().message(),
-                                              "): there is no walk to follow; give --pose instead"));
+    const bool known = std::any_of(walks_.begin(), walks_.end(), [&](const scenes::WalkPath& w) {
+      return opt_.path.empty() || w.name == opt_.path;
+    });
+    walk_pending_ = true;
+    if (known) {
+      if (absl::Status st = ChooseWalk(); !st.ok()) return st;
     }
-    const scenes::WalkPath* path = nullptr;
-    std::vector<std::string> names;
-    for (const scenes::WalkPath& w : entry_->walks) {
-      names.push_back(w.name);
-      if (w.name == opt_.path || (opt_.path.empty() && path == nullptr)) path = &w;
-    }
-    if (path == nullptr) {
-      return absl::NotFoundError(opt_.path.empty()
-                                     ? absl::StrCat("scene '", sum_->scene, "' (", entry_->file, ") has no walks")
-                                     : absl::StrCat("scene '", sum_->scene, "' has no walk '", opt_.path,
-                                                    "'; its walks: ", absl::StrJoin(names, ", ")));
-    }
-    const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
-    absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(*path, speed);
-    if (!walk.ok()) return walk.status();
-    walk_ = std::move(*walk);
-    walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
-    sum_->path = path->name;
-    sum_->speed_kmh = speed * 3.6;
-    const scenes::WalkPose start = walk_->At(0.0);
-    camera_.eye = start.eye;
-    camera_.yaw_rad = start.yaw_rad;
-    have_start_ = true;
   } else if (opt_.pose.has_value()) {
     camera_.eye = opt_.pose->eye;
     camera_.yaw_rad = opt_.pose->yaw_rad;
     camera_.pitch_rad = opt_.pose->pitch_rad;
     have_start_ = true;
-  } else if (entry_.has_value() && !entry_->walks.empty()) {
-    // The window without a walk: start where the first walk starts, then the keys move.
-    absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(entry_->walks.front(), entry_->walks.front().speed_mps);
-    if (walk.ok()) {
-      camera_.eye = walk->At(0.0).eye;
-      camera_.yaw_rad = walk->At(0.0).yaw_rad;
-      have_start_ = true;
-    }
+  } else {
+    StartAtFirstWalk();
   }
 
   const std::optional<scenes::ClientSpec>& client = entry_.has_value() ? entry_->simulation.client : std::nullopt;
@@ -259,6 +316,14 @@ absl::Status Loop::PreloadEverything() {
   g->set_ny(grid->ny());
   g->set_base_z_m(grid->base_z());
   g->set_height_m(grid->height());
+  for (const scenes::ScenePath& p : scene.paths) {
+    v1::ScenePathInfo* out = info.add_paths();
+    out->set_name(p.name);
+    for (const glm::dvec2& w : p.waypoints) {
+      out->add_xy(w.x);
+      out->add_xy(w.y);
+    }
+  }
   events.emplace_back(std::move(info));
   for (const scenes::Object& o : scene.objects) {
     ReceivedObject r;
@@ -312,6 +377,7 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
     const glm::dvec3 lo(info.bounds_min().x(), info.bounds_min().y(), info.bounds_min().z());
     const glm::dvec3 hi(info.bounds_max().x(), info.bounds_max().y(), info.bounds_max().z());
     camera_.far_m = std::max(1000.0, 2.0 * glm::length(hi - lo));
+    if (absl::Status st = OnSceneInfo(info); !st.ok()) return st;
     if (!have_start_) {
       const GridInfo& g = store_->grid();
       camera_.eye = {g.x0 + 0.5 * g.nx * g.cell_size, g.y0 + 0.5 * g.ny * g.cell_size, g.base_z + 0.6 * g.height};
@@ -340,11 +406,13 @@ absl::Status Loop::Startup() {
   // Following a walk, it waits for the cell it starts in and the first cell the walk enters
   // (what it reaches first), telling the server the velocity it will walk at so that the cells
   // ahead are ranked first; the simulator models the same (server/simulator.cpp).
-  const glm::dvec3 velocity = walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0);
+  // (A walk of the server's own is known once SceneInfo has come.)
+  auto velocity = [this] { return walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0); };
   std::optional<uint32_t> ahead;
   // Drawing everything, no PVS list ever comes: what is preloaded is all there is to wait for.
-  bool ahead_known = !walk_.has_value() || opt_.draw_everything;
+  bool ahead_known = (!walk_.has_value() && !walk_pending_) || opt_.draw_everything;
   auto ahead_complete = [&] {
+    if (!ahead_known && store_->has_scene_info() && !walk_.has_value()) ahead_known = true;
     if (!ahead_known && store_->has_scene_info()) {
       const GridInfo& g = store_->grid();
       const std::vector<uint32_t> along =
@@ -359,7 +427,7 @@ absl::Status Loop::Startup() {
            std::all_of(list->begin(), list->end(), [&](uint32_t id) { return renderer_->Uploaded(id); });
   };
   for (;;) {
-    if (have_start_) SendPose(velocity, Now() - session_start_);
+    if (have_start_) SendPose(velocity(), Now() - session_start_);
     absl::StatusOr<Pumped> p = Pump(camera_.eye, ~uint64_t{0});
     if (!p.ok()) return p.status();
     ObserveCells(Now() - session_start_, std::nullopt, false);  // the walk's clock: shifted at its start
@@ -455,7 +523,7 @@ absl::Status Loop::Walkthrough() {
   uint64_t triangles = 0, objects = 0;
   std::set<uint32_t> cells;
   glm::dvec3 prev_eye = camera_.eye;
-  const double free_speed = entry_.has_value() && !entry_->walks.empty() ? entry_->walks.front().speed_mps : 1.4;
+  const double free_speed = !walks_.empty() ? walks_.front().speed_mps : 1.4;
   std::vector<DrawnObject> drawn;
   bool was_connected = true;
   double lost_at = 0.0;

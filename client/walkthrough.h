@@ -35,7 +35,11 @@ struct WalkthroughOptions {
   ChannelSecurity security;     // TLS and the bearer token (client/channel_security.h)
   bool headless = false;
   std::string scene;          // the server's scene to walk (ServerStats.scenes); empty: its only one
-  std::string path;           // a walk of the scene's catalog entry; empty: the first (headless)
+  // A walk to follow: the scene's catalog entry's walks, then those the server sends
+  // (SceneInfo.paths: the scene's own, derived from its data), a name used by the first not
+  // repeated. Empty: the first of them (headless). A walk only the server has is chosen when
+  // SceneInfo arrives.
+  std::string path;
   double speed_kmh = 0.0;     // 0: the walk's own speed
   double seconds = 0.0;       // stop after this much of the walk; 0: the whole walk
   int width = 1280, height = 720;
@@ -96,8 +100,8 @@ struct WalkthroughSummary {
 };
 
 // Runs one walkthrough against the server at options.server. Errors name what failed: an
-// unreachable server or another protocol version (UNAVAILABLE, FAILED_PRECONDITION), a walk the
-// catalog does not have (NOT_FOUND, listing the walks), no window (UNAVAILABLE), the server
+// unreachable server or another protocol version (UNAVAILABLE, FAILED_PRECONDITION), a walk
+// neither the catalog nor the server has (NOT_FOUND, listing every walk of both), no window (UNAVAILABLE), the server
 // ending the session for good (its status), the first viewcell not arriving in time.
 absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& options);
 // The same, filling *summary with what was done even when it fails (a walk that gave up on a

@@ -350,6 +350,21 @@ bool IsGltfPath(std::string_view path) {
   return ext == ".glb" || ext == ".gltf";
 }
 
+std::vector<WalkPath> WalksWithScenePaths(const std::vector<WalkPath>& declared, const Scene& scene,
+                                          double speed_mps, double eye_height_m) {
+  std::vector<WalkPath> walks = declared;
+  for (const ScenePath& p : scene.paths) {
+    if (std::any_of(walks.begin(), walks.end(), [&](const WalkPath& w) { return w.name == p.name; })) continue;
+    WalkPath w;
+    w.name = p.name;
+    w.speed_mps = speed_mps;
+    w.eye_height_m = eye_height_m;
+    w.waypoints = p.waypoints;
+    walks.push_back(std::move(w));
+  }
+  return walks;
+}
+
 absl::StatusOr<LoadedScene> LoadScene(std::string_view name_or_path, const LoadOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   LoadedScene out;
@@ -366,6 +381,11 @@ absl::StatusOr<LoadedScene> LoadScene(std::string_view name_or_path, const LoadO
     out.viewcell = entry->viewcell;
     out.entry = *std::move(entry);
   }
+  const std::vector<WalkPath> none;
+  const std::vector<WalkPath>& declared = out.entry.has_value() ? out.entry->walks : none;
+  out.walks = declared.empty() ? WalksWithScenePaths(declared, out.scene)
+                               : WalksWithScenePaths(declared, out.scene, declared.front().speed_mps,
+                                                     declared.front().eye_height_m);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }

@@ -51,6 +51,12 @@ struct WalkPath {
   std::vector<glm::dvec2> waypoints;  // scene-local metres
 };
 
+// The walks of a scene: `declared` (a catalog entry's, in order) followed by the scene's own
+// (Scene::paths, e.g. derived from an OSM import's streets) whose names `declared` does not
+// already use, at `speed_mps` and `eye_height_m`.
+std::vector<WalkPath> WalksWithScenePaths(const std::vector<WalkPath>& declared, const Scene& scene,
+                                          double speed_mps = 1.4, double eye_height_m = 1.7);
+
 // Each effect is modelled only when its key is present (server/link_model.h says how).
 struct LinkSpec {
   std::optional<double> bandwidth_mbps;  // megabits (10^6) per second, > 0
@@ -116,7 +122,10 @@ struct LoadOptions {
 struct LoadedScene {
   Scene scene;
   ViewcellSpec viewcell;                // the entry's; for glTF files the defaults
-  std::optional<CatalogEntry> entry;    // none for glTF files
+  std::optional<CatalogEntry> entry;    // none for glTF files; its walks as the file declares them
+  // Every walk of the scene: the entry's, then the scene's own paths (WalksWithScenePaths; at
+  // the speed and eye height of the entry's first walk, else 1.4 m/s and 1.7 m).
+  std::vector<WalkPath> walks;
   std::vector<std::string> warnings;    // what loading a glTF file skipped, for the caller to show
   double seconds = 0.0;                 // wall time spent loading
 };

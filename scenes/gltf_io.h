@@ -9,6 +9,10 @@
 // extras may name the coordinate reference system ({"vistream": {"origin": true, "crs":
 // "EPSG:28992"}}, Scene::crs); terrain objects' nodes say {"vistream": {"terrain": true}}
 // (Scene::terrain); an object's source type is {"vistream": {"type": "BuildingPart"}}.
+// The origin node's extras may carry the scene's own walks (Scene::paths):
+// {"vistream": {"origin": true, "paths": [{"name": "street 1", "waypoints": [x0, y0, x1, y1,
+// ...]}]}}, scene-local z-up metres (x east, y north: not glTF axes); a path without a name,
+// with fewer than 2 waypoints or a non-finite one, or named again, is warned about and skipped.
 
 #include <string>
 #include <string_view>

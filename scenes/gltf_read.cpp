@@ -123,6 +123,7 @@ class GltfImporter {
         const tinygltf::Value& crs = VistreamExtra(node, "crs");
         if (crs.IsString()) crs_ = crs.Get<std::string>();
         else if (crs.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(NodeName(index), ": extras.vistream.crs is not a string; ignored"));
+        ReadPaths(index);
       }
     }
     if (node.mesh >= 0) ImportMesh(index, world);
@@ -145,6 +146,51 @@ class GltfImporter {
     return v.Get(key);
   }
   static const tinygltf::Value& Occluders(const tinygltf::Node& node) { return VistreamExtra(node, "occluders"); }
+
+  // extras.vistream.paths of the origin node: walks in scene-local metres. A path that is not
+  // an object with a non-empty name and 2n >= 4 finite numbers is warned about and skipped.
+  void ReadPaths(int index) {
+    const tinygltf::Value& list = VistreamExtra(model_.nodes[index], "paths");
+    if (list.Type() == tinygltf::NULL_TYPE) return;
+    const std::string where = absl::StrCat(NodeName(index), ": extras.vistream.paths");
+    if (!list.IsArray()) {
+      Warn(absl::StrCat(where, " is not an array; ignored"));
+      return;
+    }
+    for (size_t k = 0; k < list.ArrayLen(); ++k) {
+      const std::string pw = absl::StrCat(where, "[", k, "]");
+      const tinygltf::Value& p = list.Get(static_cast<int>(k));
+      if (!p.IsObject() || !p.Has("name") || !p.Get("name").IsString() || p.Get("name").Get<std::string>().empty()) {
+        Warn(absl::StrCat(pw, ": expected an object with a non-empty 'name'; skipped"));
+        continue;
+      }
+      const std::string name = p.Get("name").Get<std::string>();
+      static const tinygltf::Value kNone;
+      const tinygltf::Value& xy = p.Has("waypoints") ? p.Get("waypoints") : kNone;
+      if (!xy.IsArray() || xy.ArrayLen() < 4 || xy.ArrayLen() % 2 != 0) {
+        Warn(absl::StrCat(pw, " ('", name, "').waypoints: expected an array of 2n >= 4 numbers (x, y pairs); skipped"));
+        continue;
+      }
+      ScenePath path;
+      path.name = name;
+      for (size_t i = 0; i < xy.ArrayLen(); i += 2) {
+        const tinygltf::Value &x = xy.Get(static_cast<int>(i)), &y = xy.Get(static_cast<int>(i + 1));
+        if (!x.IsNumber() || !y.IsNumber() || !std::isfinite(x.GetNumberAsDouble()) ||
+            !std::isfinite(y.GetNumberAsDouble())) {
+          path.waypoints.clear();
+          Warn(absl::StrCat(pw, " ('", name, "').waypoints[", i, "]: not a finite number pair; skipped"));
+          break;
+        }
+        path.waypoints.emplace_back(x.GetNumberAsDouble(), y.GetNumberAsDouble());
+      }
+      if (path.waypoints.empty()) continue;
+      if (std::any_of(paths_.begin(), paths_.end(), [&](const ScenePath& q) { return q.name == name; })) {
+        Warn(absl::StrCat(pw, ": a second path named '", name, "'; skipped"));
+        continue;
+      }
+      paths_.push_back(std::move(path));
+    }
+  }
 
   void ImportMesh(int node_index, const glm::dmat4& gltf_world) {
     const tinygltf::Node& node = model_.nodes[node_index];
@@ -334,6 +380,7 @@ class GltfImporter {
     }
     scene.origin = origin_;
     scene.crs = crs_;
+    scene.paths = std::move(paths_);
     scene.name = name_.empty() ? fs::path(file_).stem().string() : name_;
     for (auto& o : pending_) {
       Mesh mesh;
@@ -370,6 +417,7 @@ class GltfImporter {
   glm::dmat4 origin_world_{1.0};  // the origin node's world matrix, z-up (as ImportMesh's `world`)
   std::string name_;
   std::string crs_;
+  std::vector<ScenePath> paths_;
 };
 
 // External buffers and images may only come from the glTF file's own folder (or below);

@@ -92,6 +92,20 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
   root.translation = {origin.x, origin.y, origin.z};
   tinygltf::Value::Object root_extras{{"origin", tinygltf::Value(true)}};
   if (!scene.crs.empty()) root_extras.emplace("crs", tinygltf::Value(scene.crs));
+  if (!scene.paths.empty()) {
+    tinygltf::Value::Array paths;
+    for (const ScenePath& p : scene.paths) {
+      tinygltf::Value::Array xy;
+      xy.reserve(2 * p.waypoints.size());
+      for (const glm::dvec2& w : p.waypoints) {
+        xy.emplace_back(w.x);
+        xy.emplace_back(w.y);
+      }
+      paths.emplace_back(tinygltf::Value::Object{{"name", tinygltf::Value(p.name)},
+                                                 {"waypoints", tinygltf::Value(std::move(xy))}});
+    }
+    root_extras.emplace("paths", tinygltf::Value(std::move(paths)));
+  }
   root.extras = tinygltf::Value(tinygltf::Value::Object{{"vistream", tinygltf::Value(std::move(root_extras))}});
   model.nodes.push_back(root);
 

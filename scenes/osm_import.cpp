@@ -13,6 +13,7 @@
 #include <glm/geometric.hpp>
 #include <vector>
 
+#include "scenes/derived_walks.h"
 #include "scenes/osm_read.h"
 #include "scenes/polygon.h"
 #include "scenes/polygon_set.h"
@@ -106,6 +107,28 @@ class Projection {
   bool north_ = true;
   double ox_ = 0.0, oy_ = 0.0;
 };
+
+// The scene's walks from its highway ways, over the buildings' xy bounds (the viewcell grid's).
+void AddStreetWalks(const std::vector<RawHighway>& highways, const Projection& proj, size_t walks, Scene* scene,
+                    OsmImportSummary* s) {
+  std::vector<StreetPolyline> streets;
+  streets.reserve(highways.size());
+  for (const RawHighway& h : highways) {
+    std::optional<Ring> local = proj.Local(h.nodes);
+    if (!local) continue;
+    streets.push_back({*std::move(local), h.street});
+  }
+  DeriveWalkOptions o;
+  o.max_walks = walks;
+  o.bounds.emplace(glm::dvec2(scene->bounds.min), glm::dvec2(scene->bounds.max));
+  DerivedWalks derived = DeriveStreetWalks(streets, o);
+  s->street_edges = derived.graph_edges;
+  s->walk_notes = std::move(derived.notes);
+  for (size_t k = 0; k < derived.paths.size(); ++k) {
+    s->walks.push_back({derived.paths[k].name, derived.lengths_m[k]});
+  }
+  scene->paths = std::move(derived.paths);
+}
 
 // A building or part in scene-local metres: valid footprints and heights.
 struct Footprint {
@@ -318,7 +341,9 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
   }
 
   std::vector<RawBuilding> raw;
-  if (absl::Status read = ReadOsmBuildings(path, options.bbox, &raw, &s, run); !read.ok()) {
+  std::vector<RawHighway> highways;
+  if (absl::Status read = ReadOsmBuildings(path, options.bbox, &raw, &s, run, options.walks > 0 ? &highways : nullptr);
+      !read.ok()) {
     return read;
   }
   if (raw.empty()) {
@@ -444,6 +469,7 @@ absl::StatusOr<Scene> ImportOsm(const std::string& path, const OsmImportOptions&
     return absl::InvalidArgumentError(absl::StrCat(path, ": no building could be imported; ",
                                                    s.Skipped(), " skipped", Reasons(s)));
   }
+  if (options.walks > 0) AddStreetWalks(highways, proj, options.walks, &scene, &s);
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return scene;
 }

@@ -29,6 +29,13 @@
 // roof), so that buildings sharing OSM nodes touch exactly and fuse into one blocker
 // (visibility/occluder_set.h).
 //
+// Walks (Scene::paths): the walkable highway=* ways (scenes/osm_read.h IsWalkableHighway), in
+// the same projection, cut to the buildings' xy bounds, joined where they share a node, give
+// up to OsmImportOptions::walks walks (scenes/derived_walks.h DeriveStreetWalks): "street 1"
+// is the longest shortest path of the largest street network, named after the street it mostly
+// follows when there is one ("street 1 (Boulevard Albert 1er)"). The eye walks above the
+// street's xy at the catalog walk's eye height. No highway ways: no walks (not an error).
+//
 // Bad data never stops an import: rings with duplicate points or spikes are repaired; rings
 // that are not simple, have fewer than 3 points, lack node locations (an extract's edge) or
 // fail to assemble are skipped, each counted by reason in OsmImportSummary::skipped.
@@ -41,6 +48,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "scenes/osm_tags.h"
 #include "scenes/progress.h"
@@ -63,6 +71,13 @@ struct OsmImportOptions {
   // the next rule. The tallest building is 828 m.
   double max_height_m = 1000.0;
   std::string name;  // the scene's name; default: the file's stem
+  size_t walks = 3;  // walks derived from the highway ways, at most; 0: none
+};
+
+// One derived walk, for the summary.
+struct OsmWalkSummary {
+  std::string name;
+  double length_m = 0.0;
 };
 
 struct OsmImportSummary {
@@ -85,6 +100,10 @@ struct OsmImportSummary {
   // Skipped buildings or rings, by reason.
   std::map<std::string, uint64_t> skipped;
   std::string utm_zone;  // e.g. "32N"
+  uint64_t highway_ways = 0;   // walkable highway ways read (tunnels and indoor ways left out)
+  uint64_t street_edges = 0;   // edges of the street graph (inside the buildings' bounds)
+  std::vector<OsmWalkSummary> walks;  // the scene's paths, in order
+  std::vector<std::string> walk_notes;  // why fewer or shorter walks (DerivedWalks::notes)
   double seconds = 0.0;
 
   uint64_t Repaired() const {

@@ -99,6 +99,47 @@ std::string Tag(const osmium::TagList& tags, const char* key) {
   return v == nullptr ? std::string() : std::string(v);
 }
 
+bool InBox(const osmium::Location& l, const std::optional<GeoBox>& bbox) {
+  return !bbox || (l.lon() >= bbox->min_lon && l.lon() <= bbox->max_lon && l.lat() >= bbox->min_lat &&
+                   l.lat() <= bbox->max_lat);
+}
+
+// Walkable highway ways, cut into runs of nodes with locations inside the bbox.
+class HighwayCollector : public osmium::handler::Handler {
+ public:
+  HighwayCollector(const std::optional<GeoBox>& bbox, std::vector<RawHighway>* out, OsmImportSummary* s)
+      : bbox_(bbox), out_(out), s_(s) {}
+  void way(const osmium::Way& way) {
+    if (out_ == nullptr) return;
+    const osmium::TagList& t = way.tags();
+    const char* highway = t.get_value_by_key("highway");
+    if (highway == nullptr || !IsWalkableHighway(highway)) return;
+    if (IsYes(t, "tunnel") || Tag(t, "indoor") == "yes") return;
+    ++s_->highway_ways;
+    RawHighway run;
+    run.name = absl::StrCat("way/", way.id());
+    run.street = Tag(t, "name");
+    run.highway = highway;
+    auto flush = [&] {
+      if (run.nodes.size() >= 2) out_->push_back(run);
+      run.nodes.clear();
+    };
+    for (const osmium::NodeRef& n : way.nodes()) {
+      if (!n.location().valid() || !InBox(n.location(), bbox_)) {
+        flush();
+        continue;
+      }
+      run.nodes.push_back(n.location());
+    }
+    flush();
+  }
+
+ private:
+  const std::optional<GeoBox>& bbox_;
+  std::vector<RawHighway>* out_;
+  OsmImportSummary* s_;
+};
+
 std::vector<osmium::Location> RingLocations(const osmium::NodeRefList& ring) {
   std::vector<osmium::Location> out;
   out.reserve(ring.size());
@@ -201,7 +242,7 @@ osmium::memory::Buffer SortedCopy(const osmium::io::File& file) {
 // else the file is streamed twice (relations, then everything).
 absl::Status ReadPass(const std::string& path, const osmium::memory::Buffer* sorted,
                       const std::optional<GeoBox>& bbox, std::vector<RawBuilding>* out,
-                      OsmImportSummary* summary, const RunControl& run) {
+                      OsmImportSummary* summary, const RunControl& run, std::vector<RawHighway>* highways) {
   OsmImportSummary& s = *summary;
   std::vector<RawBuilding>& raw = *out;
   const osmium::io::File file(path);
@@ -228,6 +269,7 @@ absl::Status ReadPass(const std::string& path, const osmium::memory::Buffer* sor
   osmium::handler::NodeLocationsForWays<Index, Index> locations{positive, negative};
   locations.ignore_errors();  // an extract's ways lose nodes at its edge: counted, skipped
   WayCensus census(&s.skipped);
+  HighwayCollector roads(bbox, highways, &s);
   auto on_area = [&](const osmium::Area& area) {
     const osmium::TagList& t = area.tags();
     if (!IsBuildingOrPart(t)) return;
@@ -280,7 +322,7 @@ absl::Status ReadPass(const std::string& path, const osmium::memory::Buffer* sor
   } area_handler;
   area_handler.f = &on_area;
   auto apply = [&](osmium::memory::Buffer& buffer) {
-    osmium::apply(buffer, locations, census, manager.handler([&](osmium::memory::Buffer&& areas) {
+    osmium::apply(buffer, locations, census, roads, manager.handler([&](osmium::memory::Buffer&& areas) {
       osmium::apply(areas, area_handler);
     }));
   };
@@ -308,19 +350,30 @@ absl::Status ReadPass(const std::string& path, const osmium::memory::Buffer* sor
 
 }  // namespace
 
+bool IsWalkableHighway(std::string_view value) {
+  static constexpr std::string_view kWalkable[] = {
+      "footway",   "path",        "pedestrian",   "steps",          "living_street", "residential",
+      "service",   "unclassified", "road",        "track",          "cycleway",      "bridleway",
+      "tertiary",  "tertiary_link", "secondary",  "secondary_link", "primary",       "primary_link",
+      "trunk",     "trunk_link"};
+  return std::find(std::begin(kWalkable), std::end(kWalkable), value) != std::end(kWalkable);
+}
+
 absl::Status ReadOsmBuildings(const std::string& path, const std::optional<GeoBox>& bbox,
                               std::vector<RawBuilding>* out, OsmImportSummary* summary,
-                              const RunControl& run) {
+                              const RunControl& run, std::vector<RawHighway>* highways) {
   try {
     absl::Status status;
     try {
-      status = ReadPass(path, nullptr, bbox, out, summary, run);
+      status = ReadPass(path, nullptr, bbox, out, summary, run, highways);
     } catch (const osmium::out_of_order_error&) {
       // Ids out of order (as editors save them): start again from a sorted copy in memory.
       out->clear();
       summary->skipped.clear();
+      summary->highway_ways = 0;
+      if (highways != nullptr) highways->clear();
       const osmium::memory::Buffer sorted = SortedCopy(osmium::io::File(path));
-      status = ReadPass(path, &sorted, bbox, out, summary, run);
+      status = ReadPass(path, &sorted, bbox, out, summary, run, highways);
     }
     if (!status.ok()) return status;
   } catch (const std::exception& e) {

@@ -112,6 +112,19 @@ absl::Status ValidateScene(const Scene& scene, const std::string& where) {
           absl::StrCat(where, ": terrain object ids are not sorted and distinct at ", scene.terrain[i]));
     }
   }
+  for (size_t i = 0; i < scene.paths.size(); ++i) {
+    const ScenePath& p = scene.paths[i];
+    const std::string what = absl::StrCat(where, ": path ", i, " ('", p.name, "')");
+    if (p.name.empty()) return absl::InvalidArgumentError(absl::StrCat(what, ": has no name"));
+    if (p.waypoints.size() < 2) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": needs at least 2 waypoints, has ", p.waypoints.size()));
+    }
+    for (const glm::dvec2& w : p.waypoints) {
+      if (!std::isfinite(w.x) || !std::isfinite(w.y)) {
+        return absl::InvalidArgumentError(absl::StrCat(what, ": a waypoint is not finite"));
+      }
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -38,6 +38,15 @@ struct Occluder25D {
   ObjectId object = 0;
 };
 
+// A walk the data itself gives (streets of an OSM import, roads of a city model, or free space
+// between buildings; scenes/derived_walks.h): a polyline in scene-local metres (xy, the eye
+// stands above it). Catalog entries may declare walks of their own (scenes/catalog.h WalkPath);
+// these come with the scene, also in glTF files.
+struct ScenePath {
+  std::string name;
+  std::vector<glm::dvec2> waypoints;  // scene-local metres, at least 2
+};
+
 struct Scene {
   std::string name;
   glm::dvec3 origin{0.0};  // world coordinates of local (0, 0, 0), e.g. UTM metres
@@ -50,6 +59,9 @@ struct Scene {
   // Objects whose meshes are the terrain's surface (sorted ids): the ground is solid beneath
   // them, and viewcells follow them. Empty: flat ground at z = 0.
   std::vector<ObjectId> terrain;
+  // Walks the data gives (ScenePath); empty when it gives none. Not part of SceneFingerprint:
+  // they do not change what is visible.
+  std::vector<ScenePath> paths;
 
   size_t TriangleCount() const;
   size_t VertexCount() const;
@@ -59,7 +71,8 @@ struct Scene {
 
 // Checks the invariants every consumer relies on: at least one object, dense ids, finite
 // coordinates, indices in range, normals per position, finite occluders referencing existing
-// objects, terrain ids sorted, distinct and existing. `where` names the source (a file path) in the message.
+// objects, terrain ids sorted, distinct and existing, paths named with at least 2 finite
+// waypoints. `where` names the source (a file path) in the message.
 absl::Status ValidateScene(const Scene& scene, const std::string& where);
 
 // A 64-bit digest of what visibility depends on: every object's mesh (positions, indices) and

@@ -87,6 +87,14 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   g->set_ny(s->grid_->ny());
   g->set_base_z_m(s->grid_->base_z());
   g->set_height_m(s->grid_->height());
+  for (const scenes::ScenePath& p : s->scene_.paths) {
+    vistream::v1::ScenePathInfo* out = info.add_paths();
+    out->set_name(p.name);
+    for (const glm::dvec2& w : p.waypoints) {
+      out->add_xy(w.x);
+      out->add_xy(w.y);
+    }
+  }
 
   s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()), 4096,
                                           options.idle_priority_masks);

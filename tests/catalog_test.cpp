@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "scenes/city_generator.h"
+#include "scenes/gltf_io.h"
 #include "scenes/progress.h"
 #include "tests/temp_dir.h"
 #include "tests/test_util.h"
@@ -345,6 +346,56 @@ TEST(Progress, ReportsToTheCallersSinkAndSaysWhenStoppedEarly) {
   // No sink: nothing reported, nothing printed, the work still done.
   LondonOptions tiny = small;
   EXPECT_GT(GenerateLondon(tiny, {}).objects.size(), 100u);
+}
+
+}  // namespace
+}  // namespace vistream::scenes
+
+namespace vistream::scenes {
+namespace {
+
+TEST(Catalog, LoadSceneFollowsTheEntrysWalksWithTheScenesOwn) {
+  const std::string dir = vistream::testing::ProcessTempDir() + "/catalog_paths";
+  std::filesystem::create_directories(dir);
+  Scene scene = GenerateTestCity(true, 1);
+  scene.paths = {{"street 1", {{0, 0}, {100, 0}}}, {"street 2", {{0, 0}, {0, 100}}}};
+  ASSERT_TRUE(SaveGltf(scene, dir + "/walked.glb").ok());
+  std::FILE* f = std::fopen((dir + "/walked.json").c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  // The entry names one walk like the scene's first: the entry's is kept, the scene's skipped.
+  std::fputs(R"({"name": "walked", "source": {"gltf": "walked.glb"}, "viewcell": {"size_m": 50, "height_m": 2},
+                 "walks": [{"name": "mine", "speed_mps": 2.5, "eye_height_m": 1.6, "waypoints": [[1, 1], [2, 2]]},
+                           {"name": "street 1", "waypoints": [[5, 5], [6, 6]]}]})",
+             f);
+  std::fclose(f);
+  LoadOptions there;
+  there.catalog_dir = dir;
+  absl::StatusOr<LoadedScene> s = LoadScene("walked", there);
+  ASSERT_TRUE(s.ok()) << s.status();
+  ASSERT_EQ(s->walks.size(), 3u);
+  EXPECT_EQ(s->walks[0].name, "mine");
+  EXPECT_EQ(s->walks[1].name, "street 1");
+  EXPECT_EQ(s->walks[1].waypoints, (std::vector<glm::dvec2>{{5, 5}, {6, 6}}));  // the entry's
+  EXPECT_EQ(s->walks[2].name, "street 2");
+  EXPECT_EQ(s->walks[2].waypoints, (std::vector<glm::dvec2>{{0, 0}, {0, 100}}));
+  EXPECT_EQ(s->walks[2].speed_mps, 2.5);  // the entry's first walk's
+  EXPECT_EQ(s->walks[2].eye_height_m, 1.6);
+  ASSERT_TRUE(s->entry.has_value());
+  EXPECT_EQ(s->entry->walks.size(), 2u);  // the entry as its file says
+
+  // A glTF file alone: its own walks, at the defaults.
+  absl::StatusOr<LoadedScene> g = LoadScene(dir + "/walked.glb");
+  ASSERT_TRUE(g.ok()) << g.status();
+  ASSERT_EQ(g->walks.size(), 2u);
+  EXPECT_EQ(g->walks[0].name, "street 1");
+  EXPECT_EQ(g->walks[0].speed_mps, 1.4);
+  EXPECT_EQ(g->walks[0].eye_height_m, 1.7);
+
+  // A generated scene: the entry's walks only.
+  absl::StatusOr<LoadedScene> d = LoadScene("default");
+  ASSERT_TRUE(d.ok()) << d.status();
+  ASSERT_TRUE(d->entry.has_value());
+  EXPECT_EQ(d->walks.size(), d->entry->walks.size());
 }
 
 }  // namespace

@@ -34,6 +34,8 @@
 #include "client/walkthrough.h"
 #include "proto/walkthrough.grpc.pb.h"
 #include "scenes/catalog.h"
+#include "scenes/gltf_io.h"
+#include "scenes/osm_import.h"
 #include "server/served_scene.h"
 #include "server/service.h"
 #include "tests/temp_dir.h"
@@ -587,6 +589,79 @@ TEST(ObjectStore, OverBudgetDropsWhatNoNearbyCellNeedsFirstAndNeverTheCurrentCel
   EXPECT_EQ(store.Find(1), nullptr);
   EXPECT_EQ(store.evicted_by_server(), 1u);
   EXPECT_FALSE(store.CellComplete(0));
+}
+
+}  // namespace
+}  // namespace vistream::client
+
+namespace vistream::client {
+namespace {
+
+// Issue 35: an imported scene's own walks (streets of tests/osm/streets.osm), which no catalog
+// entry declares, come from the server in SceneInfo.paths and the headless client follows them.
+class ServedWalks : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scenes::OsmImportOptions io;
+    io.name = "osmwalks";  // in no catalog
+    absl::StatusOr<scenes::Scene> scene =
+        scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/streets.osm", io);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    ASSERT_EQ(scene->paths.size(), 2u);
+    const std::string glb = vistream::testing::ProcessTempDir() + "/osmwalks.glb";
+    ASSERT_TRUE(scenes::SaveGltf(*scene, glb).ok());
+    server::ServedSceneOptions o;
+    o.scene = glb;
+    o.threads = 1;
+    absl::StatusOr<std::unique_ptr<ServedScene>> s = ServedScene::Create(o);
+    ASSERT_TRUE(s.ok()) << s.status();
+    scene_ = s->release();
+    server::ServerOptions so;
+    so.listen = "127.0.0.1:0";
+    absl::StatusOr<std::unique_ptr<WalkthroughServer>> w = WalkthroughServer::Start(scene_, so, nullptr);
+    ASSERT_TRUE(w.ok()) << w.status();
+    server_ = w->release();
+  }
+  static void TearDownTestSuite() {
+    delete server_;
+    server_ = nullptr;
+  }
+  static ServedScene* scene_;
+  static WalkthroughServer* server_;
+};
+ServedScene* ServedWalks::scene_ = nullptr;
+WalkthroughServer* ServedWalks::server_ = nullptr;
+
+TEST_F(ServedWalks, TheHeadlessClientFollowsAWalkOnlyTheServerHas) {
+  WalkthroughOptions o = Headless(Address(*server_));
+  o.path = "street 2 (Main Street)";
+  o.speed_kmh = 72.0;
+  o.seconds = 3.0;
+  absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(s->scene, "osmwalks");
+  EXPECT_EQ(s->path, "street 2 (Main Street)");
+  EXPECT_GT(s->distance_m, 30.0);
+  EXPECT_GT(s->frames, 0u);
+  EXPECT_EQ(s->stalls, 0u);
+}
+
+TEST_F(ServedWalks, WithoutAPathTheHeadlessClientTakesTheFirstAndABadNameListsThemAll) {
+  WalkthroughOptions o = Headless(Address(*server_));
+  o.speed_kmh = 72.0;
+  o.seconds = 1.0;
+  absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(s->path, "street 1 (Main Street)");
+
+  o.path = "nowhere";
+  absl::StatusOr<WalkthroughSummary> bad = RunWalkthrough(o);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(bad.status().message().find(
+                "has no walk 'nowhere'; its walks: street 1 (Main Street), street 2 (Main Street)"),
+            std::string::npos)
+      << bad.status();
 }
 
 }  // namespace

@@ -7,7 +7,9 @@
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
+#include <absl/strings/str_join.h>
 
 #include "scenes/building.h"
 #include "scenes/city_generator.h"
@@ -477,6 +479,81 @@ TEST(GltfIo, SaveRejectsAnInvalidScene) {
   const absl::Status s = SaveGltf(empty, TempDir() + "/empty-out.glb");
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("no objects"), std::string::npos) << s;
+}
+
+}  // namespace
+}  // namespace vistream::scenes
+
+namespace vistream::scenes {
+namespace {
+
+TEST(GltfIo, PathsRoundTripInTheOriginNodeAndLeaveTheFingerprintAlone) {
+  Scene scene = SmallScene();
+  const uint64_t before = SceneFingerprint(scene);
+  scene.paths = {{"street 1", {{0.5, -3.25}, {100.125, -3.25}, {100.125, 250.0}}},
+                 {"street 2 (Rue Grimaldi)", {{-1e5, 2e5}, {1.0 / 3.0, 0.1}}}};
+  EXPECT_EQ(SceneFingerprint(scene), before);
+  ASSERT_TRUE(ValidateScene(scene, "small").ok());
+  for (const char* file : {"paths.glb", "paths.gltf"}) {
+    const std::string path = TempDir() + "/" + file;
+    ASSERT_TRUE(SaveGltf(scene, path).ok());
+    std::vector<std::string> warnings;
+    absl::StatusOr<Scene> back = LoadGltf(path, &warnings);
+    ASSERT_TRUE(back.ok()) << back.status();
+    EXPECT_TRUE(warnings.empty()) << warnings.front();
+    ExpectSameScene(scene, *back);
+    ASSERT_EQ(back->paths.size(), 2u) << file;
+    for (size_t i = 0; i < 2; ++i) {
+      EXPECT_EQ(back->paths[i].name, scene.paths[i].name);
+      EXPECT_EQ(back->paths[i].waypoints, scene.paths[i].waypoints);  // doubles, exactly
+    }
+    EXPECT_EQ(SceneFingerprint(*back), before);
+  }
+  // A scene without paths writes none.
+  const std::string plain = TempDir() + "/nopaths.gltf";
+  ASSERT_TRUE(SaveGltf(SmallScene(), plain).ok());
+  EXPECT_EQ(ReadFile(plain).find("\"paths\""), std::string::npos);
+}
+
+TEST(GltfIo, BadPathsAreWarnedAboutAndSkipped) {
+  Scene scene = SmallScene();
+  scene.paths = {{"good", {{0, 0}, {10, 0}}}};
+  const std::string path = TempDir() + "/badpaths.gltf";
+  ASSERT_TRUE(SaveGltf(scene, path).ok());
+  nlohmann::json j = nlohmann::json::parse(ReadFile(path));
+  nlohmann::json* origin = nullptr;
+  for (nlohmann::json& n : j["nodes"]) {
+    if (n.contains("extras") && n["extras"]["vistream"].value("origin", false)) origin = &n;
+  }
+  ASSERT_NE(origin, nullptr);
+  nlohmann::json& paths = (*origin)["extras"]["vistream"]["paths"];
+  ASSERT_EQ(paths.size(), 1u);
+  for (const char* bad : {R"({"name": "", "waypoints": [0, 0, 1, 1]})", R"({"name": "odd", "waypoints": [0, 0, 1]})",
+                          R"({"name": "one point", "waypoints": [0, 0]})", R"({"name": "text", "waypoints": [0, "x", 1, 1]})",
+                          R"({"name": "good", "waypoints": [5, 5, 6, 6]})", "7", R"({"name": "fine", "waypoints": [1, 2, 3, 4]})"}) {
+    paths.push_back(nlohmann::json::parse(bad));
+  }
+  WriteFile(path, j.dump());
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> back = LoadGltf(path, &warnings);
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->paths.size(), 2u);
+  EXPECT_EQ(back->paths[0].name, "good");
+  EXPECT_EQ(back->paths[0].waypoints, (std::vector<glm::dvec2>{{0, 0}, {10, 0}}));
+  EXPECT_EQ(back->paths[1].name, "fine");
+  EXPECT_EQ(warnings.size(), 6u);
+  for (const std::string& w : warnings) EXPECT_NE(w.find("extras.vistream.paths["), std::string::npos) << w;
+  EXPECT_NE(absl::StrJoin(warnings, "\n").find("a second path named 'good'"), std::string::npos);
+}
+
+TEST(Scene, ValidateSceneChecksPaths) {
+  Scene scene = SmallScene();
+  scene.paths = {{"a", {{0, 0}}}};
+  EXPECT_NE(ValidateScene(scene, "x").message().find("path 0 ('a'): needs at least 2 waypoints"), std::string::npos);
+  scene.paths = {{"", {{0, 0}, {1, 1}}}};
+  EXPECT_NE(ValidateScene(scene, "x").message().find("has no name"), std::string::npos);
+  scene.paths = {{"n", {{0, 0}, {std::nan(""), 1}}}};
+  EXPECT_NE(ValidateScene(scene, "x").message().find("not finite"), std::string::npos);
 }
 
 }  // namespace

@@ -23,6 +23,7 @@
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
 #include "scenes/catalog.h"
+#include "scenes/gltf_io.h"
 #include "server/link_model.h"
 #include "server/service.h"
 #include "visibility/mask_codec.h"
@@ -748,6 +749,48 @@ TEST(Server, AWalkerGetsTheMasksOfTheBoxesAheadBeforeItReachesThem) {
               static_cast<unsigned long long>(std::count_if(r.masks.begin(), r.masks.end(),
                                                             [](const v1::EpsilonMask& m) { return m.base_mask_id() != 0; })));
   EXPECT_TRUE(client->Finish().ok());
+}
+
+}  // namespace
+}  // namespace vistream::server
+
+namespace vistream::server {
+namespace {
+
+// Issue 35: the scene's own walks (Scene::paths) reach the client in SceneInfo.paths; a scene
+// without them sends none.
+TEST(Server, SceneInfoCarriesTheScenesOwnWalks) {
+  auto plain = StartServer();
+  auto c = Connect(*plain);
+  ASSERT_TRUE(c->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  EXPECT_EQ(c->Snapshot().info.paths_size(), 0);
+  EXPECT_TRUE(c->Finish().ok());
+
+  scenes::Scene scene = City1().scene();
+  scene.paths = {{"street 1", {{-100.5, 20.25}, {300.0, 20.25}, {300.0, 400.0}}}, {"lane", {{0, 0}, {1, 1}}}};
+  const std::string glb = vistream::testing::ProcessTempDir() + "/server_paths.glb";
+  ASSERT_TRUE(scenes::SaveGltf(scene, glb).ok());
+  ServedSceneOptions o;
+  o.scene = glb;
+  o.name = "city1";  // Connect's Hello names city1
+  o.threads = 1;
+  absl::StatusOr<std::unique_ptr<ServedScene>> served = ServedScene::Create(o);
+  ASSERT_TRUE(served.ok()) << served.status();
+  ASSERT_EQ((*served)->scene_info().paths_size(), 2);
+  ServerOptions so;
+  so.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(served->get(), so, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  auto d = Connect(**server);
+  ASSERT_TRUE(d->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
+  const v1::SceneInfo info = d->Snapshot().info;
+  ASSERT_EQ(info.paths_size(), 2);
+  EXPECT_EQ(info.paths(0).name(), "street 1");
+  EXPECT_EQ(std::vector<double>(info.paths(0).xy().begin(), info.paths(0).xy().end()),
+            (std::vector<double>{-100.5, 20.25, 300.0, 20.25, 300.0, 400.0}));
+  EXPECT_EQ(info.paths(1).name(), "lane");
+  EXPECT_EQ(info.paths(1).xy_size(), 4);
+  EXPECT_TRUE(d->Finish().ok());
 }
 
 }  // namespace

@@ -110,6 +110,8 @@ int ImportOsm(const ImportArgs& a) {
   if (a.json) {
     nlohmann::json skipped = nlohmann::json::object();
     for (const auto& [reason, n] : sum.skipped) skipped[reason] = n;
+    nlohmann::json walks_json = nlohmann::json::array();
+    for (const scenes::OsmWalkSummary& w : sum.walks) walks_json.push_back({{"name", w.name}, {"length_m", w.length_m}});
     const nlohmann::json j = {
         {"input", a.input},
         {"output", a.output},
@@ -144,6 +146,10 @@ int ImportOsm(const ImportArgs& a) {
         {"bounds_max", {scene->bounds.max.x, scene->bounds.max.y, scene->bounds.max.z}},
         {"import_s", sum.seconds},
         {"save_s", save_s},
+        {"highway_ways", sum.highway_ways},
+        {"street_edges", sum.street_edges},
+        {"walks", walks_json},
+        {"walk_notes", sum.walk_notes},
     };
     std::printf("%s\n", j.dump(2).c_str());
     return 0;
@@ -172,6 +178,10 @@ int ImportOsm(const ImportArgs& a) {
   std::printf("skipped: %llu\n", static_cast<unsigned long long>(sum.Skipped()));
   for (const auto& [reason, n] : sum.skipped) std::printf("  %-40s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
   std::printf("origin: UTM %s (%.0f, %.0f) m\n", sum.utm_zone.c_str(), scene->origin.x, scene->origin.y);
+  std::printf("walks: %zu from %llu highway ways (%llu street edges)\n", sum.walks.size(),
+              static_cast<unsigned long long>(sum.highway_ways), static_cast<unsigned long long>(sum.street_edges));
+  for (const scenes::OsmWalkSummary& w : sum.walks) std::printf("  %-40s %.0f m\n", w.name.c_str(), w.length_m);
+  for (const std::string& n : sum.walk_notes) std::printf("  (%s)\n", n.c_str());
   return 0;
 }
 
@@ -454,7 +464,8 @@ struct MapArgs {
   int size = 2048;
 };
 
-// Footprints coloured by height (tallest drawn last), the catalog's walk paths in red.
+// Footprints coloured by height (tallest drawn last), the catalog's walk paths in red, the
+// scene's own (Scene::paths) in blue.
 int Map(const MapArgs& a) {
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file);
   if (!scene.ok()) return Fail(scene.status());
@@ -512,17 +523,24 @@ int Map(const MapArgs& a) {
   if (outlines) {
     for (const scenes::Occluder25D* oc : order) map.StrokePolygon(oc->footprint, outline, 0.6);
   }
-  const Rgb walk_colour{220, 30, 30};
-  for (const scenes::WalkPath& w : walks) {
+  // The catalog's walks in red, the scene's own (derived from its data) in blue.
+  const Rgb walk_colour{220, 30, 30}, path_colour{30, 80, 220};
+  const size_t declared = walks.size();
+  walks = scenes::WalksWithScenePaths(walks, *scene);
+  for (size_t i = 0; i < walks.size(); ++i) {
+    const scenes::WalkPath& w = walks[i];
     for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
-      map.Line(w.waypoints[k], w.waypoints[k + 1], walk_colour, 3);
+      map.Line(w.waypoints[k], w.waypoints[k + 1], i < declared ? walk_colour : path_colour, 3);
     }
   }
   const scenes::Aabb& b = scene->bounds;
-  map.SetTitle(absl::StrCat(scene->name, ": building footprints by height, catalog walks"),
+  map.SetTitle(absl::StrCat(scene->name, ": building footprints by height, walks"),
                absl::StrFormat("%zu objects, %zu footprints, %.0f x %.0f m, tallest %.1f m", scene->objects.size(),
                                order.size(), b.max.x - b.min.x, b.max.y - b.min.y, b.max.z));
-  for (const scenes::WalkPath& w : walks) map.AddLegend(walk_colour, "walk '" + w.name + "'", Swatch::kLine);
+  for (size_t i = 0; i < walks.size(); ++i) {
+    map.AddLegend(i < declared ? walk_colour : path_colour,
+                  absl::StrCat(i < declared ? "walk '" : "walk from the data '", walks[i].name, "'"), Swatch::kLine);
+  }
   if (grey > 0) map.AddLegend(no_occluder, absl::StrFormat("object without an occluder (%zu)", grey));
   if (!scene->terrain.empty()) {
     map.AddLegend(shade(ground_lo), absl::StrFormat("terrain, low (%.1f m)", scene->origin.z + ground_lo));

@@ -261,8 +261,12 @@ int Simulate(const SimulateArgs& a) {
     links.push_back(*l);
   }
   if (links.empty()) links.push_back(link);
-  absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
-  if (!walk.ok()) return Fail(walk.status());
+  // Generated scenes have only the walks their entry declares: checked before the scene is
+  // built. Imported ones may have walks of their own (Scene::paths): checked once loaded.
+  if (absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
+      !walk.ok() && entry->source.kind == scenes::SceneSource::Kind::kGenerator) {
+    return Fail(walk.status());
+  }
   std::FILE* log_file = nullptr;
   if (!a.log.empty()) {
     log_file = std::fopen(a.log.c_str(), "w");
@@ -310,6 +314,12 @@ int Simulate(const SimulateArgs& a) {
   if (!scene.ok()) return Fail(scene.status());
   std::fprintf(stderr, "simulate: %s ready after %.1f s (%s, %zu objects)\n", entry->name.c_str(), SecondsSince(start),
                (*scene)->pvs_source().c_str(), (*scene)->scene().objects.size());
+  const size_t declared_walks = entry->walks.size();
+  entry->walks = declared_walks > 0 ? scenes::WalksWithScenePaths(entry->walks, (*scene)->scene(), entry->walks.front().speed_mps,
+                                                                  entry->walks.front().eye_height_m)
+                                    : scenes::WalksWithScenePaths(entry->walks, (*scene)->scene());
+  absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
+  if (!walk.ok()) return Fail(walk.status());
 
   server::SimulationOptions opt;
   opt.path = (*walk)->name;
