@@ -17,6 +17,7 @@
 #include <absl/strings/str_join.h>
 #include <glm/geometric.hpp>
 
+#include "scenes/derived_walks.h"
 #include "scenes/mesh.h"
 #include "scenes/polygon.h"
 
@@ -470,10 +471,20 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   const GroundIndex ground(terrain_tris, 25.0);
 
   // 4. Objects.
+  std::vector<std::vector<glm::dvec2>> roads;  // Road surfaces' outer rings, xy, for walks
   Progress progress(run, "building the city", chosen.size() + 1);
   for (const Chosen& c : chosen) {
     if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
     const CityObject& o = *c.object;
+    if (o.type == "Road") {
+      for (const CityGeometry* g : c.geometries) {
+        ForEachSurface(*g, [&](const CitySurface& s, int) {
+          std::vector<glm::dvec2> ring;
+          for (const glm::dvec3& p : s.outer) ring.emplace_back(p.x - origin.x, p.y - origin.y);
+          roads.push_back(std::move(ring));
+        });
+      }
+    }
     Mesh mesh;
     // Per solid (index within the geometry list), its triangles; surfaces of surface
     // geometries of buildings are gathered as one candidate solid.
@@ -582,6 +593,28 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
                                                    " objects read; ", sum.Skipped(), " skipped)"));
   }
   NormalizeOccluders(&scene);
+
+  // 6. Walks from the data, over the scene's ground.
+  if (options.walks > 0) {
+    DeriveWalkOptions walk;
+    walk.max_walks = options.walks;
+    walk.bounds = std::make_pair(glm::dvec2(scene.bounds.min), glm::dvec2(scene.bounds.max));
+    DerivedWalks derived;
+    if (!roads.empty()) {
+      walk.name_prefix = "road";
+      derived = DeriveRoadWalks(roads, walk);
+      sum.walks_from = "roads";
+    } else {
+      walk.name_prefix = "walk";
+      derived = DeriveFreeSpaceWalks(scene, {}, walk);
+      sum.walks_from = "free space";
+    }
+    for (size_t i = 0; i < derived.paths.size(); ++i) {
+      sum.walks.emplace_back(derived.paths[i].name, derived.lengths_m[i]);
+    }
+    sum.walk_notes = derived.notes;
+    scene.paths = std::move(derived.paths);
+  }
   sum.objects = scene.objects.size();
   sum.triangles = scene.TriangleCount();
   sum.occluders = scene.occluders.size();

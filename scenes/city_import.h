@@ -56,6 +56,7 @@ struct CityImportOptions {
   double terrain_quantum_m = 1.0;  // TerrainOccluders' height steps
   int terrain_levels = 16;         // TerrainOccluders' tiers per tile
   OccluderSynthesisOptions synthesis;
+  size_t walks = 3;  // walks to derive from the data (0: none)
 };
 
 struct CityImportSummary {
@@ -84,6 +85,11 @@ struct CityImportSummary {
   double terrain_min_z = 0.0, terrain_max_z = 0.0;
   std::map<std::string, uint64_t> skipped;   // the reader's and the builder's, by reason
   std::map<std::string, uint64_t> repaired;  // likewise
+  // Walks derived from the data (Scene::paths): on Road objects' surfaces where the file has
+  // them, else through the free space between the buildings (scenes/derived_walks.h).
+  std::string walks_from;  // "roads", "free space" or "" (none derived)
+  std::vector<std::pair<std::string, double>> walks;  // name, length in metres
+  std::vector<std::string> walk_notes;
   double read_s = 0.0, build_s = 0.0;
 
   uint64_t Skipped() const;

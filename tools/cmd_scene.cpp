@@ -198,6 +198,12 @@ nlohmann::json CountsJson(const std::map<std::string, uint64_t>& counts) {
   return j;
 }
 
+nlohmann::json WalksJson(const std::vector<std::pair<std::string, double>>& walks) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& [name, length] : walks) j.push_back({{"name", name}, {"length_m", length}});
+  return j;
+}
+
 void PrintCounts(const char* title, uint64_t total, const std::map<std::string, uint64_t>& counts) {
   std::printf("%s: %llu\n", title, static_cast<unsigned long long>(total));
   for (const auto& [reason, n] : counts) std::printf("  %-48s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
@@ -275,6 +281,9 @@ int ImportCity(const ImportCityArgs& a) {
           {"min_z", sum.terrain_min_z},
           {"max_z", sum.terrain_max_z},
           {"relief_m", sum.terrain_max_z - sum.terrain_min_z}}},
+        {"walks_from", sum.walks_from},
+        {"walks", WalksJson(sum.walks)},
+        {"walk_notes", sum.walk_notes},
         {"repaired", sum.Repaired()},
         {"repaired_by_reason", CountsJson(sum.repaired)},
         {"skipped", sum.Skipped()},
@@ -318,6 +327,11 @@ int ImportCity(const ImportCityArgs& a) {
   uint64_t without = 0;
   for (const auto& [reason, n] : sum.without_occluder) without += n;
   PrintCounts("solids without an occluder", without, sum.without_occluder);
+  if (!sum.walks_from.empty()) {
+    std::printf("walks from the %s: %zu\n", sum.walks_from.c_str(), sum.walks.size());
+    for (const auto& [name, length] : sum.walks) std::printf("  %-48s %.0f m\n", name.c_str(), length);
+    for (const std::string& note : sum.walk_notes) std::printf("  note: %s\n", note.c_str());
+  }
   PrintCounts("repaired", sum.Repaired(), sum.repaired);
   PrintCounts("skipped", sum.Skipped(), sum.skipped);
   std::printf("origin: %s (%.0f, %.0f, %.3f)\n", sum.crs.empty() ? "unknown CRS" : sum.crs.c_str(), scene->origin.x,
