@@ -60,6 +60,7 @@ TerrainHeight::TerrainHeight(const Scene& scene) {
     const Mesh& m = scene.objects[id].mesh;
     for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
       Tri tri;
+      tri.object = id;
       for (int k = 0; k < 3; ++k) {
         const glm::vec3& v = m.positions[m.indices[t + k]];
         tri.p[k] = glm::dvec2(v.x, v.y);
@@ -150,6 +151,7 @@ HeightRange TerrainHeight::Range(const glm::dvec2& lo, const glm::dvec2& hi) con
   std::vector<uint32_t> cand;
   Candidates(lo, hi, &cand);
   double zmin = kInf, zmax = -kInf, covered = 0.0;
+  bool several = false;  // pieces of more than one object: they may overlap
   std::vector<Vertex> poly, tmp;
   for (uint32_t n : cand) {
     const Tri& t = tris_[n];
@@ -159,6 +161,7 @@ HeightRange TerrainHeight::Range(const glm::dvec2& lo, const glm::dvec2& hi) con
     ClipAxis(poly, 1, lo.y, 1.0, &tmp);
     ClipAxis(tmp, 1, hi.y, -1.0, &poly);
     if (poly.empty()) continue;
+    several = several || t.object != tris_[cand.front()].object;
     for (const Vertex& v : poly) {
       zmin = std::min(zmin, v.z);
       zmax = std::max(zmax, v.z);
@@ -168,9 +171,10 @@ HeightRange TerrainHeight::Range(const glm::dvec2& lo, const glm::dvec2& hi) con
   if (zmin == kInf) return {0.0, 0.0};  // no terrain here: flat ground
   const double area = (hi.x - lo.x) * (hi.y - lo.y);
   bool uncovered = covered < area * (1.0 - 1e-9);
-  if (!uncovered && covered > area * (1.0 + 1e-9)) {
-    // Pieces overlap, so their areas' sum proves nothing: ask whether the square less them all
-    // is empty. A failure of the exact Boolean operation counts as uncovered (a larger band).
+  if (!uncovered && several) {
+    // Pieces of several objects may overlap, so their areas' sum proves nothing: ask whether the
+    // square less them all is empty. A failure of the exact Boolean operation counts as
+    // uncovered (a larger band).
     PolygonWithHoles square{{lo, {hi.x, lo.y}, hi, {lo.x, hi.y}}, {}};
     std::vector<PolygonWithHoles> cut;
     for (uint32_t n : cand) cut.push_back({{tris_[n].p[0], tris_[n].p[1], tris_[n].p[2]}, {}});

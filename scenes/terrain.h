@@ -42,10 +42,11 @@ class TerrainHeight {
   // metres; precondition lo <= hi componentwise, finite): the extremes of the piecewise-linear
   // surface clipped to it (at triangle vertices inside it, where triangle edges cross its border,
   // or at its corners), and 0 when terrain leaves any part of it uncovered (by more than a
-  // 10^-9 share of its area). Where up-facing triangles overlap in xy (a bridge deck over a
-  // road, tiles that overlap) the range is that of every overlapping piece: the upper surface's
-  // max exactly, and a min that may be lower than the upper surface's (a larger band, never a
-  // smaller one).
+  // 10^-9 share of its area). Coverage is decided from areas, so the up-facing triangles of one
+  // terrain object must not overlap in xy (a TIN); those of different objects may (tiles that
+  // overlap: then decided exactly, scenes/polygon_set.h). Where pieces overlap the range is that
+  // of every piece: the upper surface's max exactly, and a min that may be lower than the upper
+  // surface's (a larger band, never a smaller one).
   HeightRange Range(const glm::dvec2& lo, const glm::dvec2& hi) const;
 
  private:
@@ -53,6 +54,7 @@ class TerrainHeight {
     glm::dvec2 p[3];
     double z[3];
     glm::dvec2 lo, hi;  // xy bounds
+    ObjectId object = 0;
   };
   // The triangles whose xy bounds overlap [lo, hi], ascending, each once.
   void Candidates(const glm::dvec2& lo, const glm::dvec2& hi, std::vector<uint32_t>* out) const;
