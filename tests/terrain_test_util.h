@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -12,6 +13,7 @@
 
 #include "scenes/mesh.h"
 #include "scenes/scene.h"
+#include "scenes/terrain.h"
 
 namespace vistream::testing {
 
@@ -70,4 +72,59 @@ inline scenes::Scene TerrainScene(const std::function<double(double, double)>& h
   return s;
 }
 
+// The simplest conservative terrain occluders: a ground-up prism for each up-facing triangle of
+// each terrain object, its footprint the triangle, its height the triangle's lowest vertex
+// (inside the solid ground beneath it).
+inline void AddTerrainOccluders(scenes::Scene* scene) {
+  for (scenes::ObjectId id : scene->terrain) {
+    const scenes::Mesh& m = scene->objects[id].mesh;
+    for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+      scenes::Occluder25D o;
+      o.object = id;
+      o.height = std::numeric_limits<double>::infinity();
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3& v = m.positions[m.indices[t + k]];
+        o.footprint.emplace_back(v.x, v.y);
+        o.height = std::min(o.height, static_cast<double>(v.z));
+      }
+      if (scenes::SignedArea(o.footprint) > 0.0 && o.height > 0.0) scene->occluders.push_back(std::move(o));
+    }
+  }
+}
+
+// A ridge 20 m high along x = 0 between two valleys about 1.5 to 3.5 m up, over [-140, 140]^2 in
+// 10 m quads: the ground of the hilly test town.
+inline double Ridge(double x, double y) {
+  return 1.5 + 20.0 * std::exp(-(x / 22.0) * (x / 22.0)) + 1.0 + std::sin(0.17 * x + 0.3) * std::cos(0.13 * y);
+}
+
+// `scene` (buildings standing on z = 0) set on the ridge: a closed terrain solid (down to z = -5)
+// added as the last object and the terrain, every other object's vertices above z = 0 raised by
+// the highest ground under its box (floors stay at 0, below the ground; walls reach above it)
+// and their occluders with them, and the terrain's occluders (AddTerrainOccluders).
+inline scenes::Scene OnTheRidge(const scenes::Scene& flat) {
+  scenes::Scene s;
+  s.name = flat.name + "-on-a-ridge";
+  s.origin = flat.origin;
+  scenes::Scene ground;
+  ground.terrain.push_back(ground.AddObject("ground", TinMesh(Ridge, {-140, -140}, {140, 140}, 28, 28, -5.0)));
+  const scenes::TerrainHeight height(ground);
+  std::vector<double> raise(flat.objects.size(), 0.0);
+  for (const scenes::Object& o : flat.objects) {
+    // On the 1/256 m grid: the raised float tops stay exactly where the occluders' tops go.
+    raise[o.id] = std::ceil(height.Range(glm::dvec2(o.bounds.min), glm::dvec2(o.bounds.max)).max * 256.0) / 256.0;
+    scenes::Mesh m = o.mesh;
+    for (glm::vec3& v : m.positions) {
+      if (v.z > 0.0f) v.z += static_cast<float>(raise[o.id]);
+    }
+    s.AddObject(o.name, std::move(m));
+  }
+  for (scenes::Occluder25D o : flat.occluders) {
+    o.height += raise[o.object];
+    s.occluders.push_back(std::move(o));
+  }
+  s.terrain.push_back(s.AddObject("ground", ground.objects[0].mesh));
+  AddTerrainOccluders(&s);
+  return s;
+}
 }  // namespace vistream::testing
