@@ -312,14 +312,14 @@ TEST(PvsTerrain, ARidgeHidesTheOtherValley) {
   const CellId cell = *grid.CellAt({-100, 4});
   const Aabb box = grid.CellBox(cell);
   EXPECT_GT(box.min.z, 1.0);  // the valley floor is above z = 0
-  const KdTree tree = KdTree::Build(s);
+  const KdTree tree = KdTree::Build(s, {.leaf_size = 1});  // each object its own leaf
   const PvsComputer computer(s, tree);
   const PvsResult r = computer.Compute(box, {});
   EXPECT_EQ(r.objects, (std::vector<ObjectId>{0, 2})) << "the west shed and the ground, not the east shed";
   // Without the terrain's occluders nothing hides the east shed: the ridge is what did.
   scenes::Scene bare = s;
   std::erase_if(bare.occluders, [](const scenes::Occluder25D& o) { return o.object == 2; });
-  const KdTree bare_tree = KdTree::Build(bare);
+  const KdTree bare_tree = KdTree::Build(bare, {.leaf_size = 1});
   const PvsComputer bare_computer(bare, bare_tree);
   EXPECT_EQ(bare_computer.Compute(box, {}).objects, (std::vector<ObjectId>{0, 1, 2}));
 }

@@ -98,10 +98,12 @@ inline double Ridge(double x, double y) {
   return 1.5 + 20.0 * std::exp(-(x / 22.0) * (x / 22.0)) + 1.0 + std::sin(0.17 * x + 0.3) * std::cos(0.13 * y);
 }
 
-// `scene` (buildings standing on z = 0) set on the ridge: a closed terrain solid (down to z = -5)
-// added as the last object and the terrain, every other object's vertices above z = 0 raised by
-// the highest ground under its box (floors stay at 0, below the ground; walls reach above it)
-// and their occluders with them, and the terrain's occluders (AddTerrainOccluders).
+// `flat` (buildings standing on z = 0) set on the ridge: a closed terrain solid (down to z = -5)
+// added as the last object and the terrain; every other object's vertices above z = 0 raised by
+// the highest ground under its block (the objects whose boxes touch it, and theirs: a terrace,
+// a tower on its building), so floors stay at 0, below the ground, and walls reach above it;
+// their occluders raised with them (one raise a block: a tower still stands on its building),
+// and the terrain's occluders (AddTerrainOccluders).
 inline scenes::Scene OnTheRidge(const scenes::Scene& flat) {
   scenes::Scene s;
   s.name = flat.name + "-on-a-ridge";
@@ -109,10 +111,29 @@ inline scenes::Scene OnTheRidge(const scenes::Scene& flat) {
   scenes::Scene ground;
   ground.terrain.push_back(ground.AddObject("ground", TinMesh(Ridge, {-140, -140}, {140, 140}, 28, 28, -5.0)));
   const scenes::TerrainHeight height(ground);
-  std::vector<double> raise(flat.objects.size(), 0.0);
+  // Blocks: objects whose boxes touch (within 1 cm), joined.
+  const size_t n = flat.objects.size();
+  std::vector<size_t> root(n);
+  for (size_t k = 0; k < n; ++k) root[k] = k;
+  auto find = [&root](size_t k) {
+    while (root[k] != k) k = root[k] = root[root[k]];
+    return k;
+  };
+  for (size_t a = 0; a < n; ++a) {
+    scenes::Aabb grown = flat.objects[a].bounds;
+    grown.min -= glm::dvec3(0.01);
+    grown.max += glm::dvec3(0.01);
+    for (size_t b = a + 1; b < n; ++b) {
+      if (grown.Overlaps(flat.objects[b].bounds)) root[find(a)] = find(b);
+    }
+  }
+  std::vector<scenes::Aabb> block(n);
+  for (size_t k = 0; k < n; ++k) block[find(k)].Extend(flat.objects[k].bounds);
+  std::vector<double> raise(n, 0.0);
   for (const scenes::Object& o : flat.objects) {
+    const scenes::Aabb& b = block[find(o.id)];
     // On the 1/256 m grid: the raised float tops stay exactly where the occluders' tops go.
-    raise[o.id] = std::ceil(height.Range(glm::dvec2(o.bounds.min), glm::dvec2(o.bounds.max)).max * 256.0) / 256.0;
+    raise[o.id] = std::ceil(height.Range(glm::dvec2(b.min), glm::dvec2(b.max)).max * 256.0) / 256.0;
     scenes::Mesh m = o.mesh;
     for (glm::vec3& v : m.positions) {
       if (v.z > 0.0f) v.z += static_cast<float>(raise[o.id]);
