@@ -24,7 +24,7 @@ struct City1 {
 const City1& Fixture() {
   static const City1* f = [] {
     auto* x = new City1{*scenes::GenerateNamed("city1", scenes::GeneratorParams{}), {}};
-    x->grid = *visibility::ViewcellGrid::Create(x->scene.bounds, 50.0, 0.5, 2.0);
+    x->grid = *visibility::ViewcellGrid::Create(x->scene, scenes::ViewcellSpec{.size_m = 50.0, .height_m = 2.0, .base_m = 0.5});
     return x;
   }();
   return *f;

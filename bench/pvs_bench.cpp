@@ -23,7 +23,7 @@ const LondonPvs& Fixture() {
     x->scene = scenes::GenerateLondon(scenes::LondonOptions{});
     x->tree = visibility::KdTree::Build(x->scene);
     x->computer = std::make_unique<visibility::PvsComputer>(x->scene, x->tree);
-    const auto grid = visibility::ViewcellGrid::Create(x->scene.bounds, 100.0, 0.5, 2.0);
+    const auto grid = visibility::ViewcellGrid::Create(x->scene, scenes::ViewcellSpec{.size_m = 100.0, .height_m = 2.0, .base_m = 0.5});
     for (const visibility::CellCoord c : grid->Sample(8, 2001)) x->cells.push_back(grid->CellBox(c));
     return x;
   }();

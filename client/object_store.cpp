@@ -19,7 +19,24 @@ GridInfo GridInfo::From(const v1::ViewcellGrid& g) {
   out.height = g.height_m();
   out.nx = g.nx();
   out.ny = g.ny();
+  out.band_z.assign(g.band_z().begin(), g.band_z().end());
   return out;
+}
+
+std::optional<std::string> GridInfo::Problem(const v1::ViewcellGrid& g) {
+  if (g.band_z().empty()) return std::nullopt;
+  const uint64_t cells = g.nx() > 0 && g.ny() > 0 ? uint64_t(g.nx()) * uint64_t(g.ny()) : 0;
+  if (uint64_t(g.band_z().size()) != 2 * cells) {
+    return absl::StrCat("the viewcell grid lists ", g.band_z().size(), " band values for ", cells, " cells (",
+                        2 * cells, " expected)");
+  }
+  for (int k = 0; k + 1 < g.band_z().size(); k += 2) {
+    const double z0 = g.band_z(k), z1 = g.band_z(k + 1);
+    if (!(std::isfinite(z0) && std::isfinite(z1) && z0 < z1)) {
+      return absl::StrCat("viewcell ", k / 2, "'s band [", z0, ", ", z1, "] is empty or not finite");
+    }
+  }
+  return std::nullopt;
 }
 
 std::optional<uint32_t> GridInfo::CellAt(double x, double y) const {
@@ -44,6 +61,13 @@ std::vector<uint32_t> GridInfo::Neighbourhood(uint32_t cell) const {
 std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optional<uint32_t> current_cell) {
   for (Event& e : events) {
     if (auto* info = std::get_if<v1::SceneInfo>(&e)) {
+      if (std::optional<std::string> problem = GridInfo::Problem(info->grid()); problem.has_value()) {
+        if (!failure_.has_value()) {
+          failure_ = absl::StrCat("the server sent a malformed scene description: ", *problem);
+          bad_data_ = true;
+        }
+        continue;
+      }
       scene_info_ = std::move(*info);
       grid_ = GridInfo::From(scene_info_->grid());
       mask_bases_.Clear();  // a session starts here; its masks number from 1 again

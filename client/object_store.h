@@ -21,6 +21,7 @@
 #include <set>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -35,15 +36,30 @@ namespace vistream::client {
 struct GridInfo {
   double cell_size = 0.0, x0 = 0.0, y0 = 0.0, base_z = 0.0, height = 0.0;
   int nx = 0, ny = 0;
+  // Each cell's band, z0 then z1, in cell id order (ViewcellGrid.band_z) where cells follow
+  // terrain; empty: every cell's band is base_z to base_z + height.
+  std::vector<double> band_z;
 
   static GridInfo From(const vistream::v1::ViewcellGrid& g);
+  // Why `g` cannot be used (a band list of the wrong length, a band empty or not finite), or
+  // none when it can.
+  static std::optional<std::string> Problem(const vistream::v1::ViewcellGrid& g);
   // The cell whose ground square holds (x, y), as the server decides it (points on a shared
   // edge belong to the cell above and to the right); none outside the grid.
   std::optional<uint32_t> CellAt(double x, double y) const;
   // The cell itself and its up to eight neighbours.
   std::vector<uint32_t> Neighbourhood(uint32_t cell) const;
-  // Whether an eye height is inside the band the PVSs hold for.
-  bool InBand(double z) const { return z >= base_z && z <= base_z + height; }
+  bool has_bands() const { return !band_z.empty(); }
+  // Cell `cell`'s z range [first, second], scene-local metres. Precondition: cell < nx ny.
+  std::pair<double, double> Band(uint32_t cell) const {
+    if (band_z.empty()) return {base_z, base_z + height};
+    return {band_z[2 * size_t{cell}], band_z[2 * size_t{cell} + 1]};
+  }
+  // Whether an eye height is inside the band cell `cell`'s PVS holds for (the server's check).
+  bool InBand(uint32_t cell, double z) const {
+    const auto [z0, z1] = Band(cell);
+    return z >= z0 && z <= z1;
+  }
 };
 
 // An ε-mask decoded (proto EpsilonMask): which triangles of its cell's PVS may be seen from

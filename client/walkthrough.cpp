@@ -90,6 +90,7 @@ class Loop {
   std::vector<scenes::WalkPath> walks_;  // the catalog entry's, then the server's (SceneInfo.paths)
   bool walk_pending_ = false;            // following a walk not chosen yet (ChooseWalk)
   std::optional<scenes::Walk> walk_;
+  std::optional<scenes::WalkPath> walk_path_;  // walk_'s, to rebuild it over the local terrain
   double walk_limit_s_ = 0.0;
   uint64_t memory_budget_ = 0, triangle_budget_ = 0;
   std::optional<scenes::Scene> owned_scene_;
@@ -133,9 +134,14 @@ absl::Status Loop::ChooseWalk() {
                            absl::StrJoin(names, ", ")));
   }
   const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
-  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(*path, speed);
+  // With the scene here, terrain and all, the eye keeps its height above the ground.
+  absl::StatusOr<scenes::Walk> walk =
+      full_scene_ != nullptr && !full_scene_->terrain.empty()
+          ? scenes::Walk::Create(*path, speed, std::make_shared<const scenes::TerrainHeight>(*full_scene_))
+          : scenes::Walk::Create(*path, speed);
   if (!walk.ok()) return walk.status();
   walk_ = std::move(*walk);
+  walk_path_ = *path;
   walk_pending_ = false;
   walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
   sum_->path = path->name;
@@ -235,6 +241,15 @@ absl::Status Loop::Prepare() {
       full_scene_ = &*owned_scene_;
     }
   }
+  if (walk_.has_value() && full_scene_ != nullptr && !full_scene_->terrain.empty()) {
+    // The scene is here, terrain and all: the eye keeps its height above the ground. (Without
+    // it a walk over terrain keeps its eye inside each cell's band: see the frame loop.)
+    absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(
+        *walk_path_, walk_->speed_mps(), std::make_shared<const scenes::TerrainHeight>(*full_scene_));
+    if (!walk.ok()) return walk.status();
+    walk_ = std::move(*walk);
+    camera_.eye = walk_->At(0.0).eye;
+  }
   if (opt_.verify) {
     absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1);
     if (!ids.ok()) return ids.status();
@@ -294,7 +309,7 @@ absl::Status Loop::Prepare() {
 absl::Status Loop::PreloadEverything() {
   const scenes::Scene& scene = *full_scene_;
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(sum_->scene, 0.0, opt_.catalog_dir);
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene.bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene, spec);
   if (!grid.ok()) return grid.status();
   std::vector<Event> events;
   v1::SceneInfo info;
@@ -323,6 +338,10 @@ absl::Status Loop::PreloadEverything() {
       out->add_xy(w.x);
       out->add_xy(w.y);
     }
+  }
+  for (const visibility::CellBand& b : grid->bands()) {
+    g->add_band_z(b.z0);
+    g->add_band_z(b.z1);
   }
   events.emplace_back(std::move(info));
   for (const scenes::Object& o : scene.objects) {
@@ -381,6 +400,12 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
     if (!have_start_) {
       const GridInfo& g = store_->grid();
       camera_.eye = {g.x0 + 0.5 * g.nx * g.cell_size, g.y0 + 0.5 * g.ny * g.cell_size, g.base_z + 0.6 * g.height};
+      if (g.has_bands()) {
+        // Cells follow terrain: 0.6 of the band's height above the cell's highest ground.
+        if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) {
+          camera_.eye.z = g.Band(*c).second - 0.4 * g.height;
+        }
+      }
       have_start_ = true;
     }
     p.cell = store_->grid().CellAt(eye.x, eye.y);
@@ -546,6 +571,14 @@ absl::Status Loop::Walkthrough() {
       last = last || t >= walk_limit_s_;
       const scenes::WalkPose pose = walk_->At(at);
       camera_.eye = pose.eye;
+      if (store_->has_scene_info() && store_->grid().has_bands()) {
+        // Cells follow terrain this client may not hold: the eye stays in its cell's band, where
+        // the server accepts it and the PVSs hold.
+        const GridInfo& g = store_->grid();
+        if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) {
+          camera_.eye.z = std::clamp(camera_.eye.z, g.Band(*c).first, g.Band(*c).second);
+        }
+      }
       camera_.yaw_rad = pose.yaw_rad;
       velocity = last ? glm::dvec3(0.0) : pose.velocity;
     } else if (opt_.pose.has_value()) {
@@ -559,6 +592,10 @@ absl::Status Loop::Walkthrough() {
       const GridInfo& g = store_->grid();
       eye.x = std::clamp(eye.x, g.x0 + 0.01, g.x0 + g.nx * g.cell_size - 0.01);
       eye.y = std::clamp(eye.y, g.y0 + 0.01, g.y0 + g.ny * g.cell_size - 0.01);
+      // ...and in its cell's band (where cells follow terrain, the band moves with the ground).
+      if (const std::optional<uint32_t> c = g.CellAt(eye.x, eye.y); c.has_value() && g.has_bands()) {
+        eye.z = std::clamp(eye.z, g.Band(*c).first, g.Band(*c).second);
+      }
       velocity = (eye - camera_.eye) / dt;
       camera_.eye = eye;
     }

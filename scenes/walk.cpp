@@ -8,13 +8,15 @@
 
 namespace vistream::scenes {
 
-absl::StatusOr<Walk> Walk::Create(const WalkPath& path, double speed_mps) {
+absl::StatusOr<Walk> Walk::Create(const WalkPath& path, double speed_mps,
+                                  std::shared_ptr<const TerrainHeight> terrain) {
   if (!(speed_mps > 0.0) || !std::isfinite(speed_mps)) {
     return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': speed ", speed_mps, " m/s is not positive"));
   }
   Walk w;
   w.speed_ = speed_mps;
   w.eye_height_ = path.eye_height_m;
+  if (terrain != nullptr && !terrain->empty()) w.terrain_ = std::move(terrain);
   for (const glm::dvec2& p : path.waypoints) {
     if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
       return absl::InvalidArgumentError(absl::StrCat("walk '", path.name, "': a waypoint is not finite"));
@@ -56,7 +58,7 @@ WalkPose Walk::At(double t) const {
   const double s = std::clamp(t * speed_, 0.0, length_m());
   WalkPose pose;
   const glm::dvec2 p = PointAt(s);
-  pose.eye = {p.x, p.y, eye_height_};
+  pose.eye = {p.x, p.y, terrain_ != nullptr ? terrain_->HeightAt(p) + eye_height_ : eye_height_};
   // Look at the path ahead (behind, at the very end).
   glm::dvec2 d = PointAt(s + kLookAhead) - p;
   if (glm::length(d) < 1e-6) d = p - PointAt(s - kLookAhead);
@@ -64,7 +66,10 @@ WalkPose Walk::At(double t) const {
   if (s < length_m()) {
     const glm::dvec2 step = PointAt(s + 0.5) - p;
     const double len = glm::length(step);
-    if (len > 0.0) pose.velocity = glm::dvec3(step / len * speed_, 0.0);
+    if (len > 0.0) {
+      const double rise = terrain_ != nullptr ? terrain_->HeightAt(p + step) - terrain_->HeightAt(p) : 0.0;
+      pose.velocity = glm::dvec3(step / len * speed_, rise / len * speed_);
+    }
   }
   return pose;
 }

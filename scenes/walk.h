@@ -1,10 +1,11 @@
 #pragma once
 // A walk from the scene catalog (WalkPath) as a function of distance: where the eye is,
 // where it looks and how fast it moves. The eye looks at the path a few metres ahead, so it
-// turns smoothly round corners.
+// turns smoothly round corners. Over terrain the eye keeps its height above the ground.
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -13,6 +14,7 @@
 #include <glm/vec3.hpp>
 
 #include "scenes/catalog.h"
+#include "scenes/terrain.h"
 
 namespace vistream::scenes {
 
@@ -25,13 +27,17 @@ struct WalkPose {
 class Walk {
  public:
   // Errors (INVALID_ARGUMENT, naming the walk): fewer than two distinct waypoints, non-finite
-  // points, a speed that is not positive.
-  static absl::StatusOr<Walk> Create(const WalkPath& path, double speed_mps);
+  // points, a speed that is not positive. `terrain`: the scene's ground (the eye is
+  // path.eye_height_m above TerrainHeight::HeightAt); null or empty: flat ground at z = 0.
+  static absl::StatusOr<Walk> Create(const WalkPath& path, double speed_mps,
+                                     std::shared_ptr<const TerrainHeight> terrain = nullptr);
 
   double length_m() const { return cumulative_.back(); }
   double speed_mps() const { return speed_; }
   double duration_s() const { return length_m() / speed_; }
-  // The pose `t` seconds after the start (clamped to the path's ends).
+  // The pose `t` seconds after the start (clamped to the path's ends): the eye at the walk's
+  // eye height above the ground, the velocity along the path (its z: the ground's rise) at
+  // the walk's speed over the ground's plan.
   WalkPose At(double t) const;
   // The point `s` metres along the path (clamped to its ends), scene-local metres.
   glm::dvec2 PointAt(double s) const;
@@ -46,6 +52,7 @@ class Walk {
   std::vector<glm::dvec2> points_;
   std::vector<double> cumulative_;  // distance along the path at each point
   double speed_ = 1.0, eye_height_ = 1.7;
+  std::shared_ptr<const TerrainHeight> terrain_;  // null: flat
 };
 
 }  // namespace vistream::scenes

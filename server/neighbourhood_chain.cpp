@@ -9,11 +9,11 @@ namespace vistream::server {
 
 namespace {
 
-// The box's z range for an eye at `z`: height_m about it, inside the grid's band.
-void SetZ(const visibility::ViewcellGrid& grid, double z, double height_m, scenes::Aabb* box) {
-  const double lo = grid.base_z(), hi = grid.base_z() + grid.height();
-  box->min.z = std::clamp(z - 0.5 * height_m, lo, hi);
-  box->max.z = std::clamp(z + 0.5 * height_m, lo, hi);
+// The box's z range for an eye at `z`: height_m about it, inside `cell`'s band.
+void SetZ(const visibility::ViewcellGrid& grid, visibility::CellId cell, double z, double height_m, scenes::Aabb* box) {
+  const visibility::CellBand band = grid.Band(cell);
+  box->min.z = std::clamp(z - 0.5 * height_m, band.z0, band.z1);
+  box->max.z = std::clamp(z + 0.5 * height_m, band.z0, band.z1);
 }
 
 void ClipXy(const scenes::Aabb& cell, scenes::Aabb* box) {
@@ -63,7 +63,7 @@ NeighbourhoodChain::Update NeighbourhoodChain::Advance(const glm::dvec3& eye, co
                                                        const std::function<bool(visibility::CellId)>& allowed) {
   Update u;
   const std::optional<visibility::CellId> here = grid.CellAt(glm::dvec2(eye.x, eye.y));
-  if (!here.has_value() || !(eye.z >= grid.base_z() && eye.z <= grid.base_z() + grid.height())) {
+  if (!here.has_value() || !(eye.z >= grid.Band(*here).z0 && eye.z <= grid.Band(*here).z1)) {
     u.removed = Clear();
     return u;
   }
@@ -79,7 +79,7 @@ NeighbourhoodChain::Update NeighbourhoodChain::Advance(const glm::dvec3& eye, co
     const double half = 0.5 * opt_.standing_size_m;
     n.box.min = glm::dvec3(eye.x - half, eye.y - half, 0.0);
     n.box.max = glm::dvec3(eye.x + half, eye.y + half, 0.0);
-    SetZ(grid, eye.z, opt_.height_m, &n.box);
+    SetZ(grid, *here, eye.z, opt_.height_m, &n.box);
     ClipXy(grid.CellBox(*here), &n.box);
     boxes_.push_back(n);
     u.added.push_back(n);
@@ -125,7 +125,14 @@ NeighbourhoodChain::Update NeighbourhoodChain::Advance(const glm::dvec3& eye, co
     }
     box.min -= glm::dvec3(opt_.lateral_m, opt_.lateral_m, 0.0);
     box.max += glm::dvec3(opt_.lateral_m, opt_.lateral_m, 0.0);
-    SetZ(grid, eye.z, opt_.height_m, &box);
+    if (grid.has_bands()) {
+      // Cells follow terrain: the eye rises and falls with the ground ahead, which the chain does
+      // not know, so a box ahead spans its cell's whole band (it holds wherever the eye walks).
+      box.min.z = grid.Band(cell).z0;
+      box.max.z = grid.Band(cell).z1;
+    } else {
+      SetZ(grid, cell, eye.z, opt_.height_m, &box);
+    }
     ClipXy(grid.CellBox(cell), &box);
     Neighbourhood n;
     n.id = next_id_++;

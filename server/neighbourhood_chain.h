@@ -4,7 +4,8 @@
 // the eye, its velocity and its recent turn the chain predicts where the eye will be over the
 // next seconds and covers that path with boxes, each inside one viewcell (a mask narrows that
 // cell's PVS, which holds for no eye beyond it): long along the path, a margin either side for a
-// walker who drifts, thin in z around the eye. A standing client gets one box around it.
+// walker who drifts, thin in z around the eye (where cells follow terrain, a box ahead spans its
+// cell's band: the ground ahead may rise or fall). A standing client gets one box around it.
 //
 // The chain is kept, not redrawn: boxes the predicted path still runs through stay (their
 // masks are computed once); the path is extended past the last box as the eye moves on; when
@@ -31,7 +32,7 @@ struct ChainOptions {
   double max_length_m = 20.0;       // and at most this much
   double max_area_m2 = 80.0;        // nor more ground than this (a box across a diagonal street)
   double lateral_m = 1.0;           // margin around the predicted path, every side in xy
-  double height_m = 0.6;            // box height, centred on the eye, kept inside the grid's band
+  double height_m = 0.6;            // box height, centred on the eye, kept inside its cell's band
   double horizon_s = 8.0;           // the chain reaches this far ahead in time...
   double min_horizon_m = 12.0;      // ...but at least this far
   double max_horizon_m = 160.0;     // and at most this far
@@ -58,7 +59,7 @@ class NeighbourhoodChain {
   // Plans for an eye at `eye` moving at `velocity` (m/s; z ignored), turning at `turn_rad_s`
   // (counter-clockwise, rad/s). Only cells for which `allowed(cell)` holds get boxes (the
   // session's wanted cells: their PVSs are what masks narrow); the path stops at the first
-  // other cell and at the grid's edge. An eye outside the grid or its band gets no box.
+  // other cell and at the grid's edge. An eye outside the grid or its cell's band gets no box.
   Update Advance(const glm::dvec3& eye, const glm::dvec3& velocity, double turn_rad_s,
                  const visibility::ViewcellGrid& grid, const std::function<bool(visibility::CellId)>& allowed);
   // Forgets every box (their ids are not reused).

@@ -89,6 +89,13 @@ std::string PvsStoreNamespace(const std::string& prefix, uint64_t scene_fingerpr
     h = Fnv1a(h, &v, sizeof(v));
   }
   for (int32_t n : {static_cast<int32_t>(grid.nx()), static_cast<int32_t>(grid.ny())}) h = Fnv1a(h, &n, sizeof(n));
+  // Cells that follow terrain: their bands too (a flat grid hashes as before bands existed, so
+  // its keys are unchanged; a server that ignored a scene's terrain wrote entries for flat
+  // cells, which these keys never meet).
+  for (const visibility::CellBand& b : grid.bands()) {
+    h = Fnv1a(h, &b.z0, sizeof(b.z0));
+    h = Fnv1a(h, &b.z1, sizeof(b.z1));
+  }
   return absl::StrFormat("%s:pvs1:%016x:%016x:r%u:%s", prefix, scene_fingerprint, h, res, backend);
 }
 

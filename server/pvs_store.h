@@ -5,7 +5,8 @@
 // that computed one cell at once leave the first answer). `vistream pvs --all --store` fills
 // it ahead of traffic.
 //
-// Keys: PREFIX:pvs1:FINGERPRINT:GRID:rRES:BACKEND:CELL (PvsStoreNamespace), so that different
+// Keys: PREFIX:pvs1:FINGERPRINT:GRID:rRES:BACKEND:CELL (PvsStoreNamespace; GRID hashes the
+// cells, and their bands when they follow terrain), so that different
 // scenes, grids or settings never mix. Values: visibility::EncodeCellRecord (length, checksum,
 // cell id, ids within the scene), checked on every read: a bad entry is counted, logged and
 // recomputed (then overwritten), never served.

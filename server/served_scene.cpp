@@ -26,9 +26,10 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   s->load_seconds_ = loaded->seconds;
   s->viewcell_ = loaded->viewcell;
   if (options.cell_size > 0.0) s->viewcell_.size_m = options.cell_size;
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(s->scene_.bounds, s->viewcell_);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(s->scene_, s->viewcell_);
   if (!grid.ok()) return grid.status();
   s->grid_ = std::make_unique<visibility::ViewcellGrid>(*grid);
+  if (!s->scene_.terrain.empty()) s->terrain_ = std::make_shared<const scenes::TerrainHeight>(s->scene_);
   const size_t objects = s->scene_.objects.size();
 
   unsigned threads = options.pool != nullptr ? options.pool->threads()
@@ -94,6 +95,10 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
       out->add_xy(w.x);
       out->add_xy(w.y);
     }
+  }
+  for (const visibility::CellBand& b : s->grid_->bands()) {
+    g->add_band_z(b.z0);
+    g->add_band_z(b.z1);
   }
 
   s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()), 4096,

@@ -14,6 +14,7 @@
 #include "scenes/catalog.h"
 #include "scenes/geometry_codec.h"
 #include "scenes/progress.h"
+#include "scenes/terrain.h"
 #include "server/pvs_scheduler.h"
 #include "server/pvs_store.h"
 #include "server/task_queue.h"
@@ -58,6 +59,8 @@ class ServedScene {
   const std::string& name() const { return name_; }
   const scenes::Scene& scene() const { return scene_; }
   const visibility::ViewcellGrid& grid() const { return *grid_; }
+  // The scene's terrain heights (walks put the eye above them); null: flat ground at z = 0.
+  const std::shared_ptr<const scenes::TerrainHeight>& terrain() const { return terrain_; }
   const scenes::ViewcellSpec& viewcell() const { return viewcell_; }
   const vistream::v1::SceneInfo& scene_info() const { return scene_info_; }
   const scenes::EncodedMesh& geometry(uint32_t object) const { return geometry_[object]; }
@@ -88,6 +91,7 @@ class ServedScene {
   scenes::Scene scene_;
   scenes::ViewcellSpec viewcell_;
   std::unique_ptr<visibility::ViewcellGrid> grid_;
+  std::shared_ptr<const scenes::TerrainHeight> terrain_;
   std::unique_ptr<visibility::KdTree> tree_;
   std::unique_ptr<visibility::PvsComputer> computer_;
   std::vector<std::unique_ptr<gl::PvsBackend>> backends_;  // one per worker (null: the CPU raster)

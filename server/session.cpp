@@ -214,13 +214,19 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
           "pose %d: position (%.2f, %.2f) is outside the viewcell grid [%.1f, %.1f] x [%.1f, %.1f] m", poses_, p.x,
           p.y, b.min.x, b.max.x, b.min.y, b.max.y));
     }
-    // The PVSs hold for eyes inside the viewcells' band only (a client above the roofs sees
-    // what no viewcell's PVS holds).
+    // The PVSs hold for eyes inside their viewcell's band only (a client above the roofs sees
+    // what no viewcell's PVS holds); where cells follow terrain, each cell has its own.
     const visibility::ViewcellGrid& grid = scene_->grid();
-    if (!(p.z >= grid.base_z() && p.z <= grid.base_z() + grid.height())) {
+    const visibility::CellBand band = grid.Band(*cell);
+    if (!(p.z >= band.z0 && p.z <= band.z1)) {
+      if (!grid.has_bands()) {
+        return absl::OutOfRangeError(absl::StrFormat(
+            "pose %d: eye height %.2f m is outside the viewcells' band [%.2f, %.2f] m", poses_, p.z, band.z0, band.z1));
+      }
+      const visibility::CellCoord c = grid.Coord(*cell);
       return absl::OutOfRangeError(absl::StrFormat(
-          "pose %d: eye height %.2f m is outside the viewcells' band [%.2f, %.2f] m", poses_, p.z, grid.base_z(),
-          grid.base_z() + grid.height()));
+          "pose %d: eye height %.2f m is outside viewcell %d,%d's band [%.2f, %.2f] m", poses_, p.z, c.i, c.j,
+          band.z0, band.z1));
     }
     position_ = p;
     velocity_ = ToVec(pose.velocity());

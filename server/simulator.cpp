@@ -191,7 +191,7 @@ absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEnt
                                     PvsMemo* memo) {
   absl::StatusOr<const scenes::WalkPath*> w = FindWalk(entry, path);
   if (!w.ok()) return w.status();
-  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**w, std::max(0.1, (*w)->speed_mps));
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**w, std::max(0.1, (*w)->speed_mps), scene.terrain());
   if (!walk.ok()) return walk.status();
   double r = 0.0;
   std::set<CellId> seen;
@@ -760,7 +760,7 @@ absl::StatusOr<SimulationResult> Simulate(ServedScene& scene, const scenes::Cata
   if (!(speed > 0.0) || !std::isfinite(speed)) {
     return absl::InvalidArgumentError(absl::StrCat("speed ", speed * 3.6, " km/h is not a positive number"));
   }
-  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**path, speed * options.time_scale);
+  absl::StatusOr<scenes::Walk> walk = scenes::Walk::Create(**path, speed * options.time_scale, scene.terrain());
   if (!walk.ok()) return walk.status();
   SimulationResult result;
   result.speed_mps = speed;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
 #include <fstream>
 #include <set>
 
@@ -511,6 +512,75 @@ TEST(PvsFile, RoundTrips) {
   EXPECT_TRUE(g->Matches(grid));
   const ViewcellGrid other = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 25, 0.5, 2);
   EXPECT_FALSE(g->Matches(other));
+}
+
+// Cells that follow terrain: their bands are stored (version 3) and must match; a flat grid's
+// file is version 2, byte for byte what writers before bands wrote.
+TEST(PvsFile, BandsRoundTripAsVersion3AndFlatFilesStayVersion2) {
+  const ViewcellGrid flat = *ViewcellGrid::Create(Aabb{glm::dvec3(-100, 50, 0), glm::dvec3(49, 149, 5)}, 50, 0.5, 2);
+  std::vector<CellBand> bands;
+  for (int k = 0; k < 6; ++k) bands.push_back({0.5 + k, 2.5 + 2 * k});
+  const ViewcellGrid hilly = *ViewcellGrid::WithBands(flat, bands);
+  scenes::Scene scene;
+  scene.name = "t";
+  scene.objects.resize(300);
+  const PvsFile made = MakePvsFile(scene, hilly, SomeFile().sets, {"agvs", 10, 1.0, 0.0});
+  EXPECT_EQ(made.bands, bands);
+  const std::string bytes = EncodePvsFile(made);
+  uint32_t version = 0;
+  std::memcpy(&version, bytes.data() + 8, 4);
+  EXPECT_EQ(version, 3u);
+  const absl::StatusOr<PvsFile> g = DecodePvsFile(bytes, "hilly.pvs");
+  ASSERT_TRUE(g.ok()) << g.status();
+  EXPECT_EQ(g->bands, bands);
+  EXPECT_EQ(g->sets, made.sets);
+  EXPECT_TRUE(g->Matches(hilly));
+  EXPECT_FALSE(g->Matches(flat));  // sets computed for other cells
+  const absl::Status refused = CheckPvsFileMatches(*g, flat, scene, "hilly.pvs");
+  EXPECT_EQ(refused.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("bands following terrain"), std::string::npos) << refused;
+  std::vector<CellBand> other = bands;
+  other[4].z1 += 0.25;
+  EXPECT_FALSE(g->Matches(*ViewcellGrid::WithBands(flat, other)));
+  // Truncated anywhere, or a band empty: a clear error.
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    ASSERT_FALSE(DecodePvsFile(std::string_view(bytes).substr(0, n), "cut.pvs").ok()) << n;
+  }
+  std::string empty_band = bytes;
+  const size_t band0 = 8 + 4 + 1 + 1 + 8 + 8 + 5 * 8 + 2 * 4;  // magic, version, "t", counts, grid
+  const double high = 100.0;
+  std::memcpy(empty_band.data() + band0, &high, 8);  // cell 0's z0 above its z1
+  const absl::StatusOr<PvsFile> e = DecodePvsFile(empty_band, "band.pvs");
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.status().message().find("cell 0's band"), std::string::npos) << e.status();
+
+  // A flat grid's file: version 2, and exactly the layout writers before bands wrote.
+  const PvsFile plain = MakePvsFile(scene, flat, SomeFile().sets, {"agvs", 10, 1.0, 0.0});
+  EXPECT_TRUE(plain.bands.empty());
+  std::string v2;
+  auto raw = [&v2](const auto& v) { v2.append(reinterpret_cast<const char*>(&v), sizeof(v)); };
+  v2 += "VSPVS001";
+  raw(uint32_t{2});
+  v2 += '\x01';
+  v2 += 't';
+  raw(uint64_t{300});
+  raw(plain.scene_fingerprint);
+  for (double d : {50.0, 0.5, 2.0, -100.0, 50.0}) raw(d);
+  raw(int32_t{3});
+  raw(int32_t{2});
+  v2 += '\x04';
+  v2 += "agvs";
+  raw(uint64_t{10});
+  raw(1.0);
+  raw(0.0);
+  // Cells 0 to 5: {0, 1, 2, 299}, {}, {64, 128, 200}, {}, {}, {7} as counts and varint gaps.
+  for (int b : {4, 0, 0, 0, 0xa8, 0x02, 0, 3, 0x40, 0x3f, 0x47, 0, 0, 1, 7}) v2 += static_cast<char>(b);
+  EXPECT_EQ(EncodePvsFile(plain), v2);
+  const absl::StatusOr<PvsFile> old = DecodePvsFile(v2, "old.pvs");
+  ASSERT_TRUE(old.ok()) << old.status();
+  EXPECT_TRUE(old->bands.empty());
+  EXPECT_TRUE(old->Matches(flat));
+  EXPECT_FALSE(old->Matches(hilly));  // a flat file is never served for cells that follow terrain
 }
 
 TEST(PvsFile, LoadsOnlyForItsOwnGridAndScene) {

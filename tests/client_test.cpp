@@ -533,6 +533,55 @@ TEST(ClientGrid, FindsTheCellTheServerFinds) {
   }
 }
 
+// A server older than bands (or a flat scene) sends none: every cell's band is the grid's. A
+// server whose cells follow terrain sends each cell's; a list of the wrong length is bad data.
+TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
+  v1::SceneInfo info;
+  v1::ViewcellGrid* grid = info.mutable_grid();
+  grid->set_cell_size_m(10);
+  grid->set_nx(2);
+  grid->set_ny(1);
+  grid->set_base_z_m(0.5);
+  grid->set_height_m(2);
+  {
+    ObjectStore store(0);
+    std::vector<Event> events;
+    events.emplace_back(info);
+    store.Apply(std::move(events), std::nullopt);
+    ASSERT_FALSE(store.failure().has_value());
+    EXPECT_FALSE(store.grid().has_bands());
+    EXPECT_EQ(store.grid().Band(1), (std::pair<double, double>{0.5, 2.5}));
+    EXPECT_TRUE(store.grid().InBand(1, 1.7));
+    EXPECT_FALSE(store.grid().InBand(1, 3.0));
+  }
+  for (double z : {3.5, 14.0, 6.0, 13.0}) grid->add_band_z(z);
+  {
+    ObjectStore store(0);
+    std::vector<Event> events;
+    events.emplace_back(info);
+    store.Apply(std::move(events), std::nullopt);
+    ASSERT_FALSE(store.failure().has_value());
+    EXPECT_TRUE(store.grid().has_bands());
+    EXPECT_EQ(store.grid().Band(0), (std::pair<double, double>{3.5, 14.0}));
+    EXPECT_EQ(store.grid().Band(1), (std::pair<double, double>{6.0, 13.0}));
+    EXPECT_TRUE(store.grid().InBand(0, 4.0));
+    EXPECT_FALSE(store.grid().InBand(1, 4.0));
+  }
+  for (const auto& [bands, says] : {std::pair{std::vector<double>{3.5, 14.0, 6.0}, "3 band values for 2 cells"},
+                                    std::pair{std::vector<double>{3.5, 14.0, 6.0, 6.0}, "viewcell 1's band"}}) {
+    grid->clear_band_z();
+    for (double z : bands) grid->add_band_z(z);
+    ObjectStore store(0);
+    std::vector<Event> events;
+    events.emplace_back(info);
+    store.Apply(std::move(events), std::nullopt);
+    ASSERT_TRUE(store.failure().has_value());
+    EXPECT_TRUE(store.failure_is_bad_data());
+    EXPECT_NE(store.failure()->find(says), std::string::npos) << *store.failure();
+    EXPECT_FALSE(store.has_scene_info());
+  }
+}
+
 TEST(ObjectStore, OverBudgetDropsWhatNoNearbyCellNeedsFirstAndNeverTheCurrentCell) {
   v1::SceneInfo info;
   v1::ViewcellGrid* grid = info.mutable_grid();

@@ -6,8 +6,10 @@
 #include <gtest/gtest.h>
 
 #include "scenes/city_generator.h"
+#include "scenes/mesh.h"
 #include "scenes/progress.h"
 #include "scenes/random.h"
+#include "tests/terrain_test_util.h"
 #include "tests/test_util.h"
 #include "visibility/viewcell_grid.h"
 
@@ -290,6 +292,36 @@ TEST(PvsProperty, CellsOnOrAcrossTheGroundCullOnlyWhatTheyCannotSee) {
   EXPECT_EQ(checked_cells, 48u);
   EXPECT_GT(culled, 2000u) << "too little culled for the test to mean much";
   EXPECT_GE(culled, culled_raised) << "a cell on the ground culled less than the same cell 1 cm up";
+}
+
+// Terrain occludes: from a viewcell in one valley (its band following the ground) the ridge
+// hides a shed in the other valley, through the terrain's own ground-up prisms alone.
+TEST(PvsTerrain, ARidgeHidesTheOtherValley) {
+  scenes::Scene flat;
+  flat.name = "sheds";
+  for (const double x : {-90.0, 90.0}) {
+    scenes::Mesh m;
+    const std::vector<glm::dvec2> square{{x - 2, -2}, {x + 2, -2}, {x + 2, 2}, {x - 2, 2}};
+    scenes::AppendConvexPrism(square, 0.0, 3.0, &m);
+    flat.AddObject(x < 0 ? "west shed" : "east shed", std::move(m));
+  }
+  scenes::Scene s = testing::OnTheRidge(flat);
+  ASSERT_TRUE(scenes::ValidateScene(s, "ridge").ok());
+  const ViewcellGrid grid = *ViewcellGrid::Create(s, {.size_m = 8, .height_m = 2.0, .base_m = 0.5});
+  ASSERT_TRUE(grid.has_bands());
+  const CellId cell = *grid.CellAt({-100, 4});
+  const Aabb box = grid.CellBox(cell);
+  EXPECT_GT(box.min.z, 1.0);  // the valley floor is above z = 0
+  const KdTree tree = KdTree::Build(s, {.leaf_size = 1});  // each object its own leaf
+  const PvsComputer computer(s, tree);
+  const PvsResult r = computer.Compute(box, {});
+  EXPECT_EQ(r.objects, (std::vector<ObjectId>{0, 2})) << "the west shed and the ground, not the east shed";
+  // Without the terrain's occluders nothing hides the east shed: the ridge is what did.
+  scenes::Scene bare = s;
+  std::erase_if(bare.occluders, [](const scenes::Occluder25D& o) { return o.object == 2; });
+  const KdTree bare_tree = KdTree::Build(bare, {.leaf_size = 1});
+  const PvsComputer bare_computer(bare, bare_tree);
+  EXPECT_EQ(bare_computer.Compute(box, {}).objects, (std::vector<ObjectId>{0, 1, 2}));
 }
 
 }  // namespace

@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include "scenes/city_generator.h"
+#include "tests/terrain_test_util.h"
+
 namespace vistream::visibility {
 namespace {
 
@@ -119,6 +122,81 @@ TEST(ViewcellGrid, BadParametersAreErrors) {
   absl::StatusOr<ViewcellGrid> huge = ViewcellGrid::Create(kBounds, 1e-4, 0.5, 2);
   ASSERT_FALSE(huge.ok());
   EXPECT_NE(huge.status().message().find("too large"), std::string::npos);
+}
+
+// --- Cells that follow terrain ---
+
+const scenes::ViewcellSpec kSpec{.size_m = 30, .height_m = 2.0, .base_m = 0.5};
+
+// z = 2 + x / 4 + y / 8 over [0, 100]^2 in 20 m quads.
+double Slope(double x, double y) { return 2.0 + 0.25 * x + 0.125 * y; }
+
+TEST(ViewcellGrid, ASceneWithoutTerrainGetsTodaysGrid) {
+  const scenes::Scene city = scenes::GenerateTestCity(true, 1);
+  ASSERT_TRUE(city.terrain.empty());
+  const ViewcellGrid a = *ViewcellGrid::Create(city, kSpec), b = *ViewcellGrid::Create(city.bounds, kSpec);
+  EXPECT_FALSE(a.has_bands());
+  EXPECT_EQ(a.nx(), b.nx());
+  EXPECT_EQ(a.ny(), b.ny());
+  EXPECT_EQ(a.corner(), b.corner());
+  EXPECT_EQ(a.Bounds(), b.Bounds());
+  for (CellId id = 0; id < a.CellCount(); ++id) {
+    ASSERT_EQ(a.CellBox(id), b.CellBox(id));
+    ASSERT_EQ(a.Band(id), (CellBand{0.5, 2.5}));
+  }
+}
+
+TEST(ViewcellGrid, BandsSpanTheGroundOfASlopeAndZeroOffIt) {
+  const scenes::Scene s = testing::TerrainScene(Slope, {0, 0}, {100, 100}, 5, 5);
+  const absl::StatusOr<ViewcellGrid> g = ViewcellGrid::Create(s, kSpec);
+  ASSERT_TRUE(g.ok()) << g.status();
+  ASSERT_TRUE(g->has_bands());
+  EXPECT_EQ(g->nx(), 4);  // x from 0 to 120: the last column reaches past the terrain
+  EXPECT_EQ(g->bands().size(), g->CellCount());
+  // Cell (1, 1), [30, 60]^2: corners inside triangles hold the extremes.
+  const CellBand b11 = g->Band(g->Id({1, 1}));
+  EXPECT_NEAR(b11.z0, Slope(30, 30) + 0.5, 1e-9);
+  EXPECT_NEAR(b11.z1, Slope(60, 60) + 2.5, 1e-9);
+  const scenes::Aabb box = g->CellBox(CellCoord{1, 1});
+  EXPECT_EQ(box.min, glm::dvec3(30, 30, b11.z0));
+  EXPECT_EQ(box.max, glm::dvec3(60, 60, b11.z1));
+  // Cell (3, 0), [90, 120] x [0, 30]: partly off the terrain, where the ground is 0.
+  const CellBand b30 = g->Band(g->Id({3, 0}));
+  EXPECT_EQ(b30.z0, 0.5);
+  EXPECT_NEAR(b30.z1, Slope(100, 30) + 2.5, 1e-9);
+  // The bounds: every band's union.
+  EXPECT_EQ(g->Bounds().min.z, 0.5);
+  EXPECT_NEAR(g->Bounds().max.z, Slope(100, 100) + 2.5, 1e-9);
+  // The spec's band stays what it was: the band above the ground.
+  EXPECT_EQ(g->base_z(), 0.5);
+  EXPECT_EQ(g->height(), 2.0);
+}
+
+TEST(ViewcellGrid, BandsOfABumpyTinHoldItsPeaksAndEdgeCrossings) {
+  // A peak of 8 m at (10, 10) in a 2 m plain, 10 m quads; cells of 6 m from 0.
+  auto peak = [](double x, double y) { return x == 10.0 && y == 10.0 ? 8.0 : 2.0; };
+  const scenes::Scene s = testing::TerrainScene(peak, {0, 0}, {20, 20}, 2, 2);
+  const ViewcellGrid g = *ViewcellGrid::Create(s, {.size_m = 6, .height_m = 2.0, .base_m = 0.5});
+  // Cell (1, 1), [6, 12]^2, holds the peak vertex.
+  EXPECT_EQ(g.Band(g.Id({1, 1})).z1, 8.0 + 2.5);
+  // Cell (0, 1), [0, 6] x [6, 12]: the edge (0, 10)-(10, 10) crosses x = 6 at 2 + 0.6 * 6.
+  EXPECT_NEAR(g.Band(g.Id({0, 1})).z1, 5.6 + 2.5, 1e-9);
+  EXPECT_EQ(g.Band(g.Id({0, 1})).z0, 2.5);
+  // Cell (3, 3), [18, 24]^2: partly past the terrain's edge at 20, where the ground is 0; its
+  // highest ground at (18, 18) on the peak's diagonal, 2 + 0.2 * 6.
+  EXPECT_EQ(g.Band(g.Id({3, 3})).z0, 0.5);
+  EXPECT_NEAR(g.Band(g.Id({3, 3})).z1, 3.2 + 2.5, 1e-9);
+}
+
+TEST(ViewcellGrid, WithBandsRefusesTheWrongCountAndEmptyBands) {
+  const ViewcellGrid flat = Grid();
+  EXPECT_FALSE(ViewcellGrid::WithBands(flat, {}).ok());
+  std::vector<CellBand> bands(flat.CellCount(), CellBand{1.0, 3.0});
+  EXPECT_TRUE(ViewcellGrid::WithBands(flat, bands).ok());
+  bands[3] = {3.0, 3.0};
+  EXPECT_FALSE(ViewcellGrid::WithBands(flat, bands).ok());
+  bands[3] = {NAN, 3.0};
+  EXPECT_FALSE(ViewcellGrid::WithBands(flat, bands).ok());
 }
 
 }  // namespace

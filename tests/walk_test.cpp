@@ -5,7 +5,10 @@
 
 #include <cmath>
 
+#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+
+#include "tests/terrain_test_util.h"
 
 namespace vistream::scenes {
 namespace {
@@ -60,6 +63,32 @@ TEST(Walk, ASegmentAlongACellEdgeStaysExactlyOnIt) {
       ASSERT_EQ(p.eye.x, 200.0) << "t " << t;
     }
   }
+}
+
+TEST(Walk, OnASlopeTheEyeKeepsItsHeightAboveTheGround) {
+  // z = 2 + x / 4 + y / 8: the walk climbs the slope diagonally, then along y.
+  auto slope = [](double x, double y) { return 2.0 + 0.25 * x + 0.125 * y; };
+  const Scene s = testing::TerrainScene(slope, {0, 0}, {100, 100}, 5, 5);
+  WalkPath path;
+  path.name = "up";
+  path.eye_height_m = 1.6;
+  path.waypoints = {{5, 5}, {80, 60}, {80, 95}};
+  absl::StatusOr<Walk> w = Walk::Create(path, 1.5, std::make_shared<const TerrainHeight>(s));
+  ASSERT_TRUE(w.ok()) << w.status();
+  for (int k = 0; k <= 200; ++k) {
+    const WalkPose p = w->At(w->duration_s() * k / 200.0);
+    ASSERT_NEAR(p.eye.z, slope(p.eye.x, p.eye.y) + 1.6, 1e-6) << k;
+  }
+  // On the leg along y the ground rises 1/8 m a metre: so does the eye.
+  const WalkPose up = w->At((glm::distance(glm::dvec2(5, 5), glm::dvec2(80, 60)) + 10.0) / 1.5);
+  EXPECT_NEAR(up.velocity.y, 1.5, 1e-9);
+  EXPECT_NEAR(up.velocity.z, 1.5 * 0.125, 1e-6);
+  // Flat terrain, no terrain, an empty one: the eye at its height above z = 0, as ever.
+  Scene none;
+  absl::StatusOr<Walk> flat = Walk::Create(path, 1.5, std::make_shared<const TerrainHeight>(none));
+  ASSERT_TRUE(flat.ok());
+  EXPECT_EQ(flat->At(3.0).eye.z, 1.6);
+  EXPECT_EQ(flat->At(3.0).velocity.z, 0.0);
 }
 
 }  // namespace

@@ -16,7 +16,7 @@ absl::StatusOr<SampledScene> SampledScene::Load(const std::string& scene_arg, do
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(scene_arg, cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(scene_arg);
   if (!scene.ok()) return scene.status();
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, spec);
   if (!grid.ok()) return grid.status();
   absl::StatusOr<std::unique_ptr<visibility::GlobalSampler>> sampler =
       visibility::GlobalSampler::Create(*scene, *grid, options);

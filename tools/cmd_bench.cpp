@@ -182,8 +182,10 @@ int Table1(const Table1Args& a) {
   const size_t per_cell = 1 + a.res.size() * a.backends.size() + (a.batch ? 1 + a.res.size() : 0);
   scenes::Progress progress(ToolRun(), "table1", a.sizes.size() * a.cells * per_cell);
   for (double size : a.sizes) {
-    absl::StatusOr<visibility::ViewcellGrid> grid =
-        visibility::ViewcellGrid::Create(scene->bounds, size, spec.base_m, 2.0);
+    scenes::ViewcellSpec sized = spec;
+    sized.size_m = size;
+    sized.height_m = 2.0;
+    absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, sized);
     if (!grid.ok()) return Fail(grid.status());
     std::vector<scenes::Aabb> cells;
     const std::vector<visibility::CellCoord> samples = grid->Sample(a.cells, a.seed);

@@ -152,7 +152,7 @@ int BenchAgvs(const BenchAgvsArgs& a) {
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, spec);
   if (!grid.ok()) return Fail(grid.status());
 
   // The measured side first: views from uniform points of uniform cells, as the estimator's

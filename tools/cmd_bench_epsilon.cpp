@@ -113,8 +113,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
   if (a.pvs_cell > 0) {
     const visibility::KdTree tree = visibility::KdTree::Build(*scene);
     const visibility::PvsComputer computer(*scene, tree);
-    absl::StatusOr<visibility::ViewcellGrid> grid =
-        visibility::ViewcellGrid::Create(scene->bounds, a.pvs_cell, spec.base_m, spec.height_m);
+    scenes::ViewcellSpec sized = spec;
+    sized.size_m = a.pvs_cell;
+    absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, sized);
     if (!grid.ok()) return Fail(grid.status());
     for (size_t k = 0; k < boxes.size(); ++k) {
       const std::optional<visibility::CellId> cell = grid->CellAt(glm::dvec2(boxes[k].Centre()));

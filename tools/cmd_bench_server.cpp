@@ -33,6 +33,7 @@
 #include "client/session_stream.h"
 #include "server/pvs_store.h"
 #include "server/server_config.h"
+#include "scenes/terrain.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
 #include "tools/replica_set.h"
@@ -240,7 +241,8 @@ std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibi
 
 SessionResult RunSession(const std::string& address, const client::ChannelSecurity& security,
                          const std::string& scene_name, const Streets& streets, const visibility::ViewcellGrid& grid,
-                         uint64_t seed, double speed, double seconds, bool masks, const std::atomic<bool>& cancel) {
+                         const scenes::TerrainHeight& terrain, uint64_t seed, double speed, double seconds, bool masks,
+                         const std::atomic<bool>& cancel) {
   SessionResult out;
   client::SessionStream s(address, security);
   s.set_keep_geometry(false);
@@ -249,10 +251,11 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
   s.Start(hello);
   s.SendCredit(uint64_t{1} << 50);
   Walker walker(streets, seed, speed);
+  // 1.2 m above the band's base: on flat ground base_z + 1.2, over terrain that above the ground.
   const double eye = grid.base_z() + 1.2;
   auto pose = [&] {
     const glm::dvec2 p = walker.position(), v = walker.velocity();
-    s.SendPose({p.x, p.y, eye}, {v.x, v.y, 0.0});
+    s.SendPose({p.x, p.y, terrain.empty() ? eye : terrain.HeightAt(p) + eye}, {v.x, v.y, 0.0});
   };
   pose();
   visibility::CellId cell = *grid.CellAt(walker.position());
@@ -461,7 +464,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     stop_server();
     return Fail(scene.status());
   }
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, grid_spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, grid_spec);
   if (!grid.ok()) {
     stop_server();
     return Fail(grid.status());
@@ -474,6 +477,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   }
 
   const Streets streets(*scene, grid->Bounds(), 3.0);
+  const scenes::TerrainHeight terrain(*scene);
   std::atomic<bool> sampling{true};
   std::atomic<uint64_t> max_rss{0};
   std::thread rss([&] {
@@ -498,7 +502,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     std::vector<std::jthread> threads;
     for (size_t k = 0; k < a.sessions; ++k) {
       threads.emplace_back([&, k] {
-        results[k] = RunSession(address, security, scene->name, streets, *grid, a.seed * 1000003 + k,
+        results[k] = RunSession(address, security, scene->name, streets, *grid, terrain, a.seed * 1000003 + k,
                                 a.speed_kmh / 3.6, a.seconds, a.masks == "on", CancelFlag());
         ++finished;
       });

@@ -107,7 +107,7 @@ int PvsAll(const PvsArgs& a) {
   const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor(a.scene, a.cell_size);
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, spec);
   if (!grid.ok()) return Fail(grid.status());
   const auto t0 = std::chrono::steady_clock::now();
   const visibility::KdTree tree = visibility::KdTree::Build(*scene);
@@ -243,7 +243,7 @@ int Pvs(const PvsArgs& a) {
   double load_s = 0.0;
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.scene, &load_s);
   if (!scene.ok()) return Fail(scene.status());
-  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene->bounds, spec);
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(*scene, spec);
   if (!grid.ok()) return Fail(grid.status());
   const visibility::CellCoord coord{ci, cj};
   if (!grid->Valid(coord)) {

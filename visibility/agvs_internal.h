@@ -146,8 +146,8 @@ inline FirstRay FirstRayOf(double a, double b, bool whole) {
 }
 
 // Calls visit(cell, t) for each viewcell of `grid` the part [t0, t1] of the line origin + t dir
-// passes through, with t a parameter inside that cell, in order along the line; `vs` is the
-// grid's box, frame-relative (the sampler's view space).
+// passes through, with t a parameter inside that cell (its band too, when cells have their
+// own), in order along the line; `vs` is the grid's box, frame-relative (the sampler's view space).
 template <typename F>
 void VisitCells(const ViewcellGrid& grid, const Aabb& vs, const glm::dvec3& origin, const glm::dvec3& dir, double t0,
               double t1, F&& visit) {
@@ -171,7 +171,24 @@ void VisitCells(const ViewcellGrid& grid, const Aabb& vs, const glm::dvec3& orig
   double t = t0;
   for (;;) {
     const double exit = std::min({tx, ty, t1});
-    visit(grid.Id({i, j}), 0.5 * (t + exit));
+    if (!grid.has_bands()) {
+      visit(grid.Id({i, j}), 0.5 * (t + exit));
+    } else {
+      // Cells follow the terrain: the line is in this cell only where it is in its band (the
+      // frame's z is 0, so bands are frame-relative as they are).
+      const CellId id = grid.Id({i, j});
+      const CellBand band = grid.Band(id);
+      double from = t, to = exit;
+      if (dir.z == 0.0) {
+        if (origin.z < band.z0 || origin.z > band.z1) from = kInf;
+      } else {
+        double za = (band.z0 - origin.z) / dir.z, zb = (band.z1 - origin.z) / dir.z;
+        if (za > zb) std::swap(za, zb);
+        from = std::max(from, za);
+        to = std::min(to, zb);
+      }
+      if (from <= to) visit(id, 0.5 * (from + to));
+    }
     if (exit >= t1) return;
     t = exit;
     if (tx <= ty) {

@@ -162,8 +162,9 @@ class EpsilonSuperset {
 double TypicalObjectSize(const scenes::Scene& scene);
 
 // `count` random ground-level neighbourhoods: boxes of edge `size` whose bottom is `base`
-// above the ground, uniform over the scene's extent, none meeting an object's box (the viewer
-// walks the streets). Deterministic for a seed; fewer if the streets are hard to hit.
+// above the ground (over terrain: above the highest ground under the box), uniform over the
+// scene's extent, none meeting an object's box but the terrain's (the viewer walks the
+// streets). Deterministic for a seed; fewer if the streets are hard to hit.
 std::vector<Aabb> SampleNeighbourhoods(const scenes::Scene& scene, size_t count, double size, double base,
                                        uint64_t seed);
 

@@ -11,6 +11,7 @@
 #include <glm/geometric.hpp>
 
 #include "scenes/random.h"
+#include "scenes/terrain.h"
 #include "visibility/epsilon_superset_internal.h"
 #include "visibility/occluder_set.h"
 
@@ -186,11 +187,18 @@ std::vector<Aabb> SampleNeighbourhoods(const scenes::Scene& scene, size_t count,
   if (scene.bounds.Empty()) return out;
   scenes::Rng rng(seed);
   const glm::dvec2 lo(scene.bounds.min), hi(scene.bounds.max);
+  const scenes::TerrainHeight terrain(scene);
   for (size_t tries = 0; out.size() < count && tries < 1000 * count; ++tries) {
-    const glm::dvec3 c(rng.Uniform(lo.x, hi.x), rng.Uniform(lo.y, hi.y), base + 0.5 * size);
+    glm::dvec3 c(rng.Uniform(lo.x, hi.x), rng.Uniform(lo.y, hi.y), base + 0.5 * size);
+    if (!terrain.empty()) {
+      // Above the highest ground under the box: it stands on the terrain, not in it.
+      const glm::dvec2 corner(c.x - 0.5 * size, c.y - 0.5 * size);
+      c.z += terrain.Range(corner, corner + glm::dvec2(size)).max;
+    }
     const Aabb box{c - 0.5 * size, c + 0.5 * size};
     bool free = true;
     for (const scenes::Object& o : scene.objects) {
+      if (std::binary_search(scene.terrain.begin(), scene.terrain.end(), o.id)) continue;  // under the box
       if (!o.bounds.Empty() && o.bounds.Overlaps(box)) {
         free = false;
         break;

@@ -15,7 +15,8 @@ namespace vistream::visibility {
 
 namespace {
 constexpr char kMagic[8] = {'V', 'S', 'P', 'V', 'S', '0', '0', '1'};
-constexpr uint32_t kVersion = 2;  // 1: without the scene fingerprint (still read)
+constexpr uint32_t kVersion = 2;       // 1: without the scene fingerprint (still read)
+constexpr uint32_t kBandsVersion = 3;  // version 2 with per-cell bands: written only for grids that have them
 constexpr uint64_t kMaxObjects = uint64_t{1} << 32;
 constexpr uint64_t kMaxCells = uint64_t{1} << 31;
 }  // namespace
@@ -32,6 +33,7 @@ PvsFile MakePvsFile(const scenes::Scene& scene, const ViewcellGrid& grid, Global
   f.corner_y = grid.corner().y;
   f.nx = grid.nx();
   f.ny = grid.ny();
+  f.bands = grid.bands();
   f.strategy = provenance.strategy;
   f.samples = provenance.samples;
   f.seconds = provenance.seconds;
@@ -46,9 +48,10 @@ absl::Status CheckPvsFileMatches(const PvsFile& file, const ViewcellGrid& grid, 
   if (!file.Matches(grid)) {
     return absl::InvalidArgumentError(absl::StrCat(
         where, ": made for another scene or viewcell grid (the file: scene '", file.scene, "', ", file.nx, " x ", file.ny, " cells of ",
-        file.cell_size, " m at z ", file.base_z, "..", file.base_z + file.height, "; this scene's grid: ", grid.nx(),
+        file.cell_size, " m at z ", file.base_z, "..", file.base_z + file.height,
+        file.bands.empty() ? "" : " above the ground (bands following terrain)", "; this scene's grid: ", grid.nx(),
         " x ", grid.ny(), " cells of ", grid.cell_size(), " m at z ", grid.base_z(), "..",
-        grid.base_z() + grid.height(), ")"));
+        grid.base_z() + grid.height(), grid.has_bands() ? " above the ground (bands following terrain)" : "", ")"));
   }
   if (file.sets.object_count() != object_count) {
     return absl::InvalidArgumentError(absl::StrCat(where, ": made for another scene ('", file.scene, "', ",
@@ -78,7 +81,8 @@ absl::StatusOr<PvsFile> LoadPvsFile(const std::string& path, const ViewcellGrid&
 
 bool PvsFile::Matches(const ViewcellGrid& grid) const {
   return nx == grid.nx() && ny == grid.ny() && cell_size == grid.cell_size() && base_z == grid.base_z() &&
-         height == grid.height() && corner_x == grid.corner().x && corner_y == grid.corner().y;
+         height == grid.height() && corner_x == grid.corner().x && corner_y == grid.corner().y &&
+         bands == grid.bands();
 }
 
 void EncodeSets(const GlobalPvs& sets, ByteWriter* out) {
@@ -182,7 +186,7 @@ absl::StatusOr<std::vector<scenes::ObjectId>> DecodeCellRecord(std::string_view 
 std::string EncodePvsFile(const PvsFile& f) {
   ByteWriter w;
   w.PutRaw(std::string_view(kMagic, sizeof(kMagic)));
-  w.Put<uint32_t>(kVersion);
+  w.Put<uint32_t>(f.bands.empty() ? kVersion : kBandsVersion);
   w.PutString(f.scene);
   w.Put<uint64_t>(f.sets.object_count());
   w.Put<uint64_t>(f.scene_fingerprint);
@@ -193,6 +197,10 @@ std::string EncodePvsFile(const PvsFile& f) {
   w.Put(f.corner_y);
   w.Put(f.nx);
   w.Put(f.ny);
+  for (const CellBand& b : f.bands) {
+    w.Put(b.z0);
+    w.Put(b.z1);
+  }
   w.PutString(f.strategy);
   w.Put(f.samples);
   w.Put(f.seconds);
@@ -214,8 +222,8 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
   }
   uint32_t version = 0;
   if (absl::Status st = r.Get(&version, "the version"); !st.ok()) return st;
-  if (version != 1 && version != kVersion) {
-    return r.Error(absl::StrCat("version ", version, " is not supported (1 or ", kVersion, ")"));
+  if (version != 1 && version != kVersion && version != kBandsVersion) {
+    return r.Error(absl::StrCat("version ", version, " is not supported (1 to ", kBandsVersion, ")"));
   }
   uint64_t objects = 0;
   absl::Status st = r.GetString(&f.scene, "the scene name", 4096);
@@ -238,6 +246,19 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
     return r.Error(absl::StrCat("grid of ", f.nx, " x ", f.ny, " cells is empty or too large"));
   }
   const uint64_t cells = static_cast<uint64_t>(f.nx) * static_cast<uint64_t>(f.ny);
+  if (version == kBandsVersion) {
+    // 16 bytes a band: refuse what the remaining bytes cannot hold before allocating them.
+    if (cells > r.remaining() / 16) return r.Error(absl::StrCat("too few bytes left for ", cells, " cells' bands"));
+    f.bands.resize(cells);
+    for (uint64_t c = 0; c < cells; ++c) {
+      CellBand& b = f.bands[c];
+      if (st = r.Get(&b.z0, "the bands"); !st.ok()) return st;
+      if (st = r.Get(&b.z1, "the bands"); !st.ok()) return st;
+      if (!(std::isfinite(b.z0) && std::isfinite(b.z1) && b.z0 < b.z1)) {
+        return r.Error(absl::StrCat("cell ", c, "'s band [", b.z0, ", ", b.z1, "] is empty or not finite"));
+      }
+    }
+  }
   st = r.GetString(&f.strategy, "the strategy", 64);
   if (st.ok()) st = r.Get(&f.samples, "the sample count");
   if (st.ok()) st = r.Get(&f.seconds, "the seconds");

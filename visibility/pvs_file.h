@@ -3,11 +3,14 @@
 // serves them. Written by `vistream agvs -o`; decoding is strict (the bytes may come from
 // anywhere) and every error names the source and the byte offset.
 //
-// Layout, little-endian: "VSPVS001", u32 version (2), scene name (varint length + bytes),
-// u64 object count, u64 scene fingerprint (scenes::SceneFingerprint; version 2 only), grid (f64 cell size, base z, height, corner x, corner y; i32 nx, ny),
-// provenance (strategy name, u64 samples, f64 seconds, f64 estimated pixel error), then per
+// Layout, little-endian: "VSPVS001", u32 version (2, or 3 for a grid with per-cell bands),
+// scene name (varint length + bytes), u64 object count, u64 scene fingerprint
+// (scenes::SceneFingerprint; versions 2 and 3), grid (f64 cell size, base z, height, corner x,
+// corner y; i32 nx, ny; version 3 only: nx * ny pairs of f64 z0, z1, each cell's band in id
+// order), provenance (strategy name, u64 samples, f64 seconds, f64 estimated pixel error), then per
 // cell in id order: varint count, then the ascending ids as varint gaps (first id, then each
-// id minus the previous one minus one). Nothing may follow.
+// id minus the previous one minus one). Nothing may follow. A flat grid (no bands) is written
+// as version 2, byte for byte what writers before bands wrote; versions 1 to 3 are read.
 
 #include <cstdint>
 #include <optional>
@@ -30,13 +33,15 @@ struct PvsFile {
   double cell_size = 0.0, base_z = 0.0, height = 0.0;
   double corner_x = 0.0, corner_y = 0.0;
   int32_t nx = 0, ny = 0;
+  std::vector<CellBand> bands;  // per cell, in id order (version 3); empty: every cell's is base_z..base_z + height
   std::string strategy;
   uint64_t samples = 0;
   double seconds = 0.0;
   double estimated_pixel_error = 0.0;
   GlobalPvs sets;  // cells nx * ny, objects: the scene's object count
 
-  // Whether the file was made for `grid` (same cells, exactly).
+  // Whether the file was made for `grid` (same cells and bands, exactly: a flat file does not
+  // match a grid that follows terrain).
   bool Matches(const ViewcellGrid& grid) const;
 };
 

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <absl/strings/str_cat.h>
 
 #include "scenes/random.h"
+#include "scenes/terrain.h"
 
 namespace vistream::visibility {
 
@@ -37,6 +39,39 @@ absl::StatusOr<ViewcellGrid> ViewcellGrid::Create(const scenes::Aabb& bounds, do
   return g;
 }
 
+absl::StatusOr<ViewcellGrid> ViewcellGrid::Create(const scenes::Scene& scene, const scenes::ViewcellSpec& spec) {
+  absl::StatusOr<ViewcellGrid> flat = Create(scene.bounds, spec);
+  if (!flat.ok() || scene.terrain.empty()) return flat;
+  const scenes::TerrainHeight terrain(scene);
+  std::vector<CellBand> bands(flat->CellCount());
+  for (CellId id = 0; id < bands.size(); ++id) {
+    const CellCoord c = flat->Coord(id);
+    const glm::dvec2 lo(flat->x0_ + c.i * flat->size_, flat->y0_ + c.j * flat->size_);
+    const scenes::HeightRange g = terrain.Range(lo, lo + glm::dvec2(flat->size_));
+    bands[id] = {g.min + spec.base_m, g.max + spec.base_m + spec.height_m};
+  }
+  return WithBands(*std::move(flat), std::move(bands));
+}
+
+absl::StatusOr<ViewcellGrid> ViewcellGrid::WithBands(ViewcellGrid flat, std::vector<CellBand> bands) {
+  if (bands.size() != flat.CellCount()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(bands.size(), " viewcell bands for a grid of ", flat.CellCount(), " cells"));
+  }
+  flat.zlo_ = std::numeric_limits<double>::infinity();
+  flat.zhi_ = -std::numeric_limits<double>::infinity();
+  for (size_t k = 0; k < bands.size(); ++k) {
+    if (!(std::isfinite(bands[k].z0) && std::isfinite(bands[k].z1) && bands[k].z0 < bands[k].z1)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("viewcell ", k, "'s band [", bands[k].z0, ", ", bands[k].z1, "] is empty or not finite"));
+    }
+    flat.zlo_ = std::min(flat.zlo_, bands[k].z0);
+    flat.zhi_ = std::max(flat.zhi_, bands[k].z1);
+  }
+  flat.bands_ = std::move(bands);
+  return flat;
+}
+
 std::vector<CellCoord> ViewcellGrid::Sample(size_t count, uint64_t seed) const {
   count = std::min(count, CellCount());
   scenes::Rng rng(seed);
@@ -49,6 +84,11 @@ std::vector<CellCoord> ViewcellGrid::Sample(size_t count, uint64_t seed) const {
 }
 
 scenes::Aabb ViewcellGrid::CellBox(CellCoord c) const {
+  if (!bands_.empty()) {
+    const CellBand b = bands_[Id(c)];
+    return scenes::Aabb{glm::dvec3(x0_ + c.i * size_, y0_ + c.j * size_, b.z0),
+                        glm::dvec3(x0_ + c.i * size_ + size_, y0_ + c.j * size_ + size_, b.z1)};
+  }
   const glm::dvec3 lo(x0_ + c.i * size_, y0_ + c.j * size_, base_z_);
   return scenes::Aabb{lo, lo + glm::dvec3(size_, size_, height_)};
 }

@@ -1,8 +1,12 @@
 #pragma once
 // The viewcell grid: square cells of `size` metres over the scene's ground footprint, each an
-// eye-level box from base_z to base_z + height. Cell (i, j) covers
-// x in [x0 + i size, x0 + (i+1) size], y likewise, where x0, y0 are multiples of the size, so
-// the grid depends only on scene-local coordinates.
+// eye-level box. Cell (i, j) covers x in [x0 + i size, x0 + (i+1) size], y likewise, where x0,
+// y0 are multiples of the size, so the grid depends only on scene-local coordinates.
+//
+// The box's z range is the cell's band. Over flat ground (a scene without terrain) every cell
+// has the same band, base_z to base_z + height. Over terrain each cell has its own (bands()):
+// the ground within its square plus the eye band, [g_min + base_z, g_max + base_z + height]
+// where g_min, g_max are the lowest and highest ground over the square (scenes/terrain.h).
 
 #include <cstdint>
 #include <optional>
@@ -14,10 +18,17 @@
 
 #include "scenes/aabb.h"
 #include "scenes/catalog.h"
+#include "scenes/scene.h"
 
 namespace vistream::visibility {
 
 using CellId = uint32_t;
+
+// A cell's z range, scene-local metres; z0 < z1.
+struct CellBand {
+  double z0 = 0.0, z1 = 0.0;
+  friend bool operator==(const CellBand&, const CellBand&) = default;
+};
 
 struct CellCoord {
   int i = 0, j = 0;
@@ -35,17 +46,34 @@ class ViewcellGrid {
   static absl::StatusOr<ViewcellGrid> Create(const scenes::Aabb& bounds, const scenes::ViewcellSpec& spec) {
     return Create(bounds, spec.size_m, spec.base_m, spec.height_m);
   }
+  // The grid of `scene` (over its bounds) whose cells follow its terrain: each cell's band spans
+  // the ground over its square (scenes::TerrainHeight::Range) plus the spec's band above it. A
+  // scene without terrain gets exactly the bounds-based grid (no bands). Errors as above.
+  static absl::StatusOr<ViewcellGrid> Create(const scenes::Scene& scene, const scenes::ViewcellSpec& spec);
+  // `flat` with per-cell bands (one per cell, in id order): what a reader of stored bands (a PVS
+  // file, the protocol) rebuilds, and tests. Errors (INVALID_ARGUMENT): a count other than
+  // CellCount(), a band not finite or with z0 >= z1.
+  static absl::StatusOr<ViewcellGrid> WithBands(ViewcellGrid flat, std::vector<CellBand> bands);
 
   int nx() const { return nx_; }
   int ny() const { return ny_; }
   size_t CellCount() const { return static_cast<size_t>(nx_) * static_cast<size_t>(ny_); }
   double cell_size() const { return size_; }
+  // The spec's band: with no per-cell bands every cell's z range is base_z to base_z + height
+  // (scene-local metres); with bands, base_z is the height above the ground where each band
+  // starts, and height its depth above the highest ground.
   double base_z() const { return base_z_; }
   double height() const { return height_; }
+  // Per-cell bands, one per cell in id order; empty: every cell's is [base_z, base_z + height].
+  bool has_bands() const { return !bands_.empty(); }
+  const std::vector<CellBand>& bands() const { return bands_; }
+  // Cell `id`'s z range. Precondition: id < CellCount().
+  CellBand Band(CellId id) const { return bands_.empty() ? CellBand{base_z_, base_z_ + height_} : bands_[id]; }
   // Scene-local corner of cell (0, 0) in xy.
   glm::dvec2 corner() const { return {x0_, y0_}; }
-  // The box all cells together cover.
+  // The box all cells together cover (the union of their bands in z).
   scenes::Aabb Bounds() const {
+    if (!bands_.empty()) return {glm::dvec3(x0_, y0_, zlo_), glm::dvec3(x0_ + nx_ * size_, y0_ + ny_ * size_, zhi_)};
     return {glm::dvec3(x0_, y0_, base_z_), glm::dvec3(x0_ + nx_ * size_, y0_ + ny_ * size_, base_z_ + height_)};
   }
 
@@ -75,6 +103,8 @@ class ViewcellGrid {
   double size_ = 1.0, base_z_ = 0.0, height_ = 1.0;
   double x0_ = 0.0, y0_ = 0.0;
   int nx_ = 0, ny_ = 0;
+  std::vector<CellBand> bands_;  // empty: flat
+  double zlo_ = 0.0, zhi_ = 0.0;  // the bands' union, when there are bands
 };
 
 }  // namespace vistream::visibility
