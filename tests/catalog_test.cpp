@@ -198,9 +198,19 @@ TEST(Catalog, ShippedEntriesParseAndTheirWalksFollowStreets) {
     // The entry's walks and those the data gives (a city model's roads or free space).
     const std::vector<WalkPath> walks = WalksWithScenePaths(e->walks, *scene);
     EXPECT_FALSE(walks.empty()) << name << " has no walk path";
-    for (const WalkPath& w : walks) {
+    // Buildings only: the terrain's occluders are the ground walked on.
+    Scene buildings = *scene;
+    std::erase_if(buildings.occluders, [&](const Occluder25D& oc) {
+      return std::binary_search(scene->terrain.begin(), scene->terrain.end(), oc.object);
+    });
+    for (size_t i = 0; i < walks.size(); ++i) {
+      const WalkPath& w = walks[i];
+      // The catalog's walks keep a metre from every building; those derived from a street map
+      // follow the streets' centre lines, which may pass under a building (an arcade, a
+      // passage): they are checked on the walks' tests (derived_walks_test, osm_walks_test).
+      if (i >= e->walks.size() && e->source.kind == SceneSource::Kind::kOsm) continue;
       for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
-        EXPECT_TRUE(testing::SegmentClearOfOccluders(*scene, w.waypoints[k], w.waypoints[k + 1], 1.0))
+        EXPECT_TRUE(testing::SegmentClearOfOccluders(buildings, w.waypoints[k], w.waypoints[k + 1], 1.0))
             << name << ": walk '" << w.name << "' leg " << k << " runs into a building";
       }
     }
