@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # Writes shapes.gml (CityGML 2.0) and shapes_v1.gml (CityGML 1.0: the gabled house and the stacked
-# parts) with exactly the rings of shapes.city.json: the geometry functions below are copied from
-# make_shapes_cityjson.py (the CityJSON files' generator; keep the two in step). Rings: outer rings
+# parts) with exactly the rings of shapes.city.json: the geometry comes from make_shapes_cityjson.py
+# (the CityJSON files' generator, imported; run both from this folder). Rings: outer rings
 # counter-clockwise seen from outside the solid, holes clockwise; each ring starts at its corner of
 # least (z, x, y) and is written closed (first point repeated), as GML requires. Faces of a solid:
 # bottom faces (floor first), walls counter-clockwise seen from above starting at the wall at min y
@@ -18,150 +18,9 @@ TRANSLATE = [84990.0, 445980.0, 0.0]
 SCALE = 0.001                   # millimetres: every coordinate below is a whole number of them
 
 
-def P(x, y, z):
-    return (Fraction(x) + X0, Fraction(y) + Y0, Fraction(z))
-
-
-def start_least(ring):
-    i = min(range(len(ring)), key=lambda k: (ring[k][2], ring[k][0], ring[k][1]))
-    return ring[i:] + ring[:i]
-
-
-def newell(ring):
-    n = [Fraction(0)] * 3
-    for a, b in zip(ring, ring[1:] + ring[:1]):
-        n[0] += (a[1] - b[1]) * (a[2] + b[2])
-        n[1] += (a[2] - b[2]) * (a[0] + b[0])
-        n[2] += (a[0] - b[0]) * (a[1] + b[1])
-    return n
-
-
-def face(outer, *holes):
-    return [start_least(outer)] + [start_least(h) for h in holes]
-
-
-def box_faces(x0, y0, z0, x1, y1, z1, roof=True):
-    f = [face([P(x0, y0, z0), P(x0, y1, z0), P(x1, y1, z0), P(x1, y0, z0)]),   # floor
-         face([P(x0, y0, z0), P(x1, y0, z0), P(x1, y0, z1), P(x0, y0, z1)]),   # south (min y)
-         face([P(x1, y0, z0), P(x1, y1, z0), P(x1, y1, z1), P(x1, y0, z1)]),   # east
-         face([P(x1, y1, z0), P(x0, y1, z0), P(x0, y1, z1), P(x1, y1, z1)]),   # north
-         face([P(x0, y1, z0), P(x0, y0, z0), P(x0, y0, z1), P(x0, y1, z1)])]   # west
-    if roof:
-        f.append(face([P(x0, y0, z1), P(x1, y0, z1), P(x1, y1, z1), P(x0, y1, z1)]))
-    return f
-
-
-def check_closed(name, faces):
-    # Every directed edge once, and its reverse once: closed and consistently oriented.
-    edges = {}
-    for f in faces:
-        for r in f:
-            for a, b in zip(r, r[1:] + r[:1]):
-                assert (a, b) not in edges, (name, a, b)
-                edges[(a, b)] = True
-    for a, b in edges:
-        assert (b, a) in edges, (name, 'open edge', a, b)
-    # Outward: positive volume (divergence theorem over the faces' Newell normals).
-    vol = Fraction(0)
-    for f in faces:
-        for r in f:
-            o = r[0]
-            for a, b in zip(r[1:], r[2:]):
-                u = [a[i] - o[i] for i in range(3)]
-                v = [b[i] - o[i] for i in range(3)]
-                c = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
-                vol += sum(o[i] * c[i] for i in range(3)) / 6
-    assert vol > 0, (name, vol)
-    return vol
-
-
-def gabled():
-    f = [face([P(0, 0, 0), P(0, 8, 0), P(10, 8, 0), P(10, 0, 0)]),
-         face([P(0, 0, 0), P(10, 0, 0), P(10, 0, 6), P(0, 0, 6)]),
-         face([P(10, 0, 0), P(10, 8, 0), P(10, 8, 6), P(10, 4, 9), P(10, 0, 6)]),
-         face([P(10, 8, 0), P(0, 8, 0), P(0, 8, 6), P(10, 8, 6)]),
-         face([P(0, 8, 0), P(0, 0, 0), P(0, 0, 6), P(0, 4, 9), P(0, 8, 6)]),
-         face([P(0, 0, 6), P(10, 0, 6), P(10, 4, 9), P(0, 4, 9)]),
-         face([P(10, 8, 6), P(0, 8, 6), P(0, 4, 9), P(10, 4, 9)])]
-    assert check_closed('gabled', f) == 10 * 8 * 6 + 10 * 8 * 3 / 2
-    return f
-
-
-def tower():
-    podium = box_faces(20, 0, 0, 40, 20, 5, roof=False)
-    tw = box_faces(26, 6, 5, 34, 14, 30)
-    podium_roof = face([P(20, 0, 5), P(40, 0, 5), P(40, 20, 5), P(20, 20, 5)],
-                       [P(26, 6, 5), P(26, 14, 5), P(34, 14, 5), P(34, 6, 5)])
-    f = podium + tw[1:5] + [podium_roof, tw[5]]
-    assert check_closed('tower', f) == 20 * 20 * 5 + 8 * 8 * 25
-    return f
-
-
-def overhang():
-    f = [face([P(70, 0, 0), P(70, 6, 0), P(80, 6, 0), P(80, 0, 0)]),                    # floor
-         face([P(70, 6, 3), P(70, 10, 3), P(80, 10, 3), P(80, 6, 3)]),                  # underside
-         face([P(70, 0, 0), P(80, 0, 0), P(80, 0, 6), P(70, 0, 6)]),                    # south
-         face([P(80, 0, 0), P(80, 6, 0), P(80, 6, 3), P(80, 10, 3), P(80, 10, 6), P(80, 0, 6)]),
-         face([P(80, 6, 0), P(70, 6, 0), P(70, 6, 3), P(80, 6, 3)]),                    # north, lower
-         face([P(80, 10, 3), P(70, 10, 3), P(70, 10, 6), P(80, 10, 6)]),                # north, upper
-         face([P(70, 10, 3), P(70, 6, 3), P(70, 6, 0), P(70, 0, 0), P(70, 0, 6), P(70, 10, 6)]),
-         face([P(70, 0, 6), P(80, 0, 6), P(80, 10, 6), P(70, 10, 6)])]                  # roof
-    assert check_closed('overhang', f) == 10 * 6 * 3 + 10 * 10 * 3
-    return f
-
-
-def courtyard():
-    ox0, oy0, ox1, oy1, ix0, iy0, ix1, iy1 = 100, 0, 120, 20, 106, 6, 114, 14
-    floor = face([P(ox0, oy0, 0), P(ox0, oy1, 0), P(ox1, oy1, 0), P(ox1, oy0, 0)],
-                 [P(ix0, iy0, 0), P(ix1, iy0, 0), P(ix1, iy1, 0), P(ix0, iy1, 0)])
-    outer_walls = box_faces(ox0, oy0, 0, ox1, oy1, 10)[1:5]
-    # Inner walls face into the courtyard; counter-clockwise from the one at min y.
-    inner_walls = [face([P(ix1, iy0, 0), P(ix0, iy0, 0), P(ix0, iy0, 10), P(ix1, iy0, 10)]),
-                   face([P(ix1, iy1, 0), P(ix1, iy0, 0), P(ix1, iy0, 10), P(ix1, iy1, 10)]),
-                   face([P(ix0, iy1, 0), P(ix1, iy1, 0), P(ix1, iy1, 10), P(ix0, iy1, 10)]),
-                   face([P(ix0, iy0, 0), P(ix0, iy1, 0), P(ix0, iy1, 10), P(ix0, iy0, 10)])]
-    roof = face([P(ox0, oy0, 10), P(ox1, oy0, 10), P(ox1, oy1, 10), P(ox0, oy1, 10)],
-                [P(ix0, iy0, 10), P(ix0, iy1, 10), P(ix1, iy1, 10), P(ix1, iy0, 10)])
-    f = [floor] + outer_walls + inner_walls + [roof]
-    assert check_closed('courtyard', f) == (400 - 64) * 10
-    return f
-
-
-def closed_box(name, *a):
-    f = box_faces(*a)
-    check_closed(name, f)
-    return f
-
-
-def terrain():
-    xs, ys = [130, 140, 150, 160], [-10, 0, 10, 20]
-    # Height 0 at x 85130 rising linearly to 5 at x 85160: 0, 5/3, 10/3, 5 (written as the
-    # shortest decimal text of the nearest double, as the CityJSON files' 1/3000 m scale gives).
-    z = {130: Fraction(0), 140: Fraction(5, 3), 150: Fraction(10, 3), 160: Fraction(5)}
-    tris = []
-    for j in range(3):
-        for i in range(3):
-            x0, x1, y0, y1 = xs[i], xs[i + 1], ys[j], ys[j + 1]
-            a, b, c, d = P(x0, y0, z[x0]), P(x1, y0, z[x1]), P(x1, y1, z[x1]), P(x0, y1, z[x0])
-            tris.append(face([a, b, c]))
-            tris.append(face([a, c, d]))
-    for t in tris:
-        assert newell(t[0])[2] > 0
-    return tris
-
-
-def lamp_template():
-    # Local coordinates: centred on the reference point in x and y, standing on it.
-    h = Fraction(1, 10)
-    def L(x, y, z): return (Fraction(x), Fraction(y), Fraction(z))
-    f = [[[L(-h, -h, 0), L(-h, h, 0), L(h, h, 0), L(h, -h, 0)]],
-         [[L(-h, -h, 0), L(h, -h, 0), L(h, -h, 4), L(-h, -h, 4)]],
-         [[L(h, -h, 0), L(h, h, 0), L(h, h, 4), L(h, -h, 4)]],
-         [[L(h, h, 0), L(-h, h, 0), L(-h, h, 4), L(h, h, 4)]],
-         [[L(-h, h, 0), L(-h, -h, 0), L(-h, -h, 4), L(-h, h, 4)]],
-         [[L(-h, -h, 4), L(h, -h, 4), L(h, h, 4), L(-h, h, 4)]]]
-    check_closed('lamp', f)
-    return f
+# The geometry is shapes.city.json's, from its generator (one list of rings for both formats).
+from make_shapes_cityjson import (P, box_faces, check_closed, closed_box, courtyard, face, gabled,  # noqa: E402
+                                  lamp_template, newell, overhang, start_least, terrain, tower)
 
 
 IDENTITY = '1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1'

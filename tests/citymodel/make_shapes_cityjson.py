@@ -271,6 +271,7 @@ def pretty(doc):
     return '\n'.join(lines) + '\n'
 
 
-write('shapes.city.json', '2.0', True)
-write('shapes_v1_1.city.json', '1.1', True)
-write('shapes_v1_0.city.json', '1.0', False)
+if __name__ == '__main__':
+    write('shapes.city.json', '2.0', True)
+    write('shapes_v1_1.city.json', '1.1', True)
+    write('shapes_v1_0.city.json', '1.0', False)
