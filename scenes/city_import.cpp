@@ -557,8 +557,41 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     progress.Advance();
   }
 
-  // 5. Terrain tiles: objects and their occluders.
+  // 5. Terrain tiles: objects and their occluders. The ground is solid beneath the surface: where
+  // the terrain ends above the scene's ground level, a skirt closes it down to z = 0 (so that no
+  // line of sight slips under the terrain's edge, for the oracles as for the occluders).
+  std::map<std::pair<int64_t, int64_t>, std::vector<std::array<glm::dvec3, 3>>> skirts;
   if (!terrain_tris.empty()) {
+    auto key_of = [](const glm::dvec3& a, const glm::dvec3& b) {
+      auto less = [](const glm::dvec3& p, const glm::dvec3& q) {
+        return p.x != q.x ? p.x < q.x : (p.y != q.y ? p.y < q.y : p.z < q.z);
+      };
+      return less(a, b) ? std::make_pair(a, b) : std::make_pair(b, a);
+    };
+    auto cmp = [](const std::pair<glm::dvec3, glm::dvec3>& u, const std::pair<glm::dvec3, glm::dvec3>& v) {
+      const double x[6] = {u.first.x, u.first.y, u.first.z, u.second.x, u.second.y, u.second.z};
+      const double y[6] = {v.first.x, v.first.y, v.first.z, v.second.x, v.second.y, v.second.z};
+      return std::lexicographical_compare(x, x + 6, y, y + 6);
+    };
+    std::map<std::pair<glm::dvec3, glm::dvec3>, int, decltype(cmp)> uses(cmp);
+    for (const auto& t : terrain_tris) {
+      for (int i = 0; i < 3; ++i) ++uses[key_of(t[i], t[(i + 1) % 3])];
+    }
+    for (const auto& t : terrain_tris) {
+      for (int i = 0; i < 3; ++i) {
+        const glm::dvec3 a = t[i], b = t[(i + 1) % 3];
+        if (uses[key_of(a, b)] != 1 || (a.z <= 0.0 && b.z <= 0.0)) continue;
+        // Counter-clockwise triangles from above: the outside is right of a -> b; the skirt
+        // faces it.
+        const glm::dvec3 a0(a.x, a.y, 0.0), b0(b.x, b.y, 0.0);
+        const glm::dvec3 c = (t[0] + t[1] + t[2]) / 3.0;
+        const auto tile = std::make_pair(static_cast<int64_t>(std::floor(c.x / options.terrain_tile_m)),
+                                         static_cast<int64_t>(std::floor(c.y / options.terrain_tile_m)));
+        if (a.z > 0.0) skirts[tile].push_back({a, a0, b0});
+        if (b.z > 0.0) skirts[tile].push_back({a, b0, b});
+        sum.terrain_skirt_triangles += (a.z > 0.0) + (b.z > 0.0);
+      }
+    }
     const std::string terrain_name = terrain.size() == 1 ? terrain.front().object->id : "terrain";
     std::map<std::pair<int64_t, int64_t>, std::vector<std::array<glm::dvec3, 3>>> tiles;
     for (const auto& t : terrain_tris) {
@@ -571,6 +604,10 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
       Mesh mesh;
       for (const auto& t : tris) {
+        const glm::dvec3 n = glm::normalize(glm::cross(t[1] - t[0], t[2] - t[0]));
+        AppendTriangles({t}, n, &mesh);
+      }
+      for (const auto& t : skirts[key]) {
         const glm::dvec3 n = glm::normalize(glm::cross(t[1] - t[0], t[2] - t[0]));
         AppendTriangles({t}, n, &mesh);
       }

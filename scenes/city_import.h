@@ -82,6 +82,7 @@ struct CityImportSummary {
   // Terrain: TINRelief objects, their triangles, the tiles made of them, their occluders, and
   // the relief's lowest and highest heights (the file's CRS, metres).
   uint64_t terrain_objects = 0, terrain_triangles = 0, terrain_tiles = 0, terrain_occluders = 0;
+  uint64_t terrain_skirt_triangles = 0;  // walls closing the terrain's edge down to the ground level
   double terrain_min_z = 0.0, terrain_max_z = 0.0;
   std::map<std::string, uint64_t> skipped;   // the reader's and the builder's, by reason
   std::map<std::string, uint64_t> repaired;  // likewise

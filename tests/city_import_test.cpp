@@ -99,7 +99,10 @@ TEST_P(ShapesTest, ObjectsTrianglesAndOccludersAsWorkedOutByHand) {
       {"open", 10},        // 5 quads
       {"courtyard", 32},   // floor and roof with a hole (8 each), 8 walls
       {"slope", 12},       {"lamp", 12}, {"lamp2", 12}, {"garden", 2}, {"bridge", 12},
-      {"terrain/tile 0,-1", 18},
+      // 18 surface triangles and the skirt closing the terrain's raised edges down to z 0: two
+      // triangles per edge with both ends up (3 along x 85160, 2 along each of y 445990 and
+      // 446020), one per edge rising from 0 (1 along each): 16.
+      {"terrain/tile 0,-1", 34},
   };
   size_t total = 0;
   for (const auto& [name, n] : triangles) {
@@ -115,6 +118,7 @@ TEST_P(ShapesTest, ObjectsTrianglesAndOccludersAsWorkedOutByHand) {
   ASSERT_EQ(scene->terrain.size(), 1u);
   EXPECT_EQ(scene->objects[scene->terrain[0]].name, "terrain/tile 0,-1");
   EXPECT_EQ(sum.terrain_triangles, 18u);
+  EXPECT_EQ(sum.terrain_skirt_triangles, 16u);
   EXPECT_NEAR(sum.terrain_max_z - sum.terrain_min_z, 5.0, 1e-9);
 
   // The lamps: one template placed at two points.

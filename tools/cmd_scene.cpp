@@ -277,6 +277,7 @@ int ImportCity(const ImportCityArgs& a) {
          {{"objects", sum.terrain_objects},
           {"triangles", sum.terrain_triangles},
           {"tiles", sum.terrain_tiles},
+          {"skirt_triangles", sum.terrain_skirt_triangles},
           {"occluders", sum.terrain_occluders},
           {"min_z", sum.terrain_min_z},
           {"max_z", sum.terrain_max_z},

@@ -201,6 +201,7 @@ absl::StatusOr<std::unique_ptr<GlobalSampler>> GlobalSampler::Create(const scene
   m.view_space.min -= m.frame;
   m.view_space.max -= m.frame;
   m.cell_radius = BoxRadius(grid.CellBox(CellId{0}));
+  if (!scene.terrain.empty()) m.terrain = std::make_shared<const scenes::TerrainHeight>(scene);
   m.buffer = MutationBuffer(options.mutation_buffer);
   m.discovery_triangles = options.discovery_triangles;
   m.device = rtcNewDevice(nullptr);

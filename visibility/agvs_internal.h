@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <unordered_map>
@@ -20,6 +21,7 @@
 
 #include "scenes/progress.h"
 #include "scenes/random.h"
+#include "scenes/terrain.h"
 #include "visibility/agvs_surface.h"
 #include "visibility/bytes.h"
 #include "visibility/coincident_faces.h"
@@ -367,6 +369,9 @@ struct GlobalSampler::Impl {
   SurfaceTable surface;
   glm::dvec3 frame{0.0};             // scene-local position of the frame's origin
   Aabb view_space;                   // frame-relative
+  // The scene's terrain, solid beneath its surface: a free segment below it is not a view
+  // (it never crosses the surface, so its origin tells). Null without terrain.
+  std::shared_ptr<const scenes::TerrainHeight> terrain;
   double cell_radius = 0.0;
 
   size_t discovery_triangles = 2048;  // AgvsOptions::discovery_triangles

@@ -382,11 +382,18 @@ class Worker {
 
   // Walks the viewcells the sample's free segment pierces and records what is new in them,
   // how often its cells and objects were sampled, and (AGVS) its mutation candidates.
+  // Whether frame-relative point `p` lies below the terrain's surface (inside the ground).
+  bool BelowGround(const glm::dvec3& p) const {
+    if (s_.terrain == nullptr) return false;
+    const glm::dvec3 q = p + s_.frame;
+    return q.z < s_.terrain->HeightAt(glm::dvec2(q));
+  }
+
   void Emit(const Sample& smp) {
     ChunkResult& out = *out_;
     ++out.samples;
     if (smp.misses) return;
-    if (!smp.valid) {
+    if (!smp.valid || BelowGround(smp.origin)) {
       ++out.discarded;
       return;
     }
