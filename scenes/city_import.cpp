@@ -82,6 +82,12 @@ void ForEachSurface(const CityGeometry& g, Fn&& fn) {
   for (const CitySurface& surface : g.surfaces) fn(surface, -1);
 }
 
+// Points ordered by x, then y, then z: rings, terrain triangles and edges in an order that does
+// not depend on how the file listed them.
+bool LexLess(const glm::dvec3& a, const glm::dvec3& b) {
+  return a.x != b.x ? a.x < b.x : (a.y != b.y ? a.y < b.y : a.z < b.z);
+}
+
 // A triangulated polygon in scene-local double coordinates.
 struct Triangulated {
   std::vector<std::array<glm::dvec3, 3>> triangles;
@@ -134,10 +140,7 @@ absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, cons
   // Every ring from its least point: the same polygon triangulates the same way whichever
   // vertex a file starts it at (a rectangle has two Delaunay diagonals).
   auto least_first = [](std::vector<glm::dvec3>* ring) {
-    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
-      return a.x != b.x ? a.x < b.x : (a.y != b.y ? a.y < b.y : a.z < b.z);
-    };
-    std::rotate(ring->begin(), std::min_element(ring->begin(), ring->end(), less), ring->end());
+    std::rotate(ring->begin(), std::min_element(ring->begin(), ring->end(), LexLess), ring->end());
   };
   least_first(&outer);
   if (outer.size() < 3) return absl::InvalidArgumentError("a ring of fewer than 3 distinct points");
@@ -453,19 +456,9 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     }
   }
   // In a fixed order (by least corner), so that a TIN listed in any order gives the same tiles.
-  for (auto& t : terrain_tris) {
-    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
-      return a.x != b.x ? a.x < b.x : (a.y != b.y ? a.y < b.y : a.z < b.z);
-    };
-    std::rotate(t.begin(), std::min_element(t.begin(), t.end(), less), t.end());
-  }
+  for (auto& t : terrain_tris) std::rotate(t.begin(), std::min_element(t.begin(), t.end(), LexLess), t.end());
   std::sort(terrain_tris.begin(), terrain_tris.end(), [](const auto& a, const auto& b) {
-    for (int i = 0; i < 3; ++i) {
-      if (a[i].x != b[i].x) return a[i].x < b[i].x;
-      if (a[i].y != b[i].y) return a[i].y < b[i].y;
-      if (a[i].z != b[i].z) return a[i].z < b[i].z;
-    }
-    return false;
+    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), LexLess);
   });
   sum.terrain_triangles = terrain_tris.size();
   const GroundIndex ground(terrain_tris, 25.0);
@@ -563,15 +556,10 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   std::map<std::pair<int64_t, int64_t>, std::vector<std::array<glm::dvec3, 3>>> skirts;
   if (!terrain_tris.empty()) {
     auto key_of = [](const glm::dvec3& a, const glm::dvec3& b) {
-      auto less = [](const glm::dvec3& p, const glm::dvec3& q) {
-        return p.x != q.x ? p.x < q.x : (p.y != q.y ? p.y < q.y : p.z < q.z);
-      };
-      return less(a, b) ? std::make_pair(a, b) : std::make_pair(b, a);
+      return LexLess(a, b) ? std::make_pair(a, b) : std::make_pair(b, a);
     };
     auto cmp = [](const std::pair<glm::dvec3, glm::dvec3>& u, const std::pair<glm::dvec3, glm::dvec3>& v) {
-      const double x[6] = {u.first.x, u.first.y, u.first.z, u.second.x, u.second.y, u.second.z};
-      const double y[6] = {v.first.x, v.first.y, v.first.z, v.second.x, v.second.y, v.second.z};
-      return std::lexicographical_compare(x, x + 6, y, y + 6);
+      return LexLess(u.first, v.first) || (u.first == v.first && LexLess(u.second, v.second));
     };
     std::map<std::pair<glm::dvec3, glm::dvec3>, int, decltype(cmp)> uses(cmp);
     for (const auto& t : terrain_tris) {

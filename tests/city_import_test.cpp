@@ -29,17 +29,6 @@ const Object* Find(const Scene& scene, const std::string& name) {
   return nullptr;
 }
 
-bool InsidePolygon(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
-  bool in = false;
-  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    if ((poly[i].y > p.y) != (poly[j].y > p.y) &&
-        p.x < (poly[j].x - poly[i].x) * (p.y - poly[i].y) / (poly[j].y - poly[i].y) + poly[i].x) {
-      in = !in;
-    }
-  }
-  return in;
-}
-
 // Volume of the union of one object's occluder prisms above height `base` (scene-local):
 // the highest prism over the centre of every 5 cm square (exact for footprints on that grid).
 double OccluderVolume(const Scene& scene, const std::string& name, double base) {
@@ -62,7 +51,7 @@ double OccluderVolume(const Scene& scene, const std::string& name, double base) 
     for (double y = std::floor(lo.y / step) * step + step / 2; y < hi.y; y += step) {
       double top = base;
       for (const Occluder25D* oc : mine) {
-        if (oc->height > top && InsidePolygon(oc->footprint, {x, y})) top = oc->height;
+        if (oc->height > top && testing::InsidePolygon(oc->footprint, {x, y})) top = oc->height;
       }
       v += (top - base) * step * step;
     }

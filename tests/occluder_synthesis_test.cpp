@@ -17,6 +17,7 @@
 #include "scenes/city_generator.h"
 #include "scenes/mesh.h"
 #include "scenes/random.h"
+#include "tests/test_util.h"
 
 namespace vistream::scenes {
 namespace {
@@ -206,15 +207,6 @@ bool InsideSolid(const SolidMesh& s, const glm::dvec3& p, Rng* rng) {
   return false;
 }
 
-bool InPolygon(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
-  bool in = false;
-  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    const glm::dvec2 &a = poly[i], &b = poly[j];
-    if ((a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x) in = !in;
-  }
-  return in;
-}
-
 glm::dvec2 PointIn(const std::vector<glm::dvec2>& poly, Rng* rng) {
   glm::dvec2 lo(INFINITY), hi(-INFINITY);
   for (const glm::dvec2& q : poly) {
@@ -223,7 +215,7 @@ glm::dvec2 PointIn(const std::vector<glm::dvec2>& poly, Rng* rng) {
   }
   for (;;) {
     const glm::dvec2 p(rng->Uniform(lo.x, hi.x), rng->Uniform(lo.y, hi.y));
-    if (InPolygon(poly, p)) return p;
+    if (testing::InsidePolygon(poly, p)) return p;
   }
 }
 
@@ -409,7 +401,7 @@ TEST(OccluderSynthesis, CourtyardLeavesTheHoleOpen) {
   EXPECT_NEAR(TotalArea(r), 800.0, 1e-9);
   for (const Occluder25D& o : r.occluders) {
     EXPECT_EQ(o.height, 10.0);
-    EXPECT_FALSE(InPolygon(o.footprint, {15, 15}));
+    EXPECT_FALSE(testing::InsidePolygon(o.footprint, {15, 15}));
   }
   EXPECT_DOUBLE_EQ(r.occluder_volume_m3, 8000.0);
   EXPECT_EQ(PointsOutside(s, r, 0.0, 6), 0);

@@ -297,14 +297,7 @@ TEST(PvsProperty, CellsOnOrAcrossTheGroundCullOnlyWhatTheyCannotSee) {
 // Terrain occludes: from a viewcell in one valley (its band following the ground) the ridge
 // hides a shed in the other valley, through the terrain's own ground-up prisms alone.
 TEST(PvsTerrain, ARidgeHidesTheOtherValley) {
-  scenes::Scene flat;
-  flat.name = "sheds";
-  for (const double x : {-90.0, 90.0}) {
-    scenes::Mesh m;
-    const std::vector<glm::dvec2> square{{x - 2, -2}, {x + 2, -2}, {x + 2, 2}, {x - 2, 2}};
-    scenes::AppendConvexPrism(square, 0.0, 3.0, &m);
-    flat.AddObject(x < 0 ? "west shed" : "east shed", std::move(m));
-  }
+  const scenes::Scene flat = testing::TwoSheds();
   scenes::Scene s = testing::OnTheRidge(flat);
   ASSERT_TRUE(scenes::ValidateScene(s, "ridge").ok());
   const ViewcellGrid grid = *ViewcellGrid::Create(s, {.size_m = 8, .height_m = 2.0, .base_m = 0.5});

@@ -20,14 +20,7 @@ namespace {
 // Two sheds on the ridge's valleys, served with 20 m cells under the name "ridge".
 ServedScene& Ridge() {
   static ServedScene* scene = [] {
-    scenes::Scene flat;
-    flat.name = "sheds";
-    for (const double x : {-90.0, 90.0}) {
-      scenes::Mesh m;
-      const std::vector<glm::dvec2> square{{x - 2, -2}, {x + 2, -2}, {x + 2, 2}, {x - 2, 2}};
-      scenes::AppendConvexPrism(square, 0.0, 3.0, &m);
-      flat.AddObject(x < 0 ? "west shed" : "east shed", std::move(m));
-    }
+    const scenes::Scene flat = vistream::testing::TwoSheds();
     const std::string path = vistream::testing::ProcessTempDir() + "/ridge.glb";
     const absl::Status saved = scenes::SaveGltf(vistream::testing::OnTheRidge(flat), path);
     EXPECT_TRUE(saved.ok()) << saved;

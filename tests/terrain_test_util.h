@@ -98,6 +98,20 @@ inline double Ridge(double x, double y) {
   return 1.5 + 20.0 * std::exp(-(x / 22.0) * (x / 22.0)) + 1.0 + std::sin(0.17 * x + 0.3) * std::cos(0.13 * y);
 }
 
+// Two 4 x 4 m sheds 3 m high on flat ground, "west shed" at x -90 and "east shed" at x 90, each
+// in one of the ridge's valleys once OnTheRidge sets them there.
+inline scenes::Scene TwoSheds() {
+  scenes::Scene flat;
+  flat.name = "sheds";
+  for (const double x : {-90.0, 90.0}) {
+    scenes::Mesh m;
+    const std::vector<glm::dvec2> square{{x - 2, -2}, {x + 2, -2}, {x + 2, 2}, {x - 2, 2}};
+    scenes::AppendConvexPrism(square, 0.0, 3.0, &m);
+    flat.AddObject(x < 0 ? "west shed" : "east shed", std::move(m));
+  }
+  return flat;
+}
+
 // `flat` (buildings standing on z = 0) set on the ridge: a closed terrain solid (down to z = -5)
 // added as the last object and the terrain; every other object's vertices above z = 0 raised by
 // the highest ground under its block (the objects whose boxes touch it, and theirs: a terrace,

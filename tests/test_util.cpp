@@ -33,7 +33,9 @@ bool SegmentsCross(const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c
   return ((o1 > 0) != (o2 > 0)) && ((o3 > 0) != (o4 > 0));
 }
 
-bool Inside(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
+}  // namespace
+
+bool InsidePolygon(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
   bool in = false;
   for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
     const glm::dvec2 &u = poly[i], &v = poly[j];
@@ -42,13 +44,11 @@ bool Inside(const std::vector<glm::dvec2>& poly, const glm::dvec2& p) {
   return in;
 }
 
-}  // namespace
-
 bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, const glm::dvec2& b,
                              double clearance) {
   for (const scenes::Occluder25D& oc : scene.occluders) {
     const auto& fp = oc.footprint;
-    if (Inside(fp, a) || Inside(fp, b)) return false;
+    if (InsidePolygon(fp, a) || InsidePolygon(fp, b)) return false;
     for (size_t i = 0; i < fp.size(); ++i) {
       const glm::dvec2 &u = fp[i], &v = fp[(i + 1) % fp.size()];
       if (SegmentsCross(a, b, u, v)) return false;
@@ -78,7 +78,7 @@ bool SegmentClearOfPrisms(const glm::dvec3& p, const glm::dvec3& q, const std::v
     if (q.z > h) t1 = (h - p.z) / (q.z - p.z);
     const glm::dvec2 a = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t0;
     const glm::dvec2 b = glm::dvec2(p) + (glm::dvec2(q) - glm::dvec2(p)) * t1;
-    if (fp.size() >= 3 && (Inside(fp, a) || Inside(fp, b))) return false;
+    if (fp.size() >= 3 && (InsidePolygon(fp, a) || InsidePolygon(fp, b))) return false;
     for (size_t i = 0; i < fp.size(); ++i) {
       const glm::dvec2 &u = fp[i], &v = fp[(i + 1) % fp.size()];
       if (SegmentsCross(a, b, u, v)) return false;

@@ -12,6 +12,10 @@ namespace vistream::testing {
 // at its exit (ProcessTempDir, tests/temp_dir.h).
 std::string TempDir();
 
+// Whether `p` lies inside polygon `poly` (xy, either orientation; crossing parity, so a point
+// on an edge may go either way).
+bool InsidePolygon(const std::vector<glm::dvec2>& poly, const glm::dvec2& p);
+
 // True when the polygon footprints of the scene's occluders keep at least `clearance` metres
 // from the segment a-b (scene-local xy).
 bool SegmentClearOfOccluders(const scenes::Scene& scene, const glm::dvec2& a, const glm::dvec2& b,
