@@ -181,6 +181,7 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
       if (!ok && !finish_requested_) {  // the client is gone
         finish_requested_ = true;
         status_ = grpc::Status(grpc::StatusCode::UNAVAILABLE, "the client stopped receiving");
+        write_failed_ = true;
       }
     }
     Pump();
@@ -190,9 +191,10 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
     const grpc::Status cancelled(grpc::StatusCode::CANCELLED, "cancelled by the client (or its connection lost)");
     {
       // A client that goes away (killed, its connection lost) ends its reads too, which may come
-      // first and end the call as a client that closed its side does: the log says which it was.
+      // first and end the call as a client that closed its side does, and a write in flight
+      // fails before the cancel is seen: the log says which it was, a cancel.
       std::lock_guard lock(mu_);
-      if (finish_requested_ && status_.ok()) status_ = cancelled;
+      if (finish_requested_ && (status_.ok() || write_failed_)) status_ = cancelled;
     }
     EndWith(cancelled);
   }
@@ -357,6 +359,7 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
   std::mutex mu_;
   bool writing_ = false;
   bool finish_requested_ = false;
+  bool write_failed_ = false;  // status_ came from a failed write (the client gone), not the session
   bool finished_ = false;
   grpc::Status status_;
 
