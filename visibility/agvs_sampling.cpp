@@ -177,12 +177,23 @@ class Worker {
       const bool meets = ViewSpaceSpan(s_.view_space, p, smp.dir, &near, &far) && far >= 0.0;
       const Hit h = meets ? Cast(p, smp.dir, kSurfaceOffset, near) : Hit{};
       smp.misses = !meets || h.short_of_reach;
-      smp.valid = !h.back;
+      // A point on a face that another solid covers (a party wall, a tier's floor on the roof
+      // below: coincident faces) lies on that solid's boundary, and the ray leaves it into the
+      // solid: a sample from inside an object, discarded like one that meets a back face.
+      smp.valid = !h.back && !Covered(picks_[i], p);
       smp.t_fwd = h.t;
       smp.fwd = h.object;
       Emit(smp);
     }
   }
+  // Whether frame-relative point `p` of surface entry `entry` lies on a face of opposite
+  // orientation (CoincidentFaces): the inside of the solid that face bounds.
+  bool Covered(uint32_t entry, const glm::dvec3& p) const {
+    const ObjectId o = s_.surface[entry].object;
+    if (!options_.backface_rule || s_.coincident_quads[o] == nullptr) return false;
+    return s_.OnCoincidentFace(o, s_.surface.TriangleOf(entry), p);
+  }
+
   // A sample's random numbers but the surface point's column, drawn ahead (SurfaceChunk).
   struct Ahead {
     glm::dvec3 view{0.0};  // two-point: the view space point

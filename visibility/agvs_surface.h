@@ -39,10 +39,12 @@ class SurfaceTable {
   explicit SurfaceTable(std::span<const std::span<const EdgeTriangle>> objects) {
     std::vector<double> weight;
     size_t sampleable = 0;
+    first_.assign(objects.size(), 0);
     for (scenes::ObjectId id = 0; id < objects.size(); ++id) {
       if (objects[id].empty()) continue;
       ++sampleable;
       const size_t first = weight.size();
+      first_[id] = static_cast<uint32_t>(first);
       double sum = 0.0;
       for (const EdgeTriangle& t : objects[id]) {
         entries_.push_back({t, 1.0f, static_cast<uint32_t>(entries_.size()), id});
@@ -83,6 +85,8 @@ class SurfaceTable {
   bool empty() const { return entries_.empty(); }
   size_t size() const { return entries_.size(); }
   const Entry& operator[](uint32_t i) const { return entries_[i]; }
+  // Which of its object's triangles entry i is (the index into the triangles given for it).
+  uint32_t TriangleOf(uint32_t i) const { return i - first_[entries_[i].object]; }
 
   // The entry that `x`, uniform in [0, size()), picks: its integer part the column, its
   // fraction whether to keep the column or take its alias. Precondition: !empty().
@@ -121,6 +125,7 @@ class SurfaceTable {
   }
 
   std::vector<Entry> entries_;
+  std::vector<uint32_t> first_;  // per object, its first triangle's entry
 };
 
 }  // namespace vistream::visibility::agvs_detail
