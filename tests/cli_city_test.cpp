@@ -1,0 +1,82 @@
+// Conservative visibility on a real city model (issue 35): Den Haag's tile 01 (CityJSON,
+// ../shared/data/citymodels: 1,990 LoD2 buildings and parts on a TIN rising 13 m, their
+// occluders synthesised from the solids), imported by the CLI and checked by
+// check-conservative at 100 m and 8 m viewcells with the cpu and exact backends: nothing
+// sampling sees from a cell's band may be missing from its PVS or from an ε-superset on the
+// ground. Each case is non-vacuous: PVS entries checked, queries that found something hidden,
+// ε hits checked (and the exact backend's own test run).
+
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "tests/cli_test_util.h"
+
+namespace {
+
+using vistream::testing::RunResult;
+using vistream::testing::Tmp;
+using vistream::testing::Vistream;
+
+const std::string kDenHaag = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
+
+// Imported once per process ("" if the import failed: the failure is reported there).
+const std::string& DenHaag() {
+  static const std::string path = [] {
+    const std::string out = Tmp("denhaag.glb");
+    const RunResult r = Vistream("scene import-city " + kDenHaag + " -o " + out + " --crs EPSG:28992 --json");
+    EXPECT_EQ(r.exit_code, 0) << r.out;
+    if (r.exit_code != 0) return std::string();
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    // Most buildings occlude (1,854 of 1,990 when this was written: README "Your own city").
+    EXPECT_GT(j.at("buildings_with_occluder").get<double>(), 0.9 * j.at("buildings_drawn").get<double>()) << r.out;
+    return out;
+  }();
+  return path;
+}
+
+struct CityCase {
+  int cell_size;
+  const char* backend;
+  int cells;  // sampled viewcells (0: all)
+  double min_entries;
+};
+
+void PrintTo(const CityCase& c, std::ostream* os) { *os << c.cell_size << " m cells, " << c.backend; }
+
+class CheckConservativeOnDenHaag : public ::testing::TestWithParam<CityCase> {};
+
+TEST_P(CheckConservativeOnDenHaag, FindsNoViolation) {
+  if (!std::filesystem::exists(kDenHaag)) GTEST_SKIP() << kDenHaag << " is absent: Den Haag is not checked";
+  const CityCase& c = GetParam();
+  ASSERT_FALSE(DenHaag().empty());
+  const RunResult r = Vistream("check-conservative --scene " + DenHaag() + " --cell-size " +
+                               std::to_string(c.cell_size) + " --backend " + c.backend + " --cells " +
+                               std::to_string(c.cells) + " --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("cell_size").get<double>(), c.cell_size);
+  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
+  EXPECT_TRUE(j.at("unchecked").empty()) << r.out;
+  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), c.min_entries) << r.out;
+  EXPECT_GT(j.at("occluded_queries").get<double>(), 1000.0) << r.out;
+  EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0) << r.out;
+  if (std::string(c.backend) == "exact") {
+    EXPECT_GE(j.at("exact_tests").get<int>(), 1) << r.out;
+  }
+}
+
+std::string CaseName(const ::testing::TestParamInfo<CityCase>& test) {
+  return std::to_string(test.param.cell_size) + "m_" + test.param.backend;
+}
+
+// Measured when written (AMD EPYC): 18,630 PVS entries checked at 100 m (64 cells), 8,805 at
+// 8 m (100 sampled cells); the bounds leave room for other seeds of the sampled cells.
+INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnDenHaag,
+                         ::testing::Values(CityCase{100, "cpu", 0, 10000}, CityCase{100, "exact", 0, 10000},
+                                           CityCase{8, "cpu", 100, 4000}, CityCase{8, "exact", 100, 4000}),
+                         CaseName);
+
+}  // namespace
