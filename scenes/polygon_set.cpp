@@ -37,6 +37,21 @@ Ring FromCgal(const Polygon& p) {
   return out;
 }
 
+std::vector<PolygonWithHoles> FromCgal(const CGAL::Polygon_set_2<K>& set) {
+  std::vector<Holed> pieces;
+  set.polygons_with_holes(std::back_inserter(pieces));
+  std::vector<PolygonWithHoles> out;
+  for (const Holed& h : pieces) {
+    PolygonWithHoles p;
+    p.outer = FromCgal(h.outer_boundary());
+    for (auto hole = h.holes_begin(); hole != h.holes_end(); ++hole) {
+      p.holes.push_back(FromCgal(*hole));
+    }
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<std::vector<PolygonWithHoles>> Difference(const PolygonWithHoles& from,
@@ -44,20 +59,22 @@ absl::StatusOr<std::vector<PolygonWithHoles>> Difference(const PolygonWithHoles&
   try {
     CGAL::Polygon_set_2<K> set(ToCgal(from));
     for (const PolygonWithHoles& c : cut) set.difference(ToCgal(c));
-    std::vector<Holed> pieces;
-    set.polygons_with_holes(std::back_inserter(pieces));
-    std::vector<PolygonWithHoles> out;
-    for (const Holed& h : pieces) {
-      PolygonWithHoles p;
-      p.outer = FromCgal(h.outer_boundary());
-      for (auto hole = h.holes_begin(); hole != h.holes_end(); ++hole) {
-        p.holes.push_back(FromCgal(*hole));
-      }
-      out.push_back(std::move(p));
-    }
-    return out;
+    return FromCgal(set);
   } catch (const std::exception& e) {
     return absl::InvalidArgumentError(absl::StrCat("polygon difference failed: ", e.what()));
+  }
+}
+
+absl::StatusOr<std::vector<PolygonWithHoles>> Union(const std::vector<PolygonWithHoles>& pieces) {
+  try {
+    std::vector<Holed> in;
+    in.reserve(pieces.size());
+    for (const PolygonWithHoles& p : pieces) in.push_back(ToCgal(p));
+    CGAL::Polygon_set_2<K> set;
+    set.join(in.begin(), in.end());  // the aggregated union: one sweep, not one join a piece
+    return FromCgal(set);
+  } catch (const std::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("polygon union failed: ", e.what()));
   }
 }
 

@@ -19,4 +19,9 @@ namespace vistream::scenes {
 absl::StatusOr<std::vector<PolygonWithHoles>> Difference(const PolygonWithHoles& from,
                                                          const std::vector<PolygonWithHoles>& cut);
 
+// The union of `pieces` (each as Difference takes its rings), as polygons with holes: outer
+// counter-clockwise, holes clockwise, in no particular order. Points where edges cross are
+// rounded to double. An empty vector for no pieces; an error if CGAL refuses the input.
+absl::StatusOr<std::vector<PolygonWithHoles>> Union(const std::vector<PolygonWithHoles>& pieces);
+
 }  // namespace vistream::scenes

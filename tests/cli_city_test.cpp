@@ -6,6 +6,7 @@
 // ground. Each case is non-vacuous: PVS entries checked, queries that found something hidden,
 // ε hits checked (and the exact backend's own test run).
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -78,5 +79,45 @@ INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnDenHaag,
                          ::testing::Values(CityCase{100, "cpu", 0, 10000}, CityCase{100, "exact", 0, 10000},
                                            CityCase{8, "cpu", 100, 4000}, CityCase{8, "exact", 100, 4000}),
                          CaseName);
+
+// The same city as OpenStreetMap draws it (`scene extrude`: each building its footprint's prism,
+// ground to top, on flat ground over the same extent): conservative too, and it culls more than
+// the LoD2 model with its synthesised occluders, which still culls a good part of the city.
+double MeanBuildingsInPvs(const nlohmann::json& j) {
+  return j.at("by_type").at("Building").at("mean_pvs_objects").get<double>() +
+         j.at("by_type").at("BuildingPart").at("mean_pvs_objects").get<double>();
+}
+
+TEST(DenHaagExtruded, IsConservativeAndCullsMoreThanTheLod2Model) {
+  if (!std::filesystem::exists(kDenHaag)) GTEST_SKIP() << kDenHaag << " is absent: Den Haag is not checked";
+  ASSERT_FALSE(DenHaag().empty());
+  const std::string extruded = Tmp("denhaag-extruded.glb");
+  const RunResult e = Vistream("scene extrude " + DenHaag() + " -o " + extruded + " --json");
+  ASSERT_EQ(e.exit_code, 0) << e.out;
+  const nlohmann::json ej = nlohmann::json::parse(e.out);
+  EXPECT_EQ(ej.at("extruded").get<int>(), ej.at("buildings").get<int>()) << e.out;
+  EXPECT_GT(ej.at("buildings").get<int>(), 1900) << e.out;
+
+  const RunResult check = Vistream("check-conservative --scene " + extruded +
+                                   " --cell-size 100 --cells 0 --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
+  ASSERT_EQ(check.exit_code, 0) << check.out;
+  const nlohmann::json cj = nlohmann::json::parse(check.out);
+  EXPECT_EQ(cj.at("violations").get<int>(), 0) << check.out;
+  EXPECT_GT(cj.at("occluded_queries").get<double>(), 1000.0) << check.out;
+
+  nlohmann::json pvs[2];
+  const std::string scenes[2] = {DenHaag(), extruded};
+  for (int k = 0; k < 2; ++k) {
+    const RunResult r = Vistream("pvs --scene " + scenes[k] + " --all --cell-size 100 -o " + Tmp("dh" + std::to_string(k) + ".pvs") + " --json");
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    pvs[k] = nlohmann::json::parse(r.out);
+  }
+  EXPECT_EQ(pvs[0].at("cells"), pvs[1].at("cells")) << "the flat ground keeps the viewcell grid";
+  const double lod2 = MeanBuildingsInPvs(pvs[0]), flat = MeanBuildingsInPvs(pvs[1]);
+  const double buildings = ej.at("buildings").get<double>();
+  std::printf("mean buildings in a 100 m viewcell's PVS: LoD2 %.1f, extruded %.1f, of %.0f\n", lod2, flat, buildings);
+  EXPECT_LT(flat, lod2);
+  EXPECT_LT(lod2, 0.75 * buildings) << "the LoD2 model's occluders cull little";
+}
 
 }  // namespace

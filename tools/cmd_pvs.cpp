@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <cstdio>
 #include <filesystem>
+#include <map>
+#include <string>
 
 #include <unistd.h>
 
@@ -151,6 +153,10 @@ int PvsAll(const PvsArgs& a) {
   }
   visibility::GlobalPvs sets(a.out.empty() ? 0 : grid->CellCount(), scene->objects.size());
   double objects = 0;
+  // PVS entries by the objects' type (a city model's "Building", "TINRelief", ...), against the
+  // whole scene's: how much of the city a viewcell sees, buildings apart from the terrain.
+  auto TypeName = [](const scenes::Object& o) { return o.type.empty() ? std::string("untyped") : o.type; };
+  std::map<std::string, double> by_type;
   std::vector<std::pair<visibility::CellId, std::string>> batch;
   auto flush = [&]() -> absl::Status {
     if (batch.empty()) return absl::OkStatus();
@@ -164,6 +170,7 @@ int PvsAll(const PvsArgs& a) {
       *backend, computer, *grid, cells, options, ToolRun(), label,
       [&](visibility::CellId cell, const visibility::PvsResult& r) -> absl::Status {
         objects += static_cast<double>(r.objects.size());
+        for (scenes::ObjectId id : r.objects) ++by_type[TypeName(scene->objects[id])];
         if (!a.out.empty()) sets.Assign(cell, r.objects);
         if (store == nullptr) return absl::OkStatus();
         batch.emplace_back(cell, visibility::EncodeCellRecord(cell, r.objects));
@@ -195,6 +202,15 @@ int PvsAll(const PvsArgs& a) {
     j["backend"] = a.backend;
     j["res"] = a.res;
     j["mean_pvs_objects"] = mean;
+    j["objects"] = scene->objects.size();
+    std::map<std::string, uint64_t> in_scene;
+    for (const scenes::Object& o : scene->objects) ++in_scene[TypeName(o)];
+    nlohmann::json types = nlohmann::json::object();
+    for (const auto& [type, n] : in_scene) {
+      types[type] = {{"objects", n},
+                     {"mean_pvs_objects", cells.empty() ? 0.0 : by_type[type] / static_cast<double>(cells.size())}};
+    }
+    j["by_type"] = types;
     j["seconds"] = provenance.seconds;
     if (!a.out.empty()) j["pvs_file"] = a.out;
     if (store != nullptr) {

@@ -1,4 +1,4 @@
-// vistream scene generate | import-osm | import-city | occluders | info | map
+// vistream scene generate | import-osm | import-city | occluders | extrude | info | map
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,6 +19,7 @@
 #include "scenes/catalog.h"
 #include "scenes/city_generator.h"
 #include "scenes/city_import.h"
+#include "scenes/footprint_extrusion.h"
 #include "scenes/gltf_io.h"
 #include "scenes/osm_import.h"
 #include "scenes/progress.h"
@@ -390,6 +391,51 @@ int Occluders(const OccludersArgs& a) {
   return 0;
 }
 
+struct ExtrudeArgs {
+  std::string input, output;
+  bool json = false;
+};
+
+int Extrude(const ExtrudeArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  double load_s = 0.0;
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.input, &load_s);
+  if (!scene.ok()) return Fail(scene.status());
+  const auto start = std::chrono::steady_clock::now();
+  scenes::ExtrusionSummary sum;
+  absl::StatusOr<scenes::Scene> extruded = scenes::ExtrudeFootprints(*scene, &sum);
+  if (!extruded.ok()) return Fail(extruded.status());
+  const double extrude_s = SecondsSince(start);
+  if (absl::Status s = scenes::SaveGltf(*extruded, a.output); !s.ok()) return Fail(s);
+  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "extrusion");
+  uint64_t kept = 0;
+  for (const auto& [reason, n] : sum.not_extruded) kept += n;
+  if (a.json) {
+    const nlohmann::json j = {{"input", a.input},
+                              {"output", a.output},
+                              {"objects_before", scene->objects.size()},
+                              {"objects", extruded->objects.size()},
+                              {"buildings", sum.buildings},
+                              {"extruded", sum.extruded},
+                              {"not_extruded", CountsJson(sum.not_extruded)},
+                              {"terrain_dropped", sum.terrain_dropped},
+                              {"occluders", sum.occluders},
+                              {"footprint_m2", sum.footprint_m2},
+                              {"triangles", extruded->TriangleCount()},
+                              {"extrude_s", extrude_s}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s: %llu of %llu buildings extruded (%.0f m² of footprint, %llu occluders), %llu terrain objects left "
+              "out; %zu objects, %zu triangles; %.2f s; saved %s\n",
+              a.input.c_str(), static_cast<unsigned long long>(sum.extruded),
+              static_cast<unsigned long long>(sum.buildings), sum.footprint_m2,
+              static_cast<unsigned long long>(sum.occluders), static_cast<unsigned long long>(sum.terrain_dropped),
+              extruded->objects.size(), extruded->TriangleCount(), extrude_s, a.output.c_str());
+  PrintCounts("buildings kept as they were", kept, sum.not_extruded);
+  return 0;
+}
+
 struct InfoArgs {
   std::string file;
   bool json = false;
@@ -623,6 +669,14 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   oc->add_flag("--keep", occ->keep, "keep the file's occluders (synthesize only for objects without); default: replace them");
   oc->add_flag("--json", occ->json, "print the summary as one JSON object");
   oc->callback([occ, done] { done(Occluders(*occ)); });
+
+  auto ext = std::make_shared<ExtrudeArgs>();
+  CLI::App* ex = scene->add_subcommand(
+      "extrude", "a city model as OpenStreetMap draws it: each building its footprint's prism, ground to top, flat ground");
+  ex->add_option("IN", ext->input, ".glb/.gltf file, catalog name or catalog .json")->required();
+  ex->add_option("-o,--output", ext->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  ex->add_flag("--json", ext->json, "print the summary as one JSON object");
+  ex->callback([ext, done] { done(Extrude(*ext)); });
 
   auto info = std::make_shared<InfoArgs>();
   CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");
