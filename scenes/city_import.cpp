@@ -20,6 +20,7 @@
 #include "scenes/derived_walks.h"
 #include "scenes/mesh.h"
 #include "scenes/polygon.h"
+#include "scenes/polygon_set.h"
 
 namespace vistream::scenes {
 
@@ -747,7 +748,7 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
   OcclusionStats st;
   std::vector<bool> is_terrain(scene.objects.size(), false);
   for (ObjectId t : scene.terrain) is_terrain[t] = true;
-  std::vector<double> occluder_volume(scene.objects.size(), 0.0);
+  std::vector<std::vector<const Occluder25D*>> of_object(scene.objects.size());
   std::vector<bool> has(scene.objects.size(), false);
   for (const Occluder25D& oc : scene.occluders) {
     if (is_terrain[oc.object]) {
@@ -756,9 +757,43 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
     }
     ++st.occluders;
     has[oc.object] = true;
-    const double base = scene.objects[oc.object].bounds.min.z;
-    occluder_volume[oc.object] += std::abs(SignedArea(oc.footprint)) * std::max(0.0, oc.height - base);
+    of_object[oc.object].push_back(&oc);
   }
+  // The volume of the union of an object's occluders above its lowest point: a tier stands on
+  // the ground through the tiers below it, and a tower's prism through its building's, so the
+  // prisms overlap and their volumes do not add up. Slab by slab between the occluders'
+  // heights, each slab's area the union of the footprints reaching above it.
+  auto occluder_volume = [&](ObjectId id) {
+    std::vector<const Occluder25D*>& ocs = of_object[id];
+    std::sort(ocs.begin(), ocs.end(), [](const Occluder25D* a, const Occluder25D* b) { return a->height > b->height; });
+    const double base = scene.objects[id].bounds.min.z;
+    double volume = 0.0;
+    std::vector<PolygonWithHoles> reaching;
+    double plain_area = 0.0;  // the footprints' summed area: the slab's if CGAL refuses the union
+    for (size_t k = 0; k < ocs.size();) {
+      const double top = ocs[k]->height;
+      for (; k < ocs.size() && ocs[k]->height == top; ++k) {
+        Ring r = ocs[k]->footprint;
+        const double area = SignedArea(r);
+        if (area == 0.0) continue;
+        if (area < 0.0) std::reverse(r.begin(), r.end());
+        plain_area += std::abs(area);
+        reaching.push_back(PolygonWithHoles{std::move(r), {}});
+      }
+      const double below = std::max(base, k < ocs.size() ? ocs[k]->height : base);
+      if (!(top > below)) continue;
+      double area = plain_area;
+      if (absl::StatusOr<std::vector<PolygonWithHoles>> u = Union(reaching); u.ok()) {
+        area = 0.0;
+        for (const PolygonWithHoles& p : *u) {
+          area += SignedArea(p.outer);
+          for (const Ring& h : p.holes) area += SignedArea(h);  // clockwise: negative
+        }
+      }
+      volume += area * (top - below);
+    }
+    return volume;
+  };
   Aabb terrain_box;
   for (const Object& o : scene.objects) {
     ++st.objects_by_type[o.type.empty() ? "object" : o.type];
@@ -771,7 +806,7 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
     ++st.non_terrain_objects;
     if (!has[o.id]) continue;
     ++st.objects_with_occluder;
-    st.occluder_volume_m3 += occluder_volume[o.id];
+    st.occluder_volume_m3 += occluder_volume(o.id);
     double six_v = 0.0;  // six times the signed volume, relative to the object's box corner
     const glm::dvec3 c = o.bounds.min;
     const Mesh& m = o.mesh;

@@ -534,7 +534,11 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z, c
     levels = std::move(kept_levels);
     areas = std::move(kept_areas);
   }
-  double below = ground_z;
+  // The volume counted is the occluders' inside the solid: above its lowest point (below it,
+  // down to ground_z, the prisms stand in the ground).
+  double lowest = s.vertices.front().z;
+  for (const glm::dvec3& p : s.vertices) lowest = std::min(lowest, p.z);
+  double below = std::max(ground_z, lowest);
   for (const size_t i : ChooseTierLevels(levels, areas, ground_z, options.max_tiers)) {
     const double level = levels[i];
     std::vector<std::vector<glm::dvec2>> pieces;
@@ -550,8 +554,8 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z, c
       out.occluders.push_back(Occluder25D{std::move(piece), level, 0});
     }
     if (tier_area <= 0.0) continue;
-    out.occluder_volume_m3 += tier_area * (level - below);
-    below = level;
+    out.occluder_volume_m3 += tier_area * std::max(0.0, level - below);
+    below = std::max(below, level);
   }
   return out;
 }

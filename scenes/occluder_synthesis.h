@@ -69,9 +69,9 @@ struct OccluderSynthesis {
   // Of the solid, 0 unless closed: integrated over the regions' stacks (orientation does not
   // matter); for a self-intersecting solid by the divergence theorem (orientation does).
   double solid_volume_m3 = 0.0;
-  // Of the union of the prisms above ground_z: the sum over tiers of footprint area times the
-  // rise over the tier below (exact while no piece under min_area_m2 was dropped; a lower
-  // bound otherwise).
+  // Of the union of the prisms above the solid's lowest point (or ground_z, if higher): what
+  // of the solid occludes. The sum over tiers of footprint area times the rise over the tier
+  // below (exact while no piece under min_area_m2 was dropped; a lower bound otherwise).
   double occluder_volume_m3 = 0.0;
 };
 
