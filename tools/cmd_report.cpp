@@ -59,6 +59,7 @@ struct Plan {
   std::string pvs_scene, pvs_cell;
   std::string heatmap_scene, heatmap_seconds;
   std::string map_scene;
+  std::string city_scene;  // an imported city model (issue 35)
   LatencyPlan latency;
   PacePlan pace;
 };
@@ -84,6 +85,8 @@ Plan PlanFor(bool quick) {
     p.heatmap_scene = "london", p.heatmap_seconds = "60";
     p.map_scene = "london";
   }
+  // Den Haag in both: its import takes seconds, and CI has the data folder (.ci/run).
+  p.city_scene = "denhaag";
   p.latency = LatencyPlanFor(quick);
   p.pace = PacePlanFor(quick);
   return p;
@@ -162,6 +165,56 @@ void SceneSection(Page& page, const Plan& plan) {
   }
   if (page.RunForFile("scene map", {"scene", "map", plan.map_scene, "-o", page.Path(png), "--size", kMapPixels}, png)) {
     page.Image(png, plan.map_scene + ": building footprints by height and the catalog's walks");
+  }
+}
+
+// What a city model import gave (scene info of the catalog entry: it imports the file), its
+// map, and its PVSs at 100 m viewcells against the same city's footprints extruded as
+// OpenStreetMap would draw them (scene extrude): how much of the extrusions' culling the real
+// roofs and the synthesised occluders keep.
+void CitySection(Page& page, const Plan& plan) {
+  page.Heading("A city model: " + plan.city_scene);
+  const std::optional<json> info = page.Run("scene info (city)", {"scene", "info", plan.city_scene, "--json"});
+  if (info) {
+    const json& types = info->at("objects_by_type");
+    const uint64_t buildings = types.value("Building", uint64_t{0}) + types.value("BuildingPart", uint64_t{0});
+    const json& terrain = info->at("terrain");
+    page.Table({"scene", "CRS", "buildings and parts", "occluding objects", "occluder volume / solids' volume",
+                "terrain relief m", "terrain tiles", "triangles"},
+               {{info->value("name", ""), info->value("crs", ""), Int(buildings), Int(info->at("objects_with_occluder")),
+                 Fixed(100.0 * info->at("occluder_volume_share").get<double>(), 1) + "%",
+                 Fixed(terrain.at("relief_m"), 1), Int(terrain.at("objects")), Int(info->at("triangles"))}});
+  }
+  const std::string png = "city_" + plan.city_scene + ".png";
+  if (page.RunForFile("scene map (city)", {"scene", "map", plan.city_scene, "-o", page.Path(png), "--size", kMapPixels},
+                      png)) {
+    page.Image(png, plan.city_scene + ": footprints by height over the terrain, objects without occluders grey, derived walks");
+  }
+  // The extrusion and the PVS files are scratch: they go to a temporary folder, not the page's.
+  std::error_code ec;
+  const fs::path scratch = fs::temp_directory_path(ec) / ("vistream-report-" + std::to_string(getpid()));
+  fs::create_directories(scratch, ec);
+  const std::string extruded = (scratch / (plan.city_scene + "-extruded.glb")).string();
+  const std::optional<json> ext =
+      page.Run("scene extrude", {"scene", "extrude", plan.city_scene, "-o", extruded, "--json"});
+  std::vector<std::vector<std::string>> rows;
+  const std::pair<std::string, std::string> models[] = {{"LoD2, occluders synthesised", plan.city_scene},
+                                                        {"footprints extruded (OSM-style)", extruded}};
+  for (const auto& [model, scene] : models) {
+    if (scene == extruded && !ext) continue;
+    const std::optional<json> pvs =
+        page.Run("pvs --all (city)", {"pvs", "--scene", scene, "--all", "--cell-size", "100", "-o",
+                                      (scratch / "city.pvs").string(), "--json"});
+    if (!pvs) continue;
+    const json& by = pvs->at("by_type");
+    const double mean = by.at("Building").at("mean_pvs_objects").get<double>() +
+                        by.at("BuildingPart").at("mean_pvs_objects").get<double>();
+    const double all = by.at("Building").at("objects").get<double>() + by.at("BuildingPart").at("objects").get<double>();
+    rows.push_back({model, Int(pvs->at("cells")), Fixed(mean, 1), Fixed(all, 0), Fixed(100.0 * mean / all, 1) + "%"});
+  }
+  fs::remove_all(scratch, ec);
+  if (!rows.empty()) {
+    page.Table({"model", "100 m viewcells", "mean buildings and parts in a PVS", "of", "share"}, rows);
   }
 }
 
@@ -377,6 +430,7 @@ int Report(const ReportArgs& given) {
       a.quick ? "Quick mode: small scenes and counts, for CI; the README's figures come from the full run."
               : "Full mode: the README's scenes and sizes."));
   SceneSection(page, plan);
+  CitySection(page, plan);
   Table1Section(page, plan);
   EpsilonSection(page, plan);
   AgvsSection(page, plan);
