@@ -22,6 +22,7 @@
 #include "client/window_input.h"
 #include "gl/gl_context.h"
 #include "gl/id_renderer.h"
+#include "proto/scene_info.h"
 #include "scenes/catalog.h"
 #include "visibility/viewcell_grid.h"
 
@@ -312,38 +313,7 @@ absl::Status Loop::PreloadEverything() {
   absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(scene, spec);
   if (!grid.ok()) return grid.status();
   std::vector<Event> events;
-  v1::SceneInfo info;
-  info.set_name(scene.name);
-  info.set_object_count(static_cast<uint32_t>(scene.objects.size()));
-  info.set_triangle_count(scene.TriangleCount());
-  auto set = [](const glm::dvec3& v, v1::Vec3* out) {
-    out->set_x(v.x);
-    out->set_y(v.y);
-    out->set_z(v.z);
-  };
-  set(scene.bounds.min, info.mutable_bounds_min());
-  set(scene.bounds.max, info.mutable_bounds_max());
-  v1::ViewcellGrid* g = info.mutable_grid();
-  g->set_cell_size_m(grid->cell_size());
-  g->set_x0_m(grid->corner().x);
-  g->set_y0_m(grid->corner().y);
-  g->set_nx(grid->nx());
-  g->set_ny(grid->ny());
-  g->set_base_z_m(grid->base_z());
-  g->set_height_m(grid->height());
-  for (const scenes::ScenePath& p : scene.paths) {
-    v1::ScenePathInfo* out = info.add_paths();
-    out->set_name(p.name);
-    for (const glm::dvec2& w : p.waypoints) {
-      out->add_xy(w.x);
-      out->add_xy(w.y);
-    }
-  }
-  for (const visibility::CellBand& b : grid->bands()) {
-    g->add_band_z(b.z0);
-    g->add_band_z(b.z1);
-  }
-  events.emplace_back(std::move(info));
+  events.emplace_back(MakeSceneInfo(scene, *grid, scene.name));
   for (const scenes::Object& o : scene.objects) {
     ReceivedObject r;
     r.id = o.id;

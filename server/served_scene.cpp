@@ -5,6 +5,7 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
+#include "proto/scene_info.h"
 #include "server/wire.h"
 #include "visibility/parallel.h"
 
@@ -73,33 +74,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   if (!eps.ok()) return eps.status();
   s->epsilon_ = std::move(*eps);
 
-  vistream::v1::SceneInfo& info = s->scene_info_;
-  info.set_name(s->name_);
-  SetVec(s->scene_.origin, info.mutable_origin());
-  SetVec(s->scene_.bounds.min, info.mutable_bounds_min());
-  SetVec(s->scene_.bounds.max, info.mutable_bounds_max());
-  info.set_object_count(static_cast<uint32_t>(objects));
-  info.set_triangle_count(s->scene_.TriangleCount());
-  vistream::v1::ViewcellGrid* g = info.mutable_grid();
-  g->set_cell_size_m(s->grid_->cell_size());
-  g->set_x0_m(s->grid_->corner().x);
-  g->set_y0_m(s->grid_->corner().y);
-  g->set_nx(s->grid_->nx());
-  g->set_ny(s->grid_->ny());
-  g->set_base_z_m(s->grid_->base_z());
-  g->set_height_m(s->grid_->height());
-  for (const scenes::ScenePath& p : s->scene_.paths) {
-    vistream::v1::ScenePathInfo* out = info.add_paths();
-    out->set_name(p.name);
-    for (const glm::dvec2& w : p.waypoints) {
-      out->add_xy(w.x);
-      out->add_xy(w.y);
-    }
-  }
-  for (const visibility::CellBand& b : s->grid_->bands()) {
-    g->add_band_z(b.z0);
-    g->add_band_z(b.z1);
-  }
+  s->scene_info_ = MakeSceneInfo(s->scene_, *s->grid_, s->name_);
 
   s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()), 4096,
                                           options.idle_priority_masks);

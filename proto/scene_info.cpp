@@ -1,0 +1,46 @@
+#include "proto/scene_info.h"
+
+namespace vistream {
+
+namespace {
+
+void SetVec(const glm::dvec3& v, v1::Vec3* out) {
+  out->set_x(v.x);
+  out->set_y(v.y);
+  out->set_z(v.z);
+}
+
+}  // namespace
+
+v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::ViewcellGrid& grid, const std::string& name) {
+  v1::SceneInfo info;
+  info.set_name(name);
+  SetVec(scene.origin, info.mutable_origin());
+  SetVec(scene.bounds.min, info.mutable_bounds_min());
+  SetVec(scene.bounds.max, info.mutable_bounds_max());
+  info.set_object_count(static_cast<uint32_t>(scene.objects.size()));
+  info.set_triangle_count(scene.TriangleCount());
+  v1::ViewcellGrid* g = info.mutable_grid();
+  g->set_cell_size_m(grid.cell_size());
+  g->set_x0_m(grid.corner().x);
+  g->set_y0_m(grid.corner().y);
+  g->set_nx(grid.nx());
+  g->set_ny(grid.ny());
+  g->set_base_z_m(grid.base_z());
+  g->set_height_m(grid.height());
+  for (const scenes::ScenePath& p : scene.paths) {
+    v1::ScenePathInfo* out = info.add_paths();
+    out->set_name(p.name);
+    for (const glm::dvec2& w : p.waypoints) {
+      out->add_xy(w.x);
+      out->add_xy(w.y);
+    }
+  }
+  for (const visibility::CellBand& b : grid.bands()) {
+    g->add_band_z(b.z0);
+    g->add_band_z(b.z1);
+  }
+  return info;
+}
+
+}  // namespace vistream

@@ -1,0 +1,20 @@
+#pragma once
+// The SceneInfo message (proto/walkthrough.proto) a session starts with, made from the scene
+// and its viewcell grid: by the server for every session, and by the client that holds the
+// whole scene itself (--draw-everything's preload), so that both describe a scene alike.
+
+#include <string>
+
+#include "proto/walkthrough.pb.h"
+#include "scenes/scene.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream {
+
+// SceneInfo for `scene` served as `name` over `grid`: origin (the scene's frame in its CRS),
+// bounds, object and triangle counts (scene-local metres), the grid (corner, cell size, cell
+// counts, band; per-cell bands where cells follow terrain, as band_z pairs in cell order) and
+// the scene's own walks (Scene::paths, xy pairs). Infallible.
+v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::ViewcellGrid& grid, const std::string& name);
+
+}  // namespace vistream
