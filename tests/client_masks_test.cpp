@@ -476,6 +476,35 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesWithoutHolesOrPix
   }
 }
 
+// A real city model (issue 35): Den Haag's tile 01 served from the catalog (imported from
+// ../shared/data/citymodels: LoD2 buildings on a TIN, cells following it), the walker along
+// the walk the server derived from the data ("walk 1": the catalog entry has none of its own,
+// so the client takes the server's first) at 6 and 30 km/h: no stall, no hole, pixel error 0,
+// the eye over the terrain inside each cell's band.
+TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesWithoutStallsOrPixelError) {
+  const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
+  if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
+  server::ServedSceneOptions so;
+  so.scene = "denhaag";
+  so.threads = 2;
+  so.idle_priority_masks = false;
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = server::ServedScene::Create(so);
+  ASSERT_TRUE(city.ok()) << city.status();
+  ASSERT_FALSE((*city)->scene().paths.empty()) << "no walk derived from the data";
+  ASSERT_FALSE((*city)->scene().terrain.empty());
+  for (const double kmh : {6.0, 30.0}) {
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 30.0, 2.0));
+    ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_EQ(s->path, "walk 1");
+    EXPECT_GT(s->frames, 300u) << kmh;
+    EXPECT_EQ(s->stalls, 0u) << kmh;
+    EXPECT_GT(static_cast<double>(s->frames_masked), 0.8 * static_cast<double>(s->frames)) << kmh;
+    EXPECT_EQ(s->hole_frames, 0u) << kmh;
+    EXPECT_EQ(s->pixel_error, 0u) << kmh;
+    EXPECT_GE(s->checked_frames, 10u) << kmh;
+  }
+}
+
 // A walker at 60 km/h who turns back twice, then turns a corner into a street the boxes ahead
 // did not cover: no hole, no stall, no pixel error. (Turning back is covered by the masks of
 // the boxes behind, which the client still holds.)
