@@ -17,10 +17,12 @@
 #include <absl/strings/str_join.h>
 #include <glm/geometric.hpp>
 
+#include "scenes/derived_ground.h"
 #include "scenes/derived_walks.h"
 #include "scenes/mesh.h"
 #include "scenes/polygon.h"
 #include "scenes/polygon_set.h"
+#include "scenes/solid_floor.h"
 
 namespace vistream::scenes {
 
@@ -42,6 +44,10 @@ std::optional<double> ParseLod(const std::string& text) {
 
 bool IsBuilding(const std::string& type) { return type == "Building" || type == "BuildingPart"; }
 bool IsTerrain(const std::string& type) { return type == "TINRelief"; }
+// The ground covers whose points a derived terrain takes (city_import.h "Ground without a TIN").
+bool IsGroundSurface(const std::string& type) {
+  return type == "Road" || type == "Railway" || type == "TransportSquare" || type == "LandUse" || type == "WaterBody";
+}
 
 // The geometries of `o` drawn at the chosen LoD: those whose LoD text is the best one
 // (highest, or highest with integer part `lod`). Empty when none qualifies.
@@ -456,17 +462,24 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       });
     }
   }
-  // In a fixed order (by least corner), so that a TIN listed in any order gives the same tiles.
-  for (auto& t : terrain_tris) std::rotate(t.begin(), std::min_element(t.begin(), t.end(), LexLess), t.end());
-  std::sort(terrain_tris.begin(), terrain_tris.end(), [](const auto& a, const auto& b) {
-    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), LexLess);
-  });
-  sum.terrain_triangles = terrain_tris.size();
-  const GroundIndex ground(terrain_tris, 25.0);
+  if (!terrain_tris.empty()) sum.terrain_from = "TIN";
 
-  // 4. Objects.
+  // 4. Objects: meshes, floors closed; their solids wait for the ground.
   std::vector<std::vector<glm::dvec2>> roads;  // Road surfaces' outer rings, xy, for walks
-  Progress progress(run, "building the city", chosen.size() + 1);
+  const bool derive_ground = terrain.empty() && options.ground == CityGround::kDerived;
+  DerivedGroundInput ground_input;
+  // A solid for the synthesis: its triangles and whether every polygon of it was triangulated.
+  struct PendingSolid {
+    std::vector<std::array<glm::dvec3, 3>> triangles;
+    bool complete = true;
+  };
+  struct PendingObject {
+    ObjectId id;
+    bool building;
+    std::vector<PendingSolid> solids;
+  };
+  std::vector<PendingObject> pending;
+  Progress progress(run, "building the city", 2 * chosen.size() + 1);
   for (const Chosen& c : chosen) {
     if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
     const CityObject& o = *c.object;
@@ -479,72 +492,153 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
         });
       }
     }
+    const bool ground_surface = derive_ground && IsGroundSurface(o.type);
     Mesh mesh;
     // Per solid (index within the geometry list), its triangles; surfaces of surface
     // geometries of buildings are gathered as one candidate solid.
-    std::vector<std::vector<std::array<glm::dvec3, 3>>> solids;
-    std::vector<bool> solid_complete;
-    std::vector<std::array<glm::dvec3, 3>> surface_shell;
-    bool surface_shell_complete = true, has_surface_shell = false;
+    std::vector<PendingSolid> solids;
+    PendingSolid surface_shell;
+    bool has_surface_shell = false;
+    auto triangulate = [&](const CitySurface& s) -> std::optional<Triangulated> {
+      absl::StatusOr<Triangulated> t = TriangulateSurface(s, origin, &sum.repaired);
+      if (!t.ok()) {
+        ++sum.skipped[absl::StrCat("polygon not triangulated: ", t.status().message())];
+        return std::nullopt;
+      }
+      ++sum.surfaces;
+      AppendTriangles(t->triangles, t->normal, &mesh);
+      return std::move(*t);
+    };
     for (const CityGeometry* g : c.geometries) {
-      const size_t first = solids.size();
-      solids.resize(first + g->solids.size());
-      solid_complete.resize(first + g->solids.size(), true);
-      ForEachSurface(*g, [&](const CitySurface& s, int solid) {
-        absl::StatusOr<Triangulated> t = TriangulateSurface(s, origin, &sum.repaired);
-        if (!t.ok()) {
-          ++sum.skipped[absl::StrCat("polygon not triangulated: ", t.status().message())];
-          if (solid >= 0) solid_complete[first + solid] = false;
-          else surface_shell_complete = false;
-          return;
+      for (const CitySolid& solid : g->solids) {
+        PendingSolid& out = solids.emplace_back();
+        for (size_t sh = 0; sh < solid.shells.size(); ++sh) {
+          std::vector<std::array<glm::dvec3, 3>> shell;
+          bool shell_complete = true;
+          for (const CitySurface& surface : solid.shells[sh]) {
+            std::optional<Triangulated> t = triangulate(surface);
+            if (!t) {
+              shell_complete = false;
+              continue;
+            }
+            shell.insert(shell.end(), t->triangles.begin(), t->triangles.end());
+          }
+          out.complete = out.complete && shell_complete;
+          if (shell_complete) {
+            const FloorResult floor = CloseFloor(shell);
+            if (floor.outcome == FloorClosing::kClosed) {
+              ++sum.repaired["solid closed with a floor"];
+              AppendTriangles(floor.triangles, glm::dvec3(0.0, 0.0, -1.0), &mesh);
+              shell.insert(shell.end(), floor.triangles.begin(), floor.triangles.end());
+            } else if (floor.outcome == FloorClosing::kFailed) {
+              ++sum.skipped[absl::StrCat("floor not closed: ", floor.why)];
+            }
+            // The exterior shell's floor is ground (a void's is not). In the mesh's single
+            // precision, so that the terrain meets the floor that is drawn exactly.
+            if (derive_ground && IsBuilding(o.type) && sh == 0) {
+              std::vector<std::array<glm::dvec3, 3>> f = FloorTriangles(shell);
+              for (auto& t : f) {
+                for (auto& p : t) p = glm::dvec3(glm::vec3(p));
+              }
+              if (!f.empty()) ground_input.floors.push_back(std::move(f));
+            }
+          }
+          out.triangles.insert(out.triangles.end(), shell.begin(), shell.end());
         }
-        ++sum.surfaces;
-        AppendTriangles(t->triangles, t->normal, &mesh);
-        if (solid >= 0) {
-          solids[first + solid].insert(solids[first + solid].end(), t->triangles.begin(), t->triangles.end());
-        } else if (IsBuilding(o.type)) {
-          has_surface_shell = true;
-          surface_shell.insert(surface_shell.end(), t->triangles.begin(), t->triangles.end());
+      }
+      for (const CitySurface& surface : g->surfaces) {
+        std::optional<Triangulated> t = triangulate(surface);
+        if (ground_surface && t) {
+          for (const auto& tri : t->triangles) {
+            for (const glm::dvec3& p : tri) ground_input.points.push_back(glm::dvec3(glm::vec3(p)));
+          }
         }
-      });
+        if (!IsBuilding(o.type)) continue;
+        if (!t) {
+          surface_shell.complete = false;
+          continue;
+        }
+        has_surface_shell = true;
+        surface_shell.triangles.insert(surface_shell.triangles.end(), t->triangles.begin(), t->triangles.end());
+      }
     }
     if (mesh.indices.empty()) {
       ++sum.skipped["object without a drawable polygon"];
-      progress.Advance();
+      progress.Advance(2);
       continue;
     }
     const ObjectId id = scene.AddObject(o.id, std::move(mesh));
     scene.objects[id].type = o.type;
-    const Aabb box = scene.objects[id].bounds;
+    if (has_surface_shell) solids.push_back(std::move(surface_shell));
+    pending.push_back({id, IsBuilding(o.type), std::move(solids)});
+    progress.Advance();
+  }
+
+  // The ground derived where the file has none.
+  if (derive_ground) {
+    const glm::dvec3 lo = world.min - origin, hi = world.max - origin;
+    ground_input.lo = glm::dvec2(glm::vec2(glm::dvec2(lo)));
+    ground_input.hi = glm::dvec2(glm::vec2(glm::dvec2(hi)));
+    absl::StatusOr<DerivedGround> derived = DeriveGround(ground_input);
+    if (derived.ok()) {
+      sum.terrain_from = "derived";
+      sum.ground_floors = derived->floors;
+      sum.ground_floors_overlapping = derived->floors_overlapping;
+      sum.ground_floor_points = derived->floor_points;
+      sum.ground_surface_points = derived->surface_points;
+      sum.ground_points_under_floors = derived->points_under_floors;
+      sum.ground_corner_points = derived->corner_points;
+      terrain_tris = std::move(derived->triangles);
+      Aabb box;
+      for (const auto& t : terrain_tris) {
+        for (const glm::dvec3& p : t) box.Extend(p + origin);
+      }
+      sum.terrain_min_z = box.min.z;
+      sum.terrain_max_z = box.max.z;
+    } else {
+      ++sum.skipped[absl::StrCat("ground not derived: ", derived.status().message())];
+    }
+  }
+
+  // In a fixed order (by least corner), so that a TIN listed in any order gives the same tiles.
+  for (auto& t : terrain_tris) std::rotate(t.begin(), std::min_element(t.begin(), t.end(), LexLess), t.end());
+  std::sort(terrain_tris.begin(), terrain_tris.end(), [](const auto& a, const auto& b) {
+    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), LexLess);
+  });
+  sum.terrain_triangles = terrain_tris.size();
+  const GroundIndex ground(terrain_tris, 25.0);
+
+  // Occluders of the objects' solids, on the ground.
+  for (const PendingObject& po : pending) {
+    if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
+    const Aabb box = scene.objects[po.id].bounds;
     const double ground_z = ground.LowestUnder(box);
     const GroundSurface under = ground.Under(box);
     bool got_occluder = false;
-    auto synthesize = [&](const std::vector<std::array<glm::dvec3, 3>>& tris, bool complete) {
+    for (const PendingSolid& solid : po.solids) {
       ++sum.solids;
-      if (!complete) {
+      if (!solid.complete) {
         ++sum.without_occluder["a polygon could not be triangulated"];
-        return;
+        continue;
       }
-      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(tris), ground_z, under, options.synthesis);
+      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(solid.triangles), ground_z, under, options.synthesis);
       if (r.defect != SolidDefect::kNone) {
         ++sum.without_occluder[SolidDefectName(r.defect)];
-        return;
+        continue;
       }
       sum.solid_volume_m3 += r.solid_volume_m3;
       sum.occluder_volume_m3 += r.occluder_volume_m3;
       if (r.occluders.empty()) {
         ++sum.without_occluder["no prism large enough"];
-        return;
+        continue;
       }
       got_occluder = true;
       for (Occluder25D& oc : r.occluders) {
-        oc.object = id;
+        oc.object = po.id;
         scene.occluders.push_back(std::move(oc));
       }
-    };
-    for (size_t s = 0; s < solids.size(); ++s) synthesize(solids[s], solid_complete[s]);
-    if (has_surface_shell) synthesize(surface_shell, surface_shell_complete);
-    if (IsBuilding(o.type)) {
+    }
+    if (po.building) {
       ++sum.buildings_drawn;
       sum.buildings_with_occluder += got_occluder;
     }
@@ -581,7 +675,9 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
         sum.terrain_skirt_triangles += (a.z > 0.0) + (b.z > 0.0);
       }
     }
-    const std::string terrain_name = terrain.size() == 1 ? terrain.front().object->id : "terrain";
+    const bool derived = sum.terrain_from == "derived";
+    const std::string terrain_name =
+        derived ? "derived terrain" : (terrain.size() == 1 ? terrain.front().object->id : "terrain");
     std::map<std::pair<int64_t, int64_t>, std::vector<std::array<glm::dvec3, 3>>> tiles;
     for (const auto& t : terrain_tris) {
       const glm::dvec3 c = (t[0] + t[1] + t[2]) / 3.0;
@@ -602,7 +698,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       }
       const ObjectId id = scene.AddObject(absl::StrCat(terrain_name, "/tile ", key.first, ",", key.second), std::move(mesh));
       scene.terrain.push_back(id);
-      scene.objects[id].type = "TINRelief";
+      scene.objects[id].type = derived ? "DerivedTerrain" : "TINRelief";
       ++sum.terrain_tiles;
       for (Occluder25D& oc : TerrainOccluders(tris, options.terrain_quantum_m, options.terrain_levels)) {
         oc.object = id;

@@ -25,6 +25,21 @@
 // cannot be triangulated (a self-crossing ring, a hole outside its ring, no area) is left out
 // and counted; its object is kept.
 //
+// Floors: a Solid shell that is open only at its lowest height (the walls' lower edges form
+// closed loops there: extruded LoD1 models such as the 3D BAG leave the ground surface out)
+// gets the floor that closes it (scenes/solid_floor.h), drawn and counted in
+// CityImportSummary::repaired["solid closed with a floor"]; anything else open stays open.
+//
+// Ground without a TIN (CityImportOptions::ground, default derived): a terrain is derived
+// (scenes/derived_ground.h) from the floors of the Building and BuildingPart solids (their
+// lowest faces, constrained: each footprint is exactly a set of terrain triangles at its floor's
+// height) and the vertices of the ground-level surfaces: those of Road, Railway,
+// TransportSquare, LandUse and WaterBody objects (the ground covers of a planar partition such
+// as the Dutch BGT). PlantCover is not ground: 3D data sets lift it to the vegetation's height
+// (Delft's reaches 16.8 m). The derived terrain takes the TIN's path below: tiles named
+// "derived terrain/tile <i>,<j>" of type "DerivedTerrain", skirts, occluders; buildings on it
+// occlude by the same GroundSurface test.
+//
 // Occluders: each solid of an object (and each closed MultiSurface/CompositeSurface of a
 // Building or BuildingPart) through SynthesizeOccluders with the ground under it: the
 // terrain's lowest height under the object's xy box (0 without terrain). Terrain tiles get
@@ -45,6 +60,12 @@
 
 namespace vistream::scenes {
 
+// What stands for the ground when the file has no terrain (TINRelief).
+enum class CityGround {
+  kDerived,  // a terrain derived from building floors and ground-level surfaces (the default)
+  kNone,     // flat ground at the data's lowest point
+};
+
 struct CityImportOptions {
   std::optional<int> lod;        // 0..4: the integer part of the LoD to use; none: each object's highest
   std::string name;              // the scene's name; default: the file name up to its first dot
@@ -55,6 +76,7 @@ struct CityImportOptions {
   double terrain_tile_m = 100.0;  // edge of the terrain's tiles, > 0
   double terrain_quantum_m = 1.0;  // TerrainOccluders' height steps
   int terrain_levels = 16;         // TerrainOccluders' tiers per tile
+  CityGround ground = CityGround::kDerived;  // only for files without a TINRelief
   OccluderSynthesisOptions synthesis;
   size_t walks = 3;  // walks to derive from the data (0: none)
 };
@@ -84,6 +106,14 @@ struct CityImportSummary {
   uint64_t terrain_objects = 0, terrain_triangles = 0, terrain_tiles = 0, terrain_occluders = 0;
   uint64_t terrain_skirt_triangles = 0;  // walls closing the terrain's edge down to the ground level
   double terrain_min_z = 0.0, terrain_max_z = 0.0;
+  // Where the terrain came from: "TIN" (the file's TINRelief objects), "derived" (no TIN: the
+  // ground derived from the data, terrain_objects 0), "" (none: flat ground).
+  std::string terrain_from;
+  // The derived terrain's inputs (scenes/derived_ground.h DerivedGround): building floors taken
+  // and left out (over a lower floor), distinct floor corners, surface points taken and left
+  // out (inside or on a floor), box corners added.
+  uint64_t ground_floors = 0, ground_floors_overlapping = 0, ground_floor_points = 0;
+  uint64_t ground_surface_points = 0, ground_points_under_floors = 0, ground_corner_points = 0;
   std::map<std::string, uint64_t> skipped;   // the reader's and the builder's, by reason
   std::map<std::string, uint64_t> repaired;  // likewise
   // Walks derived from the data (Scene::paths): on Road objects' surfaces where the file has
