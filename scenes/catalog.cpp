@@ -134,8 +134,15 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
       s.synthesize_occluders = how == "synthesize";
     }
   } else if (r.Has("city")) {
-    r.Allow({"city", "lod", "crs"});
+    r.Allow({"city", "lod", "crs", "ground"});
     if (r.Has("crs")) s.crs = r.String("crs");
+    if (r.Has("ground")) {
+      const std::string ground = r.String("ground");
+      if (ground != "derived" && ground != "none") {
+        r.Fail(r.Key("ground"), absl::StrCat("'", ground, "' is not 'derived' (a terrain from the data where the file has none) or 'none' (flat ground)"));
+      }
+      s.ground = ground == "none" ? CityGround::kNone : CityGround::kDerived;
+    }
     s.kind = SceneSource::Kind::kCity;
     const fs::path p(r.String("city"));
     s.path = (p.is_absolute() ? p : fs::path(base_dir) / p).lexically_normal().string();
@@ -324,6 +331,7 @@ absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& ru
     CityImportOptions options;
     options.lod = entry.source.lod;
     options.crs = entry.source.crs;
+    options.ground = entry.source.ground;
     options.name = entry.name;
     return ImportCity(entry.source.path, options, nullptr, run);
   }

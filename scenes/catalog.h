@@ -15,6 +15,7 @@
 #include <absl/status/statusor.h>
 #include <glm/vec2.hpp>
 
+#include "scenes/city_import.h"
 #include "scenes/osm_import.h"
 #include "scenes/scene.h"
 
@@ -33,6 +34,8 @@ struct SceneSource {
   double max_height_m = OsmImportOptions{}.max_height_m;  // kOsm
   std::optional<int> lod;           // kCity: the LoD to draw ("lod"); none: each object's highest
   std::string crs;                  // kCity: the CRS when the file names none ("crs")
+  // kCity: the ground of a file without a TIN ("ground": "derived", the default, or "none").
+  CityGround ground = CityGround::kDerived;
   bool synthesize_occluders = false;  // kGltf ("occluders": "synthesize"): occluders from closed meshes
 };
 

@@ -44,6 +44,7 @@ std::optional<double> ParseLod(const std::string& text) {
 
 bool IsBuilding(const std::string& type) { return type == "Building" || type == "BuildingPart"; }
 bool IsTerrain(const std::string& type) { return type == "TINRelief"; }
+constexpr const char* kDerivedTerrainType = "DerivedTerrain";
 // The ground covers whose points a derived terrain takes (city_import.h "Ground without a TIN").
 bool IsGroundSurface(const std::string& type) {
   return type == "Road" || type == "Railway" || type == "TransportSquare" || type == "LandUse" || type == "WaterBody";
@@ -698,7 +699,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       }
       const ObjectId id = scene.AddObject(absl::StrCat(terrain_name, "/tile ", key.first, ",", key.second), std::move(mesh));
       scene.terrain.push_back(id);
-      scene.objects[id].type = derived ? "DerivedTerrain" : "TINRelief";
+      scene.objects[id].type = derived ? kDerivedTerrainType : "TINRelief";
       ++sum.terrain_tiles;
       for (Occluder25D& oc : TerrainOccluders(tris, options.terrain_quantum_m, options.terrain_levels)) {
         oc.object = id;
@@ -895,6 +896,7 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
     ++st.objects_by_type[o.type.empty() ? "object" : o.type];
     if (is_terrain[o.id]) {
       ++st.terrain_objects;
+      st.derived_terrain_objects += o.type == kDerivedTerrainType;
       st.terrain_triangles += o.mesh.TriangleCount();
       terrain_box.Extend(o.bounds);
       continue;

@@ -169,6 +169,9 @@ struct OcclusionStats {
   // volume above each object's lowest point.
   double solid_volume_m3 = 0.0, occluder_volume_m3 = 0.0;
   uint64_t terrain_objects = 0, terrain_triangles = 0;
+  // Of the terrain objects, those of a terrain the import derived (type "DerivedTerrain": the
+  // file had no TIN), not read from the file.
+  uint64_t derived_terrain_objects = 0;
   double terrain_min_z = 0.0, terrain_max_z = 0.0;  // world heights; equal when there is no terrain
 };
 OcclusionStats ComputeOcclusionStats(const Scene& scene);

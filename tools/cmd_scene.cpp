@@ -221,6 +221,7 @@ struct ImportCityArgs {
   std::string input, output, name, crs;
   std::optional<int> lod;
   double terrain_tile_m = 100.0;
+  std::string ground = "derived";
   bool keep_going = false;
   bool json = false;
 };
@@ -233,6 +234,7 @@ int ImportCity(const ImportCityArgs& a) {
   options.keep_going = a.keep_going;
   options.crs = a.crs;
   options.terrain_tile_m = a.terrain_tile_m;
+  options.ground = a.ground == "none" ? scenes::CityGround::kNone : scenes::CityGround::kDerived;
   scenes::CityImportSummary sum;
   absl::StatusOr<scenes::Scene> scene = scenes::ImportCity(a.input, options, &sum, ToolRun());
   if (!scene.ok() && a.json) {
@@ -275,14 +277,22 @@ int ImportCity(const ImportCityArgs& a) {
         {"occluder_volume_m3", sum.occluder_volume_m3},
         {"occluder_volume_share", volume_share},
         {"terrain",
-         {{"objects", sum.terrain_objects},
+         {{"from", sum.terrain_from},
+          {"objects", sum.terrain_objects},
           {"triangles", sum.terrain_triangles},
           {"tiles", sum.terrain_tiles},
           {"skirt_triangles", sum.terrain_skirt_triangles},
           {"occluders", sum.terrain_occluders},
           {"min_z", sum.terrain_min_z},
           {"max_z", sum.terrain_max_z},
-          {"relief_m", sum.terrain_max_z - sum.terrain_min_z}}},
+          {"relief_m", sum.terrain_max_z - sum.terrain_min_z},
+          {"derived",
+           {{"floors", sum.ground_floors},
+            {"floors_overlapping", sum.ground_floors_overlapping},
+            {"floor_points", sum.ground_floor_points},
+            {"surface_points", sum.ground_surface_points},
+            {"points_under_floors", sum.ground_points_under_floors},
+            {"corner_points", sum.ground_corner_points}}}}},
         {"walks_from", sum.walks_from},
         {"walks", WalksJson(sum.walks)},
         {"walk_notes", sum.walk_notes},
@@ -313,11 +323,21 @@ int ImportCity(const ImportCityArgs& a) {
               static_cast<unsigned long long>(sum.buildings_drawn),
               static_cast<unsigned long long>(sum.buildings_with_occluder), 100.0 * share, 100.0 * volume_share,
               sum.occluder_volume_m3, sum.solid_volume_m3);
-  if (sum.terrain_objects > 0) {
+  if (sum.terrain_triangles > 0) {
     std::printf("terrain: %llu triangles in %llu tiles, %llu occluders, heights %.2f to %.2f m (relief %.2f m)\n",
                 static_cast<unsigned long long>(sum.terrain_triangles), static_cast<unsigned long long>(sum.terrain_tiles),
                 static_cast<unsigned long long>(sum.terrain_occluders), sum.terrain_min_z, sum.terrain_max_z,
                 sum.terrain_max_z - sum.terrain_min_z);
+    if (sum.terrain_from == "derived") {
+      std::printf("terrain derived (the file has no TIN): %llu building floors (%llu left out over a lower one), "
+                  "%llu floor corners, %llu ground surface points (%llu under floors left out), %llu box corners\n",
+                  static_cast<unsigned long long>(sum.ground_floors),
+                  static_cast<unsigned long long>(sum.ground_floors_overlapping),
+                  static_cast<unsigned long long>(sum.ground_floor_points),
+                  static_cast<unsigned long long>(sum.ground_surface_points),
+                  static_cast<unsigned long long>(sum.ground_points_under_floors),
+                  static_cast<unsigned long long>(sum.ground_corner_points));
+    }
   } else {
     std::printf("terrain: none (flat ground at the lowest point, %.2f m)\n", scene->origin.z);
   }
@@ -478,7 +498,8 @@ int Info(const InfoArgs& a) {
     j["solid_volume_m3"] = st.solid_volume_m3;
     j["occluder_volume_m3"] = st.occluder_volume_m3;
     j["occluder_volume_share"] = occluding_share;
-    j["terrain"] = {{"objects", st.terrain_objects},
+    j["terrain"] = {{"derived", st.derived_terrain_objects > 0},
+                    {"objects", st.terrain_objects},
                     {"triangles", st.terrain_triangles},
                     {"occluders", st.terrain_occluders},
                     {"min_z", st.terrain_min_z},
@@ -504,9 +525,10 @@ int Info(const InfoArgs& a) {
     std::printf("\n");
   }
   if (st.terrain_objects > 0) {
-    std::printf("terrain     %llu objects, %llu triangles, heights %.2f to %.2f m (relief %.2f m)\n",
+    std::printf("terrain     %llu objects, %llu triangles, heights %.2f to %.2f m (relief %.2f m)%s\n",
                 static_cast<unsigned long long>(st.terrain_objects), static_cast<unsigned long long>(st.terrain_triangles),
-                st.terrain_min_z, st.terrain_max_z, st.terrain_max_z - st.terrain_min_z);
+                st.terrain_min_z, st.terrain_max_z, st.terrain_max_z - st.terrain_min_z,
+                st.derived_terrain_objects > 0 ? "; derived from the data (the file had no TIN)" : "");
   }
   std::printf("bounds      min (%.2f, %.2f, %.2f)  max (%.2f, %.2f, %.2f)  [scene-local m]\n", b.min.x,
               b.min.y, b.min.z, b.max.x, b.max.y, b.max.z);
@@ -658,6 +680,11 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--crs", city->crs, "the coordinate reference system when the file names none (EPSG:28992)");
   c->add_option("--terrain-tile", city->terrain_tile_m, "edge of the terrain's tiles in metres (each tile an object)")
       ->check(FiniteRange(1.0, 100000.0));
+  c->add_option("--ground", city->ground,
+                 "without a TIN in the file: derived (a terrain from building floors and roads, land use, water) "
+                 "or none (flat ground at the lowest point)")
+      ->check(CLI::IsMember({"derived", "none"}))
+      ->capture_default_str();
   c->add_flag("--keep-going", city->keep_going, "leave out objects with malformed geometry (counted) instead of failing");
   c->add_flag("--json", city->json, "print the summary as one JSON object");
   c->callback([city, done] { done(ImportCity(*city)); });
