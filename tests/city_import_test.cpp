@@ -2,6 +2,7 @@
 // from CityGML give the same scene, with the object, triangle and occluder counts worked out by
 // hand in tests/citymodel/README.md; Den Haag read from both formats gives the same scene.
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <tuple>
@@ -10,10 +11,14 @@
 
 #include <gtest/gtest.h>
 #include <glm/common.hpp>
+#include <glm/geometric.hpp>
 
 #include "scenes/city_import.h"
 #include "scenes/gltf_io.h"
 #include "scenes/mesh.h"
+#include "scenes/random.h"
+#include "scenes/terrain.h"
+#include "tests/solid_oracle.h"
 #include "tests/test_util.h"
 
 namespace vistream::scenes {
@@ -64,6 +69,34 @@ size_t OccluderCount(const Scene& scene, const std::string& name) {
   size_t n = 0;
   for (const Occluder25D& oc : scene.occluders) n += o != nullptr && oc.object == o->id;
   return n;
+}
+
+// Random points of every occluder prism of the scene's non-terrain objects that lie neither
+// inside the object's solid (the independent ray-parity oracle, tests/solid_oracle.h) nor at or
+// below the terrain's surface (TerrainHeight): occluders must never leave solid ∪ ground.
+int PrismPointsOutside(const Scene& scene, int samples, uint64_t seed) {
+  const TerrainHeight terrain(scene);
+  std::vector<bool> is_terrain(scene.objects.size(), false);
+  for (ObjectId t : scene.terrain) is_terrain[t] = true;
+  std::map<ObjectId, SolidMesh> solids;
+  Rng rng(seed);
+  int outside = 0;
+  for (const Occluder25D& oc : scene.occluders) {
+    if (is_terrain[oc.object]) continue;
+    auto it = solids.find(oc.object);
+    if (it == solids.end()) it = solids.emplace(oc.object, SolidMeshFromMesh(scene.objects[oc.object].mesh)).first;
+    for (int i = 0; i < samples; ++i) {
+      const glm::dvec2 xy = testing::PointIn(oc.footprint, &rng);
+      const double z = rng.Uniform(0.0, oc.height);
+      if (z <= terrain.HeightAt(xy) + 1e-9) continue;
+      if (testing::InsideSolid(it->second, glm::dvec3(xy, z), &rng)) continue;
+      if (outside++ == 0) {
+        ADD_FAILURE() << "(" << xy.x << ", " << xy.y << ", " << z << ") of an occluder of "
+                      << scene.objects[oc.object].name << " up to " << oc.height << " is outside its solid and above the ground";
+      }
+    }
+  }
+  return outside;
 }
 
 class ShapesTest : public ::testing::TestWithParam<std::string> {};
@@ -299,6 +332,150 @@ TEST(CityImport, DenHaagFromCityGmlAndCityJsonIsTheSameScene) {
   EXPECT_EQ(gs.buildings, 844u);
   EXPECT_EQ(js.terrain_triangles, 5595u);
   EXPECT_GT(js.buildings_with_occluder, 9 * js.buildings_drawn / 10) << "most parts stand on the ground and occlude";
+}
+
+// Extruded LoD1 solids without a ground surface (tests/citymodel/floorless.city.json, written by
+// make_floorless_cityjson.py): a box, an L and a block round a courtyard get their floors; a
+// box missing a wall as well stays open.
+TEST(CityImport, FloorlessSolidsAreClosedWithAFloorAndOtherOpenOnesAreNot) {
+  CityImportOptions options;
+  options.ground = CityGround::kNone;
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + "floorless.city.json", options, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->origin, glm::dvec3(85040.0, 446010.0, 0.0));
+  EXPECT_TRUE(scene->terrain.empty());
+  EXPECT_EQ(sum.terrain_from, "");
+  EXPECT_EQ(sum.repaired["solid closed with a floor"], 3u);
+  EXPECT_EQ(sum.Repaired(), 3u);
+  EXPECT_EQ(sum.buildings_drawn, 4u);
+  EXPECT_EQ(sum.buildings_with_occluder, 3u);
+  EXPECT_EQ(sum.without_occluder, (std::map<std::string, uint64_t>{{"open", 1}})) << "no-wall";
+  // Walls two triangles each; roof and floor the footprint's triangles each.
+  EXPECT_EQ(Find(*scene, "box")->mesh.TriangleCount(), 4 * 2 + 2 + 2u);
+  EXPECT_EQ(Find(*scene, "ell")->mesh.TriangleCount(), 6 * 2 + 4 + 4u);
+  EXPECT_EQ(Find(*scene, "ring")->mesh.TriangleCount(), 8 * 2 + 8 + 8u);
+  EXPECT_EQ(Find(*scene, "no-wall")->mesh.TriangleCount(), 3 * 2 + 2u) << "no floor added";
+  EXPECT_NEAR(OccluderVolume(*scene, "box", 0.0), 10.0 * 8.0 * 6.0, 1e-3);
+  EXPECT_NEAR(OccluderVolume(*scene, "ell", 0.0), (12.0 * 12.0 - 6.0 * 7.0) * 7.0, 1e-3);
+  EXPECT_NEAR(OccluderVolume(*scene, "ring", 0.0), (400.0 - 64.0) * 10.0, 1e-3) << "the courtyard stays open";
+  EXPECT_EQ(OccluderCount(*scene, "no-wall"), 0u);
+  EXPECT_NEAR(sum.solid_volume_m3, 480.0 + 714.0 + 3360.0, 1e-6);
+  EXPECT_EQ(PrismPointsOutside(*scene, 500, 11), 0);
+  // The floors face down: the meshes enclose positive volume with outward normals.
+  for (const char* name : {"box", "ell", "ring"}) {
+    const Mesh& m = Find(*scene, name)->mesh;
+    double six_v = 0.0;
+    for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+      const glm::dvec3 a(m.positions[m.indices[k]]), b(m.positions[m.indices[k + 1]]), c(m.positions[m.indices[k + 2]]);
+      six_v += glm::dot(a, glm::cross(b, c));
+    }
+    EXPECT_GT(six_v, 0.0) << name;
+  }
+}
+
+// Two floorless buildings on a road rising 3 m over 60 m (tests/citymodel/derived_ground.city.json):
+// without a TIN, the ground derived from the road and the floors carries both.
+TEST(CityImport, DerivedGroundCarriesFloorlessBuildingsOnASlope) {
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(kShapes + "derived_ground.city.json", {}, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->origin, glm::dvec3(85030.0, 446010.0, 0.0));
+  EXPECT_EQ(sum.terrain_from, "derived");
+  EXPECT_EQ(sum.terrain_objects, 0u) << "none in the file";
+  EXPECT_EQ(sum.repaired["solid closed with a floor"], 2u);
+  EXPECT_EQ(sum.ground_floors, 2u);
+  EXPECT_EQ(sum.ground_floor_points, 8u);
+  EXPECT_EQ(sum.ground_surface_points, 4u) << "the road's corners";
+  EXPECT_EQ(sum.ground_corner_points, 0u) << "the road's corners are the box's";
+  // 12 points, 4 on the hull: 2 * 12 - 2 - 4 triangles; skirts along the raised edges: one
+  // triangle on each of y 0 and y 20 (rising from 0), two along x 60 (both ends at 3 m).
+  EXPECT_EQ(sum.terrain_triangles, 18u);
+  EXPECT_EQ(sum.terrain_skirt_triangles, 4u);
+  // x -30..30, y -10..10 about the origin: four 100 m tiles.
+  ASSERT_EQ(scene->terrain.size(), 4u);
+  EXPECT_EQ(scene->objects[scene->terrain[0]].name, "derived terrain/tile -1,-1");
+  for (ObjectId t : scene->terrain) EXPECT_EQ(scene->objects[t].type, "DerivedTerrain");
+  EXPECT_NEAR(sum.terrain_min_z, 0.0, 1e-9);
+  EXPECT_NEAR(sum.terrain_max_z, 3.0, 1e-9);
+  // The floors lie on the terrain: at their corners and over their footprints.
+  const TerrainHeight terrain(*scene);
+  for (const auto& [name, z] : {std::pair<std::string, double>{"low", 0.7}, {"high", 2.0}}) {
+    const Aabb b = Find(*scene, name)->bounds;
+    EXPECT_NEAR(b.min.z, z, 1e-6) << name;
+    for (double fx : {0.0, 0.3, 0.5, 1.0}) {
+      for (double fy : {0.0, 0.6, 1.0}) {
+        const glm::dvec2 p(b.min.x + fx * (b.max.x - b.min.x), b.min.y + fy * (b.max.y - b.min.y));
+        EXPECT_NEAR(terrain.HeightAt(p), b.min.z, 1e-9) << name << " at " << p.x << ", " << p.y;
+      }
+    }
+  }
+  EXPECT_EQ(sum.buildings_drawn, 2u);
+  EXPECT_EQ(sum.buildings_with_occluder, 2u);
+  EXPECT_TRUE(sum.without_occluder.empty());
+  EXPECT_NEAR(OccluderVolume(*scene, "low", 0.7), 100.0 * 8.0, 1e-3);
+  EXPECT_NEAR(OccluderVolume(*scene, "high", 2.0), 100.0 * 10.0, 1e-3);
+  EXPECT_EQ(PrismPointsOutside(*scene, 2000, 12), 0);
+  EXPECT_TRUE(ValidateScene(*scene, "derived_ground.city.json").ok());
+
+  // Saved and loaded, the scene still says its terrain was derived.
+  const std::string path = testing::TempDir() + "/derived_ground.glb";
+  ASSERT_TRUE(SaveGltf(*scene, path).ok());
+  absl::StatusOr<Scene> back = LoadGltf(path);
+  ASSERT_TRUE(back.ok()) << back.status();
+  const OcclusionStats st = ComputeOcclusionStats(*back);
+  EXPECT_EQ(st.terrain_objects, 4u);
+  EXPECT_EQ(st.derived_terrain_objects, 4u);
+  EXPECT_EQ(st.objects_with_occluder, 2u);
+
+  // Without the derived ground the buildings float above the road's low end: no occluder.
+  CityImportOptions flat;
+  flat.ground = CityGround::kNone;
+  CityImportSummary fsum;
+  absl::StatusOr<Scene> floating = ImportCity(kShapes + "derived_ground.city.json", flat, &fsum);
+  ASSERT_TRUE(floating.ok()) << floating.status();
+  EXPECT_TRUE(floating->terrain.empty());
+  EXPECT_EQ(fsum.buildings_with_occluder, 0u);
+  EXPECT_EQ(fsum.without_occluder["raised above the ground"], 2u);
+}
+
+// Delft (3D BAG LoD1 + BGT, CityJSON 2.0, no TIN): every building is a floorless extrusion whose
+// floor floats 0.1 to 1 m above the data's lowest point. Closed and on the derived ground, all
+// 160 occlude; the counts are the import's (deterministic), measured when this was written.
+TEST(CityImport, DelftBuildingsAreClosedAndStandOnADerivedGround) {
+  const std::string path = kData + "delft.city.json";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << path << " is absent: Delft is not tested";
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(path, {}, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(sum.crs, "EPSG:7415");
+  EXPECT_EQ(sum.buildings, 160u);
+  EXPECT_EQ(sum.buildings_drawn, 160u);
+  EXPECT_EQ(sum.repaired["solid closed with a floor"], 160u);
+  EXPECT_EQ(sum.terrain_from, "derived");
+  EXPECT_EQ(sum.ground_floors, 160u);
+  EXPECT_EQ(sum.ground_floors_overlapping, 0u);
+  EXPECT_GT(sum.terrain_triangles, 10000u);
+  EXPECT_GT(sum.terrain_occluders, 0u);
+  EXPECT_EQ(sum.buildings_with_occluder, 160u);
+  EXPECT_TRUE(sum.without_occluder.empty());
+  EXPECT_EQ(PrismPointsOutside(*scene, 20, 13), 0);
+  std::printf("Delft: %llu of %llu buildings occlude; derived terrain of %llu triangles from %llu floors (%llu corners) and "
+              "%llu surface points (%llu under floors left out); occluder volume %.0f of %.0f m³\n",
+              static_cast<unsigned long long>(sum.buildings_with_occluder),
+              static_cast<unsigned long long>(sum.buildings_drawn),
+              static_cast<unsigned long long>(sum.terrain_triangles), static_cast<unsigned long long>(sum.ground_floors),
+              static_cast<unsigned long long>(sum.ground_floor_points),
+              static_cast<unsigned long long>(sum.ground_surface_points),
+              static_cast<unsigned long long>(sum.ground_points_under_floors), sum.occluder_volume_m3, sum.solid_volume_m3);
+  // Flat ground at the lowest point: the same floors, but every building floats above it.
+  CityImportOptions flat;
+  flat.ground = CityGround::kNone;
+  CityImportSummary fsum;
+  absl::StatusOr<Scene> floating = ImportCity(path, flat, &fsum);
+  ASSERT_TRUE(floating.ok()) << floating.status();
+  EXPECT_EQ(fsum.buildings_with_occluder, 0u);
+  EXPECT_EQ(fsum.without_occluder["raised above the ground"], 160u);
 }
 
 }  // namespace
