@@ -45,6 +45,8 @@ std::optional<double> ParseLod(const std::string& text) {
 bool IsBuilding(const std::string& type) { return type == "Building" || type == "BuildingPart"; }
 bool IsTerrain(const std::string& type) { return type == "TINRelief"; }
 constexpr const char* kDerivedTerrainType = "DerivedTerrain";
+// How far road walks keep from buildings (the catalog's walks keep a metre too).
+constexpr double kWalkClearanceM = 1.0;
 // The ground covers whose points a derived terrain takes (city_import.h "Ground without a TIN").
 bool IsGroundSurface(const std::string& type) {
   return type == "Road" || type == "Railway" || type == "TransportSquare" || type == "LandUse" || type == "WaterBody";
@@ -725,6 +727,16 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     DerivedWalks derived;
     if (!roads.empty()) {
       walk.name_prefix = "road";
+      // A metre from every building: pavements reach the walls.
+      for (const Object& o : scene.objects) {
+        if (!IsBuilding(o.type)) continue;
+        const Mesh& m = o.mesh;
+        for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+          walk.obstacles.push_back({glm::dvec2(m.positions[m.indices[k]]), glm::dvec2(m.positions[m.indices[k + 1]]),
+                                    glm::dvec2(m.positions[m.indices[k + 2]])});
+        }
+      }
+      walk.clearance_m = kWalkClearanceM;
       derived = DeriveRoadWalks(roads, walk);
       sum.walks_from = "roads";
     } else {

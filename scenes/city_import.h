@@ -117,7 +117,8 @@ struct CityImportSummary {
   std::map<std::string, uint64_t> skipped;   // the reader's and the builder's, by reason
   std::map<std::string, uint64_t> repaired;  // likewise
   // Walks derived from the data (Scene::paths): on Road objects' surfaces where the file has
-  // them, else through the free space between the buildings (scenes/derived_walks.h).
+  // them, a metre clear of every building, else through the free space between the buildings
+  // (scenes/derived_walks.h).
   std::string walks_from;  // "roads", "free space" or "" (none derived)
   std::vector<std::pair<std::string, double>> walks;  // name, length in metres
   std::vector<std::string> walk_notes;

@@ -387,6 +387,11 @@ DerivedWalks DeriveStreetWalks(const std::vector<StreetPolyline>& streets, const
 
 DerivedWalks DeriveRoadWalks(const std::vector<PolygonWithHoles>& polygons, const DeriveWalkOptions& options) {
   Graph g;
+  const Obstacles obstacles(options.obstacles, 10.0);
+  const double clearance = options.clearance_m;
+  auto edge = [&](uint32_t a, uint32_t b) {
+    if (obstacles.Clear(g.at(a), g.at(b), clearance)) g.Edge(a, b);
+  };
   size_t failed = 0;
   for (const PolygonWithHoles& poly : polygons) {
     absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(poly);
@@ -398,12 +403,14 @@ DerivedWalks DeriveRoadWalks(const std::vector<PolygonWithHoles>& polygons, cons
       if (!Inside(t[0], options) || !Inside(t[1], options) || !Inside(t[2], options)) continue;
       const uint32_t c = g.Node((t[0] + t[1] + t[2]) / 3.0);
       for (int e = 0; e < 3; ++e) {
-        g.Edge(c, g.Node(t[e]));
-        g.Edge(c, g.Node(0.5 * (t[e] + t[(e + 1) % 3])));
+        edge(c, g.Node(t[e]));
+        edge(c, g.Node(0.5 * (t[e] + t[(e + 1) % 3])));
       }
     }
   }
-  DerivedWalks out = Derive(g, {}, options, {});
+  DerivedWalks out = Derive(g, {}, options, [&](const glm::dvec2& a, const glm::dvec2& b) {
+    return obstacles.Clear(a, b, clearance);
+  });
   if (failed > 0) out.notes.push_back(absl::StrCat(failed, " road polygon(s) did not triangulate: left out"));
   return out;
 }

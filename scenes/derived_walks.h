@@ -35,6 +35,12 @@ struct DeriveWalkOptions {
   // are used, e.g. the scene's bounds, so that every walk stays over the viewcell grid.
   // Street polylines are cut where they leave it. None: everything.
   std::optional<std::pair<glm::dvec2, glm::dvec2>> bounds;
+  // Road walks only (DeriveRoadWalks): what a walk keeps clearance_m from, as xy triangles
+  // (scene-local metres; e.g. the buildings' triangles projected, zero-area ones as segments).
+  // Road surfaces of a planar partition (the Dutch BGT) reach the walls, so a walk along a
+  // pavement, or a simplification's shortcut past a corner, would touch or cut a building.
+  std::vector<Triangle2> obstacles;
+  double clearance_m = 0.0;
 };
 
 // What a derivation gives: the walks, their lengths, and what it found out on the way.
@@ -69,7 +75,9 @@ DerivedWalks DeriveStreetWalks(const std::vector<StreetPolyline>& streets, const
 // vertices and to the midpoints of its edges. Triangles of different polygons that share a
 // vertex or an edge (equal to 1 mm) are joined through it. Every graph edge lies inside one
 // triangle, so the graph stays on the roads; the simplified walk leaves them by at most
-// options.simplify_m.
+// options.simplify_m. With options.obstacles, graph edges closer than options.clearance_m to
+// one are left out and simplification takes only shortcuts that keep that clearance, so every
+// segment of every walk keeps it.
 DerivedWalks DeriveRoadWalks(const std::vector<PolygonWithHoles>& polygons, const DeriveWalkOptions& options = {});
 // The same for simple polygons without holes (counter-clockwise or not).
 DerivedWalks DeriveRoadWalks(const std::vector<std::vector<glm::dvec2>>& polygons,

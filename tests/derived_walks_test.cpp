@@ -192,6 +192,36 @@ double SegmentPolygonDistance(const P& a, const P& b, const std::vector<P>& poly
   return d;
 }
 
+// Pavements of a planar partition reach the walls: an L of road round a building's corner,
+// sharing its edges. Without obstacles the walk runs along the wall (and a shortcut may cut the
+// corner); with the building as an obstacle every segment keeps the clearance.
+TEST(DerivedWalks, RoadWalksKeepTheirClearanceFromObstacles) {
+  const std::vector<P> building = {{0, 10}, {90, 10}, {90, 100}, {0, 100}};
+  const std::vector<std::vector<P>> roads = {
+      {{0, 0}, {100, 0}, {100, 10}, {90, 10}, {0, 10}},
+      {{90, 10}, {100, 10}, {100, 100}, {90, 100}},
+  };
+  auto nearest = [&](const DerivedWalks& d) {
+    double n = std::numeric_limits<double>::infinity();
+    for (const ScenePath& w : d.paths) {
+      for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
+        n = std::min(n, SegmentPolygonDistance(w.waypoints[k], w.waypoints[k + 1], building));
+      }
+    }
+    return n;
+  };
+  const DerivedWalks free = DeriveRoadWalks(roads);
+  ASSERT_FALSE(free.paths.empty());
+  EXPECT_LT(nearest(free), 1.0) << "without obstacles the walk touches the building";
+  DeriveWalkOptions options;
+  options.obstacles = {{building[0], building[1], building[2]}, {building[0], building[2], building[3]}};
+  options.clearance_m = 1.0;
+  const DerivedWalks clear = DeriveRoadWalks(roads, options);
+  ASSERT_FALSE(clear.paths.empty());
+  EXPECT_GE(nearest(clear), 1.0);
+  EXPECT_GE(clear.lengths_m[0], 150.0) << "still round the corner, along both arms";
+}
+
 TEST(DerivedWalks, FreeSpaceWalksOfCity1KeepTwoMetresFromEveryFootprintAndAreLong) {
   const Scene city = GenerateTestCity(/*dense=*/true, 1);
   const DerivedWalks d = DeriveFreeSpaceWalks(city);
