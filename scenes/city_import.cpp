@@ -226,8 +226,11 @@ class GroundIndex {
       for (const auto& p : t) box_.Extend(p);
     }
     if (tris_.empty()) return;
-    nx_ = std::max(1, static_cast<int>(std::ceil((box_.max.x - box_.min.x) / cell_)));
-    ny_ = std::max(1, static_cast<int>(std::ceil((box_.max.y - box_.min.y) / cell_)));
+    // At most 1024 cells a side, whatever the file's extent.
+    cell_ = std::max(cell_, std::max(box_.max.x - box_.min.x, box_.max.y - box_.min.y) / 1024.0);
+    if (!std::isfinite(cell_)) cell_ = std::numeric_limits<double>::max();
+    nx_ = std::clamp(static_cast<int>(std::ceil((box_.max.x - box_.min.x) / cell_)), 1, 1024);
+    ny_ = std::clamp(static_cast<int>(std::ceil((box_.max.y - box_.min.y) / cell_)), 1, 1024);
     cells_.resize(static_cast<size_t>(nx_) * ny_);
     for (uint32_t k = 0; k < tris_.size(); ++k) {
       int i0, j0, i1, j1;
@@ -294,7 +297,7 @@ class GroundIndex {
     return b;
   }
   void Range(const Aabb& b, int* i0, int* j0, int* i1, int* j1) const {
-    auto clampi = [](double v, int n) { return std::clamp(static_cast<int>(std::floor(v)), 0, n - 1); };
+    auto clampi = [](double v, int n) { return v >= 0.0 ? static_cast<int>(std::min(std::floor(v), n - 1.0)) : 0; };
     *i0 = clampi((b.min.x - box_.min.x) / cell_, nx_);
     *i1 = clampi((b.max.x - box_.min.x) / cell_, nx_);
     *j0 = clampi((b.min.y - box_.min.y) / cell_, ny_);

@@ -9,7 +9,6 @@
 #include <limits>
 #include <map>
 #include <tuple>
-#include <unordered_map>
 #include <utility>
 
 #include <absl/strings/str_cat.h>
@@ -70,51 +69,59 @@ bool Covers(const Tri2& t, const Point& q) {
   return true;
 }
 
-// Floor triangles in a uniform grid of `cell` metres, for the overlap and cover tests.
+// Floor triangles in a uniform grid over [lo, hi] (at most kCells a side, so that a file's
+// extent cannot make it large), for the overlap and cover tests.
 class FloorGrid {
  public:
-  explicit FloorGrid(double cell) : cell_(cell) {}
+  static constexpr int64_t kCells = 1024;
+
+  FloorGrid(const glm::dvec2& lo, const glm::dvec2& hi, double cell) : lo_(lo) {
+    const double extent = std::max(hi.x - lo.x, hi.y - lo.y);
+    cell_ = std::max(cell, extent / static_cast<double>(kCells));
+    if (!std::isfinite(cell_)) cell_ = std::numeric_limits<double>::max();
+    cells_.resize(static_cast<size_t>(kCells * kCells));
+  }
 
   void Add(const Tri2& t) {
     const uint32_t id = static_cast<uint32_t>(tris_.size());
     tris_.push_back(t);
-    ForCells(t.lo, t.hi, [&](int64_t key) { cells_[key].push_back(id); });
+    ForCells(t.lo, t.hi, [&](size_t cell) { cells_[cell].push_back(id); });
   }
 
-  // Calls fn(triangle) for every triangle whose cells meet [lo, hi] (some more than once);
-  // stops when fn returns true, and returns whether one did.
+  // Whether fn(triangle) holds for a triangle whose box meets [lo, hi].
   template <typename Fn>
   bool Any(const glm::dvec2& lo, const glm::dvec2& hi, Fn&& fn) const {
     bool found = false;
-    ForCells(lo, hi, [&](int64_t key) {
-      if (found) return;
-      auto it = cells_.find(key);
-      if (it == cells_.end()) return;
-      for (uint32_t id : it->second) {
+    ForCells(lo, hi, [&](size_t cell) {
+      for (uint32_t id : cells_[cell]) {
+        if (found) return;
         const Tri2& t = tris_[id];
         if (t.hi.x < lo.x || t.lo.x > hi.x || t.hi.y < lo.y || t.lo.y > hi.y) continue;
-        if (fn(t)) {
-          found = true;
-          return;
-        }
+        found = fn(t);
       }
     });
     return found;
   }
 
  private:
+  int64_t Index(double v, double lo) const {
+    const double f = (v - lo) / cell_;
+    if (!(f >= 0.0)) return 0;
+    if (f >= static_cast<double>(kCells - 1)) return kCells - 1;
+    return static_cast<int64_t>(f);
+  }
   template <typename Fn>
   void ForCells(const glm::dvec2& lo, const glm::dvec2& hi, Fn&& fn) const {
-    const int64_t i0 = static_cast<int64_t>(std::floor(lo.x / cell_)), i1 = static_cast<int64_t>(std::floor(hi.x / cell_));
-    const int64_t j0 = static_cast<int64_t>(std::floor(lo.y / cell_)), j1 = static_cast<int64_t>(std::floor(hi.y / cell_));
+    const int64_t i0 = Index(lo.x, lo_.x), i1 = Index(hi.x, lo_.x), j0 = Index(lo.y, lo_.y), j1 = Index(hi.y, lo_.y);
     for (int64_t j = j0; j <= j1; ++j) {
-      for (int64_t i = i0; i <= i1; ++i) fn(j * 4000003 + i);
+      for (int64_t i = i0; i <= i1; ++i) fn(static_cast<size_t>(j * kCells + i));
     }
   }
 
-  double cell_;
+  glm::dvec2 lo_;
+  double cell_ = 1.0;
   std::vector<Tri2> tris_;
-  std::unordered_map<int64_t, std::vector<uint32_t>> cells_;
+  std::vector<std::vector<uint32_t>> cells_;
 };
 
 bool Finite(const glm::dvec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
@@ -162,7 +169,16 @@ absl::StatusOr<DerivedGround> DeriveGround(const DerivedGroundInput& input) {
     const glm::dvec3 &p = input.floors[a.index][0][0], &q = input.floors[b.index][0][0];
     return std::tie(p.x, p.y, p.z, a.index) < std::tie(q.x, q.y, q.z, b.index);
   });
-  FloorGrid grid(10.0);
+  glm::dvec2 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+  for (const FloorRef& ref : order) {
+    for (const Triangle3& t : input.floors[ref.index]) {
+      for (const glm::dvec3& p : t) {
+        lo = glm::min(lo, glm::dvec2(p));
+        hi = glm::max(hi, glm::dvec2(p));
+      }
+    }
+  }
+  FloorGrid grid(lo, hi, 10.0);
   std::map<Xy, double> floor_z;  // corner -> height in the ground (the highest floor's)
   std::vector<std::pair<Xy, Xy>> constraints;
   for (const FloorRef& ref : order) {

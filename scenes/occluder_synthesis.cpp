@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <set>
 #include <utility>
@@ -330,13 +331,19 @@ OccluderSynthesis SynthesizeOccluders(const SolidMesh& solid, double ground_z, c
     xy[i] = Point2(s.vertices[i].x, s.vertices[i].y);
     vh[i] = ct.insert(xy[i]);
   }
-  std::set<std::pair<Ct::Vertex*, Ct::Vertex*>> edges;
+  // Each triangulation vertex by the first input vertex at its xy, so that constraints go in
+  // (and run) in an order that depends on the input only, not on where the heap put the
+  // vertices: the same solid gives the same occluders in every process.
+  std::map<Ct::Vertex*, uint32_t> first_at;
+  std::vector<uint32_t> canon(s.vertices.size());
+  for (uint32_t i = 0; i < s.vertices.size(); ++i) canon[i] = first_at.emplace(&*vh[i], i).first->second;
+  std::set<std::pair<uint32_t, uint32_t>> edges;
   for (const Triangle& t : s.triangles) {
     for (int i = 0; i < 3; ++i) {
-      Ct::Vertex_handle a = vh[t[i]], b = vh[t[(i + 1) % 3]];
+      uint32_t a = canon[t[i]], b = canon[t[(i + 1) % 3]];
       if (a == b) continue;  // a vertical edge
-      if (&*b < &*a) std::swap(a, b);
-      if (edges.insert({&*a, &*b}).second) ct.insert_constraint(a, b);
+      if (b < a) std::swap(a, b);
+      if (edges.insert({a, b}).second) ct.insert_constraint(vh[a], vh[b]);
     }
   }
   // The terrain triangles under the solid: their edges cut the regions too, so that the

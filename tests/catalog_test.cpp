@@ -113,6 +113,24 @@ TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   EXPECT_NE(low.message().find("key 'source.max_height_m'"), std::string::npos) << low;
 }
 
+TEST(Catalog, CitySourceReadsItsGround) {
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
+      R"({"name": "t", "source": {"city": "x.city.json", "lod": 1}, "viewcell": {"size_m": 50, "height_m": 2}})", "t.json",
+      "/base/scenes");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->source.kind, SceneSource::Kind::kCity);
+  EXPECT_EQ(e->source.lod, 1);
+  EXPECT_EQ(e->source.ground, CityGround::kDerived) << "the default";
+  e = ParseCatalogEntry(
+      R"({"name": "t", "source": {"city": "x.city.json", "ground": "none"}, "viewcell": {"size_m": 50, "height_m": 2}})",
+      "t.json", "/base/scenes");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->source.ground, CityGround::kNone);
+  ExpectErrorMentions(
+      R"({"name": "t", "source": {"city": "x.city.json", "ground": "flat"}, "viewcell": {"size_m": 50, "height_m": 2}})",
+      {"key 'source.ground'", "'flat' is not 'derived'"});
+}
+
 TEST(Catalog, MalformedJsonGivesLineAndColumn) {
   const absl::Status s = ParseError("{\n  \"name\": \"t\",\n  \"source\": {,}\n}");
   ASSERT_FALSE(s.ok());

@@ -35,6 +35,7 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
   ExpectBadOption("", "'vistream' needs a command: scene, pvs, epsilon, agvs, check-conservative, bench");
   ExpectBadOption("scene", "'vistream scene' needs a command: generate, import-osm, import-city, occluders, info, map");
   ExpectBadOption("bench nosuch", "'nosuch': not a vistream bench command");
+  ExpectBadOption("scene import-city x.city.json -o " + Tmp("never.glb") + " --ground flat", "--ground: ");
   ExpectBadOption("pvs --scene city1 --cell 1,1 --bogus", "--bogus: not an option of 'vistream pvs'");
   // Named before the required option it hides, without the value beside it.
   ExpectBadOption("pvs --sene city1", "--sene: not an option of 'vistream pvs'");
