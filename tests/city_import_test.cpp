@@ -439,6 +439,28 @@ TEST(CityImport, DerivedGroundCarriesFloorlessBuildingsOnASlope) {
   EXPECT_EQ(fsum.without_occluder["raised above the ground"], 2u);
 }
 
+// The derived ground's indexes are sized by cell counts, not by the file's extent: land use
+// 2,000 km apart (a bad file, or a fuzzer's) is a few triangles, not a grid of billions of cells.
+TEST(CityImport, DerivedGroundOverAHugeExtentStaysSmall) {
+  CityModel model;
+  CityGeometry near, far;
+  near.lod = far.lod = "1";
+  near.surfaces.push_back({{{0, 0, 0}, {10, 0, 0}, {0, 10, 0}}, {}});
+  far.surfaces.push_back({{{2e6, 2e6, 1}, {2e6 + 10, 2e6, 1}, {2e6, 2e6 + 10, 1}}, {}});
+  model.objects.push_back({"near", "LandUse", "", {near}});
+  model.objects.push_back({"far", "LandUse", "", {far}});
+  CityImportSummary sum;
+  CityImportOptions options;
+  options.walks = 0;
+  absl::StatusOr<Scene> s = BuildCityScene(model, "huge", options, &sum);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(sum.terrain_from, "derived");
+  EXPECT_EQ(sum.ground_surface_points, 6u);
+  EXPECT_EQ(sum.ground_corner_points, 3u) << "(0, 0) is a point already";
+  // 9 points, 8 of them on the box's edges: 2 * 9 - 2 - 8 triangles.
+  EXPECT_EQ(sum.terrain_triangles, 8u);
+}
+
 // Delft (3D BAG LoD1 + BGT, CityJSON 2.0, no TIN): every building is a floorless extrusion whose
 // floor floats 0.1 to 1 m above the data's lowest point. Closed and on the derived ground, all
 // 160 occlude; the counts are the import's (deterministic), measured when this was written.
