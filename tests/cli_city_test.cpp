@@ -1,10 +1,10 @@
-// Conservative visibility on a real city model (issue 35): Den Haag's tile 01 (CityJSON,
+// Conservative visibility on real city models (issue 35): Den Haag's tile 01 (CityJSON,
 // ../shared/data/citymodels: 1,990 LoD2 buildings and parts on a TIN rising 13 m, their
 // occluders synthesised from the solids), imported by the CLI and checked by
 // check-conservative at 100 m and 8 m viewcells with the cpu and exact backends: nothing
 // sampling sees from a cell's band may be missing from its PVS or from an ε-superset on the
 // ground. Each case is non-vacuous: PVS entries checked, queries that found something hidden,
-// ε hits checked (and the exact backend's own test run).
+// ε hits checked (and the exact backend's own test run). Delft likewise, on its derived ground.
 
 #include <cstdio>
 #include <filesystem>
@@ -43,6 +43,7 @@ struct CityCase {
   const char* backend;
   int cells;  // sampled viewcells (0: all)
   double min_entries;
+  double min_occluded = 1000.0;  // queries that found something hidden
 };
 
 void PrintTo(const CityCase& c, std::ostream* os) { *os << c.cell_size << " m cells, " << c.backend; }
@@ -62,7 +63,7 @@ TEST_P(CheckConservativeOnDenHaag, FindsNoViolation) {
   EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
   EXPECT_TRUE(j.at("unchecked").empty()) << r.out;
   EXPECT_GT(j.at("pvs_entries_checked").get<double>(), c.min_entries) << r.out;
-  EXPECT_GT(j.at("occluded_queries").get<double>(), 1000.0) << r.out;
+  EXPECT_GT(j.at("occluded_queries").get<double>(), c.min_occluded) << r.out;
   EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0) << r.out;
   if (std::string(c.backend) == "exact") {
     EXPECT_GE(j.at("exact_tests").get<int>(), 1) << r.out;
@@ -78,6 +79,50 @@ std::string CaseName(const ::testing::TestParamInfo<CityCase>& test) {
 INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnDenHaag,
                          ::testing::Values(CityCase{100, "cpu", 0, 10000}, CityCase{100, "exact", 0, 10000},
                                            CityCase{8, "cpu", 100, 4000}, CityCase{8, "exact", 100, 4000}),
+                         CaseName);
+
+// Delft (delft.city.json: 160 LoD1 buildings without floors, no TIN): closed with their floors
+// and standing on the terrain the import derives from them and the roads, land use and water,
+// every building occludes (README "Your own city"); checked the same way.
+const std::string kDelft = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/delft.city.json";
+
+const std::string& Delft() {
+  static const std::string path = [] {
+    const std::string out = Tmp("delft.glb");
+    const RunResult r = Vistream("scene import-city " + kDelft + " -o " + out + " --json");
+    EXPECT_EQ(r.exit_code, 0) << r.out;
+    if (r.exit_code != 0) return std::string();
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j.at("terrain").at("from"), "derived") << r.out;
+    EXPECT_EQ(j.at("buildings_with_occluder").get<int>(), 160) << r.out;
+    return out;
+  }();
+  return path;
+}
+
+class CheckConservativeOnDelft : public ::testing::TestWithParam<CityCase> {};
+
+TEST_P(CheckConservativeOnDelft, FindsNoViolation) {
+  if (!std::filesystem::exists(kDelft)) GTEST_SKIP() << kDelft << " is absent: Delft is not checked";
+  const CityCase& c = GetParam();
+  ASSERT_FALSE(Delft().empty());
+  const RunResult r = Vistream("check-conservative --scene " + Delft() + " --cell-size " + std::to_string(c.cell_size) +
+                               " --backend " + c.backend + " --cells " + std::to_string(c.cells) +
+                               " --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
+  EXPECT_TRUE(j.at("unchecked").empty()) << r.out;
+  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), c.min_entries) << r.out;
+  EXPECT_GT(j.at("occluded_queries").get<double>(), c.min_occluded) << r.out;
+  EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0) << r.out;
+}
+
+// Measured when written: at 100 m all 24 cells, 6,045 PVS entries checked, 482 (cpu) and 489
+// (exact) occluded queries; at 8 m (100 sampled cells) 10,785 entries, 4,588 and 4,602.
+INSTANTIATE_TEST_SUITE_P(Delft, CheckConservativeOnDelft,
+                         ::testing::Values(CityCase{100, "cpu", 0, 3000, 200}, CityCase{100, "exact", 0, 3000, 200},
+                                           CityCase{8, "cpu", 100, 4000, 1000}, CityCase{8, "exact", 100, 4000, 1000}),
                          CaseName);
 
 // The same city as OpenStreetMap draws it (`scene extrude`: each building its footprint's prism,
