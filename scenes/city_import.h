@@ -15,8 +15,9 @@
 // counted ("no LoD <n> geometry"), but terrain keeps its highest (it is the ground).
 //
 // Frame: the scene origin is the file's CRS coordinates of the bounds' centre, rounded to
-// whole metres in x and y, and z at the ground level: the terrain's lowest point, or without
-// terrain the lowest point of all geometry. Scene::crs is the file's.
+// whole metres in x and y, and z at the ground level: the TIN's lowest point, or without a
+// TIN the lowest point of all geometry (also when a terrain is derived: it lies at or above
+// that point, and its skirts close it down to it). Scene::crs is the file's.
 //
 // Polygons: rings cleaned (consecutive duplicate points, spikes), projected on the plane of
 // their dominant normal axis and triangulated with holes (CGAL's constrained Delaunay

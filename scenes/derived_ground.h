@@ -11,7 +11,9 @@
 //     triangles' edges are constraints, so that its footprint is exactly a set of terrain
 //     triangles; its corners enter at the floor's highest z (floors are flat within a
 //     millimetre), and where floors of neighbouring buildings share a corner at the highest of
-//     them: every floor lies at or below the ground, so every one can occlude.
+//     them: every floor lies at or below the ground, so every one can occlude (a lower
+//     neighbour's floor lies under the ground near the shared corners, by the floors'
+//     difference: up to 0.64 m in Delft).
 //   - ground-level surface points (the caller's rule: scenes/city_import.h), less those inside
 //     or on a floor taken (the footprint stays the floor's); where several share an xy, the
 //     lowest.
