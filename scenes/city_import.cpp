@@ -368,6 +368,11 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   CityImportSummary local_summary;
   CityImportSummary& sum = summary_out != nullptr ? *summary_out : local_summary;
   sum.format = model.format;
+  if (!options.crs.empty() && !IsCrsName(options.crs)) {
+    return absl::InvalidArgumentError(absl::StrCat("'", options.crs,
+                                                   "' names no coordinate reference system (expected AUTHORITY:CODE, "
+                                                   "such as EPSG:28992)"));
+  }
   sum.crs = model.crs.empty() ? options.crs : model.crs;
   if (!options.crs.empty() && !model.crs.empty() && options.crs != model.crs) {
     return absl::InvalidArgumentError(absl::StrCat("the file's coordinate reference system is ", model.crs,
@@ -763,6 +768,19 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
 bool IsCityModelPath(std::string_view path) {
   const std::string lower = absl::AsciiStrToLower(std::string(path));
   return absl::EndsWith(lower, ".gml") || absl::EndsWith(lower, ".xml") || absl::EndsWith(lower, ".json");
+}
+
+bool IsCrsName(std::string_view text) {
+  const size_t colon = text.find(':');
+  if (colon == std::string_view::npos || colon == 0 || colon + 1 == text.size()) return false;
+  for (size_t k = 0; k < colon; ++k) {
+    if (!absl::ascii_isalpha(static_cast<unsigned char>(text[k]))) return false;
+  }
+  for (size_t k = colon + 1; k < text.size(); ++k) {
+    const unsigned char c = static_cast<unsigned char>(text[k]);
+    if (!absl::ascii_isalnum(c) && c != '.' && c != '+' && c != '_' && c != '-') return false;
+  }
+  return true;
 }
 
 absl::StatusOr<Scene> ImportCity(const std::string& path, const CityImportOptions& options,

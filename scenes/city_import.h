@@ -50,6 +50,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <absl/status/statusor.h>
@@ -67,12 +68,18 @@ enum class CityGround {
   kNone,     // flat ground at the data's lowest point
 };
 
+// Whether `text` names a coordinate reference system as the importers write them: an
+// authority and a code, "EPSG:28992", a compound "EPSG:7415+5109", "OGC:CRS84" (letters, a
+// colon, then letters, digits, '.', '+', '_' or '-').
+bool IsCrsName(std::string_view text);
+
 struct CityImportOptions {
   std::optional<int> lod;        // 0..4: the integer part of the LoD to use; none: each object's highest
   std::string name;              // the scene's name; default: the file name up to its first dot
   bool keep_going = false;       // CityReadOptions::keep_going
-  // The CRS to record when the file names none ("EPSG:28992"); a file that names another one
-  // is an error (INVALID_ARGUMENT naming both). Empty: the file's, or none.
+  // The CRS to record when the file names none ("EPSG:28992", IsCrsName); a file that names
+  // another one is an error (INVALID_ARGUMENT naming both), and so is text that names none.
+  // Empty: the file's, or none.
   std::string crs;
   double terrain_tile_m = 100.0;  // edge of the terrain's tiles, > 0
   double terrain_quantum_m = 1.0;  // TerrainOccluders' height steps

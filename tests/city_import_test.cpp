@@ -252,6 +252,17 @@ TEST(CityImport, ACrsGivenForAFileWithoutOneIsKeptAndOneThatContradictsItIsAnErr
   absl::StatusOr<Scene> e = BuildCityScene(model, "one", options);
   ASSERT_FALSE(e.ok());
   EXPECT_NE(e.status().message().find("EPSG:7415"), std::string::npos) << e.status();
+  // Text that names no CRS is refused, whatever the file says (a catalog entry's "crs" too).
+  model.crs.clear();
+  options.crs = "nonsense";
+  absl::StatusOr<Scene> n = BuildCityScene(model, "one", options);
+  ASSERT_FALSE(n.ok());
+  EXPECT_NE(n.status().message().find("'nonsense' names no coordinate reference system"), std::string::npos)
+      << n.status();
+  for (const char* good : {"EPSG:28992", "EPSG:7415+5109", "OGC:CRS84", "epsg:4326"}) EXPECT_TRUE(IsCrsName(good)) << good;
+  for (const char* bad : {"", "nonsense", "EPSG:", ":28992", "EPSG 28992", "EPSG:28992;rm", "1:2"}) {
+    EXPECT_FALSE(IsCrsName(bad)) << bad;
+  }
 }
 
 TEST(CityImport, UnknownExtensionAndEmptyModelAreErrors) {

@@ -36,6 +36,16 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
   ExpectBadOption("scene", "'vistream scene' needs a command: generate, import-osm, import-city, occluders, extrude, info, map");
   ExpectBadOption("bench nosuch", "'nosuch': not a vistream bench command");
   ExpectBadOption("scene import-city x.city.json -o " + Tmp("never.glb") + " --ground flat", "--ground: ");
+  // A CRS is AUTHORITY:CODE; a scene is written as .glb or .gltf, not into a folder or a .png,
+  // and these are told before anything is read.
+  ExpectBadOption("scene import-city x.city.json -o " + Tmp("never.glb") + " --crs nonsense",
+                  "--crs: 'nonsense' names no coordinate reference system");
+  ExpectBadOption("scene import-city x.city.json -o " + Tmp("never.png"), "--output: '" + Tmp("never.png") +
+                                                                             "': a scene is written as .glb or .gltf");
+  std::filesystem::create_directories(Tmp("folder.glb"));
+  ExpectBadOption("scene extrude city1 -o " + Tmp("folder.glb"), "--output: '" + Tmp("folder.glb") + "' is a folder");
+  ExpectBadOption("scene generate city1 -o " + Tmp("city1.json"),
+                  "--output: '" + Tmp("city1.json") + "': a scene is written as .glb or .gltf");
   ExpectBadOption("pvs --scene city1 --cell 1,1 --bogus", "--bogus: not an option of 'vistream pvs'");
   // Named before the required option it hides, without the value beside it.
   ExpectBadOption("pvs --sene city1", "--sene: not an option of 'vistream pvs'");

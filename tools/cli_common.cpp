@@ -12,6 +12,8 @@
 
 #include <unistd.h>
 
+#include <absl/strings/ascii.h>
+#include <absl/strings/match.h>
 #include <absl/strings/str_format.h>
 #include <absl/strings/str_join.h>
 
@@ -168,6 +170,21 @@ double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const size_t n = v.size();
   return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+CLI::Validator SceneOutputPath() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        if (text.empty()) return "an empty path";
+        const std::string lower = absl::AsciiStrToLower(text);
+        if (!absl::EndsWith(lower, ".glb") && !absl::EndsWith(lower, ".gltf")) {
+          return "'" + text + "': a scene is written as .glb or .gltf";
+        }
+        std::error_code ec;
+        if (std::filesystem::is_directory(text, ec)) return "'" + text + "' is a folder";
+        return "";
+      },
+      "FILE.glb|FILE.gltf");
 }
 
 }  // namespace vistream::tools

@@ -58,6 +58,9 @@ inline CLI::Validator OutputPath() {
   return CLI::Validator([](std::string& text) -> std::string { return text.empty() ? "an empty path" : ""; }, "PATH");
 }
 
+// A scene file to write: a path ending in .glb or .gltf (any case) that is not a folder.
+CLI::Validator SceneOutputPath();
+
 // The whole file, or an error naming it.
 absl::StatusOr<std::string> ReadFile(const std::string& path);
 // Writes `bytes` to `path` through `path`.tmp renamed over it, so a failed write (disk full,

@@ -652,13 +652,13 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london, streets)");
   g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
   g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)")->check(WholeRange(0, kMaxSeed));
-  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   g->callback([gen, done] { done(Generate(*gen)); });
 
   auto imp = std::make_shared<ImportArgs>();
   CLI::App* o = scene->add_subcommand("import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene");
   o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML), .osm.pbf, .osm.bz2 or .osm.gz")->required();
-  o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
   o->add_option("--storey", imp->storey_m, "storey height in metres (levels to heights)")->check(FiniteRange(1.0, 20.0));
   o->add_option("--max-height", imp->max_height_m,
@@ -673,11 +673,16 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
       "import-city", "import a 3D city model (CityGML .gml/.xml, CityJSON .json/.city.json): buildings, parts, terrain, "
                      "with occluders synthesized from the solids");
   c->add_option("IN", city->input, "CityGML 1.0/2.0 (.gml, .xml) or CityJSON 0.x-2.0 (.json, .city.json)")->required();
-  c->add_option("-o,--output", city->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  c->add_option("-o,--output", city->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   c->add_option("--lod", city->lod, "level of detail to draw (its integer part: 1, 2); default: each object's highest")
       ->check(WholeRange(0, 4));
   c->add_option("--name", city->name, "the scene's name (default: the file name up to its first dot)");
-  c->add_option("--crs", city->crs, "the coordinate reference system when the file names none (EPSG:28992)");
+  c->add_option("--crs", city->crs, "the coordinate reference system when the file names none (EPSG:28992)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            return scenes::IsCrsName(text) ? "" : "'" + text + "' names no coordinate reference system (AUTHORITY:CODE, such as EPSG:28992)";
+          },
+          "AUTHORITY:CODE"));
   c->add_option("--terrain-tile", city->terrain_tile_m, "edge of the terrain's tiles in metres (each tile an object)")
       ->check(FiniteRange(1.0, 100000.0));
   c->add_option("--ground", city->ground,
@@ -692,7 +697,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   auto occ = std::make_shared<OccludersArgs>();
   CLI::App* oc = scene->add_subcommand("occluders", "synthesize occluders from a glTF scene's closed meshes");
   oc->add_option("IN", occ->input, ".glb or .gltf file")->required();
-  oc->add_option("-o,--output", occ->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  oc->add_option("-o,--output", occ->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   oc->add_flag("--keep", occ->keep, "keep the file's occluders (synthesize only for objects without); default: replace them");
   oc->add_flag("--json", occ->json, "print the summary as one JSON object");
   oc->callback([occ, done] { done(Occluders(*occ)); });
@@ -701,7 +706,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   CLI::App* ex = scene->add_subcommand(
       "extrude", "a city model as OpenStreetMap draws it: each building its footprint's prism, ground to top, flat ground");
   ex->add_option("IN", ext->input, ".glb/.gltf file, catalog name or catalog .json")->required();
-  ex->add_option("-o,--output", ext->output, "output file, .glb or .gltf")->required()->check(OutputPath());
+  ex->add_option("-o,--output", ext->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   ex->add_flag("--json", ext->json, "print the summary as one JSON object");
   ex->callback([ext, done] { done(Extrude(*ext)); });
 
