@@ -8,6 +8,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -23,22 +24,44 @@ using vistream::testing::Vistream;
 
 const std::string kDenHaag = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
 
-// Imported once per process ("" if the import failed: the failure is reported there).
+// `data` imported by the CLI into Tmp(`glb`) with `options`, its --json summary checked by
+// `check`: the path, or "" if the import failed (the failure is reported there). Called once per
+// process and city (DenHaag, Delft).
+std::string Import(const std::string& data, const std::string& glb, const std::string& options,
+                   const std::function<void(const nlohmann::json&, const std::string&)>& check) {
+  const std::string out = Tmp(glb);
+  const RunResult r = Vistream("scene import-city " + data + " -o " + out + options + " --json");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  if (r.exit_code != 0) return std::string();
+  check(nlohmann::json::parse(r.out), r.out);
+  return out;
+}
+
 const std::string& DenHaag() {
-  static const std::string path = [] {
-    const std::string out = Tmp("denhaag.glb");
-    const RunResult r = Vistream("scene import-city " + kDenHaag + " -o " + out + " --crs EPSG:28992 --json");
-    EXPECT_EQ(r.exit_code, 0) << r.out;
-    if (r.exit_code != 0) return std::string();
-    const nlohmann::json j = nlohmann::json::parse(r.out);
-    // Most buildings occlude (1,854 of 1,990 when this was written: README "Your own city").
-    EXPECT_GT(j.at("buildings_with_occluder").get<double>(), 0.9 * j.at("buildings_drawn").get<double>()) << r.out;
-    return out;
-  }();
+  static const std::string path = Import(kDenHaag, "denhaag.glb", " --crs EPSG:28992", [](const nlohmann::json& j,
+                                                                                       const std::string& out) {
+    // Most buildings occlude (1,861 of 1,990 when this was written: README "Your own city").
+    EXPECT_GT(j.at("buildings_with_occluder").get<double>(), 0.9 * j.at("buildings_drawn").get<double>()) << out;
+  });
+  return path;
+}
+
+// Delft (delft.city.json: 160 LoD1 buildings without floors, no TIN): closed with their floors
+// and standing on the terrain the import derives from them and the roads, land use and water,
+// every building occludes (README "Your own city").
+const std::string kDelft = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/delft.city.json";
+
+const std::string& Delft() {
+  static const std::string path = Import(kDelft, "delft.glb", "", [](const nlohmann::json& j, const std::string& out) {
+    EXPECT_EQ(j.at("terrain").at("from"), "derived") << out;
+    EXPECT_EQ(j.at("buildings_with_occluder").get<int>(), 160) << out;
+  });
   return path;
 }
 
 struct CityCase {
+  const std::string* data;       // the city model file (the case skips without it)
+  const std::string& (*scene)();  // its import
   int cell_size;
   const char* backend;
   int cells;  // sampled viewcells (0: all)
@@ -46,17 +69,18 @@ struct CityCase {
   double min_occluded = 1000.0;  // queries that found something hidden
 };
 
-void PrintTo(const CityCase& c, std::ostream* os) { *os << c.cell_size << " m cells, " << c.backend; }
+void PrintTo(const CityCase& c, std::ostream* os) { *os << *c.data << ", " << c.cell_size << " m cells, " << c.backend; }
 
-class CheckConservativeOnDenHaag : public ::testing::TestWithParam<CityCase> {};
+class CheckConservativeOnCity : public ::testing::TestWithParam<CityCase> {};
 
-TEST_P(CheckConservativeOnDenHaag, FindsNoViolation) {
-  if (!std::filesystem::exists(kDenHaag)) GTEST_SKIP() << kDenHaag << " is absent: Den Haag is not checked";
+TEST_P(CheckConservativeOnCity, FindsNoViolation) {
   const CityCase& c = GetParam();
-  ASSERT_FALSE(DenHaag().empty());
-  const RunResult r = Vistream("check-conservative --scene " + DenHaag() + " --cell-size " +
-                               std::to_string(c.cell_size) + " --backend " + c.backend + " --cells " +
-                               std::to_string(c.cells) + " --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
+  if (!std::filesystem::exists(*c.data)) GTEST_SKIP() << *c.data << " is absent: the city is not checked";
+  const std::string& scene = c.scene();
+  ASSERT_FALSE(scene.empty());
+  const RunResult r = Vistream("check-conservative --scene " + scene + " --cell-size " + std::to_string(c.cell_size) +
+                               " --backend " + c.backend + " --cells " + std::to_string(c.cells) +
+                               " --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
   ASSERT_EQ(r.exit_code, 0) << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j.at("cell_size").get<double>(), c.cell_size);
@@ -76,53 +100,20 @@ std::string CaseName(const ::testing::TestParamInfo<CityCase>& test) {
 
 // Measured when written (AMD EPYC): 18,630 PVS entries checked at 100 m (64 cells), 8,805 at
 // 8 m (100 sampled cells); the bounds leave room for other seeds of the sampled cells.
-INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnDenHaag,
-                         ::testing::Values(CityCase{100, "cpu", 0, 10000}, CityCase{100, "exact", 0, 10000},
-                                           CityCase{8, "cpu", 100, 4000}, CityCase{8, "exact", 100, 4000}),
+INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnCity,
+                         ::testing::Values(CityCase{&kDenHaag, DenHaag, 100, "cpu", 0, 10000},
+                                           CityCase{&kDenHaag, DenHaag, 100, "exact", 0, 10000},
+                                           CityCase{&kDenHaag, DenHaag, 8, "cpu", 100, 4000},
+                                           CityCase{&kDenHaag, DenHaag, 8, "exact", 100, 4000}),
                          CaseName);
-
-// Delft (delft.city.json: 160 LoD1 buildings without floors, no TIN): closed with their floors
-// and standing on the terrain the import derives from them and the roads, land use and water,
-// every building occludes (README "Your own city"); checked the same way.
-const std::string kDelft = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/delft.city.json";
-
-const std::string& Delft() {
-  static const std::string path = [] {
-    const std::string out = Tmp("delft.glb");
-    const RunResult r = Vistream("scene import-city " + kDelft + " -o " + out + " --json");
-    EXPECT_EQ(r.exit_code, 0) << r.out;
-    if (r.exit_code != 0) return std::string();
-    const nlohmann::json j = nlohmann::json::parse(r.out);
-    EXPECT_EQ(j.at("terrain").at("from"), "derived") << r.out;
-    EXPECT_EQ(j.at("buildings_with_occluder").get<int>(), 160) << r.out;
-    return out;
-  }();
-  return path;
-}
-
-class CheckConservativeOnDelft : public ::testing::TestWithParam<CityCase> {};
-
-TEST_P(CheckConservativeOnDelft, FindsNoViolation) {
-  if (!std::filesystem::exists(kDelft)) GTEST_SKIP() << kDelft << " is absent: Delft is not checked";
-  const CityCase& c = GetParam();
-  ASSERT_FALSE(Delft().empty());
-  const RunResult r = Vistream("check-conservative --scene " + Delft() + " --cell-size " + std::to_string(c.cell_size) +
-                               " --backend " + c.backend + " --cells " + std::to_string(c.cells) +
-                               " --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
-  ASSERT_EQ(r.exit_code, 0) << r.out;
-  const nlohmann::json j = nlohmann::json::parse(r.out);
-  EXPECT_EQ(j.at("violations").get<int>(), 0) << r.out;
-  EXPECT_TRUE(j.at("unchecked").empty()) << r.out;
-  EXPECT_GT(j.at("pvs_entries_checked").get<double>(), c.min_entries) << r.out;
-  EXPECT_GT(j.at("occluded_queries").get<double>(), c.min_occluded) << r.out;
-  EXPECT_GT(j.at("epsilon_hits_checked").get<double>(), 10000.0) << r.out;
-}
 
 // Measured when written: at 100 m all 24 cells, 6,045 PVS entries checked, 482 (cpu) and 489
 // (exact) occluded queries; at 8 m (100 sampled cells) 10,785 entries, 4,588 and 4,602.
-INSTANTIATE_TEST_SUITE_P(Delft, CheckConservativeOnDelft,
-                         ::testing::Values(CityCase{100, "cpu", 0, 3000, 200}, CityCase{100, "exact", 0, 3000, 200},
-                                           CityCase{8, "cpu", 100, 4000, 1000}, CityCase{8, "exact", 100, 4000, 1000}),
+INSTANTIATE_TEST_SUITE_P(Delft, CheckConservativeOnCity,
+                         ::testing::Values(CityCase{&kDelft, Delft, 100, "cpu", 0, 3000, 200},
+                                           CityCase{&kDelft, Delft, 100, "exact", 0, 3000, 200},
+                                           CityCase{&kDelft, Delft, 8, "cpu", 100, 4000, 1000},
+                                           CityCase{&kDelft, Delft, 8, "exact", 100, 4000, 1000}),
                          CaseName);
 
 // The same city as OpenStreetMap draws it (`scene extrude`: each building its footprint's prism,

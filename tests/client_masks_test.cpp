@@ -253,15 +253,21 @@ TEST(ObjectStoreMasks, TheUsableMaskHoldsTheEyeHasEveryObjectReadyAndTheFewestTr
 }
 
 // city1 as the server's tests serve it (50 m viewcells), shared by the tests here.
+// `scene` (a catalog name or entry) served as these tests serve it: two PVS workers, masks on
+// ordinary threads (the shares of masked frames asserted here must not depend on what else
+// loads the machine; SCHED_IDLE's effect is MaskQueue's test).
+absl::StatusOr<std::unique_ptr<server::ServedScene>> ServeForMasks(const std::string& scene, uint32_t res = 128) {
+  server::ServedSceneOptions o;
+  o.scene = scene;
+  o.res = res;
+  o.threads = 2;
+  o.idle_priority_masks = false;
+  return server::ServedScene::Create(o);
+}
+
 server::ServedScene& City1() {
   static server::ServedScene* scene = [] {
-    server::ServedSceneOptions o;
-    o.scene = "city1";
-    o.threads = 2;
-    // Masks on ordinary threads: the shares of masked frames asserted here must not depend on
-    // what else loads the machine (SCHED_IDLE's effect is MaskQueue's test).
-    o.idle_priority_masks = false;
-    absl::StatusOr<std::unique_ptr<server::ServedScene>> s = server::ServedScene::Create(o);
+    absl::StatusOr<std::unique_ptr<server::ServedScene>> s = ServeForMasks("city1");
     EXPECT_TRUE(s.ok()) << s.status();
     return s->release();
   }();
@@ -457,12 +463,7 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesWithoutHolesOrPix
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
                              dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
-  server::ServedSceneOptions so;
-  so.scene = dir + "/london-small.json";
-  so.res = 64;
-  so.threads = 2;
-  so.idle_priority_masks = false;
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = server::ServedScene::Create(so);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeForMasks(dir + "/london-small.json", 64);
   ASSERT_TRUE(town.ok()) << town.status();
   for (const double kmh : {6.0, 60.0}) {
     const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(town->get(), kmh, kmh < 10 ? 40.0 : 20.0, 2.0, dir));
@@ -484,11 +485,7 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesWithoutHolesOrPix
 TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesWithoutStallsOrPixelError) {
   const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
   if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
-  server::ServedSceneOptions so;
-  so.scene = "denhaag";
-  so.threads = 2;
-  so.idle_priority_masks = false;
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = server::ServedScene::Create(so);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeForMasks("denhaag");
   ASSERT_TRUE(city.ok()) << city.status();
   ASSERT_FALSE((*city)->scene().paths.empty()) << "no walk derived from the data";
   ASSERT_FALSE((*city)->scene().terrain.empty());

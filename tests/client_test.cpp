@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <algorithm>
 #include <future>
 #include <map>
@@ -543,11 +544,17 @@ TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
   grid->set_ny(1);
   grid->set_base_z_m(0.5);
   grid->set_height_m(2);
-  {
-    ObjectStore store(0);
+  // A store that has been sent `info`, as it stands now.
+  auto sent = [&info] {
+    auto store = std::make_unique<ObjectStore>(0);
     std::vector<Event> events;
     events.emplace_back(info);
-    store.Apply(std::move(events), std::nullopt);
+    store->Apply(std::move(events), std::nullopt);
+    return store;
+  };
+  {
+    const std::unique_ptr<ObjectStore> s = sent();
+    const ObjectStore& store = *s;
     ASSERT_FALSE(store.failure().has_value());
     EXPECT_FALSE(store.grid().has_bands());
     EXPECT_EQ(store.grid().Band(1), (std::pair<double, double>{0.5, 2.5}));
@@ -556,10 +563,8 @@ TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
   }
   for (double z : {3.5, 14.0, 6.0, 13.0}) grid->add_band_z(z);
   {
-    ObjectStore store(0);
-    std::vector<Event> events;
-    events.emplace_back(info);
-    store.Apply(std::move(events), std::nullopt);
+    const std::unique_ptr<ObjectStore> s = sent();
+    const ObjectStore& store = *s;
     ASSERT_FALSE(store.failure().has_value());
     EXPECT_TRUE(store.grid().has_bands());
     EXPECT_EQ(store.grid().Band(0), (std::pair<double, double>{3.5, 14.0}));
@@ -571,10 +576,8 @@ TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
                                     std::pair{std::vector<double>{3.5, 14.0, 6.0, 6.0}, "viewcell 1's band"}}) {
     grid->clear_band_z();
     for (double z : bands) grid->add_band_z(z);
-    ObjectStore store(0);
-    std::vector<Event> events;
-    events.emplace_back(info);
-    store.Apply(std::move(events), std::nullopt);
+    const std::unique_ptr<ObjectStore> s = sent();
+    const ObjectStore& store = *s;
     ASSERT_TRUE(store.failure().has_value());
     EXPECT_TRUE(store.failure_is_bad_data());
     EXPECT_NE(store.failure()->find(says), std::string::npos) << *store.failure();
