@@ -14,7 +14,8 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libpng-dev zlib1g-dev libbz2-dev libdraco-dev
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   libcgal-dev libgmp-dev libmpfr-dev libmeshoptimizer-dev libosmium2-dev libgeographiclib-dev
-  xvfb xauth
+  xvfb xauth xdotool   # the window's tests: a bare X server and real key presses
+  libimgui-dev   # the client's overlay (Dear ImGui with its GLFW back end)
   libcairo2-dev gnuplot-nox fonts-dejavu-core   # figures: maps through Cairo, plots through gnuplot
   libtomlplusplus-dev   # the server's configuration file
   libcpp-httplib-dev prometheus   # the server's /metrics and /healthz; promtool checks the exposition in a test

@@ -26,7 +26,9 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
+std::atomic<bool> g_screenshot{false};
 extern "C" void OnSignal(int) { g_stop.store(true); }
+extern "C" void OnScreenshotSignal(int) { g_screenshot.store(true); }
 
 // A finite number in [lo, hi], shared with the vistream tool (CLI11's own checks let NaN through).
 using vistream::cli::FiniteRange;
@@ -85,6 +87,18 @@ int main(int argc, char** argv) {
   app.add_flag("--verify", o.verify,
                "load the full scene locally and count pixels where the drawn set differs from it (tests)");
   app.add_flag("--json", json, "print the summary as JSON");
+  app.add_flag("--overlay", o.overlay,
+               "headless: draw the statistics panel and the minimap into the frames and screenshots (the window "
+               "always has them: F1, M)");
+  app.add_option("--overlay-dump", o.overlay_dump, "at the end, write the statistics panel's lines of the last frame "
+                 "to this file (the window's, or with --overlay)");
+  app.add_option("--msaa", o.msaa_samples, "multisample antialiasing samples, 0 for none (default: 4 in the window, "
+                 "none headless)")
+      ->check(CLI::Range(0, 16));
+  bool no_overlay = false;
+  app.add_flag("--no-overlay", no_overlay, "the window starts without its panels (F1 and M show them)");
+  bool no_vsync = false;
+  app.add_flag("--no-vsync", no_vsync, "the window does not wait for the display's refresh (vsync is on by default)");
   app.add_option("--frame-log", o.frame_log, "write one CSV line per frame to this file");
   app.add_option("--cell-log", o.cell_log,
                  "write one CSV line per viewcell entered (cell_id,i,j,entered_s,complete_s,margin_s,stalled)");
@@ -142,6 +156,10 @@ int main(int argc, char** argv) {
     o.pose = p;
   }
   if (o.frames > 0 && !o.pose.has_value()) return bad_option("--frames: needs --pose");
+  if (!o.overlay_dump.empty() && o.headless && !o.overlay) return bad_option("--overlay-dump: headless, needs --overlay");
+  o.vsync = !no_vsync;
+  o.window_panels = !no_overlay;
+  if (o.overlay && no_overlay) return bad_option("--overlay: cannot be given with --no-overlay");
   if (!o.path.empty() && o.pose.has_value()) return bad_option("--path: cannot be given with --pose");
   if (absl::StatusOr<vistream::client::ChannelSecurity> security =
           vistream::client::LoadChannelSecurity(tls_ca, tls_cert, tls_key, token_file);
@@ -158,12 +176,19 @@ int main(int argc, char** argv) {
   // client prints; GRPC_VERBOSITY in the environment brings them back.
   if (std::getenv("GRPC_VERBOSITY") == nullptr) gpr_set_log_function([](gpr_log_func_args*) {});
   o.cancel = &g_stop;
+  o.screenshot_request = &g_screenshot;
   o.log = [](const std::string& line) { std::fprintf(stderr, "vistream-client: %s\n", line.c_str()); };
   struct sigaction sa {};
   sa.sa_handler = OnSignal;
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // SIGUSR1: a screenshot of the next frame (headless too), into --screenshots or ./vistream-screenshots.
+  struct sigaction shot {};
+  shot.sa_handler = OnScreenshotSignal;
+  sigemptyset(&shot.sa_mask);
+  shot.sa_flags = SA_RESTART;
+  sigaction(SIGUSR1, &shot, nullptr);
 
   vistream::client::WalkthroughSummary summary;
   const absl::Status status = vistream::client::RunWalkthrough(o, &summary);

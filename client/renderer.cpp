@@ -32,16 +32,24 @@ in vec3 world;
 uniform vec3 colour;
 uniform vec3 sun;
 uniform float lit;
+uniform vec3 eye;
+uniform vec2 fog;  // start and end distance, metres; none when end <= start
+uniform vec3 sky_colour;
 out vec4 fragment;
+vec3 Fogged(vec3 c) {
+  if (fog.y <= fog.x) return c;
+  float f = clamp((length(world - eye) - fog.x) / (fog.y - fog.x), 0.0, 1.0);
+  return mix(c, sky_colour, f);
+}
 void main() {
   if (lit == 0.0) {
-    fragment = vec4(colour, 1.0);
+    fragment = vec4(Fogged(colour), 1.0);
     return;
   }
   vec3 n = normalize(cross(dFdx(world), dFdy(world)));
   float direct = max(dot(n, sun), 0.0);
   float sky = 0.5 + 0.5 * n.z;
-  fragment = vec4(colour * (0.30 + 0.15 * sky + 0.60 * direct), 1.0);
+  fragment = vec4(Fogged(colour * (0.30 + 0.15 * sky + 0.60 * direct)), 1.0);
 }
 )";
 
@@ -89,7 +97,10 @@ bool Camera::MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) co
 }
 
 absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* context, int width, int height,
-                                                           bool offscreen) {
+                                                           bool offscreen, int samples) {
+  if (samples < 0 || samples > 16) {
+    return absl::InvalidArgumentError(absl::StrCat("renderer: ", samples, " samples is outside 0 .. 16"));
+  }
   if (width < 1 || height < 1 || width > 8192 || height > 8192) {
     return absl::InvalidArgumentError(absl::StrCat("renderer: frame size ", width, "x", height,
                                                    " is outside 1x1 .. 8192x8192"));
@@ -97,6 +108,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* contex
   auto r = std::unique_ptr<Renderer>(new Renderer(context, context->functions()));
   r->width_ = width;
   r->height_ = height;
+  r->samples_ = offscreen ? samples : 0;
   if (absl::Status s = r->Init(offscreen); !s.ok()) return s;
   return r;
 }
@@ -110,6 +122,9 @@ absl::Status Renderer::Init(bool offscreen) {
   loc_colour_ = gl_.GetUniformLocation(program_, "colour");
   loc_sun_ = gl_.GetUniformLocation(program_, "sun");
   loc_lit_ = gl_.GetUniformLocation(program_, "lit");
+  loc_eye_ = gl_.GetUniformLocation(program_, "eye");
+  loc_fog_ = gl_.GetUniformLocation(program_, "fog");
+  loc_sky_ = gl_.GetUniformLocation(program_, "sky_colour");
   gl_.GenVertexArrays(1, &ground_vao_);
   gl_.GenBuffers(1, &ground_vbo_);
   if (offscreen_) {
@@ -122,24 +137,54 @@ absl::Status Renderer::Init(bool offscreen) {
 }
 
 absl::Status Renderer::MakeFramebuffer() {
-  if (fbo_ != 0) {
-    gl_.DeleteFramebuffers(1, &fbo_);
-    gl_.DeleteRenderbuffers(1, &colour_rb_);
-    gl_.DeleteRenderbuffers(1, &depth_rb_);
-  }
+  FreeFramebuffer();
+  // With samples, the frame is drawn multisampled and resolved into a second framebuffer to
+  // be read (ReadRgb).
+  auto storage = [&](GLenum format) {
+    if (samples_ > 0) {
+      gl_.RenderbufferStorageMultisample(GL_RENDERBUFFER, samples_, format, width_, height_);
+    } else {
+      gl_.RenderbufferStorage(GL_RENDERBUFFER, format, width_, height_);
+    }
+  };
   gl_.GenRenderbuffers(1, &colour_rb_);
   gl_.BindRenderbuffer(GL_RENDERBUFFER, colour_rb_);
-  gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width_, height_);
+  storage(GL_RGBA8);
   gl_.GenRenderbuffers(1, &depth_rb_);
   gl_.BindRenderbuffer(GL_RENDERBUFFER, depth_rb_);
-  gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width_, height_);
+  storage(GL_DEPTH_COMPONENT24);
   gl_.GenFramebuffers(1, &fbo_);
   gl_.BindFramebuffer(GL_FRAMEBUFFER, fbo_);
   gl_.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colour_rb_);
   gl_.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_rb_);
-  const GLenum complete = gl_.CheckFramebufferStatus(GL_FRAMEBUFFER);
-  if (complete != GL_FRAMEBUFFER_COMPLETE) return absl::InternalError("renderer: framebuffer is incomplete");
+  if (gl_.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+    return absl::InternalError(absl::StrCat("renderer: the ", samples_ > 0 ? absl::StrCat(samples_, "-sample ") : "",
+                                            "framebuffer is incomplete"));
+  }
+  if (samples_ > 0) {
+    gl_.GenRenderbuffers(1, &resolve_rb_);
+    gl_.BindRenderbuffer(GL_RENDERBUFFER, resolve_rb_);
+    gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width_, height_);
+    gl_.GenFramebuffers(1, &resolve_fbo_);
+    gl_.BindFramebuffer(GL_FRAMEBUFFER, resolve_fbo_);
+    gl_.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, resolve_rb_);
+    if (gl_.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      return absl::InternalError("renderer: the resolve framebuffer is incomplete");
+    }
+    gl_.BindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  }
   return absl::OkStatus();
+}
+
+void Renderer::FreeFramebuffer() {
+  for (unsigned* f : {&fbo_, &resolve_fbo_}) {
+    if (*f != 0) gl_.DeleteFramebuffers(1, f);
+    *f = 0;
+  }
+  for (unsigned* rb : {&colour_rb_, &depth_rb_, &resolve_rb_}) {
+    if (*rb != 0) gl_.DeleteRenderbuffers(1, rb);
+    *rb = 0;
+  }
 }
 
 absl::Status Renderer::Resize(int width, int height) {
@@ -155,11 +200,7 @@ Renderer::~Renderer() {
   gl_.DeleteProgram(program_);
   gl_.DeleteVertexArrays(1, &ground_vao_);
   gl_.DeleteBuffers(1, &ground_vbo_);
-  if (fbo_ != 0) {
-    gl_.DeleteFramebuffers(1, &fbo_);
-    gl_.DeleteRenderbuffers(1, &colour_rb_);
-    gl_.DeleteRenderbuffers(1, &depth_rb_);
-  }
+  FreeFramebuffer();
 }
 
 void Renderer::Free(Gpu& g) {
@@ -284,6 +325,10 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
   const glm::vec3 sun = glm::normalize(glm::vec3(0.62f, 0.45f, 0.64f));
   gl_.Uniform3f(loc_sun_, sun.x, sun.y, sun.z);
   gl_.Uniform1f(loc_lit_, 1.0f);
+  gl_.Uniform3f(loc_eye_, static_cast<float>(camera.eye.x), static_cast<float>(camera.eye.y),
+                static_cast<float>(camera.eye.z));
+  gl_.Uniform2f(loc_fog_, static_cast<float>(fog_start_m_), static_cast<float>(fog_end_m_));
+  gl_.Uniform3f(loc_sky_, kSky[0], kSky[1], kSky[2]);
 
   // The ground: a square around the eye reaching past the far plane's reach on the ground.
   if (store.has_scene_info()) {
@@ -354,7 +399,14 @@ uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera
 void Renderer::Finish() { gl_.Finish(); }
 
 absl::StatusOr<std::vector<uint8_t>> Renderer::ReadRgb() {
-  gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
+  if (resolve_fbo_ != 0) {
+    gl_.BindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+    gl_.BindFramebuffer(GL_DRAW_FRAMEBUFFER, resolve_fbo_);
+    gl_.BlitFramebuffer(0, 0, width_, height_, 0, 0, width_, height_, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    gl_.BindFramebuffer(GL_FRAMEBUFFER, resolve_fbo_);
+  } else {
+    gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
+  }
   std::vector<uint8_t> rgba(static_cast<size_t>(width_) * height_ * 4);
   gl_.PixelStorei(GL_PACK_ALIGNMENT, 1);
   gl_.ReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());

@@ -60,8 +60,10 @@ class Renderer {
   // `context` must stay current while the renderer is used. With `offscreen` the renderer draws
   // into its own `width` x `height` framebuffer (read back with ReadRgb); otherwise into the
   // window's. Errors: GL failing (shaders, framebuffer).
+  // `samples`: off-screen, multisample antialiasing (0 none, up to 16; a window's framebuffer
+  // is multisampled by its context instead, gl::GlContext::CreateWindowed).
   static absl::StatusOr<std::unique_ptr<Renderer>> Create(gl::GlContext* context, int width, int height,
-                                                          bool offscreen);
+                                                          bool offscreen, int samples = 0);
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
@@ -92,6 +94,13 @@ class Renderer {
   static std::array<uint8_t, 3> SkyRgb();
   static std::array<uint8_t, 3> GroundRgb();
 
+  // Distance fog towards the sky colour (scenes::FogSpec, the catalog's effects.fog): none
+  // nearer than `start_m` from the eye, whole from `end_m`. end <= start: none (the default).
+  void SetFog(double start_m, double end_m) {
+    fog_start_m_ = start_m;
+    fog_end_m_ = end_m;
+  }
+
   int width() const { return width_; }
   int height() const { return height_; }
   // Resizes the off-screen framebuffer or the window viewport.
@@ -114,6 +123,7 @@ class Renderer {
   Renderer(gl::GlContext* context, const gl::GlFunctions& gl) : context_(context), gl_(gl) {}
   absl::Status Init(bool offscreen);
   absl::Status MakeFramebuffer();
+  void FreeFramebuffer();
   void Free(Gpu& g);
   void Upload(uint32_t id, const StoredObject& o);
   // The masked index list of `o` for `mask_key`, built (or rebuilt over the least recently used
@@ -125,8 +135,12 @@ class Renderer {
   gl::GlFunctions gl_;
   int width_ = 0, height_ = 0;
   bool offscreen_ = false;
+  int samples_ = 0;
+  double fog_start_m_ = 0.0, fog_end_m_ = 0.0;
   unsigned program_ = 0, fbo_ = 0, colour_rb_ = 0, depth_rb_ = 0, ground_vao_ = 0, ground_vbo_ = 0;
-  int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1, loc_lit_ = -1;
+  unsigned resolve_fbo_ = 0, resolve_rb_ = 0;  // samples_ > 0: the single-sample copy ReadRgb reads
+  int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1, loc_lit_ = -1, loc_eye_ = -1, loc_fog_ = -1,
+      loc_sky_ = -1;
   std::unordered_map<uint32_t, Gpu> gpu_;
   std::set<uint32_t> pending_;
 };

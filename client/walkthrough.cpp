@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <set>
 #include <thread>
@@ -13,9 +14,12 @@
 #include <absl/strings/str_format.h>
 #include <absl/strings/str_join.h>
 #include <nlohmann/json.hpp>
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
 
 #include "client/connection.h"
 #include "client/object_store.h"
+#include "client/overlay.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
 #include "scenes/walk.h"
@@ -60,6 +64,18 @@ class Loop {
   // Follows the walk named opt_.path (empty: the first) of walks_; NOT_FOUND listing walks_
   // when there is none such.
   absl::Status ChooseWalk();
+  // Follows `path` from its start (`from_here`: from its point nearest the eye); the window's
+  // walk list (P) and ChooseWalk.
+  absl::Status FollowWalk(const scenes::WalkPath& path, bool from_here);
+  // The window's keys (F1, M, H, P, space, +/-, R, F11, F12) and resizing; the walk list's choice.
+  absl::Status HandleWindow();
+  // The overlay's status for this frame (counters as they stand after it).
+  OverlayStatus Status(const Pumped& p, const FrameStats& fs, const EpsilonMaskSet* mask, bool hole,
+                       uint64_t triangles_without, double now) const;
+  // Draws the overlay over the frame just drawn and acts on what its walk list asked.
+  absl::Status DrawOverlay(const OverlayStatus& status, double dt);
+  // Brings the minimap's cell states near the eye up to date (at most 4 times a second).
+  void RefreshCellStates(double now);
   // The window without a walk: starts where the first walk starts, if there is one.
   void StartAtFirstWalk();
   // SceneInfo arrived: the server's walks join walks_; a pending walk is chosen.
@@ -111,6 +127,18 @@ class Loop {
   CellMargins margins_;
   double session_start_ = 0.0;
   uint64_t masks_seen_ = 0;
+  std::unique_ptr<Overlay> overlay_;
+  std::vector<std::string> overlay_lines_;  // the statistics panel's last lines (overlay_dump)
+  std::vector<CellState> cell_states_;      // the minimap's, by cell id
+  double cell_states_at_ = -1.0;
+  double walk_t_ = 0.0;       // the walk's clock: seconds along it
+  double rate_ = 1.0;         // + and -: the speed factor
+  bool paused_ = false;       // space
+  bool walk_ends_run_ = true; // a walk chosen in the window (P) does not end the run at its end
+  FixedPose start_pose_;      // R
+  bool screenshot_now_ = false;
+  double lost_at_ = 0.0;
+  bool link_up_ = true, gave_up_flag_ = false;
 };
 
 absl::Status Loop::ChooseWalk() {
@@ -134,22 +162,39 @@ absl::Status Loop::ChooseWalk() {
             : absl::StrCat("scene '", sum_->scene, "' has no walk '", opt_.path, "'; its walks: ",
                            absl::StrJoin(names, ", ")));
   }
-  const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path->speed_mps;
+  return FollowWalk(*path, false);
+}
+
+absl::Status Loop::FollowWalk(const scenes::WalkPath& path, bool from_here) {
+  const double speed = opt_.speed_kmh > 0.0 ? opt_.speed_kmh / 3.6 : path.speed_mps;
   // With the scene here, terrain and all, the eye keeps its height above the ground.
   absl::StatusOr<scenes::Walk> walk =
       full_scene_ != nullptr && !full_scene_->terrain.empty()
-          ? scenes::Walk::Create(*path, speed, std::make_shared<const scenes::TerrainHeight>(*full_scene_))
-          : scenes::Walk::Create(*path, speed);
+          ? scenes::Walk::Create(path, speed, std::make_shared<const scenes::TerrainHeight>(*full_scene_))
+          : scenes::Walk::Create(path, speed);
   if (!walk.ok()) return walk.status();
+  double from_s = 0.0;
+  if (from_here) {
+    // The walk's point nearest the eye, to a metre.
+    double best = std::numeric_limits<double>::infinity();
+    for (double along = 0.0; along <= walk->length_m() + 0.5; along += 1.0) {
+      const glm::dvec2 q = walk->PointAt(along);
+      const double d = glm::length(q - glm::dvec2(camera_.eye));
+      if (d < best) best = d, from_s = std::min(along, walk->length_m()) / walk->speed_mps();
+    }
+  }
   walk_ = std::move(*walk);
-  walk_path_ = *path;
+  walk_path_ = path;
   walk_pending_ = false;
   walk_limit_s_ = opt_.seconds > 0.0 ? std::min(opt_.seconds, walk_->duration_s()) : walk_->duration_s();
-  sum_->path = path->name;
+  walk_t_ = from_s;
+  paused_ = false;
+  sum_->path = path.name;
   sum_->speed_kmh = speed * 3.6;
-  const scenes::WalkPose start = walk_->At(0.0);
+  const scenes::WalkPose start = walk_->At(from_s);
   camera_.eye = start.eye;
   camera_.yaw_rad = start.yaw_rad;
+  camera_.pitch_rad = 0.0;
   have_start_ = true;
   return absl::OkStatus();
 }
@@ -258,9 +303,11 @@ absl::Status Loop::Prepare() {
     sum_->verified = true;
   }
 
+  const int samples = opt_.msaa_samples >= 0 ? opt_.msaa_samples : opt_.headless ? 0 : 4;
   absl::StatusOr<std::unique_ptr<gl::GlContext>> context =
       opt_.headless ? gl::GlContext::CreateOffscreen()
-                    : gl::GlContext::CreateWindowed(opt_.width, opt_.height, absl::StrCat("vistream: ", sum_->scene));
+                    : gl::GlContext::CreateWindowed(opt_.width, opt_.height, absl::StrCat("vistream: ", sum_->scene),
+                                                    samples, opt_.vsync);
   if (!context.ok()) return context.status();
   context_ = std::move(*context);
   int width = opt_.width, height = opt_.height;
@@ -268,9 +315,19 @@ absl::Status Loop::Prepare() {
     context_->FramebufferSize(&width, &height);
     input_ = std::make_unique<WindowInput>(context_->window());
   }
-  absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(context_.get(), width, height, opt_.headless);
+  absl::StatusOr<std::unique_ptr<Renderer>> renderer =
+      Renderer::Create(context_.get(), width, height, opt_.headless, opt_.headless ? samples : 0);
   if (!renderer.ok()) return renderer.status();
   renderer_ = std::move(*renderer);
+  if (entry_.has_value() && entry_->effects.fog.has_value()) {
+    renderer_->SetFog(entry_->effects.fog->start_m, entry_->effects.fog->end_m);
+  }
+  if (!opt_.headless || opt_.overlay) {
+    absl::StatusOr<std::unique_ptr<Overlay>> overlay = Overlay::Create(context_.get(), context_->window());
+    if (!overlay.ok()) return overlay.status();
+    overlay_ = std::move(*overlay);
+    overlay_->show_stats = overlay_->show_minimap = opt_.headless ? opt_.overlay : opt_.window_panels;
+  }
   camera_.width = width;
   camera_.height = height;
   sum_->width = width;
@@ -471,7 +528,14 @@ absl::Status Loop::Startup() {
 absl::Status Loop::Screenshot(double t) {
   absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
   if (!rgb.ok()) return rgb.status();
-  const std::string path = (std::filesystem::path(opt_.screenshots_dir) /
+  // F12 and SIGUSR1 without --screenshots: a folder of their own in the working folder.
+  const std::string dir = opt_.screenshots_dir.empty() ? std::string("vistream-screenshots") : opt_.screenshots_dir;
+  if (opt_.screenshots_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(dir, ": cannot create: ", ec.message()));
+  }
+  const std::string path = (std::filesystem::path(dir) /
                             absl::StrFormat("frame-%06d-t%07.1fs.png", static_cast<int>(sum_->frames), t))
                                .string();
   if (absl::Status s = WritePng(path, {renderer_->width(), renderer_->height(), std::move(*rgb)}); !s.ok()) return s;
@@ -509,6 +573,188 @@ absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMa
   return context_->MakeCurrent();
 }
 
+void Loop::RefreshCellStates(double now) {
+  if (!store_->has_scene_info()) return;
+  const GridInfo& g = store_->grid();
+  const size_t n = static_cast<size_t>(g.nx) * static_cast<size_t>(g.ny);
+  if (cell_states_.size() != n) cell_states_.assign(n, CellState::kNotListed);
+  auto state = [&](uint32_t id) {
+    const std::vector<uint32_t>* list = store_->Pvs(id);
+    if (list == nullptr) return CellState::kNotListed;
+    const bool complete =
+        std::all_of(list->begin(), list->end(), [&](uint32_t o) { return renderer_->Uploaded(o); });
+    return complete ? CellState::kComplete : CellState::kPending;
+  };
+  if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) cell_states_[*c] = state(*c);
+  // The cells on the map, a few a frame (a PVS list is hundreds of objects): each is at most
+  // a few frames old.
+  if (now - cell_states_at_ < 0.25) return;
+  cell_states_at_ = now;
+  const double r = std::clamp(8.0 * g.cell_size, 150.0, 600.0) + g.cell_size;
+  const int i0 = std::max(0, static_cast<int>(std::floor((camera_.eye.x - r - g.x0) / g.cell_size)));
+  const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((camera_.eye.x + r - g.x0) / g.cell_size)));
+  const int j0 = std::max(0, static_cast<int>(std::floor((camera_.eye.y - r - g.y0) / g.cell_size)));
+  const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((camera_.eye.y + r - g.y0) / g.cell_size)));
+  for (int j = j0; j <= j1; ++j) {
+    for (int i = i0; i <= i1; ++i) {
+      const auto id = static_cast<uint32_t>(j * g.nx + i);
+      cell_states_[id] = state(id);
+    }
+  }
+}
+
+OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonMaskSet* mask, bool hole,
+                           uint64_t triangles_without, double now) const {
+  OverlayStatus st;
+  st.server = opt_.server;
+  st.scene = sum_->scene;
+  if (connection_ == nullptr) {
+    st.link = OverlayStatus::Link::kLocal;
+  } else {
+    const ConnectionStats c = connection_->stats();
+    st.reconnects = c.reconnects;
+    st.bytes_received = c.bytes_received;
+    st.link = link_up_ ? OverlayStatus::Link::kConnected
+              : gave_up_flag_ ? OverlayStatus::Link::kGivenUp
+                              : OverlayStatus::Link::kReconnecting;
+    st.lost_for_s = link_up_ ? 0.0 : now - lost_at_;
+  }
+  st.give_up_s = opt_.give_up_s;
+  st.cell = p.cell;
+  if (p.cell.has_value()) {
+    const GridInfo& g = store_->grid();
+    st.cell_i = static_cast<int>(*p.cell % static_cast<uint32_t>(g.nx));
+    st.cell_j = static_cast<int>(*p.cell / static_cast<uint32_t>(g.nx));
+  }
+  st.pvs_listed = p.pvs != nullptr;
+  st.pvs_complete = p.complete;
+  if (p.pvs != nullptr) {
+    st.pvs_objects = p.pvs->size();
+    st.pvs_missing = static_cast<size_t>(
+        std::count_if(p.pvs->begin(), p.pvs->end(), [&](uint32_t id) { return !renderer_->Uploaded(id); }));
+  }
+  st.held_objects = store_->objects().size();
+  st.held_bytes = store_->held_bytes();
+  st.memory_budget_bytes = memory_budget_;
+  // The counters as they will stand after this frame (the summary's at the end).
+  st.frames = sum_->frames + 1;
+  st.stalls = sum_->stalls + (p.complete ? 0 : 1);
+  st.stall_s = sum_->stall_s;
+  st.hole_frames = sum_->hole_frames + (hole ? 1 : 0);
+  st.frames_masked = sum_->frames_masked + (fs.mask_used ? 1 : 0);
+  st.masks_received = masks_seen_;
+  st.masked = mask != nullptr;
+  st.hole = hole;
+  if (mask != nullptr) {
+    st.mask_id = mask->mask_id;
+    st.mask_box_min = mask->box_min;
+    st.mask_box_max = mask->box_max;
+  }
+  st.triangles_drawn = fs.triangles_drawn;
+  st.triangles_without_masks = triangles_without;
+  st.scene_triangles = sum_->scene_triangles;
+  st.eye = camera_.eye;
+  st.yaw_rad = camera_.yaw_rad;
+  if (walk_.has_value()) {
+    st.walk = sum_->path;
+    st.walk_t_s = std::min(walk_t_, walk_limit_s_);
+    st.walk_duration_s = walk_limit_s_;
+    st.speed_kmh = walk_->speed_mps() * 3.6 * rate_;
+    st.walk_paused = paused_;
+  } else {
+    st.speed_kmh = (!walks_.empty() ? walks_.front().speed_mps : 1.4) * 3.6 * rate_;
+  }
+  return st;
+}
+
+absl::Status Loop::DrawOverlay(const OverlayStatus& status, double dt) {
+  RefreshCellStates(Now());
+  MinimapView map;
+  if (store_->has_scene_info()) {
+    map.grid = &store_->grid();
+    map.cells = &cell_states_;
+    map.radius_m = std::clamp(8.0 * map.grid->cell_size, 150.0, 600.0);
+  }
+  if (walk_.has_value() && walk_path_.has_value()) map.walk = walk_path_->waypoints;
+  std::vector<std::string> names;
+  for (const scenes::WalkPath& w : walks_) names.push_back(w.name);
+  const OverlayRequest req = overlay_->Frame(status, map, names, renderer_->width(), renderer_->height(), dt);
+  overlay_lines_ = overlay_->last_lines();
+  if (req.follow_walk.has_value() && *req.follow_walk < walks_.size()) {
+    const scenes::WalkPath chosen = walks_[*req.follow_walk];
+    if (absl::Status st = FollowWalk(chosen, !req.from_start); !st.ok()) return st;
+    walk_ends_run_ = false;
+    Log(absl::StrFormat("following the walk '%s' from %s", chosen.name, req.from_start ? "its start" : "here"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Loop::HandleWindow() {
+  // The window's size: the projection and the viewport follow it (F11, a drag, a tiling
+  // window manager).
+  int fw = 0, fh = 0;
+  context_->FramebufferSize(&fw, &fh);
+  if (fw > 0 && fh > 0 && (fw != renderer_->width() || fh != renderer_->height())) {
+    if (absl::Status st = renderer_->Resize(fw, fh); !st.ok()) return st;
+    camera_.width = fw;
+    camera_.height = fh;
+    sum_->width = fw;
+    sum_->height = fh;
+  }
+  auto faster = [this] { rate_ = std::min(rate_ * 1.25, 64.0); };
+  auto slower = [this] { rate_ = std::max(rate_ / 1.25, 1.0 / 64.0); };
+  for (unsigned c : input_->TakeChars()) {
+    if (c == '?') overlay_->show_help = !overlay_->show_help;
+    if (c == '+') faster();
+    if (c == '-') slower();
+  }
+  for (const WindowInput::KeyPress& k : input_->TakeKeys()) {
+    if (overlay_->show_walks) {
+      // The walk list has the keyboard: Up/Down choose, Enter from its start, F from here.
+      size_t& sel = overlay_->walk_selected();
+      if (k.key == GLFW_KEY_UP && sel > 0) --sel;
+      if (k.key == GLFW_KEY_DOWN && sel + 1 < walks_.size()) ++sel;
+      if ((k.key == GLFW_KEY_ENTER || k.key == GLFW_KEY_KP_ENTER || k.key == GLFW_KEY_F) && sel < walks_.size()) {
+        const scenes::WalkPath chosen = walks_[sel];
+        if (absl::Status st = FollowWalk(chosen, k.key == GLFW_KEY_F); !st.ok()) return st;
+        walk_ends_run_ = false;
+        overlay_->show_walks = false;
+        Log(absl::StrFormat("following the walk '%s' from %s", chosen.name,
+                            k.key == GLFW_KEY_F ? "here" : "its start"));
+      }
+      if (k.key == GLFW_KEY_P || k.key == GLFW_KEY_ESCAPE) overlay_->show_walks = false;
+      continue;
+    }
+    switch (k.key) {
+      case GLFW_KEY_F1: overlay_->show_stats = !overlay_->show_stats; break;
+      case GLFW_KEY_M: overlay_->show_minimap = !overlay_->show_minimap; break;
+      case GLFW_KEY_H: overlay_->show_help = !overlay_->show_help; break;
+      case GLFW_KEY_P: overlay_->show_walks = true; break;
+      case GLFW_KEY_SPACE:
+        if (walk_.has_value()) {
+          paused_ = !paused_;
+          Log(paused_ ? "walk paused" : "walk resumed");
+        }
+        break;
+      case GLFW_KEY_KP_ADD: faster(); break;
+      case GLFW_KEY_KP_SUBTRACT: slower(); break;
+      case GLFW_KEY_R:
+        if (walk_.has_value()) {
+          walk_t_ = 0.0;
+        } else {
+          camera_.eye = start_pose_.eye;
+          camera_.yaw_rad = start_pose_.yaw_rad;
+          camera_.pitch_rad = start_pose_.pitch_rad;
+        }
+        break;
+      case GLFW_KEY_F11: input_->ToggleFullScreen(); break;
+      case GLFW_KEY_F12: screenshot_now_ = true; break;
+      default: break;
+    }
+  }
+  return absl::OkStatus();
+}
+
 absl::Status Loop::Walkthrough() {
   const double t0 = Now();
   margins_.Shift(session_start_ - t0);
@@ -526,9 +772,20 @@ absl::Status Loop::Walkthrough() {
   std::optional<uint32_t> holed_in;    // the cell a hole frame was last reported for
   uint64_t triangles_without = 0;      // over the frames: what the viewcell PVS alone would draw
   absl::Status gave_up;  // the server lost for longer than --give-up: the walk ends with it
+  start_pose_ = {camera_.eye, camera_.yaw_rad, camera_.pitch_rad};
+  walk_ends_run_ = opt_.headless;  // the window stays open at a walk's end
+  double prev_t = 0.0;
   for (;;) {
     const double begin = Now();
     const double t = begin - t0 - paused;
+    if (input_ != nullptr) {
+      if (absl::Status st = HandleWindow(); !st.ok()) return st;
+    }
+    if (opt_.screenshot_request != nullptr && opt_.screenshot_request->exchange(false)) screenshot_now_ = true;
+    // The walk's clock: the frame's time at the speed factor, unless paused (the headless
+    // walk's clock is t itself).
+    if (!paused_) walk_t_ += (t - prev_t) * rate_;
+    prev_t = t;
     bool last = opt_.seconds > 0.0 && t >= opt_.seconds;  // walks clamp to it below
     const bool cancel = Cancelled();
     if (cancel) {
@@ -537,8 +794,9 @@ absl::Status Loop::Walkthrough() {
     }
     glm::dvec3 velocity(0.0);
     if (walk_.has_value()) {
-      const double at = std::min(t, walk_limit_s_);
-      last = last || t >= walk_limit_s_;
+      walk_t_ = std::min(walk_t_, walk_limit_s_);
+      const double at = walk_t_;
+      last = last || (walk_ends_run_ && walk_t_ >= walk_limit_s_);
       const scenes::WalkPose pose = walk_->At(at);
       camera_.eye = pose.eye;
       if (store_->has_scene_info() && store_->grid().has_bands()) {
@@ -550,14 +808,14 @@ absl::Status Loop::Walkthrough() {
         }
       }
       camera_.yaw_rad = pose.yaw_rad;
-      velocity = last ? glm::dvec3(0.0) : pose.velocity;
+      velocity = last || paused_ || walk_t_ >= walk_limit_s_ ? glm::dvec3(0.0) : pose.velocity * rate_;
     } else if (opt_.pose.has_value()) {
       const uint64_t frames = opt_.frames > 0 ? opt_.frames : (opt_.headless ? 1 : ~uint64_t{0});
       last = last || sum_->frames + 1 >= frames;
     } else if (input_ != nullptr) {
       const double dt = std::min(0.1, begin - prev_end + 1e-3);
       glm::dvec3 eye = camera_.eye;
-      input_->Update(dt, free_speed, &eye, &camera_.yaw_rad, &camera_.pitch_rad);
+      input_->Update(dt, free_speed * rate_, &eye, &camera_.yaw_rad, &camera_.pitch_rad);
       // The PVSs hold inside the grid: the eye stays in it.
       const GridInfo& g = store_->grid();
       eye.x = std::clamp(eye.x, g.x0 + 0.01, g.x0 + g.nx * g.cell_size - 0.01);
@@ -576,11 +834,17 @@ absl::Status Loop::Walkthrough() {
       Log(was_connected ? absl::StrFormat("reconnected to %s", opt_.server)
                         : absl::StrFormat("lost the server at %s; reconnecting (drawing what is held)", opt_.server));
     }
-    if (!was_connected && opt_.give_up_s > 0.0 && begin - lost_at > opt_.give_up_s) {
-      // The summary of what was walked is still made (and printed), then the error.
+    link_up_ = was_connected;
+    lost_at_ = lost_at;
+    gave_up_flag_ = !was_connected && opt_.give_up_s > 0.0 && begin - lost_at > opt_.give_up_s;
+    if (gave_up_flag_) {
+      // The summary of what was walked is still made (and printed), then the error. The
+      // window stays open, saying so, until it is closed (or the server comes back).
       gave_up = absl::UnavailableError(absl::StrFormat("lost the server at %s: no answer for %.0f s", opt_.server,
                                                        opt_.give_up_s));
-      break;
+      if (input_ == nullptr) break;
+    } else if (was_connected) {
+      gave_up = absl::OkStatus();
     }
     absl::StatusOr<Pumped> p = Pump(camera_.eye, opt_.upload_budget_bytes);
     if (!p.ok()) return p.status();
@@ -604,11 +868,18 @@ absl::Status Loop::Walkthrough() {
     const bool check = ids_ != nullptr && (t >= next_check || last);
     drawn.clear();
     const FrameStats fs = renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr);
-    renderer_->Finish();
-    // What the PVS alone would have drawn (counted, not drawn: out of the frame time).
+    // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
         use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
+    if (overlay_ != nullptr) {
+      const OverlayStatus status = Status(*p, fs, use_mask, hole, triangles_without_masks, begin);
+      if (absl::Status st = DrawOverlay(status, begin - prev_end); !st.ok()) return st;
+    }
+    renderer_->Finish();
     const double end = Now();
+    if (overlay_ != nullptr) {
+      overlay_->AddFrame((end - begin) * 1000.0, end, connection_ != nullptr ? connection_->stats().bytes_received : 0);
+    }
     ++sum_->frames;
     frame_ms.push_back((end - begin) * 1000.0);
     if (hole) {
@@ -656,6 +927,12 @@ absl::Status Loop::Walkthrough() {
     if (!opt_.screenshots_dir.empty() && (t >= next_shot || last)) {
       if (absl::Status s = Screenshot(t); !s.ok()) return s;
       while (next_shot <= t) next_shot += opt_.every_s;
+      screenshot_now_ = false;
+    }
+    if (screenshot_now_) {
+      screenshot_now_ = false;
+      if (absl::Status s = Screenshot(t); !s.ok()) return s;
+      Log(absl::StrCat("screenshot: ", sum_->screenshots.back()));
     }
     if (check) {
       if (absl::Status s = Verify(drawn, use_mask); !s.ok()) return s;
@@ -743,6 +1020,14 @@ absl::Status Loop::Run() {
     sum_->evicted_by_budget = store_->evicted_by_budget();
   }
   sum_->masks_received = masks_seen_;
+  if (!opt_.overlay_dump.empty()) {
+    std::FILE* f = std::fopen(opt_.overlay_dump.c_str(), "w");
+    bool failed = f == nullptr;
+    for (const std::string& line : overlay_lines_) failed = failed || std::fprintf(f, "%s\n", line.c_str()) < 0;
+    if ((f != nullptr && std::fclose(f) != 0) || failed) {
+      if (s.ok()) s = absl::DataLossError(absl::StrCat(opt_.overlay_dump, ": writing the overlay's lines failed"));
+    }
+  }
   sum_->margins = margins_.Summary();
   sum_->cells = margins_.entries();
   if (cell_log_ != nullptr) {
@@ -759,6 +1044,7 @@ absl::Status Loop::Run() {
     }
   }
   // GL objects go with their context, the id renderer's first (it makes its own).
+  overlay_.reset();
   renderer_.reset();
   ids_.reset();
   context_.reset();

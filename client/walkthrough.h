@@ -66,6 +66,16 @@ struct WalkthroughOptions {
   double connect_timeout_s = 10.0;
   double give_up_s = 60.0;      // a server lost this long ends the run (error); 0: never
   const std::atomic<bool>* cancel = nullptr;  // set: the loop ends after the frame
+  // Set (SIGUSR1, or F12 in the window): the next frame is written as a PNG into
+  // screenshots_dir (else ./vistream-screenshots), and the flag cleared.
+  std::atomic<bool>* screenshot_request = nullptr;
+  // The overlay (client/overlay.h): the window always has it (F1 statistics, M minimap, both
+  // shown at the start); headless, `overlay` draws both into every frame and screenshot.
+  bool overlay = false;
+  bool window_panels = true;  // the window starts with the panels shown (F1 and M toggle them)
+  std::string overlay_dump;   // at the end: the statistics panel's lines of the last frame
+  int msaa_samples = -1;      // multisample antialiasing: -1 the default (4 in the window, none headless), 0 none
+  bool vsync = true;          // the window waits for the display's refresh
   std::function<void(const std::string&)> log;  // progress lines; may be empty
 };
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -12,7 +13,43 @@ namespace {
 GLFWwindow* W(void* w) { return static_cast<GLFWwindow*>(w); }
 }  // namespace
 
-WindowInput::WindowInput(void* window) : window_(window) {}
+WindowInput::WindowInput(void* window) : window_(window) {
+  glfwSetWindowUserPointer(W(window), this);
+  glfwSetKeyCallback(W(window), [](GLFWwindow* w, int key, int scancode, int action, int mods) {
+    OnKey(w, key, scancode, action, mods);
+  });
+  glfwSetCharCallback(W(window), [](GLFWwindow* w, unsigned c) { OnChar(w, c); });
+}
+
+void WindowInput::OnKey(void* window, int key, int /*scancode*/, int action, int mods) {
+  auto* self = static_cast<WindowInput*>(glfwGetWindowUserPointer(W(window)));
+  if (self != nullptr && action == GLFW_PRESS) self->keys_.push_back({key, mods});
+}
+
+void WindowInput::OnChar(void* window, unsigned codepoint) {
+  auto* self = static_cast<WindowInput*>(glfwGetWindowUserPointer(W(window)));
+  if (self != nullptr) self->chars_.push_back(codepoint);
+}
+
+std::vector<WindowInput::KeyPress> WindowInput::TakeKeys() { return std::exchange(keys_, {}); }
+
+std::vector<unsigned> WindowInput::TakeChars() { return std::exchange(chars_, {}); }
+
+void WindowInput::ToggleFullScreen() {
+  GLFWwindow* w = W(window_);
+  if (!full_screen_) {
+    GLFWmonitor* monitor = glfwGetPrimaryMonitor();
+    const GLFWvidmode* mode = monitor != nullptr ? glfwGetVideoMode(monitor) : nullptr;
+    if (mode == nullptr) return;
+    glfwGetWindowPos(w, &windowed_x_, &windowed_y_);
+    glfwGetWindowSize(w, &windowed_w_, &windowed_h_);
+    glfwSetWindowMonitor(w, monitor, 0, 0, mode->width, mode->height, mode->refreshRate);
+    full_screen_ = true;
+  } else {
+    glfwSetWindowMonitor(w, nullptr, windowed_x_, windowed_y_, windowed_w_, windowed_h_, GLFW_DONT_CARE);
+    full_screen_ = false;
+  }
+}
 
 void WindowInput::Poll() { glfwPollEvents(); }
 

@@ -1,9 +1,12 @@
 #pragma once
 // Keyboard and mouse of the windowed front end (GLFW): W/S or Up/Down walk, A/D strafe,
 // Left/Right turn, the mouse looks once the window is clicked (Esc frees it; Esc again or Q
-// closes the window), Shift runs.
+// closes the window), Shift runs. The other keys (the overlay's, the walk's, screenshots) come
+// as presses from TakeKeys/TakeChars, so that a key pressed and released within one frame (as
+// xdotool types) is not lost. Install before the overlay: ImGui's callbacks chain to these.
 
 #include <string>
+#include <vector>
 
 #include <glm/vec3.hpp>
 
@@ -22,8 +25,27 @@ class WindowInput {
   bool ShouldClose() const;
   void SetTitle(const std::string& title);
 
+  // A key pressed since the last TakeKeys (GLFW key code and modifier bits), and characters
+  // typed (Unicode code points: '+', '-' and '?' whatever the keyboard layout).
+  struct KeyPress {
+    int key = 0;
+    int mods = 0;
+  };
+  std::vector<KeyPress> TakeKeys();
+  std::vector<unsigned> TakeChars();
+  // Full screen on the window's monitor, or back to the window it was.
+  void ToggleFullScreen();
+  bool full_screen() const { return full_screen_; }
+
  private:
+  static void OnKey(void* window, int key, int scancode, int action, int mods);
+  static void OnChar(void* window, unsigned codepoint);
+
   void* window_;
+  std::vector<KeyPress> keys_;
+  std::vector<unsigned> chars_;
+  bool full_screen_ = false;
+  int windowed_x_ = 0, windowed_y_ = 0, windowed_w_ = 0, windowed_h_ = 0;
   bool captured_ = false;
   bool escape_was_down_ = false;
   double last_x_ = 0.0, last_y_ = 0.0;

@@ -15,7 +15,8 @@
 namespace vistream::gl {
 
 // Every entry point the table holds (OpenGL 3.3 core, plus texture buffers for the id
-// renderer's masks).
+// renderer's masks): the renderer's, the overlay's (blending, scissors, its font texture) and
+// multisampling's (renderbuffers, the resolving blit).
 #define VISTREAM_GL_FUNCTIONS(X)                                                                         \
   X(ActiveTexture) X(AttachShader) X(BindBuffer) X(BindFramebuffer) X(BindRenderbuffer) X(BindTexture)     \
   X(BindVertexArray) X(BufferData) X(BufferSubData) X(CheckFramebufferStatus) X(Clear) X(ClearColor)       \
@@ -26,7 +27,9 @@ namespace vistream::gl {
   X(GenVertexArrays) X(GetError) X(GetProgramInfoLog) X(GetProgramiv) X(GetShaderInfoLog) X(GetShaderiv)  \
   X(GetString) X(GetUniformLocation) X(LinkProgram) X(PixelStorei) X(ReadPixels) X(RenderbufferStorage)    \
   X(ShaderSource) X(TexBuffer) X(Uniform1f) X(Uniform1i) X(Uniform3f) X(UniformMatrix4fv) X(UseProgram)    \
-  X(VertexAttribPointer) X(Viewport)
+  X(VertexAttribPointer) X(Viewport)                                                                      \
+  X(BlendEquation) X(BlendFuncSeparate) X(Scissor) X(TexImage2D) X(TexParameteri) X(BlitFramebuffer)      \
+  X(RenderbufferStorageMultisample) X(GetIntegerv) X(Uniform2f)
 
 struct GlFunctions {
 #define VISTREAM_GL_MEMBER(name) decltype(&::gl##name) name = nullptr;

@@ -242,7 +242,7 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
   }
   try {
     const Reader r(j, "", file);
-    r.Allow({"name", "description", "source", "viewcell", "walks", "simulation"});
+    r.Allow({"name", "description", "source", "viewcell", "walks", "simulation", "effects"});
     CatalogEntry e;
     e.file = file;
     e.name = r.String("name");
@@ -257,6 +257,21 @@ absl::StatusOr<CatalogEntry> ParseCatalogEntry(std::string_view json_text, const
     e.viewcell.epsilon_m = v.Number("epsilon_m", 0.0, 1000.0, 4.0, true);
     e.walks = ReadWalks(r);
     e.simulation = ReadSimulation(r);
+    if (r.Has("effects")) {
+      const Reader fx = r.Object("effects");
+      fx.Allow({"fog"});
+      if (fx.Has("fog")) {
+        const Reader f = fx.Object("fog");
+        f.Allow({"start_m", "end_m"});
+        FogSpec fog;
+        fog.start_m = f.Number("start_m", 0.0, 1e6);
+        fog.end_m = f.Number("end_m", 0.0, 1e6, {}, true);
+        if (fog.end_m <= fog.start_m) {
+          f.Fail(f.Key("end_m"), absl::StrCat("must be beyond start_m (", fog.start_m, "), got ", fog.end_m));
+        }
+        e.effects.fog = fog;
+      }
+    }
     return e;
   } catch (const CatalogError& err) {
     return absl::InvalidArgumentError(err.message);

@@ -77,6 +77,15 @@ struct SimulationSpec {
   std::optional<ClientSpec> client;
 };
 
+// How the client draws the scene where the scene calls for it (the catalog's "effects"): distance
+// fog towards the sky colour, none below start_m from the eye, whole at end_m and beyond.
+struct FogSpec {
+  double start_m = 0.0, end_m = 0.0;
+};
+struct EffectsSpec {
+  std::optional<FogSpec> fog;
+};
+
 struct CatalogEntry {
   std::string file;  // where it was read from
   std::string name;
@@ -85,6 +94,7 @@ struct CatalogEntry {
   ViewcellSpec viewcell;
   std::vector<WalkPath> walks;
   SimulationSpec simulation;
+  EffectsSpec effects;
 };
 
 // Parses a catalog entry. `file` names it in errors; relative source paths resolve against

@@ -1,0 +1,128 @@
+// The client overlay's cost a frame (client/overlay.h; the window's issue: at most 1 ms a frame
+// at 1280x720): the same frame of the default scene, its PVS-sized set of objects drawn off-screen
+// (OSMesa, as the headless client draws), with the overlay off (overlay:0) and with the
+// statistics panel and the minimap on (overlay:1), side by side in one run. The difference of
+// the two medians is the overlay's cost.
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <memory>
+#include <vector>
+
+#include "client/object_store.h"
+#include "client/overlay.h"
+#include "client/renderer.h"
+#include "gl/gl_context.h"
+#include "proto/scene_info.h"
+#include "scenes/catalog.h"
+#include "visibility/viewcell_grid.h"
+
+namespace vistream::client {
+namespace {
+
+struct Fixture {
+  scenes::Scene scene;
+  std::optional<visibility::ViewcellGrid> grid;
+  Camera camera;
+  std::vector<uint32_t> ids;
+};
+
+const Fixture* Load() {
+  static Fixture* f = [] {
+    auto* out = new Fixture;
+    absl::StatusOr<scenes::LoadedScene> loaded = scenes::LoadScene("default", {});
+    if (!loaded.ok()) {
+      std::fprintf(stderr, "overlay_bench: %s\n", std::string(loaded.status().message()).c_str());
+      return static_cast<Fixture*>(nullptr);
+    }
+    out->scene = std::move(loaded->scene);
+    const scenes::ViewcellSpec spec = scenes::ViewcellSpecFor("default", 0.0, "");
+    absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::Create(out->scene, spec);
+    if (!grid.ok()) return static_cast<Fixture*>(nullptr);
+    out->grid = std::move(*grid);
+    // The README's walk's start, looking along it (tests/window_test.cpp's pose).
+    out->camera.eye = {509.4, 215.9, 1.7};
+    out->camera.yaw_rad = 80.0 * M_PI / 180.0;
+    out->camera.width = 1280;
+    out->camera.height = 720;
+    for (const scenes::Object& o : out->scene.objects) out->ids.push_back(o.id);
+    return out;
+  }();
+  return f;
+}
+
+void BM_Frame(benchmark::State& state) {
+  const Fixture* f = Load();
+  if (f == nullptr) {
+    state.SkipWithError("the default scene did not load");
+    return;
+  }
+  absl::StatusOr<std::unique_ptr<gl::GlContext>> context = gl::GlContext::CreateOffscreen();
+  if (!context.ok()) {
+    state.SkipWithError("no OSMesa context");
+    return;
+  }
+  absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(context->get(), 1280, 720, true);
+  if (!renderer.ok()) {
+    state.SkipWithError("no renderer");
+    return;
+  }
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(MakeSceneInfo(f->scene, *f->grid, "default"));
+  for (const scenes::Object& o : f->scene.objects) {
+    ReceivedObject r;
+    r.id = o.id;
+    r.mesh = o.mesh;
+    r.bounds_min = o.bounds.min;
+    r.bounds_max = o.bounds.max;
+    events.emplace_back(std::move(r));
+  }
+  const std::optional<uint32_t> cell = f->grid->CellAt(glm::dvec2(f->camera.eye));
+  store.Apply(std::move(events), cell);
+  (*renderer)->Sync(store, {}, ~uint64_t{0});
+
+  std::unique_ptr<Overlay> overlay;
+  if (state.range(0) != 0) {
+    absl::StatusOr<std::unique_ptr<Overlay>> o = Overlay::Create(context->get(), nullptr);
+    if (!o.ok()) {
+      state.SkipWithError("no overlay");
+      return;
+    }
+    overlay = std::move(*o);
+  }
+  OverlayStatus status;
+  status.server = "127.0.0.1:50051";
+  status.scene = "default";
+  status.cell = cell;
+  status.pvs_listed = status.pvs_complete = true;
+  status.pvs_objects = f->ids.size();
+  status.held_objects = f->ids.size();
+  status.held_bytes = 200u << 20;
+  status.memory_budget_bytes = 1024u << 20;
+  status.eye = f->camera.eye;
+  status.yaw_rad = f->camera.yaw_rad;
+  status.walk = "avenue-and-back-streets";
+  const GridInfo grid = store.grid();
+  const std::vector<CellState> cells(static_cast<size_t>(grid.nx) * grid.ny, CellState::kComplete);
+  MinimapView map;
+  map.grid = &grid;
+  map.cells = &cells;
+  const std::vector<std::string> walks{"avenue-and-back-streets"};
+  uint64_t frame = 0;
+  double now = 0.0;
+  for (auto _ : state) {
+    const FrameStats fs = (*renderer)->Draw(store, f->camera, f->ids, nullptr, ++frame, nullptr);
+    if (overlay != nullptr) {
+      status.frames = frame;
+      status.triangles_drawn = fs.triangles_drawn;
+      overlay->AddFrame(16.0, now += 1.0 / 60.0, frame * 1000);
+      overlay->Frame(status, map, walks, 1280, 720, 1.0 / 60.0);
+    }
+    (*renderer)->Finish();
+  }
+}
+BENCHMARK(BM_Frame)->ArgName("overlay")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+
+}  // namespace
+}  // namespace vistream::client

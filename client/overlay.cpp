@@ -1,0 +1,554 @@
+#include "client/overlay.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+#include <glm/gtc/type_ptr.hpp>
+#include <glm/mat4x4.hpp>
+#include <imgui.h>
+#include <backends/imgui_impl_glfw.h>
+
+#include "gl/shader.h"
+
+namespace vistream::client {
+
+namespace {
+
+constexpr const char* kVertexShader = R"(#version 330 core
+layout(location = 0) in vec2 position;
+layout(location = 1) in vec2 uv;
+layout(location = 2) in vec4 colour;
+uniform mat4 projection;
+out vec2 f_uv;
+out vec4 f_colour;
+void main() {
+  f_uv = uv;
+  f_colour = colour;
+  gl_Position = projection * vec4(position, 0.0, 1.0);
+}
+)";
+
+constexpr const char* kFragmentShader = R"(#version 330 core
+in vec2 f_uv;
+in vec4 f_colour;
+uniform sampler2D atlas;
+out vec4 fragment;
+void main() { fragment = f_colour * texture(atlas, f_uv); }
+)";
+
+// A TrueType font from Debian's fonts-dejavu-core reads better than ImGui's 13-pixel bitmap
+// font; without it, the bitmap font.
+constexpr const char* kFontPath = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+constexpr float kFontPx = 15.0f;
+
+ImU32 Rgb(const std::array<uint8_t, 3>& c, uint8_t alpha = 255) { return IM_COL32(c[0], c[1], c[2], alpha); }
+
+// A round length for a scale bar about `target_m` long: 1, 2 or 5 times a power of ten.
+double NiceLength(double target_m) {
+  const double p = std::pow(10.0, std::floor(std::log10(std::max(target_m, 1e-3))));
+  for (double m : {5.0, 2.0, 1.0}) {
+    if (m * p <= target_m) return m * p;
+  }
+  return p;
+}
+
+std::string Megabytes(uint64_t bytes) { return absl::StrFormat("%.1f MB", static_cast<double>(bytes) / 1e6); }
+
+}  // namespace
+
+std::array<uint8_t, 3> MinimapColour(CellState state) {
+  switch (state) {
+    case CellState::kComplete:
+      return {64, 160, 90};
+    case CellState::kPending:
+      return {225, 170, 40};
+    case CellState::kNotListed:
+      break;
+  }
+  return {70, 74, 82};
+}
+
+std::array<uint8_t, 3> MinimapCurrentCellColour() { return {80, 170, 255}; }
+
+std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double frame_ms, double bytes_per_s) {
+  std::vector<std::string> out;
+  out.push_back(absl::StrCat("scene ", s.scene, " on ", s.server));
+  switch (s.link) {
+    case OverlayStatus::Link::kConnected:
+      out.push_back(absl::StrCat("connection: connected", s.reconnects > 0 ? absl::StrCat(" (", s.reconnects,
+                                                                                          " reconnects)")
+                                                                           : ""));
+      break;
+    case OverlayStatus::Link::kReconnecting:
+      out.push_back(s.give_up_s > 0.0 ? absl::StrFormat("connection: reconnecting for %.1f s (gives up after %.0f s)",
+                                                        s.lost_for_s, s.give_up_s)
+                                      : absl::StrFormat("connection: reconnecting for %.1f s", s.lost_for_s));
+      break;
+    case OverlayStatus::Link::kGivenUp:
+      out.push_back(absl::StrFormat("connection: given up after %.0f s", s.give_up_s));
+      break;
+    case OverlayStatus::Link::kLocal:
+      out.push_back("connection: none (the whole scene drawn locally)");
+      break;
+  }
+  out.push_back(absl::StrFormat("fps %.1f, frame %.1f ms", fps, frame_ms));
+  if (s.cell.has_value()) {
+    out.push_back(absl::StrCat("viewcell ", s.cell_i, ",", s.cell_j, " (id ", *s.cell, "): ",
+                               !s.pvs_listed     ? std::string("PVS list not here")
+                               : s.pvs_complete ? absl::StrCat("PVS ", s.pvs_objects, " objects, complete")
+                                                : absl::StrCat("PVS ", s.pvs_objects, " objects, ", s.pvs_missing,
+                                                               " missing")));
+  } else {
+    out.push_back("viewcell: none (outside the grid, or no scene yet)");
+  }
+  out.push_back(s.masked ? absl::StrFormat("frame: masked (eps-mask %d, neighbourhood %.0f x %.0f m)", s.mask_id,
+                                           s.mask_box_max.x - s.mask_box_min.x, s.mask_box_max.y - s.mask_box_min.y)
+                : s.hole ? std::string("frame: HOLE (no usable mask, PVS incomplete)")
+                         : std::string("frame: viewcell PVS"));
+  out.push_back(absl::StrFormat("drawn %d triangles (PVS alone %d; scene %d)", s.triangles_drawn,
+                                s.triangles_without_masks, s.scene_triangles));
+  out.push_back(absl::StrCat("held ", s.held_objects, " objects, ", Megabytes(s.held_bytes),
+                             s.memory_budget_bytes > 0 ? absl::StrCat(" of ", Megabytes(s.memory_budget_bytes))
+                                                       : std::string(" (no budget)")));
+  out.push_back(absl::StrFormat("received %s, %.2f MB/s", Megabytes(s.bytes_received), bytes_per_s / 1e6));
+  out.push_back(absl::StrFormat("frames %d, stalls %d (%.2f s), holes %d", s.frames, s.stalls, s.stall_s,
+                                s.hole_frames));
+  out.push_back(absl::StrFormat("masked frames %d (%.1f%%), masks %d", s.frames_masked,
+                                s.frames > 0 ? 100.0 * static_cast<double>(s.frames_masked) / s.frames : 0.0,
+                                s.masks_received));
+  if (!s.walk.empty()) {
+    out.push_back(absl::StrFormat("walk '%s' %.0f of %.0f s at %.1f km/h%s", s.walk, s.walk_t_s, s.walk_duration_s,
+                                  s.speed_kmh, s.walk_paused ? ", PAUSED" : ""));
+  } else {
+    out.push_back(absl::StrFormat("free walking at %.1f km/h", s.speed_kmh));
+  }
+  double heading = std::fmod(90.0 - s.yaw_rad * 180.0 / M_PI, 360.0);  // compass: 0 north, clockwise
+  if (heading < 0.0) heading += 360.0;
+  out.push_back(absl::StrFormat("eye %.1f, %.1f, %.1f m, heading %.0f deg", s.eye.x, s.eye.y, s.eye.z, heading));
+  return out;
+}
+
+struct Overlay::Impl {
+  gl::GlContext* context = nullptr;
+  gl::GlFunctions gl;
+  void* window = nullptr;
+  ImGuiContext* imgui = nullptr;
+  bool glfw_backend = false;
+  unsigned program = 0, vao = 0, vbo = 0, ibo = 0, font_texture = 0;
+  int loc_projection = -1, loc_atlas = -1;
+  std::deque<std::pair<double, float>> frames;            // (time, frame ms)
+  std::deque<std::pair<double, uint64_t>> bytes;          // (time, bytes received)
+  size_t walk_selected = 0;
+  std::vector<std::string> lines;  // the statistics panel's, this frame
+
+  absl::Status Init();
+  void Render(ImDrawData* d);
+  double Fps() const;
+  double BytesPerSecond() const;
+  void StatsPanel(const OverlayStatus& s);
+  void Minimap(const OverlayStatus& s, const MinimapView& map, int width);
+  void Help(int width, int height);
+  OverlayRequest Walks(const std::vector<std::string>& walks, int width, int height, bool* open);
+};
+
+absl::Status Overlay::Impl::Init() {
+  imgui = ImGui::CreateContext();
+  ImGui::SetCurrentContext(imgui);
+  ImGuiIO& io = ImGui::GetIO();
+  io.IniFilename = nullptr;  // no imgui.ini in the working folder
+  io.LogFilename = nullptr;
+  ImGui::StyleColorsDark();
+  ImGuiStyle& style = ImGui::GetStyle();
+  style.WindowRounding = 4.0f;
+  style.WindowBorderSize = 0.0f;
+  if (std::error_code ec; std::filesystem::exists(kFontPath, ec)) {
+    io.Fonts->AddFontFromFileTTF(kFontPath, kFontPx);
+  } else {
+    io.Fonts->AddFontDefault();
+  }
+  if (window != nullptr) {
+    // Keyboard and mouse for the panels (the walk list's buttons); the loop reads the keys it
+    // needs itself, and ImGui's callbacks chain to those installed before them.
+    glfw_backend = ImGui_ImplGlfw_InitForOpenGL(static_cast<GLFWwindow*>(window), true);
+    if (!glfw_backend) return absl::InternalError("overlay: ImGui's GLFW back end did not start");
+  }
+  io.BackendRendererName = "vistream_gl_functions";
+
+  absl::StatusOr<unsigned> p = gl::LinkProgram(gl, kVertexShader, kFragmentShader, "overlay");
+  if (!p.ok()) return p.status();
+  program = *p;
+  loc_projection = gl.GetUniformLocation(program, "projection");
+  loc_atlas = gl.GetUniformLocation(program, "atlas");
+  gl.GenVertexArrays(1, &vao);
+  gl.GenBuffers(1, &vbo);
+  gl.GenBuffers(1, &ibo);
+  gl.BindVertexArray(vao);
+  gl.BindBuffer(GL_ARRAY_BUFFER, vbo);
+  gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo);
+  gl.EnableVertexAttribArray(0);
+  gl.EnableVertexAttribArray(1);
+  gl.EnableVertexAttribArray(2);
+  gl.VertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert),
+                         reinterpret_cast<void*>(offsetof(ImDrawVert, pos)));
+  gl.VertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert), reinterpret_cast<void*>(offsetof(ImDrawVert, uv)));
+  gl.VertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(ImDrawVert),
+                         reinterpret_cast<void*>(offsetof(ImDrawVert, col)));
+  gl.BindVertexArray(0);
+
+  unsigned char* pixels = nullptr;
+  int w = 0, h = 0;
+  io.Fonts->GetTexDataAsRGBA32(&pixels, &w, &h);
+  gl.GenTextures(1, &font_texture);
+  gl.BindTexture(GL_TEXTURE_2D, font_texture);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  gl.PixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  gl.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, w, h, 0, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
+  gl.BindTexture(GL_TEXTURE_2D, 0);
+  io.Fonts->SetTexID(reinterpret_cast<ImTextureID>(static_cast<intptr_t>(font_texture)));
+  if (const GLenum err = gl.GetError(); err != GL_NO_ERROR) {
+    return absl::InternalError(absl::StrCat("overlay: GL error ", err, " while setting up"));
+  }
+  return absl::OkStatus();
+}
+
+// ImGui's draw lists, drawn as its OpenGL 3 back end draws them (alpha blending, scissored
+// commands, no depth), through the context's function table.
+void Overlay::Impl::Render(ImDrawData* d) {
+  const int fb_w = static_cast<int>(d->DisplaySize.x * d->FramebufferScale.x);
+  const int fb_h = static_cast<int>(d->DisplaySize.y * d->FramebufferScale.y);
+  if (fb_w <= 0 || fb_h <= 0 || d->CmdListsCount == 0) return;
+  gl.Enable(GL_BLEND);
+  gl.BlendEquation(GL_FUNC_ADD);
+  gl.BlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+  gl.Disable(GL_CULL_FACE);
+  gl.Disable(GL_DEPTH_TEST);
+  gl.Enable(GL_SCISSOR_TEST);
+  gl.Viewport(0, 0, fb_w, fb_h);
+  const float l = d->DisplayPos.x, r = d->DisplayPos.x + d->DisplaySize.x;
+  const float t = d->DisplayPos.y, b = d->DisplayPos.y + d->DisplaySize.y;
+  const glm::mat4 projection(2.0f / (r - l), 0.0f, 0.0f, 0.0f,  //
+                             0.0f, 2.0f / (t - b), 0.0f, 0.0f,  //
+                             0.0f, 0.0f, -1.0f, 0.0f,           //
+                             (r + l) / (l - r), (t + b) / (b - t), 0.0f, 1.0f);
+  gl.UseProgram(program);
+  gl.Uniform1i(loc_atlas, 0);
+  gl.UniformMatrix4fv(loc_projection, 1, GL_FALSE, glm::value_ptr(projection));
+  gl.ActiveTexture(GL_TEXTURE0);
+  gl.BindVertexArray(vao);
+  gl.BindBuffer(GL_ARRAY_BUFFER, vbo);
+  const ImVec2 off = d->DisplayPos, scale = d->FramebufferScale;
+  for (int n = 0; n < d->CmdListsCount; ++n) {
+    const ImDrawList* list = d->CmdLists[n];
+    gl.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->VtxBuffer.Size) * sizeof(ImDrawVert),
+                  list->VtxBuffer.Data, GL_STREAM_DRAW);
+    gl.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->IdxBuffer.Size) * sizeof(ImDrawIdx),
+                  list->IdxBuffer.Data, GL_STREAM_DRAW);
+    for (int c = 0; c < list->CmdBuffer.Size; ++c) {
+      const ImDrawCmd& cmd = list->CmdBuffer[c];
+      if (cmd.UserCallback != nullptr) continue;  // none are used
+      const float x0 = (cmd.ClipRect.x - off.x) * scale.x, y0 = (cmd.ClipRect.y - off.y) * scale.y;
+      const float x1 = (cmd.ClipRect.z - off.x) * scale.x, y1 = (cmd.ClipRect.w - off.y) * scale.y;
+      if (x1 <= x0 || y1 <= y0) continue;
+      gl.Scissor(static_cast<int>(x0), static_cast<int>(static_cast<float>(fb_h) - y1), static_cast<int>(x1 - x0),
+                 static_cast<int>(y1 - y0));
+      gl.BindTexture(GL_TEXTURE_2D, static_cast<unsigned>(reinterpret_cast<intptr_t>(cmd.GetTexID())));
+      gl.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(cmd.ElemCount),
+                      sizeof(ImDrawIdx) == 2 ? GL_UNSIGNED_SHORT : GL_UNSIGNED_INT,
+                      reinterpret_cast<void*>(static_cast<intptr_t>(cmd.IdxOffset * sizeof(ImDrawIdx))));
+    }
+  }
+  gl.BindVertexArray(0);
+  gl.BindTexture(GL_TEXTURE_2D, 0);
+  gl.Disable(GL_SCISSOR_TEST);
+  gl.Disable(GL_BLEND);
+  gl.Enable(GL_DEPTH_TEST);
+}
+
+double Overlay::Impl::Fps() const {
+  if (frames.size() < 2) return 0.0;
+  // Over the last second (or what there is of it).
+  const double now = frames.back().first;
+  size_t k = frames.size() - 1;
+  while (k > 0 && now - frames[k - 1].first <= 1.0) --k;
+  const double span = now - frames[k].first;
+  return span > 0.0 ? static_cast<double>(frames.size() - 1 - k) / span : 0.0;
+}
+
+double Overlay::Impl::BytesPerSecond() const {
+  if (bytes.size() < 2) return 0.0;
+  const double now = bytes.back().first;
+  size_t k = bytes.size() - 1;
+  while (k > 0 && now - bytes[k - 1].first <= 1.0) --k;
+  const double span = now - bytes[k].first;
+  return span > 0.0 ? static_cast<double>(bytes.back().second - bytes[k].second) / span : 0.0;
+}
+
+void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
+  ImGui::SetNextWindowPos(ImVec2(kMargin, kMargin));
+  ImGui::SetNextWindowSize(ImVec2(kStatsWidth, 0.0f));
+  ImGui::SetNextWindowBgAlpha(0.78f);
+  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
+                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
+                                 ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoNav |
+                                 ImGuiWindowFlags_NoScrollbar;
+  if (ImGui::Begin("vistream (F1)", nullptr, flags)) {
+    // Warnings in colour: a hole, stalls, a lost server.
+    const ImVec4 warn(1.0f, 0.55f, 0.35f, 1.0f);
+    for (const std::string& line : lines) {
+      const bool bad = (line.rfind("frame: HOLE", 0) == 0) ||
+                       (line.rfind("connection: reconnecting", 0) == 0) || (line.rfind("connection: given up", 0) == 0);
+      if (bad) {
+        ImGui::PushStyleColor(ImGuiCol_Text, warn);
+        ImGui::TextWrapped("%s", line.c_str());
+        ImGui::PopStyleColor();
+      } else {
+        ImGui::TextWrapped("%s", line.c_str());
+      }
+      if (line.rfind("fps ", 0) == 0 && !frames.empty()) {
+        // The frame-time graph of the last seconds, 0 to at least 50 ms.
+        std::vector<float> ms;
+        ms.reserve(frames.size());
+        float top = 50.0f;
+        for (const auto& [t, v] : frames) {
+          ms.push_back(v);
+          top = std::max(top, v);
+        }
+        const std::string label = absl::StrFormat("frame ms, last %.0f s (0-%.0f)", kHistoryS, top);
+        ImGui::PlotLines("##frame_ms", ms.data(), static_cast<int>(ms.size()), 0, label.c_str(), 0.0f, top,
+                         ImVec2(static_cast<float>(kStatsWidth) - 20.0f, 48.0f));
+      }
+      if (line.rfind("held ", 0) == 0 && s.memory_budget_bytes > 0) {
+        const float f = static_cast<float>(static_cast<double>(s.held_bytes) / static_cast<double>(s.memory_budget_bytes));
+        ImGui::ProgressBar(std::min(f, 1.0f), ImVec2(-FLT_MIN, 0.0f),
+                           absl::StrFormat("%.0f%% of the memory budget", 100.0 * f).c_str());
+      }
+    }
+    ImGui::TextDisabled("F1 panel  M map  H keys  P walks");
+  }
+  ImGui::End();
+}
+
+void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int width) {
+  const float px = static_cast<float>(kMinimapPx);
+  ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - kMargin), kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
+  ImGui::SetNextWindowBgAlpha(0.85f);
+  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
+                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
+                                 ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoNav |
+                                 ImGuiWindowFlags_NoScrollbar | ImGuiWindowFlags_NoTitleBar;
+  if (ImGui::Begin("minimap", nullptr, flags)) {
+    ImGui::TextUnformatted("Viewcells around the eye (M), north up");
+    const ImVec2 origin = ImGui::GetCursorScreenPos();
+    ImGui::Dummy(ImVec2(px, px));
+    ImDrawList* dl = ImGui::GetWindowDrawList();
+    const ImVec2 lo = origin, hi(origin.x + px, origin.y + px);
+    dl->AddRectFilled(lo, hi, IM_COL32(30, 32, 36, 255));
+    dl->PushClipRect(lo, hi, true);
+    const double scale = px / (2.0 * map.radius_m);  // pixels a metre
+    const ImVec2 centre(origin.x + 0.5f * px, origin.y + 0.5f * px);
+    auto to_map = [&](double x, double y) {
+      return ImVec2(centre.x + static_cast<float>((x - s.eye.x) * scale), centre.y - static_cast<float>((y - s.eye.y) * scale));
+    };
+    if (map.grid != nullptr && map.grid->nx > 0 && map.grid->ny > 0 && map.grid->cell_size > 0.0) {
+      const GridInfo& g = *map.grid;
+      const int i0 = std::max(0, static_cast<int>(std::floor((s.eye.x - map.radius_m - g.x0) / g.cell_size)));
+      const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((s.eye.x + map.radius_m - g.x0) / g.cell_size)));
+      const int j0 = std::max(0, static_cast<int>(std::floor((s.eye.y - map.radius_m - g.y0) / g.cell_size)));
+      const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((s.eye.y + map.radius_m - g.y0) / g.cell_size)));
+      for (int j = j0; j <= j1; ++j) {
+        for (int i = i0; i <= i1; ++i) {
+          const size_t id = static_cast<size_t>(j) * static_cast<size_t>(g.nx) + static_cast<size_t>(i);
+          const CellState state =
+              map.cells != nullptr && id < map.cells->size() ? (*map.cells)[id] : CellState::kNotListed;
+          const ImVec2 a = to_map(g.x0 + i * g.cell_size, g.y0 + (j + 1) * g.cell_size);
+          const ImVec2 b = to_map(g.x0 + (i + 1) * g.cell_size, g.y0 + j * g.cell_size);
+          const bool current = s.cell.has_value() && *s.cell == id;
+          dl->AddRectFilled(a, b, Rgb(current ? MinimapCurrentCellColour() : MinimapColour(state)));
+          dl->AddRect(a, b, IM_COL32(20, 20, 20, 255));
+        }
+      }
+    }
+    if (map.walk.size() >= 2) {
+      std::vector<ImVec2> pts;
+      pts.reserve(map.walk.size());
+      for (const glm::dvec2& q : map.walk) pts.push_back(to_map(q.x, q.y));
+      dl->AddPolyline(pts.data(), static_cast<int>(pts.size()), IM_COL32(240, 80, 200, 255), ImDrawFlags_None, 2.0f);
+    }
+    // The eye: a triangle pointing along its heading (yaw counter-clockwise from east; the
+    // map's y grows downwards).
+    const float c = static_cast<float>(std::cos(s.yaw_rad)), sn = static_cast<float>(-std::sin(s.yaw_rad));
+    auto rot = [&](float fx, float fy) { return ImVec2(centre.x + fx * c - fy * sn, centre.y + fx * sn + fy * c); };
+    dl->AddTriangleFilled(rot(11.0f, 0.0f), rot(-6.0f, 6.0f), rot(-6.0f, -6.0f), IM_COL32(255, 255, 255, 255));
+    dl->AddTriangle(rot(11.0f, 0.0f), rot(-6.0f, 6.0f), rot(-6.0f, -6.0f), IM_COL32(0, 0, 0, 255), 1.5f);
+    // The scale bar, bottom left.
+    const double bar_m = NiceLength(map.radius_m * 0.5);
+    const float bar_px = static_cast<float>(bar_m * scale);
+    const ImVec2 b0(lo.x + 10.0f, hi.y - 12.0f), b1(lo.x + 10.0f + bar_px, hi.y - 12.0f);
+    dl->AddRectFilled(ImVec2(b0.x - 4.0f, b0.y - 20.0f), ImVec2(b1.x + 4.0f, b0.y + 6.0f), IM_COL32(0, 0, 0, 150));
+    dl->AddLine(b0, b1, IM_COL32(255, 255, 255, 255), 2.0f);
+    dl->AddLine(ImVec2(b0.x, b0.y - 4.0f), ImVec2(b0.x, b0.y + 4.0f), IM_COL32(255, 255, 255, 255), 2.0f);
+    dl->AddLine(ImVec2(b1.x, b1.y - 4.0f), ImVec2(b1.x, b1.y + 4.0f), IM_COL32(255, 255, 255, 255), 2.0f);
+    dl->AddText(ImVec2(b0.x, b0.y - 19.0f), IM_COL32(255, 255, 255, 255), absl::StrFormat("%.0f m", bar_m).c_str());
+    // North.
+    dl->AddText(ImVec2(hi.x - 16.0f, lo.y + 4.0f), IM_COL32(255, 255, 255, 255), "N");
+    dl->AddTriangleFilled(ImVec2(hi.x - 12.0f, lo.y + 22.0f), ImVec2(hi.x - 16.0f, lo.y + 30.0f),
+                          ImVec2(hi.x - 8.0f, lo.y + 30.0f), IM_COL32(255, 255, 255, 255));
+    dl->PopClipRect();
+    // The legend.
+    auto legend = [&](const std::array<uint8_t, 3>& colour, const char* text) {
+      const ImVec2 p = ImGui::GetCursorScreenPos();
+      const float h = ImGui::GetTextLineHeight();
+      ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 2.0f), ImVec2(p.x + h - 4.0f, p.y + h - 2.0f),
+                                                Rgb(colour));
+      ImGui::Dummy(ImVec2(h, h));
+      ImGui::SameLine();
+      ImGui::TextUnformatted(text);
+    };
+    // Two columns, so that the window keeps the map's width.
+    const float column = 0.5f * px;
+    auto second = [&] { ImGui::SameLine(ImGui::GetCursorStartPos().x + column); };
+    legend(MinimapCurrentCellColour(), "current");
+    second();
+    legend(MinimapColour(CellState::kComplete), "PVS complete");
+    legend(MinimapColour(CellState::kPending), "pending");
+    second();
+    legend(MinimapColour(CellState::kNotListed), "not asked for");
+    if (!map.walk.empty()) legend({240, 80, 200}, "walk followed");
+  }
+  ImGui::End();
+}
+
+void Overlay::Impl::Help(int width, int height) {
+  ImGui::SetNextWindowPos(ImVec2(0.5f * width, 0.5f * height), ImGuiCond_Always, ImVec2(0.5f, 0.5f));
+  ImGui::SetNextWindowBgAlpha(0.9f);
+  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
+                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
+                                 ImGuiWindowFlags_NoNav;
+  if (ImGui::Begin("Keys (H or ? closes)", nullptr, flags)) {
+    static constexpr const char* kKeys[][2] = {
+        {"W A S D, arrows", "walk, strafe, turn (Shift: 5x faster)"},
+        {"click, then mouse", "look around (Esc frees the mouse)"},
+        {"P", "the scene's walks: Up/Down choose, Enter from its start, F from here"},
+        {"space", "pause or resume the walk followed"},
+        {"+ / -", "faster / slower (walk or free)"},
+        {"R", "back to the start pose (a walk: its start)"},
+        {"F1", "statistics panel"},
+        {"M", "minimap of the viewcells"},
+        {"F11", "full screen"},
+        {"F12", "screenshot (PNG into --screenshots, else ./vistream-screenshots)"},
+        {"H or ?", "this list"},
+        {"Esc (mouse free), Q", "quit"},
+    };
+    if (ImGui::BeginTable("keys", 2, ImGuiTableFlags_RowBg)) {
+      for (const auto& k : kKeys) {
+        ImGui::TableNextRow();
+        ImGui::TableSetColumnIndex(0);
+        ImGui::TextUnformatted(k[0]);
+        ImGui::TableSetColumnIndex(1);
+        ImGui::TextUnformatted(k[1]);
+      }
+      ImGui::EndTable();
+    }
+  }
+  ImGui::End();
+}
+
+OverlayRequest Overlay::Impl::Walks(const std::vector<std::string>& walks, int width, int height, bool* open) {
+  OverlayRequest req;
+  ImGui::SetNextWindowPos(ImVec2(0.5f * width, 0.5f * height), ImGuiCond_Always, ImVec2(0.5f, 0.5f));
+  ImGui::SetNextWindowBgAlpha(0.92f);
+  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
+                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
+                                 ImGuiWindowFlags_NoNav;
+  if (ImGui::Begin("Walks (P closes)", nullptr, flags)) {
+    if (walks.empty()) {
+      ImGui::TextUnformatted("this scene has no walks");
+    } else {
+      walk_selected = std::min(walk_selected, walks.size() - 1);
+      ImGui::TextDisabled("Up/Down choose, Enter from its start, F from here");
+      for (size_t k = 0; k < walks.size(); ++k) {
+        ImGui::PushID(static_cast<int>(k));
+        if (ImGui::Selectable(walks[k].c_str(), k == walk_selected, 0, ImVec2(220.0f, 0.0f))) walk_selected = k;
+        ImGui::SameLine();
+        if (ImGui::SmallButton("from start")) req.follow_walk = k, req.from_start = true;
+        ImGui::SameLine();
+        if (ImGui::SmallButton("from here")) req.follow_walk = k, req.from_start = false;
+        ImGui::PopID();
+      }
+    }
+  }
+  ImGui::End();
+  if (req.follow_walk.has_value()) *open = false;
+  return req;
+}
+
+Overlay::Overlay(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+absl::StatusOr<std::unique_ptr<Overlay>> Overlay::Create(gl::GlContext* context, void* window) {
+  auto impl = std::make_unique<Impl>();
+  impl->context = context;
+  impl->gl = context->functions();
+  impl->window = window;
+  auto overlay = std::unique_ptr<Overlay>(new Overlay(std::move(impl)));
+  if (absl::Status s = overlay->impl_->Init(); !s.ok()) return s;
+  return overlay;
+}
+
+Overlay::~Overlay() {
+  if (impl_ == nullptr || impl_->imgui == nullptr) return;
+  ImGui::SetCurrentContext(impl_->imgui);
+  if (impl_->glfw_backend) ImGui_ImplGlfw_Shutdown();
+  if (impl_->context != nullptr && impl_->context->MakeCurrent().ok()) {
+    impl_->gl.DeleteProgram(impl_->program);
+    impl_->gl.DeleteVertexArrays(1, &impl_->vao);
+    impl_->gl.DeleteBuffers(1, &impl_->vbo);
+    impl_->gl.DeleteBuffers(1, &impl_->ibo);
+    impl_->gl.DeleteTextures(1, &impl_->font_texture);
+  }
+  ImGui::DestroyContext(impl_->imgui);
+}
+
+void Overlay::AddFrame(double frame_ms, double now_s, uint64_t bytes_received) {
+  impl_->frames.emplace_back(now_s, static_cast<float>(frame_ms));
+  while (!impl_->frames.empty() && now_s - impl_->frames.front().first > kHistoryS) impl_->frames.pop_front();
+  impl_->bytes.emplace_back(now_s, bytes_received);
+  while (!impl_->bytes.empty() && now_s - impl_->bytes.front().first > kHistoryS) impl_->bytes.pop_front();
+}
+
+bool Overlay::WantsKeyboard() const { return show_walks; }
+
+size_t& Overlay::walk_selected() { return impl_->walk_selected; }
+
+const std::vector<std::string>& Overlay::last_lines() const { return impl_->lines; }
+
+OverlayRequest Overlay::Frame(const OverlayStatus& status, const MinimapView& map,
+                              const std::vector<std::string>& walks, int width, int height, double dt_s) {
+  ImGui::SetCurrentContext(impl_->imgui);
+  ImGuiIO& io = ImGui::GetIO();
+  if (impl_->glfw_backend) {
+    ImGui_ImplGlfw_NewFrame();  // display size, scale, time and input from the window
+  } else {
+    io.DisplaySize = ImVec2(static_cast<float>(width), static_cast<float>(height));
+    io.DisplayFramebufferScale = ImVec2(1.0f, 1.0f);
+    io.DeltaTime = dt_s > 0.0 ? static_cast<float>(dt_s) : 1.0f / 60.0f;
+  }
+  ImGui::NewFrame();
+  const int w = static_cast<int>(io.DisplaySize.x), h = static_cast<int>(io.DisplaySize.y);
+  OverlayRequest req;
+  impl_->lines = OverlayLines(status, impl_->Fps(), impl_->frames.empty() ? 0.0 : impl_->frames.back().second,
+                              impl_->BytesPerSecond());
+  if (show_stats) impl_->StatsPanel(status);
+  if (show_minimap) impl_->Minimap(status, map, w);
+  if (show_walks) req = impl_->Walks(walks, w, h, &show_walks);
+  if (show_help) impl_->Help(w, h);
+  ImGui::Render();
+  impl_->Render(ImGui::GetDrawData());
+  return req;
+}
+
+}  // namespace vistream::client

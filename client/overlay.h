@@ -1,0 +1,130 @@
+#pragma once
+// The client's on-screen overlay (Dear ImGui): a statistics panel (F1), a minimap of the
+// viewcell grid (M), the key list (H or ?) and the list of the scene's walks (P). The same
+// overlay draws into the window and, for `--overlay`, into the headless client's off-screen
+// frames: ImGui builds the panels, and they are drawn through the context's GL function table
+// (gl/gl_functions.h), so that an OSMesa frame gets them as a window does. (Debian's ImGui
+// OpenGL 3 back end loads its GL from libGL.so.1, GLX's, which cannot draw into an OSMesa
+// context: its ~100 lines of drawing are done here through the table instead. The GLFW back
+// end, keyboard and mouse for the window, is Debian's.)
+
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <absl/status/statusor.h>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "client/object_store.h"
+#include "gl/gl_context.h"
+
+namespace vistream::client {
+
+// What the client knows this frame, as the overlay shows it (all filled by the walkthrough
+// loop; units in the names).
+struct OverlayStatus {
+  std::string server, scene;
+  enum class Link { kConnected, kReconnecting, kGivenUp, kLocal } link = Link::kConnected;
+  double lost_for_s = 0.0;         // kReconnecting: since the connection dropped
+  double give_up_s = 0.0;          // the client gives up after this long without the server; 0 never
+  uint64_t reconnects = 0;
+  std::optional<uint32_t> cell;    // the eye's viewcell id; none outside the grid or before SceneInfo
+  int cell_i = -1, cell_j = -1;
+  size_t pvs_objects = 0;          // its PVS list's length (0: not arrived)
+  bool pvs_listed = false, pvs_complete = false;
+  size_t pvs_missing = 0;          // of the list, objects not here and uploaded
+  size_t held_objects = 0;
+  uint64_t held_bytes = 0, memory_budget_bytes = 0;  // budget 0: none
+  uint64_t bytes_received = 0;     // since the start (the overlay derives the rate)
+  uint64_t frames = 0, stalls = 0, hole_frames = 0, frames_masked = 0;
+  double stall_s = 0.0;
+  bool masked = false, hole = false;  // what this frame drew
+  uint32_t mask_id = 0;               // masked: the server's id of the ε-mask drawn
+  glm::dvec3 mask_box_min{0.0}, mask_box_max{0.0};  // masked: its neighbourhood, scene-local m
+  uint64_t masks_received = 0;
+  uint64_t triangles_drawn = 0, triangles_without_masks = 0, scene_triangles = 0;
+  glm::dvec3 eye{0.0};
+  double yaw_rad = 0.0;
+  // The walk followed: its name, where on it, paused, the speed (km/h, after +/-).
+  std::string walk;
+  double walk_t_s = 0.0, walk_duration_s = 0.0, speed_kmh = 0.0;
+  bool walk_paused = false;
+};
+
+// A viewcell's state on the minimap.
+enum class CellState : uint8_t {
+  kNotListed,  // no PVS list from the server (not asked for by the eye's motion yet)
+  kPending,    // its list is here, some of its geometry is not
+  kComplete,   // list and every object here and uploaded
+};
+
+// What the minimap draws: the grid, each cell's state, the walk's polyline.
+struct MinimapView {
+  const GridInfo* grid = nullptr;
+  const std::vector<CellState>* cells = nullptr;  // by cell id, nx * ny (those near the eye current)
+  std::vector<glm::dvec2> walk;    // the polyline of the walk followed (scene-local m); may be empty
+  double radius_m = 300.0;         // the map shows this far around the eye
+};
+
+// What the user asked for through the overlay's walk list this frame.
+struct OverlayRequest {
+  std::optional<size_t> follow_walk;  // index into the names given to Frame
+  bool from_start = true;             // else from the walk's point nearest the eye
+};
+
+class Overlay {
+ public:
+  // `window`: the GLFWwindow of gl::GlContext::window() (its keyboard and mouse reach the
+  // panels), or null off-screen. `context` current. Errors: GL failing (shaders, the font).
+  static absl::StatusOr<std::unique_ptr<Overlay>> Create(gl::GlContext* context, void* window);
+  ~Overlay();
+  Overlay(const Overlay&) = delete;
+  Overlay& operator=(const Overlay&) = delete;
+
+  // Records a frame's time for the frame-time graph (the last kHistoryS seconds) and the
+  // byte rate. `now_s`: a steady clock.
+  void AddFrame(double frame_ms, double now_s, uint64_t bytes_received);
+  // Builds and draws the panels shown over the frame just drawn (into the framebuffer bound:
+  // the window's or the renderer's off-screen one), `width` x `height` pixels. `walks`: the
+  // names for the walk list. Returns what the walk list asked for.
+  OverlayRequest Frame(const OverlayStatus& status, const MinimapView& map, const std::vector<std::string>& walks,
+                       int width, int height, double dt_s);
+
+  bool show_stats = true;    // F1
+  bool show_minimap = true;  // M
+  bool show_help = false;    // H or ?
+  bool show_walks = false;   // P
+  // Whether the panels want the keyboard (the walk list open): the loop then leaves it to them.
+  bool WantsKeyboard() const;
+  // The walk list's highlighted row (the loop's Up/Down move it; Enter and F follow it).
+  size_t& walk_selected();
+  // The statistics panel's lines of the last Frame (made whether it is shown or not).
+  const std::vector<std::string>& last_lines() const;
+
+  static constexpr double kHistoryS = 5.0;
+  // The panels' places (pixels from the top left; tests look there): the statistics at the top
+  // left, the minimap at the top right, kMinimapPx square.
+  static constexpr int kMargin = 10;
+  static constexpr int kStatsWidth = 400;
+  static constexpr int kMinimapPx = 260;
+
+ private:
+  struct Impl;
+  explicit Overlay(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+// The statistics panel's lines, as drawn (tests compare them with the run's summary): `fps`
+// over the last second, `frame_ms` the last frame's time, `bytes_per_s` over the last second.
+std::vector<std::string> OverlayLines(const OverlayStatus& status, double fps, double frame_ms, double bytes_per_s);
+
+// The colours the minimap gives each state (RGB), and the eye's marker.
+std::array<uint8_t, 3> MinimapColour(CellState state);
+std::array<uint8_t, 3> MinimapCurrentCellColour();
+
+}  // namespace vistream::client
