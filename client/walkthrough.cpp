@@ -515,6 +515,9 @@ absl::Status Loop::Startup() {
       renderer_->Draw(*store_, camera_, none, nullptr, 0, nullptr);
       context_->SwapBuffers();
       input_->Poll();
+      for (const WindowInput::KeyPress& k : input_->TakeKeys()) {
+        if (k.key == GLFW_KEY_Q || k.key == GLFW_KEY_ESCAPE) input_->Close();
+      }
       if (input_->ShouldClose()) return absl::CancelledError("the window was closed while loading");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -749,6 +752,14 @@ absl::Status Loop::HandleWindow() {
         break;
       case GLFW_KEY_F11: input_->ToggleFullScreen(); break;
       case GLFW_KEY_F12: screenshot_now_ = true; break;
+      case GLFW_KEY_Q: input_->Close(); break;
+      case GLFW_KEY_ESCAPE:
+        if (overlay_->show_help) {
+          overlay_->show_help = false;
+        } else {
+          input_->Escape();
+        }
+        break;
       default: break;
     }
   }

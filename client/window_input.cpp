@@ -35,6 +35,17 @@ std::vector<WindowInput::KeyPress> WindowInput::TakeKeys() { return std::exchang
 
 std::vector<unsigned> WindowInput::TakeChars() { return std::exchange(chars_, {}); }
 
+void WindowInput::Escape() {
+  if (captured_) {
+    captured_ = false;
+    glfwSetInputMode(W(window_), GLFW_CURSOR, GLFW_CURSOR_NORMAL);
+  } else {
+    Close();
+  }
+}
+
+void WindowInput::Close() { glfwSetWindowShouldClose(W(window_), GLFW_TRUE); }
+
 void WindowInput::ToggleFullScreen() {
   GLFWwindow* w = W(window_);
   if (!full_screen_) {
@@ -61,18 +72,6 @@ bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* y
   GLFWwindow* w = W(window_);
   auto down = [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; };
   bool moved = false;
-  // Esc frees the mouse, or closes the window when the mouse is free; Q closes.
-  const bool escape = down(GLFW_KEY_ESCAPE);
-  if (escape && !escape_was_down_) {
-    if (captured_) {
-      captured_ = false;
-      glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_NORMAL);
-    } else {
-      glfwSetWindowShouldClose(w, GLFW_TRUE);
-    }
-  }
-  escape_was_down_ = escape;
-  if (down(GLFW_KEY_Q)) glfwSetWindowShouldClose(w, GLFW_TRUE);
   if (!captured_ && glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
     captured_ = true;
     glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_DISABLED);

@@ -33,6 +33,10 @@ class WindowInput {
   };
   std::vector<KeyPress> TakeKeys();
   std::vector<unsigned> TakeChars();
+  // Esc: frees the mouse if it looks around, else closes the window.
+  void Escape();
+  // Q: closes the window.
+  void Close();
   // Full screen on the window's monitor, or back to the window it was.
   void ToggleFullScreen();
   bool full_screen() const { return full_screen_; }
@@ -47,7 +51,6 @@ class WindowInput {
   bool full_screen_ = false;
   int windowed_x_ = 0, windowed_y_ = 0, windowed_w_ = 0, windowed_h_ = 0;
   bool captured_ = false;
-  bool escape_was_down_ = false;
   double last_x_ = 0.0, last_y_ = 0.0;
 };
 

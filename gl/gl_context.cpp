@@ -105,6 +105,10 @@ void* GlContext::ProcAddress(const char* name) { return reinterpret_cast<void*>(
 
 absl::Status GlContext::MakeCurrent() {
   if (impl_->window != nullptr) {
+    // Released first: GLX skips making current a context it thinks is current already, but
+    // an OSMesa context made current since (the id renderer of --verify) took the GL dispatch
+    // both share (libglapi), and the window's calls would reach it.
+    glfwMakeContextCurrent(nullptr);
     glfwMakeContextCurrent(impl_->window);
     return absl::OkStatus();
   }
