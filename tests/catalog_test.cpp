@@ -71,6 +71,27 @@ TEST(Catalog, ClientFrameTimeIsAnEffectOfItsOwn) {
   EXPECT_FALSE(e->simulation.link.has_value());
 }
 
+TEST(Catalog, FogIsOnOnlyWhereTheEntryDeclaresItAndItsRangeIsChecked) {
+  absl::StatusOr<CatalogEntry> plain = ParseCatalogEntry(kMinimal, "t.json", "/base");
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_FALSE(plain->effects.fog.has_value());
+  absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(R"({
+    "name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 50, "height_m": 2},
+    "effects": {"fog": {"start_m": 400, "end_m": 2500}}})", "t.json", "/base");
+  ASSERT_TRUE(e.ok()) << e.status();
+  ASSERT_TRUE(e->effects.fog.has_value());
+  EXPECT_EQ(e->effects.fog->start_m, 400.0);
+  EXPECT_EQ(e->effects.fog->end_m, 2500.0);
+  const std::string head = R"({"name": "t", "source": {"generator": "city1"}, "viewcell": {"size_m": 50, "height_m": 2}, )";
+  ExpectErrorMentions(head + R"("effects": {"fog": {"start_m": 500, "end_m": 400}}})",
+                      {"effects.fog.end_m", "beyond start_m"});
+  ExpectErrorMentions(head + R"("effects": {"fog": {"start_m": -1, "end_m": 400}}})", {"effects.fog.start_m"});
+  ExpectErrorMentions(head + R"("effects": {"fog": {"end_m": 400}}})", {"effects.fog.start_m", "missing"});
+  ExpectErrorMentions(head + R"("effects": {"rain": true}})", {"effects.rain", "unknown key"});
+  ExpectErrorMentions(head + R"("effects": {"fog": {"start_m": 1, "end_m": 400, "colour": 3}}})",
+                      {"effects.fog.colour", "unknown key"});
+}
+
 TEST(Catalog, GltfSourceResolvesAgainstTheCatalogFolder) {
   absl::StatusOr<CatalogEntry> e = ParseCatalogEntry(
       R"({"name": "t", "source": {"gltf": "../data/x.glb"}, "viewcell": {"size_m": 50, "height_m": 2}})",

@@ -450,6 +450,18 @@ TEST(CityGmlRead, XmlThatIsNotCityGmlIsRejected) {
                 {"v3.gml", "not CityGML 1.0 or 2.0", "citygml/3.0"});
 }
 
+// A document on which libcitygml's own parser throws (found by citygml_fuzz): an error naming
+// the file and libcitygml's reason. (libcitygml leaks what it had built when it throws; the
+// sanitizer runs suppress leaks inside it and xerces: tests/lsan.supp.)
+TEST(CityGmlRead, WhatLibcitygmlThrowsOnIsAnErrorNamingTheFile) {
+  const std::string path = VISTREAM_SOURCE_DIR "/tests/citymodel/libcitygml_throws.gml";
+  auto m = ReadCityGml(path);
+  ASSERT_FALSE(m.ok());
+  EXPECT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(m.status().message().find(path), std::string::npos) << m.status();
+  EXPECT_NE(m.status().message().find("libcitygml: DelayedChoiceElementParser"), std::string::npos) << m.status();
+}
+
 TEST(CityGmlRead, DoctypeIsRefused) {
   ExpectInvalid(ReadCityGmlFromMemory("<?xml version=\"1.0\"?><!DOCTYPE x SYSTEM \"file:///etc/passwd\">"
                                       "<CityModel xmlns=\"http://www.opengis.net/citygml/2.0\"/>", "dtd.gml"),
