@@ -108,12 +108,11 @@ INSTANTIATE_TEST_SUITE_P(DenHaag, CheckConservativeOnCity,
                          CaseName);
 
 // Measured when written: at 100 m all 24 cells, 6,045 PVS entries checked, 482 (cpu) and 489
-// (exact) occluded queries; at 8 m (100 sampled cells) 10,785 entries, 4,588 and 4,602.
+// (exact) occluded queries; at 8 m (100 sampled cells) 10,785 entries, 4,588 and 4,602. Each
+// backend once (Den Haag has both at both sizes), to keep CI within its time.
 INSTANTIATE_TEST_SUITE_P(Delft, CheckConservativeOnCity,
-                         ::testing::Values(CityCase{&kDelft, Delft, 100, "cpu", 0, 3000, 200},
-                                           CityCase{&kDelft, Delft, 100, "exact", 0, 3000, 200},
-                                           CityCase{&kDelft, Delft, 8, "cpu", 100, 4000, 1000},
-                                           CityCase{&kDelft, Delft, 8, "exact", 100, 4000, 1000}),
+                         ::testing::Values(CityCase{&kDelft, Delft, 100, "exact", 0, 3000, 200},
+                                           CityCase{&kDelft, Delft, 8, "cpu", 100, 4000, 1000}),
                          CaseName);
 
 // The same city as OpenStreetMap draws it (`scene extrude`: each building its footprint's prism,
@@ -134,12 +133,14 @@ TEST(DenHaagExtruded, IsConservativeAndCullsMoreThanTheLod2Model) {
   EXPECT_EQ(ej.at("extruded").get<int>(), ej.at("buildings").get<int>()) << e.out;
   EXPECT_GT(ej.at("buildings").get<int>(), 1900) << e.out;
 
+  // 16 of the 64 viewcells, sampled (all of them took two minutes of CI).
   const RunResult check = Vistream("check-conservative --scene " + extruded +
-                                   " --cell-size 100 --cells 0 --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
+                                   " --cell-size 100 --cells 16 --samples 3000000 --neighbourhoods 10 --rays 5000 --json");
   ASSERT_EQ(check.exit_code, 0) << check.out;
   const nlohmann::json cj = nlohmann::json::parse(check.out);
   EXPECT_EQ(cj.at("violations").get<int>(), 0) << check.out;
-  EXPECT_GT(cj.at("occluded_queries").get<double>(), 1000.0) << check.out;
+  EXPECT_TRUE(cj.at("unchecked").empty()) << check.out;
+  EXPECT_GT(cj.at("occluded_queries").get<double>(), 250.0) << check.out;
 
   nlohmann::json pvs[2];
   const std::string scenes[2] = {DenHaag(), extruded};
