@@ -207,6 +207,7 @@ void Connection::Run() {
     }
     // A dropped connection: try again after a back-off that resets once a session has lasted.
     if (std::chrono::steady_clock::now() - began > std::chrono::seconds(5)) backoff = 0.25;
+    stats_.backoff_s = backoff;
     cv_.wait_for(lock, std::chrono::duration<double>(backoff), [&] { return stop_; });
     backoff = std::min(options_.max_backoff_s, 2.0 * backoff);
   }

@@ -69,6 +69,7 @@ struct ConnectionStats {
   uint64_t duplicates = 0;       // geometry received for an object already held
   uint64_t reconnects = 0;       // sessions after the first that the server answered
   uint64_t poses_sent = 0;
+  double backoff_s = 0.0;        // the last wait before a reconnect attempt (0.25 s doubling to max_backoff_s)
 };
 
 // A channel to `address` as every client session uses it: keepalive every 30 s, 64 MiB

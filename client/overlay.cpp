@@ -84,9 +84,8 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
                                                                            : ""));
       break;
     case OverlayStatus::Link::kReconnecting:
-      out.push_back(s.give_up_s > 0.0 ? absl::StrFormat("connection: reconnecting for %.1f s (gives up after %.0f s)",
-                                                        s.lost_for_s, s.give_up_s)
-                                      : absl::StrFormat("connection: reconnecting for %.1f s", s.lost_for_s));
+      out.push_back(absl::StrFormat("connection: reconnecting for %.1f s, back-off %.2f s%s", s.lost_for_s, s.backoff_s,
+                                    s.give_up_s > 0.0 ? absl::StrFormat(", gives up after %.0f s", s.give_up_s) : ""));
       break;
     case OverlayStatus::Link::kGivenUp:
       out.push_back(absl::StrFormat("connection: given up after %.0f s", s.give_up_s));

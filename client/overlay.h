@@ -32,6 +32,7 @@ struct OverlayStatus {
   enum class Link { kConnected, kReconnecting, kGivenUp, kLocal } link = Link::kConnected;
   double lost_for_s = 0.0;         // kReconnecting: since the connection dropped
   double give_up_s = 0.0;          // the client gives up after this long without the server; 0 never
+  double backoff_s = 0.0;          // kReconnecting: the wait before the latest attempt
   uint64_t reconnects = 0;
   std::optional<uint32_t> cell;    // the eye's viewcell id; none outside the grid or before SceneInfo
   int cell_i = -1, cell_j = -1;

@@ -336,6 +336,8 @@ absl::Status Loop::Prepare() {
   if (!opt_.frame_log.empty()) {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
     if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
+    // A line at a time, so that the log can be followed while the client runs (tail -f, tests).
+    std::setvbuf(frame_log_, nullptr, _IOLBF, 0);
     std::fprintf(frame_log_,
                  "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked,hole,"
                  "triangles_without_masks,mask_id\n");
@@ -617,6 +619,7 @@ OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonM
     const ConnectionStats c = connection_->stats();
     st.reconnects = c.reconnects;
     st.bytes_received = c.bytes_received;
+    st.backoff_s = c.backoff_s;
     st.link = link_up_ ? OverlayStatus::Link::kConnected
               : gave_up_flag_ ? OverlayStatus::Link::kGivenUp
                               : OverlayStatus::Link::kReconnecting;

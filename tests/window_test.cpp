@@ -482,6 +482,73 @@ TEST(HeadlessOverlay, ItsNumbersEqualTheJsonSummary) {
   ExpectOverlayEqualsSummary(ReadFile(dir + "/overlay.txt"), ReadFile(dir + "/out.txt"));
 }
 
+TEST(HeadlessOverlay, ALostServerShowsReconnectingWithItsBackOff) {
+  auto server = StartServer();
+  ASSERT_NE(server, nullptr);
+  const std::string dir = TempDir("lost");
+  Child c({VISTREAM_CLIENT_BIN, "--headless", "--server", "127.0.0.1:" + std::to_string(server->port()), "--pose",
+           kPose, "--frames", "100000", "--max-fps", "20", "--size", "320x180", "--give-up", "3", "--overlay",
+           "--overlay-dump", dir + "/overlay.txt", "--frame-log", dir + "/frames.csv"},
+          {}, dir, dir + "/out.txt", dir + "/err.txt");
+  for (int k = 0; k < 1200 && ReadFile(dir + "/frames.csv").find("\n5,") == std::string::npos; ++k) Sleep(0.1);
+  server.reset();  // stopped: the client reconnects with back-off, then gives up
+  EXPECT_EQ(c.Wait(60.0), 1) << ReadFile(dir + "/err.txt");
+  const std::string dump = ReadFile(dir + "/overlay.txt");
+  EXPECT_NE(dump.find("connection: reconnecting for "), std::string::npos) << dump;
+  EXPECT_NE(dump.find(", back-off "), std::string::npos) << dump;
+  EXPECT_NE(dump.find("gives up after 3 s"), std::string::npos) << dump;
+  EXPECT_NE(ReadFile(dir + "/err.txt").find("no answer for 3 s"), std::string::npos) << ReadFile(dir + "/err.txt");
+}
+
+TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
+  OverlayStatus s;
+  s.server = "127.0.0.1:1";
+  s.scene = "london";
+  s.reconnects = 2;
+  auto has = [](const std::vector<std::string>& lines, const std::string& text) {
+    return std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+  };
+  std::vector<std::string> l = OverlayLines(s, 60.0, 16.7, 2.5e6);
+  EXPECT_TRUE(has(l, "scene london on 127.0.0.1:1"));
+  EXPECT_TRUE(has(l, "connection: connected (2 reconnects)"));
+  EXPECT_TRUE(has(l, "fps 60.0, frame 16.7 ms"));
+  EXPECT_TRUE(has(l, "2.50 MB/s"));
+  EXPECT_TRUE(has(l, "frame: viewcell PVS"));
+  EXPECT_TRUE(has(l, "viewcell: none"));
+  EXPECT_TRUE(has(l, "free walking"));
+  s.link = OverlayStatus::Link::kReconnecting;
+  s.lost_for_s = 3.3;
+  s.backoff_s = 1.0;
+  s.give_up_s = 60.0;
+  s.hole = true;
+  s.cell = 7;
+  s.cell_i = 2;
+  s.cell_j = 1;
+  s.pvs_listed = true;
+  s.pvs_objects = 10;
+  s.pvs_missing = 3;
+  l = OverlayLines(s, 0.0, 0.0, 0.0);
+  EXPECT_TRUE(has(l, "connection: reconnecting for 3.3 s, back-off 1.00 s, gives up after 60 s")) << l[1];
+  EXPECT_TRUE(has(l, "frame: HOLE"));
+  EXPECT_TRUE(has(l, "viewcell 2,1 (id 7): PVS 10 objects, 3 missing"));
+  s.link = OverlayStatus::Link::kGivenUp;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "connection: given up after 60 s"));
+  s.link = OverlayStatus::Link::kLocal;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "connection: none"));
+  s.hole = false;
+  s.masked = true;
+  s.mask_id = 12;
+  s.mask_box_min = {0.0, 0.0, 0.0};
+  s.mask_box_max = {8.0, 6.0, 2.0};
+  s.walk = "cross-town";
+  s.walk_paused = true;
+  s.speed_kmh = 6.0;
+  l = OverlayLines(s, 0.0, 0.0, 0.0);
+  EXPECT_TRUE(has(l, "frame: masked (eps-mask 12, neighbourhood 8 x 6 m)"));
+  EXPECT_TRUE(has(l, "walk 'cross-town'"));
+  EXPECT_TRUE(has(l, "PAUSED"));
+}
+
 TEST(HeadlessOverlay, SigUsr1WritesAScreenshotIntoTheWorkingFolder) {
   auto server = StartServer();
   ASSERT_NE(server, nullptr);
