@@ -203,8 +203,8 @@ absl::Status Overlay::Impl::Init() {
   io.Fonts->GetTexDataAsRGBA32(&pixels, &w, &h);
   gl.GenTextures(1, &font_texture);
   gl.BindTexture(GL_TEXTURE_2D, font_texture);
-  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   gl.PixelStorei(GL_UNPACK_ALIGNMENT, 1);
   gl.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, w, h, 0, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
   gl.BindTexture(GL_TEXTURE_2D, 0);
