@@ -2,7 +2,8 @@
 // at 1280x720): the same frame of the default scene, its PVS-sized set of objects drawn off-screen
 // (OSMesa, as the headless client draws), with the overlay off (overlay:0) and with the
 // statistics panel and the minimap on (overlay:1), side by side in one run. The difference of
-// the two medians is the overlay's cost.
+// the two medians is the overlay's cost, the minimap's cell states (client/overlay.h,
+// MinimapCells) included.
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
@@ -16,9 +17,12 @@
 #include "proto/scene_info.h"
 #include "scenes/catalog.h"
 #include "visibility/viewcell_grid.h"
+#include "proto/walkthrough.pb.h"
 
 namespace vistream::client {
 namespace {
+
+namespace v1 = vistream::v1;
 
 struct Fixture {
   scenes::Scene scene;
@@ -79,6 +83,14 @@ void BM_Frame(benchmark::State& state) {
     events.emplace_back(std::move(r));
   }
   const std::optional<uint32_t> cell = f->grid->CellAt(glm::dvec2(f->camera.eye));
+  // Every cell's PVS list holds every object: the minimap's states cost what they would on a
+  // city whose PVSs are the whole scene (its lookups a frame are bounded, client/overlay.h).
+  for (uint32_t c = 0; c < f->grid->CellCount(); ++c) {
+    v1::ViewcellPvs pvs;
+    pvs.set_cell_id(c);
+    for (uint32_t id : f->ids) pvs.add_object_ids(id);
+    events.emplace_back(std::move(pvs));
+  }
   store.Apply(std::move(events), cell);
   (*renderer)->Sync(store, {}, ~uint64_t{0});
 
@@ -103,11 +115,10 @@ void BM_Frame(benchmark::State& state) {
   status.eye = f->camera.eye;
   status.yaw_rad = f->camera.yaw_rad;
   status.walk = "avenue-and-back-streets";
-  const GridInfo grid = store.grid();
-  const std::vector<CellState> cells(static_cast<size_t>(grid.nx) * grid.ny, CellState::kComplete);
+  MinimapCells cells;
   MinimapView map;
-  map.grid = &grid;
-  map.cells = &cells;
+  map.grid = &store.grid();
+  map.radius_m = MinimapRadius(store.grid());
   const std::vector<std::string> walks{"avenue-and-back-streets"};
   uint64_t frame = 0;
   double now = 0.0;
@@ -117,6 +128,8 @@ void BM_Frame(benchmark::State& state) {
       status.frames = frame;
       status.triangles_drawn = fs.triangles_drawn;
       overlay->AddFrame(16.0, now += 1.0 / 60.0, frame * 1000);
+      cells.Refresh(store, [&](uint32_t id) { return (*renderer)->Uploaded(id); }, f->camera.eye, map.radius_m);
+      map.cells = &cells.states();
       overlay->Frame(status, map, walks, 1280, 720, 1.0 / 60.0);
     }
     (*renderer)->Finish();

@@ -74,6 +74,39 @@ std::array<uint8_t, 3> MinimapColour(CellState state) {
 
 std::array<uint8_t, 3> MinimapCurrentCellColour() { return {80, 170, 255}; }
 
+double MinimapRadius(const GridInfo& grid) { return std::clamp(8.0 * grid.cell_size, 150.0, 600.0); }
+
+void MinimapCells::Refresh(const ObjectStore& store, const std::function<bool(uint32_t)>& uploaded,
+                           const glm::dvec3& eye, double radius_m, size_t max_lookups) {
+  if (!store.has_scene_info()) return;
+  const GridInfo& g = store.grid();
+  const size_t n = static_cast<size_t>(g.nx) * static_cast<size_t>(g.ny);
+  if (states_.size() != n) states_.assign(n, CellState::kNotListed);
+  size_t lookups = 0;
+  auto state = [&](uint32_t id) {
+    const std::vector<uint32_t>* list = store.Pvs(id);
+    if (list == nullptr) return CellState::kNotListed;
+    for (uint32_t o : *list) {
+      ++lookups;
+      if (!uploaded(o)) return CellState::kPending;
+    }
+    return CellState::kComplete;
+  };
+  if (const std::optional<uint32_t> c = g.CellAt(eye.x, eye.y)) states_[*c] = state(*c);
+  const double r = radius_m + g.cell_size;
+  const int i0 = std::max(0, static_cast<int>(std::floor((eye.x - r - g.x0) / g.cell_size)));
+  const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((eye.x + r - g.x0) / g.cell_size)));
+  const int j0 = std::max(0, static_cast<int>(std::floor((eye.y - r - g.y0) / g.cell_size)));
+  const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((eye.y + r - g.y0) / g.cell_size)));
+  if (i1 < i0 || j1 < j0) return;
+  const size_t w = static_cast<size_t>(i1 - i0 + 1), count = w * static_cast<size_t>(j1 - j0 + 1);
+  for (size_t k = 0; k < count && lookups < max_lookups; ++k) {
+    const size_t at = cursor_++ % count;
+    const auto id = static_cast<uint32_t>((j0 + static_cast<int>(at / w)) * g.nx + i0 + static_cast<int>(at % w));
+    states_[id] = state(id);
+  }
+}
+
 std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double frame_ms, double bytes_per_s) {
   std::vector<std::string> out;
   out.push_back(absl::StrCat("scene ", s.scene, " on ", s.server));

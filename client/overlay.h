@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -70,6 +71,25 @@ struct MinimapView {
   const std::vector<CellState>* cells = nullptr;  // by cell id, nx * ny (those near the eye current)
   std::vector<glm::dvec2> walk;    // the polyline of the walk followed (scene-local m); may be empty
   double radius_m = 300.0;         // the map shows this far around the eye
+};
+
+// How far around the eye the minimap shows: eight cells of `grid`, within 150 to 600 m.
+double MinimapRadius(const GridInfo& grid);
+
+// The minimap's cell states, kept up to date a bounded amount of work a frame: a cell's state
+// costs a lookup per object of its PVS list (thousands on london).
+class MinimapCells {
+ public:
+  // The eye's cell every call; the other cells within `radius_m` (+ a cell) of `eye` round
+  // robin, until `max_lookups` objects have been checked. `uploaded`: whether an object is
+  // here and on the GPU. Each cell on the map is a few calls old at most.
+  void Refresh(const ObjectStore& store, const std::function<bool(uint32_t)>& uploaded, const glm::dvec3& eye,
+               double radius_m, size_t max_lookups = 20000);
+  const std::vector<CellState>& states() const { return states_; }
+
+ private:
+  std::vector<CellState> states_;  // by cell id
+  size_t cursor_ = 0;
 };
 
 // What the user asked for through the overlay's walk list this frame.

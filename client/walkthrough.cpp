@@ -74,8 +74,7 @@ class Loop {
                        uint64_t triangles_without, double now) const;
   // Draws the overlay over the frame just drawn and acts on what its walk list asked.
   absl::Status DrawOverlay(const OverlayStatus& status, double dt);
-  // Brings the minimap's cell states near the eye up to date (at most 4 times a second).
-  void RefreshCellStates(double now);
+
   // The window without a walk: starts where the first walk starts, if there is one.
   void StartAtFirstWalk();
   // SceneInfo arrived: the server's walks join walks_; a pending walk is chosen.
@@ -129,8 +128,7 @@ class Loop {
   uint64_t masks_seen_ = 0;
   std::unique_ptr<Overlay> overlay_;
   std::vector<std::string> overlay_lines_;  // the statistics panel's last lines (overlay_dump)
-  std::vector<CellState> cell_states_;      // the minimap's, by cell id
-  double cell_states_at_ = -1.0;
+  MinimapCells minimap_cells_;
   double walk_t_ = 0.0;       // the walk's clock: seconds along it
   double rate_ = 1.0;         // + and -: the speed factor
   bool paused_ = false;       // space
@@ -578,36 +576,6 @@ absl::Status Loop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMa
   return context_->MakeCurrent();
 }
 
-void Loop::RefreshCellStates(double now) {
-  if (!store_->has_scene_info()) return;
-  const GridInfo& g = store_->grid();
-  const size_t n = static_cast<size_t>(g.nx) * static_cast<size_t>(g.ny);
-  if (cell_states_.size() != n) cell_states_.assign(n, CellState::kNotListed);
-  auto state = [&](uint32_t id) {
-    const std::vector<uint32_t>* list = store_->Pvs(id);
-    if (list == nullptr) return CellState::kNotListed;
-    const bool complete =
-        std::all_of(list->begin(), list->end(), [&](uint32_t o) { return renderer_->Uploaded(o); });
-    return complete ? CellState::kComplete : CellState::kPending;
-  };
-  if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) cell_states_[*c] = state(*c);
-  // The cells on the map, a few a frame (a PVS list is hundreds of objects): each is at most
-  // a few frames old.
-  if (now - cell_states_at_ < 0.25) return;
-  cell_states_at_ = now;
-  const double r = std::clamp(8.0 * g.cell_size, 150.0, 600.0) + g.cell_size;
-  const int i0 = std::max(0, static_cast<int>(std::floor((camera_.eye.x - r - g.x0) / g.cell_size)));
-  const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((camera_.eye.x + r - g.x0) / g.cell_size)));
-  const int j0 = std::max(0, static_cast<int>(std::floor((camera_.eye.y - r - g.y0) / g.cell_size)));
-  const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((camera_.eye.y + r - g.y0) / g.cell_size)));
-  for (int j = j0; j <= j1; ++j) {
-    for (int i = i0; i <= i1; ++i) {
-      const auto id = static_cast<uint32_t>(j * g.nx + i);
-      cell_states_[id] = state(id);
-    }
-  }
-}
-
 OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonMaskSet* mask, bool hole,
                            uint64_t triangles_without, double now) const {
   OverlayStatus st;
@@ -674,12 +642,13 @@ OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonM
 }
 
 absl::Status Loop::DrawOverlay(const OverlayStatus& status, double dt) {
-  RefreshCellStates(Now());
   MinimapView map;
   if (store_->has_scene_info()) {
     map.grid = &store_->grid();
-    map.cells = &cell_states_;
-    map.radius_m = std::clamp(8.0 * map.grid->cell_size, 150.0, 600.0);
+    map.radius_m = MinimapRadius(*map.grid);
+    minimap_cells_.Refresh(*store_, [this](uint32_t id) { return renderer_->Uploaded(id); }, camera_.eye,
+                           map.radius_m);
+    map.cells = &minimap_cells_.states();
   }
   if (walk_.has_value() && walk_path_.has_value()) map.walk = walk_path_->waypoints;
   std::vector<std::string> names;
