@@ -56,6 +56,20 @@ double NiceLength(double target_m) {
   return p;
 }
 
+// Windows in fixed places, sized to what they hold; the panels also never take the focus.
+constexpr ImGuiWindowFlags kFixed = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
+                                    ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
+                                    ImGuiWindowFlags_NoNav;
+constexpr ImGuiWindowFlags kPanel = kFixed | ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoScrollbar;
+
+// A window in the middle of a `width` x `height` frame (the key list, the walk list).
+bool BeginCentred(const char* title, int width, int height) {
+  ImGui::SetNextWindowPos(ImVec2(0.5f * static_cast<float>(width), 0.5f * static_cast<float>(height)), ImGuiCond_Always,
+                          ImVec2(0.5f, 0.5f));
+  ImGui::SetNextWindowBgAlpha(0.92f);
+  return ImGui::Begin(title, nullptr, kFixed);
+}
+
 std::string Megabytes(uint64_t bytes) { return absl::StrFormat("%.1f MB", static_cast<double>(bytes) / 1e6); }
 
 }  // namespace
@@ -172,13 +186,19 @@ struct Overlay::Impl {
   bool glfw_backend = false;
   unsigned program = 0, vao = 0, vbo = 0, ibo = 0, font_texture = 0;
   int loc_projection = -1, loc_atlas = -1;
-  std::deque<std::pair<double, float>> frames;            // (time, frame ms)
-  std::deque<std::pair<double, uint64_t>> bytes;          // (time, bytes received)
+  struct Sample {
+    double t = 0.0;  // steady clock, s
+    float frame_ms = 0.0f;
+    uint64_t bytes = 0;  // received since the start
+  };
+  std::deque<Sample> samples;  // the last kHistoryS seconds' frames
   size_t walk_selected = 0;
   std::vector<std::string> lines;  // the statistics panel's, this frame
 
   absl::Status Init();
   void Render(ImDrawData* d);
+  // The samples of the last second (or what there is): the first one's index, and the span.
+  std::pair<size_t, double> LastSecond() const;
   double Fps() const;
   double BytesPerSecond() const;
   void StatsPanel(const OverlayStatus& s);
@@ -301,34 +321,29 @@ void Overlay::Impl::Render(ImDrawData* d) {
   gl.Enable(GL_DEPTH_TEST);
 }
 
+std::pair<size_t, double> Overlay::Impl::LastSecond() const {
+  if (samples.size() < 2) return {0, 0.0};
+  const double now = samples.back().t;
+  size_t k = samples.size() - 1;
+  while (k > 0 && now - samples[k - 1].t <= 1.0) --k;
+  return {k, now - samples[k].t};
+}
+
 double Overlay::Impl::Fps() const {
-  if (frames.size() < 2) return 0.0;
-  // Over the last second (or what there is of it).
-  const double now = frames.back().first;
-  size_t k = frames.size() - 1;
-  while (k > 0 && now - frames[k - 1].first <= 1.0) --k;
-  const double span = now - frames[k].first;
-  return span > 0.0 ? static_cast<double>(frames.size() - 1 - k) / span : 0.0;
+  const auto [k, span] = LastSecond();
+  return span > 0.0 ? static_cast<double>(samples.size() - 1 - k) / span : 0.0;
 }
 
 double Overlay::Impl::BytesPerSecond() const {
-  if (bytes.size() < 2) return 0.0;
-  const double now = bytes.back().first;
-  size_t k = bytes.size() - 1;
-  while (k > 0 && now - bytes[k - 1].first <= 1.0) --k;
-  const double span = now - bytes[k].first;
-  return span > 0.0 ? static_cast<double>(bytes.back().second - bytes[k].second) / span : 0.0;
+  const auto [k, span] = LastSecond();
+  return span > 0.0 ? static_cast<double>(samples.back().bytes - samples[k].bytes) / span : 0.0;
 }
 
 void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
   ImGui::SetNextWindowPos(ImVec2(kMargin, kMargin));
   ImGui::SetNextWindowSize(ImVec2(kStatsWidth, 0.0f));
   ImGui::SetNextWindowBgAlpha(0.78f);
-  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
-                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
-                                 ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoNav |
-                                 ImGuiWindowFlags_NoScrollbar;
-  if (ImGui::Begin("vistream (F1)", nullptr, flags)) {
+  if (ImGui::Begin("vistream (F1)", nullptr, kPanel)) {
     // Warnings in colour: a hole, stalls, a lost server.
     const ImVec4 warn(1.0f, 0.55f, 0.35f, 1.0f);
     for (const std::string& line : lines) {
@@ -341,14 +356,14 @@ void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
       } else {
         ImGui::TextWrapped("%s", line.c_str());
       }
-      if (line.rfind("fps ", 0) == 0 && !frames.empty()) {
+      if (line.rfind("fps ", 0) == 0 && !samples.empty()) {
         // The frame-time graph of the last seconds, 0 to at least 50 ms.
         std::vector<float> ms;
-        ms.reserve(frames.size());
+        ms.reserve(samples.size());
         float top = 50.0f;
-        for (const auto& [t, v] : frames) {
-          ms.push_back(v);
-          top = std::max(top, v);
+        for (const Sample& f : samples) {
+          ms.push_back(f.frame_ms);
+          top = std::max(top, f.frame_ms);
         }
         const std::string label = absl::StrFormat("frame ms, last %.0f s (0-%.0f)", kHistoryS, top);
         ImGui::PlotLines("##frame_ms", ms.data(), static_cast<int>(ms.size()), 0, label.c_str(), 0.0f, top,
@@ -369,11 +384,7 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
   const float px = static_cast<float>(kMinimapPx);
   ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - kMargin), kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
   ImGui::SetNextWindowBgAlpha(0.85f);
-  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
-                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
-                                 ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoNav |
-                                 ImGuiWindowFlags_NoScrollbar | ImGuiWindowFlags_NoTitleBar;
-  if (ImGui::Begin("minimap", nullptr, flags)) {
+  if (ImGui::Begin("minimap", nullptr, kPanel | ImGuiWindowFlags_NoTitleBar)) {
     ImGui::TextUnformatted("Viewcells around the eye (M), north up");
     const ImVec2 origin = ImGui::GetCursorScreenPos();
     ImGui::Dummy(ImVec2(px, px));
@@ -456,12 +467,7 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
 }
 
 void Overlay::Impl::Help(int width, int height) {
-  ImGui::SetNextWindowPos(ImVec2(0.5f * width, 0.5f * height), ImGuiCond_Always, ImVec2(0.5f, 0.5f));
-  ImGui::SetNextWindowBgAlpha(0.9f);
-  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
-                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
-                                 ImGuiWindowFlags_NoNav;
-  if (ImGui::Begin("Keys (H or ? closes)", nullptr, flags)) {
+  if (BeginCentred("Keys (H or ? closes)", width, height)) {
     static constexpr const char* kKeys[][2] = {
         {"W A S D, arrows", "walk, strafe, turn (Shift: 5x faster)"},
         {"click, then mouse", "look around (Esc frees the mouse)"},
@@ -492,12 +498,7 @@ void Overlay::Impl::Help(int width, int height) {
 
 OverlayRequest Overlay::Impl::Walks(const std::vector<std::string>& walks, int width, int height, bool* open) {
   OverlayRequest req;
-  ImGui::SetNextWindowPos(ImVec2(0.5f * width, 0.5f * height), ImGuiCond_Always, ImVec2(0.5f, 0.5f));
-  ImGui::SetNextWindowBgAlpha(0.92f);
-  const ImGuiWindowFlags flags = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse |
-                                 ImGuiWindowFlags_NoSavedSettings | ImGuiWindowFlags_AlwaysAutoResize |
-                                 ImGuiWindowFlags_NoNav;
-  if (ImGui::Begin("Walks (P closes)", nullptr, flags)) {
+  if (BeginCentred("Walks (P closes)", width, height)) {
     if (walks.empty()) {
       ImGui::TextUnformatted("this scene has no walks");
     } else {
@@ -546,10 +547,8 @@ Overlay::~Overlay() {
 }
 
 void Overlay::AddFrame(double frame_ms, double now_s, uint64_t bytes_received) {
-  impl_->frames.emplace_back(now_s, static_cast<float>(frame_ms));
-  while (!impl_->frames.empty() && now_s - impl_->frames.front().first > kHistoryS) impl_->frames.pop_front();
-  impl_->bytes.emplace_back(now_s, bytes_received);
-  while (!impl_->bytes.empty() && now_s - impl_->bytes.front().first > kHistoryS) impl_->bytes.pop_front();
+  impl_->samples.push_back({now_s, static_cast<float>(frame_ms), bytes_received});
+  while (now_s - impl_->samples.front().t > kHistoryS) impl_->samples.pop_front();
 }
 
 bool Overlay::WantsKeyboard() const { return show_walks; }
@@ -572,7 +571,7 @@ OverlayRequest Overlay::Frame(const OverlayStatus& status, const MinimapView& ma
   ImGui::NewFrame();
   const int w = static_cast<int>(io.DisplaySize.x), h = static_cast<int>(io.DisplaySize.y);
   OverlayRequest req;
-  impl_->lines = OverlayLines(status, impl_->Fps(), impl_->frames.empty() ? 0.0 : impl_->frames.back().second,
+  impl_->lines = OverlayLines(status, impl_->Fps(), impl_->samples.empty() ? 0.0 : impl_->samples.back().frame_ms,
                               impl_->BytesPerSecond());
   if (show_stats) impl_->StatsPanel(status);
   if (show_minimap) impl_->Minimap(status, map, w);
