@@ -292,13 +292,16 @@ RgbImage Png(const std::string& path) {
   return im.ok() ? *im : RgbImage{};
 }
 
-// A headless screenshot at kPose: the client's last frame of 10.
-RgbImage HeadlessShot(const std::string& address, const std::string& dir, const std::vector<std::string>& more) {
+// A headless screenshot at kPose: the client's last frame of 10; `summary`, if given, gets its
+// --json summary.
+RgbImage HeadlessShot(const std::string& address, const std::string& dir, const std::vector<std::string>& more,
+                      nlohmann::json* summary = nullptr) {
   std::vector<std::string> argv{VISTREAM_CLIENT_BIN, "--headless", "--server", address, "--pose", kPose,
-                                "--frames", "10", "--screenshots", dir};
+                                "--frames", "10", "--screenshots", dir, "--json"};
   argv.insert(argv.end(), more.begin(), more.end());
   Child c(argv, {}, dir, dir + "/out.txt", dir + "/err.txt");
   EXPECT_EQ(c.Wait(120.0), 0) << ReadFile(dir + "/err.txt");
+  if (summary != nullptr) *summary = nlohmann::json::parse(ReadFile(dir + "/out.txt"));
   std::vector<std::string> files;
   for (const auto& e : fs::directory_iterator(dir)) {
     if (e.path().extension() == ".png") files.push_back(e.path().string());
@@ -577,7 +580,12 @@ TEST(HeadlessPicture, MultisamplingSmoothsEdgesOnlyAndFogFadesOnlyTheDistance) {
   ASSERT_NE(server, nullptr);
   const std::string address = "127.0.0.1:" + std::to_string(server->port());
   const RgbImage plain = HeadlessShot(address, TempDir("msaa0"), {"--size", "640x360"});
-  const RgbImage msaa = HeadlessShot(address, TempDir("msaa4"), {"--size", "640x360", "--msaa", "4", "--verify"});
+  nlohmann::json checked;
+  const RgbImage msaa =
+      HeadlessShot(address, TempDir("msaa4"), {"--size", "640x360", "--msaa", "4", "--verify", "--every", "0.1"}, &checked);
+  // The object-id pass has no multisampling: the pixel error stays 0.
+  EXPECT_EQ(checked["pixel_error"].get<uint64_t>(), 0u);
+  EXPECT_GE(checked["checked_frames"].get<uint64_t>(), 1u);
   // Edges only: some pixels change, most do not.
   const size_t edges = Differ(plain, msaa, std::nullopt);
   EXPECT_GT(edges, 100u);
@@ -587,7 +595,10 @@ TEST(HeadlessPicture, MultisamplingSmoothsEdgesOnlyAndFogFadesOnlyTheDistance) {
   nlohmann::json entry = nlohmann::json::parse(ReadFile(std::string(VISTREAM_SOURCE_DIR) + "/scenes/default.json"));
   entry["effects"] = {{"fog", {{"start_m", 30.0}, {"end_m", 400.0}}}};
   std::ofstream(catalog + "/default.json") << entry.dump(2);
-  const RgbImage fog = HeadlessShot(address, TempDir("fog"), {"--size", "640x360", "--catalog", catalog});
+  const RgbImage fog = HeadlessShot(address, TempDir("fog"),
+                                    {"--size", "640x360", "--catalog", catalog, "--verify", "--every", "0.1"}, &checked);
+  EXPECT_EQ(checked["pixel_error"].get<uint64_t>(), 0u) << "the object-id pass has no fog";
+  EXPECT_GE(checked["checked_frames"].get<uint64_t>(), 1u);
   const size_t fogged = Differ(plain, fog, std::nullopt);
   EXPECT_GT(fogged, 1000u) << "the fog changed nothing";
   // Fog goes towards the sky colour: the sky itself does not change, and what changes comes

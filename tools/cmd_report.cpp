@@ -207,10 +207,17 @@ void CitySection(Page& page, const Plan& plan) {
         page.Run("pvs --all (city)", {"pvs", "--scene", scene, "--all", "--cell-size", "100", "-o",
                                       (scratch / "city.pvs").string(), "--json"});
     if (!pvs) continue;
+    // Buildings and their parts (a city without parts, Delft, has no BuildingPart entry).
     const json& by = pvs->at("by_type");
-    const double mean = by.at("Building").at("mean_pvs_objects").get<double>() +
-                        by.at("BuildingPart").at("mean_pvs_objects").get<double>();
-    const double all = by.at("Building").at("objects").get<double>() + by.at("BuildingPart").at("objects").get<double>();
+    auto sum = [&by](const char* key) {
+      double total = 0.0;
+      for (const char* type : {"Building", "BuildingPart"}) {
+        if (by.contains(type)) total += by.at(type).at(key).get<double>();
+      }
+      return total;
+    };
+    const double mean = sum("mean_pvs_objects"), all = sum("objects");
+    if (all == 0.0) continue;
     rows.push_back({model, Int(pvs->at("cells")), Fixed(mean, 1), Fixed(all, 0), Fixed(100.0 * mean / all, 1) + "%"});
   }
   fs::remove_all(scratch, ec);
