@@ -164,7 +164,9 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
   out.push_back(absl::StrFormat("frames %d, stalls %d (%.2f s), holes %d", s.frames, s.stalls, s.stall_s,
                                 s.hole_frames));
   out.push_back(absl::StrFormat("masked frames %d (%.1f%%), masks %d", s.frames_masked,
-                                s.frames > 0 ? 100.0 * static_cast<double>(s.frames_masked) / s.frames : 0.0,
+                                // Rounded down: 100.0% only when every frame was.
+                                s.frames > 0 ? std::floor(1000.0 * static_cast<double>(s.frames_masked) / s.frames) / 10.0
+                                             : 0.0,
                                 s.masks_received));
   if (!s.walk.empty()) {
     out.push_back(absl::StrFormat("walk '%s' %.0f of %.0f s at %.1f km/h%s", s.walk, s.walk_t_s, s.walk_duration_s,
@@ -343,7 +345,9 @@ void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
   ImGui::SetNextWindowPos(ImVec2(kMargin, kMargin));
   ImGui::SetNextWindowSize(ImVec2(kStatsWidth, 0.0f));
   ImGui::SetNextWindowBgAlpha(0.78f);
-  if (ImGui::Begin("vistream (F1)", nullptr, kPanel)) {
+  // The keys' hints only where keys reach (the window, not headless frames).
+  const bool keys = window != nullptr;
+  if (ImGui::Begin(keys ? "vistream (F1)" : "vistream", nullptr, kPanel)) {
     // Warnings in colour: a hole, stalls, a lost server.
     const ImVec4 warn(1.0f, 0.55f, 0.35f, 1.0f);
     for (const std::string& line : lines) {
@@ -375,7 +379,7 @@ void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
                            absl::StrFormat("%.0f%% of the memory budget", 100.0 * f).c_str());
       }
     }
-    ImGui::TextDisabled("F1 panel  M map  H keys  P walks");
+    if (keys) ImGui::TextDisabled("F1 panel  M map  H keys  P walks");
   }
   ImGui::End();
 }
@@ -385,7 +389,7 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
   ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - kMargin), kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
   ImGui::SetNextWindowBgAlpha(0.85f);
   if (ImGui::Begin("minimap", nullptr, kPanel | ImGuiWindowFlags_NoTitleBar)) {
-    ImGui::TextUnformatted("Viewcells around the eye (M), north up");
+    ImGui::TextUnformatted(window != nullptr ? "Viewcells around the eye (M), north up" : "Viewcells around the eye, north up");
     const ImVec2 origin = ImGui::GetCursorScreenPos();
     ImGui::Dummy(ImVec2(px, px));
     ImDrawList* dl = ImGui::GetWindowDrawList();
@@ -469,7 +473,7 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
 void Overlay::Impl::Help(int width, int height) {
   if (BeginCentred("Keys (H or ? closes)", width, height)) {
     static constexpr const char* kKeys[][2] = {
-        {"W A S D, arrows", "walk, strafe, turn (Shift: 5x faster)"},
+        {"W A S D, arrows", "walk, strafe, turn (Shift: 5x faster); leave a walk followed"},
         {"click, then mouse", "look around (Esc frees the mouse)"},
         {"P", "the scene's walks: Up/Down choose, Enter from its start, F from here"},
         {"space", "pause or resume the walk followed"},
@@ -552,6 +556,11 @@ void Overlay::AddFrame(double frame_ms, double now_s, uint64_t bytes_received) {
 }
 
 bool Overlay::WantsKeyboard() const { return show_walks; }
+
+bool Overlay::WantsMouse() const {
+  ImGui::SetCurrentContext(impl_->imgui);
+  return ImGui::GetIO().WantCaptureMouse;
+}
 
 size_t& Overlay::walk_selected() { return impl_->walk_selected; }
 

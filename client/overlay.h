@@ -122,6 +122,8 @@ class Overlay {
   bool show_walks = false;   // P
   // Whether the panels want the keyboard (the walk list open): the loop then leaves it to them.
   bool WantsKeyboard() const;
+  // Whether the mouse is over a panel (its click is the panel's, not the start of mouse look).
+  bool WantsMouse() const;
   // The walk list's highlighted row (the loop's Up/Down move it; Enter and F follow it).
   size_t& walk_selected();
   // The statistics panel's lines of the last Frame (made whether it is shown or not).

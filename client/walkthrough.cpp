@@ -123,6 +123,7 @@ class Loop {
   bool have_start_ = false;  // camera_ holds a start pose
   std::FILE* frame_log_ = nullptr;
   std::FILE* cell_log_ = nullptr;
+  std::FILE* overlay_dump_ = nullptr;
   CellMargins margins_;
   double session_start_ = 0.0;
   uint64_t masks_seen_ = 0;
@@ -137,6 +138,7 @@ class Loop {
   bool screenshot_now_ = false;
   double lost_at_ = 0.0;
   bool link_up_ = true, gave_up_flag_ = false;
+  uint64_t reconnected_ = 0;  // the connection came back (the Connection counts a session when it ends)
 };
 
 absl::Status Loop::ChooseWalk() {
@@ -242,8 +244,13 @@ absl::Status Loop::Prepare() {
 
   // The walks: the catalog entry's now; the server's own (SceneInfo.paths) join them when
   // SceneInfo arrives. A walk the catalog has is chosen now, any other then (ChooseWalk).
-  if (entry_.has_value()) walks_ = entry_->walks;
-  else catalog_status_ = entry.status();
+  if (entry_.has_value()) {
+    walks_ = entry_->walks;
+  } else {
+    catalog_status_ = entry.status();
+    Log(absl::StrCat("no scene catalog entry for '", sum_->scene, "' (", catalog_status_.message(),
+                     "): no walks, client budgets or effects from the catalog"));
+  }
   const bool follow = !opt_.pose.has_value() && (opt_.headless || !opt_.path.empty());
   if (follow) {
     const bool known = std::any_of(walks_.begin(), walks_.end(), [&](const scenes::WalkPath& w) {
@@ -339,6 +346,12 @@ absl::Status Loop::Prepare() {
     std::fprintf(frame_log_,
                  "frame,t_s,x_m,y_m,cell,stall,objects_drawn,triangles_drawn,frame_ms,held_bytes,masked,hole,"
                  "triangles_without_masks,mask_id\n");
+  }
+  if (!opt_.overlay_dump.empty()) {
+    overlay_dump_ = std::fopen(opt_.overlay_dump.c_str(), "w");
+    if (overlay_dump_ == nullptr) {
+      return absl::UnavailableError(absl::StrCat(opt_.overlay_dump, ": cannot open for writing (--overlay-dump)"));
+    }
   }
   if (!opt_.cell_log.empty()) {
     cell_log_ = std::fopen(opt_.cell_log.c_str(), "w");
@@ -532,7 +545,10 @@ absl::Status Loop::Screenshot(double t) {
   absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
   if (!rgb.ok()) return rgb.status();
   // F12 and SIGUSR1 without --screenshots: a folder of their own in the working folder.
-  const std::string dir = opt_.screenshots_dir.empty() ? std::string("vistream-screenshots") : opt_.screenshots_dir;
+  std::error_code cwd_error;
+  const std::string dir = opt_.screenshots_dir.empty()
+                              ? (std::filesystem::current_path(cwd_error) / "vistream-screenshots").string()
+                              : opt_.screenshots_dir;
   if (opt_.screenshots_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
@@ -585,7 +601,7 @@ OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonM
     st.link = OverlayStatus::Link::kLocal;
   } else {
     const ConnectionStats c = connection_->stats();
-    st.reconnects = c.reconnects;
+    st.reconnects = std::max<uint64_t>(c.reconnects, reconnected_);
     st.bytes_received = c.bytes_received;
     st.backoff_s = c.backoff_s;
     st.link = link_up_ ? OverlayStatus::Link::kConnected
@@ -684,35 +700,44 @@ absl::Status Loop::HandleWindow() {
     if (c == '-') slower();
   }
   for (const WindowInput::KeyPress& k : input_->TakeKeys()) {
-    if (overlay_->show_walks) {
-      // The walk list has the keyboard: Up/Down choose, Enter from its start, F from here.
+    const bool enter = k.key == GLFW_KEY_ENTER || k.key == GLFW_KEY_KP_ENTER;
+    if (overlay_->show_walks && (k.key == GLFW_KEY_UP || k.key == GLFW_KEY_DOWN || enter || k.key == GLFW_KEY_F ||
+                                 k.key == GLFW_KEY_ESCAPE)) {
+      // The walk list's keys: Up/Down choose, Enter from its start, F from here, Esc closes.
       size_t& sel = overlay_->walk_selected();
       if (k.key == GLFW_KEY_UP && sel > 0) --sel;
       if (k.key == GLFW_KEY_DOWN && sel + 1 < walks_.size()) ++sel;
-      if ((k.key == GLFW_KEY_ENTER || k.key == GLFW_KEY_KP_ENTER || k.key == GLFW_KEY_F) && sel < walks_.size()) {
+      if ((enter || k.key == GLFW_KEY_F) && sel < walks_.size()) {
         const scenes::WalkPath chosen = walks_[sel];
         if (absl::Status st = FollowWalk(chosen, k.key == GLFW_KEY_F); !st.ok()) return st;
         walk_ends_run_ = false;
-        overlay_->show_walks = false;
         Log(absl::StrFormat("following the walk '%s' from %s", chosen.name,
                             k.key == GLFW_KEY_F ? "here" : "its start"));
       }
-      if (k.key == GLFW_KEY_P || k.key == GLFW_KEY_ESCAPE) overlay_->show_walks = false;
+      if (k.key != GLFW_KEY_UP && k.key != GLFW_KEY_DOWN) overlay_->show_walks = false;
+      continue;
+    }
+    const bool moves = k.key == GLFW_KEY_W || k.key == GLFW_KEY_A || k.key == GLFW_KEY_S || k.key == GLFW_KEY_D ||
+                       k.key == GLFW_KEY_UP || k.key == GLFW_KEY_DOWN || k.key == GLFW_KEY_LEFT ||
+                       k.key == GLFW_KEY_RIGHT;
+    if (moves && walk_.has_value()) {
+      // Walking leaves the walk followed: free walking from where the eye is.
+      Log(absl::StrFormat("left the walk '%s': walking freely", sum_->path));
+      walk_.reset();
+      paused_ = false;
       continue;
     }
     switch (k.key) {
       case GLFW_KEY_F1: overlay_->show_stats = !overlay_->show_stats; break;
       case GLFW_KEY_M: overlay_->show_minimap = !overlay_->show_minimap; break;
       case GLFW_KEY_H: overlay_->show_help = !overlay_->show_help; break;
-      case GLFW_KEY_P: overlay_->show_walks = true; break;
+      case GLFW_KEY_P: overlay_->show_walks = !overlay_->show_walks; break;
       case GLFW_KEY_SPACE:
         if (walk_.has_value()) {
           paused_ = !paused_;
           Log(paused_ ? "walk paused" : "walk resumed");
         }
         break;
-      case GLFW_KEY_KP_ADD: faster(); break;
-      case GLFW_KEY_KP_SUBTRACT: slower(); break;
       case GLFW_KEY_R:
         if (walk_.has_value()) {
           walk_t_ = 0.0;
@@ -742,6 +767,7 @@ absl::Status Loop::Walkthrough() {
   const double t0 = Now();
   margins_.Shift(session_start_ - t0);
   double paused = 0.0, next_shot = 0.0, next_check = 0.0, prev_end = Now(), last_title = 0.0;
+  double prev_begin = Now();  // free walking moves by the frame period (not the idle gap after a frame)
   int next_progress = 1;
   std::vector<double> frame_ms;
   uint64_t triangles = 0, objects = 0;
@@ -764,6 +790,8 @@ absl::Status Loop::Walkthrough() {
     if (input_ != nullptr) {
       if (absl::Status st = HandleWindow(); !st.ok()) return st;
     }
+    const double frame_period = begin - prev_begin;
+    prev_begin = begin;
     if (opt_.screenshot_request != nullptr && opt_.screenshot_request->exchange(false)) screenshot_now_ = true;
     // The walk's clock: the frame's time at the speed factor, unless paused (the headless
     // walk's clock is t itself).
@@ -796,9 +824,9 @@ absl::Status Loop::Walkthrough() {
       const uint64_t frames = opt_.frames > 0 ? opt_.frames : (opt_.headless ? 1 : ~uint64_t{0});
       last = last || sum_->frames + 1 >= frames;
     } else if (input_ != nullptr) {
-      const double dt = std::min(0.1, begin - prev_end + 1e-3);
+      const double dt = std::clamp(begin - prev_begin, 1e-3, 0.1);
       glm::dvec3 eye = camera_.eye;
-      input_->Update(dt, free_speed * rate_, &eye, &camera_.yaw_rad, &camera_.pitch_rad);
+      input_->Update(dt, free_speed * rate_, &eye, &camera_.yaw_rad, &camera_.pitch_rad, overlay_->WantsMouse());
       // The PVSs hold inside the grid: the eye stays in it.
       const GridInfo& g = store_->grid();
       eye.x = std::clamp(eye.x, g.x0 + 0.01, g.x0 + g.nx * g.cell_size - 0.01);
@@ -814,12 +842,18 @@ absl::Status Loop::Walkthrough() {
     if (connection_ != nullptr && connection_->connected() != was_connected) {
       was_connected = !was_connected;
       lost_at = begin;
+      if (was_connected) ++reconnected_;
       Log(was_connected ? absl::StrFormat("reconnected to %s", opt_.server)
                         : absl::StrFormat("lost the server at %s; reconnecting (drawing what is held)", opt_.server));
     }
     link_up_ = was_connected;
     lost_at_ = lost_at;
+    const bool gave_up_before = gave_up_flag_;
     gave_up_flag_ = !was_connected && opt_.give_up_s > 0.0 && begin - lost_at > opt_.give_up_s;
+    if (gave_up_flag_ && !gave_up_before && input_ != nullptr) {
+      Log(absl::StrFormat("gave up on the server at %s after %.0f s; the window stays open on what it holds",
+                          opt_.server, opt_.give_up_s));
+    }
     if (gave_up_flag_) {
       // The summary of what was walked is still made (and printed), then the error. The
       // window stays open, saying so, until it is closed (or the server comes back).
@@ -856,7 +890,7 @@ absl::Status Loop::Walkthrough() {
         use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
     if (overlay_ != nullptr) {
       const OverlayStatus status = Status(*p, fs, use_mask, hole, triangles_without_masks, begin);
-      if (absl::Status st = DrawOverlay(status, begin - prev_end); !st.ok()) return st;
+      if (absl::Status st = DrawOverlay(status, frame_period); !st.ok()) return st;
     }
     renderer_->Finish();
     const double end = Now();
@@ -913,9 +947,13 @@ absl::Status Loop::Walkthrough() {
       screenshot_now_ = false;
     }
     if (screenshot_now_) {
+      // Asked for (F12, SIGUSR1): one that cannot be written is said, and the walk goes on.
       screenshot_now_ = false;
-      if (absl::Status s = Screenshot(t); !s.ok()) return s;
-      Log(absl::StrCat("screenshot: ", sum_->screenshots.back()));
+      if (absl::Status s = Screenshot(t); s.ok()) {
+        Log(absl::StrCat("screenshot: ", sum_->screenshots.back()));
+      } else {
+        Log(absl::StrCat("screenshot failed: ", s.message()));
+      }
     }
     if (check) {
       if (absl::Status s = Verify(drawn, use_mask); !s.ok()) return s;
@@ -1003,12 +1041,11 @@ absl::Status Loop::Run() {
     sum_->evicted_by_budget = store_->evicted_by_budget();
   }
   sum_->masks_received = masks_seen_;
-  if (!opt_.overlay_dump.empty()) {
-    std::FILE* f = std::fopen(opt_.overlay_dump.c_str(), "w");
-    bool failed = f == nullptr;
-    for (const std::string& line : overlay_lines_) failed = failed || std::fprintf(f, "%s\n", line.c_str()) < 0;
-    if ((f != nullptr && std::fclose(f) != 0) || failed) {
-      if (s.ok()) s = absl::DataLossError(absl::StrCat(opt_.overlay_dump, ": writing the overlay's lines failed"));
+  if (overlay_dump_ != nullptr) {
+    bool failed = false;
+    for (const std::string& line : overlay_lines_) failed = failed || std::fprintf(overlay_dump_, "%s\n", line.c_str()) < 0;
+    if ((std::fclose(overlay_dump_) != 0 || failed) && s.ok()) {
+      s = absl::DataLossError(absl::StrCat(opt_.overlay_dump, ": writing the overlay's lines failed (--overlay-dump)"));
     }
   }
   sum_->margins = margins_.Summary();

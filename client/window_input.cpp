@@ -68,11 +68,12 @@ bool WindowInput::ShouldClose() const { return glfwWindowShouldClose(W(window_))
 
 void WindowInput::SetTitle(const std::string& title) { glfwSetWindowTitle(W(window_), title.c_str()); }
 
-bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad) {
+bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad,
+                         bool ui_has_mouse) {
   GLFWwindow* w = W(window_);
   auto down = [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; };
   bool moved = false;
-  if (!captured_ && glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+  if (!captured_ && !ui_has_mouse && glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
     captured_ = true;
     glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_DISABLED);
     glfwGetCursorPos(w, &last_x_, &last_y_);

@@ -361,7 +361,7 @@ TEST_F(WindowTest, F1AndMHideThePanelsWhereTheySitAndF12WritesWhatIsOnScreen) {
 
 TEST_F(WindowTest, PThenEnterFollowsAWalkAndSpacePausesIt) {
   const std::string dir = TempDir("walk");
-  WindowClient c(*x_, dir, {"--server", address_, "--size", "640x360"});
+  WindowClient c(*x_, dir, {"--server", address_, "--size", "640x360", "--overlay-dump", dir + "/overlay.txt"});
   ASSERT_FALSE(c.window().empty()) << c.err();
   ASSERT_TRUE(c.WaitForFrames(10)) << c.err();
   auto at = [&] {
@@ -372,6 +372,8 @@ TEST_F(WindowTest, PThenEnterFollowsAWalkAndSpacePausesIt) {
   Sleep(1.0);
   EXPECT_LT(glm::length(at() - standing), 0.01) << "it moved before P";
   c.Key("p");
+  // The walk list takes only its own keys: F12 still writes a screenshot.
+  EXPECT_FALSE(c.Screenshot().empty()) << "F12 with the walk list open: " << c.err();
   c.Key("Return");
   Sleep(3.0);
   const glm::dvec2 walking = at();
@@ -385,8 +387,17 @@ TEST_F(WindowTest, PThenEnterFollowsAWalkAndSpacePausesIt) {
   c.Key("space");
   Sleep(2.0);
   EXPECT_GT(glm::length(at() - paused), 1.0) << "space did not resume the walk";
+  c.Key("KP_Add");  // once: 1.25 times the walk's 6 km/h
+  c.Key("a");       // a step aside leaves the walk: the eye stays where it is
+  Sleep(0.5);
+  const glm::dvec2 left = at();
+  Sleep(1.5);
+  EXPECT_LT(glm::length(at() - left), 0.01) << "still following after a movement key";
+  EXPECT_NE(c.err().find("left the walk"), std::string::npos) << c.err();
   c.Key("q");
   EXPECT_EQ(c.child().Wait(30.0), 0) << c.err();
+  const std::string dump = ReadFile(dir + "/overlay.txt");
+  EXPECT_NE(dump.find("free walking at 7.5 km/h"), std::string::npos) << dump;
 }
 
 TEST_F(WindowTest, AResizeAndF11KeepDrawingAtTheNewSize) {
@@ -550,6 +561,31 @@ TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
   EXPECT_TRUE(has(l, "frame: masked (eps-mask 12, neighbourhood 8 x 6 m)"));
   EXPECT_TRUE(has(l, "walk 'cross-town'"));
   EXPECT_TRUE(has(l, "PAUSED"));
+}
+
+TEST(HeadlessOverlay, AScreenshotThatCannotBeWrittenIsSaidAndTheWalkGoesOn) {
+  auto server = StartServer();
+  ASSERT_NE(server, nullptr);
+  const std::string dir = TempDir("unwritable");
+  Child c({VISTREAM_CLIENT_BIN, "--headless", "--server", "127.0.0.1:" + std::to_string(server->port()), "--pose",
+           kPose, "--frames", "100000", "--max-fps", "10", "--size", "320x180", "--frame-log", dir + "/frames.csv"},
+          {}, dir, dir + "/out.txt", dir + "/err.txt");
+  // A file where the screenshots' folder would be: the folder cannot be made.
+  std::ofstream(dir + "/vistream-screenshots") << "not a folder";
+  for (int k = 0; k < 1200 && ReadFile(dir + "/frames.csv").find("\n2,") == std::string::npos; ++k) Sleep(0.1);
+  c.Signal(SIGUSR1);
+  for (int k = 0; k < 100 && ReadFile(dir + "/err.txt").find("screenshot failed") == std::string::npos; ++k) Sleep(0.1);
+  const std::string before = ReadFile(dir + "/frames.csv");
+  const auto frames_then = static_cast<size_t>(std::count(before.begin(), before.end(), '\n'));
+  Sleep(1.0);
+  EXPECT_TRUE(c.Running()) << ReadFile(dir + "/err.txt");
+  const std::string log = ReadFile(dir + "/frames.csv");
+  EXPECT_GT(static_cast<size_t>(std::count(log.begin(), log.end(), '\n')), frames_then + 3) << "the walk stopped";
+  c.Signal(SIGTERM);
+  EXPECT_EQ(c.Wait(60.0), 130) << ReadFile(dir + "/err.txt");
+  EXPECT_NE(ReadFile(dir + "/err.txt").find("screenshot failed: " + dir + "/vistream-screenshots: cannot create"),
+            std::string::npos)
+      << ReadFile(dir + "/err.txt");
 }
 
 TEST(HeadlessOverlay, SigUsr1WritesAScreenshotIntoTheWorkingFolder) {
