@@ -84,7 +84,7 @@ class MinimapCells {
   // robin, until `max_lookups` objects have been checked. `uploaded`: whether an object is
   // here and on the GPU. Each cell on the map is a few calls old at most.
   void Refresh(const ObjectStore& store, const std::function<bool(uint32_t)>& uploaded, const glm::dvec3& eye,
-               double radius_m, size_t max_lookups = 20000);
+               double radius_m, size_t max_lookups = 4000);
   const std::vector<CellState>& states() const { return states_; }
 
  private:
