@@ -563,16 +563,26 @@ TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
   EXPECT_TRUE(has(l, "PAUSED"));
 }
 
+// A headless client standing at kPose until stopped, working in `dir`, once it has drawn two
+// frames (its frame log, dir/frames.csv, says so).
+std::unique_ptr<Child> StandingHeadless(int port, const std::string& dir) {
+  auto c = std::make_unique<Child>(
+      std::vector<std::string>{VISTREAM_CLIENT_BIN, "--headless", "--server", "127.0.0.1:" + std::to_string(port),
+                               "--pose", kPose, "--frames", "100000", "--max-fps", "10", "--size", "320x180",
+                               "--frame-log", dir + "/frames.csv"},
+      std::map<std::string, std::string>{}, dir, dir + "/out.txt", dir + "/err.txt");
+  for (int k = 0; k < 1200 && ReadFile(dir + "/frames.csv").find("\n2,") == std::string::npos; ++k) Sleep(0.1);
+  return c;
+}
+
 TEST(HeadlessOverlay, AScreenshotThatCannotBeWrittenIsSaidAndTheWalkGoesOn) {
   auto server = StartServer();
   ASSERT_NE(server, nullptr);
   const std::string dir = TempDir("unwritable");
-  Child c({VISTREAM_CLIENT_BIN, "--headless", "--server", "127.0.0.1:" + std::to_string(server->port()), "--pose",
-           kPose, "--frames", "100000", "--max-fps", "10", "--size", "320x180", "--frame-log", dir + "/frames.csv"},
-          {}, dir, dir + "/out.txt", dir + "/err.txt");
   // A file where the screenshots' folder would be: the folder cannot be made.
   std::ofstream(dir + "/vistream-screenshots") << "not a folder";
-  for (int k = 0; k < 1200 && ReadFile(dir + "/frames.csv").find("\n2,") == std::string::npos; ++k) Sleep(0.1);
+  const std::unique_ptr<Child> child = StandingHeadless(server->port(), dir);
+  Child& c = *child;
   c.Signal(SIGUSR1);
   for (int k = 0; k < 100 && ReadFile(dir + "/err.txt").find("screenshot failed") == std::string::npos; ++k) Sleep(0.1);
   const std::string before = ReadFile(dir + "/frames.csv");
@@ -592,10 +602,8 @@ TEST(HeadlessOverlay, SigUsr1WritesAScreenshotIntoTheWorkingFolder) {
   auto server = StartServer();
   ASSERT_NE(server, nullptr);
   const std::string dir = TempDir("usr1");
-  Child c({VISTREAM_CLIENT_BIN, "--headless", "--server", "127.0.0.1:" + std::to_string(server->port()), "--pose",
-           kPose, "--frames", "100000", "--max-fps", "10", "--size", "320x180", "--frame-log", dir + "/frames.csv"},
-          {}, dir, dir + "/out.txt", dir + "/err.txt");
-  for (int k = 0; k < 1200 && ReadFile(dir + "/frames.csv").find("\n2,") == std::string::npos; ++k) Sleep(0.1);
+  const std::unique_ptr<Child> child = StandingHeadless(server->port(), dir);
+  Child& c = *child;
   c.Signal(SIGUSR1);
   const fs::path shots = fs::path(dir) / "vistream-screenshots";
   bool written = false;
