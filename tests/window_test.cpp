@@ -469,6 +469,27 @@ TEST_F(WindowTest, TheOverlaysNumbersEqualTheJsonSummaryAtTheEnd) {
   EXPECT_GT(j["checked_frames"].get<uint64_t>(), 0u);
 }
 
+TEST(WindowOptions, BadOverlayAndPictureOptionsExitTwoNamingTheOption) {
+  const std::string dir = TempDir("options");
+  struct Case {
+    std::vector<std::string> args;
+    const char* says;
+  };
+  const Case cases[] = {
+      {{"--msaa", "99"}, "--msaa"},
+      {{"--msaa", "-1"}, "--msaa"},
+      {{"--overlay", "--no-overlay"}, "--overlay: cannot be given with --no-overlay"},
+      {{"--headless", "--overlay-dump", dir + "/o.txt"}, "--overlay-dump: headless, needs --overlay"},
+  };
+  for (const Case& c : cases) {
+    std::vector<std::string> argv{VISTREAM_CLIENT_BIN, "--server", "127.0.0.1:1"};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    Child child(argv, {}, dir, dir + "/out.txt", dir + "/err.txt");
+    EXPECT_EQ(child.Wait(30.0), 2) << c.says;
+    EXPECT_NE(ReadFile(dir + "/err.txt").find(c.says), std::string::npos) << ReadFile(dir + "/err.txt");
+  }
+}
+
 // ---- the headless front end ----
 
 TEST(HeadlessOverlay, DrawsThePanelsWhereTheySitAndNothingElseChanges) {
