@@ -561,8 +561,6 @@ void Overlay::AddFrame(double frame_ms, double now_s, uint64_t bytes_received) {
   while (now_s - impl_->samples.front().t > kHistoryS) impl_->samples.pop_front();
 }
 
-bool Overlay::WantsKeyboard() const { return show_walks; }
-
 bool Overlay::WantsMouse() const {
   ImGui::SetCurrentContext(impl_->imgui);
   return ImGui::GetIO().WantCaptureMouse;

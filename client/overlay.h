@@ -120,8 +120,6 @@ class Overlay {
   bool show_minimap = true;  // M
   bool show_help = false;    // H or ?
   bool show_walks = false;   // P
-  // Whether the panels want the keyboard (the walk list open): the loop then leaves it to them.
-  bool WantsKeyboard() const;
   // Whether the mouse is over a panel (its click is the panel's, not the start of mouse look).
   bool WantsMouse() const;
   // The walk list's highlighted row (the loop's Up/Down move it; Enter and F follow it).
