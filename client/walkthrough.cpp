@@ -888,15 +888,15 @@ absl::Status Loop::Walkthrough() {
     // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
         use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
+    uint64_t bytes_received = 0;  // as the overlay's status read it (one look at the connection a frame)
     if (overlay_ != nullptr) {
       const OverlayStatus status = Status(*p, fs, use_mask, hole, triangles_without_masks, begin);
+      bytes_received = status.bytes_received;
       if (absl::Status st = DrawOverlay(status, frame_period); !st.ok()) return st;
     }
     renderer_->Finish();
     const double end = Now();
-    if (overlay_ != nullptr) {
-      overlay_->AddFrame((end - begin) * 1000.0, end, connection_ != nullptr ? connection_->stats().bytes_received : 0);
-    }
+    if (overlay_ != nullptr) overlay_->AddFrame((end - begin) * 1000.0, end, bytes_received);
     ++sum_->frames;
     frame_ms.push_back((end - begin) * 1000.0);
     if (hole) {
