@@ -108,7 +108,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* contex
   auto r = std::unique_ptr<Renderer>(new Renderer(context, context->functions()));
   r->width_ = width;
   r->height_ = height;
-  r->samples_ = offscreen ? samples : 0;
+  r->samples_ = samples;
   if (absl::Status s = r->Init(offscreen); !s.ok()) return s;
   return r;
 }
@@ -127,7 +127,7 @@ absl::Status Renderer::Init(bool offscreen) {
   loc_sky_ = gl_.GetUniformLocation(program_, "sky_colour");
   gl_.GenVertexArrays(1, &ground_vao_);
   gl_.GenBuffers(1, &ground_vbo_);
-  if (offscreen_) {
+  if (offscreen_ || samples_ > 0) {
     if (absl::Status s = MakeFramebuffer(); !s.ok()) return s;
   }
   if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
@@ -161,7 +161,7 @@ absl::Status Renderer::MakeFramebuffer() {
     return absl::InternalError(absl::StrCat("renderer: the ", samples_ > 0 ? absl::StrCat(samples_, "-sample ") : "",
                                             "framebuffer is incomplete"));
   }
-  if (samples_ > 0) {
+  if (samples_ > 0 && offscreen_) {
     gl_.GenRenderbuffers(1, &resolve_rb_);
     gl_.BindRenderbuffer(GL_RENDERBUFFER, resolve_rb_);
     gl_.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width_, height_);
@@ -191,7 +191,7 @@ absl::Status Renderer::Resize(int width, int height) {
   if (width < 1 || height < 1) return absl::OkStatus();  // a minimised window: keep the last size
   width_ = width;
   height_ = height;
-  return offscreen_ ? MakeFramebuffer() : absl::OkStatus();
+  return offscreen_ || samples_ > 0 ? MakeFramebuffer() : absl::OkStatus();
 }
 
 Renderer::~Renderer() {
@@ -311,7 +311,8 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
                           const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn) {
   FrameStats stats;
   stats.mask_used = mask != nullptr;
-  gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
+  gl_.BindFramebuffer(GL_FRAMEBUFFER, fbo_);  // 0: the window's
+  resolved_ = false;
   gl_.Viewport(0, 0, width_, height_);
   gl_.ClearColor(kSky[0], kSky[1], kSky[2], 1.0f);
   gl_.Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
@@ -396,17 +397,21 @@ uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera
   return triangles;
 }
 
+void Renderer::Resolve() {
+  const unsigned shown = samples_ > 0 ? resolve_fbo_ : fbo_;  // 0: the window's
+  if (samples_ > 0 && !resolved_) {
+    gl_.BindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+    gl_.BindFramebuffer(GL_DRAW_FRAMEBUFFER, shown);
+    gl_.BlitFramebuffer(0, 0, width_, height_, 0, 0, width_, height_, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+  }
+  resolved_ = true;
+  gl_.BindFramebuffer(GL_FRAMEBUFFER, shown);
+}
+
 void Renderer::Finish() { gl_.Finish(); }
 
 absl::StatusOr<std::vector<uint8_t>> Renderer::ReadRgb() {
-  if (resolve_fbo_ != 0) {
-    gl_.BindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
-    gl_.BindFramebuffer(GL_DRAW_FRAMEBUFFER, resolve_fbo_);
-    gl_.BlitFramebuffer(0, 0, width_, height_, 0, 0, width_, height_, GL_COLOR_BUFFER_BIT, GL_NEAREST);
-    gl_.BindFramebuffer(GL_FRAMEBUFFER, resolve_fbo_);
-  } else {
-    gl_.BindFramebuffer(GL_FRAMEBUFFER, offscreen_ ? fbo_ : 0);
-  }
+  Resolve();
   std::vector<uint8_t> rgba(static_cast<size_t>(width_) * height_ * 4);
   gl_.PixelStorei(GL_PACK_ALIGNMENT, 1);
   gl_.ReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());

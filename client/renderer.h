@@ -60,8 +60,9 @@ class Renderer {
   // `context` must stay current while the renderer is used. With `offscreen` the renderer draws
   // into its own `width` x `height` framebuffer (read back with ReadRgb); otherwise into the
   // window's. Errors: GL failing (shaders, framebuffer).
-  // `samples`: off-screen, multisample antialiasing (0 none, up to 16; a window's framebuffer
-  // is multisampled by its context instead, gl::GlContext::CreateWindowed).
+  // `samples`: multisample antialiasing (0 none, up to 16): the frame is drawn into a
+  // multisample framebuffer of the renderer's and resolved (Resolve) into the single-sample one
+  // that is read or shown (off-screen its own, else the window's).
   static absl::StatusOr<std::unique_ptr<Renderer>> Create(gl::GlContext* context, int width, int height,
                                                           bool offscreen, int samples = 0);
   ~Renderer();
@@ -85,9 +86,13 @@ class Renderer {
   // The triangles Draw would draw of `objects` without a mask (uploaded, in the view frustum),
   // counted without drawing.
   uint64_t CountTriangles(const ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects) const;
+  // The frame drawn, into the single-sample framebuffer that is read or shown, and binds that
+  // (what is drawn over the frame, the overlay, is drawn there after this). Without samples it
+  // binds the framebuffer drawn into. Once a frame; ReadRgb calls it.
+  void Resolve();
   // Waits until the frame is drawn (for frame timing).
   void Finish();
-  // The last frame as RGB bytes, top row first (width x height x 3). Errors: GL failing.
+  // The last frame as RGB bytes, top row first (width x height x 3), resolved. Errors: GL failing.
   absl::StatusOr<std::vector<uint8_t>> ReadRgb();
 
   // The colours of sky and ground pixels in ReadRgb (neither is lit).
@@ -138,7 +143,8 @@ class Renderer {
   int samples_ = 0;
   double fog_start_m_ = 0.0, fog_end_m_ = 0.0;
   unsigned program_ = 0, fbo_ = 0, colour_rb_ = 0, depth_rb_ = 0, ground_vao_ = 0, ground_vbo_ = 0;
-  unsigned resolve_fbo_ = 0, resolve_rb_ = 0;  // samples_ > 0: the single-sample copy ReadRgb reads
+  unsigned resolve_fbo_ = 0, resolve_rb_ = 0;  // off-screen with samples_ > 0: the single-sample copy ReadRgb reads
+  bool resolved_ = false;                      // the frame drawn is resolved (Resolve)
   int loc_view_projection_ = -1, loc_colour_ = -1, loc_sun_ = -1, loc_lit_ = -1, loc_eye_ = -1, loc_fog_ = -1,
       loc_sky_ = -1;
   std::unordered_map<uint32_t, Gpu> gpu_;

@@ -312,7 +312,7 @@ absl::Status Loop::Prepare() {
   absl::StatusOr<std::unique_ptr<gl::GlContext>> context =
       opt_.headless ? gl::GlContext::CreateOffscreen()
                     : gl::GlContext::CreateWindowed(opt_.width, opt_.height, absl::StrCat("vistream: ", sum_->scene),
-                                                    samples, opt_.vsync);
+                                                    opt_.vsync);
   if (!context.ok()) return context.status();
   context_ = std::move(*context);
   int width = opt_.width, height = opt_.height;
@@ -321,7 +321,7 @@ absl::Status Loop::Prepare() {
     input_ = std::make_unique<WindowInput>(context_->window());
   }
   absl::StatusOr<std::unique_ptr<Renderer>> renderer =
-      Renderer::Create(context_.get(), width, height, opt_.headless, opt_.headless ? samples : 0);
+      Renderer::Create(context_.get(), width, height, opt_.headless, samples);
   if (!renderer.ok()) return renderer.status();
   renderer_ = std::move(*renderer);
   if (entry_.has_value() && entry_->effects.fog.has_value()) {
@@ -526,6 +526,7 @@ absl::Status Loop::Startup() {
     if (input_ != nullptr) {
       std::vector<uint32_t> none;
       renderer_->Draw(*store_, camera_, none, nullptr, 0, nullptr);
+      renderer_->Resolve();
       context_->SwapBuffers();
       input_->Poll();
       for (const WindowInput::KeyPress& k : input_->TakeKeys()) {
@@ -669,7 +670,10 @@ absl::Status Loop::DrawOverlay(const OverlayStatus& status, double dt) {
   if (walk_.has_value() && walk_path_.has_value()) map.walk = walk_path_->waypoints;
   std::vector<std::string> names;
   for (const scenes::WalkPath& w : walks_) names.push_back(w.name);
-  const OverlayRequest req = overlay_->Frame(status, map, names, renderer_->width(), renderer_->height(), dt);
+  absl::StatusOr<OverlayRequest> frame =
+      overlay_->Frame(status, map, names, renderer_->width(), renderer_->height(), dt);
+  if (!frame.ok()) return frame.status();
+  const OverlayRequest& req = *frame;
   overlay_lines_ = overlay_->last_lines();
   if (req.follow_walk.has_value() && *req.follow_walk < walks_.size()) {
     const scenes::WalkPath chosen = walks_[*req.follow_walk];
@@ -694,12 +698,16 @@ absl::Status Loop::HandleWindow() {
   }
   auto faster = [this] { rate_ = std::min(rate_ * 1.25, 64.0); };
   auto slower = [this] { rate_ = std::max(rate_ / 1.25, 1.0 / 64.0); };
-  for (unsigned c : input_->TakeChars()) {
+  const std::vector<unsigned> chars = input_->TakeChars();
+  const std::vector<WindowInput::KeyPress> keys = input_->TakeKeys();
+  // A key may change what a panel says (the walk list's row, the speed): rebuilt this frame.
+  if (!chars.empty() || !keys.empty()) overlay_->Invalidate();
+  for (unsigned c : chars) {
     if (c == '?') overlay_->show_help = !overlay_->show_help;
     if (c == '+') faster();
     if (c == '-') slower();
   }
-  for (const WindowInput::KeyPress& k : input_->TakeKeys()) {
+  for (const WindowInput::KeyPress& k : keys) {
     const bool enter = k.key == GLFW_KEY_ENTER || k.key == GLFW_KEY_KP_ENTER;
     if (overlay_->show_walks && (k.key == GLFW_KEY_UP || k.key == GLFW_KEY_DOWN || enter || k.key == GLFW_KEY_F ||
                                  k.key == GLFW_KEY_ESCAPE)) {
@@ -888,8 +896,11 @@ absl::Status Loop::Walkthrough() {
     // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
         use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
+    renderer_->Resolve();  // the overlay is drawn over the single-sample frame
     uint64_t bytes_received = 0;  // as the overlay's status read it (one look at the connection a frame)
     if (overlay_ != nullptr) {
+      // A screenshot shows the panels as they stand this frame, and so does the last frame.
+      if (screenshot_now_ || last || (!opt_.screenshots_dir.empty() && t >= next_shot)) overlay_->Invalidate();
       const OverlayStatus status = Status(*p, fs, use_mask, hole, triangles_without_masks, begin);
       bytes_received = status.bytes_received;
       if (absl::Status st = DrawOverlay(status, frame_period); !st.ok()) return st;

@@ -40,7 +40,7 @@ void OnGlfwError(int /*code*/, const char* description) { GlfwError() = descript
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateWindowed(int width, int height, const std::string& title,
-                                                                     int samples, bool vsync) {
+                                                                     bool vsync) {
   glfwSetErrorCallback(OnGlfwError);
   if (!glfwInit()) {
     return absl::UnavailableError(absl::StrCat("cannot open a window: ", GlfwError(),
@@ -50,7 +50,7 @@ absl::StatusOr<std::unique_ptr<GlContext>> GlContext::CreateWindowed(int width, 
   glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
   glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
   glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
-  glfwWindowHint(GLFW_SAMPLES, samples);
+  glfwWindowHint(GLFW_SAMPLES, 0);
   glfwWindowHint(GLFW_RESIZABLE, GLFW_TRUE);
   GLFWwindow* window = glfwCreateWindow(width, height, title.c_str(), nullptr, nullptr);
   if (window == nullptr) {

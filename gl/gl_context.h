@@ -18,11 +18,12 @@ class GlContext {
   // on one thread at a time.
   static absl::StatusOr<std::unique_ptr<GlContext>> CreateOffscreen();
   // A resizable window of `width` x `height` screen pixels with an OpenGL 3.3 core context,
-  // current on the calling thread; one at a time per process. `samples`: multisample
-  // antialiasing of its framebuffer (0 none); `vsync`: swaps wait for the display's refresh.
+  // current on the calling thread; one at a time per process. Its framebuffer is single-sample
+  // (a renderer multisamples into its own and resolves into it); `vsync`: swaps wait for the
+  // display's refresh.
   // Errors (UNAVAILABLE): no display (the message says how to run without one), no GL 3.3.
   static absl::StatusOr<std::unique_ptr<GlContext>> CreateWindowed(int width, int height, const std::string& title,
-                                                                   int samples = 0, bool vsync = true);
+                                                                   bool vsync = true);
   ~GlContext();
   GlContext(const GlContext&) = delete;
   GlContext& operator=(const GlContext&) = delete;

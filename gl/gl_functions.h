@@ -15,7 +15,8 @@
 namespace vistream::gl {
 
 // Every entry point the table holds (OpenGL 3.3 core, plus texture buffers for the id
-// renderer's masks): the renderer's, the overlay's (blending, scissors, its font texture) and
+// renderer's masks): the renderer's, the overlay's (blending, scissors, its font texture, the
+// texture its panels are kept in) and
 // multisampling's (renderbuffers, the resolving blit).
 #define VISTREAM_GL_FUNCTIONS(X)                                                                         \
   X(ActiveTexture) X(AttachShader) X(BindBuffer) X(BindFramebuffer) X(BindRenderbuffer) X(BindTexture)     \
@@ -29,7 +30,7 @@ namespace vistream::gl {
   X(ShaderSource) X(TexBuffer) X(Uniform1f) X(Uniform1i) X(Uniform3f) X(UniformMatrix4fv) X(UseProgram)    \
   X(VertexAttribPointer) X(Viewport)                                                                      \
   X(BlendEquation) X(BlendFuncSeparate) X(Scissor) X(TexImage2D) X(TexParameteri) X(BlitFramebuffer)      \
-  X(RenderbufferStorageMultisample) X(GetIntegerv) X(Uniform2f)
+  X(RenderbufferStorageMultisample) X(GetIntegerv) X(Uniform2f) X(FramebufferTexture2D)
 
 struct GlFunctions {
 #define VISTREAM_GL_MEMBER(name) decltype(&::gl##name) name = nullptr;

@@ -27,6 +27,7 @@
 #include "client/overlay.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
+#include "gl/gl_context.h"
 #include "server/served_scene.h"
 #include "server/service.h"
 #include "tests/temp_dir.h"
@@ -504,6 +505,107 @@ TEST(HeadlessOverlay, DrawsThePanelsWhereTheySitAndNothingElseChanges) {
   EXPECT_GT(Differ(plain, with, stats), 10000u);
   EXPECT_GT(Differ(plain, with, map), 10000u);
   EXPECT_EQ(Differ(plain, with, std::nullopt, {stats, map}), 0u);
+}
+
+// Frames of the overlay in process (OSMesa): an empty city's frame, the panels over it.
+class OverlayFrames {
+ public:
+  explicit OverlayFrames(int samples) {
+    absl::StatusOr<std::unique_ptr<gl::GlContext>> c = gl::GlContext::CreateOffscreen();
+    EXPECT_TRUE(c.ok()) << c.status();
+    if (!c.ok()) return;
+    context_ = std::move(*c);
+    absl::StatusOr<std::unique_ptr<Renderer>> r = Renderer::Create(context_.get(), kW, kH, true, samples);
+    EXPECT_TRUE(r.ok()) << r.status();
+    absl::StatusOr<std::unique_ptr<Overlay>> o = Overlay::Create(context_.get(), nullptr);
+    EXPECT_TRUE(o.ok()) << o.status();
+    if (!r.ok() || !o.ok()) return;
+    renderer_ = std::move(*r);
+    overlay_ = std::move(*o);
+    camera_.width = kW;
+    camera_.height = kH;
+  }
+  bool ok() const { return overlay_ != nullptr; }
+  Overlay& overlay() { return *overlay_; }
+  // One frame with `status`, `dt_s` after the last, the panels over the resolved frame (as the
+  // client draws) or, `!resolve_first`, into the multisample one; its picture.
+  RgbImage Frame(const OverlayStatus& status, double dt_s, bool resolve_first = true) {
+    renderer_->Draw(store_, camera_, {}, nullptr, ++frame_, nullptr);
+    if (resolve_first) renderer_->Resolve();
+    absl::StatusOr<OverlayRequest> req = overlay_->Frame(status, MinimapView{}, {}, kW, kH, dt_s);
+    EXPECT_TRUE(req.ok()) << req.status();
+    absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
+    EXPECT_TRUE(rgb.ok()) << rgb.status();
+    return RgbImage{kW, kH, rgb.ok() ? *rgb : std::vector<uint8_t>{}};
+  }
+  static constexpr int kW = 800, kH = 600;
+
+ private:
+  std::unique_ptr<gl::GlContext> context_;
+  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<Overlay> overlay_;
+  ObjectStore store_{0};
+  Camera camera_;
+  uint64_t frame_ = 0;
+};
+
+TEST(HeadlessOverlay, BetweenBuildsAFrameCopiesThePanelsAsBuiltAndAKeyOrTheClockRebuildsThem) {
+  OverlayFrames f(0);
+  ASSERT_TRUE(f.ok());
+  OverlayStatus a;
+  a.server = "127.0.0.1:1";
+  a.scene = "default";
+  a.frames = 10;
+  OverlayStatus b = a;
+  b.frames = 987654;
+  b.stalls = 321;
+  const RgbImage built = f.Frame(a, 0.0);
+  const Box stats = StatsBox(), map = MinimapBox(OverlayFrames::kW);
+  // Within kRebuildS the panels are the ones built (their lines are this frame's)...
+  const RgbImage copied = f.Frame(b, 0.25 * Overlay::kRebuildS);
+  EXPECT_EQ(Differ(built, copied, std::nullopt), 0u);
+  EXPECT_NE(f.overlay().last_lines(), OverlayLines(a, 0.0, 0.0, 0.0));
+  // ...a key (Invalidate) rebuilds them with the new numbers, only where the statistics sit...
+  f.overlay().Invalidate();
+  const RgbImage keyed = f.Frame(b, 0.25 * Overlay::kRebuildS);
+  EXPECT_GT(Differ(built, keyed, stats), 50u);
+  EXPECT_EQ(Differ(built, keyed, std::nullopt, {stats}), 0u);
+  // ...and so does the clock, kRebuildS after the last build.
+  const RgbImage before = f.Frame(a, 0.5 * Overlay::kRebuildS);
+  EXPECT_EQ(Differ(keyed, before, std::nullopt), 0u);
+  const RgbImage after = f.Frame(a, 0.6 * Overlay::kRebuildS);
+  EXPECT_EQ(Differ(built, after, std::nullopt), 0u);
+  // Hiding a panel is seen at once; nothing outside the panels ever changed.
+  f.overlay().show_minimap = false;
+  const RgbImage hidden = f.Frame(a, 0.0);
+  EXPECT_GT(Differ(after, hidden, map), 10000u);
+  EXPECT_EQ(Differ(after, hidden, std::nullopt, {map}), 0u);
+}
+
+TEST(HeadlessOverlay, AMultisampleFrameGetsThePanelsAsASingleSampleOne) {
+  // Copied (a single-sample frame) or drawn (into a multisample one, left unresolved): the
+  // same panels. ImGui's shapes are pixel-aligned but for the graph's lines and the minimap's
+  // eye and north arrow, whose edges multisampling smooths: under 1% of a panel's pixels.
+  OverlayStatus s;
+  s.server = "127.0.0.1:1";
+  s.scene = "default";
+  s.frames = 10;
+  RgbImage copied, drawn;
+  {
+    OverlayFrames single(0);
+    ASSERT_TRUE(single.ok());
+    copied = single.Frame(s, 0.0);
+  }
+  {
+    OverlayFrames multi(4);
+    ASSERT_TRUE(multi.ok());
+    drawn = multi.Frame(s, 0.0, false);
+  }
+  ASSERT_EQ(drawn.rgb.size(), copied.rgb.size());
+  const Box stats = StatsBox(), map = MinimapBox(OverlayFrames::kW);
+  EXPECT_LT(Differ(copied, drawn, stats), 2000u);
+  EXPECT_LT(Differ(copied, drawn, map), 1100u);
+  EXPECT_EQ(Differ(copied, drawn, std::nullopt, {stats, map}), 0u);
 }
 
 TEST(HeadlessOverlay, ItsNumbersEqualTheJsonSummary) {
