@@ -896,7 +896,9 @@ absl::Status Loop::Walkthrough() {
     // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
         use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
-    renderer_->Resolve();  // the overlay is drawn over the single-sample frame
+    // The window shows the single-sample frame, and the overlay is drawn over it (headless
+    // without the overlay, a screenshot resolves the frame it reads).
+    if (input_ != nullptr || overlay_ != nullptr) renderer_->Resolve();
     uint64_t bytes_received = 0;  // as the overlay's status read it (one look at the connection a frame)
     if (overlay_ != nullptr) {
       // A screenshot shows the panels as they stand this frame, and so does the last frame.
