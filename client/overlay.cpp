@@ -143,6 +143,10 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
       out.push_back("connection: none (the whole scene drawn locally)");
       break;
   }
+  if (s.starting_s >= 0.0) {
+    out.push_back(absl::StrFormat("starting: waiting %.0f s for the first viewcell's PVS and geometry (%.0f s at most)",
+                                  s.starting_s, s.startup_timeout_s));
+  }
   out.push_back(absl::StrFormat("fps %.1f, frame %.1f ms", fps, frame_ms));
   if (s.cell.has_value()) {
     out.push_back(absl::StrCat("viewcell ", s.cell_i, ",", s.cell_j, " (id ", *s.cell, "): ",
@@ -234,7 +238,9 @@ struct Overlay::Impl {
   double Fps() const;
   double BytesPerSecond() const;
   void StatsPanel(const OverlayStatus& s);
-  void Minimap(const OverlayStatus& s, const MinimapView& map, int width);
+  // `beside_stats`: the statistics panel is shown (the map shrinks to stay clear of it in a
+  // narrow frame).
+  void Minimap(const OverlayStatus& s, const MinimapView& map, int width, bool beside_stats);
   void Help(int width, int height);
   OverlayRequest Walks(const std::vector<std::string>& walks, int width, int height, bool* open);
 };
@@ -533,11 +539,17 @@ void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
   ImGui::End();
 }
 
-void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int width) {
-  const float px = static_cast<float>(kMinimapPx);
+void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int width, bool beside_stats) {
+  // Beside the statistics panel: what the frame's width leaves (its padding 2 x 8 px), at least
+  // kMinimapMinPx (a frame narrower than both panels gets them overlapping).
+  const int room = beside_stats ? width - (kMargin + kStatsWidth) - 2 * kMargin - 16 : kMinimapPx;
+  const float px = static_cast<float>(std::clamp(room, kMinimapMinPx, kMinimapPx));
   ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - kMargin), kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
   if (ImGui::Begin("minimap", nullptr, kPanel | ImGuiWindowFlags_NoTitleBar)) {
-    ImGui::TextUnformatted(window != nullptr ? "Viewcells around the eye (M), north up" : "Viewcells around the eye, north up");
+    // Wrapped at the map's width, so that the window keeps it.
+    ImGui::PushTextWrapPos(ImGui::GetCursorPosX() + px);
+    ImGui::TextWrapped("%s", window != nullptr ? "Viewcells around the eye (M), north up" : "Viewcells around the eye, north up");
+    ImGui::PopTextWrapPos();
     const ImVec2 origin = ImGui::GetCursorScreenPos();
     ImGui::Dummy(ImVec2(px, px));
     ImDrawList* dl = ImGui::GetWindowDrawList();
@@ -605,9 +617,12 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
       ImGui::SameLine();
       ImGui::TextUnformatted(text);
     };
-    // Two columns, so that the window keeps the map's width.
+    // Two columns where they fit the map's width (the window keeps it), else one.
     const float column = 0.5f * px;
-    auto second = [&] { ImGui::SameLine(ImGui::GetCursorStartPos().x + column); };
+    const bool two = column >= ImGui::CalcTextSize("not asked for").x + 2.0f * ImGui::GetTextLineHeight();
+    auto second = [&] {
+      if (two) ImGui::SameLine(ImGui::GetCursorStartPos().x + column);
+    };
     legend(MinimapCurrentCellColour(), "current");
     second();
     legend(MinimapColour(CellState::kComplete), "PVS complete");
@@ -745,7 +760,7 @@ absl::StatusOr<OverlayRequest> Overlay::Frame(const OverlayStatus& status, const
       ImGui::NewFrame();
       const int w = static_cast<int>(io.DisplaySize.x), h = static_cast<int>(io.DisplaySize.y);
       if (show_stats) impl_->StatsPanel(status);
-      if (show_minimap) impl_->Minimap(status, map, w);
+      if (show_minimap) impl_->Minimap(status, map, w, show_stats);
       if (show_walks) {
         const OverlayRequest asked = impl_->Walks(walks, w, h, &show_walks);
         if (asked.follow_walk.has_value()) req = asked;

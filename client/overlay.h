@@ -35,6 +35,8 @@ struct OverlayStatus {
   double give_up_s = 0.0;          // the client gives up after this long without the server; 0 never
   double backoff_s = 0.0;          // kReconnecting: the wait before the latest attempt
   uint64_t reconnects = 0;
+  double starting_s = -1.0;        // >= 0: the window has waited this long for the first viewcell
+  double startup_timeout_s = 0.0;  // starting: the client gives up after this long
   std::optional<uint32_t> cell;    // the eye's viewcell id; none outside the grid or before SceneInfo
   int cell_i = -1, cell_j = -1;
   size_t pvs_objects = 0;          // its PVS list's length (0: not arrived)
@@ -138,10 +140,12 @@ class Overlay {
   static constexpr double kHistoryS = 5.0;
   static constexpr double kRebuildS = 0.2;  // the panels' numbers change 5 times a second
   // The panels' places (pixels from the top left; tests look there): the statistics at the top
-  // left, the minimap at the top right, kMinimapPx square.
+  // left, the minimap at the top right, kMinimapPx square (smaller where the frame is too narrow
+  // for both: down to kMinimapMinPx).
   static constexpr int kMargin = 10;
   static constexpr int kStatsWidth = 400;
   static constexpr int kMinimapPx = 260;
+  static constexpr int kMinimapMinPx = 120;  // in a frame too narrow for both panels side by side
 
  private:
   struct Impl;

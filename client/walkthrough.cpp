@@ -468,6 +468,7 @@ absl::Status Loop::Startup() {
   Log(absl::StrCat("connected to ", opt_.server, " (scene ", sum_->scene, "); waiting for the first viewcell"));
   uint64_t objects_seen = 0;
   double last_arrival = Now();
+  double last_drawn = Now();  // the window's last frame while waiting
   // Following a walk, it waits for the cell it starts in and the first cell the walk enters
   // (what it reaches first), telling the server the velocity it will walk at so that the cells
   // ahead are ranked first; the simulator models the same (server/simulator.cpp).
@@ -525,8 +526,18 @@ absl::Status Loop::Startup() {
     }
     if (input_ != nullptr) {
       std::vector<uint32_t> none;
+      const double begin = Now();
       renderer_->Draw(*store_, camera_, none, nullptr, 0, nullptr);
       renderer_->Resolve();
+      if (overlay_ != nullptr) {
+        // The panels say what the window waits for.
+        OverlayStatus st = Status(*p, FrameStats{}, nullptr, false, 0, begin);
+        st.starting_s = begin - session_start_;
+        st.startup_timeout_s = opt_.startup_timeout_s;
+        st.frames = st.stalls = 0;
+        if (absl::Status s = DrawOverlay(st, begin - last_drawn); !s.ok()) return s;
+      }
+      last_drawn = begin;
       context_->SwapBuffers();
       input_->Poll();
       for (const WindowInput::KeyPress& k : input_->TakeKeys()) {

@@ -510,20 +510,20 @@ TEST(HeadlessOverlay, DrawsThePanelsWhereTheySitAndNothingElseChanges) {
 // Frames of the overlay in process (OSMesa): an empty city's frame, the panels over it.
 class OverlayFrames {
  public:
-  explicit OverlayFrames(int samples) {
+  explicit OverlayFrames(int samples, int width = 800, int height = 600) : w_(width), h_(height) {
     absl::StatusOr<std::unique_ptr<gl::GlContext>> c = gl::GlContext::CreateOffscreen();
     EXPECT_TRUE(c.ok()) << c.status();
     if (!c.ok()) return;
     context_ = std::move(*c);
-    absl::StatusOr<std::unique_ptr<Renderer>> r = Renderer::Create(context_.get(), kW, kH, true, samples);
+    absl::StatusOr<std::unique_ptr<Renderer>> r = Renderer::Create(context_.get(), w_, h_, true, samples);
     EXPECT_TRUE(r.ok()) << r.status();
     absl::StatusOr<std::unique_ptr<Overlay>> o = Overlay::Create(context_.get(), nullptr);
     EXPECT_TRUE(o.ok()) << o.status();
     if (!r.ok() || !o.ok()) return;
     renderer_ = std::move(*r);
     overlay_ = std::move(*o);
-    camera_.width = kW;
-    camera_.height = kH;
+    camera_.width = w_;
+    camera_.height = h_;
   }
   bool ok() const { return overlay_ != nullptr; }
   Overlay& overlay() { return *overlay_; }
@@ -532,15 +532,15 @@ class OverlayFrames {
   RgbImage Frame(const OverlayStatus& status, double dt_s, bool resolve_first = true) {
     renderer_->Draw(store_, camera_, {}, nullptr, ++frame_, nullptr);
     if (resolve_first) renderer_->Resolve();
-    absl::StatusOr<OverlayRequest> req = overlay_->Frame(status, MinimapView{}, {}, kW, kH, dt_s);
+    absl::StatusOr<OverlayRequest> req = overlay_->Frame(status, MinimapView{}, {}, w_, h_, dt_s);
     EXPECT_TRUE(req.ok()) << req.status();
     absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
     EXPECT_TRUE(rgb.ok()) << rgb.status();
-    return RgbImage{kW, kH, rgb.ok() ? *rgb : std::vector<uint8_t>{}};
+    return RgbImage{w_, h_, rgb.ok() ? *rgb : std::vector<uint8_t>{}};
   }
-  static constexpr int kW = 800, kH = 600;
 
  private:
+  int w_, h_;
   std::unique_ptr<gl::GlContext> context_;
   std::unique_ptr<Renderer> renderer_;
   std::unique_ptr<Overlay> overlay_;
@@ -560,7 +560,7 @@ TEST(HeadlessOverlay, BetweenBuildsAFrameCopiesThePanelsAsBuiltAndAKeyOrTheClock
   b.frames = 987654;
   b.stalls = 321;
   const RgbImage built = f.Frame(a, 0.0);
-  const Box stats = StatsBox(), map = MinimapBox(OverlayFrames::kW);
+  const Box stats = StatsBox(), map = MinimapBox(800);
   // Within kRebuildS the panels are the ones built (their lines are this frame's)...
   const RgbImage copied = f.Frame(b, 0.25 * Overlay::kRebuildS);
   EXPECT_EQ(Differ(built, copied, std::nullopt), 0u);
@@ -602,10 +602,30 @@ TEST(HeadlessOverlay, AMultisampleFrameGetsThePanelsAsASingleSampleOne) {
     drawn = multi.Frame(s, 0.0, false);
   }
   ASSERT_EQ(drawn.rgb.size(), copied.rgb.size());
-  const Box stats = StatsBox(), map = MinimapBox(OverlayFrames::kW);
+  const Box stats = StatsBox(), map = MinimapBox(800);
   EXPECT_LT(Differ(copied, drawn, stats), 2000u);
   EXPECT_LT(Differ(copied, drawn, map), 1100u);
   EXPECT_EQ(Differ(copied, drawn, std::nullopt, {stats, map}), 0u);
+}
+
+TEST(HeadlessOverlay, InAFrameTooNarrowForBothPanelsTheMinimapShrinksBesideTheStatistics) {
+  OverlayStatus s;
+  s.server = "127.0.0.1:1";
+  s.scene = "default";
+  for (const auto& [w, h] : {std::pair{640, 360}, std::pair{1280, 720}}) {
+    OverlayFrames f(0, w, h);
+    ASSERT_TRUE(f.ok());
+    const RgbImage im = f.Frame(s, 0.0);
+    // Sky just right of the statistics panel, at the minimap's height: the two do not touch.
+    const int x = Overlay::kMargin + Overlay::kStatsWidth + 3, y = 3 * Overlay::kMargin;
+    const size_t i = (static_cast<size_t>(y) * w + x) * 3;
+    ASSERT_LT(i + 2, im.rgb.size());
+    const std::array<uint8_t, 3> sky = Renderer::SkyRgb();
+    EXPECT_EQ((std::array<uint8_t, 3>{im.rgb[i], im.rgb[i + 1], im.rgb[i + 2]}), sky) << w << "x" << h;
+    // And the minimap is there: its panel at the right edge.
+    const size_t j = (static_cast<size_t>(y) * w + (w - Overlay::kMargin - 5)) * 3;
+    EXPECT_NE((std::array<uint8_t, 3>{im.rgb[j], im.rgb[j + 1], im.rgb[j + 2]}), sky) << w << "x" << h;
+  }
 }
 
 TEST(HeadlessOverlay, ItsNumbersEqualTheJsonSummary) {
@@ -653,6 +673,11 @@ TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
   EXPECT_TRUE(has(l, "frame: viewcell PVS"));
   EXPECT_TRUE(has(l, "viewcell: none"));
   EXPECT_TRUE(has(l, "free walking"));
+  EXPECT_FALSE(has(l, "starting"));
+  s.starting_s = 3.2;
+  s.startup_timeout_s = 120.0;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "starting: waiting 3 s for the first viewcell's PVS and geometry (120 s at most)"));
+  s.starting_s = -1.0;
   s.link = OverlayStatus::Link::kReconnecting;
   s.lost_for_s = 3.3;
   s.backoff_s = 1.0;
