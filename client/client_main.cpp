@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -141,6 +142,9 @@ int main(int argc, char** argv) {
     // Unknown options first: a misspelt option often hides another complaint.
     const std::string unexpected = vistream::cli::UnexpectedArguments(app.remaining(), "vistream-client");
     return bad_option(unexpected.empty() ? e.what() : unexpected);
+  }
+  if (std::error_code ec; !o.catalog_dir.empty() && !std::filesystem::is_directory(o.catalog_dir, ec)) {
+    return bad_option("--catalog: '" + o.catalog_dir + "': no such folder");
   }
   if (!ValidAddress(o.server)) {
     return bad_option("--server: '" + o.server + "': expected HOST:PORT with a port from 1 to 65535");

@@ -474,13 +474,14 @@ TEST(WindowOptions, BadOverlayAndPictureOptionsExitTwoNamingTheOption) {
   const std::string dir = TempDir("options");
   struct Case {
     std::vector<std::string> args;
-    const char* says;
+    std::string says;
   };
   const Case cases[] = {
       {{"--msaa", "99"}, "--msaa"},
       {{"--msaa", "-1"}, "--msaa"},
       {{"--overlay", "--no-overlay"}, "--overlay: cannot be given with --no-overlay"},
       {{"--headless", "--overlay-dump", dir + "/o.txt"}, "--overlay-dump: headless, needs --overlay"},
+      {{"--catalog", dir + "/nowhere"}, "--catalog: '" + dir + "/nowhere': no such folder"},
   };
   for (const Case& c : cases) {
     std::vector<std::string> argv{VISTREAM_CLIENT_BIN, "--server", "127.0.0.1:1"};
