@@ -468,6 +468,8 @@ absl::Status Overlay::Impl::Draw(const ImDrawData* d, bool rebuilt) {
 bool Overlay::Impl::MouseOverPanel() const {
   if (window == nullptr || rects.empty()) return false;
   auto* w = static_cast<GLFWwindow*>(window);
+  // Looking around (the cursor captured), the cursor is nowhere on the window.
+  if (glfwGetInputMode(w, GLFW_CURSOR) == GLFW_CURSOR_DISABLED) return false;
   double x = 0.0, y = 0.0;
   int ww = 0, wh = 0;
   glfwGetCursorPos(w, &x, &y);
