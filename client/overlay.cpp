@@ -65,6 +65,9 @@ constexpr ImGuiWindowFlags kFixed = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_N
                                     ImGuiWindowFlags_NoNav;
 constexpr ImGuiWindowFlags kPanel = kFixed | ImGuiWindowFlags_NoFocusOnAppearing | ImGuiWindowFlags_NoScrollbar;
 
+// The minimap's ground where there are no viewcells (and the lines between cells).
+constexpr std::array<uint8_t, 3> kBeyondGrid{30, 32, 36};
+
 // A window in the middle of a `width` x `height` frame (the key list, the walk list).
 bool BeginCentred(const char* title, int width, int height) {
   ImGui::SetNextWindowPos(ImVec2(0.5f * static_cast<float>(width), 0.5f * static_cast<float>(height)), ImGuiCond_Always,
@@ -556,15 +559,18 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
     ImGui::Dummy(ImVec2(px, px));
     ImDrawList* dl = ImGui::GetWindowDrawList();
     const ImVec2 lo = origin, hi(origin.x + px, origin.y + px);
-    dl->AddRectFilled(lo, hi, IM_COL32(30, 32, 36, 255));
+    dl->AddRectFilled(lo, hi, Rgb(kBeyondGrid));
     dl->PushClipRect(lo, hi, true);
     const double scale = px / (2.0 * map.radius_m);  // pixels a metre
     const ImVec2 centre(origin.x + 0.5f * px, origin.y + 0.5f * px);
     auto to_map = [&](double x, double y) {
       return ImVec2(centre.x + static_cast<float>((x - s.eye.x) * scale), centre.y - static_cast<float>((y - s.eye.y) * scale));
     };
+    bool beyond_grid = true;  // the map shows ground without viewcells
     if (map.grid != nullptr && map.grid->nx > 0 && map.grid->ny > 0 && map.grid->cell_size > 0.0) {
       const GridInfo& g = *map.grid;
+      beyond_grid = s.eye.x - map.radius_m < g.x0 || s.eye.x + map.radius_m > g.x0 + g.nx * g.cell_size ||
+                    s.eye.y - map.radius_m < g.y0 || s.eye.y + map.radius_m > g.y0 + g.ny * g.cell_size;
       const int i0 = std::max(0, static_cast<int>(std::floor((s.eye.x - map.radius_m - g.x0) / g.cell_size)));
       const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((s.eye.x + map.radius_m - g.x0) / g.cell_size)));
       const int j0 = std::max(0, static_cast<int>(std::floor((s.eye.y - map.radius_m - g.y0) / g.cell_size)));
@@ -604,7 +610,8 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
     dl->AddLine(ImVec2(b0.x, b0.y - 4.0f), ImVec2(b0.x, b0.y + 4.0f), IM_COL32(255, 255, 255, 255), 2.0f);
     dl->AddLine(ImVec2(b1.x, b1.y - 4.0f), ImVec2(b1.x, b1.y + 4.0f), IM_COL32(255, 255, 255, 255), 2.0f);
     dl->AddText(ImVec2(b0.x, b0.y - 19.0f), IM_COL32(255, 255, 255, 255), absl::StrFormat("%.0f m", bar_m).c_str());
-    // North.
+    // North, on a backing like the scale bar's.
+    dl->AddRectFilled(ImVec2(hi.x - 20.0f, lo.y + 2.0f), ImVec2(hi.x - 4.0f, lo.y + 33.0f), IM_COL32(0, 0, 0, 150));
     dl->AddText(ImVec2(hi.x - 16.0f, lo.y + 4.0f), IM_COL32(255, 255, 255, 255), "N");
     dl->AddTriangleFilled(ImVec2(hi.x - 12.0f, lo.y + 22.0f), ImVec2(hi.x - 16.0f, lo.y + 30.0f),
                           ImVec2(hi.x - 8.0f, lo.y + 30.0f), IM_COL32(255, 255, 255, 255));
@@ -632,6 +639,7 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
     second();
     legend(MinimapColour(CellState::kNotListed), "not asked for");
     if (!map.walk.empty()) legend({240, 80, 200}, "walk followed");
+    if (beyond_grid) legend(kBeyondGrid, "outside the grid");
   }
   ImGui::End();
 }
