@@ -51,6 +51,7 @@ double Percentile(std::vector<double> v, double q) {
 struct Pumped {
   std::optional<uint32_t> cell;
   const std::vector<uint32_t>* pvs = nullptr;
+  size_t missing = 0;  // of the PVS list, objects not here and uploaded
   bool complete = false;
 };
 
@@ -453,12 +454,11 @@ absl::StatusOr<Pumped> Loop::Pump(const glm::dvec3& eye, uint64_t upload_budget)
   if (p.cell.has_value()) p.pvs = store_->Pvs(*p.cell);
   static const std::vector<uint32_t> kNone;
   renderer_->Sync(*store_, p.pvs != nullptr ? *p.pvs : kNone, upload_budget);
-  if (opt_.draw_everything) {
-    p.complete = renderer_->pending_uploads() == 0;
-    return p;
+  if (p.pvs != nullptr) {
+    p.missing = static_cast<size_t>(
+        std::count_if(p.pvs->begin(), p.pvs->end(), [&](uint32_t id) { return !renderer_->Uploaded(id); }));
   }
-  p.complete = p.pvs != nullptr && std::all_of(p.pvs->begin(), p.pvs->end(),
-                                               [&](uint32_t id) { return renderer_->Uploaded(id); });
+  p.complete = opt_.draw_everything ? renderer_->pending_uploads() == 0 : p.pvs != nullptr && p.missing == 0;
   return p;
 }
 
@@ -632,8 +632,7 @@ OverlayStatus Loop::Status(const Pumped& p, const FrameStats& fs, const EpsilonM
   st.pvs_complete = p.complete;
   if (p.pvs != nullptr) {
     st.pvs_objects = p.pvs->size();
-    st.pvs_missing = static_cast<size_t>(
-        std::count_if(p.pvs->begin(), p.pvs->end(), [&](uint32_t id) { return !renderer_->Uploaded(id); }));
+    st.pvs_missing = p.missing;
   }
   st.held_objects = store_->objects().size();
   st.held_bytes = store_->held_bytes();
