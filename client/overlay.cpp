@@ -383,14 +383,31 @@ void Overlay::Impl::Measure(const ImDrawData* d) {
   for (int n = 0; n < d->CmdListsCount; ++n) {
     const ImDrawList* list = d->CmdLists[n];
     if (list->VtxBuffer.Size == 0) continue;
-    // A panel's draw list starts with its opaque, square background: its vertices' box.
+    // What the list draws: each command's triangles' box within its clip rectangle (a walk's
+    // line runs past the minimap, clipped), over the commands. A panel's list starts with its
+    // opaque, square background, so the whole box is opaque.
     float lo_x = FLT_MAX, lo_y = FLT_MAX, hi_x = -FLT_MAX, hi_y = -FLT_MAX;
-    for (const ImDrawVert& v : list->VtxBuffer) {
-      lo_x = std::min(lo_x, v.pos.x);
-      lo_y = std::min(lo_y, v.pos.y);
-      hi_x = std::max(hi_x, v.pos.x);
-      hi_y = std::max(hi_y, v.pos.y);
+    for (const ImDrawCmd& cmd : list->CmdBuffer) {
+      if (cmd.UserCallback != nullptr || cmd.ElemCount == 0) continue;
+      float cx0 = FLT_MAX, cy0 = FLT_MAX, cx1 = -FLT_MAX, cy1 = -FLT_MAX;
+      for (unsigned k = cmd.IdxOffset; k < cmd.IdxOffset + cmd.ElemCount; ++k) {
+        const ImVec2& v = list->VtxBuffer[static_cast<int>(cmd.VtxOffset + list->IdxBuffer[static_cast<int>(k)])].pos;
+        cx0 = std::min(cx0, v.x);
+        cy0 = std::min(cy0, v.y);
+        cx1 = std::max(cx1, v.x);
+        cy1 = std::max(cy1, v.y);
+      }
+      cx0 = std::max(cx0, cmd.ClipRect.x);
+      cy0 = std::max(cy0, cmd.ClipRect.y);
+      cx1 = std::min(cx1, cmd.ClipRect.z);
+      cy1 = std::min(cy1, cmd.ClipRect.w);
+      if (cx1 <= cx0 || cy1 <= cy0) continue;
+      lo_x = std::min(lo_x, cx0);
+      lo_y = std::min(lo_y, cy0);
+      hi_x = std::max(hi_x, cx1);
+      hi_y = std::max(hi_y, cy1);
     }
+    if (hi_x <= lo_x || hi_y <= lo_y) continue;
     const Rect r{std::max(0, static_cast<int>(std::floor((lo_x - off.x) * scale.x))),
                  std::max(0, static_cast<int>(std::floor((lo_y - off.y) * scale.y))),
                  std::min(fb_w, static_cast<int>(std::ceil((hi_x - off.x) * scale.x))),

@@ -842,7 +842,7 @@ absl::Status Loop::Walkthrough() {
       const uint64_t frames = opt_.frames > 0 ? opt_.frames : (opt_.headless ? 1 : ~uint64_t{0});
       last = last || sum_->frames + 1 >= frames;
     } else if (input_ != nullptr) {
-      const double dt = std::clamp(begin - prev_begin, 1e-3, 0.1);
+      const double dt = std::clamp(frame_period, 1e-3, 0.1);
       glm::dvec3 eye = camera_.eye;
       input_->Update(dt, free_speed * rate_, &eye, &camera_.yaw_rad, &camera_.pitch_rad, overlay_->WantsMouse());
       // The PVSs hold inside the grid: the eye stays in it.
@@ -991,9 +991,10 @@ absl::Status Loop::Walkthrough() {
                    static_cast<unsigned long long>(triangles_without_masks),
                    use_mask != nullptr ? use_mask->mask_id : 0u);
     }
-    if (walk_.has_value() && t >= next_progress * 0.1 * walk_limit_s_ && next_progress <= 9) {
+    // Where on the walk (its clock: paused, faster, restarted), not the run's time.
+    if (walk_.has_value() && walk_t_ >= next_progress * 0.1 * walk_limit_s_ && next_progress <= 9) {
       Log(absl::StrFormat("walk %d%%: %.0f of %.0f s, %d frames, %d stalls, %.1f MB held", next_progress * 10,
-                          t, walk_limit_s_, sum_->frames, sum_->stalls, store_->held_bytes() / 1e6));
+                          walk_t_, walk_limit_s_, sum_->frames, sum_->stalls, store_->held_bytes() / 1e6));
       ++next_progress;
     }
     if (input_ != nullptr) {

@@ -199,6 +199,12 @@ class WindowClient {
   std::string out() const { return ReadFile(dir_ + "/out.txt"); }
 
   void Key(const std::string& key) { x_.Xdotool("key --clearmodifiers " + key); }
+  // Holds `key` down for `seconds`.
+  void Hold(const std::string& key, double seconds) {
+    x_.Xdotool("keydown " + key);
+    Sleep(seconds);
+    x_.Xdotool("keyup " + key);
+  }
 
   // The frame log's rows: (x, y) of each frame drawn, and whether it stalled.
   struct Row {
@@ -395,6 +401,12 @@ TEST_F(WindowTest, PThenEnterFollowsAWalkAndSpacePausesIt) {
   Sleep(1.5);
   EXPECT_LT(glm::length(at() - left), 0.01) << "still following after a movement key";
   EXPECT_NE(c.err().find("left the walk"), std::string::npos) << c.err();
+  // Free walking: W held for 1.5 s at 7.5 km/h (2.1 m/s) walks about 3 m.
+  c.Hold("w", 1.5);
+  Sleep(0.5);
+  const double walked = glm::length(at() - left);
+  EXPECT_GT(walked, 1.5) << "W held for 1.5 s";
+  EXPECT_LT(walked, 6.0) << "W held for 1.5 s";
   c.Key("q");
   EXPECT_EQ(c.child().Wait(30.0), 0) << c.err();
   const std::string dump = ReadFile(dir + "/overlay.txt");
@@ -530,10 +542,10 @@ class OverlayFrames {
   Overlay& overlay() { return *overlay_; }
   // One frame with `status`, `dt_s` after the last, the panels over the resolved frame (as the
   // client draws) or, `!resolve_first`, into the multisample one; its picture.
-  RgbImage Frame(const OverlayStatus& status, double dt_s, bool resolve_first = true) {
+  RgbImage Frame(const OverlayStatus& status, double dt_s, bool resolve_first = true, const MinimapView& map = {}) {
     renderer_->Draw(store_, camera_, {}, nullptr, ++frame_, nullptr);
     if (resolve_first) renderer_->Resolve();
-    absl::StatusOr<OverlayRequest> req = overlay_->Frame(status, MinimapView{}, {}, w_, h_, dt_s);
+    absl::StatusOr<OverlayRequest> req = overlay_->Frame(status, map, {}, w_, h_, dt_s);
     EXPECT_TRUE(req.ok()) << req.status();
     absl::StatusOr<std::vector<uint8_t>> rgb = renderer_->ReadRgb();
     EXPECT_TRUE(rgb.ok()) << rgb.status();
@@ -627,6 +639,31 @@ TEST(HeadlessOverlay, InAFrameTooNarrowForBothPanelsTheMinimapShrinksBesideTheSt
     const size_t j = (static_cast<size_t>(y) * w + (w - Overlay::kMargin - 5)) * 3;
     EXPECT_NE((std::array<uint8_t, 3>{im.rgb[j], im.rgb[j + 1], im.rgb[j + 2]}), sky) << w << "x" << h;
   }
+}
+
+TEST(HeadlessOverlay, AWalkRunningPastTheMinimapIsClippedToIt) {
+  OverlayStatus s;
+  s.server = "127.0.0.1:1";
+  s.scene = "default";
+  s.eye = {500.0, 200.0, 1.7};
+  RgbImage without, with;
+  {
+    OverlayFrames f(0);
+    ASSERT_TRUE(f.ok());
+    without = f.Frame(s, 0.0);
+  }
+  {
+    OverlayFrames f(0);
+    ASSERT_TRUE(f.ok());
+    MinimapView map;
+    map.walk = {{-5000.0, 150.0}, {500.0, 200.0}, {600.0, 9000.0}};  // far past the map, west and north
+    with = f.Frame(s, 0.0, true, map);
+  }
+  // The minimap's column (its legend grows by the walk's row): the line clipped to the map
+  // leaves everything left of it as it was.
+  const Box column{MinimapBox(800).x0, 0, 800, 600};
+  EXPECT_GT(Differ(without, with, column), 100u);  // the line on the map
+  EXPECT_EQ(Differ(without, with, std::nullopt, {column}), 0u);
 }
 
 TEST(HeadlessOverlay, ItsNumbersEqualTheJsonSummary) {
