@@ -546,9 +546,10 @@ void Overlay::Impl::StatsPanel(const OverlayStatus& s) {
           ms.push_back(f.frame_ms);
           top = std::max(top, f.frame_ms);
         }
-        const std::string label = absl::StrFormat("frame ms, last %.0f s (0-%.0f)", kHistoryS, top);
-        ImGui::PlotLines("##frame_ms", ms.data(), static_cast<int>(ms.size()), 0, label.c_str(), 0.0f, top,
-                         ImVec2(static_cast<float>(kStatsWidth) - 20.0f, 48.0f));
+        // Its label above it, clear of the line.
+        ImGui::TextDisabled("frame time, last %.0f s (0 to %.0f ms)", kHistoryS, top);
+        ImGui::PlotLines("##frame_ms", ms.data(), static_cast<int>(ms.size()), 0, nullptr, 0.0f, top,
+                         ImVec2(static_cast<float>(kStatsWidth) - 20.0f, 40.0f));
       }
       if (line.rfind("held ", 0) == 0 && s.memory_budget_bytes > 0) {
         const float f = static_cast<float>(static_cast<double>(s.held_bytes) / static_cast<double>(s.memory_budget_bytes));

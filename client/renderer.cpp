@@ -109,6 +109,15 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* contex
   r->width_ = width;
   r->height_ = height;
   r->samples_ = samples;
+  if (samples > 0) {
+    GLint most = 0;
+    r->gl_.GetIntegerv(GL_MAX_SAMPLES, &most);
+    if (samples > most) {
+      return absl::InvalidArgumentError(absl::StrCat("renderer: ", samples, " samples asked for; this OpenGL (",
+                                                     reinterpret_cast<const char*>(r->gl_.GetString(GL_RENDERER)),
+                                                     ") takes at most ", most, " (--msaa)"));
+    }
+  }
   if (absl::Status s = r->Init(offscreen); !s.ok()) return s;
   return r;
 }

@@ -62,7 +62,8 @@ class Renderer {
   // window's. Errors: GL failing (shaders, framebuffer).
   // `samples`: multisample antialiasing (0 none, up to 16): the frame is drawn into a
   // multisample framebuffer of the renderer's and resolved (Resolve) into the single-sample one
-  // that is read or shown (off-screen its own, else the window's).
+  // that is read or shown (off-screen its own, else the window's). Errors (INVALID_ARGUMENT):
+  // more samples than the OpenGL takes (GL_MAX_SAMPLES; llvmpipe 4).
   static absl::StatusOr<std::unique_ptr<Renderer>> Create(gl::GlContext* context, int width, int height,
                                                           bool offscreen, int samples = 0);
   ~Renderer();

@@ -341,7 +341,7 @@ absl::Status Loop::Prepare() {
 
   if (!opt_.frame_log.empty()) {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
-    if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing"));
+    if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing (--frame-log)"));
     // A line at a time, so that the log can be followed while the client runs (tail -f, tests).
     std::setvbuf(frame_log_, nullptr, _IOLBF, 0);
     std::fprintf(frame_log_,
@@ -356,12 +356,12 @@ absl::Status Loop::Prepare() {
   }
   if (!opt_.cell_log.empty()) {
     cell_log_ = std::fopen(opt_.cell_log.c_str(), "w");
-    if (cell_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.cell_log, ": cannot open for writing"));
+    if (cell_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.cell_log, ": cannot open for writing (--cell-log)"));
   }
   if (!opt_.screenshots_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(opt_.screenshots_dir, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(opt_.screenshots_dir, ": cannot create: ", ec.message()));
+    if (ec) return absl::UnavailableError(absl::StrCat(opt_.screenshots_dir, ": cannot create: ", ec.message(), " (--screenshots)"));
   }
 
   ConnectionOptions co;

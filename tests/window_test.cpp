@@ -666,6 +666,21 @@ TEST(HeadlessOverlay, AWalkRunningPastTheMinimapIsClippedToIt) {
   EXPECT_EQ(Differ(without, with, std::nullopt, {column}), 0u);
 }
 
+TEST(HeadlessPicture, MoreSamplesThanTheOpenGLTakesIsAnErrorNamingTheMost) {
+  absl::StatusOr<std::unique_ptr<gl::GlContext>> c = gl::GlContext::CreateOffscreen();
+  ASSERT_TRUE(c.ok()) << c.status();
+  GLint most = 0;
+  (*c)->functions().GetIntegerv(GL_MAX_SAMPLES, &most);
+  ASSERT_GT(most, 0);
+  ASSERT_LT(most, 16) << "this OpenGL takes every sample count --msaa allows";
+  absl::StatusOr<std::unique_ptr<Renderer>> r = Renderer::Create(c->get(), 64, 64, true, most + 1);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find(absl::StrCat("takes at most ", most, " (--msaa)")), std::string::npos)
+      << r.status();
+  EXPECT_TRUE(Renderer::Create(c->get(), 64, 64, true, most).ok());
+}
+
 TEST(HeadlessOverlay, ItsNumbersEqualTheJsonSummary) {
   auto server = StartServer();
   ASSERT_NE(server, nullptr);
