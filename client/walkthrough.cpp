@@ -816,6 +816,8 @@ absl::Status Loop::Walkthrough() {
     if (!paused_) walk_t_ += (t - prev_t) * rate_;
     prev_t = t;
     bool last = opt_.seconds > 0.0 && t >= opt_.seconds;  // walks clamp to it below
+    // The window closed (Q, its close button): one more frame, the last, with its screenshot.
+    if (input_ != nullptr && input_->ShouldClose()) last = true;
     const bool cancel = Cancelled();
     if (cancel) {
       sum_->cancelled = true;
@@ -1015,7 +1017,6 @@ absl::Status Loop::Walkthrough() {
             fs.triangles_drawn, triangles_without_masks, sum_->stalls, sum_->hole_frames));
         last_title = end;
       }
-      if (input_->ShouldClose()) last = true;
     }
     paused += Now() - pause_begin;
     if (last) break;

@@ -407,8 +407,10 @@ TEST_F(WindowTest, PThenEnterFollowsAWalkAndSpacePausesIt) {
   const double walked = glm::length(at() - left);
   EXPECT_GT(walked, 1.5) << "W held for 1.5 s";
   EXPECT_LT(walked, 6.0) << "W held for 1.5 s";
+  const size_t shots = c.Shots().size();
   c.Key("q");
   EXPECT_EQ(c.child().Wait(30.0), 0) << c.err();
+  EXPECT_EQ(c.Shots().size(), shots + 1) << "Q: --screenshots takes the last frame";
   const std::string dump = ReadFile(dir + "/overlay.txt");
   EXPECT_NE(dump.find("free walking at 7.5 km/h"), std::string::npos) << dump;
 }
