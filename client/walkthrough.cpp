@@ -1171,7 +1171,8 @@ std::string SummaryText(const WalkthroughSummary& s) {
   std::string out = absl::StrFormat(
       "walkthrough of %s%s: %d frames in %.1f s (%.1f fps; frame time p50 %.1f ms, p99 %.1f ms), %.0f m walked, "
       "%d viewcells\n",
-      s.scene, s.path.empty() ? "" : absl::StrCat(" along '", s.path, "'"), s.frames, s.walk_s, s.fps,
+      s.scene.empty() ? std::string("no scene (stopped before the server said which)") : s.scene,
+      s.path.empty() ? "" : absl::StrCat(" along '", s.path, "'"), s.frames, s.walk_s, s.fps,
       s.frame_ms_p50, s.frame_ms_p99, s.distance_m, s.cells_visited);
   absl::StrAppendFormat(&out, "  stalls: %d (%.2f s); first viewcell after %.1f s\n", s.stalls, s.stall_s,
                         s.startup_s);
