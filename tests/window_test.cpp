@@ -564,6 +564,12 @@ class OverlayFrames {
   uint64_t frame_ = 0;
 };
 
+// The first frame of a new 800 x 600 overlay with `samples`; empty when the context failed.
+RgbImage OneFrame(int samples, const OverlayStatus& s, bool resolve_first, const MinimapView& map) {
+  OverlayFrames f(samples);
+  return f.ok() ? f.Frame(s, 0.0, resolve_first, map) : RgbImage{};
+}
+
 TEST(HeadlessOverlay, BetweenBuildsAFrameCopiesThePanelsAsBuiltAndAKeyOrTheClockRebuildsThem) {
   OverlayFrames f(0);
   ASSERT_TRUE(f.ok());
@@ -605,17 +611,9 @@ TEST(HeadlessOverlay, AMultisampleFrameGetsThePanelsAsASingleSampleOne) {
   s.server = "127.0.0.1:1";
   s.scene = "default";
   s.frames = 10;
-  RgbImage copied, drawn;
-  {
-    OverlayFrames single(0);
-    ASSERT_TRUE(single.ok());
-    copied = single.Frame(s, 0.0);
-  }
-  {
-    OverlayFrames multi(4);
-    ASSERT_TRUE(multi.ok());
-    drawn = multi.Frame(s, 0.0, false);
-  }
+  const RgbImage copied = OneFrame(0, s, true, {});
+  const RgbImage drawn = OneFrame(4, s, false, {});
+  ASSERT_FALSE(copied.rgb.empty());
   ASSERT_EQ(drawn.rgb.size(), copied.rgb.size());
   const Box stats = StatsBox(), map = MinimapBox(800);
   EXPECT_LT(Differ(copied, drawn, stats), 2000u);
@@ -648,19 +646,12 @@ TEST(HeadlessOverlay, AWalkRunningPastTheMinimapIsClippedToIt) {
   s.server = "127.0.0.1:1";
   s.scene = "default";
   s.eye = {500.0, 200.0, 1.7};
-  RgbImage without, with;
-  {
-    OverlayFrames f(0);
-    ASSERT_TRUE(f.ok());
-    without = f.Frame(s, 0.0);
-  }
-  {
-    OverlayFrames f(0);
-    ASSERT_TRUE(f.ok());
-    MinimapView map;
-    map.walk = {{-5000.0, 150.0}, {500.0, 200.0}, {600.0, 9000.0}};  // far past the map, west and north
-    with = f.Frame(s, 0.0, true, map);
-  }
+  const RgbImage without = OneFrame(0, s, true, {});
+  MinimapView map;
+  map.walk = {{-5000.0, 150.0}, {500.0, 200.0}, {600.0, 9000.0}};  // far past the map, west and north
+  const RgbImage with = OneFrame(0, s, true, map);
+  ASSERT_FALSE(with.rgb.empty());
+  ASSERT_EQ(with.rgb.size(), without.rgb.size());
   // The minimap's column (its legend grows by the walk's row): the line clipped to the map
   // leaves everything left of it as it was.
   const Box column{MinimapBox(800).x0, 0, 800, 600};
