@@ -19,6 +19,14 @@ WindowInput::WindowInput(void* window) : window_(window) {
     OnKey(w, key, scancode, action, mods);
   });
   glfwSetCharCallback(W(window), [](GLFWwindow* w, unsigned c) { OnChar(w, c); });
+  glfwSetMouseButtonCallback(W(window), [](GLFWwindow* w, int button, int action, int mods) {
+    OnMouseButton(w, button, action, mods);
+  });
+}
+
+void WindowInput::OnMouseButton(void* window, int button, int action, int /*mods*/) {
+  auto* self = static_cast<WindowInput*>(glfwGetWindowUserPointer(W(window)));
+  if (self != nullptr && button == GLFW_MOUSE_BUTTON_LEFT && action == GLFW_PRESS) self->clicked_ = true;
 }
 
 void WindowInput::OnKey(void* window, int key, int /*scancode*/, int action, int mods) {
@@ -73,7 +81,9 @@ bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* y
   GLFWwindow* w = W(window_);
   auto down = [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; };
   bool moved = false;
-  if (!captured_ && !ui_has_mouse && glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+  // A click (pressed and released between two frames) or the button held.
+  const bool clicked = std::exchange(clicked_, false);
+  if (!captured_ && !ui_has_mouse && (clicked || glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS)) {
     captured_ = true;
     glfwSetInputMode(w, GLFW_CURSOR, GLFW_CURSOR_DISABLED);
     glfwGetCursorPos(w, &last_x_, &last_y_);

@@ -45,6 +45,7 @@ class WindowInput {
  private:
   static void OnKey(void* window, int key, int scancode, int action, int mods);
   static void OnChar(void* window, unsigned codepoint);
+  static void OnMouseButton(void* window, int button, int action, int mods);
 
   void* window_;
   std::vector<KeyPress> keys_;
@@ -52,6 +53,7 @@ class WindowInput {
   bool full_screen_ = false;
   int windowed_x_ = 0, windowed_y_ = 0, windowed_w_ = 0, windowed_h_ = 0;
   bool captured_ = false;
+  bool clicked_ = false;  // the left button pressed since the last Update (a click within a frame)
   double last_x_ = 0.0, last_y_ = 0.0;
 };
 
