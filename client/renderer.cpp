@@ -113,9 +113,10 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* contex
     GLint most = 0;
     r->gl_.GetIntegerv(GL_MAX_SAMPLES, &most);
     if (samples > most) {
+      const auto* name = reinterpret_cast<const char*>(r->gl_.GetString(GL_RENDERER));
       return absl::InvalidArgumentError(absl::StrCat("renderer: ", samples, " samples asked for; this OpenGL (",
-                                                     reinterpret_cast<const char*>(r->gl_.GetString(GL_RENDERER)),
-                                                     ") takes at most ", most, " (--msaa)"));
+                                                     name != nullptr ? name : "unnamed", ") takes at most ", most,
+                                                     " (--msaa)"));
     }
   }
   if (absl::Status s = r->Init(offscreen); !s.ok()) return s;
