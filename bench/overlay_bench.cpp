@@ -71,7 +71,8 @@ void BM_Frame(benchmark::State& state) {
     state.SkipWithError("no OSMesa context");
     return;
   }
-  absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(context->get(), 1280, 720, true, static_cast<int>(state.range(1)));
+  absl::StatusOr<std::unique_ptr<Renderer>> renderer =
+      Renderer::Create(context->get(), 1280, 720, true, static_cast<int>(state.range(1)));
   if (!renderer.ok()) {
     state.SkipWithError("no renderer");
     return;
@@ -153,7 +154,12 @@ void BM_Frame(benchmark::State& state) {
   }
   state.counters["overlay_ms"] = benchmark::Counter(overlay_s * 1000.0, benchmark::Counter::kAvgIterations);
 }
-BENCHMARK(BM_Frame)->ArgNames({"overlay", "msaa"})->ArgsProduct({{0, 1, 2}, {0, 4}})->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+BENCHMARK(BM_Frame)
+    ->ArgNames({"overlay", "msaa"})
+    ->ArgsProduct({{0, 1, 2}, {0, 4}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(3.0);
 
 }  // namespace
 }  // namespace vistream::client

@@ -172,10 +172,10 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
   out.push_back(absl::StrFormat("received %s, %.2f MB/s", Megabytes(s.bytes_received), bytes_per_s / 1e6));
   out.push_back(absl::StrFormat("frames %d, stalls %d (%.2f s), holes %d", s.frames, s.stalls, s.stall_s,
                                 s.hole_frames));
-  out.push_back(absl::StrFormat("masked frames %d (%.1f%%), masks %d", s.frames_masked,
-                                // Rounded down: 100.0% only when every frame was.
-                                s.frames > 0 ? std::floor(1000.0 * static_cast<double>(s.frames_masked) / s.frames) / 10.0
-                                             : 0.0,
+  // Rounded down: 100.0% only when every frame was.
+  const double masked_percent =
+      s.frames > 0 ? std::floor(1000.0 * static_cast<double>(s.frames_masked) / s.frames) / 10.0 : 0.0;
+  out.push_back(absl::StrFormat("masked frames %d (%.1f%%), masks %d", s.frames_masked, masked_percent,
                                 s.masks_received));
   if (!s.walk.empty()) {
     out.push_back(absl::StrFormat("walk '%s' %.0f of %.0f s at %.1f km/h%s", s.walk, s.walk_t_s, s.walk_duration_s,
@@ -498,7 +498,8 @@ bool Overlay::Impl::MouseOverPanel() const {
   // Window coordinates onto the framebuffer's pixels (a HiDPI window has more).
   x *= static_cast<double>(fb_w) / ww;
   y *= static_cast<double>(fb_h) / wh;
-  return std::any_of(rects.begin(), rects.end(), [&](const Rect& r) { return x >= r.x0 && x < r.x1 && y >= r.y0 && y < r.y1; });
+  return std::any_of(rects.begin(), rects.end(),
+                     [&](const Rect& r) { return x >= r.x0 && x < r.x1 && y >= r.y0 && y < r.y1; });
 }
 
 std::pair<size_t, double> Overlay::Impl::LastSecond() const {
@@ -571,7 +572,8 @@ void Overlay::Impl::Minimap(const OverlayStatus& s, const MinimapView& map, int 
   if (ImGui::Begin("minimap", nullptr, kPanel | ImGuiWindowFlags_NoTitleBar)) {
     // Wrapped at the map's width, so that the window keeps it.
     ImGui::PushTextWrapPos(ImGui::GetCursorPosX() + px);
-    ImGui::TextWrapped("%s", window != nullptr ? "Viewcells around the eye (M), north up" : "Viewcells around the eye, north up");
+    ImGui::TextWrapped("%s", window != nullptr ? "Viewcells around the eye (M), north up"
+                                               : "Viewcells around the eye, north up");
     ImGui::PopTextWrapPos();
     const ImVec2 origin = ImGui::GetCursorScreenPos();
     ImGui::Dummy(ImVec2(px, px));

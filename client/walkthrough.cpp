@@ -341,7 +341,9 @@ absl::Status Loop::Prepare() {
 
   if (!opt_.frame_log.empty()) {
     frame_log_ = std::fopen(opt_.frame_log.c_str(), "w");
-    if (frame_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing (--frame-log)"));
+    if (frame_log_ == nullptr) {
+      return absl::UnavailableError(absl::StrCat(opt_.frame_log, ": cannot open for writing (--frame-log)"));
+    }
     // A line at a time, so that the log can be followed while the client runs (tail -f, tests).
     std::setvbuf(frame_log_, nullptr, _IOLBF, 0);
     std::fprintf(frame_log_,
@@ -356,12 +358,17 @@ absl::Status Loop::Prepare() {
   }
   if (!opt_.cell_log.empty()) {
     cell_log_ = std::fopen(opt_.cell_log.c_str(), "w");
-    if (cell_log_ == nullptr) return absl::UnavailableError(absl::StrCat(opt_.cell_log, ": cannot open for writing (--cell-log)"));
+    if (cell_log_ == nullptr) {
+      return absl::UnavailableError(absl::StrCat(opt_.cell_log, ": cannot open for writing (--cell-log)"));
+    }
   }
   if (!opt_.screenshots_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(opt_.screenshots_dir, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(opt_.screenshots_dir, ": cannot create: ", ec.message(), " (--screenshots)"));
+    if (ec) {
+      return absl::UnavailableError(
+          absl::StrCat(opt_.screenshots_dir, ": cannot create: ", ec.message(), " (--screenshots)"));
+    }
   }
 
   ConnectionOptions co;
@@ -1068,7 +1075,9 @@ absl::Status Loop::Run() {
   sum_->masks_received = masks_seen_;
   if (overlay_dump_ != nullptr) {
     bool failed = false;
-    for (const std::string& line : overlay_lines_) failed = failed || std::fprintf(overlay_dump_, "%s\n", line.c_str()) < 0;
+    for (const std::string& line : overlay_lines_) {
+      failed = failed || std::fprintf(overlay_dump_, "%s\n", line.c_str()) < 0;
+    }
     if ((std::fclose(overlay_dump_) != 0 || failed) && s.ok()) {
       s = absl::DataLossError(absl::StrCat(opt_.overlay_dump, ": writing the overlay's lines failed (--overlay-dump)"));
     }

@@ -20,7 +20,8 @@ class WindowInput {
   // Reads the keys and the mouse and moves the eye by `dt` seconds at `speed_mps` (xy only:
   // the eye keeps its height). Returns whether any key or the mouse moved the camera.
   // `ui_has_mouse`: the overlay's panels want the mouse (a click on them does not start mouse look).
-  bool Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad, bool ui_has_mouse = false);
+  bool Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad,
+              bool ui_has_mouse = false);
   // Processes window events (call once a frame).
   void Poll();
   bool ShouldClose() const;

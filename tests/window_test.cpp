@@ -732,7 +732,8 @@ TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
   EXPECT_FALSE(has(l, "starting"));
   s.starting_s = 3.2;
   s.startup_timeout_s = 120.0;
-  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "starting: waiting 3 s for the first viewcell's PVS and geometry (120 s at most)"));
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0),
+                  "starting: waiting 3 s for the first viewcell's PVS and geometry (120 s at most)"));
   s.starting_s = -1.0;
   s.link = OverlayStatus::Link::kReconnecting;
   s.lost_for_s = 3.3;
