@@ -1,5 +1,7 @@
 #include "client/cell_margins.h"
 
+#include "client/cell_completion.h"
+
 #include <algorithm>
 
 #include <absl/strings/str_format.h>
@@ -14,7 +16,7 @@ void CellMargins::Observe(double t_s, const std::map<uint32_t, std::vector<uint3
     it = lists.count(it->first) == 0 ? complete_since_.erase(it) : std::next(it);
   }
   for (const auto& [cell, objects] : lists) {
-    const bool complete = std::all_of(objects.begin(), objects.end(), ready);
+    const bool complete = CellComplete(&objects, ready);
     if (!complete) {
       complete_since_.erase(cell);
     } else if (complete_since_.count(cell) == 0) {

@@ -3,7 +3,7 @@
 // enters, when it entered, when the cell's PVS was complete (its list and every object on it
 // held and uploaded), and the margin between the two: positive when the geometry was there
 // first, negative when the client walked in before it (a stall). The discrete-event simulator
-// (server/simulator.h) reports the same records for the same walk.
+// (simulation/simulator.h) reports the same records for the same walk.
 
 #include <cstdint>
 #include <functional>

@@ -31,10 +31,13 @@ std::chrono::system_clock::time_point After(double seconds) {
   return std::chrono::system_clock::now() + std::chrono::microseconds(static_cast<int64_t>(seconds * 1e6));
 }
 
-void SetVec(const glm::dvec3& v, v1::Vec3* out) {
-  out->set_x(v.x);
-  out->set_y(v.y);
-  out->set_z(v.z);
+double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+std::chrono::steady_clock::time_point SteadyAt(double seconds) {
+  return std::chrono::steady_clock::time_point(
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(seconds)));
 }
 
 // Statuses after which reconnecting cannot help: the server refused this client's input.
@@ -122,7 +125,7 @@ absl::StatusOr<std::string> PickScene(const v1::ServerStats& stats, const std::s
 
 Connection::Connection(ConnectionOptions options)
     : options_(std::move(options)), channel_(MakeChannel(options_.address, options_.security)),
-      stub_(v1::Walkthrough::NewStub(channel_)) {}
+      stub_(v1::Walkthrough::NewStub(channel_)), credit_(options_.credit_window_bytes) {}
 
 Connection::~Connection() { (void)Stop(); }
 
@@ -133,12 +136,9 @@ void Connection::Start() {
 
 void Connection::SetPose(const glm::dvec3& position, const glm::dvec3& velocity, double yaw_rad, double pitch_rad,
                          double client_time_s) {
+  v1::Pose pose = MakePose(position, velocity, yaw_rad, pitch_rad, client_time_s);
   std::lock_guard lock(mu_);
-  pose_.set_client_time_s(client_time_s);
-  SetVec(position, pose_.mutable_position());
-  SetVec(velocity, pose_.mutable_velocity());
-  pose_.set_yaw_rad(static_cast<float>(yaw_rad));
-  pose_.set_pitch_rad(static_cast<float>(pitch_rad));
+  pose_ = std::move(pose);
   have_pose_ = true;
 }
 
@@ -224,49 +224,42 @@ grpc::Status Connection::RunSession(bool* answered) {
   grpc::ClientContext context;
   Authorize(options_.security, &context);
   auto stream = stub_->Session(&context);
-  v1::ClientMessage hello;
+  v1::ClientMessage hello, credit;
   {
     std::lock_guard lock(mu_);
     context_ = &context;
     reader_done_ = false;
-    consumed_since_grant_ = 0;
-    v1::Hello* h = hello.mutable_hello();
-    h->set_scene(options_.scene);
-    h->set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
-    h->set_memory_budget_bytes(options_.memory_budget_bytes);
-    h->set_triangle_budget(options_.triangle_budget);
-    h->set_epsilon_masks(options_.epsilon_masks);
-    h->mutable_held_objects()->Add(held_.begin(), held_.end());
+    HelloSettings settings;
+    settings.scene = options_.scene;
+    settings.memory_budget_bytes = options_.memory_budget_bytes;
+    settings.triangle_budget = options_.triangle_budget;
+    settings.epsilon_masks = options_.epsilon_masks;
+    settings.held_objects.assign(held_.begin(), held_.end());
+    hello = HelloMessage(settings);
+    credit = CreditMessage(credit_.Open());
   }
-  v1::ClientMessage credit;
-  credit.mutable_credit()->set_bytes(options_.credit_window_bytes);
   bool writing = stream->Write(hello) && stream->Write(credit);
   std::thread reader([&] { ReadLoop(stream.get()); });
 
-  const auto period = std::chrono::duration<double>(1.0 / std::max(0.1, options_.pose_rate_hz));
-  auto next_pose = std::chrono::steady_clock::now();
+  PoseCadence cadence(options_.pose_rate_hz);
+  cadence.Restart(SteadySeconds());
   bool stopping = false;
   while (writing) {
     v1::ClientMessage pose, grant;
     {
       std::unique_lock lock(mu_);
-      cv_.wait_until(lock, next_pose, [&] {
-        return stop_ || reader_done_ || consumed_since_grant_ >= options_.credit_window_bytes / 2;
-      });
+      cv_.wait_until(lock, SteadyAt(cadence.next_s()),
+                     [&] { return stop_ || reader_done_ || credit_.GrantDue(); });
       if (reader_done_) break;
       if (stop_) {
         stopping = true;
         break;
       }
-      if (consumed_since_grant_ >= options_.credit_window_bytes / 2) {
-        grant.mutable_credit()->set_bytes(consumed_since_grant_);
-        consumed_since_grant_ = 0;
-      }
-      if (std::chrono::steady_clock::now() >= next_pose) {
-        next_pose += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-        if (next_pose < std::chrono::steady_clock::now()) next_pose = std::chrono::steady_clock::now();
+      if (credit_.GrantDue()) grant = CreditMessage(credit_.TakeGrant());
+      if (const double now = SteadySeconds(); cadence.Due(now)) {
+        cadence.Sent(now);
         if (have_pose_) {
-          *pose.mutable_pose() = pose_;
+          pose = PoseMessage(pose_);
           ++stats_.poses_sent;
         }
       }
@@ -309,11 +302,11 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
       case v1::ServerMessage::kEpsilonMask: {
         // The server charged the mask's triangle bytes to the credit: they are consumed, as
         // geometry is, or the credit would leak away and the session stall for good.
-        const uint64_t mask_bytes = m.epsilon_mask().triangles().size();
+        const uint64_t mask_bytes = ChargedBytes(m);
         std::lock_guard lock(mu_);
         ++stats_.masks_received;
         stats_.mask_bytes += mask_bytes;
-        consumed_since_grant_ += mask_bytes;
+        credit_.Consume(mask_bytes);
         event = std::move(*m.mutable_epsilon_mask());
         break;
       }
@@ -342,13 +335,13 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         o.mesh = std::move(*mesh);
         o.bounds_min = {g.bounds_min().x(), g.bounds_min().y(), g.bounds_min().z()};
         o.bounds_max = {g.bounds_max().x(), g.bounds_max().y(), g.bounds_max().z()};
-        o.raw_bytes = uint64_t{g.vertex_count()} * 24 + uint64_t{g.index_count()} * 4;
-        const uint64_t encoded = g.vertices().size() + g.indices().size();
+        o.raw_bytes = scenes::RawMeshBytes(g.vertex_count(), g.index_count());
+        const uint64_t encoded = ChargedBytes(m);
         std::lock_guard lock(mu_);
         if (!held_.insert(o.id).second) ++stats_.duplicates;
         ++stats_.objects_received;
         stats_.geometry_bytes += encoded;
-        consumed_since_grant_ += encoded;
+        credit_.Consume(encoded);
         event = std::move(o);
         break;
       }

@@ -26,6 +26,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "client/channel_security.h"
+#include "client/client_model.h"
 #include "proto/walkthrough.grpc.pb.h"
 #include "scenes/mesh.h"
 
@@ -36,8 +37,8 @@ struct ConnectionOptions {
   std::string scene;                   // Hello.scene: the name the server serves
   uint64_t memory_budget_bytes = 0;    // Hello: decoded bytes the client may hold; 0 unlimited
   uint64_t triangle_budget = 0;        // Hello: triangles per frame; 0 unlimited
-  double pose_rate_hz = 10.0;          // poses sent per second (the server allows 120)
-  uint64_t credit_window_bytes = uint64_t{8} << 20;  // encoded geometry and mask bytes in flight at most
+  double pose_rate_hz = kPoseRateHz;   // poses sent per second (the server allows 120)
+  uint64_t credit_window_bytes = CreditWindow::kDefaultBytes;  // encoded geometry and mask bytes in flight at most
   bool epsilon_masks = false;          // Hello: the client draws ε-masks (the server sends none otherwise)
   double connect_timeout_s = 10.0;     // per attempt
   double max_backoff_s = 4.0;          // reconnect back-off doubles from 0.25 s up to this
@@ -49,7 +50,7 @@ struct ReceivedObject {
   uint32_t id = 0;
   scenes::Mesh mesh;
   glm::dvec3 bounds_min{0.0}, bounds_max{0.0};
-  uint64_t raw_bytes = 0;  // vertex_count * 24 + index_count * 4: the server's accounting
+  uint64_t raw_bytes = 0;  // scenes::RawMeshBytes: the server's accounting
 };
 
 struct SessionEnded {
@@ -138,7 +139,7 @@ class Connection {
   bool have_pose_ = false;
   vistream::v1::Pose pose_;
   std::set<uint32_t> held_;            // received and not evicted: Hello.held_objects on resume
-  uint64_t consumed_since_grant_ = 0;  // encoded geometry and mask bytes since the last Credit
+  CreditWindow credit_;                // the session's grants (client/client_model.h)
   bool reader_done_ = false;
   grpc::ClientContext* context_ = nullptr;  // of the session in progress, for Stop/Drop
   ConnectionStats stats_;

@@ -6,6 +6,9 @@
 
 #include <absl/strings/str_cat.h>
 
+#include "client/cell_completion.h"
+#include "proto/scene_info.h"
+
 namespace vistream::client {
 
 namespace v1 = vistream::v1;
@@ -21,22 +24,6 @@ GridInfo GridInfo::From(const v1::ViewcellGrid& g) {
   out.ny = g.ny();
   out.band_z.assign(g.band_z().begin(), g.band_z().end());
   return out;
-}
-
-std::optional<std::string> GridInfo::Problem(const v1::ViewcellGrid& g) {
-  if (g.band_z().empty()) return std::nullopt;
-  const uint64_t cells = g.nx() > 0 && g.ny() > 0 ? uint64_t(g.nx()) * uint64_t(g.ny()) : 0;
-  if (uint64_t(g.band_z().size()) != 2 * cells) {
-    return absl::StrCat("the viewcell grid lists ", g.band_z().size(), " band values for ", cells, " cells (",
-                        2 * cells, " expected)");
-  }
-  for (int k = 0; k + 1 < g.band_z().size(); k += 2) {
-    const double z0 = g.band_z(k), z1 = g.band_z(k + 1);
-    if (!(std::isfinite(z0) && std::isfinite(z1) && z0 < z1)) {
-      return absl::StrCat("viewcell ", k / 2, "'s band [", z0, ", ", z1, "] is empty or not finite");
-    }
-  }
-  return std::nullopt;
 }
 
 std::optional<uint32_t> GridInfo::CellAt(double x, double y) const {
@@ -61,16 +48,18 @@ std::vector<uint32_t> GridInfo::Neighbourhood(uint32_t cell) const {
 std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optional<uint32_t> current_cell) {
   for (Event& e : events) {
     if (auto* info = std::get_if<v1::SceneInfo>(&e)) {
-      if (std::optional<std::string> problem = GridInfo::Problem(info->grid()); problem.has_value()) {
+      absl::StatusOr<visibility::ViewcellGrid> grid = GridFromSceneInfo(info->grid());
+      if (!grid.ok()) {
         if (!failure_.has_value()) {
-          failure_ = absl::StrCat("the server sent a malformed scene description: ", *problem);
+          failure_ = absl::StrCat("the server sent a malformed scene description: ", grid.status().message());
           bad_data_ = true;
         }
         continue;
       }
       scene_info_ = std::move(*info);
       grid_ = GridInfo::From(scene_info_->grid());
-      mask_bases_.Clear();  // a session starts here; its masks number from 1 again
+      cell_grid_ = *std::move(grid);
+      masks_.NewSession();  // a session starts here; its masks number from 1 again
     } else if (auto* pvs = std::get_if<v1::ViewcellPvs>(&e)) {
       pvs_[pvs->cell_id()].assign(pvs->object_ids().begin(), pvs->object_ids().end());
     } else if (auto* object = std::get_if<ReceivedObject>(&e)) {
@@ -102,14 +91,8 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       return std::max(std::abs(i - ci), std::abs(j - cj)) >= 3;
     });
   }
-  KeepMasksNear(current_cell);
+  masks_.KeepNear(scene_info_.has_value() ? current_cell : std::nullopt, cell_grid_);
   return EnforceBudget(current_cell);
-}
-
-const std::vector<uint8_t>* EpsilonMaskSet::Bits(uint32_t object) const {
-  auto it = std::lower_bound(objects.begin(), objects.end(), object,
-                             [](const visibility::MaskObject& m, uint32_t id) { return m.object < id; });
-  return it != objects.end() && it->object == object ? &it->bits : nullptr;
 }
 
 void ObjectStore::AddMask(const v1::EpsilonMask& m) {
@@ -121,68 +104,17 @@ void ObjectStore::AddMask(const v1::EpsilonMask& m) {
     bad_data_ = true;
     return;
   }
-  absl::StatusOr<visibility::DecodedMask> decoded = mask_bases_.Decode(
-      m.cell_id(), m.mask_id(), m.base_mask_id(), m.triangles(), scene_info_->object_count(), scene_info_->triangle_count());
-  if (!decoded.ok()) {
-    failure_ = absl::StrCat(what, ": ", decoded.status().message());
+  if (absl::Status st = masks_.Add(m, scene_info_->object_count(), scene_info_->triangle_count()); !st.ok()) {
+    failure_ = absl::StrCat(what, ": ", st.message());
     bad_data_ = true;
-    return;
-  }
-  EpsilonMaskSet set;
-  set.mask_id = m.mask_id();
-  set.key = next_mask_key_++;
-  set.cell = m.cell_id();
-  set.box_min = {m.neighbourhood_min().x(), m.neighbourhood_min().y(), m.neighbourhood_min().z()};
-  set.box_max = {m.neighbourhood_max().x(), m.neighbourhood_max().y(), m.neighbourhood_max().z()};
-  set.triangles = decoded->triangles;
-  set.objects = std::move(decoded->objects);
-  set.object_ids.reserve(set.objects.size());
-  for (const visibility::MaskObject& o : set.objects) set.object_ids.push_back(o.object);
-  // A mask id seen again comes from a new session (ids start again at 1): the new one replaces it.
-  if (auto it = masks_.find(set.mask_id); it != masks_.end()) DropMask(it);
-  masks_.emplace(set.mask_id, std::move(set));
-}
-
-void ObjectStore::DropMask(std::map<uint32_t, EpsilonMaskSet>::iterator it) {
-  dropped_masks_.push_back(it->second.key);
-  masks_.erase(it);
-}
-
-void ObjectStore::KeepMasksNear(std::optional<uint32_t> current_cell) {
-  if (current_cell.has_value() && scene_info_.has_value()) {
-    const std::vector<uint32_t> near = grid_.Neighbourhood(*current_cell);
-    for (auto it = masks_.begin(); it != masks_.end();) {
-      auto next = std::next(it);
-      if (std::find(near.begin(), near.end(), it->second.cell) == near.end()) DropMask(it);
-      it = next;
-    }
-  }
-  while (masks_.size() > kMaxMasks) {
-    auto oldest = std::min_element(masks_.begin(), masks_.end(),
-                                   [](const auto& a, const auto& b) { return a.second.key < b.second.key; });
-    DropMask(oldest);
   }
 }
 
 MaskChoice ObjectStore::ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready) const {
-  MaskChoice choice;
-  for (const auto& [id, m] : masks_) {
-    if (!m.Contains(eye)) continue;
-    choice.in_box = true;
-    if (choice.mask != nullptr && choice.mask->triangles <= m.triangles) continue;
-    const bool usable = std::all_of(m.object_ids.begin(), m.object_ids.end(), [&](uint32_t o) {
-      return objects_.count(o) > 0 && (!ready || ready(o));
-    });
-    if (usable) choice.mask = &m;
-  }
-  return choice;
+  return masks_.Choose(eye, [&](uint32_t o) { return objects_.count(o) > 0 && (!ready || ready(o)); });
 }
 
-std::vector<uint64_t> ObjectStore::TakeDroppedMasks() {
-  std::vector<uint64_t> out;
-  out.swap(dropped_masks_);
-  return out;
-}
+std::vector<uint64_t> ObjectStore::TakeDroppedMasks() { return masks_.TakeDropped(); }
 
 std::vector<uint32_t> ObjectStore::EnforceBudget(std::optional<uint32_t> current_cell) {
   std::vector<uint32_t> dropped;
@@ -235,9 +167,7 @@ const std::vector<uint32_t>* ObjectStore::Pvs(uint32_t cell) const {
 }
 
 bool ObjectStore::CellComplete(uint32_t cell) const {
-  const std::vector<uint32_t>* p = Pvs(cell);
-  if (p == nullptr) return false;
-  return std::all_of(p->begin(), p->end(), [&](uint32_t id) { return objects_.count(id) > 0; });
+  return client::CellComplete(Pvs(cell), [&](uint32_t id) { return objects_.count(id) > 0; });
 }
 
 std::vector<uint32_t> ObjectStore::TakeAdded() {

@@ -4,9 +4,9 @@
 // the neighbourhoods around the eye. The render loop owns it and feeds it the connection's
 // events; nothing here waits.
 //
-// Masks: kept while their cell is the current cell or one of its eight neighbours, at most
-// kMaxMasks (the oldest dropped first). A mask holds for its box forever (the scene is static);
-// a frame may draw it once every object it lists is held (ChooseMask).
+// Masks: held and chosen by the client model's rule (client/mask_holdings.h): kept while their
+// cell is the current cell or one of its eight neighbours, at most kMaxMasks (the oldest dropped
+// first); a frame may draw one once every object it lists is held (ChooseMask).
 //
 // Memory: the server keeps the client within Hello.memory_budget_bytes by the same accounting
 // (24 bytes a vertex, 4 an index) and sends Evict hints for objects outside the current and
@@ -27,8 +27,9 @@
 #include <glm/vec3.hpp>
 
 #include "client/connection.h"
+#include "client/mask_holdings.h"
 #include "proto/walkthrough.pb.h"
-#include "visibility/mask_codec.h"
+#include "visibility/viewcell_grid.h"
 
 namespace vistream::client {
 
@@ -41,9 +42,6 @@ struct GridInfo {
   std::vector<double> band_z;
 
   static GridInfo From(const vistream::v1::ViewcellGrid& g);
-  // Why `g` cannot be used (a band list of the wrong length, a band empty or not finite), or
-  // none when it can.
-  static std::optional<std::string> Problem(const vistream::v1::ViewcellGrid& g);
   // The cell whose ground square holds (x, y), as the server decides it (points on a shared
   // edge belong to the cell above and to the right); none outside the grid.
   std::optional<uint32_t> CellAt(double x, double y) const;
@@ -60,31 +58,6 @@ struct GridInfo {
     const auto [z0, z1] = Band(cell);
     return z >= z0 && z <= z1;
   }
-};
-
-// An ε-mask decoded (proto EpsilonMask): which triangles of its cell's PVS may be seen from
-// anywhere in its neighbourhood box. Objects with no such triangle are not listed.
-struct EpsilonMaskSet {
-  uint32_t mask_id = 0;  // the server's id (session-unique: a new session starts again from 1)
-  uint64_t key = 0;      // the store's own id, unique over its life (renderer caches key on it)
-  uint32_t cell = 0;     // the viewcell whose PVS it narrows
-  glm::dvec3 box_min{0.0}, box_max{0.0};  // the neighbourhood, scene-local metres
-  std::vector<visibility::MaskObject> objects;  // ascending ids, each with a set bit
-  std::vector<uint32_t> object_ids;             // the same ids, to draw
-  uint64_t triangles = 0;                       // set bits over all objects
-
-  bool Contains(const glm::dvec3& p) const {
-    return p.x >= box_min.x && p.x <= box_max.x && p.y >= box_min.y && p.y <= box_max.y && p.z >= box_min.z &&
-           p.z <= box_max.z;
-  }
-  // The triangle bits of `object` (bit t: its triangle t may be seen); null if it has none.
-  const std::vector<uint8_t>* Bits(uint32_t object) const;
-};
-
-// The mask a frame may draw (ObjectStore::ChooseMask).
-struct MaskChoice {
-  const EpsilonMaskSet* mask = nullptr;  // none: no held mask is usable for the eye
-  bool in_box = false;                   // the eye is inside the box of some held mask
 };
 
 struct StoredObject {
@@ -115,9 +88,9 @@ class ObjectStore {
   bool CellComplete(uint32_t cell) const;
 
   // At most this many masks are held.
-  static constexpr size_t kMaxMasks = 64;
+  static constexpr size_t kMaxMasks = MaskHoldings::kMaxMasks;
   // Every mask held, by the server's mask id.
-  const std::map<uint32_t, EpsilonMaskSet>& masks() const { return masks_; }
+  const std::map<uint32_t, EpsilonMaskSet>& masks() const { return masks_.masks(); }
   // The mask a frame at `eye` (scene-local metres) may draw: among held masks whose box holds
   // the eye and all of whose objects are held and pass `ready` (the renderer's Uploaded; none:
   // held is enough), the one with the fewest triangles (ties: the lower mask id). Also whether
@@ -148,18 +121,14 @@ class ObjectStore {
   void Remove(uint32_t id);
   std::vector<uint32_t> EnforceBudget(std::optional<uint32_t> current_cell);
   void AddMask(const vistream::v1::EpsilonMask& m);
-  void DropMask(std::map<uint32_t, EpsilonMaskSet>::iterator it);
-  void KeepMasksNear(std::optional<uint32_t> current_cell);
 
   uint64_t budget_;
   std::optional<vistream::v1::SceneInfo> scene_info_;
   GridInfo grid_;
+  visibility::ViewcellGrid cell_grid_;  // the same grid (GridFromSceneInfo)
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
-  std::map<uint32_t, EpsilonMaskSet> masks_;  // by mask id
-  visibility::MaskBases mask_bases_;          // the latest mask of each cell: deltas' bases
-  uint64_t next_mask_key_ = 1;
-  std::vector<uint64_t> dropped_masks_;
+  MaskHoldings masks_;
   std::vector<uint32_t> removed_, added_;
   uint64_t held_bytes_ = 0, max_held_bytes_ = 0;
   uint64_t evicted_by_server_ = 0, evicted_by_budget_ = 0;

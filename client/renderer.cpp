@@ -75,27 +75,6 @@ std::array<uint8_t, 3> ToRgb(const float c[3]) {
 std::array<uint8_t, 3> Renderer::SkyRgb() { return ToRgb(kSky); }
 std::array<uint8_t, 3> Renderer::GroundRgb() { return ToRgb(kGround); }
 
-glm::dvec3 Camera::Forward() const {
-  return {std::cos(pitch_rad) * std::cos(yaw_rad), std::cos(pitch_rad) * std::sin(yaw_rad), std::sin(pitch_rad)};
-}
-
-glm::dvec3 Camera::Up() const {
-  const glm::dvec3 right = glm::normalize(glm::cross(Forward(), glm::dvec3(0, 0, 1)));
-  return glm::cross(right, Forward());
-}
-
-glm::dmat4 Camera::ViewProjection() const {
-  const glm::dmat4 view = glm::lookAt(eye, eye + Forward(), Up());
-  const glm::dmat4 projection =
-      glm::perspective(fov_y_rad, static_cast<double>(width) / static_cast<double>(height), near_m, far_m);
-  return projection * view;
-}
-
-bool Camera::MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const {
-  return scenes::ViewFrustum(eye, Forward(), Up(), fov_y_rad, static_cast<double>(width) / static_cast<double>(height))
-      .MayOverlap(box_min, box_max);
-}
-
 absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(gl::GlContext* context, int width, int height,
                                                            bool offscreen, int samples) {
   if (samples < 0 || samples > 16) {

@@ -18,30 +18,11 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
+#include "client/camera.h"
 #include "client/object_store.h"
 #include "gl/gl_context.h"
 
 namespace vistream::client {
-
-// A pinhole camera in scene-local metres, z up. yaw: counter-clockwise from +x; pitch: up
-// from the horizontal (radians).
-struct Camera {
-  glm::dvec3 eye{0.0};
-  double yaw_rad = 0.0, pitch_rad = 0.0;
-  double fov_y_rad = 1.0471975511965976;  // 60 degrees
-  int width = 1280, height = 720;
-  double near_m = 0.25;
-  double far_m = 20000.0;
-
-  glm::dvec3 Forward() const;
-  glm::dvec3 Up() const;
-  // World to clip, OpenGL conventions (depth -1..1).
-  glm::dmat4 ViewProjection() const;
-  // Whether any part of the box may be inside the view frustum (its side planes and the near
-  // plane; the far plane is beyond the scene). Conservative: false only when the box is wholly
-  // outside one plane.
-  bool MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const;
-};
 
 // What a frame drew: an object whole, or only its ε-mask triangles.
 struct DrawnObject {

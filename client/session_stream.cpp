@@ -3,27 +3,17 @@
 #include <algorithm>
 
 #include "client/connection.h"
+#include "scenes/geometry_codec.h"
 
 namespace vistream::client {
 
 namespace v1 = vistream::v1;
-
-bool SessionRecord::CellComplete(uint32_t cell) const {
-  auto it = pvs.find(cell);
-  if (it == pvs.end()) return false;
-  for (uint32_t o : it->second) {
-    if (held.count(o) == 0) return false;
-  }
-  return true;
-}
 
 namespace {
 double SteadySeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 }  // namespace
-
-void SessionRecord::NoteCompletion(uint32_t cell, double now) { complete_s[cell].push_back(now); }
 
 double SessionRecord::CompletedAfter(uint32_t cell, double t) const {
   auto it = complete_s.find(cell);
@@ -33,7 +23,9 @@ double SessionRecord::CompletedAfter(uint32_t cell, double t) const {
 }
 
 SessionStream::SessionStream(const std::string& address, const ChannelSecurity& security)
-    : channel_(MakeChannel(address, security)), stub_(v1::Walkthrough::NewStub(channel_)), security_(security) {}
+    : channel_(MakeChannel(address, security)), stub_(v1::Walkthrough::NewStub(channel_)), security_(security) {
+  received_.completion_.on_complete = [this](uint32_t cell, double t) { received_.complete_s[cell].push_back(t); };
+}
 
 SessionStream::~SessionStream() {
   if (stream_ != nullptr && !finished_) {
@@ -44,11 +36,10 @@ SessionStream::~SessionStream() {
 }
 
 v1::Hello SessionStream::HelloFor(const std::string& scene, std::vector<uint32_t> held) {
-  v1::Hello h;
-  h.set_scene(scene);
-  h.set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
-  h.mutable_held_objects()->Add(held.begin(), held.end());
-  return h;
+  HelloSettings settings;
+  settings.scene = scene;
+  settings.held_objects = std::move(held);
+  return MakeHello(settings);
 }
 
 void SessionStream::OpenStream() {
@@ -62,7 +53,10 @@ void SessionStream::Start(const v1::Hello& hello, bool read) {
   OpenStream();
   {
     std::lock_guard lock(mu_);
-    for (uint32_t o : hello.held_objects()) received_.held.insert(o);
+    for (uint32_t o : hello.held_objects()) {
+      received_.held.insert(o);
+      received_.completion_.Arrive(o, 0.0);
+    }
   }
   v1::ClientMessage m;
   *m.mutable_hello() = hello;
@@ -79,23 +73,10 @@ void SessionStream::StartRaw(const v1::ClientMessage& first) {
 bool SessionStream::Send(const v1::ClientMessage& m) { return stream_->Write(m); }
 
 bool SessionStream::SendPose(const glm::dvec3& position, const glm::dvec3& velocity) {
-  v1::ClientMessage m;
-  v1::Pose* p = m.mutable_pose();
-  p->mutable_position()->set_x(position.x);
-  p->mutable_position()->set_y(position.y);
-  p->mutable_position()->set_z(position.z);
-  p->mutable_velocity()->set_x(velocity.x);
-  p->mutable_velocity()->set_y(velocity.y);
-  p->mutable_velocity()->set_z(velocity.z);
-  p->set_client_time_s(time_s_ += 0.05);
-  return Send(m);
+  return Send(PoseMessage(MakePose(position, velocity, 0.0, 0.0, time_s_ += 0.05)));
 }
 
-bool SessionStream::SendCredit(uint64_t bytes) {
-  v1::ClientMessage m;
-  m.mutable_credit()->set_bytes(bytes);
-  return Send(m);
-}
+bool SessionStream::SendCredit(uint64_t bytes) { return Send(CreditMessage(bytes)); }
 
 void SessionStream::ReadLoop() {
   v1::ServerMessage m;
@@ -114,43 +95,30 @@ void SessionStream::ReadLoop() {
         r.pvs[cell].assign(m.pvs().object_ids().begin(), m.pvs().object_ids().end());
         r.pvs_order.push_back(cell);
         r.order.emplace_back('P', cell);
-        uint32_t missing = 0;
-        for (uint32_t o : r.pvs[cell]) {
-          if (r.held.count(o) == 0) {
-            ++missing;
-            r.waiting_[o].push_back(cell);
-          }
-        }
-        r.missing_[cell] = missing;
-        if (missing == 0) r.NoteCompletion(cell, now);
+        r.completion_.SetList(cell, r.pvs[cell], now);
         break;
       }
       case v1::ServerMessage::kGeometry: {
         const uint32_t id = m.geometry().object_id();
         if (!r.held.insert(id).second) ++r.duplicates;
-        r.geometry_bytes += m.geometry().vertices().size() + m.geometry().indices().size();
-        r.raw_geometry_bytes += uint64_t{m.geometry().vertex_count()} * 24 + uint64_t{m.geometry().index_count()} * 4;
+        r.geometry_bytes += ChargedBytes(m);
+        r.raw_geometry_bytes += scenes::RawMeshBytes(m.geometry().vertex_count(), m.geometry().index_count());
         if (keep_geometry_) r.geometry[id] = m.geometry();
         r.order.emplace_back('G', id);
-        if (auto it = r.waiting_.find(id); it != r.waiting_.end()) {
-          for (uint32_t cell : it->second) {
-            auto mi = r.missing_.find(cell);
-            if (mi != r.missing_.end() && mi->second > 0 && --mi->second == 0) r.NoteCompletion(cell, now);
-          }
-          r.waiting_.erase(it);
-        }
+        r.completion_.Arrive(id, now);
         break;
       }
       case v1::ServerMessage::kEvict:
         for (uint32_t o : m.evict().object_ids()) {
           r.held.erase(o);
           r.evicted.push_back(o);
+          r.completion_.Drop(o);
         }
         r.order.emplace_back('E', 0);
         break;
       case v1::ServerMessage::kEpsilonMask:
         r.masks.push_back(m.epsilon_mask());
-        r.mask_bytes += m.epsilon_mask().triangles().size();
+        r.mask_bytes += ChargedBytes(m);
         r.order.emplace_back('M', m.epsilon_mask().mask_id());
         break;
       case v1::ServerMessage::BODY_NOT_SET:

@@ -19,7 +19,9 @@
 #include <glm/vec3.hpp>
 #include <grpcpp/grpcpp.h>
 
+#include "client/cell_completion.h"
 #include "client/channel_security.h"
+#include "client/client_model.h"
 #include "proto/walkthrough.grpc.pb.h"
 
 namespace vistream::client {
@@ -47,8 +49,9 @@ struct SessionRecord {
   // The first time at or after `t` that `cell` became complete; negative if it has not.
   double CompletedAfter(uint32_t cell, double t) const;
 
-  // Whether the cell's PVS and the geometry of every object in it have arrived.
-  bool CellComplete(uint32_t cell) const;
+  // Whether the cell's PVS and the geometry of every object in it have arrived (and not been
+  // evicted): the client model's rule (client/cell_completion.h).
+  bool CellComplete(uint32_t cell) const { return completion_.Complete(cell); }
   // Whether every one of `cells` (a container of cell ids) is complete.
   template <typename Cells>
   bool AllComplete(const Cells& cells) const {
@@ -60,9 +63,7 @@ struct SessionRecord {
 
  private:
   friend class SessionStream;
-  void NoteCompletion(uint32_t cell, double now);
-  std::map<uint32_t, uint32_t> missing_;                  // per cell with a PVS: objects not held
-  std::map<uint32_t, std::vector<uint32_t>> waiting_;     // per object: cells missing it
+  CellCompletion completion_;  // the lists and objects above, as the rule keeps them
 };
 
 class SessionStream {
@@ -80,7 +81,7 @@ class SessionStream {
   void Start(const vistream::v1::Hello& hello, bool read = true);
   // Opens the session with `first` as its first message, whatever it is (bad-input tests).
   void StartRaw(const vistream::v1::ClientMessage& first);
-  // A Hello for `scene` with the current protocol version.
+  // A Hello for `scene` with the current protocol version (client/client_model.h MakeHello).
   static vistream::v1::Hello HelloFor(const std::string& scene, std::vector<uint32_t> held = {});
 
   // Whether to keep every ObjectGeometry message (tests decode them); off, only counts are kept.

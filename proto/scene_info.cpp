@@ -1,5 +1,7 @@
 #include "proto/scene_info.h"
 
+#include <absl/strings/str_cat.h>
+
 namespace vistream {
 
 namespace {
@@ -41,6 +43,20 @@ v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::Viewce
     g->add_band_z(b.z1);
   }
   return info;
+}
+
+absl::StatusOr<visibility::ViewcellGrid> GridFromSceneInfo(const v1::ViewcellGrid& g) {
+  absl::StatusOr<visibility::ViewcellGrid> grid = visibility::ViewcellGrid::FromLayout(
+      glm::dvec2(g.x0_m(), g.y0_m()), g.cell_size_m(), g.nx(), g.ny(), g.base_z_m(), g.height_m());
+  if (!grid.ok() || g.band_z().empty()) return grid;
+  const uint64_t cells = g.nx() > 0 && g.ny() > 0 ? uint64_t(g.nx()) * uint64_t(g.ny()) : 0;
+  if (uint64_t(g.band_z().size()) != 2 * cells) {
+    return absl::InvalidArgumentError(absl::StrCat("the viewcell grid lists ", g.band_z().size(), " band values for ",
+                                                   cells, " cells (", 2 * cells, " expected)"));
+  }
+  std::vector<visibility::CellBand> bands(cells);
+  for (size_t k = 0; k < bands.size(); ++k) bands[k] = {g.band_z(2 * int(k)), g.band_z(2 * int(k) + 1)};
+  return visibility::ViewcellGrid::WithBands(*std::move(grid), std::move(bands));
 }
 
 }  // namespace vistream

@@ -15,6 +15,11 @@
 
 namespace vistream::scenes {
 
+// What a mesh of `vertex_count` vertices and `index_count` indices takes decoded: 24 bytes a
+// vertex (float position and normal), 4 an index. The one memory accounting of server and
+// client (Hello.memory_budget_bytes, the client's store).
+inline uint64_t RawMeshBytes(uint64_t vertex_count, uint64_t index_count) { return vertex_count * 24 + index_count * 4; }
+
 struct EncodedMesh {
   uint32_t vertex_count = 0;
   uint32_t index_count = 0;  // a multiple of 3
@@ -23,7 +28,7 @@ struct EncodedMesh {
 
   // Bytes on the wire, and bytes of the same mesh unencoded (24 per vertex, 4 per index).
   size_t EncodedBytes() const { return vertices.size() + indices.size(); }
-  size_t RawBytes() const { return size_t{vertex_count} * 24 + size_t{index_count} * 4; }
+  size_t RawBytes() const { return RawMeshBytes(vertex_count, index_count); }
 };
 
 // Precondition: mesh.normals has one normal per position (or none: zero normals are sent),

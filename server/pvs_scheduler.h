@@ -43,7 +43,7 @@ struct SchedulerStats {
 };
 
 // What a session asks for viewcell PVSs: the threaded PvsScheduler in the server, the
-// simulator's SimulatedScheduler (server/simulator.h) on simulated time. Both keep the same
+// simulator's SimulatedScheduler (simulation/simulated_workers.h) on simulated time. Both keep the same
 // policy (PvsSchedulePolicy): earliest deadline first, a shared LRU byte cache, joins, drops.
 class PvsSource {
  public:

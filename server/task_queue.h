@@ -1,7 +1,7 @@
 #pragma once
 // Where ε-masks are computed: MaskQueue, worker threads that run only when the CPU would
 // otherwise idle, in the server; the simulator's own runner on simulated time
-// (server/simulator.h). Both take the job whose result is wanted soonest first.
+// (simulation/simulator.h). Both take the job whose result is wanted soonest first.
 
 #include <condition_variable>
 #include <cstdint>

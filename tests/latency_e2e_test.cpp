@@ -26,7 +26,7 @@
 #include "scenes/catalog.h"
 #include "server/link_model.h"
 #include "server/served_scene.h"
-#include "server/simulator.h"
+#include "simulation/simulator.h"
 #include "tests/temp_dir.h"
 
 namespace vistream {
@@ -174,18 +174,18 @@ Simulated& Prepared(const std::string& name) {
 
 // The same walk (the scene's first), speed, link and time scale as WalkScaled, through the
 // simulator: its times are the scaled run's seconds, as the client's are.
-absl::StatusOr<server::SimulationResult> SimulateScaled(const std::string& name,
+absl::StatusOr<simulation::SimulationResult> SimulateScaled(const std::string& name,
                                                         const std::optional<scenes::LinkSpec>& link,
                                                         double kmh = kWalkKmh) {
   Simulated& d = Prepared(name);
   if (d.scene == nullptr) return absl::FailedPreconditionError("the scene did not load: " + name);
-  server::SimulationOptions o;
+  simulation::SimulationOptions o;
   o.speed_mps = kmh / 3.6;
   o.link = link;
   o.time_scale = kScale;
   o.workers = 2;  // the server's --threads 2
   o.seed = 1;     // the server's --link-seed 1: its first session draws as the simulator does
-  return server::Simulate(*d.scene, d.entry, o);
+  return simulation::Simulate(*d.scene, d.entry, o);
 }
 
 // Margin tolerance, in the scaled run's seconds (the client's walk clock; the simulator's with
@@ -224,16 +224,16 @@ std::vector<const Entry*> Lasting(const std::vector<Entry>& entries, bool keep_l
 }
 
 // Compares the real run's cells (but its last: the walk was cut there) with the simulator's.
-void ExpectAgreement(const ClientRun& real_run, const server::SimulationResult& sim_run, bool expect_no_stall) {
+void ExpectAgreement(const ClientRun& real_run, const simulation::SimulationResult& sim_run, bool expect_no_stall) {
   const std::vector<const CellRow*> real = Lasting(real_run.cells, false);
-  const std::vector<const server::CellRecord*> sim = Lasting(sim_run.cells, true);
+  const std::vector<const client::CellEntry*> sim = Lasting(sim_run.cells, true);
   ASSERT_GE(real.size(), 2u);
   const size_t n = real.size();
   ASSERT_GE(sim.size(), n) << "the simulator entered fewer cells than the real run";
   size_t real_stalled = 0, sim_stalled = 0;
   for (size_t k = 0; k < n; ++k) {
     const CellRow& r = *real[k];
-    const server::CellRecord& s = *sim[k];
+    const client::CellEntry& s = *sim[k];
     ASSERT_EQ(r.cell, s.cell) << "entry " << k << ": the runs walked into different cells";
     if (k == 0) continue;  // the start cell: both waited for it
     real_stalled += r.stalled ? 1 : 0;
@@ -263,13 +263,13 @@ void ExpectAgreement(const ClientRun& real_run, const server::SimulationResult& 
 constexpr double kMaskedShareTolerance = 0.15;
 constexpr double kHoleShareTolerance = 0.10;
 
-void ExpectMaskAgreement(const ClientRun& real_run, const server::SimulationResult& sim_run) {
+void ExpectMaskAgreement(const ClientRun& real_run, const simulation::SimulationResult& sim_run) {
   const double frames = real_run.summary["frames"].get<double>();
   ASSERT_GT(frames, 0.0);
   const double real_masked = real_run.summary["frames_masked"].get<double>() / frames;
   const double real_holes = real_run.summary["hole_frames"].get<double>() / frames;
   double samples = 0.0, masked = 0.0, holes = 0.0;
-  for (const server::SimulationResult::TriangleSample& t : sim_run.triangle_samples) {
+  for (const simulation::SimulationResult::TriangleSample& t : sim_run.triangle_samples) {
     if (t.t_s > kSeconds) break;
     samples += 1.0;
     masked += t.masked ? 1.0 : 0.0;
@@ -304,7 +304,7 @@ TEST(LatencyE2e, AtWalkingSpeedOnTheDeclaredLinkNoCellStallsAndTheSimulatorAgree
     EXPECT_NEAR(c.margin_s, c.entered_s - c.complete_s, 1e-3);
   }
   process.reset();  // the simulation measures its PVS computations alone
-  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", Prepared("default").entry.simulation.link);
+  absl::StatusOr<simulation::SimulationResult> sim = SimulateScaled("default", Prepared("default").entry.simulation.link);
   ASSERT_TRUE(sim.ok()) << sim.status();
   ExpectAgreement(run, *sim, /*expect_no_stall=*/true);
   ExpectMaskAgreement(run, *sim);
@@ -340,7 +340,7 @@ TEST(LatencyE2e, OnALinkTooSlowForTheWalkCellsStallAndTheSimulatorAgrees) {
   process.reset();
   absl::StatusOr<scenes::LinkSpec> slow = server::ParseLinkOption("15k,40", Prepared("default").entry.simulation.link);
   ASSERT_TRUE(slow.ok()) << slow.status();
-  absl::StatusOr<server::SimulationResult> sim = SimulateScaled("default", *slow, kSlowWalkKmh);
+  absl::StatusOr<simulation::SimulationResult> sim = SimulateScaled("default", *slow, kSlowWalkKmh);
   ASSERT_TRUE(sim.ok()) << sim.status();
   ExpectAgreement(run, *sim, /*expect_no_stall=*/false);
   ExpectMaskAgreement(run, *sim);

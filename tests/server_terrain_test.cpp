@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "client/object_store.h"
+#include "proto/scene_info.h"
 #include "scenes/gltf_io.h"
 #include "scenes/mesh.h"
 #include "server/service.h"
@@ -42,21 +43,28 @@ TEST(ServerTerrain, SceneInfoCarriesEachCellsBandAndTheClientReadsThem) {
   ASSERT_TRUE(s.grid().has_bands());
   const v1::ViewcellGrid& g = s.scene_info().grid();
   ASSERT_EQ(static_cast<size_t>(g.band_z_size()), 2 * s.grid().CellCount());
-  const client::GridInfo info = client::GridInfo::From(g);
-  EXPECT_FALSE(client::GridInfo::Problem(g).has_value());
-  ASSERT_TRUE(info.has_bands());
+  // The client's grid (proto/scene_info.h) is the server's: the same cells and bands.
+  const absl::StatusOr<visibility::ViewcellGrid> info = GridFromSceneInfo(g);
+  ASSERT_TRUE(info.ok()) << info.status();
+  ASSERT_TRUE(info->has_bands());
+  EXPECT_EQ(info->nx(), s.grid().nx());
+  EXPECT_EQ(info->ny(), s.grid().ny());
+  EXPECT_EQ(info->corner(), s.grid().corner());
+  EXPECT_EQ(info->cell_size(), s.grid().cell_size());
   for (CellId c = 0; c < s.grid().CellCount(); ++c) {
-    ASSERT_EQ(info.Band(c).first, s.grid().Band(c).z0) << c;
-    ASSERT_EQ(info.Band(c).second, s.grid().Band(c).z1) << c;
+    ASSERT_EQ(info->Band(c), s.grid().Band(c)) << c;
+    ASSERT_EQ(info->CellBox(c).min, s.grid().CellBox(c).min) << c;
+    ASSERT_EQ(info->CellBox(c).max, s.grid().CellBox(c).max) << c;
   }
   // The ridge's cells stand high: their bands are far above a flat grid's.
   const CellId top = *s.grid().CellAt({1, 1});
-  EXPECT_GT(info.Band(top).first, 10.0);
-  EXPECT_TRUE(info.InBand(top, s.grid().Band(top).z0 + 1.0));
-  EXPECT_FALSE(info.InBand(top, 1.7));
+  EXPECT_EQ(info->CellAt({1, 1}), top);
+  EXPECT_GT(info->Band(top).z0, 10.0);
+  EXPECT_TRUE(info->InBand(top, s.grid().Band(top).z0 + 1.0));
+  EXPECT_FALSE(info->InBand(top, 1.7));
   // A flat scene sends none: the bytes of SceneInfo are what they were before bands.
   EXPECT_EQ(City1().scene_info().grid().band_z_size(), 0);
-  EXPECT_FALSE(client::GridInfo::From(City1().scene_info().grid()).has_bands());
+  EXPECT_FALSE(GridFromSceneInfo(City1().scene_info().grid())->has_bands());
 }
 
 TEST(ServerTerrain, APoseIsInACellWhenInsideItsSquareAndItsBand) {

@@ -1,7 +1,7 @@
-// The discrete-event simulator (server/simulator.h) and `vistream simulate`: the papers' latency
+// The discrete-event simulator (simulation/simulator.h) and `vistream simulate`: the papers' latency
 // claim on city1 and a london-generated city over their declared links, a link too slow for the
 // walk, jitter only where declared, the baselines, the speed search, determinism, bad input.
-#include "server/simulator.h"
+#include "simulation/simulator.h"
 
 #include <algorithm>
 #include <cmath>
@@ -22,8 +22,11 @@
 #include "server/served_scene.h"
 #include "tests/cli_test_util.h"
 
-namespace vistream::server {
+namespace vistream::simulation {
 namespace {
+
+using server::ParseLinkOption;
+using server::ServedSceneOptions;
 
 // A london-generated city of 1.6 km x 1.6 km (the generator at a smaller size, not a crop of
 // london) with london's declared link and client (tests/simulator/london_small.json).
@@ -368,7 +371,7 @@ TEST_F(SimulatorTest, TheRadiusBaselineLeavesNoHoleAndStreamsMoreObjects) {
   // No hole: every object of every entered cell's PVS lies within R of that cell.
   const visibility::ViewcellGrid& grid = london_->scene->grid();
   std::set<CellId> cells;
-  for (const CellRecord& c : r.cells) cells.insert(c.cell);
+  for (const client::CellEntry& c : r.cells) cells.insert(c.cell);
   ASSERT_GT(cells.size(), 5u);
   for (CellId c : cells) {
     const scenes::Aabb box = grid.CellBox(c);
@@ -715,4 +718,4 @@ TEST(SimulateCli, JsonHasTheFigures) {
 }
 
 }  // namespace
-}  // namespace vistream::server
+}  // namespace vistream::simulation

@@ -233,12 +233,6 @@ struct SessionResult {
   uint64_t masks = 0, mask_bytes = 0;                   // ε-masks received, their triangle bytes
 };
 
-std::set<visibility::CellId> Around(const visibility::ViewcellGrid& grid, visibility::CellId c) {
-  std::set<visibility::CellId> s{c};
-  for (visibility::CellId n : grid.Neighbours(c)) s.insert(n);
-  return s;
-}
-
 SessionResult RunSession(const std::string& address, const client::ChannelSecurity& security,
                          const std::string& scene_name, const Streets& streets, const visibility::ViewcellGrid& grid,
                          const scenes::TerrainHeight& terrain, uint64_t seed, double speed, double seconds, bool masks,
@@ -263,7 +257,7 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
   // Start-up: the nine cells around the client, in slices so that ^C is heard.
   bool ready = false;
   while (!ready && !cancel.load() && !s.Ended() && SteadySeconds() - t0 < 300.0) {
-    ready = s.WaitFor([&](const client::SessionRecord& r) { return r.AllComplete(Around(grid, cell)); }, 0.5);
+    ready = s.WaitFor([&](const client::SessionRecord& r) { return r.AllComplete(grid.Neighbourhood(cell)); }, 0.5);
   }
   if (!ready) {
     out.error = s.Ended() ? "the server ended the session" : cancel.load() ? "interrupted" : "start-up took over 300 s";
@@ -288,7 +282,7 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
     }
     return true;
   };
-  constexpr double kDt = 0.1;  // poses at 10 Hz
+  constexpr double kDt = 1.0 / client::kPoseRateHz;  // a pose a step, at the client model's rate
   const double start = SteadySeconds();
   double next = start;
   while (SteadySeconds() - start < seconds && !cancel.load()) {
@@ -310,9 +304,9 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
       // the new neighbourhood that were not in the old one.
       std::vector<visibility::CellId> fresh = grid.NewlyAdjacent(cell, *now_cell);
       if (fresh.empty()) {
-        const std::set<visibility::CellId> before = Around(grid, cell);
-        for (visibility::CellId n : Around(grid, *now_cell)) {
-          if (before.count(n) == 0) fresh.push_back(n);
+        const std::vector<visibility::CellId> before = grid.Neighbourhood(cell);
+        for (visibility::CellId n : grid.Neighbourhood(*now_cell)) {
+          if (std::find(before.begin(), before.end(), n) == before.end()) fresh.push_back(n);
         }
       }
       for (visibility::CellId n : fresh) {

@@ -1,4 +1,4 @@
-// vistream simulate: the discrete-event simulator (server/simulator.h): stalls, arrival margins,
+// vistream simulate: the discrete-event simulator (simulation/simulator.h): stalls, arrival margins,
 // bytes, masked and hole frames and triangles drawn along a catalog walk, over the scene's
 // declared link.
 #include <algorithm>
@@ -17,7 +17,7 @@
 
 #include "server/link_model.h"
 #include "server/served_scene.h"
-#include "server/simulator.h"
+#include "simulation/simulator.h"
 #include "tools/cli_common.h"
 #include "tools/commands.h"
 
@@ -47,10 +47,10 @@ double Pct(const std::vector<double>& v, double q) {
   return s[static_cast<size_t>(std::round(q * static_cast<double>(s.size() - 1)))];
 }
 
-nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, const std::string& path,
+nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme scheme, const std::string& path,
                       bool ideal_asked) {
   nlohmann::json j;
-  j["scheme"] = std::string(server::SchemeName(scheme));
+  j["scheme"] = std::string(simulation::SchemeName(scheme));
   j["path"] = path;
   j["speed_kmh"] = r.speed_mps * 3.6;
   j["stalls"] = r.stalls;
@@ -72,7 +72,7 @@ nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, 
                                   {"p99", 1000.0 * Pct(r.compute_s_per_crossing, 0.99)},
                                   {"max", 1000.0 * Pct(r.compute_s_per_crossing, 1.0)}};
   uint64_t entered = 0;
-  for (const server::CellRecord& c : r.cells) entered += c.startup ? 0 : 1;
+  for (const client::CellEntry& c : r.cells) entered += c.start ? 0 : 1;
   j["cells_entered"] = entered;
   j["crossings"] = r.crossings;
   j["pvs_computed"] = r.pvs_computed;
@@ -99,7 +99,7 @@ nlohmann::json ToJson(const server::SimulationResult& r, server::Scheme scheme, 
   j["frame_declared"] = r.frame_declared;
   j["jitter_draws"] = r.jitter_draws;
   j["lost_segments"] = r.lost_segments;
-  if (scheme == server::Scheme::kRadius) j["radius_m"] = r.radius_m;
+  if (scheme == simulation::Scheme::kRadius) j["radius_m"] = r.radius_m;
   nlohmann::json link;
   link["bandwidth_bps"] = std::isfinite(r.link.bandwidth_bps) ? nlohmann::json(r.link.bandwidth_bps) : nlohmann::json();
   link["latency_ms"] = r.link.latency_s * 1000.0;
@@ -196,14 +196,14 @@ int Simulate(const SimulateArgs& a) {
     speeds_kmh.push_back(*v);
   }
   if (speeds_kmh.empty()) speeds_kmh.push_back(0.0);
-  std::vector<server::Scheme> schemes;
+  std::vector<simulation::Scheme> schemes;
   if (!a.schemes.empty() && !a.scheme.empty()) {
     return BadOption("simulate", "--schemes", "give --scheme or --schemes, not both");
   }
   if (!a.schemes.empty()) {
     const std::vector<std::string> names = absl::StrSplit(a.schemes, ',');
     for (const std::string& s : names) {
-      absl::StatusOr<server::Scheme> scheme = server::ParseScheme(s);
+      absl::StatusOr<simulation::Scheme> scheme = simulation::ParseScheme(s);
       if (!scheme.ok()) return BadOption("simulate", "--schemes", std::string(scheme.status().message()));
       if (std::find(schemes.begin(), schemes.end(), *scheme) != schemes.end()) {
         return BadOption("simulate", "--schemes", absl::StrCat("'", s, "' is listed twice"));
@@ -211,7 +211,7 @@ int Simulate(const SimulateArgs& a) {
       schemes.push_back(*scheme);
     }
   } else {
-    absl::StatusOr<server::Scheme> scheme = server::ParseScheme(a.scheme.empty() ? "pvs+eps" : a.scheme);
+    absl::StatusOr<simulation::Scheme> scheme = simulation::ParseScheme(a.scheme.empty() ? "pvs+eps" : a.scheme);
     if (!scheme.ok()) return BadOption("simulate", "--scheme", std::string(scheme.status().message()));
     schemes.push_back(*scheme);
   }
@@ -263,7 +263,7 @@ int Simulate(const SimulateArgs& a) {
   if (links.empty()) links.push_back(link);
   // Generated scenes have only the walks their entry declares: checked before the scene is
   // built. Imported ones may have walks of their own (Scene::paths): checked once loaded.
-  if (absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
+  if (absl::StatusOr<const scenes::WalkPath*> walk = simulation::FindWalk(*entry, a.path);
       !walk.ok() && entry->source.kind == scenes::SceneSource::Kind::kGenerator) {
     return Fail(walk.status());
   }
@@ -292,12 +292,12 @@ int Simulate(const SimulateArgs& a) {
   }
   Closer series_closer{series_file};
   size_t series_blocks = 0;
-  auto write_series = [&](const server::SimulationResult& r, server::Scheme scheme) {
+  auto write_series = [&](const simulation::SimulationResult& r, simulation::Scheme scheme) {
     if (series_file == nullptr) return;
     std::fprintf(series_file, "%s# run %zu: scheme %s, %.6g km/h, %s\n", series_blocks > 0 ? "\n\n" : "", series_blocks,
-                 std::string(server::SchemeName(scheme)).c_str(), r.speed_mps * 3.6,
+                 std::string(simulation::SchemeName(scheme)).c_str(), r.speed_mps * 3.6,
                  r.link_declared ? r.link.Describe().c_str() : "ideal link");
-    for (const server::SimulationResult::TriangleSample& t : r.triangle_samples) {
+    for (const simulation::SimulationResult::TriangleSample& t : r.triangle_samples) {
       std::fprintf(series_file, "%.3f %.3f %llu %llu %d %d\n", t.along_m, t.t_s, static_cast<unsigned long long>(t.triangles),
                    static_cast<unsigned long long>(t.triangles_without_masks), t.masked ? 1 : 0, t.hole ? 1 : 0);
     }
@@ -318,31 +318,31 @@ int Simulate(const SimulateArgs& a) {
   entry->walks = declared_walks > 0 ? scenes::WalksWithScenePaths(entry->walks, (*scene)->scene(), entry->walks.front().speed_mps,
                                                                   entry->walks.front().eye_height_m)
                                     : scenes::WalksWithScenePaths(entry->walks, (*scene)->scene());
-  absl::StatusOr<const scenes::WalkPath*> walk = server::FindWalk(*entry, a.path);
+  absl::StatusOr<const scenes::WalkPath*> walk = simulation::FindWalk(*entry, a.path);
   if (!walk.ok()) return Fail(walk.status());
 
-  server::SimulationOptions opt;
+  simulation::SimulationOptions opt;
   opt.path = (*walk)->name;
   opt.seed = static_cast<uint64_t>(a.seed);
   opt.workers = static_cast<unsigned>(a.threads);
   if (a.compute_ms >= 0.0) opt.fixed_compute_s = a.compute_ms / 1000.0;
   opt.log = log.get();
-  opt.memo = std::make_shared<server::PvsMemo>();
+  opt.memo = std::make_shared<simulation::PvsMemo>();
 
   nlohmann::json runs = nlohmann::json::array();
   struct Point {
-    server::Scheme scheme;
+    simulation::Scheme scheme;
     double speed_kmh;
     std::optional<scenes::LinkSpec> link;
   };
   std::vector<Point> points;
   for (const auto& l : links) {
     for (double v : speeds_kmh) {
-      for (server::Scheme scheme : schemes) points.push_back({scheme, v, l});
+      for (simulation::Scheme scheme : schemes) points.push_back({scheme, v, l});
     }
   }
   for (const Point& point : points) {
-    const server::Scheme scheme = point.scheme;
+    const simulation::Scheme scheme = point.scheme;
     opt.scheme = scheme;
     opt.speed_mps = point.speed_kmh / 3.6;
     opt.link = point.link;
@@ -350,7 +350,7 @@ int Simulate(const SimulateArgs& a) {
     nlohmann::json j;
     if (search) {
       opt.speed_mps = 0.0;  // the search starts from the walk's own speed
-      absl::StatusOr<server::SpeedSearch> s = server::FindMaxSpeed(**scene, *entry, opt, kMinSearchKmh / 3.6,
+      absl::StatusOr<simulation::SpeedSearch> s = simulation::FindMaxSpeed(**scene, *entry, opt, kMinSearchKmh / 3.6,
                                                                    kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun());
       if (!s.ok()) return Fail(s.status());
       j = ToJson(s->at_max, scheme, opt.path, a.link == "none");
@@ -367,10 +367,10 @@ int Simulate(const SimulateArgs& a) {
       // hole, so the same speed.
       j["max_speed_no_hole_kmh"] = j["max_speed_kmh"];
       j["hole_speed_kmh"] = j["stall_speed_kmh"];
-      if (scheme == server::Scheme::kPvsEps && s->stall_speed_mps > 0.0) {
+      if (scheme == simulation::Scheme::kPvsEps && s->stall_speed_mps > 0.0) {
         const double lo = std::max(kMinSearchKmh / 3.6, s->max_speed_mps);
-        absl::StatusOr<server::SpeedSearch> h = server::FindMaxSpeed(
-            **scene, *entry, opt, lo, kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun(), server::SpeedCriterion::kNoHole);
+        absl::StatusOr<simulation::SpeedSearch> h = simulation::FindMaxSpeed(
+            **scene, *entry, opt, lo, kMaxSearchKmh / 3.6, kSearchPrecision, ToolRun(), simulation::SpeedCriterion::kNoHole);
         if (!h.ok()) return Fail(h.status());
         j["max_speed_no_hole_kmh"] = kmh_or_null(h->max_speed_mps);
         j["hole_speed_kmh"] = kmh_or_null(h->stall_speed_mps);
@@ -379,7 +379,7 @@ int Simulate(const SimulateArgs& a) {
         j["search"]["hole_runs"] = hole_probes;
       }
     } else {
-      absl::StatusOr<server::SimulationResult> r = server::Simulate(**scene, *entry, opt, ToolRun());
+      absl::StatusOr<simulation::SimulationResult> r = simulation::Simulate(**scene, *entry, opt, ToolRun());
       if (!r.ok()) return Fail(r.status());
       j = ToJson(*r, scheme, opt.path, a.link == "none");
       write_series(*r, scheme);
@@ -391,7 +391,7 @@ int Simulate(const SimulateArgs& a) {
     j["compute"] = opt.fixed_compute_s.has_value() ? absl::StrFormat("fixed %g ms", a.compute_ms) : "measured";
     j["wall_s"] = SecondsSince(t0);
     std::fprintf(stderr, "simulate: %s at %.1f km/h: %llu stalls, %llu hole frames, %.1f%% masked, %.2f MB, %.1f s\n",
-                 std::string(server::SchemeName(scheme)).c_str(), j["speed_kmh"].get<double>(),
+                 std::string(simulation::SchemeName(scheme)).c_str(), j["speed_kmh"].get<double>(),
                  static_cast<unsigned long long>(j["stalls"].get<uint64_t>()),
                  static_cast<unsigned long long>(j["hole_frames"].get<uint64_t>()), j["masked_frames_pct"].get<double>(),
                  j["bytes"].get<double>() / 1e6, j["wall_s"].get<double>());

@@ -72,6 +72,27 @@ absl::StatusOr<ViewcellGrid> ViewcellGrid::WithBands(ViewcellGrid flat, std::vec
   return flat;
 }
 
+absl::StatusOr<ViewcellGrid> ViewcellGrid::FromLayout(const glm::dvec2& corner, double cell_size, int nx, int ny,
+                                                      double base_z, double height) {
+  ViewcellGrid g;
+  g.base_z_ = base_z;
+  g.height_ = height;
+  if (!(std::isfinite(cell_size) && cell_size > 0.0 && nx > 0 && ny > 0 && std::isfinite(corner.x) &&
+        std::isfinite(corner.y))) {
+    return g;  // no cells
+  }
+  if (!(double(nx) * double(ny) <= 2147483648.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("viewcell grid of ", nx, " x ", ny, " cells is too large; use larger cells"));
+  }
+  g.size_ = cell_size;
+  g.x0_ = corner.x;
+  g.y0_ = corner.y;
+  g.nx_ = nx;
+  g.ny_ = ny;
+  return g;
+}
+
 std::vector<CellCoord> ViewcellGrid::Sample(size_t count, uint64_t seed) const {
   count = std::min(count, CellCount());
   scenes::Rng rng(seed);
@@ -101,12 +122,17 @@ std::optional<CellId> ViewcellGrid::CellAt(const glm::dvec2& p) const {
 }
 
 std::vector<CellId> ViewcellGrid::Neighbours(CellId id) const {
+  std::vector<CellId> out = Neighbourhood(id);
+  std::erase(out, id);
+  return out;
+}
+
+std::vector<CellId> ViewcellGrid::Neighbourhood(CellId id) const {
   const CellCoord c = Coord(id);
   std::vector<CellId> out;
   for (int dj = -1; dj <= 1; ++dj) {
     for (int di = -1; di <= 1; ++di) {
-      const CellCoord n{c.i + di, c.j + dj};
-      if ((di != 0 || dj != 0) && Valid(n)) out.push_back(Id(n));
+      if (const CellCoord n{c.i + di, c.j + dj}; Valid(n)) out.push_back(Id(n));
     }
   }
   return out;

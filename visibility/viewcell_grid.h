@@ -54,6 +54,13 @@ class ViewcellGrid {
   // file, the protocol) rebuilds, and tests. Errors (INVALID_ARGUMENT): a count other than
   // CellCount(), a band not finite or with z0 >= z1.
   static absl::StatusOr<ViewcellGrid> WithBands(ViewcellGrid flat, std::vector<CellBand> bands);
+  // The grid laid out as stated rather than derived from bounds: cell (0, 0)'s corner, square
+  // cells of `cell_size` metres, nx by ny of them, the band base_z to base_z + height (what the
+  // protocol's SceneInfo states; proto/scene_info.h GridFromSceneInfo). A layout without cells
+  // (a size or a count not positive, or not finite) gives an empty grid: no point is in a cell.
+  // Errors (INVALID_ARGUMENT): more than 2^31 cells.
+  static absl::StatusOr<ViewcellGrid> FromLayout(const glm::dvec2& corner, double cell_size, int nx, int ny,
+                                                 double base_z, double height);
 
   int nx() const { return nx_; }
   int ny() const { return ny_; }
@@ -69,6 +76,12 @@ class ViewcellGrid {
   const std::vector<CellBand>& bands() const { return bands_; }
   // Cell `id`'s z range. Precondition: id < CellCount().
   CellBand Band(CellId id) const { return bands_.empty() ? CellBand{base_z_, base_z_ + height_} : bands_[id]; }
+  // Whether an eye at height `z` (scene-local metres) is inside cell `id`'s band, ends included:
+  // the poses the server takes for that cell. Precondition: id < CellCount().
+  bool InBand(CellId id, double z) const {
+    const CellBand b = Band(id);
+    return z >= b.z0 && z <= b.z1;
+  }
   // Scene-local corner of cell (0, 0) in xy.
   glm::dvec2 corner() const { return {x0_, y0_}; }
   // The box all cells together cover (the union of their bands in z).
@@ -94,6 +107,14 @@ class ViewcellGrid {
 
   // The up to eight cells around `id`, in row-major order.
   std::vector<CellId> Neighbours(CellId id) const;
+  // `id` and the up to eight cells around it, in row-major order: the cells whose PVSs a
+  // client at `id` holds (DESIGN.md "Server and client").
+  std::vector<CellId> Neighbourhood(CellId id) const;
+  // Whether `a` and `b` are the same cell or neighbours (Chebyshev distance at most 1).
+  bool Near(CellId a, CellId b) const {
+    const CellCoord ca = Coord(a), cb = Coord(b);
+    return ca.i - cb.i <= 1 && cb.i - ca.i <= 1 && ca.j - cb.j <= 1 && cb.j - ca.j <= 1;
+  }
   // The cells a client needs anew after moving from `from` to an adjacent `to`: `to`'s
   // neighbourhood (itself and its neighbours) less `from`'s. Three for an edge crossing,
   // five for a corner crossing; empty when `to` is not adjacent to `from`.

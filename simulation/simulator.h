@@ -2,9 +2,11 @@
 // The discrete-event simulator behind `vistream simulate` (DESIGN.md "Simulation" and
 // "Measures"; the papers' claim that a walking client never reaches a viewcell before its PVS
 // has arrived). It runs the server's own Session, with its scheduling policy, PVS cache and
-// meshoptimizer geometry, against a modelled client and a modelled link (server/link_model.h),
-// on simulated time: a PVS is computed with the real PvsComputer when a simulated worker starts
-// it, and completes the measured wall time later on the simulated clock.
+// meshoptimizer geometry, against the client model (client/client_model.h: Hello, credit, pose
+// cadence; client/mask_holdings.h; client/cell_completion.h) over the emulated link
+// (server/link_model.h), on simulated time (simulation/simulated_workers.h): a PVS is computed
+// with the real PvsComputer when a simulated worker starts it, and completes the measured wall
+// time later on the simulated clock. Only the link and the clocks are modelled here.
 //
 // What is modelled is what the scene's catalog entry declares (simulation.link, .client) and
 // nothing else: an entry without a link gets an ideal one; without client.frame_ms frames are
@@ -12,36 +14,35 @@
 //
 // ε-masks (scheme pvs+eps): the session plans and sends them as the server does (its chain of
 // neighbourhoods, computed on one simulated mask worker that runs only while a PVS worker is
-// free); the modelled client holds them as the real one (client/: by mask_id, those of its cell
-// and the 8 around it, at most 64, the oldest dropped first), grants their bytes back as credit
-// like geometry's, and draws one whenever its eye is in its box and its objects are here.
+// free); the client holds them, grants their bytes back as credit and draws one by the client
+// model's rules (client/mask_holdings.h), the same code the real client runs.
 //
 // Units: seconds of simulated time (0 = the client opens its session), metres in the scene's
 // local frame (z up), bytes.
 
 #include <cstdint>
-#include <deque>
-#include <functional>
-#include <map>
 #include <memory>
 #include <optional>
-#include <queue>
 #include <string>
 #include <string_view>
-#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <absl/status/statusor.h>
 
+#include "client/cell_margins.h"
 #include "scenes/catalog.h"
 #include "scenes/progress.h"
 #include "server/event_log.h"
 #include "server/link_model.h"
-#include "server/pvs_scheduler.h"
 #include "server/served_scene.h"
-#include "server/task_queue.h"
+#include "simulation/simulated_workers.h"
 
-namespace vistream::server {
+namespace vistream::simulation {
+
+using server::EventLog;
+using server::LinkParams;
+using server::ServedScene;
 
 // What the server streams for a viewcell.
 enum class Scheme {
@@ -54,106 +55,6 @@ enum class Scheme {
 std::string_view SchemeName(Scheme scheme);
 // The inverse; INVALID_ARGUMENT naming the text and the schemes otherwise.
 absl::StatusOr<Scheme> ParseScheme(std::string_view text);
-
-// Simulated time: events run in time order (ties in the order they were added).
-class EventQueue {
- public:
-  double now() const { return now_; }
-  // Runs `fn` at `t` (not before now()).
-  void At(double t, std::function<void()> fn);
-  bool empty() const { return events_.empty(); }
-  double next_time() const { return events_.top().t; }
-  // Runs the earliest event, advancing now() to its time.
-  void RunNext();
-
- private:
-  struct Event {
-    double t;
-    uint64_t seq;
-    std::function<void()> fn;
-    bool operator>(const Event& o) const { return t != o.t ? t > o.t : seq > o.seq; }
-  };
-  double now_ = 0.0;
-  uint64_t seq_ = 0;
-  std::priority_queue<Event, std::vector<Event>, std::greater<>> events_;
-};
-
-// Viewcell PVSs computed in this process, with the wall time each took, so that a speed search
-// or a comparison of schemes computes each cell once (whether a run pays the time is the
-// simulated cache's decision). Not thread-safe.
-class PvsMemo {
- public:
-  struct Entry {
-    CellPvsPtr pvs;
-    double seconds = 0.0;  // wall time of the computation on this machine
-  };
-  // The PVS of `cell`, computed with scene.ComputePvs(cell, 0) the first time.
-  const Entry& Get(const ServedScene& scene, CellId cell);
-  // The radius baseline's set of `cell`: every object whose box lies within `radius_m` (metres,
-  // box to box) of the cell's, found by a scan of the scene the first time. Kept like the PVSs,
-  // so that every run of a process (a speed search's probes and its run at the answer) is
-  // charged the same seconds for it.
-  const Entry& GetRadius(const ServedScene& scene, CellId cell, double radius_m);
-  size_t size() const { return entries_.size(); }
-
- private:
-  std::unordered_map<CellId, Entry> entries_;
-  std::map<std::pair<CellId, double>, Entry> radius_entries_;
-};
-
-// The server's PVS scheduling policy (PvsSchedulePolicy) on `workers` simulated workers: a job
-// starts when a worker is free, takes `compute`'s seconds, and its waiters hear at the end.
-class SimulatedScheduler : public PvsSource {
- public:
-  // A cell's set and the simulated seconds it costs.
-  using Compute = std::function<CellPvsPtr(CellId cell, double* seconds)>;
-  // `cache` false: no cache at all (the plain scheme).
-  SimulatedScheduler(EventQueue* queue, Compute compute, unsigned workers, size_t cache_bytes, bool cache);
-
-  CellPvsPtr Request(uint64_t requester, CellId cell, double deadline, Done done) override;
-  void Cancel(uint64_t requester, CellId cell) override;
-  void CancelAll(uint64_t requester) override;
-  CellPvsPtr Cached(CellId cell) override;
-  SchedulerStats stats() const override;
-
-  // Starts waiting jobs on the free workers at queue->now(). `on_start(cell, seconds)` hears of
-  // each job started (may be empty).
-  void Dispatch(const std::function<void(CellId, double)>& on_start);
-  // Whether a simulated worker is free (no PVS job waits for it after Dispatch).
-  bool has_free_worker() const { return busy_ < workers_; }
-
- private:
-  EventQueue* queue_;
-  Compute compute_;
-  unsigned workers_, busy_ = 0;
-  PvsSchedulePolicy policy_;
-};
-
-// ε-masks on one simulated worker, earliest deadline first, as MaskQueue runs them: a job
-// starts only when `may_start` says so (the simulator: while a PVS worker is free, as the
-// server's idle-priority mask threads run only on cores the PVS workers leave), and delivers its
-// measured time (or `fixed_s`) later. A job whose work returns no delivery (stale) costs nothing.
-class SimulatedTaskRunner : public TaskRunner {
- public:
-  SimulatedTaskRunner(EventQueue* queue, std::optional<double> fixed_s, std::function<bool()> may_start = nullptr)
-      : queue_(queue), fixed_s_(fixed_s), may_start_(std::move(may_start)) {}
-  void Post(Work work, double deadline) override { waiting_.emplace(std::pair{deadline, seq_++}, std::move(work)); }
-  // Starts the earliest waiting job if the worker is free (and may_start allows).
-  void Dispatch();
-  uint64_t ran() const { return ran_; }        // jobs that computed a mask
-  uint64_t dropped() const { return dropped_; }  // jobs found stale
-  double busy_s() const { return busy_s_; }     // simulated seconds spent computing
-
- private:
-  EventQueue* queue_;
-  std::optional<double> fixed_s_;
-  std::function<bool()> may_start_;
-  std::map<std::pair<double, uint64_t>, Work> waiting_;
-  uint64_t seq_ = 0;
-  bool busy_ = false;
-  uint64_t ran_ = 0, dropped_ = 0;
-  double busy_s_ = 0.0;
-};
 
 struct SimulationOptions {
   std::string path;       // the walk's name; empty: the entry's first walk
@@ -177,17 +78,6 @@ struct SimulationOptions {
   bool count_triangles = true;   // false: skip the per-frame culling (speed search probes)
 };
 
-// One viewcell the client entered while walking (a cell entered twice has two records).
-struct CellRecord {
-  CellId cell = 0;
-  double entered_s = 0.0;   // the first frame drawn in it
-  double complete_s = 0.0;  // its PVS list and every object in it had arrived (and been uploaded at
-                            // a frame, with a declared frame time); the exit time when it never was
-  double margin_s = 0.0;    // entered_s - complete_s; negative: the client waited
-  bool stalled = false;     // frames were drawn in it before it was complete
-  bool startup = false;     // the first cell: the walk waited for it (not a stall)
-};
-
 struct SimulationResult {
   // Frames drawn inside a viewcell whose PVS geometry had not all arrived, at the declared frame
   // time (undeclared: 60 Hz, for counting only); their time; the cells they were in.
@@ -208,7 +98,11 @@ struct SimulationResult {
   // Simulated PVS compute seconds of the jobs started from one crossing to the next (and from
   // the first pose to the first crossing), one entry per crossing.
   std::vector<double> compute_s_per_crossing;
-  std::vector<CellRecord> cells;
+  // Every viewcell entered while walking (client/cell_margins.h, as the real client records
+  // them; a cell entered twice has two), the first cell's first (start: the walk waited for it).
+  // Complete: its PVS list and every object in it had arrived (and been uploaded at a frame,
+  // with a declared frame time); the exit time when it never was.
+  std::vector<client::CellEntry> cells;
   uint64_t crossings = 0;
   uint64_t pvs_computed = 0;     // jobs the simulated scheduler ran (paid for)
   uint64_t pvs_cache_hits = 0;
@@ -296,4 +190,4 @@ absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::Catal
                                          double precision, const scenes::RunControl& run = {},
                                          SpeedCriterion criterion = SpeedCriterion::kNoStall);
 
-}  // namespace vistream::server
+}  // namespace vistream::simulation

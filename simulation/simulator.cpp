@@ -1,14 +1,10 @@
-#include "server/simulator.h"
+#include "simulation/simulator.h"
 
 #include <algorithm>
-#include <bit>
 #include <chrono>
 #include <cmath>
-#include <limits>
-#include <map>
 #include <set>
 #include <thread>
-#include <unordered_set>
 
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
@@ -16,15 +12,22 @@
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
-#include "scenes/view_frustum.h"
+#include "client/camera.h"
+#include "client/cell_completion.h"
+#include "client/client_model.h"
+#include "client/mask_holdings.h"
 #include "scenes/walk.h"
 #include "server/link_model.h"
 #include "server/session.h"
-#include "server/simulated_holdings.h"
-#include "server/wire.h"
-#include "visibility/mask_codec.h"
 
-namespace vistream::server {
+namespace vistream::simulation {
+
+using server::LinkModel;
+using server::LinkParamsFrom;
+using server::SchedulerStats;
+using server::SessionLimits;
+using server::SessionSeams;
+using server::Session;
 
 namespace {
 
@@ -32,21 +35,6 @@ namespace v1 = vistream::v1;
 
 double WallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-// The client renderer's view (client/renderer.h Camera: 60 degrees vertical field of view,
-// 1280 x 720, a level eye), culled as it culls.
-scenes::ViewFrustum RendererFrustum(const glm::dvec3& eye, double yaw_rad) {
-  constexpr double kFovY = 1.0471975511965976, kAspect = 1280.0 / 720.0;
-  return scenes::ViewFrustum(eye, glm::dvec3(std::cos(yaw_rad), std::sin(yaw_rad), 0.0), glm::dvec3(0.0, 0.0, 1.0),
-                             kFovY, kAspect);
-}
-
-double BoxDistance(const scenes::Aabb& a, const scenes::Aabb& b) {
-  const double dx = std::max({0.0, a.min.x - b.max.x, b.min.x - a.max.x});
-  const double dy = std::max({0.0, a.min.y - b.max.y, b.min.y - a.max.y});
-  const double dz = std::max({0.0, a.min.z - b.max.z, b.min.z - a.max.z});
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
 }
 
 const char* BodyName(const v1::ServerMessage& m) {
@@ -94,97 +82,6 @@ absl::StatusOr<const scenes::WalkPath*> FindWalk(const scenes::CatalogEntry& ent
       absl::StrCat("scene '", entry.name, "' has no walk '", name, "'; its walks: ", absl::StrJoin(names, ", ")));
 }
 
-// EventQueue
-
-void EventQueue::At(double t, std::function<void()> fn) { events_.push(Event{std::max(t, now_), seq_++, std::move(fn)}); }
-
-void EventQueue::RunNext() {
-  Event e = events_.top();
-  events_.pop();
-  now_ = e.t;
-  e.fn();
-}
-
-// PvsMemo
-
-const PvsMemo::Entry& PvsMemo::Get(const ServedScene& scene, CellId cell) {
-  auto it = entries_.find(cell);
-  if (it != entries_.end()) return it->second;
-  const double start = WallSeconds();
-  auto pvs = std::make_shared<CellPvs>(scene.ComputePvs(cell, 0));
-  pvs->cell = cell;
-  const double seconds = WallSeconds() - start;
-  return entries_.emplace(cell, Entry{std::move(pvs), seconds}).first->second;
-}
-
-const PvsMemo::Entry& PvsMemo::GetRadius(const ServedScene& scene, CellId cell, double radius_m) {
-  auto it = radius_entries_.find({cell, radius_m});
-  if (it != radius_entries_.end()) return it->second;
-  const double start = WallSeconds();
-  auto pvs = std::make_shared<CellPvs>();
-  pvs->cell = cell;
-  const scenes::Aabb box = scene.grid().CellBox(cell);
-  for (const scenes::Object& o : scene.scene().objects) {
-    if (BoxDistance(box, o.bounds) <= radius_m) pvs->objects.push_back(o.id);
-  }
-  const double seconds = WallSeconds() - start;
-  return radius_entries_.emplace(std::make_pair(cell, radius_m), Entry{std::move(pvs), seconds}).first->second;
-}
-
-// SimulatedScheduler
-
-SimulatedScheduler::SimulatedScheduler(EventQueue* queue, Compute compute, unsigned workers, size_t cache_bytes,
-                                       bool cache)
-    : queue_(queue), compute_(std::move(compute)), workers_(std::max(1u, workers)), policy_(cache_bytes, cache) {}
-
-CellPvsPtr SimulatedScheduler::Request(uint64_t requester, CellId cell, double deadline, Done done) {
-  return policy_.Request(requester, cell, deadline, std::move(done));
-}
-void SimulatedScheduler::Cancel(uint64_t requester, CellId cell) { policy_.Cancel(requester, cell); }
-void SimulatedScheduler::CancelAll(uint64_t requester) { policy_.CancelAll(requester); }
-CellPvsPtr SimulatedScheduler::Cached(CellId cell) { return policy_.Cached(cell); }
-SchedulerStats SimulatedScheduler::stats() const { return policy_.stats(); }
-
-void SimulatedScheduler::Dispatch(const std::function<void(CellId, double)>& on_start) {
-  while (busy_ < workers_) {
-    const std::optional<CellId> cell = policy_.StartNext();
-    if (!cell.has_value()) return;
-    double seconds = 0.0;
-    CellPvsPtr pvs = compute_(*cell, &seconds);
-    ++busy_;
-    if (on_start) on_start(*cell, seconds);
-    queue_->At(queue_->now() + seconds, [this, pvs, seconds] {
-      --busy_;
-      for (Done& d : policy_.Finish(pvs, seconds)) {
-        if (d) d(pvs);
-      }
-    });
-  }
-}
-
-// SimulatedTaskRunner
-
-void SimulatedTaskRunner::Dispatch() {
-  while (!busy_ && !waiting_.empty() && (!may_start_ || may_start_())) {
-    Work work = std::move(waiting_.begin()->second);
-    waiting_.erase(waiting_.begin());
-    const double start = WallSeconds();
-    std::function<void()> deliver = work();
-    if (!deliver) {
-      ++dropped_;
-      continue;  // stale: no time spent
-    }
-    const double seconds = fixed_s_.has_value() ? *fixed_s_ : WallSeconds() - start;
-    busy_ = true;
-    ++ran_;
-    busy_s_ += seconds;
-    queue_->At(queue_->now() + seconds, [this, deliver = std::move(deliver)] {
-      busy_ = false;
-      deliver();
-    });
-  }
-}
-
 // The radius scheme's R
 
 absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEntry& entry, const std::string& path,
@@ -224,7 +121,7 @@ class Run {
   // When `cell` became complete (list and objects arrived; uploaded at the next frame when the
   // frame time is declared), if it is.
   std::optional<double> CompleteAt(CellId cell) {
-    const std::optional<double> t = holdings_.CompleteAt(cell);
+    const std::optional<double> t = completion_.CompleteAt(cell);
     return t.has_value() ? std::optional<double>(FrameCeil(*t)) : std::nullopt;
   }
   double FrameCeil(double t) const {
@@ -234,6 +131,16 @@ class Run {
   void Frame(double t);
   void Pose(double t);
   void CloseRecord(double t);
+  // A record of entering `cell` at `t` (client/cell_margins.h's, as the real client keeps them).
+  client::CellEntry Entry(CellId cell, double t) const {
+    client::CellEntry e;
+    e.cell = cell;
+    const visibility::CellCoord c = scene_.grid().Coord(cell);
+    e.i = c.i;
+    e.j = c.j;
+    e.entered_s = t;
+    return e;
+  }
 
   ServedScene& scene_;
   const SimulationOptions& opt_;
@@ -248,50 +155,29 @@ class Run {
   bool down_busy_ = false;
   absl::Status failure_;
 
-  // The client.
-  SimulatedHoldings holdings_;
-  uint64_t holdings_generation_ = 0;  // bumped whenever an object arrives or is dropped
-  // An ε-mask as the client holds it (client/: the masks of its cell and the 8 around it, at
-  // most kMaxMasks, the oldest dropped first).
-  struct HeldMask {
-    uint32_t id = 0;
-    CellId cell = 0;
-    scenes::Aabb box;
-    std::vector<std::pair<uint32_t, uint64_t>> objects;  // ascending ids, visible triangles of each
-    uint64_t triangles = 0;                               // over every object
-    double arrival_s = 0.0;
-    bool used = false;  // drawn on some frame
-    // When it became drawable (FrameCeil of the latest arrival among it and its objects), if
-    // every object is held; valid while holdings_generation_ equals checked.
-    std::optional<double> ready_s;
-    uint64_t checked = std::numeric_limits<uint64_t>::max();
-  };
-  std::deque<HeldMask> masks_held_;  // in arrival order
-  visibility::MaskBases mask_bases_;  // the latest mask of each cell: deltas' bases
-  // Drops the masks of cells other than the client's and the 8 around it, then the oldest over kMaxMasks.
-  void KeepMasks();
-  // Whether `m` can be drawn at `t` (it and every object it names arrived and were uploaded).
-  bool MaskReady(HeldMask& m, double t);
-  void Consume(uint64_t bytes);  // bytes charged to the credit were consumed: grant them back
-  uint64_t consumed_since_grant_ = 0;
+  // The client: the client model's rules (client/client_model.h, mask_holdings.h,
+  // cell_completion.h), on simulated time.
+  client::CellCompletion completion_;  // lists and objects held, with their arrival times
+  client::MaskHoldings masks_held_;
+  std::set<uint64_t> masks_drawn_;     // keys of the held masks drawn on some frame
+  client::CreditWindow credit_;
+  client::PoseCadence poses_;
+  // Whether object `o` is held and uploaded by a frame at `t` (with a declared frame time, an
+  // object is uploaded at the first frame after its arrival).
+  bool Ready(uint32_t o, double t) const {
+    const client::CellCompletion::Object* h = completion_.Held(o);
+    return h != nullptr && FrameCeil(h->arrival_s) <= t + 1e-9;
+  }
+  uint64_t TrianglesOf(uint32_t o) const { return scene_.scene().objects[o].mesh.indices.size() / 3; }
+  // Drops the masks of cells other than the client's and the 8 around it, then the oldest
+  // over MaskHoldings::kMaxMasks.
+  void KeepMasks() { masks_held_.KeepNear(cell_.has_value() ? cell_ : start_cell_, scene_.grid()); }
   std::optional<double> walk_t0_;  // when the walk started (the first viewcell complete)
   std::optional<CellId> start_cell_;
   std::optional<CellId> ahead_cell_;  // the first cell the walk enters, if it leaves the first
   bool walking_done_ = false;
   std::optional<CellId> cell_;     // while walking: the cell of the last frame
   bool pending_ = false;           // the current record waits for its cell to complete
-  // While pending: whether its list is here, and which of its objects are not.
-  bool pending_list_ = false;
-  std::unordered_set<uint32_t> missing_;
-  void StartPending(CellId cell) {
-    missing_.clear();
-    const std::vector<uint32_t>* list = holdings_.ListOf(cell);
-    pending_list_ = list != nullptr;
-    if (!pending_list_) return;
-    for (uint32_t o : *list) {
-      if (holdings_.Of(o) == nullptr) missing_.insert(o);
-    }
-  }
   uint64_t frame_index_ = 0;       // of the next frame since the walk started
   uint64_t triangle_every_ = 1;    // frames between two triangle counts (10 Hz)
   uint64_t triangle_samples_ = 0;
@@ -301,13 +187,8 @@ class Run {
   bool crossed_ = false;
 };
 
-constexpr uint64_t kCreditWindow = uint64_t{8} << 20;  // client/connection.h credit_window_bytes
-constexpr double kPosePeriod = 0.1;                   // 10 Hz
-constexpr size_t kMaxMasks = 64;                      // ε-masks the client holds at most
-
-bool Inside(const glm::dvec3& e, const scenes::Aabb& b) {
-  return e.x >= b.min.x && e.x <= b.max.x && e.y >= b.min.y && e.y <= b.max.y && e.z >= b.min.z && e.z <= b.max.z;
-}
+// Triangles drawn are counted on frames this far apart (10 Hz).
+constexpr double kTriangleSampleS = 0.1;
 
 void Run::SendUp(v1::ClientMessage m, const char* what) {
   const size_t bytes = m.ByteSizeLong();
@@ -341,72 +222,44 @@ void Run::Pull() {
 
 void Run::Receive(const v1::ServerMessage& m) {
   const double t = q_.now();
+  // What the message costs the credit; a grant goes back as the client grants it.
+  credit_.Consume(client::ChargedBytes(m));
+  if (credit_.GrantDue()) SendUp(client::CreditMessage(credit_.TakeGrant()), "credit");
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
       const v1::ViewcellPvs& p = m.pvs();
-      holdings_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t);
-      if (pending_ && cell_ == p.cell_id()) StartPending(p.cell_id());
+      completion_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t);
       break;
     }
     case v1::ServerMessage::kGeometry: {
-      const v1::ObjectGeometry& g = m.geometry();
-      if (holdings_.Receive(g.object_id(), t, g.index_count() / 3)) ++r_.distinct_objects;
-      if (pending_) missing_.erase(g.object_id());
-      ++holdings_generation_;
-      const uint64_t encoded = g.vertices().size() + g.indices().size();
-      r_.geometry_bytes += encoded;
+      if (completion_.Arrive(m.geometry().object_id(), t)) ++r_.distinct_objects;
+      r_.geometry_bytes += client::ChargedBytes(m);
       ++r_.objects_received;
-      Consume(encoded);
       break;
     }
     case v1::ServerMessage::kEvict:
-      ++holdings_generation_;
-      for (uint32_t o : m.evict().object_ids()) {
-        holdings_.Evict(o);
-        if (pending_ && pending_list_) {
-          const std::vector<uint32_t>& list = *holdings_.ListOf(*cell_);  // ascending
-          if (std::binary_search(list.begin(), list.end(), o)) missing_.insert(o);
-        }
-      }
+      for (uint32_t o : m.evict().object_ids()) completion_.Drop(o);
       break;
     case v1::ServerMessage::kEpsilonMask: {
       const v1::EpsilonMask& e = m.epsilon_mask();
       ++r_.masks;
-      r_.mask_bytes += e.triangles().size();
-      Consume(e.triangles().size());  // a mask costs credit like geometry (proto EpsilonMask)
-      const scenes::Scene& sc = scene_.scene();
-      absl::StatusOr<visibility::DecodedMask> d = mask_bases_.Decode(
-          e.cell_id(), e.mask_id(), e.base_mask_id(), e.triangles(), static_cast<uint32_t>(sc.objects.size()),
-          r_.scene_triangles);
-      if (!d.ok()) {
+      r_.mask_bytes += client::ChargedBytes(m);
+      if (absl::Status st = masks_held_.Add(e, static_cast<uint32_t>(scene_.scene().objects.size()), r_.scene_triangles);
+          !st.ok()) {
         failure_ = absl::InternalError(
-            absl::StrCat("the simulated client cannot decode ε-mask ", e.mask_id(), ": ", d.status().message()));
+            absl::StrCat("the simulated client cannot decode ε-mask ", e.mask_id(), ": ", st.message()));
         break;
       }
-      HeldMask mask;
-      mask.id = e.mask_id();
-      mask.cell = e.cell_id();
-      mask.box.min = ToVec(e.neighbourhood_min());
-      mask.box.max = ToVec(e.neighbourhood_max());
-      mask.arrival_s = t;
-      mask.triangles = d->triangles;
-      mask.objects.reserve(d->objects.size());
-      for (const visibility::MaskObject& o : d->objects) {
-        uint64_t n = 0;
-        for (uint8_t byte : o.bits) n += static_cast<uint64_t>(std::popcount(byte));
-        mask.objects.emplace_back(o.object, n);
-      }
       if (opt_.log != nullptr) {
+        const client::EpsilonMaskSet& mask = masks_held_.masks().at(e.mask_id());
         const visibility::CellCoord c = scene_.grid().Coord(mask.cell);
-        const scenes::Aabb& b = mask.box;
-        Log("mask_arrival", {{"t_s", t}, {"mask_id", static_cast<uint64_t>(mask.id)}, {"cell", absl::StrCat(c.i, ",", c.j)},
-                             {"box", absl::StrFormat("%.2f,%.2f,%.2f,%.2f,%.2f,%.2f", b.min.x, b.min.y, b.min.z, b.max.x,
-                                                     b.max.y, b.max.z)},
+        Log("mask_arrival", {{"t_s", t}, {"mask_id", static_cast<uint64_t>(mask.mask_id)}, {"cell", absl::StrCat(c.i, ",", c.j)},
+                             {"box", absl::StrFormat("%.2f,%.2f,%.2f,%.2f,%.2f,%.2f", mask.box_min.x, mask.box_min.y,
+                                                     mask.box_min.z, mask.box_max.x, mask.box_max.y, mask.box_max.z)},
                              {"objects", static_cast<uint64_t>(mask.objects.size())}, {"triangles", mask.triangles},
                              {"bytes", static_cast<uint64_t>(e.triangles().size())},
                              {"delta", e.base_mask_id() != 0 ? "yes" : "no"}});
       }
-      masks_held_.push_back(std::move(mask));
       KeepMasks();
       break;
     }
@@ -425,11 +278,9 @@ void Run::Receive(const v1::ServerMessage& m) {
     if (done.has_value()) {
       walk_t0_ = std::max(*done, t);
       r_.startup_s = *walk_t0_;
-      CellRecord rec;
-      rec.cell = *start_cell_;
-      rec.entered_s = rec.complete_s = *walk_t0_;
-      rec.startup = true;
-      r_.cells.push_back(rec);
+      r_.cells.push_back(Entry(*start_cell_, *walk_t0_));
+      r_.cells.back().complete_s = *walk_t0_;
+      r_.cells.back().start = true;
       cell_ = *start_cell_;
       if (opt_.log != nullptr) Log("walk_start", {{"t_s", *walk_t0_}});
       q_.At(*walk_t0_, [this] { Frame(q_.now()); });
@@ -437,51 +288,9 @@ void Run::Receive(const v1::ServerMessage& m) {
   }
 }
 
-void Run::Consume(uint64_t bytes) {
-  // The client's grant (client/connection.cpp): what it consumed, once half the window is.
-  consumed_since_grant_ += bytes;
-  if (consumed_since_grant_ >= kCreditWindow / 2) {
-    v1::ClientMessage c;
-    c.mutable_credit()->set_bytes(consumed_since_grant_);
-    consumed_since_grant_ = 0;
-    SendUp(std::move(c), "credit");
-  }
-}
-
-void Run::KeepMasks() {
-  const std::optional<CellId> at = cell_.has_value() ? cell_ : start_cell_;
-  if (at.has_value()) {
-    const visibility::CellCoord c = scene_.grid().Coord(*at);
-    std::erase_if(masks_held_, [&](const HeldMask& m) {
-      const visibility::CellCoord mc = scene_.grid().Coord(m.cell);
-      return std::abs(mc.i - c.i) > 1 || std::abs(mc.j - c.j) > 1;
-    });
-  }
-  while (masks_held_.size() > kMaxMasks) masks_held_.pop_front();
-}
-
-bool Run::MaskReady(HeldMask& m, double t) {
-  if (m.checked != holdings_generation_) {
-    m.checked = holdings_generation_;
-    double latest = m.arrival_s;
-    m.ready_s.reset();
-    bool all = true;
-    for (const auto& [o, n] : m.objects) {
-      const SimulatedHoldings::Held* h = holdings_.Of(o);
-      if (h == nullptr) {
-        all = false;
-        break;
-      }
-      latest = std::max(latest, h->arrival_s);
-    }
-    if (all) m.ready_s = FrameCeil(latest);
-  }
-  return m.ready_s.has_value() && *m.ready_s <= t + 1e-9;
-}
-
 void Run::CloseRecord(double t) {
   if (r_.cells.empty() || !pending_) return;
-  CellRecord& rec = r_.cells.back();
+  client::CellEntry& rec = r_.cells.back();
   rec.complete_s = t;  // never completed while the client was in it
   rec.margin_s = rec.entered_s - t;
   pending_ = false;
@@ -501,16 +310,13 @@ void Run::Frame(double t) {
     crossing_compute_s_ = 0.0;
     cell_ = cell;
     KeepMasks();
-    CellRecord rec;
-    rec.cell = *cell;
-    rec.entered_s = t;
+    client::CellEntry rec = Entry(*cell, t);
     const std::optional<double> done = CompleteAt(*cell);
     if (done.has_value() && *done <= t + 1e-9) {
       rec.complete_s = *done;
       rec.margin_s = t - *done;
     } else {
       pending_ = true;
-      StartPending(*cell);
       rec.stalled = true;
       ++r_.stalled_cells;
     }
@@ -524,10 +330,10 @@ void Run::Frame(double t) {
     r_.cells.push_back(rec);
   }
   bool complete = true;
-  if (pending_ && pending_list_ && missing_.empty()) {
+  if (pending_ && completion_.Complete(*cell_)) {
     const std::optional<double> done = CompleteAt(*cell_);
     if (done.has_value() && *done <= t + 1e-9) {
-      CellRecord& rec = r_.cells.back();
+      client::CellEntry& rec = r_.cells.back();
       rec.complete_s = *done;
       rec.margin_s = rec.entered_s - *done;
       pending_ = false;
@@ -539,24 +345,15 @@ void Run::Frame(double t) {
     ++r_.stalls;
     r_.stall_s += r_.frame_s;
   }
-  // The mask drawn: of the held masks whose box the eye is in and whose objects are all here,
-  // the one with the fewest triangles.
-  HeldMask* mask = nullptr;
-  bool in_unready = false;
-  for (HeldMask& m : masks_held_) {
-    if (!Inside(pose.eye, m.box)) continue;
-    if (!MaskReady(m, t)) {
-      in_unready = true;
-    } else if (mask == nullptr || m.triangles < mask->triangles) {
-      mask = &m;
-    }
-  }
+  // The mask drawn, by the client model's rule (client/mask_holdings.h), of the masks whose
+  // objects have arrived and been uploaded.
+  const client::MaskChoice choice = masks_held_.Choose(pose.eye, [&](uint32_t o) { return Ready(o, t); });
+  const client::EpsilonMaskSet* mask = choice.mask;
   const bool hole = mask == nullptr && !complete;
   if (mask != nullptr) {
     ++r_.frames_masked;
-    if (!mask->used) ++r_.masks_used;
-    mask->used = true;
-  } else if (in_unready) {
+    if (masks_drawn_.insert(mask->key).second) ++r_.masks_used;
+  } else if (choice.in_box) {
     ++r_.frames_in_unready_mask;
   }
   if (hole) ++r_.hole_frames;
@@ -565,26 +362,27 @@ void Run::Frame(double t) {
     // What the renderer draws, culled against the view frustum: the mask's triangles; else the
     // cell's PVS; else (a hole) everything held. Without masks: the PVS, or during a stall
     // everything held.
-    const scenes::ViewFrustum frustum = RendererFrustum(pose.eye, pose.yaw_rad);
+    client::Camera camera;  // the renderer's (client/camera.h), level
+    camera.eye = pose.eye;
+    camera.yaw_rad = pose.yaw_rad;
+    const scenes::ViewFrustum frustum = camera.Frustum();
     const auto& objects = scene_.scene().objects;
     auto seen = [&](uint32_t o) { return frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max); };
     uint64_t without = 0;
     if (complete && cell_.has_value()) {
-      for (uint32_t o : *holdings_.ListOf(*cell_)) {
-        const SimulatedHoldings::Held* h = holdings_.Of(o);
-        if (h != nullptr && seen(o)) without += h->triangles;
+      for (uint32_t o : *completion_.List(*cell_)) {
+        if (completion_.Held(o) != nullptr && seen(o)) without += TrianglesOf(o);
       }
     } else {
-      for (uint32_t o = 0; o < holdings_.IdBound(); ++o) {
-        const SimulatedHoldings::Held* h = holdings_.Of(o);
-        if (h != nullptr && seen(o)) without += h->triangles;
-      }
+      completion_.ForEachHeld([&](uint32_t o, const client::CellCompletion::Object&) {
+        if (seen(o)) without += TrianglesOf(o);
+      });
     }
     uint64_t tris = without;
     if (mask != nullptr) {
       tris = 0;
-      for (const auto& [o, n] : mask->objects) {
-        if (seen(o)) tris += n;
+      for (size_t k = 0; k < mask->object_ids.size(); ++k) {
+        if (seen(mask->object_ids[k])) tris += mask->object_triangles[k];
       }
     }
     triangles_sum_ += static_cast<double>(tris);
@@ -606,8 +404,6 @@ void Run::Frame(double t) {
 }
 
 void Run::Pose(double t) {
-  v1::ClientMessage m;
-  v1::Pose* p = m.mutable_pose();
   // Waiting to walk: at the start, with the velocity it will walk at, so that the server ranks
   // the cells ahead first (as the real client, client/walkthrough.cpp Startup).
   scenes::WalkPose pose = walk_.At(0.0);
@@ -616,13 +412,9 @@ void Run::Pose(double t) {
     pose = walk_.At(std::min(walk_t, walk_.duration_s()));
     if (walk_t >= walk_.duration_s()) pose.velocity = glm::dvec3(0.0);
   }
-  SetVec(pose.eye, p->mutable_position());
-  SetVec(pose.velocity, p->mutable_velocity());
-  p->set_yaw_rad(pose.yaw_rad);
-  p->set_pitch_rad(0.0);
-  p->set_client_time_s(t);
-  SendUp(std::move(m), "pose");
-  q_.At(t + kPosePeriod, [this] { Pose(q_.now()); });
+  SendUp(client::PoseMessage(client::MakePose(pose.eye, pose.velocity, pose.yaw_rad, 0.0, t)), "pose");
+  poses_.Sent(t);
+  q_.At(poses_.next_s(), [this] { Pose(q_.now()); });
 }
 
 absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl& run) {
@@ -635,7 +427,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   r_.frame_declared = sim.client.has_value() && sim.client->frame_ms.has_value();
   r_.frame_s = r_.frame_declared ? *sim.client->frame_ms / 1000.0 : 1.0 / 60.0;
   r_.scene_triangles = scene_.scene().TriangleCount();
-  triangle_every_ = std::max<uint64_t>(1, static_cast<uint64_t>(std::llround(kPosePeriod / r_.frame_s)));
+  triangle_every_ = std::max<uint64_t>(1, static_cast<uint64_t>(std::llround(kTriangleSampleS / r_.frame_s)));
 
   // The PVS each scheme streams for a cell, and what computing it costs.
   std::shared_ptr<PvsMemo> memo = opt_.memo != nullptr ? opt_.memo : std::make_shared<PvsMemo>();
@@ -679,20 +471,18 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
     return absl::OutOfRangeError("the walk starts outside the scene's viewcell grid");
   }
   // Hello with the declared client budgets only, then the credit window.
-  v1::ClientMessage hello;
-  hello.mutable_hello()->set_scene(scene_.scene().name);
-  hello.mutable_hello()->set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
-  hello.mutable_hello()->set_epsilon_masks(opt_.scheme == Scheme::kPvsEps);
+  client::HelloSettings hello;
+  hello.scene = scene_.scene().name;
+  hello.epsilon_masks = opt_.scheme == Scheme::kPvsEps;
   if (sim.client.has_value() && sim.client->memory_mb.has_value()) {
-    hello.mutable_hello()->set_memory_budget_bytes(static_cast<uint64_t>(*sim.client->memory_mb * 1048576.0));
+    hello.memory_budget_bytes = static_cast<uint64_t>(*sim.client->memory_mb * 1048576.0);
   }
   if (sim.client.has_value() && sim.client->triangle_budget.has_value()) {
-    hello.mutable_hello()->set_triangle_budget(*sim.client->triangle_budget);
+    hello.triangle_budget = *sim.client->triangle_budget;
   }
-  SendUp(std::move(hello), "hello");
-  v1::ClientMessage credit;
-  credit.mutable_credit()->set_bytes(kCreditWindow);
-  SendUp(std::move(credit), "credit");
+  SendUp(client::HelloMessage(hello), "hello");
+  SendUp(client::CreditMessage(credit_.Open()), "credit");
+  poses_.Restart(0.0);
   q_.At(0.0, [this] { Pose(q_.now()); });
 
   const auto on_start = [this](CellId cell, double seconds) {
@@ -735,8 +525,8 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   double sum = 0.0;
   size_t n = 0;
   r_.min_margin_s = 0.0;
-  for (const CellRecord& c : r_.cells) {
-    if (c.startup) continue;
+  for (const client::CellEntry& c : r_.cells) {
+    if (c.start) continue;
     r_.min_margin_s = n == 0 ? c.margin_s : std::min(r_.min_margin_s, c.margin_s);
     sum += c.margin_s;
     ++n;
@@ -832,4 +622,4 @@ absl::StatusOr<SpeedSearch> FindMaxSpeed(ServedScene& scene, const scenes::Catal
   return finish(a, b);
 }
 
-}  // namespace vistream::server
+}  // namespace vistream::simulation

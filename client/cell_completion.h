@@ -1,0 +1,98 @@
+#pragma once
+// When a viewcell is complete (DESIGN.md "Server and client": a *stall* is a frame drawn inside
+// a viewcell that is not): its PVS list is held and so is every object on it. The rule is
+// stated once here, as CellComplete (for a holder that can look at its objects) and as
+// CellCompletion (the same rule kept up to date message by message, with arrival times, for
+// holders that are asked often: the scripted sessions of client/session_stream.h and the
+// simulator's client). "Held" is the caller's word: received, or received and uploaded for a
+// client that draws (client/walkthrough.cpp, client/cell_margins.h).
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+namespace vistream::client {
+
+// The objects of `list` that `held` says are not held.
+template <typename Held>
+size_t MissingObjects(const std::vector<uint32_t>& list, Held&& held) {
+  size_t n = 0;
+  for (uint32_t o : list) n += held(o) ? 0 : 1;
+  return n;
+}
+
+// Whether a cell whose PVS list is `list` (null: not held) is complete: the list is held and
+// `held` holds for every object on it.
+template <typename Held>
+bool CellComplete(const std::vector<uint32_t>* list, Held&& held) {
+  if (list == nullptr) return false;
+  for (uint32_t o : *list) {
+    if (!held(o)) return false;
+  }
+  return true;
+}
+
+// CellComplete kept up to date as messages arrive: objects held with their arrival times, the
+// latest PVS list of each cell, and per cell how many of its objects are missing, so that each
+// question is answered in constant time. Times are the caller's seconds (steady or simulated),
+// never decreasing from one call to the next. Object ids and cells are whatever the server
+// sent; nothing is assumed dense.
+class CellCompletion {
+ public:
+  struct Object {
+    double arrival_s = 0.0;  // the latest arrival
+    bool held = false;       // now
+    bool ever = false;       // at some time
+  };
+
+  // Hears of every cell that becomes complete (a list arriving whole, or the last object of
+  // a list arriving), with the time it did; may be empty.
+  std::function<void(uint32_t cell, double t_s)> on_complete;
+
+  // The PVS list of `cell` (object ids, distinct) arrived at `t_s`, replacing an earlier one.
+  void SetList(uint32_t cell, std::span<const uint32_t> objects, double t_s);
+  // The caller forgot `cell`'s list (nothing: no list is held).
+  void DropList(uint32_t cell);
+  // Object `id` arrived at `t_s` (again while held: its arrival moves to `t_s`). Returns true
+  // the first time the object is held in this tracker's life.
+  bool Arrive(uint32_t id, double t_s);
+  // The caller dropped object `id` (not held: nothing happens).
+  void Drop(uint32_t id);
+
+  // The object's entry while held, else null.
+  const Object* Held(uint32_t id) const;
+  // Calls fn(id, object) for every object held now, in no particular order.
+  template <typename Fn>
+  void ForEachHeld(Fn&& fn) const {
+    for (const auto& [id, e] : entries_) {
+      if (e.state.held) fn(id, e.state);
+    }
+  }
+  // The list of `cell`, or null when none is held.
+  const std::vector<uint32_t>* List(uint32_t cell) const;
+  // Whether `cell` is complete (CellComplete with "arrived and not dropped").
+  bool Complete(uint32_t cell) const;
+  // The objects of `cell`'s list not held (0 without a list).
+  size_t Missing(uint32_t cell) const;
+  // When `cell` is complete: the latest arrival among its list and the objects it names.
+  std::optional<double> CompleteAt(uint32_t cell) const;
+
+ private:
+  struct CellList {
+    std::vector<uint32_t> objects;
+    size_t missing = 0;
+    double latest_s = 0.0;  // the latest arrival among the list and its held objects
+  };
+  struct ObjectEntry {
+    Object state;
+    std::vector<uint32_t> cells;  // cells whose list names it
+  };
+  std::unordered_map<uint32_t, ObjectEntry> entries_;  // every object held or named by a list
+  std::unordered_map<uint32_t, CellList> lists_;
+};
+
+}  // namespace vistream::client

@@ -1,0 +1,77 @@
+#include "client/client_model.h"
+
+#include <algorithm>
+
+namespace vistream::client {
+
+namespace v1 = vistream::v1;
+
+namespace {
+
+void SetVec(const glm::dvec3& v, v1::Vec3* out) {
+  out->set_x(v.x);
+  out->set_y(v.y);
+  out->set_z(v.z);
+}
+
+}  // namespace
+
+v1::Hello MakeHello(const HelloSettings& settings) {
+  v1::Hello h;
+  h.set_scene(settings.scene);
+  h.set_protocol_version(v1::PROTOCOL_VERSION_CURRENT);
+  h.set_memory_budget_bytes(settings.memory_budget_bytes);
+  h.set_triangle_budget(settings.triangle_budget);
+  h.set_epsilon_masks(settings.epsilon_masks);
+  h.mutable_held_objects()->Add(settings.held_objects.begin(), settings.held_objects.end());
+  return h;
+}
+
+v1::Pose MakePose(const glm::dvec3& position, const glm::dvec3& velocity, double yaw_rad, double pitch_rad,
+                  double client_time_s) {
+  v1::Pose p;
+  p.set_client_time_s(client_time_s);
+  SetVec(position, p.mutable_position());
+  SetVec(velocity, p.mutable_velocity());
+  p.set_yaw_rad(static_cast<float>(yaw_rad));
+  p.set_pitch_rad(static_cast<float>(pitch_rad));
+  return p;
+}
+
+PoseCadence::PoseCadence(double rate_hz) : period_s_(1.0 / std::max(0.1, rate_hz)) {}
+
+void PoseCadence::Sent(double now_s) {
+  next_s_ += period_s_;
+  if (next_s_ < now_s) next_s_ = now_s;
+}
+
+uint64_t ChargedBytes(const v1::ServerMessage& m) {
+  switch (m.body_case()) {
+    case v1::ServerMessage::kGeometry:
+      return m.geometry().vertices().size() + m.geometry().indices().size();
+    case v1::ServerMessage::kEpsilonMask:
+      return m.epsilon_mask().triangles().size();
+    default:
+      return 0;
+  }
+}
+
+v1::ClientMessage HelloMessage(const HelloSettings& settings) {
+  v1::ClientMessage m;
+  *m.mutable_hello() = MakeHello(settings);
+  return m;
+}
+
+v1::ClientMessage PoseMessage(const v1::Pose& pose) {
+  v1::ClientMessage m;
+  *m.mutable_pose() = pose;
+  return m;
+}
+
+v1::ClientMessage CreditMessage(uint64_t bytes) {
+  v1::ClientMessage m;
+  m.mutable_credit()->set_bytes(bytes);
+  return m;
+}
+
+}  // namespace vistream::client

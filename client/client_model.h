@@ -1,0 +1,112 @@
+#pragma once
+// The client's side of the walkthrough protocol (proto/walkthrough.proto; DESIGN.md "The client
+// model and the web client"), written once: what a client says in Hello, how often it reports
+// its pose, how it grants byte credit and what each server message costs it. The native
+// client's network thread (client/connection.h), the scripted sessions of the tests and of
+// `vistream bench server` (client/session_stream.h) and the simulator (simulation/simulator.h)
+// all follow these rules by calling them. The rest of the model: which ε-masks a client holds
+// and which one a frame draws (client/mask_holdings.h), when a viewcell is complete
+// (client/cell_completion.h), the viewcell grid (visibility::ViewcellGrid from SceneInfo,
+// proto/scene_info.h GridFromSceneInfo), the memory accounting of a decoded object
+// (scenes/geometry_codec.h RawMeshBytes).
+//
+// Nothing here does input or output, waits or takes a lock: callers own the clock (steady
+// seconds for a real client, simulated seconds for the simulator) and the stream.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "proto/walkthrough.pb.h"
+
+namespace vistream::client {
+
+// ---- Hello ----
+
+// What a client asks for when a session opens (proto Hello).
+struct HelloSettings {
+  std::string scene;                 // the served scene's name (ServerStats.scenes)
+  uint64_t memory_budget_bytes = 0;  // decoded bytes the client may hold (RawMeshBytes); 0 unlimited
+  uint64_t triangle_budget = 0;      // triangles a frame; 0 unlimited
+  bool epsilon_masks = false;        // the client draws ε-masks (the server sends none otherwise)
+  std::vector<uint32_t> held_objects;  // on resume: the objects it still holds, any order
+};
+
+// The Hello of the current protocol version (PROTOCOL_VERSION_CURRENT) with `settings`.
+vistream::v1::Hello MakeHello(const HelloSettings& settings);
+
+// ---- Pose ----
+
+// Poses a client reports a second (the server accepts up to 120).
+inline constexpr double kPoseRateHz = 10.0;
+
+// The pose message: eye in scene-local metres (z up), velocity in m/s (the server's
+// look-ahead), yaw counter-clockwise from +x and pitch up from the horizontal in radians,
+// `client_time_s` the client's clock in seconds since its session started.
+vistream::v1::Pose MakePose(const glm::dvec3& position, const glm::dvec3& velocity, double yaw_rad, double pitch_rad,
+                            double client_time_s);
+
+// When the next pose is due, on the caller's clock (seconds): one every 1 / rate_hz seconds
+// from the first, never a burst to catch up after a late one (a pose sent late moves the next
+// to the time it was sent, as a steady rate would).
+class PoseCadence {
+ public:
+  // `rate_hz` below 0.1 is taken as 0.1.
+  explicit PoseCadence(double rate_hz = kPoseRateHz);
+  double period_s() const { return period_s_; }
+  // Starts the cadence again: the next pose is due at `now_s`.
+  void Restart(double now_s) { next_s_ = now_s; }
+  double next_s() const { return next_s_; }
+  bool Due(double now_s) const { return now_s >= next_s_; }
+  // A pose went out at `now_s` (at or after next_s()): the next is due one period after the
+  // one that was due, or at `now_s` if that is already past.
+  void Sent(double now_s);
+
+ private:
+  double period_s_;
+  double next_s_ = 0.0;
+};
+
+// ---- Credit ----
+
+// Byte credit as a client grants it (proto Credit): the whole window when the session opens;
+// then, each time half the window has been consumed (ChargedBytes of what arrived), a grant of
+// exactly what was consumed. So at most `window_bytes` are in flight, and a client that stops
+// reading stops the server.
+class CreditWindow {
+ public:
+  static constexpr uint64_t kDefaultBytes = uint64_t{8} << 20;
+  explicit CreditWindow(uint64_t window_bytes = kDefaultBytes) : window_bytes_(window_bytes) {}
+  uint64_t window_bytes() const { return window_bytes_; }
+  // A session opens: what it grants first (the window); nothing is consumed yet.
+  uint64_t Open() {
+    consumed_ = 0;
+    return window_bytes_;
+  }
+  // `bytes` of what the server charged arrived.
+  void Consume(uint64_t bytes) { consumed_ += bytes; }
+  // Whether a grant is due (half the window consumed since the last one).
+  bool GrantDue() const { return consumed_ >= window_bytes_ / 2; }
+  // The grant due (what was consumed), starting the count again. Precondition: GrantDue().
+  uint64_t TakeGrant() {
+    const uint64_t g = consumed_;
+    consumed_ = 0;
+    return g;
+  }
+
+ private:
+  uint64_t window_bytes_;
+  uint64_t consumed_ = 0;
+};
+
+// Bytes a server message costs the credit: an object's encoded geometry (its vertex and index
+// bytes) and an ε-mask's run-length triangle bytes; every other message is free.
+uint64_t ChargedBytes(const vistream::v1::ServerMessage& m);
+
+vistream::v1::ClientMessage HelloMessage(const HelloSettings& settings);
+vistream::v1::ClientMessage PoseMessage(const vistream::v1::Pose& pose);
+vistream::v1::ClientMessage CreditMessage(uint64_t bytes);
+
+}  // namespace vistream::client
