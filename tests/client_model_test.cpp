@@ -1,0 +1,138 @@
+// The client model's rules (client/client_model.h, mask_holdings.h): what a client says in
+// Hello, its pose cadence, its credit grants and what each message costs it, the ε-masks it
+// keeps near its cell.
+#include "client/client_model.h"
+
+#include <cstdint>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "client/mask_holdings.h"
+#include "scenes/geometry_codec.h"
+#include "visibility/mask_codec.h"
+
+namespace vistream::client {
+namespace {
+
+namespace v1 = vistream::v1;
+
+TEST(ClientModel, HelloCarriesTheProtocolVersionTheBudgetsAndWhatIsHeld) {
+  HelloSettings s;
+  s.scene = "london";
+  s.memory_budget_bytes = 1 << 20;
+  s.triangle_budget = 5000;
+  s.epsilon_masks = true;
+  s.held_objects = {7, 3};
+  const v1::Hello h = MakeHello(s);
+  EXPECT_EQ(h.scene(), "london");
+  EXPECT_EQ(h.protocol_version(), static_cast<uint32_t>(v1::PROTOCOL_VERSION_CURRENT));
+  EXPECT_EQ(h.memory_budget_bytes(), 1u << 20);
+  EXPECT_EQ(h.triangle_budget(), 5000u);
+  EXPECT_TRUE(h.epsilon_masks());
+  EXPECT_EQ(std::vector<uint32_t>(h.held_objects().begin(), h.held_objects().end()), (std::vector<uint32_t>{7, 3}));
+  // Defaults ask for nothing: no budget, no mask (the fields are left at proto3's zero).
+  HelloSettings city1;
+  city1.scene = "city1";
+  const v1::Hello plain = MakeHello(city1);
+  EXPECT_EQ(plain.ByteSizeLong(), 2 + city1.scene.size() + 2);  // the scene and the version only
+  EXPECT_FALSE(plain.epsilon_masks());
+  EXPECT_EQ(plain.memory_budget_bytes(), 0u);
+  EXPECT_TRUE(HelloMessage(s).has_hello());
+}
+
+TEST(ClientModel, PosesGoOutAtTheRateWithoutABurstAfterALateOne) {
+  PoseCadence c(kPoseRateHz);
+  EXPECT_DOUBLE_EQ(c.period_s(), 0.1);
+  c.Restart(5.0);
+  EXPECT_TRUE(c.Due(5.0));
+  c.Sent(5.0);
+  EXPECT_FALSE(c.Due(5.05));
+  EXPECT_TRUE(c.Due(5.1));
+  c.Sent(5.1);
+  // Sent late (1 s after it was due): the next is due at once, not ten to catch up.
+  c.Sent(6.2);
+  EXPECT_DOUBLE_EQ(c.next_s(), 6.2);
+  c.Sent(6.2);
+  EXPECT_DOUBLE_EQ(c.next_s(), 6.3);
+  EXPECT_DOUBLE_EQ(PoseCadence(0.0).period_s(), 10.0);  // a rate below 0.1 is 0.1
+  const v1::Pose p = MakePose({1, 2, 3}, {4, 5, 6}, 0.5, -0.25, 9.5);
+  EXPECT_EQ(p.position().y(), 2.0);
+  EXPECT_EQ(p.velocity().z(), 6.0);
+  EXPECT_FLOAT_EQ(p.yaw_rad(), 0.5f);
+  EXPECT_FLOAT_EQ(p.pitch_rad(), -0.25f);
+  EXPECT_EQ(p.client_time_s(), 9.5);
+}
+
+TEST(ClientModel, CreditOpensWithTheWindowAndGrantsBackWhatWasConsumedAtHalf) {
+  CreditWindow w(1000);
+  EXPECT_EQ(w.Open(), 1000u);
+  w.Consume(300);
+  EXPECT_FALSE(w.GrantDue());
+  w.Consume(250);
+  ASSERT_TRUE(w.GrantDue());
+  EXPECT_EQ(w.TakeGrant(), 550u);
+  EXPECT_FALSE(w.GrantDue());
+  w.Consume(100);
+  EXPECT_EQ(w.Open(), 1000u);  // a new session starts the count again
+  EXPECT_FALSE(w.GrantDue());
+  EXPECT_EQ(CreditWindow().window_bytes(), uint64_t{8} << 20);
+  EXPECT_EQ(CreditMessage(42).credit().bytes(), 42u);
+}
+
+TEST(ClientModel, GeometryAndMasksCostTheCreditAndNothingElseDoes) {
+  v1::ServerMessage g;
+  g.mutable_geometry()->set_vertices(std::string(100, 'v'));
+  g.mutable_geometry()->set_indices(std::string(20, 'i'));
+  EXPECT_EQ(ChargedBytes(g), 120u);
+  v1::ServerMessage m;
+  m.mutable_epsilon_mask()->set_triangles(std::string(7, 't'));
+  EXPECT_EQ(ChargedBytes(m), 7u);
+  v1::ServerMessage p;
+  p.mutable_pvs()->add_object_ids(3);
+  EXPECT_EQ(ChargedBytes(p), 0u);
+  EXPECT_EQ(ChargedBytes(v1::ServerMessage()), 0u);
+  EXPECT_EQ(scenes::RawMeshBytes(10, 30), 10u * 24 + 30u * 4);
+}
+
+v1::EpsilonMask Mask(uint32_t id, uint32_t cell, double x0) {
+  v1::EpsilonMask m;
+  m.set_mask_id(id);
+  m.set_cell_id(cell);
+  m.mutable_neighbourhood_min()->set_x(x0);
+  m.mutable_neighbourhood_max()->set_x(x0 + 4);
+  m.mutable_neighbourhood_max()->set_y(4);
+  m.mutable_neighbourhood_max()->set_z(2);
+  std::vector<visibility::MaskObject> objects = {{1, {0x3}}, {2, {0x1}}};
+  m.set_triangles(visibility::EncodeMaskRuns(objects));
+  return m;
+}
+
+TEST(MaskHoldings, KeepsTheMasksOfTheCellAndItsNeighboursAndChoosesAReadyOne) {
+  const visibility::ViewcellGrid grid = *visibility::ViewcellGrid::FromLayout({0, 0}, 10, 5, 1, 0, 2);
+  MaskHoldings h;
+  ASSERT_TRUE(h.Add(Mask(1, 0, 1), 10, 100).ok());
+  ASSERT_TRUE(h.Add(Mask(2, 4, 41), 10, 100).ok());
+  ASSERT_EQ(h.masks().size(), 2u);
+  EXPECT_EQ(h.masks().at(1).object_triangles, (std::vector<uint64_t>{2, 1}));
+  EXPECT_EQ(h.masks().at(1).triangles, 3u);
+  h.KeepNear(std::nullopt, grid);  // no cell known: nothing dropped for that
+  EXPECT_EQ(h.masks().size(), 2u);
+  h.KeepNear(1, grid);  // cell 4 is two cells away from cell 1
+  ASSERT_EQ(h.masks().size(), 1u);
+  EXPECT_EQ(h.TakeDropped().size(), 1u);
+  const MaskChoice ready = h.Choose({2, 1, 1}, [](uint32_t) { return true; });
+  ASSERT_NE(ready.mask, nullptr);
+  EXPECT_EQ(ready.mask->mask_id, 1u);
+  const MaskChoice unready = h.Choose({2, 1, 1}, [](uint32_t o) { return o != 2; });
+  EXPECT_EQ(unready.mask, nullptr);
+  EXPECT_TRUE(unready.in_box);
+  EXPECT_FALSE(h.Choose({30, 1, 1}, [](uint32_t) { return true; }).in_box);
+  v1::EpsilonMask bad = Mask(3, 0, 1);
+  bad.set_triangles("\xff");
+  EXPECT_FALSE(h.Add(bad, 10, 100).ok());
+  EXPECT_EQ(h.masks().size(), 1u);
+}
+
+}  // namespace
+}  // namespace vistream::client
