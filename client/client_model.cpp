@@ -2,19 +2,11 @@
 
 #include <algorithm>
 
+#include "proto/vec3.h"
+
 namespace vistream::client {
 
 namespace v1 = vistream::v1;
-
-namespace {
-
-void SetVec(const glm::dvec3& v, v1::Vec3* out) {
-  out->set_x(v.x);
-  out->set_y(v.y);
-  out->set_z(v.z);
-}
-
-}  // namespace
 
 v1::Hello MakeHello(const HelloSettings& settings) {
   v1::Hello h;

@@ -5,6 +5,8 @@
 #include <iterator>
 #include <utility>
 
+#include "proto/vec3.h"
+
 namespace vistream::client {
 
 namespace v1 = vistream::v1;
@@ -23,8 +25,8 @@ absl::Status MaskHoldings::Add(const v1::EpsilonMask& m, uint32_t object_count, 
   set.mask_id = m.mask_id();
   set.key = next_key_++;
   set.cell = m.cell_id();
-  set.box_min = {m.neighbourhood_min().x(), m.neighbourhood_min().y(), m.neighbourhood_min().z()};
-  set.box_max = {m.neighbourhood_max().x(), m.neighbourhood_max().y(), m.neighbourhood_max().z()};
+  set.box_min = ToVec(m.neighbourhood_min());
+  set.box_max = ToVec(m.neighbourhood_max());
   set.triangles = decoded->triangles;
   set.objects = std::move(decoded->objects);
   set.object_ids.reserve(set.objects.size());

@@ -2,17 +2,9 @@
 
 #include <absl/strings/str_cat.h>
 
+#include "proto/vec3.h"
+
 namespace vistream {
-
-namespace {
-
-void SetVec(const glm::dvec3& v, v1::Vec3* out) {
-  out->set_x(v.x);
-  out->set_y(v.y);
-  out->set_z(v.z);
-}
-
-}  // namespace
 
 v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::ViewcellGrid& grid, const std::string& name) {
   v1::SceneInfo info;
