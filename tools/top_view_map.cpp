@@ -113,13 +113,17 @@ glm::dvec2 TopViewMap::PixelFromScene(const glm::dvec2& p) const {
 
 void TopViewMap::SetColour(Rgb c) { Colour(cr_, c); }
 
-void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bool antialias) {
-  if (polygon.size() < 3) return;
+void TopViewMap::TracePolygon(std::span<const glm::dvec2> polygon) {
   for (const glm::dvec2& p : polygon) {
     const glm::dvec2 q = PixelFromScene(p);
     cairo_line_to(cr_, q.x, q.y);
   }
   cairo_close_path(cr_);
+}
+
+void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bool antialias) {
+  if (polygon.size() < 3) return;
+  TracePolygon(polygon);
   SetColour(colour);
   cairo_set_antialias(cr_, antialias ? CAIRO_ANTIALIAS_DEFAULT : CAIRO_ANTIALIAS_NONE);
   cairo_fill(cr_);
@@ -128,11 +132,7 @@ void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bo
 
 void TopViewMap::StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour, double width_px) {
   if (polygon.size() < 2) return;
-  for (const glm::dvec2& p : polygon) {
-    const glm::dvec2 q = PixelFromScene(p);
-    cairo_line_to(cr_, q.x, q.y);
-  }
-  cairo_close_path(cr_);
+  TracePolygon(polygon);
   SetColour(colour);
   cairo_set_line_width(cr_, width_px);
   cairo_stroke(cr_);

@@ -86,6 +86,8 @@ class TopViewMap {
   struct Layout;
   glm::dvec2 PixelFromScene(const glm::dvec2& p) const;
   void SetColour(Rgb c);
+  // The closed polygon (scene-local metres) as Cairo's current path, in pixels.
+  void TracePolygon(std::span<const glm::dvec2> polygon);
   Layout ComputeLayout() const;
 
   glm::dvec2 min_;
