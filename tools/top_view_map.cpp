@@ -69,6 +69,24 @@ std::string Length(double metres) {
 
 }  // namespace
 
+void DrawVisibleSet(const scenes::Scene& scene, std::span<const scenes::ObjectId> visible,
+                    std::span<const glm::dvec2> region, const VisibleSetLegend& legend, TopViewMap* map) {
+  std::vector<bool> in(scene.objects.size(), false);
+  for (scenes::ObjectId id : visible) in[id] = true;
+  const Rgb in_set{40, 90, 220}, hidden{215, 50, 40}, region_fill{30, 200, 60}, outline{60, 60, 60};
+  for (const auto& oc : scene.occluders) map->FillPolygon(oc.footprint, in[oc.object] ? in_set : hidden);
+  const bool outlines = map->outlines_readable();
+  if (outlines) {
+    for (const auto& oc : scene.occluders) map->StrokePolygon(oc.footprint, outline);
+  }
+  map->FillPolygon(region, region_fill);
+  map->StrokePolygon(region, Rgb{0, 120, 30}, 2.0);
+  map->AddLegend(region_fill, legend.region);
+  map->AddLegend(in_set, legend.in_set);
+  map->AddLegend(hidden, legend.hidden);
+  if (outlines) map->AddLegend(outline, "building footprint edge", Swatch::kOutline);
+}
+
 double RoundDown125(double x) {
   if (!(x > 0) || !std::isfinite(x)) return 1.0;
   const double p = std::pow(10.0, std::floor(std::log10(x)));
