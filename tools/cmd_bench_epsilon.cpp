@@ -176,6 +176,12 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
   progress.Finish();
   const auto n = static_cast<double>(boxes.size());
   auto mean = [n](double sum) { return sum / n; };
+  // The mean of per-neighbourhood figures, summed in sample order.
+  auto mean_of = [&mean](const std::vector<double>& v) {
+    double sum = 0;
+    for (double m : v) sum += m;
+    return mean(sum);
+  };
 
   // Table 1 from the paper's fully optimised column if it ran (this project's hints find
   // hiders before the first ray, so "first occluders" means nothing there), else the last.
@@ -206,8 +212,6 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
                    {"first_occluders", mean(full.first_occluders)}};
     j["table2"] = nlohmann::json::array();
     for (const Column& c : columns) {
-      double sum = 0;
-      for (double m : c.ms) sum += m;
       // Per neighbourhood, in sample order; the digest (hex) of its superset, and of all of them.
       nlohmann::json per = nlohmann::json::array();
       uint64_t all = 1469598103934665603ull;
@@ -231,13 +235,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
         all = (all ^ f.digest) * 1099511628211ull;
       }
       j["table2"].push_back({{"opt", c.opt},
-                             {"ms", sum / n},
+                             {"ms", mean_of(c.ms)},
                              {"median_ms", Median(c.ms)},
-                             {"cpu_ms", [&] {
-                                double cpu = 0;
-                                for (double m : c.cpu_ms) cpu += m;
-                                return cpu / n;
-                              }()},
+                             {"cpu_ms", mean_of(c.cpu_ms)},
                              {"median_cpu_ms", Median(c.cpu_ms)},
                              {"box_ms", mean(c.box_ms)},
                              {"polygon_ms", mean(c.polygon_ms)},
@@ -290,23 +290,11 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
     std::printf("\n");
   };
   auto fmt = [](double v) { return v < 100 ? absl::StrFormat("%.2f", v) : absl::StrFormat("%.0f", v); };
-  row2(
-      "total time, mean",
-      [&](const Column& c) {
-        double sum = 0;
-        for (double m : c.ms) sum += m;
-        return fmt(sum / n);
-      },
-      [](const PaperTable2& p) { return p.total_ms; });
+  row2("total time, mean", [&](const Column& c) { return fmt(mean_of(c.ms)); },
+       [](const PaperTable2& p) { return p.total_ms; });
   row2("total time, median", [&](const Column& c) { return fmt(Median(c.ms)); }, [](const PaperTable2&) { return -1.0; });
-  row2(
-      "thread CPU time, mean",
-      [&](const Column& c) {
-        double sum = 0;
-        for (double m : c.cpu_ms) sum += m;
-        return fmt(sum / n);
-      },
-      [](const PaperTable2&) { return -1.0; });
+  row2("thread CPU time, mean", [&](const Column& c) { return fmt(mean_of(c.cpu_ms)); },
+       [](const PaperTable2&) { return -1.0; });
   row2("thread CPU time, median", [&](const Column& c) { return fmt(Median(c.cpu_ms)); },
        [](const PaperTable2&) { return -1.0; });
   row2("box occlusion time", [&](const Column& c) { return fmt(mean(c.box_ms)); },
