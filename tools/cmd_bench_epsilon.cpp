@@ -297,19 +297,25 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
        [](const PaperTable2&) { return -1.0; });
   row2("thread CPU time, median", [&](const Column& c) { return fmt(Median(c.cpu_ms)); },
        [](const PaperTable2&) { return -1.0; });
-  row2("box occlusion time", [&](const Column& c) { return fmt(mean(c.box_ms)); },
-       [](const PaperTable2& p) { return p.box_ms; });
-  row2("polygon occlusion time", [&](const Column& c) { return fmt(mean(c.polygon_ms)); },
-       [](const PaperTable2& p) { return p.polygon_ms; });
-  row2("ray / occluder tests, boxes", [&](const Column& c) { return fmt(mean(c.box_tests)); },
-       [](const PaperTable2& p) { return p.box_tests; });
-  row2("ray / occluder tests, polygons", [&](const Column& c) { return fmt(mean(c.polygon_tests)); },
-       [](const PaperTable2& p) { return p.polygon_tests; });
-  row2("rays", [&](const Column& c) { return fmt(mean(c.rays)); }, [](const PaperTable2&) { return -1.0; });
-  row2("Embree traversals", [&](const Column& c) { return fmt(mean(c.traversals)); },
-       [](const PaperTable2&) { return -1.0; });
-  row2("visible triangles", [&](const Column& c) { return fmt(mean(c.visible_triangles)); },
-       [](const PaperTable2&) { return -1.0; });
+  // The rows that are the mean of a figure each column sums, beside the paper's where it has one.
+  struct MeanRow {
+    const char* name;
+    double Column::*sum;
+    double PaperTable2::*paper;  // nullptr: not in the paper
+  };
+  const MeanRow mean_rows[] = {
+      {"box occlusion time", &Column::box_ms, &PaperTable2::box_ms},
+      {"polygon occlusion time", &Column::polygon_ms, &PaperTable2::polygon_ms},
+      {"ray / occluder tests, boxes", &Column::box_tests, &PaperTable2::box_tests},
+      {"ray / occluder tests, polygons", &Column::polygon_tests, &PaperTable2::polygon_tests},
+      {"rays", &Column::rays, nullptr},
+      {"Embree traversals", &Column::traversals, nullptr},
+      {"visible triangles", &Column::visible_triangles, nullptr},
+  };
+  for (const MeanRow& r : mean_rows) {
+    row2(r.name, [&](const Column& c) { return fmt(mean(c.*r.sum)); },
+         [&](const PaperTable2& p) { return r.paper ? p.*r.paper : -1.0; });
+  }
   return 0;
 }
 
