@@ -14,6 +14,7 @@
 #include <system_error>
 
 #include <CLI/CLI.hpp>
+#include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
 namespace vistream::cli {
@@ -31,23 +32,6 @@ inline bool ParseFinite(std::string_view text, double* v) {
   return !text.empty() && ec == std::errc() && ptr == end && std::isfinite(*v);
 }
 
-}  // namespace internal
-
-// A finite number in [lo, hi].
-inline CLI::Validator FiniteRange(double lo, double hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        double v = 0.0;
-        if (!internal::ParseFinite(text, &v) || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a number from %g to %g", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("NUMBER in [%g, %g]", lo, hi));
-}
-
-namespace internal {
-
 // `text` as a whole decimal number (no sign unless negative, no exponent), if it is one.
 inline bool ParseWhole(const std::string& text, int64_t* v) {
   const char* end = text.data() + text.size();
@@ -55,32 +39,40 @@ inline bool ParseWhole(const std::string& text, int64_t* v) {
   return !text.empty() && ec == std::errc() && ptr == end;
 }
 
+inline std::string NumberText(double v) { return absl::StrFormat("%g", v); }
+inline std::string NumberText(int64_t v) { return absl::StrFormat("%d", v); }
+
+// A check that lets through a text `parse` reads whole as a T in [lo, hi] that `also` accepts;
+// else it fails with "'<text>' is not <what> from <lo> to <hi>". --help shows the value as
+// "<value_name> in [<lo>, <hi>]".
+template <typename T, typename Parse, typename Also>
+CLI::Validator NumberIn(T lo, T hi, Parse parse, Also also, const char* what, const char* value_name) {
+  const std::string lo_text = NumberText(lo), hi_text = NumberText(hi);
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        T v{};
+        if (parse(text, &v) && v >= lo && v <= hi && also(v)) return "";
+        return absl::StrCat("'", text, "' is not ", what, " from ", lo_text, " to ", hi_text);
+      },
+      absl::StrCat(value_name, " in [", lo_text, ", ", hi_text, "]"));
+}
+
 }  // namespace internal
+
+// A finite number in [lo, hi].
+inline CLI::Validator FiniteRange(double lo, double hi) {
+  return internal::NumberIn(lo, hi, internal::ParseFinite, [](double) { return true; }, "a number", "NUMBER");
+}
 
 // A whole number in [lo, hi].
 inline CLI::Validator WholeRange(int64_t lo, int64_t hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        int64_t v = 0;
-        if (!internal::ParseWhole(text, &v) || v < lo || v > hi) {
-          return absl::StrFormat("'%s' is not a whole number from %d to %d", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("INTEGER in [%d, %d]", lo, hi));
+  return internal::NumberIn(lo, hi, internal::ParseWhole, [](int64_t) { return true; }, "a whole number", "INTEGER");
 }
 
 // A power of two in [lo, hi] (raster resolutions).
 inline CLI::Validator PowerOfTwo(int64_t lo, int64_t hi) {
-  return CLI::Validator(
-      [lo, hi](std::string& text) -> std::string {
-        int64_t v = 0;
-        if (!internal::ParseWhole(text, &v) || v < lo || v > hi || v <= 0 || (v & (v - 1)) != 0) {
-          return absl::StrFormat("'%s' is not a power of two from %d to %d", text, lo, hi);
-        }
-        return "";
-      },
-      absl::StrFormat("POWER OF TWO in [%d, %d]", lo, hi));
+  return internal::NumberIn(lo, hi, internal::ParseWhole, [](int64_t v) { return v > 0 && (v & (v - 1)) == 0; },
+                            "a power of two", "POWER OF TWO");
 }
 
 }  // namespace vistream::cli

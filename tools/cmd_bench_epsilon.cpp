@@ -176,6 +176,12 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
   progress.Finish();
   const auto n = static_cast<double>(boxes.size());
   auto mean = [n](double sum) { return sum / n; };
+  // The mean of per-neighbourhood figures, summed in sample order.
+  auto mean_of = [&mean](const std::vector<double>& v) {
+    double sum = 0;
+    for (double m : v) sum += m;
+    return mean(sum);
+  };
 
   // Table 1 from the paper's fully optimised column if it ran (this project's hints find
   // hiders before the first ray, so "first occluders" means nothing there), else the last.
@@ -206,8 +212,6 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
                    {"first_occluders", mean(full.first_occluders)}};
     j["table2"] = nlohmann::json::array();
     for (const Column& c : columns) {
-      double sum = 0;
-      for (double m : c.ms) sum += m;
       // Per neighbourhood, in sample order; the digest (hex) of its superset, and of all of them.
       nlohmann::json per = nlohmann::json::array();
       uint64_t all = 1469598103934665603ull;
@@ -231,13 +235,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
         all = (all ^ f.digest) * 1099511628211ull;
       }
       j["table2"].push_back({{"opt", c.opt},
-                             {"ms", sum / n},
+                             {"ms", mean_of(c.ms)},
                              {"median_ms", Median(c.ms)},
-                             {"cpu_ms", [&] {
-                                double cpu = 0;
-                                for (double m : c.cpu_ms) cpu += m;
-                                return cpu / n;
-                              }()},
+                             {"cpu_ms", mean_of(c.cpu_ms)},
                              {"median_cpu_ms", Median(c.cpu_ms)},
                              {"box_ms", mean(c.box_ms)},
                              {"polygon_ms", mean(c.polygon_ms)},
@@ -290,38 +290,32 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
     std::printf("\n");
   };
   auto fmt = [](double v) { return v < 100 ? absl::StrFormat("%.2f", v) : absl::StrFormat("%.0f", v); };
-  row2(
-      "total time, mean",
-      [&](const Column& c) {
-        double sum = 0;
-        for (double m : c.ms) sum += m;
-        return fmt(sum / n);
-      },
-      [](const PaperTable2& p) { return p.total_ms; });
+  row2("total time, mean", [&](const Column& c) { return fmt(mean_of(c.ms)); },
+       [](const PaperTable2& p) { return p.total_ms; });
   row2("total time, median", [&](const Column& c) { return fmt(Median(c.ms)); }, [](const PaperTable2&) { return -1.0; });
-  row2(
-      "thread CPU time, mean",
-      [&](const Column& c) {
-        double sum = 0;
-        for (double m : c.cpu_ms) sum += m;
-        return fmt(sum / n);
-      },
-      [](const PaperTable2&) { return -1.0; });
+  row2("thread CPU time, mean", [&](const Column& c) { return fmt(mean_of(c.cpu_ms)); },
+       [](const PaperTable2&) { return -1.0; });
   row2("thread CPU time, median", [&](const Column& c) { return fmt(Median(c.cpu_ms)); },
        [](const PaperTable2&) { return -1.0; });
-  row2("box occlusion time", [&](const Column& c) { return fmt(mean(c.box_ms)); },
-       [](const PaperTable2& p) { return p.box_ms; });
-  row2("polygon occlusion time", [&](const Column& c) { return fmt(mean(c.polygon_ms)); },
-       [](const PaperTable2& p) { return p.polygon_ms; });
-  row2("ray / occluder tests, boxes", [&](const Column& c) { return fmt(mean(c.box_tests)); },
-       [](const PaperTable2& p) { return p.box_tests; });
-  row2("ray / occluder tests, polygons", [&](const Column& c) { return fmt(mean(c.polygon_tests)); },
-       [](const PaperTable2& p) { return p.polygon_tests; });
-  row2("rays", [&](const Column& c) { return fmt(mean(c.rays)); }, [](const PaperTable2&) { return -1.0; });
-  row2("Embree traversals", [&](const Column& c) { return fmt(mean(c.traversals)); },
-       [](const PaperTable2&) { return -1.0; });
-  row2("visible triangles", [&](const Column& c) { return fmt(mean(c.visible_triangles)); },
-       [](const PaperTable2&) { return -1.0; });
+  // The rows that are the mean of a figure each column sums, beside the paper's where it has one.
+  struct MeanRow {
+    const char* name;
+    double Column::*sum;
+    double PaperTable2::*paper;  // nullptr: not in the paper
+  };
+  const MeanRow mean_rows[] = {
+      {"box occlusion time", &Column::box_ms, &PaperTable2::box_ms},
+      {"polygon occlusion time", &Column::polygon_ms, &PaperTable2::polygon_ms},
+      {"ray / occluder tests, boxes", &Column::box_tests, &PaperTable2::box_tests},
+      {"ray / occluder tests, polygons", &Column::polygon_tests, &PaperTable2::polygon_tests},
+      {"rays", &Column::rays, nullptr},
+      {"Embree traversals", &Column::traversals, nullptr},
+      {"visible triangles", &Column::visible_triangles, nullptr},
+  };
+  for (const MeanRow& r : mean_rows) {
+    row2(r.name, [&](const Column& c) { return fmt(mean(c.*r.sum)); },
+         [&](const PaperTable2& p) { return r.paper ? p.*r.paper : -1.0; });
+  }
   return 0;
 }
 

@@ -64,19 +64,13 @@ int Epsilon(const EpsilonArgs& a) {
 
   if (!a.map.empty()) {
     TopViewMap map(scene->bounds, 2048, Rgb{250, 250, 250});
-    std::vector<bool> visible(scene->objects.size(), false);
-    for (scenes::ObjectId id : r.objects) visible[id] = true;
-    const Rgb in_set{40, 90, 220}, hidden{215, 50, 40}, box_fill{30, 200, 60}, outline{60, 60, 60};
-    for (const auto& oc : scene->occluders) map.FillPolygon(oc.footprint, visible[oc.object] ? in_set : hidden);
-    const bool outlines = map.outlines_readable();
-    if (outlines) {
-      for (const auto& oc : scene->occluders) map.StrokePolygon(oc.footprint, outline);
-    }
     // The neighbourhood is far smaller than a pixel on a city map: draw it at least 9 px wide.
     const double r_m = std::max(h, 4.5 * map.metres_per_pixel());
     const std::vector<glm::dvec2> square = {{x - r_m, y - r_m}, {x + r_m, y - r_m}, {x + r_m, y + r_m}, {x - r_m, y + r_m}};
-    map.FillPolygon(square, box_fill);
-    map.StrokePolygon(square, Rgb{0, 120, 30}, 2.0);
+    DrawVisibleSet(*scene, r.objects, square,
+                   {absl::StrFormat("the neighbourhood (%g m box)", a.size), "building with triangles in the superset",
+                    "building hidden from the whole box"},
+                   &map);
     map.SetTitle(absl::StrFormat("%s: \u03b5-superset of a %g m box at (%.1f, %.1f, %.1f) m (optimisations: %s)",
                                  scene->name, a.size, x, y, z, a.opt),
                  absl::StrFormat("%llu of %llu triangles left (%zu of %zu objects keep some); the box drawn at least "
@@ -84,10 +78,6 @@ int Epsilon(const EpsilonArgs& a) {
                                  static_cast<unsigned long long>(s.visible_triangles),
                                  static_cast<unsigned long long>(s.total_triangles), r.objects.size(),
                                  scene->objects.size()));
-    map.AddLegend(box_fill, absl::StrFormat("the neighbourhood (%g m box)", a.size));
-    map.AddLegend(in_set, "building with triangles in the superset");
-    map.AddLegend(hidden, "building hidden from the whole box");
-    if (outlines) map.AddLegend(outline, "building footprint edge", Swatch::kOutline);
     if (absl::Status st = map.WritePng(a.map); !st.ok()) return Fail(st);
   }
 

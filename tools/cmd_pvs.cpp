@@ -281,18 +281,12 @@ int Pvs(const PvsArgs& a) {
 
   if (!a.map.empty()) {
     TopViewMap map(scene->bounds, a.map_size, Rgb{250, 250, 250});
-    std::vector<bool> visible(scene->objects.size(), false);
-    for (scenes::ObjectId id : pvs.objects) visible[id] = true;
-    const Rgb in_pvs{40, 90, 220}, hidden{215, 50, 40}, cell_fill{30, 200, 60}, outline{60, 60, 60};
-    for (const auto& oc : scene->occluders) map.FillPolygon(oc.footprint, visible[oc.object] ? in_pvs : hidden);
-    const bool outlines = map.outlines_readable();
-    if (outlines) {
-      for (const auto& oc : scene->occluders) map.StrokePolygon(oc.footprint, outline);
-    }
     const glm::dvec2 c0(cell.min), c1(cell.max);
     const std::vector<glm::dvec2> square = {c0, {c1.x, c0.y}, c1, {c0.x, c1.y}};
-    map.FillPolygon(square, cell_fill);
-    map.StrokePolygon(square, Rgb{0, 120, 30}, 2.0);
+    DrawVisibleSet(*scene, pvs.objects, square,
+                   {absl::StrFormat("the viewcell (%g m)", cell.max.x - cell.min.x),
+                    "building in the PVS (may be visible)", "building not in the PVS (occluded)"},
+                   &map);
     map.SetTitle(absl::StrFormat("%s: PVS of viewcell %d,%d (dual ray space, %s backend, %u\u00b2 raster)",
                                  scene->name, ci, cj, a.backend, a.res),
                  absl::StrFormat("viewcell x %.0f to %.0f m, y %.0f to %.0f m, z %.1f to %.1f m; %zu of %zu objects "
@@ -300,10 +294,6 @@ int Pvs(const PvsArgs& a) {
                                  cell.min.x, cell.max.x, cell.min.y, cell.max.y, cell.min.z, cell.max.z,
                                  pvs.objects.size(), scene->objects.size(),
                                  static_cast<unsigned long long>(pvs.triangles), scene->TriangleCount()));
-    map.AddLegend(cell_fill, absl::StrFormat("the viewcell (%g m)", cell.max.x - cell.min.x));
-    map.AddLegend(in_pvs, "building in the PVS (may be visible)");
-    map.AddLegend(hidden, "building not in the PVS (occluded)");
-    if (outlines) map.AddLegend(outline, "building footprint edge", Swatch::kOutline);
     if (absl::Status s = map.WritePng(a.map); !s.ok()) return Fail(s);
   }
 

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <cstdio>
 #include <map>
+#include <optional>
 
 #include <sys/resource.h>
 
@@ -68,6 +69,60 @@ int Generate(const GenerateArgs& a) {
   return 0;
 }
 
+// The process's peak resident memory so far, MiB (getrusage).
+double PeakRssMib() {
+  struct rusage usage {};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
+
+nlohmann::json CountsJson(const std::map<std::string, uint64_t>& counts) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [k, n] : counts) j[k] = n;
+  return j;
+}
+
+nlohmann::json WalksJson(const std::vector<std::pair<std::string, double>>& walks) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& [name, length] : walks) j.push_back({{"name", name}, {"length_m", length}});
+  return j;
+}
+
+void PrintCounts(const char* title, uint64_t total, const std::map<std::string, uint64_t>& counts) {
+  std::printf("%s: %llu\n", title, static_cast<unsigned long long>(total));
+  for (const auto& [reason, n] : counts) std::printf("  %-48s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
+}
+
+// Removes an output a cancelled command did not finish.
+int CancelledWhileSaving(const std::string& output, const char* what) {
+  std::error_code ec;
+  std::filesystem::remove(output, ec);
+  return Fail(absl::CancelledError(absl::StrCat(what, " cancelled (while saving)")));
+}
+
+// Saves `scene` to `output`. A ^C that came while saving removes the file (what was asked for
+// was not finished, so nothing is left behind): "<what> cancelled (while saving)". The exit
+// code when the save failed or was cancelled, nullopt when `output` is written.
+std::optional<int> SaveSceneOutput(const scenes::Scene& scene, const std::string& output, const char* what) {
+  if (absl::Status s = scenes::SaveGltf(scene, output); !s.ok()) return Fail(s);
+  if (ToolRun().Cancelled()) return CancelledWhileSaving(output, what);
+  return std::nullopt;
+}
+
+// An import of `input` that failed with `status`: with --json (`as_json`) it first prints the
+// error and what was skipped, by reason, as the success path reports them.
+int ImportFailed(const std::string& input, const absl::Status& status, uint64_t skipped,
+                 const std::map<std::string, uint64_t>& skipped_by_reason, bool as_json) {
+  if (as_json) {
+    const nlohmann::json j = {{"input", input},
+                              {"error", std::string(status.message())},
+                              {"skipped", skipped},
+                              {"skipped_by_reason", CountsJson(skipped_by_reason)}};
+    std::printf("%s\n", j.dump(2).c_str());
+  }
+  return Fail(status);
+}
+
 struct ImportArgs {
   std::string input, output, bbox, name;
   double storey_m = 3.0;
@@ -88,29 +143,11 @@ int ImportOsm(const ImportArgs& a) {
   }
   scenes::OsmImportSummary sum;
   absl::StatusOr<scenes::Scene> scene = scenes::ImportOsm(a.input, options, &sum, ToolRun());
-  if (!scene.ok() && a.json) {
-    // The error path reports what was skipped, by reason, as the success path does.
-    nlohmann::json skipped = nlohmann::json::object();
-    for (const auto& [reason, n] : sum.skipped) skipped[reason] = n;
-    const nlohmann::json j = {{"input", a.input},
-                              {"error", std::string(scene.status().message())},
-                              {"skipped", sum.Skipped()},
-                              {"skipped_by_reason", skipped}};
-    std::printf("%s\n", j.dump(2).c_str());
-  }
-  if (!scene.ok()) return Fail(scene.status());
+  if (!scene.ok()) return ImportFailed(a.input, scene.status(), sum.Skipped(), sum.skipped, a.json);
   const auto save_start = std::chrono::steady_clock::now();
-  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
-  if (ToolRun().Cancelled()) {
-    // ^C while saving: what was asked for was not finished, so nothing is left behind.
-    std::error_code ec;
-    std::filesystem::remove(a.output, ec);
-    return Fail(absl::CancelledError("OSM import cancelled (while saving)"));
-  }
+  if (std::optional<int> failed = SaveSceneOutput(*scene, a.output, "OSM import")) return *failed;
   const double save_s = SecondsSince(save_start);
   if (a.json) {
-    nlohmann::json skipped = nlohmann::json::object();
-    for (const auto& [reason, n] : sum.skipped) skipped[reason] = n;
     nlohmann::json walks_json = nlohmann::json::array();
     for (const scenes::OsmWalkSummary& w : sum.walks) walks_json.push_back({{"name", w.name}, {"length_m", w.length_m}});
     const nlohmann::json j = {
@@ -140,7 +177,7 @@ int ImportOsm(const ImportArgs& a) {
         {"repaired_spikes", sum.repaired_spikes},
         {"dropped_inner_rings", sum.dropped_inner_rings},
         {"skipped", sum.Skipped()},
-        {"skipped_by_reason", skipped},
+        {"skipped_by_reason", CountsJson(sum.skipped)},
         {"utm_zone", sum.utm_zone},
         {"origin", {scene->origin.x, scene->origin.y, scene->origin.z}},
         {"bounds_min", {scene->bounds.min.x, scene->bounds.min.y, scene->bounds.min.z}},
@@ -186,37 +223,6 @@ int ImportOsm(const ImportArgs& a) {
   return 0;
 }
 
-// The process's peak resident memory so far, MiB (getrusage).
-double PeakRssMib() {
-  struct rusage usage {};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;
-}
-
-nlohmann::json CountsJson(const std::map<std::string, uint64_t>& counts) {
-  nlohmann::json j = nlohmann::json::object();
-  for (const auto& [k, n] : counts) j[k] = n;
-  return j;
-}
-
-nlohmann::json WalksJson(const std::vector<std::pair<std::string, double>>& walks) {
-  nlohmann::json j = nlohmann::json::array();
-  for (const auto& [name, length] : walks) j.push_back({{"name", name}, {"length_m", length}});
-  return j;
-}
-
-void PrintCounts(const char* title, uint64_t total, const std::map<std::string, uint64_t>& counts) {
-  std::printf("%s: %llu\n", title, static_cast<unsigned long long>(total));
-  for (const auto& [reason, n] : counts) std::printf("  %-48s %llu\n", reason.c_str(), static_cast<unsigned long long>(n));
-}
-
-// Removes an output a cancelled command did not finish.
-int CancelledWhileSaving(const std::string& output, const char* what) {
-  std::error_code ec;
-  std::filesystem::remove(output, ec);
-  return Fail(absl::CancelledError(absl::StrCat(what, " cancelled (while saving)")));
-}
-
 struct ImportCityArgs {
   std::string input, output, name, crs;
   std::optional<int> lod;
@@ -237,17 +243,9 @@ int ImportCity(const ImportCityArgs& a) {
   options.ground = a.ground == "none" ? scenes::CityGround::kNone : scenes::CityGround::kDerived;
   scenes::CityImportSummary sum;
   absl::StatusOr<scenes::Scene> scene = scenes::ImportCity(a.input, options, &sum, ToolRun());
-  if (!scene.ok() && a.json) {
-    const nlohmann::json j = {{"input", a.input},
-                              {"error", std::string(scene.status().message())},
-                              {"skipped", sum.Skipped()},
-                              {"skipped_by_reason", CountsJson(sum.skipped)}};
-    std::printf("%s\n", j.dump(2).c_str());
-  }
-  if (!scene.ok()) return Fail(scene.status());
+  if (!scene.ok()) return ImportFailed(a.input, scene.status(), sum.Skipped(), sum.skipped, a.json);
   const auto save_start = std::chrono::steady_clock::now();
-  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
-  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "city import");
+  if (std::optional<int> failed = SaveSceneOutput(*scene, a.output, "city import")) return *failed;
   const double save_s = SecondsSince(save_start);
   const double share = sum.buildings_drawn == 0 ? 0.0 : static_cast<double>(sum.buildings_with_occluder) / sum.buildings_drawn;
   const double volume_share = sum.solid_volume_m3 > 0.0 ? sum.occluder_volume_m3 / sum.solid_volume_m3 : 0.0;
@@ -380,8 +378,7 @@ int Occluders(const OccludersArgs& a) {
   const scenes::OccluderSynthesisSummary sum = scenes::AddSynthesizedOccluders(&*scene, /*replace=*/!a.keep, {}, ToolRun());
   if (ToolRun().Cancelled()) return Fail(absl::CancelledError("occluder synthesis cancelled"));
   const double synth_s = SecondsSince(start);
-  if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);
-  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "occluder synthesis");
+  if (std::optional<int> failed = SaveSceneOutput(*scene, a.output, "occluder synthesis")) return *failed;
   const double volume_share = sum.solid_volume_m3 > 0.0 ? sum.occluder_volume_m3 / sum.solid_volume_m3 : 0.0;
   if (a.json) {
     const nlohmann::json j = {{"input", a.input},
@@ -426,8 +423,7 @@ int Extrude(const ExtrudeArgs& a) {
   absl::StatusOr<scenes::Scene> extruded = scenes::ExtrudeFootprints(*scene, &sum);
   if (!extruded.ok()) return Fail(extruded.status());
   const double extrude_s = SecondsSince(start);
-  if (absl::Status s = scenes::SaveGltf(*extruded, a.output); !s.ok()) return Fail(s);
-  if (ToolRun().Cancelled()) return CancelledWhileSaving(a.output, "extrusion");
+  if (std::optional<int> failed = SaveSceneOutput(*extruded, a.output, "extrusion")) return *failed;
   uint64_t kept = 0;
   for (const auto& [reason, n] : sum.not_extruded) kept += n;
   if (a.json) {

@@ -69,6 +69,24 @@ std::string Length(double metres) {
 
 }  // namespace
 
+void DrawVisibleSet(const scenes::Scene& scene, std::span<const scenes::ObjectId> visible,
+                    std::span<const glm::dvec2> region, const VisibleSetLegend& legend, TopViewMap* map) {
+  std::vector<bool> in(scene.objects.size(), false);
+  for (scenes::ObjectId id : visible) in[id] = true;
+  const Rgb in_set{40, 90, 220}, hidden{215, 50, 40}, region_fill{30, 200, 60}, outline{60, 60, 60};
+  for (const auto& oc : scene.occluders) map->FillPolygon(oc.footprint, in[oc.object] ? in_set : hidden);
+  const bool outlines = map->outlines_readable();
+  if (outlines) {
+    for (const auto& oc : scene.occluders) map->StrokePolygon(oc.footprint, outline);
+  }
+  map->FillPolygon(region, region_fill);
+  map->StrokePolygon(region, Rgb{0, 120, 30}, 2.0);
+  map->AddLegend(region_fill, legend.region);
+  map->AddLegend(in_set, legend.in_set);
+  map->AddLegend(hidden, legend.hidden);
+  if (outlines) map->AddLegend(outline, "building footprint edge", Swatch::kOutline);
+}
+
 double RoundDown125(double x) {
   if (!(x > 0) || !std::isfinite(x)) return 1.0;
   const double p = std::pow(10.0, std::floor(std::log10(x)));
@@ -113,13 +131,17 @@ glm::dvec2 TopViewMap::PixelFromScene(const glm::dvec2& p) const {
 
 void TopViewMap::SetColour(Rgb c) { Colour(cr_, c); }
 
-void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bool antialias) {
-  if (polygon.size() < 3) return;
+void TopViewMap::TracePolygon(std::span<const glm::dvec2> polygon) {
   for (const glm::dvec2& p : polygon) {
     const glm::dvec2 q = PixelFromScene(p);
     cairo_line_to(cr_, q.x, q.y);
   }
   cairo_close_path(cr_);
+}
+
+void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bool antialias) {
+  if (polygon.size() < 3) return;
+  TracePolygon(polygon);
   SetColour(colour);
   cairo_set_antialias(cr_, antialias ? CAIRO_ANTIALIAS_DEFAULT : CAIRO_ANTIALIAS_NONE);
   cairo_fill(cr_);
@@ -128,11 +150,7 @@ void TopViewMap::FillPolygon(std::span<const glm::dvec2> polygon, Rgb colour, bo
 
 void TopViewMap::StrokePolygon(std::span<const glm::dvec2> polygon, Rgb colour, double width_px) {
   if (polygon.size() < 2) return;
-  for (const glm::dvec2& p : polygon) {
-    const glm::dvec2 q = PixelFromScene(p);
-    cairo_line_to(cr_, q.x, q.y);
-  }
-  cairo_close_path(cr_);
+  TracePolygon(polygon);
   SetColour(colour);
   cairo_set_line_width(cr_, width_px);
   cairo_stroke(cr_);

@@ -20,6 +20,7 @@
 #include <glm/vec2.hpp>
 
 #include "scenes/aabb.h"
+#include "scenes/scene.h"
 
 // Cairo's types, so that users of the map need not include cairo.h.
 struct _cairo;
@@ -86,6 +87,8 @@ class TopViewMap {
   struct Layout;
   glm::dvec2 PixelFromScene(const glm::dvec2& p) const;
   void SetColour(Rgb c);
+  // The closed polygon (scene-local metres) as Cairo's current path, in pixels.
+  void TracePolygon(std::span<const glm::dvec2> polygon);
   Layout ComputeLayout() const;
 
   glm::dvec2 min_;
@@ -106,6 +109,20 @@ class TopViewMap {
   double bar_max_ = 0.0;
   std::vector<std::string> notes_;
 };
+
+// The legend rows of a visible-set map (DrawVisibleSet): what the region is, and what a
+// footprint in the set and one not in it mean.
+struct VisibleSetLegend {
+  std::string region, in_set, hidden;
+};
+
+// The objects visible from one region (a viewcell, an ε-neighbourhood) on `map`: each occluder
+// footprint of `scene` blue when its object is in `visible`, red when not, outlined where the
+// scale lets outlines read (outlines_readable); then `region` (scene-local metres) green over
+// them. Adds the legend rows region, in set, hidden, and the outline's when drawn; the caller
+// sets the title and writes the PNG.
+void DrawVisibleSet(const scenes::Scene& scene, std::span<const scenes::ObjectId> visible,
+                    std::span<const glm::dvec2> region, const VisibleSetLegend& legend, TopViewMap* map);
 
 // A perceptually ordered colour ramp for t in [0, 1] (viridis-like: dark violet, teal, yellow).
 Rgb Ramp(double t);

@@ -60,12 +60,8 @@ std::string GlobalSampler::SaveState() const {
 absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string& where) {
   Impl& m = *impl_;
   ByteReader r(bytes, where);
-  char magic[8];
-  for (char& ch : magic) {
-    if (absl::Status st = r.Get(&ch, "the magic"); !st.ok()) return st;
-  }
-  if (std::string_view(magic, 8) != std::string_view(kStateMagic, 8)) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": not a vistream sampling state (no VSAGVS01 magic)"));
+  if (absl::Status st = r.ExpectMagic(std::string_view(kStateMagic, sizeof(kStateMagic)), "sampling state"); !st.ok()) {
+    return st;
   }
   uint64_t objects = 0, cells = 0;
   double size = 0, cx = 0, cy = 0;

@@ -75,6 +75,20 @@ class ByteReader {
     pos_ += n;
     return absl::OkStatus();
   }
+  // Reads the magic that opens a file of `kind` ("PVS file"): an error naming the source when
+  // the bytes end first (while reading "the magic"), else when they are not `magic`
+  // ("<where>: not a vistream <kind> (no <magic> magic)").
+  absl::Status ExpectMagic(std::string_view magic, std::string_view kind) {
+    std::string read(magic.size(), '\0');
+    for (char& ch : read) {
+      if (absl::Status st = Get(&ch, "the magic"); !st.ok()) return st;
+    }
+    if (read != magic) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where_, ": not a vistream ", std::string(kind), " (no ", std::string(magic), " magic)"));
+    }
+    return absl::OkStatus();
+  }
   bool AtEnd() const { return pos_ == in_.size(); }
   size_t remaining() const { return in_.size() - pos_; }
   size_t offset() const { return pos_; }

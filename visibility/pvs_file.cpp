@@ -213,13 +213,7 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
                                       std::optional<uint64_t> scene_objects) {
   ByteReader r(bytes, where);
   PvsFile f;
-  char magic[8];
-  for (char& ch : magic) {
-    if (absl::Status st = r.Get(&ch, "the magic"); !st.ok()) return st;
-  }
-  if (std::string_view(magic, 8) != std::string_view(kMagic, 8)) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": not a vistream PVS file (no VSPVS001 magic)"));
-  }
+  if (absl::Status st = r.ExpectMagic(std::string_view(kMagic, sizeof(kMagic)), "PVS file"); !st.ok()) return st;
   uint32_t version = 0;
   if (absl::Status st = r.Get(&version, "the version"); !st.ok()) return st;
   if (version != 1 && version != kVersion && version != kBandsVersion) {
