@@ -73,10 +73,6 @@ MaskChoice MaskHoldings::Choose(const glm::dvec3& eye, const std::function<bool(
   return choice;
 }
 
-std::vector<uint64_t> MaskHoldings::TakeDropped() {
-  std::vector<uint64_t> out;
-  out.swap(dropped_);
-  return out;
-}
+std::vector<uint64_t> MaskHoldings::TakeDropped() { return std::exchange(dropped_, {}); }
 
 }  // namespace vistream::client

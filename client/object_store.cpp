@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <utility>
 
 #include <absl/strings/str_cat.h>
 
@@ -170,16 +171,8 @@ bool ObjectStore::CellComplete(uint32_t cell) const {
   return client::CellComplete(Pvs(cell), [&](uint32_t id) { return objects_.count(id) > 0; });
 }
 
-std::vector<uint32_t> ObjectStore::TakeAdded() {
-  std::vector<uint32_t> out;
-  out.swap(added_);
-  return out;
-}
+std::vector<uint32_t> ObjectStore::TakeAdded() { return std::exchange(added_, {}); }
 
-std::vector<uint32_t> ObjectStore::TakeRemoved() {
-  std::vector<uint32_t> out;
-  out.swap(removed_);
-  return out;
-}
+std::vector<uint32_t> ObjectStore::TakeRemoved() { return std::exchange(removed_, {}); }
 
 }  // namespace vistream::client

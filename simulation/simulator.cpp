@@ -7,6 +7,7 @@
 #include <thread>
 
 #include <absl/strings/str_cat.h>
+#include <google/protobuf/descriptor.h>
 #include <absl/strings/str_format.h>
 #include <absl/strings/str_join.h>
 #include <glm/geometric.hpp>
@@ -37,15 +38,10 @@ double WallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+// The message's kind as the protocol names it (its body field: "geometry", "pvs", ...).
 const char* BodyName(const v1::ServerMessage& m) {
-  switch (m.body_case()) {
-    case v1::ServerMessage::kSceneInfo: return "scene_info";
-    case v1::ServerMessage::kPvs: return "pvs";
-    case v1::ServerMessage::kGeometry: return "geometry";
-    case v1::ServerMessage::kEvict: return "evict";
-    case v1::ServerMessage::kEpsilonMask: return "epsilon_mask";
-    default: return "other";
-  }
+  const google::protobuf::FieldDescriptor* body = m.GetDescriptor()->FindFieldByNumber(m.body_case());
+  return body != nullptr ? body->name().c_str() : "other";
 }
 
 }  // namespace
