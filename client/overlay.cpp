@@ -102,8 +102,9 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
 }
 
 struct Overlay::Impl {
+  explicit Impl(const gl::GlFunctions& functions) : painter(functions) {}
+
   gl::GlContext* context = nullptr;
-  gl::GlFunctions gl;
   void* window = nullptr;
   ImGuiContext* imgui = nullptr;
   bool glfw_backend = false;
@@ -165,7 +166,7 @@ absl::Status Overlay::Impl::Init() {
     if (!glfw_backend) return absl::InternalError("overlay: ImGui's GLFW back end did not start");
   }
   io.BackendRendererName = "vistream_gl_functions";
-  return painter.Init(gl, io);
+  return painter.Init(io);
 }
 
 bool Overlay::Impl::MouseOverPanel() const {
@@ -298,9 +299,8 @@ OverlayRequest Overlay::Impl::Walks(const std::vector<std::string>& walks, int w
 Overlay::Overlay(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 absl::StatusOr<std::unique_ptr<Overlay>> Overlay::Create(gl::GlContext* context, void* window) {
-  auto impl = std::make_unique<Impl>();
+  auto impl = std::make_unique<Impl>(context->functions());
   impl->context = context;
-  impl->gl = context->functions();
   impl->window = window;
   auto overlay = std::unique_ptr<Overlay>(new Overlay(std::move(impl)));
   if (absl::Status s = overlay->impl_->Init(); !s.ok()) return s;

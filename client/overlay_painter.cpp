@@ -40,95 +40,94 @@ void main() { fragment = f_colour * texture(atlas, f_uv); }
 
 }  // namespace
 
-absl::Status OverlayPainter::Init(const gl::GlFunctions& functions, ImGuiIO& io) {
-  gl_ = functions;
-  absl::StatusOr<unsigned> p = gl::LinkProgram(gl_, kVertexShader, kFragmentShader, "overlay");
+absl::Status OverlayPainter::Init(ImGuiIO& io) {
+  absl::StatusOr<unsigned> p = gl::LinkProgram(gl, kVertexShader, kFragmentShader, "overlay");
   if (!p.ok()) return p.status();
-  program_ = *p;
-  loc_projection_ = gl_.GetUniformLocation(program_, "projection");
-  loc_atlas_ = gl_.GetUniformLocation(program_, "atlas");
-  gl_.GenVertexArrays(1, &vao_);
-  gl_.GenBuffers(1, &vbo_);
-  gl_.GenBuffers(1, &ibo_);
-  gl_.BindVertexArray(vao_);
-  gl_.BindBuffer(GL_ARRAY_BUFFER, vbo_);
-  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo_);
-  gl_.EnableVertexAttribArray(0);
-  gl_.EnableVertexAttribArray(1);
-  gl_.EnableVertexAttribArray(2);
-  gl_.VertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert),
+  program = *p;
+  loc_projection = gl.GetUniformLocation(program, "projection");
+  loc_atlas = gl.GetUniformLocation(program, "atlas");
+  gl.GenVertexArrays(1, &vao);
+  gl.GenBuffers(1, &vbo);
+  gl.GenBuffers(1, &ibo);
+  gl.BindVertexArray(vao);
+  gl.BindBuffer(GL_ARRAY_BUFFER, vbo);
+  gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo);
+  gl.EnableVertexAttribArray(0);
+  gl.EnableVertexAttribArray(1);
+  gl.EnableVertexAttribArray(2);
+  gl.VertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert),
                          reinterpret_cast<void*>(offsetof(ImDrawVert, pos)));
-  gl_.VertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert), reinterpret_cast<void*>(offsetof(ImDrawVert, uv)));
-  gl_.VertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(ImDrawVert),
+  gl.VertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, sizeof(ImDrawVert), reinterpret_cast<void*>(offsetof(ImDrawVert, uv)));
+  gl.VertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(ImDrawVert),
                          reinterpret_cast<void*>(offsetof(ImDrawVert, col)));
-  gl_.BindVertexArray(0);
+  gl.BindVertexArray(0);
 
   unsigned char* pixels = nullptr;
   int w = 0, h = 0;
   io.Fonts->GetTexDataAsRGBA32(&pixels, &w, &h);
-  gl_.GenTextures(1, &font_texture_);
-  gl_.BindTexture(GL_TEXTURE_2D, font_texture_);
-  gl_.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-  gl_.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-  gl_.PixelStorei(GL_UNPACK_ALIGNMENT, 1);
-  gl_.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, w, h, 0, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
-  gl_.BindTexture(GL_TEXTURE_2D, 0);
-  io.Fonts->SetTexID(reinterpret_cast<ImTextureID>(static_cast<intptr_t>(font_texture_)));
-  if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
+  gl.GenTextures(1, &font_texture);
+  gl.BindTexture(GL_TEXTURE_2D, font_texture);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  gl.TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  gl.PixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  gl.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, w, h, 0, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
+  gl.BindTexture(GL_TEXTURE_2D, 0);
+  io.Fonts->SetTexID(reinterpret_cast<ImTextureID>(static_cast<intptr_t>(font_texture)));
+  if (const GLenum err = gl.GetError(); err != GL_NO_ERROR) {
     return absl::InternalError(absl::StrCat("overlay: GL error ", err, " while setting up"));
   }
   return absl::OkStatus();
 }
 
 void OverlayPainter::Release() {
-  gl_.DeleteProgram(program_);
-  gl_.DeleteVertexArrays(1, &vao_);
-  gl_.DeleteBuffers(1, &vbo_);
-  gl_.DeleteBuffers(1, &ibo_);
-  gl_.DeleteTextures(1, &font_texture_);
-  if (cache_fbo_ != 0) gl_.DeleteFramebuffers(1, &cache_fbo_);
-  if (cache_texture_ != 0) gl_.DeleteTextures(1, &cache_texture_);
+  gl.DeleteProgram(program);
+  gl.DeleteVertexArrays(1, &vao);
+  gl.DeleteBuffers(1, &vbo);
+  gl.DeleteBuffers(1, &ibo);
+  gl.DeleteTextures(1, &font_texture);
+  if (cache_fbo != 0) gl.DeleteFramebuffers(1, &cache_fbo);
+  if (cache_texture != 0) gl.DeleteTextures(1, &cache_texture);
 }
 
 void OverlayPainter::Begin2D(int width, int height) {
   // ImGui's OpenGL 3 back end's blending.
-  gl_.Enable(GL_BLEND);
-  gl_.BlendEquation(GL_FUNC_ADD);
-  gl_.BlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-  gl_.Disable(GL_CULL_FACE);
-  gl_.Disable(GL_DEPTH_TEST);
-  gl_.Viewport(0, 0, width, height);
+  gl.Enable(GL_BLEND);
+  gl.BlendEquation(GL_FUNC_ADD);
+  gl.BlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+  gl.Disable(GL_CULL_FACE);
+  gl.Disable(GL_DEPTH_TEST);
+  gl.Viewport(0, 0, width, height);
   // Pixels, y down, onto clip space.
   const float r = static_cast<float>(width), b = static_cast<float>(height);
   const glm::mat4 projection(2.0f / r, 0.0f, 0.0f, 0.0f,   //
                              0.0f, -2.0f / b, 0.0f, 0.0f,  //
                              0.0f, 0.0f, -1.0f, 0.0f,      //
                              -1.0f, 1.0f, 0.0f, 1.0f);
-  gl_.UseProgram(program_);
-  gl_.Uniform1i(loc_atlas_, 0);
-  gl_.UniformMatrix4fv(loc_projection_, 1, GL_FALSE, glm::value_ptr(projection));
-  gl_.ActiveTexture(GL_TEXTURE0);
-  gl_.BindVertexArray(vao_);
-  gl_.BindBuffer(GL_ARRAY_BUFFER, vbo_);
+  gl.UseProgram(program);
+  gl.Uniform1i(loc_atlas, 0);
+  gl.UniformMatrix4fv(loc_projection, 1, GL_FALSE, glm::value_ptr(projection));
+  gl.ActiveTexture(GL_TEXTURE0);
+  gl.BindVertexArray(vao);
+  gl.BindBuffer(GL_ARRAY_BUFFER, vbo);
 }
 
 void OverlayPainter::End2D() {
-  gl_.BindVertexArray(0);
-  gl_.BindTexture(GL_TEXTURE_2D, 0);
-  gl_.Disable(GL_SCISSOR_TEST);
-  gl_.Disable(GL_BLEND);
-  gl_.Enable(GL_DEPTH_TEST);
+  gl.BindVertexArray(0);
+  gl.BindTexture(GL_TEXTURE_2D, 0);
+  gl.Disable(GL_SCISSOR_TEST);
+  gl.Disable(GL_BLEND);
+  gl.Enable(GL_DEPTH_TEST);
 }
 
 void OverlayPainter::DrawLists(const ImDrawData* d) {
   const ImVec2 off = d->DisplayPos, scale = d->FramebufferScale;
-  gl_.Enable(GL_SCISSOR_TEST);
+  gl.Enable(GL_SCISSOR_TEST);
   for (int n = 0; n < d->CmdListsCount; ++n) {
     const ImDrawList* list = d->CmdLists[n];
     if (list->VtxBuffer.Size == 0) continue;
-    gl_.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->VtxBuffer.Size) * sizeof(ImDrawVert),
+    gl.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->VtxBuffer.Size) * sizeof(ImDrawVert),
                   list->VtxBuffer.Data, GL_STREAM_DRAW);
-    gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->IdxBuffer.Size) * sizeof(ImDrawIdx),
+    gl.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(list->IdxBuffer.Size) * sizeof(ImDrawIdx),
                   list->IdxBuffer.Data, GL_STREAM_DRAW);
     for (int c = 0; c < list->CmdBuffer.Size; ++c) {
       const ImDrawCmd& cmd = list->CmdBuffer[c];
@@ -136,10 +135,10 @@ void OverlayPainter::DrawLists(const ImDrawData* d) {
       const float x0 = (cmd.ClipRect.x - off.x) * scale.x, y0 = (cmd.ClipRect.y - off.y) * scale.y;
       const float x1 = (cmd.ClipRect.z - off.x) * scale.x, y1 = (cmd.ClipRect.w - off.y) * scale.y;
       if (x1 <= x0 || y1 <= y0) continue;
-      gl_.Scissor(static_cast<int>(x0), static_cast<int>(static_cast<float>(fb_h_) - y1), static_cast<int>(x1 - x0),
+      gl.Scissor(static_cast<int>(x0), static_cast<int>(static_cast<float>(fb_h_) - y1), static_cast<int>(x1 - x0),
                  static_cast<int>(y1 - y0));
-      gl_.BindTexture(GL_TEXTURE_2D, static_cast<unsigned>(reinterpret_cast<intptr_t>(cmd.GetTexID())));
-      gl_.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(cmd.ElemCount),
+      gl.BindTexture(GL_TEXTURE_2D, static_cast<unsigned>(reinterpret_cast<intptr_t>(cmd.GetTexID())));
+      gl.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(cmd.ElemCount),
                       sizeof(ImDrawIdx) == 2 ? GL_UNSIGNED_SHORT : GL_UNSIGNED_INT,
                       reinterpret_cast<void*>(static_cast<intptr_t>(cmd.IdxOffset * sizeof(ImDrawIdx))));
     }
@@ -189,38 +188,38 @@ void OverlayPainter::Measure(const ImDrawData* d) {
 
 absl::Status OverlayPainter::DrawIntoCache(const ImDrawData* d) {
   GLint bound = 0;
-  gl_.GetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
-  if (cache_texture_ == 0 || fb_w_ != cache_w_ || fb_h_ != cache_h_) {
-    if (cache_fbo_ != 0) gl_.DeleteFramebuffers(1, &cache_fbo_);
-    if (cache_texture_ != 0) gl_.DeleteTextures(1, &cache_texture_);
-    gl_.GenTextures(1, &cache_texture_);
-    gl_.BindTexture(GL_TEXTURE_2D, cache_texture_);
-    gl_.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, fb_w_, fb_h_, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
-    gl_.BindTexture(GL_TEXTURE_2D, 0);
-    gl_.GenFramebuffers(1, &cache_fbo_);
-    gl_.BindFramebuffer(GL_FRAMEBUFFER, cache_fbo_);
-    gl_.FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, cache_texture_, 0);
-    const bool complete = gl_.CheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
-    gl_.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
+  gl.GetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
+  if (cache_texture == 0 || fb_w_ != cache_w || fb_h_ != cache_h) {
+    if (cache_fbo != 0) gl.DeleteFramebuffers(1, &cache_fbo);
+    if (cache_texture != 0) gl.DeleteTextures(1, &cache_texture);
+    gl.GenTextures(1, &cache_texture);
+    gl.BindTexture(GL_TEXTURE_2D, cache_texture);
+    gl.TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, fb_w_, fb_h_, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
+    gl.BindTexture(GL_TEXTURE_2D, 0);
+    gl.GenFramebuffers(1, &cache_fbo);
+    gl.BindFramebuffer(GL_FRAMEBUFFER, cache_fbo);
+    gl.FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, cache_texture, 0);
+    const bool complete = gl.CheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+    gl.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
     if (!complete) {
       return absl::InternalError(absl::StrFormat("overlay: the %dx%d panel framebuffer is incomplete", fb_w_, fb_h_));
     }
-    cache_w_ = fb_w_;
-    cache_h_ = fb_h_;
+    cache_w = fb_w_;
+    cache_h = fb_h_;
   }
-  gl_.BindFramebuffer(GL_FRAMEBUFFER, cache_fbo_);
+  gl.BindFramebuffer(GL_FRAMEBUFFER, cache_fbo);
   // Only the panels' rectangles are ever copied out: those are cleared, then drawn whole.
-  gl_.Enable(GL_SCISSOR_TEST);
-  gl_.ClearColor(0.0f, 0.0f, 0.0f, 1.0f);
+  gl.Enable(GL_SCISSOR_TEST);
+  gl.ClearColor(0.0f, 0.0f, 0.0f, 1.0f);
   for (const Rect& r : rects_) {
-    gl_.Scissor(r.x0, fb_h_ - r.y1, r.x1 - r.x0, r.y1 - r.y0);
-    gl_.Clear(GL_COLOR_BUFFER_BIT);
+    gl.Scissor(r.x0, fb_h_ - r.y1, r.x1 - r.x0, r.y1 - r.y0);
+    gl.Clear(GL_COLOR_BUFFER_BIT);
   }
   Begin2D(fb_w_, fb_h_);
   DrawLists(d);
   End2D();
-  gl_.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
-  if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
+  gl.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
+  if (const GLenum err = gl.GetError(); err != GL_NO_ERROR) {
     return absl::InternalError(absl::StrCat("overlay: GL error ", err, " while drawing the panels"));
   }
   return absl::OkStatus();
@@ -229,7 +228,7 @@ absl::Status OverlayPainter::DrawIntoCache(const ImDrawData* d) {
 absl::Status OverlayPainter::Draw(const ImDrawData* d, bool rebuilt) {
   if (rects_.empty() || fb_w_ <= 0 || fb_h_ <= 0) return absl::OkStatus();
   GLint sample_buffers = 0;
-  gl_.GetIntegerv(GL_SAMPLE_BUFFERS, &sample_buffers);
+  gl.GetIntegerv(GL_SAMPLE_BUFFERS, &sample_buffers);
   if (sample_buffers > 0) {
     // A multisample target cannot take a copy: the panels are drawn into it.
     Begin2D(fb_w_, fb_h_);
@@ -237,20 +236,20 @@ absl::Status OverlayPainter::Draw(const ImDrawData* d, bool rebuilt) {
     End2D();
     return absl::OkStatus();
   }
-  if (rebuilt || cache_texture_ == 0) {
+  if (rebuilt || cache_texture == 0) {
     if (absl::Status st = DrawIntoCache(d); !st.ok()) return st;
   }
   // The panels are opaque: their rectangles are copied, in the order drawn (where they
   // overlap, the cache holds the upper one, copied twice).
   GLint bound = 0;
-  gl_.GetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
-  gl_.BindFramebuffer(GL_READ_FRAMEBUFFER, cache_fbo_);
+  gl.GetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
+  gl.BindFramebuffer(GL_READ_FRAMEBUFFER, cache_fbo);
   for (const Rect& r : rects_) {
-    gl_.BlitFramebuffer(r.x0, fb_h_ - r.y1, r.x1, fb_h_ - r.y0, r.x0, fb_h_ - r.y1, r.x1, fb_h_ - r.y0, GL_COLOR_BUFFER_BIT,
+    gl.BlitFramebuffer(r.x0, fb_h_ - r.y1, r.x1, fb_h_ - r.y0, r.x0, fb_h_ - r.y1, r.x1, fb_h_ - r.y0, GL_COLOR_BUFFER_BIT,
                        GL_NEAREST);
   }
-  gl_.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
-  if (const GLenum err = gl_.GetError(); err != GL_NO_ERROR) {
+  gl.BindFramebuffer(GL_FRAMEBUFFER, static_cast<unsigned>(bound));
+  if (const GLenum err = gl.GetError(); err != GL_NO_ERROR) {
     return absl::InternalError(absl::StrCat("overlay: GL error ", err, " while copying the panels"));
   }
   return absl::OkStatus();

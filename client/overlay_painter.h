@@ -22,9 +22,12 @@ class OverlayPainter {
     int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   };
 
-  // Makes the program_, buffers and font texture (ImGui's font atlas of `io`, whose texture id
-  // it sets) with `gl`, whose context is current. Errors (INTERNAL): GL failing.
-  absl::Status Init(const gl::GlFunctions& gl, ImGuiIO& io);
+  // Draws through `functions`, the GL context's table (gl::GlContext::functions()).
+  explicit OverlayPainter(const gl::GlFunctions& functions) : gl(functions) {}
+
+  // Makes the program, buffers and font texture (ImGui's font atlas of `io`, whose texture id
+  // it sets); the context current. Errors (INTERNAL): GL failing.
+  absl::Status Init(ImGuiIO& io);
   // Deletes the GL objects; their context current.
   void Release();
   // The framebuffer's size and the panels' rectangles of a new build.
@@ -49,13 +52,13 @@ class OverlayPainter {
   // The panels into the cache (made or remade at the size measured).
   absl::Status DrawIntoCache(const ImDrawData* d);
 
-  gl::GlFunctions gl_;
-  unsigned program_ = 0, vao_ = 0, vbo_ = 0, ibo_ = 0, font_texture_ = 0;
-  int loc_projection_ = -1, loc_atlas_ = -1;
+  gl::GlFunctions gl;
+  unsigned program = 0, vao = 0, vbo = 0, ibo = 0, font_texture = 0;
+  int loc_projection = -1, loc_atlas = -1;
   // The panels as last built: a texture the framebuffer's size holding them, and their
   // rectangles (in drawing order), opaque. Frames between builds copy these rectangles.
-  unsigned cache_fbo_ = 0, cache_texture_ = 0;
-  int cache_w_ = 0, cache_h_ = 0;  // the texture's size
+  unsigned cache_fbo = 0, cache_texture = 0;
+  int cache_w = 0, cache_h = 0;  // the texture's size
   int fb_w_ = 0, fb_h_ = 0;        // the framebuffer's at the last build
   std::vector<Rect> rects_;
 };
