@@ -77,11 +77,13 @@ void MinimapCells::Refresh(const ObjectStore& store, const std::function<bool(ui
 }
 
 void MinimapPanel(const OverlayStatus& s, const MinimapView& map, int width, bool beside_stats, bool window_keys) {
+  constexpr int kMargin = Overlay::kMargin, kStatsWidth = Overlay::kStatsWidth;
+  constexpr int kMinimapPx = Overlay::kMinimapPx, kMinimapMinPx = Overlay::kMinimapMinPx;
   // Beside the statistics panel: what the frame's width leaves (its padding 2 x 8 px), at least
-  // Overlay::kMinimapMinPx (a frame narrower than both panels gets them overlapping).
-  const int room = beside_stats ? width - (Overlay::kMargin + Overlay::kStatsWidth) - 2 * Overlay::kMargin - 16 : Overlay::kMinimapPx;
-  const float px = static_cast<float>(std::clamp(room, Overlay::kMinimapMinPx, Overlay::kMinimapPx));
-  ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - Overlay::kMargin), Overlay::kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
+  // kMinimapMinPx (a frame narrower than both panels gets them overlapping).
+  const int room = beside_stats ? width - (kMargin + kStatsWidth) - 2 * kMargin - 16 : kMinimapPx;
+  const float px = static_cast<float>(std::clamp(room, kMinimapMinPx, kMinimapPx));
+  ImGui::SetNextWindowPos(ImVec2(static_cast<float>(width - kMargin), kMargin), ImGuiCond_Always, ImVec2(1.0f, 0.0f));
   if (ImGui::Begin("minimap", nullptr, kOverlayPanel | ImGuiWindowFlags_NoTitleBar)) {
     // Wrapped at the map's width, so that the window keeps it.
     ImGui::PushTextWrapPos(ImGui::GetCursorPosX() + px);

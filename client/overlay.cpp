@@ -347,7 +347,8 @@ absl::StatusOr<OverlayRequest> Overlay::Frame(const OverlayStatus& status, const
   if (rebuild) {
     // A panel that appears (or a new size) takes ImGui two frames: the first measures the
     // auto-sized windows without drawing them.
-    const int passes = shown != impl_->shown || width != impl_->painter.fb_w() || height != impl_->painter.fb_h() ? 2 : 1;
+    const bool resized = width != impl_->painter.fb_w() || height != impl_->painter.fb_h();
+    const int passes = shown != impl_->shown || resized ? 2 : 1;
     for (int pass = 0; pass < passes; ++pass) {
       if (impl_->glfw_backend) {
         ImGui_ImplGlfw_NewFrame();  // display size, scale, time and input from the window

@@ -47,7 +47,9 @@ void AddServerWalks(const v1::SceneInfo& info, std::vector<scenes::WalkPath>* wa
     bool finite = true;
     for (double v : p.xy()) finite = finite && std::isfinite(v);
     if (taken || p.name().empty() || p.xy_size() < 4 || p.xy_size() % 2 != 0 || !finite) {
-      if (!taken && log) log(absl::StrCat("the server's walk ", k, " ('", p.name(), "') is not a named polyline: ignored"));
+      if (!taken && log) {
+        log(absl::StrCat("the server's walk ", k, " ('", p.name(), "') is not a named polyline: ignored"));
+      }
       continue;
     }
     scenes::WalkPath w;
