@@ -5,7 +5,7 @@
 // display, composited from their texture between), and rebuilt every frame (overlay:2: what a
 // frame with a key press or the mouse over a panel costs), without and with 4x multisampling
 // (msaa, the window's default), side by side in one run. The difference of the medians is the
-// overlay's cost, the minimap's cell states (client/overlay.h, MinimapCells) included; the
+// overlay's cost, the minimap's cell states (client/minimap.h, MinimapCells) included; the
 // counter overlay_ms times it within each frame (from the frame drawn to the overlay drawn, both
 // waited for), which the machine's noise moves less.
 #include <benchmark/benchmark.h>
@@ -90,7 +90,7 @@ void BM_Frame(benchmark::State& state) {
   }
   const std::optional<uint32_t> cell = f->grid->CellAt(glm::dvec2(f->camera.eye));
   // Every cell's PVS list holds every object: the minimap's states cost what they would on a
-  // city whose PVSs are the whole scene (its lookups a frame are bounded, client/overlay.h).
+  // city whose PVSs are the whole scene (its lookups a frame are bounded, client/minimap.h).
   for (uint32_t c = 0; c < f->grid->CellCount(); ++c) {
     v1::ViewcellPvs pvs;
     pvs.set_cell_id(c);

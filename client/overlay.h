@@ -1,12 +1,13 @@
 #pragma once
 // The client's on-screen overlay (Dear ImGui): a statistics panel (F1), a minimap of the
-// viewcell grid (M), the key list (H or ?) and the list of the scene's walks (P). The same
+// viewcell grid (M, client/minimap.h), the key list (H or ?, from the window's key table:
+// client/window_keys.h) and the list of the scene's walks (P). The same
 // overlay draws into the window and, for `--overlay`, into the headless client's off-screen
 // frames: ImGui builds the panels, and they are drawn through the context's GL function table
 // (gl/gl_functions.h), so that an OSMesa frame gets them as a window does. (Debian's ImGui
 // OpenGL 3 back end loads its GL from libGL.so.1, GLX's, which cannot draw into an OSMesa
-// context: its ~100 lines of drawing are done here through the table instead. The GLFW back
-// end, keyboard and mouse for the window, is Debian's.)
+// context: its ~100 lines of drawing are done through the table instead, in
+// client/overlay_painter.h. The GLFW back end, keyboard and mouse for the window, is Debian's.)
 
 #include <array>
 #include <cstdint>
@@ -21,6 +22,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
+#include "client/minimap.h"
 #include "client/object_store.h"
 #include "gl/gl_context.h"
 
@@ -58,40 +60,6 @@ struct OverlayStatus {
   std::string walk;
   double walk_t_s = 0.0, walk_duration_s = 0.0, speed_kmh = 0.0;
   bool walk_paused = false;
-};
-
-// A viewcell's state on the minimap.
-enum class CellState : uint8_t {
-  kNotListed,  // no PVS list from the server (not asked for by the eye's motion yet)
-  kPending,    // its list is here, some of its geometry is not
-  kComplete,   // list and every object here and uploaded
-};
-
-// What the minimap draws: the grid, each cell's state, the walk's polyline.
-struct MinimapView {
-  const GridInfo* grid = nullptr;
-  const std::vector<CellState>* cells = nullptr;  // by cell id, nx * ny (those near the eye current)
-  std::vector<glm::dvec2> walk;    // the polyline of the walk followed (scene-local m); may be empty
-  double radius_m = 300.0;         // the map shows this far around the eye
-};
-
-// How far around the eye the minimap shows: eight cells of `grid`, within 150 to 600 m.
-double MinimapRadius(const GridInfo& grid);
-
-// The minimap's cell states, kept up to date a bounded amount of work a frame: a cell's state
-// costs a lookup per object of its PVS list (thousands on london).
-class MinimapCells {
- public:
-  // The eye's cell every call; the other cells within `radius_m` (+ a cell) of `eye` round
-  // robin, until `max_lookups` objects have been checked. `uploaded`: whether an object is
-  // here and on the GPU. Each cell on the map is a few calls old at most.
-  void Refresh(const ObjectStore& store, const std::function<bool(uint32_t)>& uploaded, const glm::dvec3& eye,
-               double radius_m, size_t max_lookups = 4000);
-  const std::vector<CellState>& states() const { return states_; }
-
- private:
-  std::vector<CellState> states_;  // by cell id
-  size_t cursor_ = 0;
 };
 
 // What the user asked for through the overlay's walk list this frame.
@@ -156,9 +124,5 @@ class Overlay {
 // The statistics panel's lines, as drawn (tests compare them with the run's summary): `fps`
 // over the last second, `frame_ms` the last frame's time, `bytes_per_s` over the last second.
 std::vector<std::string> OverlayLines(const OverlayStatus& status, double fps, double frame_ms, double bytes_per_s);
-
-// The colours the minimap gives each state (RGB), and the eye's marker.
-std::array<uint8_t, 3> MinimapColour(CellState state);
-std::array<uint8_t, 3> MinimapCurrentCellColour();
 
 }  // namespace vistream::client

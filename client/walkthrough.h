@@ -8,6 +8,8 @@
 // once it is complete; else what is held (a hole frame). A stall is a frame drawn inside a
 // viewcell whose PVS geometry has not fully arrived (list, objects, and their upload), masked
 // or not.
+// The loop's parts (start-up, walk following, the frame loop, the window's keys) are named in
+// client/walkthrough_loop.h; the summary in client/walkthrough_summary.h.
 
 #include <atomic>
 #include <cstdint>
@@ -21,6 +23,7 @@
 
 #include "client/cell_margins.h"
 #include "client/channel_security.h"
+#include "client/walkthrough_summary.h"
 #include "scenes/scene.h"
 
 namespace vistream::client {
@@ -79,35 +82,6 @@ struct WalkthroughOptions {
   std::function<void(const std::string&)> log;  // progress lines; may be empty
 };
 
-struct WalkthroughSummary {
-  std::string server, scene, path;
-  double speed_kmh = 0.0;
-  int width = 0, height = 0;
-  uint64_t frames = 0, stalls = 0;
-  double stall_s = 0.0;
-  uint64_t bytes_received = 0, geometry_bytes = 0, objects_received = 0, duplicates = 0, reconnects = 0;
-  double mean_triangles_drawn = 0.0, mean_objects_drawn = 0.0;
-  uint64_t max_triangles_drawn = 0;
-  uint64_t scene_triangles = 0, scene_objects = 0;
-  uint64_t max_held_bytes = 0, memory_budget_bytes = 0, frames_over_memory_budget = 0;
-  uint64_t triangle_budget = 0, frames_over_triangle_budget = 0;
-  uint64_t evicted_by_server = 0, evicted_by_budget = 0;
-  double fps = 0.0, frame_ms_p50 = 0.0, frame_ms_p99 = 0.0, frame_ms_max = 0.0;
-  bool verified = false;
-  uint64_t pixel_error = 0, checked_frames = 0, checked_pixels = 0;
-  uint64_t masks_received = 0, frames_masked = 0, cells_visited = 0;
-  uint64_t hole_frames = 0;  // neither a usable mask nor the complete viewcell PVS
-  // The same frames' viewcell PVS after view-frustum culling (what a PVS-only client would
-  // draw: on a stall, what is held); equal to mean_triangles_drawn without masks.
-  double mean_triangles_without_masks = 0.0;
-  double startup_s = 0.0, walk_s = 0.0, distance_m = 0.0;
-  // Arrival margins (client/cell_margins.h), walk-clock seconds, over the viewcells entered
-  // after the start cell (the walk waits for that one).
-  MarginSummary margins;
-  std::vector<CellEntry> cells;  // every entry, the start cell's first
-  std::vector<std::string> screenshots;
-  bool cancelled = false;
-};
 
 // Runs one walkthrough against the server at options.server. Errors name what failed: an
 // unreachable server or another protocol version (UNAVAILABLE, FAILED_PRECONDITION), a walk
@@ -118,8 +92,6 @@ absl::StatusOr<WalkthroughSummary> RunWalkthrough(const WalkthroughOptions& opti
 // lost server has walked, drawn and received until then; the summary says how much).
 absl::Status RunWalkthrough(const WalkthroughOptions& options, WalkthroughSummary* summary);
 
-// The summary as JSON (one object) and as lines for people.
-std::string SummaryJson(const WalkthroughSummary& s);
-std::string SummaryText(const WalkthroughSummary& s);
+// The summary's JSON and lines: client/walkthrough_summary.h.
 
 }  // namespace vistream::client

@@ -7,6 +7,8 @@
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
+#include "client/window_keys.h"
+
 namespace vistream::client {
 
 namespace {
@@ -79,7 +81,11 @@ void WindowInput::SetTitle(const std::string& title) { glfwSetWindowTitle(W(wind
 bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* yaw_rad, double* pitch_rad,
                          bool ui_has_mouse) {
   GLFWwindow* w = W(window_);
-  auto down = [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; };
+  // Whether a key of `action` (client/window_keys.h) is held.
+  auto down = [&](WindowAction action) {
+    const std::vector<int>& keys = BindingOf(action).keys;
+    return std::any_of(keys.begin(), keys.end(), [&](int key) { return glfwGetKey(w, key) == GLFW_PRESS; });
+  };
   bool moved = false;
   // A click (pressed and released between two frames) or the button held.
   const bool clicked = std::exchange(clicked_, false);
@@ -101,15 +107,15 @@ bool WindowInput::Update(double dt, double speed_mps, glm::dvec3* eye, double* y
     last_y_ = y;
   }
   constexpr double kTurnRadPerS = 1.5;
-  if (down(GLFW_KEY_LEFT)) *yaw_rad += kTurnRadPerS * dt, moved = true;
-  if (down(GLFW_KEY_RIGHT)) *yaw_rad -= kTurnRadPerS * dt, moved = true;
-  const double speed = speed_mps * (down(GLFW_KEY_LEFT_SHIFT) || down(GLFW_KEY_RIGHT_SHIFT) ? 5.0 : 1.0);
+  if (down(WindowAction::kTurnLeft)) *yaw_rad += kTurnRadPerS * dt, moved = true;
+  if (down(WindowAction::kTurnRight)) *yaw_rad -= kTurnRadPerS * dt, moved = true;
+  const double speed = speed_mps * (down(WindowAction::kRun) ? 5.0 : 1.0);
   const glm::dvec3 forward(std::cos(*yaw_rad), std::sin(*yaw_rad), 0.0), right(forward.y, -forward.x, 0.0);
   glm::dvec3 step(0.0);
-  if (down(GLFW_KEY_W) || down(GLFW_KEY_UP)) step += forward;
-  if (down(GLFW_KEY_S) || down(GLFW_KEY_DOWN)) step -= forward;
-  if (down(GLFW_KEY_D)) step += right;
-  if (down(GLFW_KEY_A)) step -= right;
+  if (down(WindowAction::kForward)) step += forward;
+  if (down(WindowAction::kBack)) step -= forward;
+  if (down(WindowAction::kStrafeRight)) step += right;
+  if (down(WindowAction::kStrafeLeft)) step -= right;
   if (step != glm::dvec3(0.0)) {
     *eye += step / std::sqrt(step.x * step.x + step.y * step.y) * speed * dt;
     moved = true;

@@ -1,9 +1,11 @@
 #pragma once
-// Keyboard and mouse of the windowed front end (GLFW): W/S or Up/Down walk, A/D strafe,
-// Left/Right turn, the mouse looks once the window is clicked (Esc frees it; Esc again or Q
-// closes the window), Shift runs. The other keys (the overlay's, the walk's, screenshots) come
-// as presses from TakeKeys/TakeChars, so that a key pressed and released within one frame (as
-// xdotool types) is not lost. Install before the overlay: ImGui's callbacks chain to these.
+// Keyboard and mouse of the windowed front end (GLFW): the keys held to walk, strafe, turn and
+// run are those of the window's key table (client/window_keys.h: W/S or Up/Down walk, A/D
+// strafe, Left/Right turn, Shift runs); the mouse looks once the window is clicked (Esc frees
+// it; Esc again or Q closes the window). The other keys (the overlay's, the walk's,
+// screenshots) come as presses from TakeKeys/TakeChars, so that a key pressed and released
+// within one frame (as xdotool types) is not lost; the walkthrough looks them up in the same
+// table. Install before the overlay: ImGui's callbacks chain to these.
 
 #include <string>
 #include <vector>

@@ -533,7 +533,7 @@ TEST(ClientMasks, AWalkerWhoTurnsACornerFallsBackToThePvsWithoutAHole) {
 
 // A client that jumps 20 m within its viewcell: at the new eye it holds no usable mask (the eye
 // is in none of their boxes) but the cell's PVS is complete, so its frames draw the PVS, not a
-// hole (client/walkthrough.cpp: a hole is no usable mask and an incomplete PVS); the server
+// hole (client/frame_loop.cpp: a hole is no usable mask and an incomplete PVS); the server
 // drops the old chain and the mask of a box around the new eye follows.
 TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
   absl::StatusOr<LoopbackServer> server = StartOnLoopback(&City1());
