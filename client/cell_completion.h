@@ -5,7 +5,7 @@
 // CellCompletion (the same rule kept up to date message by message, with arrival times, for
 // holders that are asked often: the scripted sessions of client/session_stream.h and the
 // simulator's client). "Held" is the caller's word: received, or received and uploaded for a
-// client that draws (client/walkthrough.cpp, client/cell_margins.h).
+// client that draws (client/frame_loop.cpp, client/cell_margins.h, client/minimap.cpp).
 
 #include <cstddef>
 #include <cstdint>

@@ -11,6 +11,7 @@
 #include <absl/strings/str_format.h>
 #include <glm/geometric.hpp>
 
+#include "client/cell_completion.h"
 #include "client/screenshots.h"
 #include "client/verification.h"
 #include "client/walkthrough_loop.h"
@@ -182,9 +183,9 @@ glm::dvec3 WalkthroughLoop::MoveEye(double frame_period, double free_speed, bool
     if (store_->has_scene_info() && store_->grid().has_bands()) {
       // Cells follow terrain this client may not hold: the eye stays in its cell's band, where
       // the server accepts it and the PVSs hold.
-      const GridInfo& g = store_->grid();
-      if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) {
-        camera_.eye.z = std::clamp(camera_.eye.z, g.Band(*c).first, g.Band(*c).second);
+      const visibility::ViewcellGrid& g = store_->grid();
+      if (const std::optional<uint32_t> c = g.CellAt({camera_.eye.x, camera_.eye.y})) {
+        camera_.eye.z = std::clamp(camera_.eye.z, g.Band(*c).z0, g.Band(*c).z1);
       }
     }
     camera_.yaw_rad = pose.yaw_rad;
@@ -197,12 +198,12 @@ glm::dvec3 WalkthroughLoop::MoveEye(double frame_period, double free_speed, bool
     glm::dvec3 eye = camera_.eye;
     input_->Update(dt, free_speed * rate_, &eye, &camera_.yaw_rad, &camera_.pitch_rad, overlay_->WantsMouse());
     // The PVSs hold inside the grid: the eye stays in it.
-    const GridInfo& g = store_->grid();
-    eye.x = std::clamp(eye.x, g.x0 + 0.01, g.x0 + g.nx * g.cell_size - 0.01);
-    eye.y = std::clamp(eye.y, g.y0 + 0.01, g.y0 + g.ny * g.cell_size - 0.01);
+    const visibility::ViewcellGrid& g = store_->grid();
+    eye.x = std::clamp(eye.x, g.corner().x + 0.01, g.corner().x + g.nx() * g.cell_size() - 0.01);
+    eye.y = std::clamp(eye.y, g.corner().y + 0.01, g.corner().y + g.ny() * g.cell_size() - 0.01);
     // ...and in its cell's band (where cells follow terrain, the band moves with the ground).
-    if (const std::optional<uint32_t> c = g.CellAt(eye.x, eye.y); c.has_value() && g.has_bands()) {
-      eye.z = std::clamp(eye.z, g.Band(*c).first, g.Band(*c).second);
+    if (const std::optional<uint32_t> c = g.CellAt({eye.x, eye.y}); c.has_value() && g.has_bands()) {
+      eye.z = std::clamp(eye.z, g.Band(*c).z0, g.Band(*c).z1);
     }
     velocity = (eye - camera_.eye) / dt;
     camera_.eye = eye;
@@ -245,13 +246,10 @@ void WalkthroughLoop::ReportHoleAndStall(double t, const Pumped& p, const MaskCh
   if (!p.complete && p.cell != stalled_in_ && p.cell.has_value()) {
     stalled_in_ = p.cell;
     size_t missing = 0;
-    if (p.pvs != nullptr) {
-      for (uint32_t id : *p.pvs) missing += store_->Find(id) == nullptr ? 1 : 0;
-    }
-    const GridInfo& g = store_->grid();
+    if (p.pvs != nullptr) missing = MissingObjects(*p.pvs, [&](uint32_t id) { return store_->Find(id) != nullptr; });
+    const visibility::CellCoord c = store_->grid().Coord(*p.cell);
     Log(absl::StrFormat(
-        "stall in viewcell %d,%d at %.0f s: %s; holding %.1f MiB%s", *p.cell % static_cast<uint32_t>(g.nx),
-        *p.cell / static_cast<uint32_t>(g.nx), t,
+        "stall in viewcell %d,%d at %.0f s: %s; holding %.1f MiB%s", c.i, c.j, t,
         p.pvs == nullptr ? std::string("its PVS list has not arrived")
                          : absl::StrFormat("%d of its %d objects have not arrived", missing, p.pvs->size()),
         store_->held_bytes() / 1048576.0,
@@ -264,8 +262,8 @@ void WalkthroughLoop::SetTitle(const Pumped& p, const FrameStats& fs, bool maske
   const double fps = 1000.0 / std::max(1e-3, frame_ms);
   std::string cell = "-";
   if (p.cell.has_value()) {
-    const GridInfo& g = store_->grid();
-    cell = absl::StrCat(*p.cell % static_cast<uint32_t>(g.nx), ",", *p.cell / static_cast<uint32_t>(g.nx));
+    const visibility::CellCoord c = store_->grid().Coord(*p.cell);
+    cell = absl::StrCat(c.i, ",", c.j);
   }
   input_->SetTitle(absl::StrFormat(
       "vistream %s | %.0f fps | cell %s | %s | PVS %d | held %d objects, %.1f MB | drawn %d tris (PVS %d) | "
@@ -302,7 +300,7 @@ void WalkthroughLoop::SendPose(const glm::dvec3& velocity, double since_start) {
 void WalkthroughLoop::ObserveCells(double t, std::optional<uint32_t> cell, bool stalled) {
   if (connection_ == nullptr || !store_->has_scene_info()) return;
   margins_.Observe(t, store_->pvs_lists(), [this](uint32_t id) { return renderer_->Uploaded(id); }, cell,
-                   store_->grid().nx, stalled);
+                   store_->grid().nx(), stalled);
 }
 
 absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upload_budget) {
@@ -312,7 +310,7 @@ absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upl
     if (std::holds_alternative<v1::EpsilonMask>(e)) ++masks_seen_;
   }
   Pumped p;
-  if (store_->has_scene_info()) p.cell = store_->grid().CellAt(eye.x, eye.y);
+  if (store_->has_scene_info()) p.cell = store_->grid().CellAt({eye.x, eye.y});
   const bool had_info = store_->has_scene_info();
   const std::vector<uint32_t> dropped = store_->Apply(std::move(events), p.cell);
   if (!dropped.empty()) connection_->Forget(dropped);
@@ -340,24 +338,24 @@ absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upl
     camera_.far_m = std::max(1000.0, 2.0 * glm::length(hi - lo));
     if (absl::Status st = OnSceneInfo(info); !st.ok()) return st;
     if (!have_start_) {
-      const GridInfo& g = store_->grid();
-      camera_.eye = {g.x0 + 0.5 * g.nx * g.cell_size, g.y0 + 0.5 * g.ny * g.cell_size, g.base_z + 0.6 * g.height};
+      const visibility::ViewcellGrid& g = store_->grid();
+      camera_.eye = {g.corner().x + 0.5 * g.nx() * g.cell_size(), g.corner().y + 0.5 * g.ny() * g.cell_size(),
+                     g.base_z() + 0.6 * g.height()};
       if (g.has_bands()) {
         // Cells follow terrain: 0.6 of the band's height above the cell's highest ground.
-        if (const std::optional<uint32_t> c = g.CellAt(camera_.eye.x, camera_.eye.y)) {
-          camera_.eye.z = g.Band(*c).second - 0.4 * g.height;
+        if (const std::optional<uint32_t> c = g.CellAt({camera_.eye.x, camera_.eye.y})) {
+          camera_.eye.z = g.Band(*c).z1 - 0.4 * g.height();
         }
       }
       have_start_ = true;
     }
-    p.cell = store_->grid().CellAt(eye.x, eye.y);
+    p.cell = store_->grid().CellAt({eye.x, eye.y});
   }
   if (p.cell.has_value()) p.pvs = store_->Pvs(*p.cell);
   static const std::vector<uint32_t> kNone;
   renderer_->Sync(*store_, p.pvs != nullptr ? *p.pvs : kNone, upload_budget);
   if (p.pvs != nullptr) {
-    p.missing = static_cast<size_t>(
-        std::count_if(p.pvs->begin(), p.pvs->end(), [&](uint32_t id) { return !renderer_->Uploaded(id); }));
+    p.missing = MissingObjects(*p.pvs, [&](uint32_t id) { return renderer_->Uploaded(id); });
   }
   p.complete = opt_.draw_everything ? renderer_->pending_uploads() == 0 : p.pvs != nullptr && p.missing == 0;
   return p;

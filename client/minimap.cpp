@@ -8,6 +8,7 @@
 #include <absl/strings/str_format.h>
 #include <imgui.h>
 
+#include "client/cell_completion.h"
 #include "client/overlay.h"
 #include "client/overlay_panels.h"
 #include "client/window_keys.h"
@@ -43,35 +44,37 @@ std::array<uint8_t, 3> MinimapColour(CellState state) {
 
 std::array<uint8_t, 3> MinimapCurrentCellColour() { return {80, 170, 255}; }
 
-double MinimapRadius(const GridInfo& grid) { return std::clamp(8.0 * grid.cell_size, 150.0, 600.0); }
+double MinimapRadius(const visibility::ViewcellGrid& grid) { return std::clamp(8.0 * grid.cell_size(), 150.0, 600.0); }
 
 void MinimapCells::Refresh(const ObjectStore& store, const std::function<bool(uint32_t)>& uploaded,
                            const glm::dvec3& eye, double radius_m, size_t max_lookups) {
   if (!store.has_scene_info()) return;
-  const GridInfo& g = store.grid();
-  const size_t n = static_cast<size_t>(g.nx) * static_cast<size_t>(g.ny);
+  const visibility::ViewcellGrid& g = store.grid();
+  const double x0 = g.corner().x, y0 = g.corner().y, size = g.cell_size();
+  const size_t n = g.CellCount();
   if (states_.size() != n) states_.assign(n, CellState::kNotListed);
   size_t lookups = 0;
   auto state = [&](uint32_t id) {
     const std::vector<uint32_t>* list = store.Pvs(id);
     if (list == nullptr) return CellState::kNotListed;
-    for (uint32_t o : *list) {
+    // The client model's rule (client/cell_completion.h), each object looked at counted.
+    const bool complete = CellComplete(list, [&](uint32_t o) {
       ++lookups;
-      if (!uploaded(o)) return CellState::kPending;
-    }
-    return CellState::kComplete;
+      return uploaded(o);
+    });
+    return complete ? CellState::kComplete : CellState::kPending;
   };
-  if (const std::optional<uint32_t> c = g.CellAt(eye.x, eye.y)) states_[*c] = state(*c);
-  const double r = radius_m + g.cell_size;
-  const int i0 = std::max(0, static_cast<int>(std::floor((eye.x - r - g.x0) / g.cell_size)));
-  const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((eye.x + r - g.x0) / g.cell_size)));
-  const int j0 = std::max(0, static_cast<int>(std::floor((eye.y - r - g.y0) / g.cell_size)));
-  const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((eye.y + r - g.y0) / g.cell_size)));
+  if (const std::optional<uint32_t> c = g.CellAt({eye.x, eye.y})) states_[*c] = state(*c);
+  const double r = radius_m + size;
+  const int i0 = std::max(0, static_cast<int>(std::floor((eye.x - r - x0) / size)));
+  const int i1 = std::min(g.nx() - 1, static_cast<int>(std::floor((eye.x + r - x0) / size)));
+  const int j0 = std::max(0, static_cast<int>(std::floor((eye.y - r - y0) / size)));
+  const int j1 = std::min(g.ny() - 1, static_cast<int>(std::floor((eye.y + r - y0) / size)));
   if (i1 < i0 || j1 < j0) return;
   const size_t w = static_cast<size_t>(i1 - i0 + 1), count = w * static_cast<size_t>(j1 - j0 + 1);
   for (size_t k = 0; k < count && lookups < max_lookups; ++k) {
     const size_t at = cursor_++ % count;
-    const auto id = static_cast<uint32_t>((j0 + static_cast<int>(at / w)) * g.nx + i0 + static_cast<int>(at % w));
+    const auto id = g.Id({i0 + static_cast<int>(at % w), j0 + static_cast<int>(at / w)});
     states_[id] = state(id);
   }
 }
@@ -104,21 +107,23 @@ void MinimapPanel(const OverlayStatus& s, const MinimapView& map, int width, boo
       return ImVec2(centre.x + static_cast<float>((x - s.eye.x) * scale), centre.y - static_cast<float>((y - s.eye.y) * scale));
     };
     bool beyond_grid = true;  // the map shows ground without viewcells
-    if (map.grid != nullptr && map.grid->nx > 0 && map.grid->ny > 0 && map.grid->cell_size > 0.0) {
-      const GridInfo& g = *map.grid;
-      beyond_grid = s.eye.x - map.radius_m < g.x0 || s.eye.x + map.radius_m > g.x0 + g.nx * g.cell_size ||
-                    s.eye.y - map.radius_m < g.y0 || s.eye.y + map.radius_m > g.y0 + g.ny * g.cell_size;
-      const int i0 = std::max(0, static_cast<int>(std::floor((s.eye.x - map.radius_m - g.x0) / g.cell_size)));
-      const int i1 = std::min(g.nx - 1, static_cast<int>(std::floor((s.eye.x + map.radius_m - g.x0) / g.cell_size)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((s.eye.y - map.radius_m - g.y0) / g.cell_size)));
-      const int j1 = std::min(g.ny - 1, static_cast<int>(std::floor((s.eye.y + map.radius_m - g.y0) / g.cell_size)));
+    if (map.grid != nullptr && map.grid->CellCount() > 0) {
+      const visibility::ViewcellGrid& g = *map.grid;
+      const double x0 = g.corner().x, y0 = g.corner().y, size = g.cell_size();
+      const int nx = g.nx(), ny = g.ny();
+      beyond_grid = s.eye.x - map.radius_m < x0 || s.eye.x + map.radius_m > x0 + nx * size ||
+                    s.eye.y - map.radius_m < y0 || s.eye.y + map.radius_m > y0 + ny * size;
+      const int i0 = std::max(0, static_cast<int>(std::floor((s.eye.x - map.radius_m - x0) / size)));
+      const int i1 = std::min(nx - 1, static_cast<int>(std::floor((s.eye.x + map.radius_m - x0) / size)));
+      const int j0 = std::max(0, static_cast<int>(std::floor((s.eye.y - map.radius_m - y0) / size)));
+      const int j1 = std::min(ny - 1, static_cast<int>(std::floor((s.eye.y + map.radius_m - y0) / size)));
       for (int j = j0; j <= j1; ++j) {
         for (int i = i0; i <= i1; ++i) {
-          const size_t id = static_cast<size_t>(j) * static_cast<size_t>(g.nx) + static_cast<size_t>(i);
+          const size_t id = static_cast<size_t>(j) * static_cast<size_t>(nx) + static_cast<size_t>(i);
           const CellState state =
               map.cells != nullptr && id < map.cells->size() ? (*map.cells)[id] : CellState::kNotListed;
-          const ImVec2 a = to_map(g.x0 + i * g.cell_size, g.y0 + (j + 1) * g.cell_size);
-          const ImVec2 b = to_map(g.x0 + (i + 1) * g.cell_size, g.y0 + j * g.cell_size);
+          const ImVec2 a = to_map(x0 + i * size, y0 + (j + 1) * size);
+          const ImVec2 b = to_map(x0 + (i + 1) * size, y0 + j * size);
           const bool current = s.cell.has_value() && *s.cell == id;
           // A pixel short of its neighbours: the map's background between them draws the grid.
           dl->AddRectFilled(ImVec2(a.x + 1.0f, a.y + 1.0f), b,

@@ -26,14 +26,14 @@ enum class CellState : uint8_t {
 
 // What the minimap draws: the grid, each cell's state, the walk's polyline.
 struct MinimapView {
-  const GridInfo* grid = nullptr;
+  const visibility::ViewcellGrid* grid = nullptr;
   const std::vector<CellState>* cells = nullptr;  // by cell id, nx * ny (those near the eye current)
   std::vector<glm::dvec2> walk;    // the polyline of the walk followed (scene-local m); may be empty
   double radius_m = 300.0;         // the map shows this far around the eye
 };
 
 // How far around the eye the minimap shows: eight cells of `grid`, within 150 to 600 m.
-double MinimapRadius(const GridInfo& grid);
+double MinimapRadius(const visibility::ViewcellGrid& grid);
 
 // The minimap's cell states, kept up to date a bounded amount of work a frame: a cell's state
 // costs a lookup per object of its PVS list (thousands on london).

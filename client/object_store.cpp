@@ -14,38 +14,6 @@ namespace vistream::client {
 
 namespace v1 = vistream::v1;
 
-GridInfo GridInfo::From(const v1::ViewcellGrid& g) {
-  GridInfo out;
-  out.cell_size = g.cell_size_m();
-  out.x0 = g.x0_m();
-  out.y0 = g.y0_m();
-  out.base_z = g.base_z_m();
-  out.height = g.height_m();
-  out.nx = g.nx();
-  out.ny = g.ny();
-  out.band_z.assign(g.band_z().begin(), g.band_z().end());
-  return out;
-}
-
-std::optional<uint32_t> GridInfo::CellAt(double x, double y) const {
-  if (!(cell_size > 0.0) || !std::isfinite(x) || !std::isfinite(y)) return std::nullopt;
-  const double fi = std::floor((x - x0) / cell_size), fj = std::floor((y - y0) / cell_size);
-  if (fi < 0 || fj < 0 || fi >= nx || fj >= ny) return std::nullopt;
-  return static_cast<uint32_t>(fj) * static_cast<uint32_t>(nx) + static_cast<uint32_t>(fi);
-}
-
-std::vector<uint32_t> GridInfo::Neighbourhood(uint32_t cell) const {
-  std::vector<uint32_t> out;
-  const int i = static_cast<int>(cell % static_cast<uint32_t>(nx)), j = static_cast<int>(cell / static_cast<uint32_t>(nx));
-  for (int dj = -1; dj <= 1; ++dj) {
-    for (int di = -1; di <= 1; ++di) {
-      const int a = i + di, b = j + dj;
-      if (a >= 0 && b >= 0 && a < nx && b < ny) out.push_back(static_cast<uint32_t>(b * nx + a));
-    }
-  }
-  return out;
-}
-
 std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optional<uint32_t> current_cell) {
   for (Event& e : events) {
     if (auto* info = std::get_if<v1::SceneInfo>(&e)) {
@@ -58,8 +26,7 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
         continue;
       }
       scene_info_ = std::move(*info);
-      grid_ = GridInfo::From(scene_info_->grid());
-      cell_grid_ = *std::move(grid);
+      grid_ = *std::move(grid);
       masks_.NewSession();  // a session starts here; its masks number from 1 again
     } else if (auto* pvs = std::get_if<v1::ViewcellPvs>(&e)) {
       pvs_[pvs->cell_id()].assign(pvs->object_ids().begin(), pvs->object_ids().end());
@@ -85,14 +52,13 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
   if (current_cell.has_value() && scene_info_.has_value()) {
     // Lists of cells two or more cells beyond the adjacent ones: the server, which follows
     // the client a pose behind, has stopped wanting them and sends them again when it does.
-    const auto nx = static_cast<uint32_t>(grid_.nx);
-    const int ci = static_cast<int>(*current_cell % nx), cj = static_cast<int>(*current_cell / nx);
+    const visibility::CellCoord c = grid_.Coord(*current_cell);
     std::erase_if(pvs_, [&](const auto& entry) {
-      const int i = static_cast<int>(entry.first % nx), j = static_cast<int>(entry.first / nx);
-      return std::max(std::abs(i - ci), std::abs(j - cj)) >= 3;
+      const visibility::CellCoord e = grid_.Coord(entry.first);
+      return std::max(std::abs(e.i - c.i), std::abs(e.j - c.j)) >= 3;
     });
   }
-  masks_.KeepNear(scene_info_.has_value() ? current_cell : std::nullopt, cell_grid_);
+  masks_.KeepNear(scene_info_.has_value() ? current_cell : std::nullopt, grid_);
   return EnforceBudget(current_cell);
 }
 

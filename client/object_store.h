@@ -33,33 +33,6 @@
 
 namespace vistream::client {
 
-// The viewcell grid as SceneInfo describes it (scene-local metres).
-struct GridInfo {
-  double cell_size = 0.0, x0 = 0.0, y0 = 0.0, base_z = 0.0, height = 0.0;
-  int nx = 0, ny = 0;
-  // Each cell's band, z0 then z1, in cell id order (ViewcellGrid.band_z) where cells follow
-  // terrain; empty: every cell's band is base_z to base_z + height.
-  std::vector<double> band_z;
-
-  static GridInfo From(const vistream::v1::ViewcellGrid& g);
-  // The cell whose ground square holds (x, y), as the server decides it (points on a shared
-  // edge belong to the cell above and to the right); none outside the grid.
-  std::optional<uint32_t> CellAt(double x, double y) const;
-  // The cell itself and its up to eight neighbours.
-  std::vector<uint32_t> Neighbourhood(uint32_t cell) const;
-  bool has_bands() const { return !band_z.empty(); }
-  // Cell `cell`'s z range [first, second], scene-local metres. Precondition: cell < nx ny.
-  std::pair<double, double> Band(uint32_t cell) const {
-    if (band_z.empty()) return {base_z, base_z + height};
-    return {band_z[2 * size_t{cell}], band_z[2 * size_t{cell} + 1]};
-  }
-  // Whether an eye height is inside the band cell `cell`'s PVS holds for (the server's check).
-  bool InBand(uint32_t cell, double z) const {
-    const auto [z0, z1] = Band(cell);
-    return z >= z0 && z <= z1;
-  }
-};
-
 struct StoredObject {
   ReceivedObject data;
   uint64_t last_drawn_frame = 0;
@@ -75,7 +48,9 @@ class ObjectStore {
 
   bool has_scene_info() const { return scene_info_.has_value(); }
   const vistream::v1::SceneInfo& scene_info() const { return *scene_info_; }
-  const GridInfo& grid() const { return grid_; }
+  // The viewcell grid SceneInfo describes (proto/scene_info.h GridFromSceneInfo): the server's
+  // cells, ids and bands; empty before SceneInfo.
+  const visibility::ViewcellGrid& grid() const { return grid_; }
 
   const StoredObject* Find(uint32_t id) const;
   StoredObject* Find(uint32_t id);
@@ -124,8 +99,7 @@ class ObjectStore {
 
   uint64_t budget_;
   std::optional<vistream::v1::SceneInfo> scene_info_;
-  GridInfo grid_;
-  visibility::ViewcellGrid cell_grid_;  // the same grid (GridFromSceneInfo)
+  visibility::ViewcellGrid grid_;
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
   MaskHoldings masks_;

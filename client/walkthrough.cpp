@@ -11,6 +11,7 @@
 #include "client/walk_follow.h"
 #include "client/walkthrough_loop.h"
 #include "proto/scene_info.h"
+#include "scenes/geometry_codec.h"
 #include "visibility/viewcell_grid.h"
 
 namespace vistream::client {
@@ -175,7 +176,7 @@ absl::Status WalkthroughLoop::PreloadEverything() {
     r.mesh = o.mesh;
     r.bounds_min = o.bounds.min;
     r.bounds_max = o.bounds.max;
-    r.raw_bytes = uint64_t{o.mesh.positions.size()} * 24 + uint64_t{o.mesh.indices.size()} * 4;
+    r.raw_bytes = scenes::RawMeshBytes(o.mesh.positions.size(), o.mesh.indices.size());
     events.emplace_back(std::move(r));
     everything_.push_back(o.id);
   }

@@ -32,9 +32,9 @@ absl::Status WalkthroughLoop::Startup() {
   auto ahead_complete = [&] {
     if (!ahead_known && store_->has_scene_info() && !walk_.has_value()) ahead_known = true;
     if (!ahead_known && store_->has_scene_info()) {
-      const GridInfo& g = store_->grid();
+      const visibility::ViewcellGrid& g = store_->grid();
       const std::vector<uint32_t> along =
-          walk_->CellsAlong(g.cell_size, [&g](const glm::dvec2& q) { return g.CellAt(q.x, q.y); });
+          walk_->CellsAlong(g.cell_size(), [&g](const glm::dvec2& q) { return g.CellAt(q); });
       if (along.size() > 1) ahead = along[1];
       ahead_known = true;
     }

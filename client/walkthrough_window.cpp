@@ -134,9 +134,9 @@ OverlayStatus WalkthroughLoop::Status(const Pumped& p, const FrameStats& fs, con
   st.give_up_s = opt_.give_up_s;
   st.cell = p.cell;
   if (p.cell.has_value()) {
-    const GridInfo& g = store_->grid();
-    st.cell_i = static_cast<int>(*p.cell % static_cast<uint32_t>(g.nx));
-    st.cell_j = static_cast<int>(*p.cell / static_cast<uint32_t>(g.nx));
+    const visibility::CellCoord c = store_->grid().Coord(*p.cell);
+    st.cell_i = c.i;
+    st.cell_j = c.j;
   }
   st.pvs_listed = p.pvs != nullptr;
   st.pvs_complete = p.complete;

@@ -262,9 +262,8 @@ void Run::Receive(const v1::ServerMessage& m) {
     default:
       break;
   }
-  // The walk starts once the first viewcell is complete (at a frame, as the real client).
   // The walk starts once the first viewcell and the first one the walk enters are complete (at
-  // a frame, as the real client, client/walkthrough.cpp Startup).
+  // a frame, as the real client, client/walkthrough_startup.cpp).
   if (!walk_t0_.has_value() && start_cell_.has_value()) {
     std::optional<double> done = CompleteAt(*start_cell_);
     if (done.has_value() && ahead_cell_.has_value()) {
@@ -401,7 +400,7 @@ void Run::Frame(double t) {
 
 void Run::Pose(double t) {
   // Waiting to walk: at the start, with the velocity it will walk at, so that the server ranks
-  // the cells ahead first (as the real client, client/walkthrough.cpp Startup).
+  // the cells ahead first (as the real client, client/walkthrough_startup.cpp).
   scenes::WalkPose pose = walk_.At(0.0);
   if (walk_t0_.has_value()) {
     const double walk_t = t - *walk_t0_;

@@ -29,6 +29,7 @@
 
 #include "client/cell_margins.h"
 #include "client/object_store.h"
+#include "proto/scene_info.h"
 #include "client/png_image.h"
 #include "client/renderer.h"
 #include "scenes/walk.h"
@@ -515,7 +516,7 @@ TEST(CellMargins, EachEntryGetsTheTimeItsCellLastBecameCompleteAndTheStartCellIs
 
 TEST(ClientGrid, FindsTheCellTheServerFinds) {
   const visibility::ViewcellGrid& grid = Default().grid();
-  const GridInfo g = GridInfo::From(Default().scene_info().grid());
+  const visibility::ViewcellGrid g = *GridFromSceneInfo(Default().scene_info().grid());
   std::mt19937 rng(5);
   const scenes::Aabb b = grid.Bounds();
   std::uniform_real_distribution<double> x(b.min.x - 50, b.max.x + 50), y(b.min.y - 50, b.max.y + 50);
@@ -524,7 +525,7 @@ TEST(ClientGrid, FindsTheCellTheServerFinds) {
     glm::dvec2 p(x(rng), y(rng));
     if (k % 4 == 0) p.x = b.min.x + std::round((p.x - b.min.x) / grid.cell_size()) * grid.cell_size();
     if (k % 8 == 0) p.y = b.min.y + std::round((p.y - b.min.y) / grid.cell_size()) * grid.cell_size();
-    ASSERT_EQ(g.CellAt(p.x, p.y), grid.CellAt(p)) << p.x << ", " << p.y;
+    ASSERT_EQ(g.CellAt(p), grid.CellAt(p)) << p.x << ", " << p.y;
   }
   for (uint32_t c : {0u, 5u, 21u, static_cast<uint32_t>(grid.CellCount() - 1)}) {
     std::vector<uint32_t> want = grid.Neighbours(c);
@@ -559,7 +560,7 @@ TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
     const ObjectStore& store = *s;
     ASSERT_FALSE(store.failure().has_value());
     EXPECT_FALSE(store.grid().has_bands());
-    EXPECT_EQ(store.grid().Band(1), (std::pair<double, double>{0.5, 2.5}));
+    EXPECT_EQ(store.grid().Band(1), (visibility::CellBand{0.5, 2.5}));
     EXPECT_TRUE(store.grid().InBand(1, 1.7));
     EXPECT_FALSE(store.grid().InBand(1, 3.0));
   }
@@ -569,8 +570,8 @@ TEST(ObjectStore, ReadsEachCellsBandOrTheGridsOne) {
     const ObjectStore& store = *s;
     ASSERT_FALSE(store.failure().has_value());
     EXPECT_TRUE(store.grid().has_bands());
-    EXPECT_EQ(store.grid().Band(0), (std::pair<double, double>{3.5, 14.0}));
-    EXPECT_EQ(store.grid().Band(1), (std::pair<double, double>{6.0, 13.0}));
+    EXPECT_EQ(store.grid().Band(0), (visibility::CellBand{3.5, 14.0}));
+    EXPECT_EQ(store.grid().Band(1), (visibility::CellBand{6.0, 13.0}));
     EXPECT_TRUE(store.grid().InBand(0, 4.0));
     EXPECT_FALSE(store.grid().InBand(1, 4.0));
   }
