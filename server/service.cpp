@@ -20,7 +20,7 @@ namespace v1 = vistream::v1;
 WalkthroughService::WalkthroughService(std::vector<ServedScene*> scenes, const ServerOptions& options, EventLog* log)
     : scenes_{std::move(scenes)}, options_(options), log_(log), start_s_(SteadySeconds()),
       quota_(options.max_sessions_per_address, options.max_sessions_per_token) {
-  if (options_.link.has_value()) timer_ = std::make_unique<LinkTimer>();
+  if (options_.link.has_value()) timer_ = std::make_unique<DueTimer>();
   if (options_.hello_timeout_s > 0.0) hello_watchdog_ = std::make_unique<HelloWatchdog>(options_.hello_timeout_s);
 }
 

@@ -110,7 +110,7 @@ class WalkthroughService final
   std::map<uint64_t, Entry> sessions_;
   SessionQuota quota_;
   std::unique_ptr<HelloWatchdog> hello_watchdog_;  // none without a Hello timeout
-  std::unique_ptr<LinkTimer> timer_;  // with link emulation: wakes sessions when their link is due
+  std::unique_ptr<DueTimer> timer_;  // with link emulation: wakes sessions when their link is due
 };
 
 // A running server: the service on its port, with health and reflection.

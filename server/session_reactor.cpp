@@ -20,46 +20,6 @@ double SteadySeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-LinkTimer::LinkTimer() : thread_([this] { Run(); }) {}
-
-LinkTimer::~LinkTimer() {
-  {
-    std::lock_guard lock(mu_);
-    stop_ = true;
-  }
-  cv_.notify_all();
-  thread_.join();
-}
-
-void LinkTimer::At(double at_s, std::weak_ptr<SessionLink> link) {
-  {
-    std::lock_guard lock(mu_);
-    due_.push(Due{at_s, std::move(link)});
-  }
-  cv_.notify_all();
-}
-
-void LinkTimer::Run() {
-  std::unique_lock lock(mu_);
-  while (!stop_) {
-    if (due_.empty()) {
-      cv_.wait(lock);
-      continue;
-    }
-    const double at = due_.top().at_s;
-    if (at > SteadySeconds()) {
-      cv_.wait_until(lock, std::chrono::steady_clock::time_point(std::chrono::duration_cast<
-                               std::chrono::steady_clock::duration>(std::chrono::duration<double>(at))));
-      continue;
-    }
-    std::weak_ptr<SessionLink> weak = due_.top().link;
-    due_.pop();
-    lock.unlock();
-    if (std::shared_ptr<SessionLink> link = weak.lock(); link != nullptr) link->Pump();
-    lock.lock();
-  }
-}
-
 class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   SessionReactor(std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link, SessionReactorSettings settings)
@@ -290,7 +250,11 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
     const double now = SteadySeconds();
     if (wake_at_ > now && wake_at_ <= at_s) return;
     wake_at_ = at_s;
-    if (settings_.timer != nullptr) settings_.timer->At(at_s, link_);
+    if (settings_.timer == nullptr) return;
+    // Held weakly: a session that ended by then is skipped.
+    settings_.timer->At(at_s, [weak = std::weak_ptr<SessionLink>(link_)] {
+      if (std::shared_ptr<SessionLink> link = weak.lock(); link != nullptr) link->Pump();
+    });
   }
 
   const SessionReactorSettings settings_;

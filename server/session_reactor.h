@@ -5,22 +5,19 @@
 // NextMessage gives, and never blocks on visibility work (workers wake it through its
 // SessionLink). With link emulation (`vistream-server --emulate-link`) both directions go
 // through an EmulatedLink (server/emulated_link.h) on the steady clock, woken by the server's
-// one LinkTimer. The service (server/service.h) admits sessions and makes their reactors; a
+// one DueTimer. The service (server/service.h) admits sessions and makes their reactors; a
 // reactor reports its end through a callback, so that it does not depend on the service.
 
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
-#include <queue>
-#include <thread>
-#include <vector>
 
 #include <absl/status/status.h>
 #include <grpcpp/grpcpp.h>
 
+#include "server/due_timer.h"
 #include "server/link_model.h"
 #include "server/session.h"
 
@@ -65,31 +62,6 @@ class SessionLink {
   SessionReactor* reactor_ = nullptr;
 };
 
-// One thread for the whole server that wakes sessions whose emulated link has something due
-// (a message arriving, the link free again). Entries hold the link weakly: a session that
-// ended is skipped.
-class LinkTimer {
- public:
-  LinkTimer();
-  ~LinkTimer();
-  // Calls `link`'s Pump at `at_s` (steady clock, seconds), unless the link is gone by then.
-  void At(double at_s, std::weak_ptr<SessionLink> link);
-
- private:
-  struct Due {
-    double at_s;
-    std::weak_ptr<SessionLink> link;
-    bool operator>(const Due& o) const { return at_s > o.at_s; }
-  };
-  void Run();
-
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::priority_queue<Due, std::vector<Due>, std::greater<Due>> due_;
-  bool stop_ = false;
-  std::thread thread_;  // last: starts after the members above exist
-};
-
 // What a session's reactor runs with.
 struct SessionReactorSettings {
   // Link emulation (ServerOptions::link, already time-scaled); none: messages are written at once.
@@ -98,7 +70,9 @@ struct SessionReactorSettings {
   uint64_t link_seed = 1;
   // At most this many payload bytes wait in the emulated downlink (SessionLimits::max_queued_bytes).
   size_t max_in_link_bytes = size_t{8} << 20;
-  LinkTimer* timer = nullptr;  // wakes the reactor when its link is due; needed with `link`
+  // The server's one timer (server/due_timer.h): wakes the reactor when its link has something
+  // due; needed with `link`.
+  DueTimer* timer = nullptr;
   // Called once, from the reactor's OnDone, with the call's final status and, with link
   // emulation, what the link did (null without). The session has ended by then.
   std::function<void(uint64_t session_id, const grpc::Status& status, const LinkFigures* link)> done;
