@@ -233,17 +233,16 @@ int RunServerProcess(const ServerProcessOptions& run) {
   PvsWorkerPool pool(threads);
   std::vector<std::unique_ptr<ServedScene>> served;
   for (const SceneConfig& sc : config.scenes) {
-    ServedSceneOptions o;
-    o.scene = sc.source();
-    o.name = sc.name;
-    o.catalog_dir = config.catalog;
-    o.cell_size = sc.cell_size_m;
-    o.res = sc.res;
-    o.backend = sc.backend;
-    o.pvs_file = sc.pvs_file;
-    o.cache_bytes = static_cast<size_t>(sc.cache_mb * (1 << 20));
-    o.pool = &pool;
-    o.store = sc.pvs_file.empty() ? store.get() : nullptr;
+    const ServedSceneOptions o{.scene = sc.source(),
+                               .name = sc.name,
+                               .catalog_dir = config.catalog,
+                               .cell_size = sc.cell_size_m,
+                               .res = sc.res,
+                               .backend = sc.backend,
+                               .pvs_file = sc.pvs_file,
+                               .cache_bytes = static_cast<size_t>(sc.cache_mb * (1 << 20)),
+                               .pool = &pool,
+                               .store = sc.pvs_file.empty() ? store.get() : nullptr};
     log.Write(0, "loading", {{"scene", sc.name}, {"source", o.scene}});
     const auto load_start = std::chrono::steady_clock::now();
     absl::StatusOr<std::unique_ptr<ServedScene>> scene =
