@@ -22,91 +22,40 @@
 #include <openssl/x509.h>
 #include <openssl/x509_vfy.h>
 
+#include "credentials/credential_files.h"
+
 namespace vistream::client {
 
 namespace {
 
-absl::StatusOr<std::string> ReadWhole(const std::string& option, const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) {
-    return absl::InvalidArgumentError(absl::StrCat(option, ": ", path, ": cannot read: ", std::strerror(errno)));
-  }
-  std::string text;
-  char buf[8192];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) text.append(buf, n);
-  const bool failed = std::ferror(f) != 0;
-  const int err = errno;
-  std::fclose(f);
-  if (failed) {
-    return absl::InvalidArgumentError(absl::StrCat(option, ": ", path, ": cannot read: ", std::strerror(err)));
-  }
-  return text;
-}
-
 struct Freer {
-  void operator()(BIO* b) const { BIO_free(b); }
-  void operator()(X509* x) const { X509_free(x); }
-  void operator()(EVP_PKEY* k) const { EVP_PKEY_free(k); }
   void operator()(SSL_CTX* c) const { SSL_CTX_free(c); }
   void operator()(SSL* s) const { SSL_free(s); }
 };
 template <typename T>
 using Owned = std::unique_ptr<T, Freer>;
 
-Owned<BIO> MemoryBio(const std::string& text) {
-  return Owned<BIO>(BIO_new_mem_buf(text.data(), static_cast<int>(text.size())));
-}
-
-std::vector<Owned<X509>> PemCertificates(const std::string& text) {
-  std::vector<Owned<X509>> out;
-  Owned<BIO> bio = MemoryBio(text);
-  while (X509* x = PEM_read_bio_X509(bio.get(), nullptr, nullptr, nullptr)) out.emplace_back(x);
-  ERR_clear_error();
-  return out;
-}
-
-int RefusePassphrase(char*, int, int, void* asked) {
-  *static_cast<bool*>(asked) = true;
-  return -1;
-}
-
-Owned<EVP_PKEY> PemKey(const std::string& text, bool* encrypted) {
-  Owned<BIO> bio = MemoryBio(text);
-  Owned<EVP_PKEY> key(PEM_read_bio_PrivateKey(bio.get(), nullptr, RefusePassphrase, encrypted));
-  ERR_clear_error();
-  return key;
-}
+using credentials::PemCertificates;
 
 bool IsSpace(char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
 absl::StatusOr<std::string> ReadToken(const std::string& path) {
-  absl::StatusOr<std::string> text = ReadWhole("--token-file", path);
+  absl::StatusOr<std::string> text = credentials::ReadCredentialFile(path, "--token-file");
   if (!text.ok()) return text.status();
-  int line_no = 0;
-  for (size_t begin = 0; begin < text->size();) {
-    size_t end = text->find('\n', begin);
-    if (end == std::string::npos) end = text->size();
-    std::string_view line(text->data() + begin, end - begin);
-    begin = end + 1;
-    ++line_no;
+  for (auto [line_no, line] : credentials::Lines(*text)) {
     while (!line.empty() && IsSpace(line.front())) line.remove_prefix(1);
     while (!line.empty() && IsSpace(line.back())) line.remove_suffix(1);
     if (line.empty() || line.front() == '#') continue;
     const std::string at = absl::StrCat("--token-file: ", path, ":", line_no, ": ");
-    for (size_t k = 0; k < line.size(); ++k) {
-      const auto c = static_cast<unsigned char>(line[k]);
-      if (c == ' ' || c == '\t') {
+    if (const size_t k = credentials::FirstNonTokenCharacter(line); k != std::string_view::npos) {
+      if (line[k] == ' ' || line[k] == '\t') {
         return absl::InvalidArgumentError(
             absl::StrCat(at, "more than a token on the line (a space at character ", k + 1,
                          "): the file holds the token alone"));
       }
-      if (c < 0x21 || c > 0x7e) {
-        return absl::InvalidArgumentError(absl::StrFormat("%sthe token has a non-printable character (byte 0x%02x) "
-                                                          "at character %d",
-                                                          at, c, k + 1));
-      }
+      return absl::InvalidArgumentError(absl::StrCat(at, "the token has ", credentials::NonPrintableAt(line, k)));
     }
-    if (line.size() < 16 || line.size() > 256) {
+    if (line.size() < credentials::kMinTokenLength || line.size() > credentials::kMaxTokenLength) {
       return absl::InvalidArgumentError(
           absl::StrCat(at, "the token is ", line.size(), " characters long: a token has 16 to 256"));
     }
@@ -189,7 +138,7 @@ absl::StatusOr<ChannelSecurity> LoadChannelSecurity(const std::string& ca_file, 
         "over TLS only");
   }
   if (!ca_file.empty()) {
-    absl::StatusOr<std::string> ca = ReadWhole("--tls-ca", ca_file);
+    absl::StatusOr<std::string> ca = credentials::ReadCredentialFile(ca_file, "--tls-ca");
     if (!ca.ok()) return ca.status();
     if (PemCertificates(*ca).empty()) {
       return absl::InvalidArgumentError(absl::StrCat("--tls-ca: ", ca_file, ": not a PEM certificate (bundle)"));
@@ -198,25 +147,23 @@ absl::StatusOr<ChannelSecurity> LoadChannelSecurity(const std::string& ca_file, 
     s.tls_ca_file = ca_file;
   }
   if (!cert_file.empty()) {
-    absl::StatusOr<std::string> cert = ReadWhole("--tls-cert", cert_file);
+    absl::StatusOr<std::string> cert = credentials::ReadCredentialFile(cert_file, "--tls-cert");
     if (!cert.ok()) return cert.status();
-    absl::StatusOr<std::string> key = ReadWhole("--tls-key", key_file);
+    absl::StatusOr<std::string> key = credentials::ReadCredentialFile(key_file, "--tls-key");
     if (!key.ok()) return key.status();
-    const std::vector<Owned<X509>> chain = PemCertificates(*cert);
-    if (chain.empty()) {
-      return absl::InvalidArgumentError(absl::StrCat("--tls-cert: ", cert_file, ": not a PEM certificate"));
-    }
-    bool encrypted = false;
-    Owned<EVP_PKEY> pkey = PemKey(*key, &encrypted);
-    if (pkey == nullptr) {
-      return absl::InvalidArgumentError(
-          encrypted ? absl::StrCat("--tls-key: ", key_file, ": the key is encrypted: give it without a passphrase")
-                    : absl::StrCat("--tls-key: ", key_file, ": not a PEM private key"));
-    }
-    if (X509_check_private_key(chain.front().get(), pkey.get()) != 1) {
-      ERR_clear_error();
-      return absl::InvalidArgumentError(
-          absl::StrCat("--tls-key: ", key_file, ": the key does not match the certificate in ", cert_file));
+    switch (credentials::CheckKeyPair(*cert, *key)) {
+      case credentials::KeyPairCheck::kGood:
+        break;
+      case credentials::KeyPairCheck::kNoCertificate:
+        return absl::InvalidArgumentError(absl::StrCat("--tls-cert: ", cert_file, ": not a PEM certificate"));
+      case credentials::KeyPairCheck::kEncryptedKey:
+        return absl::InvalidArgumentError(
+            absl::StrCat("--tls-key: ", key_file, ": the key is encrypted: give it without a passphrase"));
+      case credentials::KeyPairCheck::kNotAKey:
+        return absl::InvalidArgumentError(absl::StrCat("--tls-key: ", key_file, ": not a PEM private key"));
+      case credentials::KeyPairCheck::kKeyMismatch:
+        return absl::InvalidArgumentError(
+            absl::StrCat("--tls-key: ", key_file, ": the key does not match the certificate in ", cert_file));
     }
     s.tls_cert = *std::move(cert);
     s.tls_key = *std::move(key);
@@ -260,7 +207,7 @@ std::string DiagnoseTls(const std::string& address, const ChannelSecurity& secur
     return "";
   }
   if (tls) {
-    for (const Owned<X509>& ca : PemCertificates(security.tls_ca)) {
+    for (const credentials::Certificate& ca : PemCertificates(security.tls_ca)) {
       X509_STORE_add_cert(SSL_CTX_get_cert_store(ctx.get()), ca.get());
     }
     SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_PEER, nullptr);
@@ -268,9 +215,9 @@ std::string DiagnoseTls(const std::string& address, const ChannelSecurity& secur
     SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_NONE, nullptr);
   }
   if (!security.tls_cert.empty()) {
-    std::vector<Owned<X509>> chain = PemCertificates(security.tls_cert);
+    std::vector<credentials::Certificate> chain = PemCertificates(security.tls_cert);
     bool encrypted = false;
-    Owned<EVP_PKEY> key = PemKey(security.tls_key, &encrypted);
+    credentials::PrivateKey key = credentials::PemPrivateKey(security.tls_key, &encrypted);
     if (!chain.empty() && key != nullptr) {
       SSL_CTX_use_certificate(ctx.get(), chain.front().get());
       for (size_t k = 1; k < chain.size(); ++k) SSL_CTX_add_extra_chain_cert(ctx.get(), chain[k].release());

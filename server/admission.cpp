@@ -60,44 +60,16 @@ size_t SessionQuota::sessions_of(const std::string& tenant) const {
   return it == by_tenant_.end() ? 0 : it->second;
 }
 
-HelloWatchdog::HelloWatchdog(double timeout_s) : timeout_s_(timeout_s), thread_([this] { Run(); }) {}
+HelloWatchdog::HelloWatchdog(double timeout_s) : timeout_s_(timeout_s) {}
 
-HelloWatchdog::~HelloWatchdog() {
-  {
-    std::lock_guard lock(mu_);
-    stop_ = true;
-  }
-  cv_.notify_all();
-  thread_.join();
-}
+HelloWatchdog::~HelloWatchdog() = default;
 
 void HelloWatchdog::Watch(std::weak_ptr<Session> session, std::function<void()> expire) {
-  const auto due = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                          std::chrono::duration<double>(timeout_s_));
-  {
-    std::lock_guard lock(mu_);
-    watched_.push_back(Watched{due, std::move(session), std::move(expire)});
-  }
-  cv_.notify_all();
-}
-
-void HelloWatchdog::Run() {
-  std::unique_lock lock(mu_);
-  while (!stop_) {
-    if (watched_.empty()) {
-      cv_.wait(lock);
-      continue;
-    }
-    if (const auto due = watched_.front().due; due > std::chrono::steady_clock::now()) {
-      cv_.wait_until(lock, due);
-      continue;
-    }
-    Watched w = std::move(watched_.front());
-    watched_.pop_front();
-    lock.unlock();
-    if (std::shared_ptr<Session> s = w.session.lock(); s != nullptr && !s->greeted()) w.expire();
-    lock.lock();
-  }
+  const double due =
+      std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count() + timeout_s_;
+  timer_.At(due, [session = std::move(session), expire = std::move(expire)] {
+    if (std::shared_ptr<Session> s = session.lock(); s != nullptr && !s->greeted()) expire();
+  });
 }
 
 }  // namespace vistream::server

@@ -17,6 +17,7 @@
 
 #include <absl/status/status.h>
 
+#include "server/due_timer.h"
 #include "server/session.h"
 
 namespace vistream::server {
@@ -60,19 +61,8 @@ class HelloWatchdog {
   double timeout_s() const { return timeout_s_; }
 
  private:
-  struct Watched {
-    std::chrono::steady_clock::time_point due;
-    std::weak_ptr<Session> session;
-    std::function<void()> expire;
-  };
-  void Run();
-
   const double timeout_s_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::deque<Watched> watched_;  // in the order they are due (one timeout for all)
-  bool stop_ = false;
-  std::thread thread_;  // last: starts after the members above exist
+  DueTimer timer_;  // last: its thread runs while the member above exists
 };
 
 }  // namespace vistream::server

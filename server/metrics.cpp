@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <type_traits>
 
 namespace vistream::server {
 namespace {
@@ -183,28 +184,34 @@ MetricsRegistry::Family& MetricsRegistry::Declare(std::string_view name, std::st
   return f;
 }
 
+template <typename T>
+T* MetricsRegistry::Get(std::string_view name, std::string_view help, const MetricLabels& labels, Type type,
+                        const std::vector<double>* bounds, std::map<MetricLabels, std::unique_ptr<T>> Family::*children) {
+  MetricLabels key = Normalized(name, labels, type == Type::kHistogram);
+  std::lock_guard<std::mutex> lock(mu_);
+  Family& f = Declare(name, help, type, bounds);
+  return Child(f.*children, std::move(key), [&] {
+    if constexpr (std::is_same_v<T, Histogram>) {
+      return std::make_unique<Histogram>(f.bounds);
+    } else {
+      return std::make_unique<T>();
+    }
+  });
+}
+
 Counter* MetricsRegistry::GetCounter(std::string_view name, std::string_view help,
                                      const MetricLabels& labels) {
-  MetricLabels key = Normalized(name, labels, false);
-  std::lock_guard<std::mutex> lock(mu_);
-  Family& f = Declare(name, help, Type::kCounter, nullptr);
-  return Child(f.counters, std::move(key), [] { return std::make_unique<Counter>(); });
+  return Get(name, help, labels, Type::kCounter, nullptr, &Family::counters);
 }
 
 Gauge* MetricsRegistry::GetGauge(std::string_view name, std::string_view help,
                                  const MetricLabels& labels) {
-  MetricLabels key = Normalized(name, labels, false);
-  std::lock_guard<std::mutex> lock(mu_);
-  Family& f = Declare(name, help, Type::kGauge, nullptr);
-  return Child(f.gauges, std::move(key), [] { return std::make_unique<Gauge>(); });
+  return Get(name, help, labels, Type::kGauge, nullptr, &Family::gauges);
 }
 
 Histogram* MetricsRegistry::GetHistogram(std::string_view name, std::string_view help,
                                          std::vector<double> buckets, const MetricLabels& labels) {
-  MetricLabels key = Normalized(name, labels, true);
-  std::lock_guard<std::mutex> lock(mu_);
-  Family& f = Declare(name, help, Type::kHistogram, &buckets);
-  return Child(f.histograms, std::move(key), [&] { return std::make_unique<Histogram>(f.bounds); });
+  return Get(name, help, labels, Type::kHistogram, &buckets, &Family::histograms);
 }
 
 void MetricsRegistry::AddCollector(std::function<void()> collect) {

@@ -127,6 +127,10 @@ class MetricsRegistry {
   // The family `name` of `type`, declared if new (checking the rules); under mu_.
   Family& Declare(std::string_view name, std::string_view help, Type type,
                   const std::vector<double>* bounds);
+  // The child for `labels` of the family `name` (declared as Declare does), one of `children`.
+  template <typename T>
+  T* Get(std::string_view name, std::string_view help, const MetricLabels& labels, Type type,
+         const std::vector<double>* bounds, std::map<MetricLabels, std::unique_ptr<T>> Family::*children);
 
   std::mutex render_mu_;  // one Render() at a time; guards collectors_
   std::vector<std::function<void()>> collectors_;

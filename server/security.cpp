@@ -15,63 +15,16 @@
 #include <absl/strings/ascii.h>
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
-#include <openssl/bio.h>
 #include <openssl/crypto.h>
-#include <openssl/err.h>
 #include <openssl/evp.h>
-#include <openssl/pem.h>
-#include <openssl/x509.h>
+
+#include "credentials/credential_files.h"
 
 namespace vistream::server {
 
 namespace {
 
-// The whole of `path`, or "KEY: PATH: cannot read: why" (KEY empty: "PATH: cannot read: why").
-absl::StatusOr<std::string> ReadWhole(const std::string& path, const std::string& key) {
-  const std::string prefix = key.empty() ? path : absl::StrCat(key, ": ", path);
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) return absl::InvalidArgumentError(absl::StrCat(prefix, ": cannot read: ", std::strerror(errno)));
-  std::string text;
-  char buf[8192];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) text.append(buf, n);
-  const bool failed = std::ferror(f) != 0;
-  const int err = errno;
-  std::fclose(f);
-  if (failed) return absl::InvalidArgumentError(absl::StrCat(prefix, ": cannot read: ", std::strerror(err)));
-  return text;
-}
-
-struct BioDeleter {
-  void operator()(BIO* b) const { BIO_free(b); }
-};
-struct X509Deleter {
-  void operator()(X509* x) const { X509_free(x); }
-};
-struct KeyDeleter {
-  void operator()(EVP_PKEY* k) const { EVP_PKEY_free(k); }
-};
-using Bio = std::unique_ptr<BIO, BioDeleter>;
-using Cert = std::unique_ptr<X509, X509Deleter>;
-
-Bio MemoryBio(const std::string& text) { return Bio(BIO_new_mem_buf(text.data(), static_cast<int>(text.size()))); }
-
-// The PEM certificates in `text`, in order (none: not PEM certificates).
-std::vector<Cert> PemCertificates(const std::string& text) {
-  std::vector<Cert> out;
-  Bio bio = MemoryBio(text);
-  while (X509* x = PEM_read_bio_X509(bio.get(), nullptr, nullptr, nullptr)) out.emplace_back(x);
-  ERR_clear_error();  // the read that found no more
-  return out;
-}
-
-// A passphrase callback that refuses (an encrypted key is reported, never prompted for).
-int RefusePassphrase(char*, int, int, void* asked) {
-  *static_cast<bool*>(asked) = true;
-  return -1;
-}
-
 bool IsSpace(char c) { return c == ' ' || c == '\t'; }
-bool Printable(unsigned char c) { return c > 0x20 && c < 0x7f; }
 
 std::array<uint8_t, 32> Sha256(std::string_view text) {
   std::array<uint8_t, 32> d{};
@@ -80,13 +33,10 @@ std::array<uint8_t, 32> Sha256(std::string_view text) {
   return d;
 }
 
-// What is wrong with `field` as a name (max 64) or token (16 to 256), or empty.
+// What is wrong with `field` as a name or token (a character that cannot stand in one), or empty.
 std::string Unprintable(std::string_view field) {
-  for (size_t k = 0; k < field.size(); ++k) {
-    const auto c = static_cast<unsigned char>(field[k]);
-    if (!Printable(c)) return absl::StrFormat("a non-printable character (byte 0x%02x) at character %d", c, k + 1);
-  }
-  return "";
+  const size_t k = credentials::FirstNonTokenCharacter(field);
+  return k == std::string_view::npos ? "" : credentials::NonPrintableAt(field, k);
 }
 
 }  // namespace
@@ -127,35 +77,31 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(co
         "tls.insecure = true (--insecure) to serve plaintext there anyway"));
   }
 
-  absl::StatusOr<std::string> cert = ReadWhole(tls.cert, "tls.cert");
+  absl::StatusOr<std::string> cert = credentials::ReadCredentialFile(tls.cert, "tls.cert");
   if (!cert.ok()) return cert.status();
-  absl::StatusOr<std::string> key = ReadWhole(tls.key, "tls.key");
+  absl::StatusOr<std::string> key = credentials::ReadCredentialFile(tls.key, "tls.key");
   if (!key.ok()) return key.status();
-  const std::vector<Cert> chain = PemCertificates(*cert);
-  if (chain.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("tls.cert: ", tls.cert, ": not a PEM certificate"));
-  }
-  bool asked = false;
-  Bio key_bio = MemoryBio(*key);
-  std::unique_ptr<EVP_PKEY, KeyDeleter> pkey(PEM_read_bio_PrivateKey(key_bio.get(), nullptr, RefusePassphrase, &asked));
-  ERR_clear_error();
-  if (pkey == nullptr) {
-    return absl::InvalidArgumentError(
-        asked ? absl::StrCat("tls.key: ", tls.key, ": the key is encrypted: give it without a passphrase")
-              : absl::StrCat("tls.key: ", tls.key, ": not a PEM private key"));
-  }
-  if (X509_check_private_key(chain.front().get(), pkey.get()) != 1) {
-    ERR_clear_error();
-    return absl::InvalidArgumentError(absl::StrCat("tls.key: ", tls.key, ": the key does not match the certificate in ",
-                                                   tls.cert, " (tls.cert)"));
+  switch (credentials::CheckKeyPair(*cert, *key)) {
+    case credentials::KeyPairCheck::kGood:
+      break;
+    case credentials::KeyPairCheck::kNoCertificate:
+      return absl::InvalidArgumentError(absl::StrCat("tls.cert: ", tls.cert, ": not a PEM certificate"));
+    case credentials::KeyPairCheck::kEncryptedKey:
+      return absl::InvalidArgumentError(
+          absl::StrCat("tls.key: ", tls.key, ": the key is encrypted: give it without a passphrase"));
+    case credentials::KeyPairCheck::kNotAKey:
+      return absl::InvalidArgumentError(absl::StrCat("tls.key: ", tls.key, ": not a PEM private key"));
+    case credentials::KeyPairCheck::kKeyMismatch:
+      return absl::InvalidArgumentError(absl::StrCat("tls.key: ", tls.key, ": the key does not match the certificate in ",
+                                                     tls.cert, " (tls.cert)"));
   }
 
   grpc::SslServerCredentialsOptions options(GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE);
   options.pem_key_cert_pairs.push_back({*key, *cert});
   if (!tls.client_ca.empty()) {
-    absl::StatusOr<std::string> ca = ReadWhole(tls.client_ca, "tls.client_ca");
+    absl::StatusOr<std::string> ca = credentials::ReadCredentialFile(tls.client_ca, "tls.client_ca");
     if (!ca.ok()) return ca.status();
-    if (PemCertificates(*ca).empty()) {
+    if (credentials::PemCertificates(*ca).empty()) {
       return absl::InvalidArgumentError(
           absl::StrCat("tls.client_ca: ", tls.client_ca, ": not a PEM CA bundle (no PEM certificate in it)"));
     }
@@ -166,20 +112,13 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(co
 }
 
 absl::StatusOr<std::vector<TokenStore::Entry>> TokenStore::Parse(const std::string& path) {
-  absl::StatusOr<std::string> text = ReadWhole(path, "");
+  absl::StatusOr<std::string> text = credentials::ReadCredentialFile(path, "");
   if (!text.ok()) return text.status();
   std::vector<Entry> entries;
   std::map<std::string, int> name_line;
   std::map<std::array<uint8_t, 32>, size_t> token_entry;  // digest -> index in entries
   std::vector<int> entry_line;
-  int line_no = 0;
-  for (size_t begin = 0; begin < text->size();) {
-    size_t end = text->find('\n', begin);
-    if (end == std::string::npos) end = text->size();
-    std::string_view line(text->data() + begin, end - begin);
-    begin = end + 1;
-    ++line_no;
-    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+  for (const auto& [line_no, line] : credentials::Lines(*text)) {
     std::vector<std::string_view> fields;
     for (size_t k = 0; k < line.size();) {
       while (k < line.size() && IsSpace(line[k])) ++k;
@@ -206,7 +145,7 @@ absl::StatusOr<std::vector<TokenStore::Entry>> TokenStore::Parse(const std::stri
           " fields (a token has no spaces; a comment goes on a line of its own, starting with #)"));
     }
     const std::string_view token = fields[1];
-    if (token.size() < 16 || token.size() > 256) {
+    if (token.size() < credentials::kMinTokenLength || token.size() > credentials::kMaxTokenLength) {
       return absl::InvalidArgumentError(absl::StrCat(at, "the token of '", name, "' is ", token.size(),
                                                      " characters long: a token has 16 to 256"));
     }

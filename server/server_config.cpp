@@ -10,6 +10,8 @@
 #include <fstream>
 #include <functional>
 #include <sstream>
+#include <type_traits>
+#include <utility>
 
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_join.h>
@@ -74,9 +76,10 @@ class Reader {
         const int line = k.source().begin.line != 0 ? static_cast<int>(k.source().begin.line) : LineOf(node);
         // TOML puts every key after a [table] header into that table: a top-level key written
         // below one lands there.
-        static const char* const kTopLevel[] = {"listen", "threads", "max_sessions", "catalog", "grace_s", "drain_s"};
-        const bool top_level = !prefix.empty() && std::find(std::begin(kTopLevel), std::end(kTopLevel), name) !=
-                                                      std::end(kTopLevel);
+        const std::vector<ServerSetting>& settings = ServerSettings();
+        const bool top_level = !prefix.empty() && std::any_of(settings.begin(), settings.end(), [&](const ServerSetting& st) {
+          return *st.table == '\0' && name == st.key;
+        });
         return Error(line, dotted,
                      absl::StrCat("unknown key (", prefix.empty() ? "top level" : "[" + prefix + "]",
                                   " keys: ", absl::StrJoin(known, ", "), ")",
@@ -139,57 +142,104 @@ class Reader {
       return absl::OkStatus();
     };
   }
-  // A path to a file this process can read (relative: to the configuration file's folder);
-  // empty allowed (the feature is off).
-  Handler ReadableFile(std::string* out) const {
-    return [this, out](const toml::node& n, const std::string& key) -> absl::Status {
+  // A path (relative: to the configuration file's folder; empty allowed: the feature is off)
+  // that `problem` finds nothing wrong with: it says what is wrong with the resolved path, or "".
+  Handler Path(std::string* out, std::function<std::string(const std::string& path)> problem) const {
+    return [this, out, problem](const toml::node& n, const std::string& key) -> absl::Status {
       if (absl::Status st = String(out)(n, key); !st.ok()) return st;
       if (out->empty()) return absl::OkStatus();
       *out = Resolve(*out);
-      std::error_code ec;
-      if (!fs::is_regular_file(*out, ec)) return Error(LineOf(n), key, absl::StrCat(*out, ": no such file"));
-      if (::access(out->c_str(), R_OK) != 0) return Error(LineOf(n), key, absl::StrCat(*out, ": cannot be read"));
+      if (std::string what = problem(*out); !what.empty()) return Error(LineOf(n), key, what);
       return absl::OkStatus();
     };
   }
-  Handler Folder(std::string* out) const {
-    return [this, out](const toml::node& n, const std::string& key) -> absl::Status {
-      if (absl::Status st = String(out)(n, key); !st.ok()) return st;
-      if (out->empty()) return absl::OkStatus();
-      *out = Resolve(*out);
+  // A file this process can read.
+  Handler ReadableFile(std::string* out) const {
+    return Path(out, [](const std::string& path) -> std::string {
       std::error_code ec;
-      if (!fs::is_directory(*out, ec)) return Error(LineOf(n), key, absl::StrCat(*out, ": no such folder"));
-      return absl::OkStatus();
-    };
+      if (!fs::is_regular_file(path, ec)) return absl::StrCat(path, ": no such file");
+      if (::access(path.c_str(), R_OK) != 0) return absl::StrCat(path, ": cannot be read");
+      return "";
+    });
+  }
+  Handler Folder(std::string* out) const {
+    return Path(out, [](const std::string& path) -> std::string {
+      std::error_code ec;
+      return fs::is_directory(path, ec) ? "" : absl::StrCat(path, ": no such folder");
+    });
   }
   // A file the server will append to: its folder must exist and be writable.
   Handler WritableFile(std::string* out) const {
-    return [this, out](const toml::node& n, const std::string& key) -> absl::Status {
-      if (absl::Status st = String(out)(n, key); !st.ok()) return st;
-      if (out->empty()) return absl::OkStatus();
-      *out = Resolve(*out);
-      const fs::path p(*out);
+    return Path(out, [](const std::string& path) -> std::string {
+      const fs::path p(path);
       const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
       std::error_code ec;
-      if (fs::is_directory(p, ec)) return Error(LineOf(n), key, absl::StrCat(*out, ": is a folder, not a file"));
-      if (!fs::is_directory(dir, ec)) return Error(LineOf(n), key, absl::StrCat(dir.string(), ": no such folder"));
+      if (fs::is_directory(p, ec)) return absl::StrCat(path, ": is a folder, not a file");
+      if (!fs::is_directory(dir, ec)) return absl::StrCat(dir.string(), ": no such folder");
       const bool exists = fs::exists(p, ec);
-      if (::access(exists ? out->c_str() : dir.c_str(), W_OK) != 0) {
-        return Error(LineOf(n), key, absl::StrCat(*out, ": cannot be written"));
-      }
+      if (::access(exists ? path.c_str() : dir.c_str(), W_OK) != 0) return absl::StrCat(path, ": cannot be written");
+      return "";
+    });
+  }
+  // A string that passes `check`.
+  Handler Text(std::string* out, TextCheck check) const {
+    return [this, out, check](const toml::node& n, const std::string& key) -> absl::Status {
+      if (absl::Status st = String(out)(n, key); !st.ok()) return st;
+      if (check.empty_ok && out->empty()) return absl::OkStatus();
+      if (!check.ok(*out)) return Error(LineOf(n), key, absl::StrCat("'", *out, "' is ", check.what));
       return absl::OkStatus();
     };
   }
-  Handler Address(std::string* out, bool allow_empty) const {
-    return [this, out, allow_empty](const toml::node& n, const std::string& key) -> absl::Status {
-      if (absl::Status st = String(out)(n, key); !st.ok()) return st;
-      if (allow_empty && out->empty()) return absl::OkStatus();
-      if (!IsHostPort(*out)) {
-        return Error(LineOf(n), key,
-                     absl::StrCat("'", *out, "' is not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:50051)"));
-      }
+  // `read`, then `also` on the number it read.
+  template <typename T>
+  Handler Also(Handler read, T* out, std::string (*also)(double)) const {
+    if (also == nullptr) return read;
+    return [this, read, out, also](const toml::node& n, const std::string& key) -> absl::Status {
+      if (absl::Status st = read(n, key); !st.ok()) return st;
+      if (std::string what = also(static_cast<double>(*out)); !what.empty()) return Error(LineOf(n), key, what);
       return absl::OkStatus();
     };
+  }
+  // The handler of a setting whose value goes to `config` or `scene` (as its field says).
+  Handler Setting(const ServerSetting& setting, ServerConfig* config, SceneConfig* scene) const {
+    const FileRule& rule = setting.file;
+    using Kind = FileRule::Kind;
+    auto target = [&](auto member) {
+      if constexpr (std::is_invocable_v<decltype(member), ServerConfig&>) {
+        return &std::invoke(member, *config);
+      } else {
+        return &std::invoke(member, *scene);
+      }
+    };
+    return std::visit(
+        [&](auto member) -> Handler {
+          auto* out = target(member);
+          using T = std::remove_pointer_t<decltype(out)>;
+          if constexpr (std::is_same_v<T, std::string>) {
+            switch (rule.kind) {
+              case Kind::kText: return Text(out, rule.text);
+              case Kind::kChoice: return Choice(out, rule.choices);
+              case Kind::kReadableFile: return ReadableFile(out);
+              case Kind::kFolder: return Folder(out);
+              case Kind::kWritableFile: return WritableFile(out);
+              default: return String(out);
+            }
+          } else if constexpr (std::is_same_v<T, bool>) {
+            if (rule.kind != Kind::kChoice) return Bool(out);
+            // A choice of words for a bool: true for the last (log.format = "json").
+            return [this, out, choices = rule.choices](const toml::node& n, const std::string& key) -> absl::Status {
+              std::string word;
+              if (absl::Status st = Choice(&word, choices)(n, key); !st.ok()) return st;
+              *out = word == choices.back();
+              return absl::OkStatus();
+            };
+          } else if constexpr (std::is_same_v<T, double>) {
+            return Also(Number(out, rule.lo, rule.hi, rule.above_lo), out, rule.also);
+          } else {
+            return Also(Whole(out, static_cast<int64_t>(rule.lo), static_cast<int64_t>(rule.hi)), out, rule.also);
+          }
+        },
+        setting.field);
   }
   Handler Subtable(const std::vector<Key>& keys) const {
     return [this, keys](const toml::node& n, const std::string& key) -> absl::Status {
@@ -218,28 +268,10 @@ absl::Status ReadScenes(const Reader& r, const toml::node& n, const std::string&
     SceneConfig s;
     s.line = LineOf(t);
     const std::string prefix = absl::StrCat("scenes[", k + 1, "]");
-    const std::vector<Reader::Key> keys = {
-        {"name", r.String(&s.name)},
-        {"file", r.ReadableFile(&s.file)},
-        {"pvs_file", r.ReadableFile(&s.pvs_file)},
-        {"cell_size_m", [&](const toml::node& v, const std::string& name) -> absl::Status {
-           if (absl::Status st = r.Number(&s.cell_size_m, 0.0, 1e6)(v, name); !st.ok()) return st;
-           if (s.cell_size_m != 0.0 && s.cell_size_m < 0.01) {
-             return r.Error(LineOf(v), name, absl::StrCat(Format(s.cell_size_m),
-                                                          " is out of range (0: the catalog's, or 0.01 to 1e+06)"));
-           }
-           return absl::OkStatus();
-         }},
-        {"res", [&](const toml::node& v, const std::string& name) -> absl::Status {
-           if (absl::Status st = r.Whole(&s.res, 1, 256)(v, name); !st.ok()) return st;
-           if ((s.res & (s.res - 1)) != 0) {
-             return r.Error(LineOf(v), name, absl::StrCat(s.res, " is not a power of two from 1 to 256"));
-           }
-           return absl::OkStatus();
-         }},
-        {"backend", r.Choice(&s.backend, {"cpu", "gl", "exact"})},
-        {"cache_mb", r.Number(&s.cache_mb, 1.0, 1e6)},
-    };
+    std::vector<Reader::Key> keys;
+    for (const ServerSetting& setting : ServerSettings()) {
+      if (std::string_view(setting.table) == "scenes") keys.push_back({setting.key, r.Setting(setting, nullptr, &s)});
+    }
     if (absl::Status st = r.Table(t, prefix, keys); !st.ok()) return st;
     if (s.name.empty()) {
       return r.Error(s.line, prefix + ".name",
@@ -283,6 +315,145 @@ bool IsStoreKeyPrefix(std::string_view text) {
   return !text.empty() && text.find_first_of(" \t\r\n") == std::string_view::npos;
 }
 
+namespace {
+
+using FK = FileRule::Kind;
+using OK = OptionRule::Kind;
+
+FileRule File(FK kind) { return FileRule{.kind = kind}; }
+FileRule FileRange(FK kind, double lo, double hi) { return FileRule{.kind = kind, .lo = lo, .hi = hi}; }
+OptionRule Option(OK kind, double lo = 0.0, double hi = 0.0, bool show_default = false) {
+  return OptionRule{.kind = kind, .lo = lo, .hi = hi, .show_default = show_default};
+}
+constexpr bool kShowDefault = true;
+// A key of the file that no option overrides.
+ServerSetting FileOnly(const char* table, const char* key, SettingField field, FileRule rule) {
+  return ServerSetting{table, key, field, std::move(rule), nullptr, "", OptionRule{}, 0};
+}
+
+const TextCheck kListenCheck{IsHostPort, "not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:50051)", false};
+const TextCheck kStoreAddressCheck{IsStoreAddress, "not host:port or unix:/path (e.g. 127.0.0.1:6379)", false};
+
+std::string CellSizeAlso(double v) {
+  if (v != 0.0 && v < 0.01) return absl::StrCat(Format(v), " is out of range (0: the catalog's, or 0.01 to 1e+06)");
+  return "";
+}
+
+std::string PowerOfTwoAlso(double v) {
+  const auto n = static_cast<uint32_t>(v);
+  if ((n & (n - 1)) != 0) return absl::StrCat(n, " is not a power of two from 1 to 256");
+  return "";
+}
+
+std::vector<ServerSetting> MakeSettings() {
+  std::vector<ServerSetting> t;
+  // Top level.
+  t.push_back({"", "listen", &ServerConfig::listen, {.kind = FK::kText, .text = kListenCheck}, "--listen",
+               "address to listen on, host:port (port 0: any free one)",
+               {.kind = OK::kText, .text = kListenCheck, .type_name = "HOST:PORT", .show_default = true}, 2});
+  t.push_back({"", "threads", &ServerConfig::threads, FileRange(FK::kWhole, 0, 1024), "--threads",
+               "PVS worker threads, shared by every scene (0: one per core)", Option(OK::kWhole, 0, 1024, kShowDefault), 3});
+  t.push_back({"", "max_sessions", &ServerConfig::max_sessions, FileRange(FK::kWhole, 1, 100000), "--max-sessions",
+               "sessions at once; more are refused", Option(OK::kWhole, 1, 100000, kShowDefault), 8});
+  t.push_back({"", "catalog", &ServerConfig::catalog, File(FK::kFolder), "--catalog",
+               "folder of catalog entries (default: the built-in catalog)", Option(OK::kAny), 1});
+  t.push_back({"", "grace_s", &ServerConfig::grace_s, FileRange(FK::kNumber, 0.0, 3600.0), "--grace",
+               "seconds sessions get to end on shutdown", Option(OK::kNumber, 0, 3600, kShowDefault), 11});
+  t.push_back({"", "drain_s", &ServerConfig::drain_s, FileRange(FK::kNumber, 0.0, 3600.0), "--drain",
+               "seconds from SIGTERM to the end of the sessions: /healthz says 503 while they are served on, so "
+               "that a load balancer takes this replica out first (0: end them at once)",
+               Option(OK::kNumber, 0, 3600, kShowDefault), 12});
+  // [limits]
+  t.push_back({"limits", "hello_timeout_s", &ServerConfig::hello_timeout_s, FileRange(FK::kNumber, 0.0, 86400.0),
+               "--hello-timeout",
+               "seconds a new stream may take to send its Hello (then DEADLINE_EXCEEDED; 0: no limit)",
+               Option(OK::kNumber, 0, 86400, kShowDefault), 13});
+  t.push_back({"limits", "max_pose_rate_hz", &ServerConfig::max_pose_rate_hz, FileRange(FK::kNumber, 0.1, 100000.0),
+               "--max-pose-rate", "poses per second a session may send", Option(OK::kNumber, 0.1, 100000, kShowDefault),
+               10});
+  t.push_back({"limits", "max_sessions_per_address", &ServerConfig::max_sessions_per_address,
+               FileRange(FK::kWhole, 0, 100000), "--max-sessions-per-address",
+               "sessions at once from one client address (0: no limit)", Option(OK::kWhole, 0, 100000, kShowDefault), 14});
+  t.push_back({"limits", "max_sessions_per_token", &ServerConfig::max_sessions_per_token,
+               FileRange(FK::kWhole, 0, 100000), "--max-sessions-per-token", "sessions at once per token (0: no limit)",
+               Option(OK::kWhole, 0, 100000, kShowDefault), 15});
+  // [tls]
+  t.push_back({"tls", "cert", &ServerConfig::tls_cert, File(FK::kReadableFile), "--tls-cert",
+               "PEM certificate chain: serve TLS (with --tls-key)", Option(OK::kAny), 16});
+  t.push_back({"tls", "key", &ServerConfig::tls_key, File(FK::kReadableFile), "--tls-key",
+               "PEM private key of --tls-cert", Option(OK::kAny), 17});
+  t.push_back({"tls", "client_ca", &ServerConfig::tls_client_ca, File(FK::kReadableFile), "--tls-client-ca",
+               "PEM CA bundle: clients must present a certificate it signed (mutual TLS)", Option(OK::kAny), 18});
+  t.push_back({"tls", "insecure", &ServerConfig::tls_insecure, File(FK::kBool), "--insecure",
+               "allow plaintext on an address that is not loopback", Option(OK::kFlag), 19});
+  // [auth]
+  t.push_back({"auth", "tokens", &ServerConfig::tokens, File(FK::kReadableFile), "--tokens",
+               "file of 'name token' lines: clients must send one as a bearer token", Option(OK::kAny), 20});
+  // [metrics]
+  t.push_back({"metrics", "listen", &ServerConfig::metrics_listen,
+               {.kind = FK::kText, .text = {IsHostPort, kListenCheck.what, true}}, "--metrics-listen",
+               "host:port of the HTTP /metrics and /healthz endpoint",
+               {.kind = OK::kText,
+                .text = {IsHostPort, "not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:9464)", true},
+                .type_name = "HOST:PORT"},
+               21});
+  // [store]
+  t.push_back({"store", "address", &ServerConfig::store_address, {.kind = FK::kText, .text = kStoreAddressCheck},
+               "--store",
+               "Redis host:port or unix:PATH of the PVS store shared by replicas (README \"Beyond one machine\")",
+               {.kind = OK::kText, .text = kStoreAddressCheck, .type_name = "HOST:PORT"}, 22});
+  // The prefix is checked once the file is read (ParseServerConfig): a [store] without the key keeps the default.
+  t.push_back({"store", "key_prefix", &ServerConfig::store_key_prefix, File(FK::kString), "--store-prefix",
+               "key prefix in the PVS store",
+               {.kind = OK::kText,
+                .text = {IsStoreKeyPrefix, "not a non-empty word without spaces", false},
+                .type_name = "WORD",
+                .show_default = true},
+               23});
+  t.push_back(FileOnly("store", "connect_timeout_ms", &ServerConfig::store_connect_timeout_ms,
+                       {.kind = FK::kNumber, .lo = 0.0, .hi = 60000.0, .above_lo = true}));
+  t.push_back({"store", "read_timeout_ms", &ServerConfig::store_read_timeout_ms,
+               {.kind = FK::kNumber, .lo = 0.0, .hi = 60000.0, .above_lo = true}, "--store-read-timeout-ms",
+               "a store read's deadline in ms (then the PVS is computed)",
+               Option(OK::kNumber, 0.001, 60000, kShowDefault), 24});
+  t.push_back(FileOnly("store", "write_timeout_ms", &ServerConfig::store_write_timeout_ms,
+                       {.kind = FK::kNumber, .lo = 0.0, .hi = 60000.0, .above_lo = true}));
+  t.push_back(FileOnly("store", "username", &ServerConfig::store_username, File(FK::kString)));
+  t.push_back({"store", "password_file", &ServerConfig::store_password_file, File(FK::kReadableFile),
+               "--store-password-file", "file whose first line is the store's password", Option(OK::kAny), 25});
+  // [log]
+  t.push_back({"log", "format", &ServerConfig::log_json, {.kind = FK::kChoice, .choices = {"text", "json"}},
+               "--json-log", "log JSON lines instead of text", Option(OK::kFlag), 26});
+  t.push_back({"log", "file", &ServerConfig::log_file, File(FK::kWritableFile), "--log-file",
+               "append the log to this file instead of stderr", Option(OK::kAny), 27});
+  // [[scenes]]: the options apply to every scene (or to --scene's).
+  t.push_back(FileOnly("scenes", "name", &SceneConfig::name, File(FK::kString)));
+  t.push_back(FileOnly("scenes", "file", &SceneConfig::file, File(FK::kReadableFile)));
+  t.push_back({"scenes", "pvs_file", &SceneConfig::pvs_file, File(FK::kReadableFile), "--pvs-file",
+               "serve the PVSs of this file (vistream agvs -o, vistream pvs --all -o) instead of computing them "
+               "(one scene only)",
+               Option(OK::kAny), 7});
+  t.push_back({"scenes", "cell_size_m", &SceneConfig::cell_size_m,
+               {.kind = FK::kNumber, .lo = 0.0, .hi = 1e6, .also = CellSizeAlso}, "--cell-size",
+               "viewcell edge in metres (default: the catalog entry's)", Option(OK::kNumber, 0.01, 1e6), 4});
+  t.push_back({"scenes", "res", &SceneConfig::res, {.kind = FK::kWhole, .lo = 1, .hi = 256, .also = PowerOfTwoAlso},
+               "--res", "finest dual-ray-space raster (power of two, 1 to 256)",
+               Option(OK::kPowerOfTwo, 1, 256, kShowDefault), 5});
+  t.push_back({"scenes", "backend", &SceneConfig::backend, {.kind = FK::kChoice, .choices = {"cpu", "gl", "exact"}},
+               "--backend", "cpu | gl | exact",
+               {.kind = OK::kChoice, .choices = {"cpu", "gl", "exact"}, .show_default = true}, 6});
+  t.push_back({"scenes", "cache_mb", &SceneConfig::cache_mb, FileRange(FK::kNumber, 1.0, 1e6), "--cache-mb",
+               "PVS cache budget of each scene in MiB", Option(OK::kNumber, 1, 1e6, kShowDefault), 9});
+  return t;
+}
+
+}  // namespace
+
+const std::vector<ServerSetting>& ServerSettings() {
+  static const std::vector<ServerSetting> settings = MakeSettings();
+  return settings;
+}
+
 absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std::string& path) {
   toml::table root;
   try {
@@ -295,52 +466,23 @@ absl::StatusOr<ServerConfig> ParseServerConfig(std::string_view text, const std:
   c.path = path;
   const fs::path base = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
   const Reader r(path, base);
-  std::string log_format = "text";
-  const std::vector<Reader::Key> keys = {
-      {"listen", r.Address(&c.listen, false)},
-      {"threads", r.Whole(&c.threads, 0, 1024)},
-      {"max_sessions", r.Whole(&c.max_sessions, 1, 100000)},
-      {"catalog", r.Folder(&c.catalog)},
-      {"grace_s", r.Number(&c.grace_s, 0.0, 3600.0)},
-      {"drain_s", r.Number(&c.drain_s, 0.0, 3600.0)},
-      {"limits", r.Subtable({
-                     {"hello_timeout_s", r.Number(&c.hello_timeout_s, 0.0, 86400.0)},
-                     {"max_pose_rate_hz", r.Number(&c.max_pose_rate_hz, 0.1, 100000.0)},
-                     {"max_sessions_per_address", r.Whole(&c.max_sessions_per_address, 0, 100000)},
-                     {"max_sessions_per_token", r.Whole(&c.max_sessions_per_token, 0, 100000)},
-                 })},
-      {"tls", r.Subtable({
-                  {"cert", r.ReadableFile(&c.tls_cert)},
-                  {"key", r.ReadableFile(&c.tls_key)},
-                  {"client_ca", r.ReadableFile(&c.tls_client_ca)},
-                  {"insecure", r.Bool(&c.tls_insecure)},
-              })},
-      {"auth", r.Subtable({{"tokens", r.ReadableFile(&c.tokens)}})},
-      {"metrics", r.Subtable({{"listen", r.Address(&c.metrics_listen, true)}})},
-      {"store", r.Subtable({
-                    {"address", [&](const toml::node& n, const std::string& key) -> absl::Status {
-                       if (absl::Status st = r.String(&c.store_address)(n, key); !st.ok()) return st;
-                       if (!IsStoreAddress(c.store_address)) {
-                         return r.Error(LineOf(n), key, absl::StrCat("'", c.store_address,
-                                                                     "' is not host:port or unix:/path (e.g. 127.0.0.1:6379)"));
-                       }
-                       return absl::OkStatus();
-                     }},
-                    {"key_prefix", r.String(&c.store_key_prefix)},
-                    {"connect_timeout_ms", r.Number(&c.store_connect_timeout_ms, 0.0, 60000.0, true)},
-                    {"read_timeout_ms", r.Number(&c.store_read_timeout_ms, 0.0, 60000.0, true)},
-                    {"write_timeout_ms", r.Number(&c.store_write_timeout_ms, 0.0, 60000.0, true)},
-                    {"username", r.String(&c.store_username)},
-                    {"password_file", r.ReadableFile(&c.store_password_file)},
-                })},
-      {"log", r.Subtable({
-                  {"format", r.Choice(&log_format, {"text", "json"})},
-                  {"file", r.WritableFile(&c.log_file)},
-              })},
-      {"scenes", [&](const toml::node& n, const std::string& key) { return ReadScenes(r, n, key, &c.scenes); }},
-  };
+  // The keys of the top level and of each table, in the settings' order; [[scenes]] last.
+  std::vector<Reader::Key> keys;
+  std::vector<std::pair<std::string, std::vector<Reader::Key>>> tables;
+  for (const ServerSetting& setting : ServerSettings()) {
+    const std::string table = setting.table;
+    if (table == "scenes") continue;
+    Reader::Key key{setting.key, r.Setting(setting, &c, nullptr)};
+    if (table.empty()) {
+      keys.push_back(std::move(key));
+      continue;
+    }
+    if (tables.empty() || tables.back().first != table) tables.emplace_back(table, std::vector<Reader::Key>{});
+    tables.back().second.push_back(std::move(key));
+  }
+  for (auto& [table, table_keys] : tables) keys.push_back({table.c_str(), r.Subtable(table_keys)});
+  keys.push_back({"scenes", [&](const toml::node& n, const std::string& key) { return ReadScenes(r, n, key, &c.scenes); }});
   if (absl::Status st = r.Table(root, "", keys); !st.ok()) return st;
-  c.log_json = log_format == "json";
   if (const toml::node* n = root.get("listen")) c.listen_line = LineOf(*n);
   if (const toml::node* n = root.get("tls")) c.tls_line = LineOf(*n);
   // Pairs of keys that only work together.

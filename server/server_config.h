@@ -16,10 +16,16 @@
 // Parsed with toml++ (Debian libtomlplusplus-dev). A bad file is refused whole, before any
 // scene loads, with "FILE:LINE: KEY: what is wrong" (KEY dotted; the Nth [[scenes]] table is
 // scenes[N], counted from 1).
+//
+// Every setting is stated once, in ServerSettings(): its key in the file, where its value
+// goes, how the file's value is checked, and its command-line option (server/server_options.h
+// declares the options and merges them over the file from the same table). A setting is added
+// there and nowhere else.
 
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include <absl/status/statusor.h>
@@ -88,6 +94,79 @@ struct ServerConfig {
   // Where the file set `listen` and the [tls] table (0: not in the file), for later errors.
   int listen_line = 0, tls_line = 0;
 };
+
+// ---- the settings table ----
+
+// A check of a text value: `ok(value)`, else the message "'VALUE' is " + `what`.
+struct TextCheck {
+  bool (*ok)(std::string_view text) = nullptr;
+  const char* what = "";
+  bool empty_ok = false;  // the empty text passes (the feature is off)
+};
+
+// How a setting's value is read from the file; errors "FILE:LINE: KEY: what is wrong".
+struct FileRule {
+  enum class Kind {
+    kString,        // any string
+    kText,          // a string that passes `text`
+    kChoice,        // one of `choices` (on a bool field: true for the last one)
+    kBool,          // true or false
+    kWhole,         // a whole number in [lo, hi]
+    kNumber,        // a finite number in [lo, hi] (whole numbers allowed; `above_lo`: lo excluded)
+    kReadableFile,  // a file this process can read (relative: to the file's folder); empty: off
+    kFolder,        // a folder (relative: to the file's folder); empty: the default
+    kWritableFile,  // a file whose folder exists and that can be written; empty: off
+  };
+  Kind kind = Kind::kString;
+  double lo = 0.0, hi = 0.0;
+  bool above_lo = false;
+  std::vector<std::string> choices = {};
+  TextCheck text = {};
+  // A further check of a number once it is in range: what is wrong with it, or "" (e.g. a
+  // raster that is no power of two).
+  std::string (*also)(double value) = nullptr;
+};
+
+// How a setting's command-line option is checked (CLI11 validators, cli/number_options.h);
+// their messages are CLI11's "OPTION: what is wrong".
+struct OptionRule {
+  enum class Kind {
+    kAny,         // any text
+    kFlag,        // a flag without a value (a bool field)
+    kWhole,       // a whole number in [lo, hi] (vistream::cli::WholeRange)
+    kNumber,      // a finite number in [lo, hi] (vistream::cli::FiniteRange)
+    kPowerOfTwo,  // a power of two in [lo, hi] (vistream::cli::PowerOfTwo)
+    kChoice,      // one of `choices` (CLI::IsMember)
+    kText,        // passes `text`; `type_name` names the value in --help (HOST:PORT)
+  };
+  Kind kind = Kind::kAny;
+  double lo = 0.0, hi = 0.0;
+  std::vector<std::string> choices = {};
+  TextCheck text = {};
+  const char* type_name = "";
+  bool show_default = false;  // --help shows the default value
+};
+
+// Where a setting's value lives: a member of ServerConfig, or of SceneConfig (a setting of
+// every [[scenes]] table; its option applies to every scene).
+using SettingField = std::variant<std::string ServerConfig::*, bool ServerConfig::*, unsigned ServerConfig::*,
+                                  uint64_t ServerConfig::*, double ServerConfig::*, std::string SceneConfig::*,
+                                  uint32_t SceneConfig::*, double SceneConfig::*>;
+
+struct ServerSetting {
+  const char* table;  // the file's table: "" (top level), "limits", "tls", ..., "scenes" ([[scenes]])
+  const char* key;    // the key in it
+  SettingField field;
+  FileRule file;
+  const char* option = nullptr;  // the command-line option ("--listen"); null: the file only
+  const char* help = "";
+  OptionRule check;
+  int help_order = 0;            // the option's place in --help (the file's order differs)
+};
+
+// Every setting of vistream-server, in the file's order (top-level keys, then the tables as
+// the header above lists them).
+const std::vector<ServerSetting>& ServerSettings();
 
 // Reads and checks `path`. Errors: INVALID_ARGUMENT "PATH:LINE: KEY: what is wrong" for a
 // key that is unknown, of the wrong type, out of range, a file it names that cannot be read,

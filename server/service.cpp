@@ -1,10 +1,7 @@
 #include "server/service.h"
 
 #include <chrono>
-#include <condition_variable>
 #include <cstdlib>
-#include <deque>
-#include <queue>
 #include <thread>
 #include <vector>
 
@@ -14,410 +11,20 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include "server/service_metrics.h"
+#include "server/session_reactor.h"
 
 namespace vistream::server {
 
-namespace {
-
 namespace v1 = vistream::v1;
-
-double SteadySeconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-grpc::Status ToGrpc(const absl::Status& s) {
-  return grpc::Status(static_cast<grpc::StatusCode>(s.code()), std::string(s.message()));
-}
-
-class SessionReactor;
-
-}  // namespace
-
-// Lets worker threads (and the link timer) wake a session's reactor, and outlives it: the
-// reactor detaches itself in OnDone, after which a wake does nothing. The mutex is recursive:
-// with link emulation a wake may hand a client message to the session, whose handler must be
-// free to wake the reactor again.
-class SessionLink {
- public:
-  void Attach(SessionReactor* r) {
-    std::lock_guard lock(mu_);
-    reactor_ = r;
-  }
-  void Detach() {
-    std::lock_guard lock(mu_);
-    reactor_ = nullptr;
-  }
-  void Pump();
-  void End(const grpc::Status& status);
-
- private:
-  std::recursive_mutex mu_;
-  SessionReactor* reactor_ = nullptr;
-};
-
-// One thread for the whole server that wakes sessions whose emulated link has something due
-// (a message arriving, the link free again). Entries hold the link weakly: a session that
-// ended is skipped.
-class LinkTimer {
- public:
-  LinkTimer() : thread_([this] { Run(); }) {}
-  ~LinkTimer() {
-    {
-      std::lock_guard lock(mu_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
-  void At(double at_s, std::weak_ptr<SessionLink> link) {
-    {
-      std::lock_guard lock(mu_);
-      due_.push(Due{at_s, std::move(link)});
-    }
-    cv_.notify_all();
-  }
-
- private:
-  struct Due {
-    double at_s;
-    std::weak_ptr<SessionLink> link;
-    bool operator>(const Due& o) const { return at_s > o.at_s; }
-  };
-  void Run() {
-    std::unique_lock lock(mu_);
-    while (!stop_) {
-      if (due_.empty()) {
-        cv_.wait(lock);
-        continue;
-      }
-      const double at = due_.top().at_s;
-      if (at > SteadySeconds()) {
-        cv_.wait_until(lock, std::chrono::steady_clock::time_point(std::chrono::duration_cast<
-                                 std::chrono::steady_clock::duration>(std::chrono::duration<double>(at))));
-        continue;
-      }
-      std::weak_ptr<SessionLink> weak = due_.top().link;
-      due_.pop();
-      lock.unlock();
-      if (std::shared_ptr<SessionLink> link = weak.lock(); link != nullptr) link->Pump();
-      lock.lock();
-    }
-  }
-
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::priority_queue<Due, std::vector<Due>, std::greater<Due>> due_;
-  bool stop_ = false;
-  std::thread thread_;  // last: starts after the members above exist
-};
-
-namespace {
-
-class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
- public:
-  SessionReactor(WalkthroughService* service, std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link)
-      : service_(service), session_(std::move(session)), link_(std::move(link)) {
-    if (const std::optional<LinkParams>& p = service_->options().link; p.has_value()) {
-      // Two streams of draws per session, reproducible from the server's seed: session 1 draws
-      // as the simulator does with the same seed (uplink: seed, downlink: seed + 1).
-      const uint64_t seed = service_->options().link_seed + 2 * (session_->id() - 1);
-      up_.emplace(*p, seed);
-      down_.emplace(*p, seed + 1);
-    }
-    link_->Attach(this);
-    StartRead(&in_);
-  }
-
-  void OnReadDone(bool ok) override {
-    if (!ok) {  // the client closed its side, or the call was cancelled
-      EndWith(grpc::Status::OK);
-      return;
-    }
-    ++reads_;
-    v1::ClientMessage message;
-    std::vector<grpc::Slice> slices;
-    std::string bytes;
-    if (in_.Dump(&slices).ok()) {
-      for (const grpc::Slice& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
-    }
-    if (!message.ParseFromString(bytes)) {
-      EndWith(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                           absl::StrCat("message ", reads_, " (", bytes.size(), " bytes) is not a ClientMessage")));
-      return;
-    }
-    if (up_.has_value()) {
-      // Emulated uplink: the session sees the message at its modelled arrival, in order.
-      {
-        std::lock_guard lock(mu_);
-        const double now = SteadySeconds();
-        const LinkModel::Delivery d = up_->Send(now, bytes.size());
-        ++figures_.uplink_messages;
-        figures_.uplink_delay_sum_s += d.arrival_s - now;
-        upward_.push_back(Upward{d.arrival_s, std::move(message)});
-        WakeAt(d.arrival_s);
-        // A client that floods the link waits for it, as TCP's window would make it.
-        if (upward_.size() < kMaxUpward) {
-          StartRead(&in_);
-        } else {
-          read_paused_ = true;
-        }
-      }
-      Pump();
-      return;
-    }
-    const absl::Status st = session_->OnMessage(message, SteadySeconds());
-    if (!st.ok()) {
-      EndWith(ToGrpc(st));
-      return;
-    }
-    StartRead(&in_);
-    Pump();
-  }
-
-  void OnWriteDone(bool ok) override {
-    {
-      std::lock_guard lock(mu_);
-      writing_ = false;
-      if (!ok && !finish_requested_) {  // the client is gone
-        finish_requested_ = true;
-        status_ = grpc::Status(grpc::StatusCode::UNAVAILABLE, "the client stopped receiving");
-        write_failed_ = true;
-      }
-    }
-    Pump();
-  }
-
-  void OnCancel() override {
-    const grpc::Status cancelled(grpc::StatusCode::CANCELLED, "cancelled by the client (or its connection lost)");
-    {
-      // A client that goes away (killed, its connection lost) ends its reads too, which may come
-      // first and end the call as a client that closed its side does, and a write in flight
-      // fails before the cancel is seen: the log says which it was, a cancel.
-      std::lock_guard lock(mu_);
-      if (finish_requested_ && (status_.ok() || write_failed_)) status_ = cancelled;
-    }
-    EndWith(cancelled);
-  }
-
-  void OnDone() override {
-    link_->Detach();
-    session_->End();
-    if (down_.has_value()) {
-      figures_.wire_bytes = down_->wire_bytes();
-      figures_.lost_segments = down_->lost_segments();
-    }
-    service_->Remove(session_->id(), status_, down_.has_value() ? &figures_ : nullptr);
-    delete this;
-  }
-
-  // Hands due client messages to the session (emulation), starts the next write if none is in
-  // flight, and finishes the call when asked to and idle.
-  void Pump() {
-    if (up_.has_value()) DeliverUpward();
-    PumpWrites();
-  }
-
-  void EndWith(const grpc::Status& status) {
-    {
-      std::lock_guard lock(mu_);
-      if (finish_requested_) return;
-      finish_requested_ = true;
-      status_ = status;
-    }
-    PumpWrites();
-  }
-
- private:
-  static constexpr size_t kMaxUpward = 64;  // client messages in the emulated uplink at most
-
-  void DeliverUpward() {
-    // One deliverer at a time, so that messages stay in order. A caller that finds another at
-    // work leaves it to that one, which looks again after it lets go (a message may have come
-    // due meanwhile); a re-entrant call from the session's own handler returns at once.
-    for (;;) {
-      {
-        std::unique_lock order(deliver_mu_, std::try_to_lock);
-        if (!order.owns_lock()) return;
-        if (!DeliverDue()) return;
-      }
-      std::lock_guard lock(mu_);
-      if (finish_requested_ || upward_.empty() || upward_.front().arrival_s > SteadySeconds()) return;
-    }
-  }
-
-  // Hands the session every client message that has arrived; false when the session ended.
-  bool DeliverDue() {
-    for (;;) {
-      std::optional<v1::ClientMessage> m;
-      {
-        std::lock_guard lock(mu_);
-        if (finish_requested_) return false;
-        if (upward_.empty() || upward_.front().arrival_s > SteadySeconds()) break;
-        m = std::move(upward_.front().message);
-        upward_.pop_front();
-      }
-      const absl::Status st = session_->OnMessage(*m, SteadySeconds());
-      if (!st.ok()) {
-        std::lock_guard lock(mu_);
-        if (!finish_requested_) {
-          finish_requested_ = true;
-          status_ = ToGrpc(st);
-        }
-        return false;
-      }
-    }
-    std::lock_guard lock(mu_);
-    if (finish_requested_) return false;
-    if (read_paused_ && upward_.size() < kMaxUpward) {
-      read_paused_ = false;
-      StartRead(&in_);
-    }
-    // The next one is due later: wake then, whatever the downlink is doing (a write to a client
-    // that stopped reading must not hold its poses back).
-    if (!upward_.empty()) WakeAt(upward_.front().arrival_s);
-    return true;
-  }
-
-  void PumpWrites() {
-    std::lock_guard lock(mu_);
-    if (finished_ || writing_) return;
-    if (!finish_requested_) {
-      if (absl::Status f = session_->failure(); !f.ok()) {
-        finish_requested_ = true;
-        status_ = ToGrpc(f);
-      }
-    }
-    if (finish_requested_) {
-      finished_ = true;
-      Finish(status_);
-      return;
-    }
-    if (!down_.has_value()) {
-      std::optional<v1::ServerMessage> next = session_->NextMessage();
-      if (!next.has_value()) return;
-      Write(next->SerializeAsString());
-      return;
-    }
-    // Emulated downlink. The link takes the session's next message when it is free (the
-    // previous message's sent_s); one message taken early waits for it, so that it goes on the
-    // link the moment the link is free whatever the timer's delay. What waits in the link is
-    // bounded: it holds what it transmitted in the last latency (plus jitter), at most
-    // max_queued_bytes.
-    const double now = SteadySeconds();
-    for (;;) {
-      if (!next_.has_value()) {
-        std::optional<v1::ServerMessage> m = session_->NextMessage();
-        if (!m.has_value()) break;
-        next_ = Taken{now, m->SerializeAsString()};
-      }
-      if (down_->free_s() > now || in_link_bytes_ >= service_->options().limits.max_queued_bytes) break;
-      const double send_s = std::max(next_->taken_s, down_->free_s());
-      const LinkModel::Delivery d = down_->Send(send_s, next_->bytes.size());
-      ++figures_.messages;
-      figures_.jitter_sum_s += d.jitter_s;
-      figures_.jitter_max_s = std::max(figures_.jitter_max_s, d.jitter_s);
-      figures_.delay_sum_s += d.arrival_s - next_->taken_s;
-      in_link_bytes_ += next_->bytes.size();
-      figures_.max_in_link_bytes = std::max<uint64_t>(figures_.max_in_link_bytes, in_link_bytes_);
-      in_link_.push_back(InLink{d.arrival_s, std::move(next_->bytes)});
-      next_.reset();
-    }
-    if (!in_link_.empty() && in_link_.front().arrival_s <= now) {
-      std::string bytes = std::move(in_link_.front().bytes);
-      in_link_bytes_ -= bytes.size();
-      in_link_.pop_front();
-      Write(std::move(bytes));
-      // OnWriteDone pumps again; only the link's own times need the timer.
-      if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
-      return;
-    }
-    if (!in_link_.empty()) WakeAt(in_link_.front().arrival_s);
-    if (next_.has_value() && down_->free_s() > now) WakeAt(down_->free_s());
-  }
-
-  void Write(std::string bytes) {  // mu_ held
-    grpc::Slice slice(std::move(bytes));
-    out_ = grpc::ByteBuffer(&slice, 1);
-    writing_ = true;
-    StartWrite(&out_);
-  }
-
-  // Asks the server's link timer to pump this session at `at_s`, unless a wake at or before
-  // it is pending already. mu_ held.
-  void WakeAt(double at_s) {
-    const double now = SteadySeconds();
-    if (wake_at_ > now && wake_at_ <= at_s) return;
-    wake_at_ = at_s;
-    service_->WakeAt(at_s, link_);
-  }
-
-  WalkthroughService* service_;
-  std::shared_ptr<Session> session_;
-  std::shared_ptr<SessionLink> link_;
-  grpc::ByteBuffer in_, out_;
-  uint64_t reads_ = 0;
-  std::mutex mu_;
-  bool writing_ = false;
-  bool finish_requested_ = false;
-  bool write_failed_ = false;  // status_ came from a failed write (the client gone), not the session
-  bool finished_ = false;
-  grpc::Status status_;
-
-  // Link emulation (ServerOptions::link); empty without it.
-  std::optional<LinkModel> down_, up_;
-  struct Taken {
-    double taken_s;
-    std::string bytes;
-  };
-  std::optional<Taken> next_;  // taken from the session, waiting for the link to be free
-  struct InLink {
-    double arrival_s;
-    std::string bytes;
-  };
-  std::deque<InLink> in_link_;  // on the modelled wire, in order
-  size_t in_link_bytes_ = 0;
-  struct Upward {
-    double arrival_s;
-    v1::ClientMessage message;
-  };
-  std::deque<Upward> upward_;  // client messages on the modelled uplink, in order
-  bool read_paused_ = false;
-  std::mutex deliver_mu_;
-  double wake_at_ = 0.0;  // the latest wake asked of the timer
-  LinkFigures figures_;
-};
-
-// Ends a session that may not start (too many, draining) with `status`.
-class RefusedReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
- public:
-  explicit RefusedReactor(const grpc::Status& status) { Finish(status); }
-  void OnDone() override { delete this; }
-};
-
-}  // namespace
-
-void SessionLink::Pump() {
-  std::lock_guard lock(mu_);
-  if (reactor_ != nullptr) reactor_->Pump();
-}
-
-void SessionLink::End(const grpc::Status& status) {
-  std::lock_guard lock(mu_);
-  if (reactor_ != nullptr) reactor_->EndWith(status);
-}
 
 WalkthroughService::WalkthroughService(std::vector<ServedScene*> scenes, const ServerOptions& options, EventLog* log)
     : scenes_{std::move(scenes)}, options_(options), log_(log), start_s_(SteadySeconds()),
       quota_(options.max_sessions_per_address, options.max_sessions_per_token) {
-  if (options_.link.has_value()) timer_ = std::make_unique<LinkTimer>();
+  if (options_.link.has_value()) timer_ = std::make_unique<DueTimer>();
   if (options_.hello_timeout_s > 0.0) hello_watchdog_ = std::make_unique<HelloWatchdog>(options_.hello_timeout_s);
 }
 
 WalkthroughService::~WalkthroughService() = default;
-
-void WalkthroughService::WakeAt(double at_s, const std::shared_ptr<SessionLink>& link) {
-  if (timer_ != nullptr) timer_->At(at_s, link);
-}
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService::Session(
     grpc::CallbackServerContext* context) {
@@ -427,7 +34,7 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
     absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata());
     if (!t.ok()) {
       Refused(context, "Session", "unauthenticated", std::string(t.status().message()));
-      return new RefusedReactor(ToGrpc(t.status()));
+      return RefuseSession(ToGrpcStatus(t.status()));
     }
     tenant = *std::move(t);
   }
@@ -435,11 +42,11 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   std::lock_guard lock(mu_);
   if (draining_) {
     Refused(context, "Session", "draining", "the server is shutting down");
-    return new RefusedReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    return RefuseSession(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
   if (sessions_.size() >= options_.max_sessions) {
     Refused(context, "Session", "too_many", "too many sessions");
-    return new RefusedReactor(grpc::Status(
+    return RefuseSession(grpc::Status(
         grpc::StatusCode::RESOURCE_EXHAUSTED,
         absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
   }
@@ -447,7 +54,7 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
     Refused(context, "Session", tenant.empty() || q.message().find("tenant") == absl::string_view::npos ? "per_address"
                                                                                                       : "per_token",
             std::string(q.message()));
-    return new RefusedReactor(ToGrpc(q));
+    return RefuseSession(ToGrpcStatus(q));
   }
   const uint64_t id = next_id_++;
   ++sessions_total_;
@@ -474,7 +81,15 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
       }
     });
   }
-  return new SessionReactor(this, session, link);
+  SessionReactorSettings settings;
+  settings.link = options_.link;
+  settings.link_seed = options_.link_seed;
+  settings.max_in_link_bytes = options_.limits.max_queued_bytes;
+  settings.timer = timer_.get();
+  settings.done = [this](uint64_t session_id, const grpc::Status& status, const LinkFigures* figures) {
+    Remove(session_id, status, figures);
+  };
+  return StartSessionReactor(session, link, std::move(settings));
 }
 
 void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link) {
@@ -536,7 +151,7 @@ grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerConte
   if (options_.tokens != nullptr) {
     if (absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata()); !t.ok()) {
       Refused(context, "GetStats", "unauthenticated", std::string(t.status().message()));
-      reactor->Finish(ToGrpc(t.status()));
+      reactor->Finish(ToGrpcStatus(t.status()));
       return reactor;
     }
   }

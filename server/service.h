@@ -1,7 +1,9 @@
 #pragma once
-// The gRPC edge of the server: the vistream.v1.Walkthrough service (callback API: one read and
-// one write in flight per session, never blocking a reactor on visibility work), the standard
-// health service and reflection, keepalive and message-size limits, and draining on shutdown.
+// The gRPC edge of the server: the vistream.v1.Walkthrough service, its start (the standard
+// health service and reflection, keepalive and message-size limits), the admission of sessions
+// (tokens, quotas, the Hello watchdog), their statistics, and draining on shutdown. Each
+// admitted session is served by its reactor (server/session_reactor.h: one read and one write
+// in flight, never blocking on visibility work, the emulated link).
 
 #include <atomic>
 #include <cstdint>
@@ -21,6 +23,7 @@
 #include "server/security.h"
 #include "server/served_scene.h"
 #include "server/session.h"
+#include "server/session_reactor.h"
 
 namespace vistream::server {
 
@@ -52,22 +55,6 @@ struct ServerOptions {
   double hello_timeout_s = 30.0;        // a stream without Hello this long ends DEADLINE_EXCEEDED; 0: never
 };
 
-// What one session's emulated link did (its session_end log line).
-struct LinkFigures {
-  uint64_t messages = 0;       // downlink messages
-  uint64_t wire_bytes = 0;     // their bytes on the modelled wire (server/link_model.h WireBytes)
-  uint64_t lost_segments = 0;
-  double jitter_sum_s = 0.0, jitter_max_s = 0.0;  // the jitter draws
-  double delay_sum_s = 0.0;    // taken from the session to arrival: waiting for the link, transmission,
-                               // latency, jitter, loss recovery
-  uint64_t uplink_messages = 0;
-  double uplink_delay_sum_s = 0.0;
-  uint64_t max_in_link_bytes = 0;  // the most that waited in the link at once (bounded)
-};
-
-class SessionLink;
-class LinkTimer;
-
 // Session is served raw (bytes in, bytes out) so that bytes that are no ClientMessage end the
 // session with INVALID_ARGUMENT naming them, rather than looking like a closed stream.
 class WalkthroughService final
@@ -92,11 +79,10 @@ class WalkthroughService final
   // A call refused before any work: logged (warn, "refused") and counted
   // (vistream_sessions_refused_total{reason}).
   void Refused(grpc::CallbackServerContext* context, const char* call, const char* reason, const std::string& message);
-  // Called by a session's reactor when it is done; `link` is null without emulation.
+  // Called by a session's reactor when it is done (SessionReactorSettings::done); `link` is
+  // null without emulation.
   void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
   const ServerOptions& options() const { return options_; }
-  // Calls `link`'s Pump at `at_s` (steady clock), unless the link is gone by then.
-  void WakeAt(double at_s, const std::shared_ptr<SessionLink>& link);
 
  private:
   SceneDirectory scenes_;
@@ -124,7 +110,7 @@ class WalkthroughService final
   std::map<uint64_t, Entry> sessions_;
   SessionQuota quota_;
   std::unique_ptr<HelloWatchdog> hello_watchdog_;  // none without a Hello timeout
-  std::unique_ptr<LinkTimer> timer_;  // with link emulation: wakes sessions when their link is due
+  std::unique_ptr<DueTimer> timer_;  // with link emulation: wakes sessions when their link is due
 };
 
 // A running server: the service on its port, with health and reflection.

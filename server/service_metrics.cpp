@@ -4,8 +4,6 @@
 
 #include <absl/status/status.h>
 
-#include "server/service.h"
-
 namespace vistream::server {
 
 ServiceMetrics::ServiceMetrics(MetricsRegistry* registry, const std::vector<std::string>& scenes)
@@ -49,12 +47,11 @@ ServiceMetrics::PerScene* ServiceMetrics::Find(const std::string& scene) {
   return it == scenes_.end() ? nullptr : &it->second;
 }
 
-void ServiceMetrics::Watch(const WalkthroughService* service) {
-  registry_->AddCollector([this, service] { Collect(service); });
+void ServiceMetrics::Watch(std::function<v1::ServerStats()> stats) {
+  registry_->AddCollector([this, stats = std::move(stats)] { Collect(stats()); });
 }
 
-void ServiceMetrics::Collect(const WalkthroughService* service) {
-  const v1::ServerStats stats = service->Stats();
+void ServiceMetrics::Collect(const v1::ServerStats& stats) {
   std::map<std::string, uint64_t> queued;
   uint64_t pre_hello = 0;
   for (const v1::SessionStats& s : stats.sessions()) {

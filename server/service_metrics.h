@@ -29,26 +29,28 @@
 //   (the store families only with a store configured)
 //   vistream_process_resident_memory_bytes          the process's resident memory
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "proto/walkthrough.pb.h"
 #include "server/metrics.h"
 #include "server/session.h"
 
 namespace vistream::server {
-
-class WalkthroughService;
 
 class ServiceMetrics {
  public:
   // Declares every family above in `registry` (not owned) for `scenes` (their names).
   ServiceMetrics(MetricsRegistry* registry, const std::vector<std::string>& scenes);
 
-  // Reads the live figures of `service` (not owned; it must outlive the registry's renders)
-  // before every render.
-  void Watch(const WalkthroughService* service);
+  // Reads the server's live figures through `stats` (WalkthroughService::Stats,
+  // server/service.h) before every render; what it reads must outlive the registry's renders.
+  // A function rather than the service, so that the service, which reports to these metrics,
+  // and the metrics do not include each other.
+  void Watch(std::function<vistream::v1::ServerStats()> stats);
   // The session seams that report crossings served and late cells.
   void AddSessionSeams(SessionSeams* seams);
   // Observes each PVS computation of `scene`'s scheduler (PvsScheduler::SetComputeObserver).
@@ -77,7 +79,7 @@ class ServiceMetrics {
              last_store_hits = 0;
   };
   PerScene* Find(const std::string& scene);
-  void Collect(const WalkthroughService* service);
+  void Collect(const vistream::v1::ServerStats& stats);
 
   struct StoreFamilies {
     Gauge* up;

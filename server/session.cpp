@@ -12,8 +12,8 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
+#include "server/cell_deadlines.h"
 #include "server/wire.h"
-#include "visibility/mask_codec.h"
 
 namespace vistream::server {
 
@@ -75,7 +75,7 @@ Session::Session(uint64_t id, ServedScene* scene, const SceneDirectory* director
       epsilon_size_m_(limits.epsilon_size_m) {
   ChainOptions chain = limits.chain;
   chain.standing_size_m = epsilon_size_m_;
-  chain_ = NeighbourhoodChain(chain);
+  planner_ = MaskPlanner(chain);
   stats_.set_session_id(id);
   stats_.set_cell_id(-1);
   pose_tokens_ = 2.0 * limits_.max_pose_rate_hz;
@@ -153,7 +153,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     epsilon_size_m_ = picked->viewcell().epsilon_m;
     ChainOptions chain = limits_.chain;
     chain.standing_size_m = epsilon_size_m_;
-    chain_ = NeighbourhoodChain(chain);
+    planner_ = MaskPlanner(chain);
   } else if (hello.scene() != scene_->name()) {
     return absl::NotFoundError(
         absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene_->name(), "'"));
@@ -168,7 +168,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
   }
   hello_ = true;
-  masks_on_ = hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr;
+  planner_.set_on(hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr);
   stats_.set_scene(scene_->name());
   memory_budget_ = hello.memory_budget_bytes();
   v1::ServerMessage info;
@@ -179,7 +179,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     log_->Write(id_, "hello", {{"scene", scene_->name()},
                                {"held_objects", hello.held_objects_size()},
                                {"memory_budget_bytes", static_cast<uint64_t>(memory_budget_)},
-                               {"epsilon_masks", masks_on_ ? "yes" : "no"}});
+                               {"epsilon_masks", planner_.on() ? "yes" : "no"}});
   }
   return absl::OkStatus();
 }
@@ -261,7 +261,7 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
       // Geometry the cells left behind needed stays with the client: it is evicted only when the
       // memory budget needs the room (MakeRoom: what no wanted cell needs first), so nothing is
       // sent twice unless the budget forced it out (DESIGN.md: never sent twice in a session).
-    } else if (seams_.look_ahead && Turned()) {
+    } else if (seams_.look_ahead && Turned(velocity_, ranked_velocity_)) {
       SetWanted(now);  // the cells ahead are others now: re-rank requests and geometry
     }
     UpdateMasks(now);
@@ -270,56 +270,10 @@ absl::Status Session::OnPose(const v1::Pose& pose, double now) {
   return absl::OkStatus();
 }
 
-double Session::Deadline(CellId cell, double now) const {
-  if (current_.has_value() && cell == *current_) return now;
-  // The time the client needs to reach the cell at its speed (walking pace at least).
-  const scenes::Aabb box = scene_->grid().CellBox(cell);
-  const double dx = std::max({0.0, box.min.x - position_.x, position_.x - box.max.x});
-  const double dy = std::max({0.0, box.min.y - position_.y, position_.y - box.max.y});
-  const double speed = std::max(1.0, std::hypot(velocity_.x, velocity_.y));
-  const double reach = std::hypot(dx, dy) / speed;
-  if (std::hypot(velocity_.x, velocity_.y) < 0.1) return now + reach;
-  // Moving: a cell on the line of travel is reached when the line enters it (slab test in xy).
-  double enter = 0.0, leave = std::numeric_limits<double>::infinity();
-  bool hit = true;
-  const double p[2] = {position_.x, position_.y}, v[2] = {velocity_.x, velocity_.y};
-  const double lo[2] = {box.min.x, box.min.y}, hi[2] = {box.max.x, box.max.y};
-  for (int a = 0; a < 2 && hit; ++a) {
-    if (std::abs(v[a]) < 1e-9) {
-      hit = p[a] >= lo[a] && p[a] <= hi[a];
-      continue;
-    }
-    const double t0 = (lo[a] - p[a]) / v[a], t1 = (hi[a] - p[a]) / v[a];
-    enter = std::max(enter, std::min(t0, t1));
-    leave = std::min(leave, std::max(t0, t1));
-  }
-  if (hit && enter <= leave) return now + enter;
-  // Off the line: reached only after a turn, so after the cells on it that are as near (a
-  // street running beside a cell edge does not put the cell across the edge first).
-  // A cell on the line is at most a diagonal (1.41 cells) away.
-  return now + 1.5 * (reach + scene_->grid().cell_size() / speed);
-}
-
-bool Session::Turned() const {
-  const double a = std::hypot(velocity_.x, velocity_.y), b = std::hypot(ranked_velocity_.x, ranked_velocity_.y);
-  if ((a < 0.1) != (b < 0.1)) return true;  // started or stopped
-  if (a < 0.1) return false;
-  constexpr double kCos30 = 0.8660254037844387;
-  return (velocity_.x * ranked_velocity_.x + velocity_.y * ranked_velocity_.y) / (a * b) < kCos30;
-}
-
 void Session::SetWanted(double now) {
-  const visibility::ViewcellGrid& grid = scene_->grid();
   ranked_velocity_ = velocity_;
-  std::vector<std::pair<double, CellId>> order;
-  order.emplace_back(now, *current_);
-  if (seams_.look_ahead) {
-    for (CellId n : grid.Neighbours(*current_)) order.emplace_back(Deadline(n, now), n);
-    std::sort(order.begin() + 1, order.end());
-  } else {
-    // The plain scheme: the grid's order, a millisecond apart (the scheduler serves it so).
-    for (CellId n : grid.Neighbours(*current_)) order.emplace_back(now + 1e-3 * static_cast<double>(order.size()), n);
-  }
+  const std::vector<std::pair<double, CellId>> order =
+      WantedCells(scene_->grid(), *current_, position_, velocity_, now, seams_.look_ahead);
   wanted_.clear();
   for (const auto& [deadline, c] : order) wanted_.push_back(c);
   // Forget what no longer matters: requests, PVSs, their queued lists and geometry.
@@ -328,12 +282,7 @@ void Session::SetWanted(double now) {
   std::erase_if(requested_, unwanted);
   std::erase_if(emitted_, unwanted);
   std::erase_if(pending_geometry_, [&](const auto& entry) { return unwanted(entry.first); });
-  std::erase_if(last_sent_mask_, [&](const auto& entry) { return unwanted(entry.first); });
-  if (unwanted(mask_objects_cell_)) {
-    mask_objects_.clear();
-  } else {
-    mask_objects_rank_ = static_cast<size_t>(std::find(wanted_.begin(), wanted_.end(), mask_objects_cell_) - wanted_.begin());
-  }
+  planner_.Rewant(wanted_);
   std::erase_if(control_, [&](const Control& c) {
     if (!c.cell.has_value() || !unwanted(*c.cell)) return false;
     control_bytes_ -= c.bytes;
@@ -465,113 +414,40 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
 }
 
 void Session::UpdateMasks(double now) {
-  if (!masks_on_ || !current_.has_value()) return;
-  const double v = std::hypot(velocity_.x, velocity_.y);
-  if (v >= chain_.options().standing_speed_mps) {
-    // The turn rate: the heading's change since the last moving pose, smoothed.
-    const double heading = std::atan2(velocity_.y, velocity_.x);
-    const double dt = now - heading_s_;
-    if (heading_s_ >= 0.0 && dt > 1e-3 && dt < 1.0) {
-      const double d = std::remainder(heading - heading_, 2.0 * M_PI);
-      turn_rate_ = 0.5 * turn_rate_ + 0.5 * d / dt;
-    } else {
-      turn_rate_ = 0.0;
-    }
-    heading_ = heading;
-    heading_s_ = now;
-  } else {
-    turn_rate_ = 0.0;
-    heading_s_ = -1.0;
-  }
-  // Poses come at up to a few dozen a second: the chain moves every quarter metre or second.
-  if (chain_s_ >= 0.0 && glm::length(position_ - chain_eye_) < 0.25 && now - chain_s_ < 0.25) return;
-  chain_eye_ = position_;
-  chain_s_ = now;
-  const NeighbourhoodChain::Update u = chain_.Advance(
-      position_, velocity_, turn_rate_, scene_->grid(),
-      [this](CellId c) { return std::find(wanted_.begin(), wanted_.end(), c) != wanted_.end(); });
-  for (uint64_t id : u.removed) DropMask(id);
-  for (const Neighbourhood& n : u.added) {
-    PlannedMask& p = planned_[n.id];
-    p.n = n;
-    p.deadline = now + (v >= chain_.options().standing_speed_mps ? n.along_m / v : 0.0);
-  }
+  if (!planner_.on() || !current_.has_value()) return;
+  planner_.Advance(
+      position_, velocity_, now, scene_->grid(),
+      [this](CellId c) { return std::find(wanted_.begin(), wanted_.end(), c) != wanted_.end(); }, &stats_);
   PostMasks();
 }
 
-void Session::DropMask(uint64_t id) {
-  // A posted computation finds its entry gone and stops (or its delivery does).
-  if (planned_.erase(id) > 0) {
-    stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
-    return;
-  }
-  auto it = std::find_if(ready_masks_.begin(), ready_masks_.end(), [&](const ReadyMask& m) { return m.id == id; });
-  if (it != ready_masks_.end()) {
-    ready_masks_.erase(it);
-    stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
-  }
-}
-
 void Session::PostMasks() {
-  if (!masks_on_) return;
+  if (!planner_.on()) return;
   const visibility::EpsilonSuperset* eps = scene_->epsilon();
-  for (auto& [id, p] : planned_) {
-    // A mask narrows its cell's PVS, whose list the client must have first.
-    if (p.posted || emitted_.count(p.n.cell) == 0) continue;
-    auto it = received_.find(p.n.cell);
-    if (it == received_.end()) continue;
-    p.posted = true;
+  for (MaskPlanner::Job& job : planner_.TakeJobs(emitted_, received_)) {
     std::weak_ptr<Session> weak = weak_from_this();
-    CellPvsPtr pvs = it->second;
-    const scenes::Aabb box = p.n.box;
-    const uint64_t key = id;
     // The work computes the mask; what it returns queues it (the simulator charges the work's
     // time before delivering).
     masks_->Post(
-        [weak, key, box, pvs, eps]() -> std::function<void()> {
+        [weak, key = job.key, box = job.box, pvs = std::move(job.pvs), eps]() -> std::function<void()> {
           {
             std::shared_ptr<Session> s = weak.lock();
             if (s == nullptr) return nullptr;
             std::lock_guard lock(s->mu_);
-            if (s->ended_ || s->planned_.count(key) == 0) return nullptr;  // the path moved on
+            if (s->ended_ || !s->planner_.Planned(key)) return nullptr;  // the path moved on
           }
-          const double start = SteadySeconds();
-          const visibility::EpsilonResult r = eps->Compute(box, visibility::EpsilonOptions{}, pvs->objects);
-          const double ms = (SteadySeconds() - start) * 1000.0;
-          v1::ServerMessage m;
-          v1::EpsilonMask* mask = m.mutable_epsilon_mask();
-          mask->set_cell_id(pvs->cell);
-          SetVec(box.min, mask->mutable_neighbourhood_min());
-          SetVec(box.max, mask->mutable_neighbourhood_max());
-          mask->set_object_count(static_cast<uint32_t>(r.objects.size()));
-          mask->set_triangle_count(r.triangles.size());
-          // The sets per object (the triangles are sorted by dense id: object by object).
-          std::vector<visibility::MaskObject> sets;
-          for (uint32_t t : r.triangles) {
-            const uint32_t o = eps->ObjectOfTriangle(t);
-            if (sets.empty() || sets.back().object != o) sets.push_back(visibility::MaskObject{o, {}});
-            const uint32_t k = t - eps->TriangleId(o, 0);
-            std::vector<uint8_t>& bits = sets.back().bits;
-            if (bits.size() <= k / 8) bits.resize(k / 8 + 1, 0);
-            bits[k / 8] = static_cast<uint8_t>(bits[k / 8] | (1u << (k % 8)));
-          }
-          return [weak, key, ms, m = std::move(m), sets = std::move(sets)]() mutable {
+          BuiltMask mask = BuildMask(*eps, box, *pvs);
+          return [weak, key, mask = std::move(mask)]() mutable {
             std::shared_ptr<Session> s = weak.lock();
             if (s == nullptr) return;
             {
               std::lock_guard lock(s->mu_);
-              auto plan = s->planned_.find(key);
-              if (s->ended_ || plan == s->planned_.end()) return;  // dropped while it was computed
-              ReadyMask ready{key, plan->second.n.cell, plan->second.deadline, ms, std::move(m), std::move(sets)};
-              s->planned_.erase(plan);
-              auto at = std::upper_bound(s->ready_masks_.begin(), s->ready_masks_.end(), ready.deadline,
-                                         [](double d, const ReadyMask& other) { return d < other.deadline; });
-              s->ready_masks_.insert(at, std::move(ready));
+              if (s->ended_ || !s->planner_.AddComputed(key, std::move(mask))) return;  // dropped meanwhile
             }
             if (s->wake_) s->wake_();
           };
         },
-        p.deadline);
+        job.deadline);
   }
 }
 
@@ -648,57 +524,24 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
   }
   if (credit_ <= 0 || !current_.has_value()) return std::nullopt;
   // ε-first: the objects the last mask sent needs, then the next mask, soonest reached first.
-  while (!mask_objects_.empty()) {
-    const uint32_t o = mask_objects_.front();
-    if (sent_.count(o) > 0) {
-      mask_objects_.pop_front();
-      continue;
-    }
-    bool sent = false;
-    std::optional<v1::ServerMessage> m = SendObject(o, mask_objects_rank_, &sent);
-    if (sent || !m.has_value()) mask_objects_.pop_front();  // sent, or no room: its cell's turn
-    if (m.has_value()) return m;                           // the object, or an Evict before it
+  if (std::optional<v1::ServerMessage> m = planner_.NextObject(
+          sent_, [this](uint32_t o, size_t rank, bool* sent) { return SendObject(o, rank, sent); });
+      m.has_value()) {
+    return m;
   }
-  while (!ready_masks_.empty()) {
-    ReadyMask mask = std::move(ready_masks_.front());
-    ready_masks_.erase(ready_masks_.begin());
-    auto w = std::find(wanted_.begin(), wanted_.end(), mask.cell);
-    if (w == wanted_.end() || emitted_.count(mask.cell) == 0) {
-      stats_.set_epsilon_masks_dropped(stats_.epsilon_masks_dropped() + 1);
-      continue;  // the client turned away from its cell
-    }
-    v1::EpsilonMask* e = mask.message.mutable_epsilon_mask();
-    e->set_mask_id(next_mask_id_++);
-    // The sets, or their difference from the last mask of the cell, whichever is shorter.
-    std::string bytes = visibility::EncodeMaskRuns(mask.sets);
-    if (auto last = last_sent_mask_.find(mask.cell); last != last_sent_mask_.end()) {
-      std::string delta = visibility::EncodeMaskDelta(last->second.sets, mask.sets);
-      if (delta.size() < bytes.size()) {
-        bytes = std::move(delta);
-        e->set_base_mask_id(last->second.id);
-      }
-    }
-    e->set_triangles(std::move(bytes));
-    mask_objects_cell_ = mask.cell;
-    mask_objects_rank_ = static_cast<size_t>(w - wanted_.begin());
-    for (const visibility::MaskObject& o : mask.sets) {
-      if (sent_.count(o.object) == 0) mask_objects_.push_back(o.object);
-    }
-    last_sent_mask_[mask.cell] = SentMask{e->mask_id(), std::move(mask.sets)};
-    credit_ -= static_cast<int64_t>(e->triangles().size());
-    stats_.set_epsilon_masks(stats_.epsilon_masks() + 1);
-    stats_.set_epsilon_mask_bytes(stats_.epsilon_mask_bytes() + e->triangles().size());
-    stats_.set_bytes_sent(stats_.bytes_sent() + mask.message.ByteSizeLong());
+  if (std::optional<MaskPlanner::Sent> mask = planner_.NextMask(wanted_, emitted_, sent_, &stats_); mask.has_value()) {
+    const v1::EpsilonMask& e = mask->message.epsilon_mask();
+    credit_ -= static_cast<int64_t>(e.triangles().size());
     if (log_ != nullptr) {
-      const visibility::CellCoord c = scene_->grid().Coord(mask.cell);
+      const visibility::CellCoord c = scene_->grid().Coord(mask->cell);
       log_->Write(id_, "mask", {{"cell", absl::StrCat(c.i, ",", c.j)},
-                                {"objects", static_cast<uint64_t>(e->object_count())},
-                                {"triangles", static_cast<uint64_t>(e->triangle_count())},
-                                {"bytes", static_cast<uint64_t>(e->triangles().size())},
-                                {"delta", e->base_mask_id() != 0 ? "yes" : "no"},
-                                {"ms", mask.compute_ms}});
+                                {"objects", static_cast<uint64_t>(e.object_count())},
+                                {"triangles", static_cast<uint64_t>(e.triangle_count())},
+                                {"bytes", static_cast<uint64_t>(e.triangles().size())},
+                                {"delta", e.base_mask_id() != 0 ? "yes" : "no"},
+                                {"ms", mask->compute_ms}});
     }
-    return std::move(mask.message);
+    return std::move(mask->message);
   }
   // Geometry: the current cell's first, then the others in the order they will be reached.
   for (size_t rank = 0; rank < wanted_.size(); ++rank) {

@@ -1,6 +1,6 @@
 #pragma once
 // One walkthrough session's protocol, apart from the transport: what a client message does,
-// and which message goes out next. The gRPC reactor (service.cpp) feeds it client messages and
+// and which message goes out next. The gRPC reactor (server/session_reactor.h) feeds it client messages and
 // writes what NextMessage() gives, one at a time; the fuzz target and tests drive it directly.
 //
 // Order of what goes out (DESIGN.md, "Server and client"): SceneInfo after Hello; after the
@@ -17,7 +17,8 @@
 // ε-masks (issue 34; Cohen-Or & Zadicario 1998): only for a client whose Hello asks for them. A
 // mask is computed (on the scene's MaskQueue, by when the eye reaches its box) once its cell's
 // PVS list has been handed out; a box the predicted path leaves before its mask is sent is
-// dropped, computed or not.
+// dropped, computed or not. The chain, its queues and the masks' place in the send order are
+// server/mask_planner.h's; when each wanted cell is reached, server/cell_deadlines.h's.
 
 #include <cstdint>
 #include <deque>
@@ -36,9 +37,9 @@
 
 #include "proto/walkthrough.pb.h"
 #include "server/event_log.h"
+#include "server/mask_planner.h"
 #include "server/neighbourhood_chain.h"
 #include "server/served_scene.h"
-#include "visibility/mask_codec.h"
 
 namespace vistream::server {
 
@@ -125,8 +126,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void Emit(CellId cell);                                    // lock held
   // Moves the chain of neighbourhoods along with the client; posts the masks it can.
   void UpdateMasks(double now);                              // lock held
+  // Posts the masks whose cells' PVS lists went out to the scene's mask workers.
   void PostMasks();                                          // lock held
-  void DropMask(uint64_t id);                                // lock held
   // Geometry of `o` for the wire (or the Evict that must go before it; none when it cannot be
   // sent within the memory budget), charged to the credit; `rank`: the position in wanted_ of
   // the cell it is sent for.
@@ -136,7 +137,6 @@ class Session : public std::enable_shared_from_this<Session> {
   bool Served(CellId cell) const;                            // lock held
   // Reports crossings whose new cells are all served now (SessionSeams::crossing_served).
   void NoteServedCrossings(double now);                      // lock held
-  double Deadline(CellId cell, double now) const;
 
   const uint64_t id_;
   const SceneDirectory* const directory_;  // null: the scene is fixed at Create
@@ -160,8 +160,6 @@ class Session : public std::enable_shared_from_this<Session> {
   std::optional<CellId> current_;
   glm::dvec3 position_{0.0}, velocity_{0.0};
   glm::dvec3 ranked_velocity_{0.0};  // the velocity wanted_ was ordered for
-  // Whether the client turned (30 degrees or more), started or stopped since wanted_ was ordered.
-  bool Turned() const;
   double last_pose_s_ = 0.0;
   double pose_tokens_ = 0.0;
   uint64_t poses_ = 0;
@@ -194,37 +192,8 @@ class Session : public std::enable_shared_from_this<Session> {
   };
   std::deque<Crossing> crossings_;  // with SessionSeams::crossing_served only
 
-  // ε-masks along the path.
-  bool masks_on_ = false;                      // the Hello asked for them and the scene has the engine
-  NeighbourhoodChain chain_;
-  glm::dvec3 chain_eye_{0.0};                  // where the chain was last advanced
-  double chain_s_ = -1.0;
-  double heading_ = 0.0, heading_s_ = -1.0;    // the last moving pose's heading, for the turn rate
-  double turn_rate_ = 0.0;                     // rad/s, smoothed
-  struct PlannedMask {
-    Neighbourhood n;
-    double deadline = 0.0;  // when the eye reaches it (session clock)
-    bool posted = false;
-  };
-  std::map<uint64_t, PlannedMask> planned_;    // by neighbourhood id: not computed yet
-  struct ReadyMask {
-    uint64_t id = 0;
-    CellId cell = 0;
-    double deadline = 0.0;
-    double compute_ms = 0.0;                   // wall time of the computation
-    vistream::v1::ServerMessage message;       // all but the triangles and base_mask_id
-    std::vector<visibility::MaskObject> sets;  // its triangle sets, objects ascending
-  };
-  std::vector<ReadyMask> ready_masks_;         // computed, not sent: soonest reached first
-  std::deque<uint32_t> mask_objects_;          // the last mask sent's objects, to go next
-  CellId mask_objects_cell_ = 0;               // that mask's cell
-  size_t mask_objects_rank_ = 0;               // its place in wanted_
-  uint32_t next_mask_id_ = 1;
-  struct SentMask {
-    uint32_t id = 0;
-    std::vector<visibility::MaskObject> sets;
-  };
-  std::map<CellId, SentMask> last_sent_mask_;  // per wanted cell: the base of the next one's delta
+  // ε-masks along the path: the chain, its queues, the masks' place in the send order.
+  MaskPlanner planner_;
 
   vistream::v1::SessionStats stats_;
 };

@@ -1,4 +1,4 @@
-// vistream-server's drain (server/server_main.cpp, WalkthroughServer::HoldDrain): from the first
+// vistream-server's drain (server/server_process.cpp, WalkthroughServer::HoldDrain): from the first
 // SIGTERM, /healthz says 503 and gRPC health NOT_SERVING while every session, new ones too, is
 // served on for drain_s seconds (a load balancer takes the replica out meanwhile); then the
 // sessions end with UNAVAILABLE, which clients answer by reconnecting and resuming, and the

@@ -43,6 +43,15 @@ template <typename ObjectOf, typename FirstTriangle>
 std::string EncodeMaskRuns(std::span<const uint32_t> sorted_triangles, ObjectOf object_of,
                            FirstTriangle first_triangle);
 
+// The per-object sets of the sorted dense triangle ids of a visibility::EpsilonResult, the
+// form EncodeMaskRuns and EncodeMaskDelta take (the server builds each ε-mask so, issue 34):
+// objects ascending, each with the bits of its listed triangles set (bits sized to the last
+// one). `object_of` and `first_triangle` as EncodeMaskRuns' template takes them.
+// `sorted_triangles` must be ascending (EpsilonResult::triangles is).
+template <typename ObjectOf, typename FirstTriangle>
+std::vector<MaskObject> MaskObjectsFromTriangles(std::span<const uint32_t> sorted_triangles, ObjectOf object_of,
+                                                 FirstTriangle first_triangle);
+
 struct DecodedMask {
   std::vector<MaskObject> objects;  // ascending ids, each with at least one set bit
   uint64_t triangles = 0;           // set bits over every object
@@ -121,6 +130,21 @@ std::string EncodeMaskRuns(std::span<const uint32_t> sorted_triangles, ObjectOf 
     previous = o;
   }
   return out;
+}
+
+template <typename ObjectOf, typename FirstTriangle>
+std::vector<MaskObject> MaskObjectsFromTriangles(std::span<const uint32_t> sorted_triangles, ObjectOf object_of,
+                                                 FirstTriangle first_triangle) {
+  std::vector<MaskObject> sets;
+  for (uint32_t t : sorted_triangles) {
+    const uint32_t o = object_of(t);
+    if (sets.empty() || sets.back().object != o) sets.push_back(MaskObject{o, {}});
+    const uint32_t k = t - first_triangle(o);
+    std::vector<uint8_t>& bits = sets.back().bits;
+    if (bits.size() <= k / 8) bits.resize(k / 8 + 1, 0);
+    bits[k / 8] = static_cast<uint8_t>(bits[k / 8] | (1u << (k % 8)));
+  }
+  return sets;
 }
 
 }  // namespace vistream::visibility
