@@ -23,7 +23,7 @@ absl::Status WalkthroughLoop::Startup() {
   double last_drawn = Now();  // the window's last frame while waiting
   // Following a walk, it waits for the cell it starts in and the first cell the walk enters
   // (what it reaches first), telling the server the velocity it will walk at so that the cells
-  // ahead are ranked first; the simulator models the same (server/simulator.cpp).
+  // ahead are ranked first; the simulator models the same (simulation/simulator.cpp).
   // (A walk of the server's own is known once SceneInfo has come.)
   auto velocity = [this] { return walk_.has_value() ? walk_->At(0.0).velocity : glm::dvec3(0.0); };
   std::optional<uint32_t> ahead;

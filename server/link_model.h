@@ -1,6 +1,6 @@
 #pragma once
 // A network link as a catalog entry declares it (`simulation.link`), one direction of it: the
-// one model that both the simulator (`vistream simulate`, server/simulator.h) and the server's
+// one model that both the simulator (`vistream simulate`, simulation/simulator.h) and the server's
 // link emulation (`vistream-server --emulate-link`) put messages through, so that a simulated
 // run and a real one over loopback differ only in what the model leaves out.
 //

@@ -54,7 +54,7 @@ struct SessionLimits {
 };
 
 // What a session runs on: in the server the scene's threaded scheduler and ε-mask queue and the
-// steady clock; in the simulator (server/simulator.h) its own, on simulated time. The defaults
+// steady clock; in the simulator (simulation/simulator.h) its own, on simulated time. The defaults
 // are the server's, and leave the session's behaviour as it was.
 struct SessionSeams {
   PvsSource* pvs = nullptr;       // null: scene->scheduler()

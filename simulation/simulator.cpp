@@ -18,6 +18,7 @@
 #include "client/client_model.h"
 #include "client/mask_holdings.h"
 #include "scenes/walk.h"
+#include "server/emulated_link.h"
 #include "server/link_model.h"
 #include "server/session.h"
 
@@ -144,7 +145,10 @@ class Run {
   SimulationResult& r_;
 
   EventQueue q_;
-  std::unique_ptr<LinkModel> up_, down_;
+  // The emulated link both ways (server/emulated_link.h, the one the server's --emulate-link
+  // runs): what is on it, delivered at its modelled arrival.
+  std::unique_ptr<server::EmulatedLink<v1::ClientMessage>> up_;
+  std::unique_ptr<server::EmulatedLink<v1::ServerMessage>> down_;
   std::unique_ptr<SimulatedScheduler> sched_;
   std::unique_ptr<SimulatedTaskRunner> masks_;
   std::shared_ptr<Session> session_;
@@ -188,14 +192,16 @@ constexpr double kTriangleSampleS = 0.1;
 
 void Run::SendUp(v1::ClientMessage m, const char* what) {
   const size_t bytes = m.ByteSizeLong();
-  const LinkModel::Delivery d = up_->Send(q_.now(), bytes);
+  const LinkModel::Delivery d = up_->Send(q_.now(), std::move(m), bytes);
   if (d.jitter_s > 0.0) ++r_.jitter_draws;
   r_.lost_segments += d.lost_segments;
   if (opt_.log != nullptr) Log("uplink", {{"t_s", q_.now()}, {"message", what}, {"bytes", static_cast<uint64_t>(bytes)},
                  {"arrival_s", d.arrival_s}, {"jitter_ms", d.jitter_s * 1000.0}, {"lost", d.lost_segments}});
-  q_.At(d.arrival_s, [this, m = std::move(m)] {
-    if (!failure_.ok()) return;
-    absl::Status st = session_->OnMessage(m, q_.now());
+  // Messages arrive in the order sent: this event takes this message off the link.
+  q_.At(d.arrival_s, [this] {
+    const std::optional<v1::ClientMessage> arrived = up_->TakeArrived(q_.now());
+    if (!arrived.has_value() || !failure_.ok()) return;
+    absl::Status st = session_->OnMessage(*arrived, q_.now());
     if (!st.ok()) failure_ = absl::InternalError(absl::StrCat("the simulated session ended: ", st.ToString()));
   });
 }
@@ -205,15 +211,20 @@ void Run::Pull() {
   std::optional<v1::ServerMessage> m = session_->NextMessage();
   if (!m.has_value()) return;
   const size_t bytes = m->ByteSizeLong();
-  const LinkModel::Delivery d = down_->Send(q_.now(), bytes);
+  const char* kind = BodyName(*m);
+  const LinkModel::Delivery d = down_->Send(q_.now(), *std::move(m), bytes);
   if (d.jitter_s > 0.0) ++r_.jitter_draws;
   r_.lost_segments += d.lost_segments;
-  if (opt_.log != nullptr) Log("downlink", {{"t_s", q_.now()}, {"message", BodyName(*m)},
+  if (opt_.log != nullptr) Log("downlink", {{"t_s", q_.now()}, {"message", kind},
                    {"bytes", static_cast<uint64_t>(bytes)}, {"arrival_s", d.arrival_s},
                    {"jitter_ms", d.jitter_s * 1000.0}, {"lost", d.lost_segments}});
+  // One message on the wire at a time: the next is taken from the session when this one has
+  // left (the link's free time), as the server's writes go one at a time.
   down_busy_ = true;
   q_.At(d.sent_s, [this] { down_busy_ = false; });
-  q_.At(d.arrival_s, [this, m = std::move(*m)] { Receive(m); });
+  q_.At(d.arrival_s, [this] {
+    if (const std::optional<v1::ServerMessage> arrived = down_->TakeArrived(q_.now())) Receive(*arrived);
+  });
 }
 
 void Run::Receive(const v1::ServerMessage& m) {
@@ -417,8 +428,8 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   const scenes::SimulationSpec& sim = entry.simulation;
   r_.link_declared = opt_.link.has_value();
   r_.link = LinkParamsFrom(opt_.link, opt_.time_scale);
-  up_ = std::make_unique<LinkModel>(r_.link, opt_.seed);
-  down_ = std::make_unique<LinkModel>(r_.link, opt_.seed + 1);
+  up_ = std::make_unique<server::EmulatedLink<v1::ClientMessage>>(r_.link, opt_.seed);
+  down_ = std::make_unique<server::EmulatedLink<v1::ServerMessage>>(r_.link, opt_.seed + 1);
   r_.frame_declared = sim.client.has_value() && sim.client->frame_ms.has_value();
   r_.frame_s = r_.frame_declared ? *sim.client->frame_ms / 1000.0 : 1.0 / 60.0;
   r_.scene_triangles = scene_.scene().TriangleCount();

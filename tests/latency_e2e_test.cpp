@@ -2,7 +2,7 @@
 // (--emulate-link --time-scale K) and the headless vistream-client walking a catalog path at
 // K times its speed, over loopback. A walk of minutes runs in seconds; every time the client
 // reports is real (walk-clock) seconds, K times shorter than the walk's own. Each run is then
-// repeated through the simulator (server/simulator.h, time_scale K), whose stalls and per-cell
+// repeated through the simulator (simulation/simulator.h, time_scale K), whose stalls and per-cell
 // margins must agree with the real run's within the tolerance derived below.
 #include <signal.h>
 #include <sys/wait.h>
