@@ -18,7 +18,7 @@
 // scenes[N], counted from 1).
 //
 // Every setting is stated once, in ServerSettings(): its key in the file, where its value
-// goes, how the file's value is checked, and its command-line option (server/server_options.h
+// goes, how the file's value is checked, and its command-line option (server/server_command_line.h
 // declares the options and merges them over the file from the same table). A setting is added
 // there and nowhere else.
 
