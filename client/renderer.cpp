@@ -337,12 +337,13 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     gl_.Uniform1f(loc_lit_, 1.0f);
   }
 
+  const scenes::ViewFrustum frustum = camera.Frustum();
   for (uint32_t id : objects) {
     auto it = gpu_.find(id);
     if (it == gpu_.end()) continue;
     StoredObject* o = store.Find(id);
     if (o == nullptr) continue;
-    if (!camera.MayOverlap(o->data.bounds_min, o->data.bounds_max)) continue;
+    if (!frustum.MayOverlap(o->data.bounds_min, o->data.bounds_max)) continue;
     Gpu& g = it->second;
     bool masked = false;
     uint32_t count = g.index_count;
@@ -373,8 +374,7 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
 
 uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera,
                                   const std::vector<uint32_t>& objects) const {
-  const scenes::ViewFrustum frustum(camera.eye, camera.Forward(), camera.Up(), camera.fov_y_rad,
-                                    static_cast<double>(camera.width) / static_cast<double>(camera.height));
+  const scenes::ViewFrustum frustum = camera.Frustum();
   uint64_t triangles = 0;
   for (uint32_t id : objects) {
     auto it = gpu_.find(id);
