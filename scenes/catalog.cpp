@@ -135,13 +135,13 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
     }
   } else if (r.Has("city")) {
     r.Allow({"city", "lod", "crs", "ground"});
-    if (r.Has("crs")) s.crs = r.String("crs");
+    if (r.Has("crs")) s.city.crs = r.String("crs");
     if (r.Has("ground")) {
       const std::string ground = r.String("ground");
       if (ground != "derived" && ground != "none") {
         r.Fail(r.Key("ground"), absl::StrCat("'", ground, "' is not 'derived' (a terrain from the data where the file has none) or 'none' (flat ground)"));
       }
-      s.ground = ground == "none" ? CityGround::kNone : CityGround::kDerived;
+      s.city.ground = ground == "none" ? CityGround::kNone : CityGround::kDerived;
     }
     s.kind = SceneSource::Kind::kCity;
     const fs::path p(r.String("city"));
@@ -152,7 +152,7 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
     if (r.Has("lod")) {
       const double lod = r.Number("lod", 0.0, 4.0);
       if (lod != std::floor(lod)) r.Fail(r.Key("lod"), "a level of detail is a whole number (0 to 4)");
-      s.lod = static_cast<int>(lod);
+      s.city.lod = static_cast<int>(lod);
     }
   } else {
     r.Allow({"osm", "bbox", "storey_m", "max_height_m"});
@@ -162,10 +162,10 @@ SceneSource ReadSource(const Reader& r, const std::string& base_dir) {
     if (r.Has("bbox")) {
       absl::StatusOr<GeoBox> box = ParseGeoBox(r.String("bbox"));
       if (!box.ok()) r.Fail(r.Key("bbox"), std::string(box.status().message()));
-      s.bbox = *box;
+      s.osm.bbox = *box;
     }
-    s.storey_m = r.Number("storey_m", 1.0, 20.0, 3.0);
-    s.max_height_m = r.Number("max_height_m", 10.0, 10000.0, OsmImportOptions{}.max_height_m);
+    s.osm.storey_m = r.Number("storey_m", 1.0, 20.0, 3.0);
+    s.osm.max_height_m = r.Number("max_height_m", 10.0, 10000.0, OsmImportOptions{}.max_height_m);
   }
   return s;
 }
@@ -343,18 +343,12 @@ absl::StatusOr<Scene> BuildScene(const CatalogEntry& entry, const RunControl& ru
     return scene;
   }
   if (entry.source.kind == SceneSource::Kind::kCity) {
-    CityImportOptions options;
-    options.lod = entry.source.lod;
-    options.crs = entry.source.crs;
-    options.ground = entry.source.ground;
+    CityImportOptions options = entry.source.city;
     options.name = entry.name;
     return ImportCity(entry.source.path, options, nullptr, run);
   }
   if (entry.source.kind == SceneSource::Kind::kOsm) {
-    OsmImportOptions options;
-    options.bbox = entry.source.bbox;
-    options.storey_m = entry.source.storey_m;
-    options.max_height_m = entry.source.max_height_m;
+    OsmImportOptions options = entry.source.osm;
     options.name = entry.name;
     return ImportOsm(entry.source.path, options, nullptr, run);
   }

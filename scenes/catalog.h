@@ -29,13 +29,13 @@ struct SceneSource {
   double width_m = 0.0;  // 0: generator default
   double depth_m = 0.0;
   std::string path;  // kGltf, kOsm, kCity: absolute, resolved against the catalog file's folder
-  std::optional<GeoBox> bbox;  // kOsm: keep only buildings inside
-  double storey_m = 3.0;       // kOsm
-  double max_height_m = OsmImportOptions{}.max_height_m;  // kOsm
-  std::optional<int> lod;           // kCity: the LoD to draw ("lod"); none: each object's highest
-  std::string crs;                  // kCity: the CRS when the file names none ("crs")
-  // kCity: the ground of a file without a TIN ("ground": "derived", the default, or "none").
-  CityGround ground = CityGround::kDerived;
+  // kOsm: the import's options the entry sets ("bbox", "storey_m", "max_height_m"); the rest
+  // are OsmImportOptions' defaults, and BuildScene names the scene after the entry.
+  OsmImportOptions osm;
+  // kCity: the import's options the entry sets ("lod": the LoD to draw, none: each object's
+  // highest; "crs": the CRS when the file names none; "ground": "derived", the default, or
+  // "none", for a file without a TIN); the rest are CityImportOptions' defaults.
+  CityImportOptions city;
   bool synthesize_occluders = false;  // kGltf ("occluders": "synthesize"): occluders from closed meshes
 };
 

@@ -112,10 +112,10 @@ TEST(Catalog, OsmSourceResolvesItsFileAndReadsItsBox) {
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->source.kind, SceneSource::Kind::kOsm);
   EXPECT_EQ(e->source.path, "/base/data/x.osm.pbf");
-  ASSERT_TRUE(e->source.bbox.has_value());
-  EXPECT_DOUBLE_EQ(e->source.bbox->max_lat, 43.8);
-  EXPECT_DOUBLE_EQ(e->source.storey_m, 3.5);
-  EXPECT_DOUBLE_EQ(e->source.max_height_m, 900.0);
+  ASSERT_TRUE(e->source.osm.bbox.has_value());
+  EXPECT_DOUBLE_EQ(e->source.osm.bbox->max_lat, 43.8);
+  EXPECT_DOUBLE_EQ(e->source.osm.storey_m, 3.5);
+  EXPECT_DOUBLE_EQ(e->source.osm.max_height_m, 900.0);
   absl::StatusOr<Scene> scene = BuildScene(*e);
   ASSERT_FALSE(scene.ok());
   EXPECT_NE(scene.status().message().find("/base/data/x.osm.pbf: no such file"), std::string::npos) << scene.status();
@@ -140,13 +140,13 @@ TEST(Catalog, CitySourceReadsItsGround) {
       "/base/scenes");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->source.kind, SceneSource::Kind::kCity);
-  EXPECT_EQ(e->source.lod, 1);
-  EXPECT_EQ(e->source.ground, CityGround::kDerived) << "the default";
+  EXPECT_EQ(e->source.city.lod, 1);
+  EXPECT_EQ(e->source.city.ground, CityGround::kDerived) << "the default";
   e = ParseCatalogEntry(
       R"({"name": "t", "source": {"city": "x.city.json", "ground": "none"}, "viewcell": {"size_m": 50, "height_m": 2}})",
       "t.json", "/base/scenes");
   ASSERT_TRUE(e.ok()) << e.status();
-  EXPECT_EQ(e->source.ground, CityGround::kNone);
+  EXPECT_EQ(e->source.city.ground, CityGround::kNone);
   ExpectErrorMentions(
       R"({"name": "t", "source": {"city": "x.city.json", "ground": "flat"}, "viewcell": {"size_m": 50, "height_m": 2}})",
       {"key 'source.ground'", "'flat' is not 'derived'"});

@@ -3,7 +3,10 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -71,6 +74,33 @@ absl::Status WriteFile(const std::string& path, const std::string& bytes);
 double SecondsSince(std::chrono::steady_clock::time_point start);
 // The median of `v` (the mean of the middle two for an even count); 0 for none.
 double Median(std::vector<double> v);
+
+// Adds subcommand `name` to `app`: a group whose own subcommands do the work (`vistream bench
+// server`); the command line must choose one of them.
+inline CLI::App* AddCommandGroup(CLI::App& app, const std::string& name, const std::string& description) {
+  CLI::App* group = app.add_subcommand(name, description);
+  group->require_subcommand(1);
+  return group;
+}
+
+// A subcommand of `parent` and the arguments its options fill, kept alive for its run.
+template <class Args>
+struct Subcommand {
+  CLI::App* app;
+  std::shared_ptr<Args> args;
+};
+
+// Adds subcommand `name` (described by `description` in --help) to `parent`; when the command line
+// chooses it, `run(args)` runs after parsing and its exit code goes to `done`. Its options are added
+// to the returned app and fill the returned args.
+template <class Args>
+Subcommand<Args> AddSubcommand(CLI::App* parent, const std::string& name, const std::string& description,
+                               int (*run)(const Args&), std::function<void(int)> done) {
+  auto args = std::make_shared<Args>();
+  CLI::App* app = parent->add_subcommand(name, description);
+  app->callback([args, run, done = std::move(done)] { done(run(*args)); });
+  return {app, args};
+}
 
 // Prints `status` as "vistream: error: ..." and returns the process exit code for it.
 int Fail(const absl::Status& status);

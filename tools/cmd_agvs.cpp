@@ -221,8 +221,9 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
     if (c->get_subcommands().empty()) done(Agvs(*args));
   });
 
-  auto h = std::make_shared<HeatmapArgs>();
-  CLI::App* hm = c->add_subcommand("heatmap", "PNG of the PVS cost (triangles) of every viewcell over the top view");
+  auto [hm, h] = AddSubcommand<HeatmapArgs>(
+      c, "heatmap", "PNG of the PVS cost (triangles) of every viewcell over the top view", Heatmap,
+      done);
   hm->add_option("--scene", h->scene, "catalog name, .json entry or .glb/.gltf file")->required();
   hm->add_option("--pvs", h->pvs, "a PVS file from vistream agvs -o");
   hm->add_option("--seconds", h->seconds, "or sample this long first")->check(FiniteRange(1e-3, kMaxSeconds));
@@ -236,7 +237,6 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
                                  "below %g m per pixel", TopViewMap::kOutlineMetresPerPixel))
       ->check(WholeRange(16, 16384));
   hm->add_flag("--json", h->json, "print the result as JSON");
-  hm->callback([h, done] { done(Heatmap(*h)); });
 }
 
 }  // namespace vistream::tools

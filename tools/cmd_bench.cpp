@@ -352,10 +352,10 @@ int Table1(const Table1Args& a) {
 }  // namespace
 
 void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
-  CLI::App* bench = app.add_subcommand("bench", "benchmarks that reproduce the papers' tables");
-  bench->require_subcommand(1);
-  auto args = std::make_shared<Table1Args>();
-  CLI::App* c = bench->add_subcommand("table1", "dual ray space: time and overestimation by resolution and size");
+  CLI::App* bench = AddCommandGroup(app, "bench", "benchmarks that reproduce the papers' tables");
+  auto [c, args] = AddSubcommand<Table1Args>(
+      bench, "table1", "dual ray space: time and overestimation by resolution and size", Table1,
+      done);
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->capture_default_str();
   c->add_option("--cells", args->cells, "viewcells sampled per size")->capture_default_str()->check(WholeRange(1, 1000000));
   c->add_option("--seed", args->seed, "seed of the viewcell sample")->check(WholeRange(0, kMaxSeed))->capture_default_str();
@@ -367,8 +367,8 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--csv", args->csv, "CSV output ('' for none)")->capture_default_str();
   c->add_flag("--json", args->json, "print one JSON object instead of the Markdown table");
   c->add_flag("--batch", args->batch,
-              "also a cpu row per resolution and size for batches of five adjacent viewcells (a diagonal crossing) on 2 threads");
-  c->callback([args, done] { done(Table1(*args)); });
+              "also a cpu row per resolution and size for batches of five adjacent viewcells (a "
+              "diagonal crossing) on 2 threads");
   AddBenchEpsilonCommand(bench, done);
   AddBenchAgvsCommand(bench, done);
   AddBenchServerCommand(bench, done);

@@ -6,6 +6,7 @@
 // from random points of random cells (OSMesa), a pixel wrong when the object it shows is not
 // in that cell's PVS, weighted by its solid angle and scaled to the estimator's 1024 x 1024.
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -92,13 +93,11 @@ double TimeToReach(const std::vector<std::pair<double, double>>& curve, double s
   return -1.0;
 }
 
+// The plot's colour of strategy `s`: AGVS amber, SGVS teal, REF red (in SamplingStrategy's order).
 const char* StrategyColour(SamplingStrategy s) {
-  switch (s) {
-    case SamplingStrategy::kAgvs: return "#d08c00";
-    case SamplingStrategy::kSgvs: return "#1b9e9e";
-    case SamplingStrategy::kRef: return "#d62728";
-  }
-  return "#000000";
+  static constexpr std::array<const char*, 3> kColours = {"#d08c00", "#1b9e9e", "#d62728"};
+  const auto k = static_cast<size_t>(s);
+  return k < kColours.size() ? kColours[k] : "#000000";
 }
 
 // Two panels on a log time axis (gnuplot): mean PVS size (top, linear) and pixel error
@@ -333,9 +332,10 @@ int BenchAgvs(const BenchAgvsArgs& a) {
 }  // namespace
 
 void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
-  auto args = std::make_shared<BenchAgvsArgs>();
-  CLI::App* c = bench->add_subcommand(
-      "agvs", "AGVS, SGVS and REF side by side: PVS size against time, estimated against rendered pixel error");
+  auto [c, args] = AddSubcommand<BenchAgvsArgs>(bench, "agvs",
+                                                "AGVS, SGVS and REF side by side: PVS size against "
+                                                "time, estimated against rendered pixel error",
+                                                BenchAgvs, done);
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file");
   c->add_option("--seconds", args->seconds, "sampling time of each strategy")->check(FiniteRange(1e-3, kMaxSeconds));
   c->add_option("--views", args->views, "rendered views for the measured pixel error")->check(WholeRange(1, 100000));
@@ -348,7 +348,6 @@ void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--threads", args->threads, "worker threads (0: one per core)")->check(WholeRange(0, 1024));
   c->add_option("--plot", args->plot, "write the convergence plot (PNG)");
   c->add_flag("--json", args->json, "print the result as JSON");
-  c->callback([args, done] { done(BenchAgvs(*args)); });
 }
 
 }  // namespace vistream::tools

@@ -177,8 +177,9 @@ int BenchClient(const BenchClientArgs& a) {
 }  // namespace
 
 void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
-  auto args = std::make_shared<BenchClientArgs>();
-  CLI::App* c = bench->add_subcommand("client", "the headless client along a walk: PVS+ε, PVS, whole scene");
+  auto [c, args] = AddSubcommand<BenchClientArgs>(
+      bench, "client", "the headless client along a walk: PVS+ε, PVS, whole scene", BenchClient,
+      done);
   c->add_option("--scene", args->scene, "catalog name")->capture_default_str();
   c->add_option("--path", args->path, "walk of the catalog entry (default: its first)");
   c->add_option("--size", args->size, "frame size, WIDTHxHEIGHT")->capture_default_str();
@@ -188,7 +189,6 @@ void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
       ->check(FiniteRange(0.0, 86400.0))->capture_default_str();
   c->add_option("--threads", args->threads, "server PVS workers")->check(WholeRange(1, 256))->capture_default_str();
   c->add_flag("--json", args->json, "print one JSON object");
-  c->callback([args, done] { done(BenchClient(*args)); });
 }
 
 }  // namespace vistream::tools

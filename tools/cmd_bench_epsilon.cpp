@@ -322,8 +322,9 @@ int BenchEpsilon(const BenchEpsilonArgs& a) {
 }  // namespace
 
 void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done) {
-  auto args = std::make_shared<BenchEpsilonArgs>();
-  CLI::App* c = bench->add_subcommand("epsilon", "ε-superset: the paper's Tables 1 and 2 over random neighbourhoods");
+  auto [c, args] = AddSubcommand<BenchEpsilonArgs>(
+      bench, "epsilon", "ε-superset: the paper's Tables 1 and 2 over random neighbourhoods",
+      BenchEpsilon, done);
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name (city1, city2)")->capture_default_str();
   c->add_option("--count", args->count, "neighbourhoods")->capture_default_str()->check(WholeRange(1, 1000000));
   c->add_option("--seed", args->seed, "seed of the neighbourhood sample")->check(WholeRange(0, kMaxSeed))->capture_default_str();
@@ -337,7 +338,6 @@ void AddBenchEpsilonCommand(CLI::App* bench, std::function<void(int)> done) {
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "boxes", "occluders", "rays", "paper", "all"}));
   c->add_flag("--json", args->json, "print one JSON object instead of the Markdown tables");
-  c->callback([args, done] { done(BenchEpsilon(*args)); });
 }
 
 }  // namespace vistream::tools

@@ -776,8 +776,9 @@ int BenchServer(const BenchServerArgs& a) {
 }  // namespace
 
 void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
-  auto args = std::make_shared<BenchServerArgs>();
-  CLI::App* c = bench->add_subcommand("server", "simulated clients walking a city through a real vistream-server");
+  auto [c, args] = AddSubcommand<BenchServerArgs>(
+      bench, "server", "simulated clients walking a city through a real vistream-server",
+      BenchServer, done);
   c->add_option("--scene", args->scene, "catalog name, .json or glTF")->capture_default_str();
   c->add_option("--sessions", args->sessions, "simulated clients at once")->check(WholeRange(1, 1000))
       ->capture_default_str();
@@ -816,8 +817,8 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
                 "--pattern 'vistream-bench-*' | xargs redis-cli del)")
       ->capture_default_str();
   c->add_flag("--warm", args->warm,
-              "fill the store first with the same walks on replicas of their own; then measure on fresh replicas");
-  c->callback([args, done] { done(BenchServer(*args)); });
+              "fill the store first with the same walks on replicas of their own; then measure on "
+              "fresh replicas");
 }
 
 }  // namespace vistream::tools

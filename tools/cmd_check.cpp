@@ -232,10 +232,11 @@ int Check(const CheckArgs& a) {
 }  // namespace
 
 void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
-  auto args = std::make_shared<CheckArgs>();
-  CLI::App* c = app.add_subcommand(
-      "check-conservative",
-      "check that the dual-ray-space PVS and the epsilon-superset contain everything sampling sees (exit 1 if not)");
+  auto [c, args] = AddSubcommand<CheckArgs>(
+      &app, "check-conservative",
+      "check that the dual-ray-space PVS and the epsilon-superset contain everything sampling sees "
+      "(exit 1 if not)",
+      Check, done);
   c->add_option("--scene", args->scene, "catalog name, .json entry or .glb/.gltf file")->required();
   c->add_option("--cells", args->cells, "viewcells to check, sampled (0: every cell)")->check(WholeRange(0, 1 << 30));
   CLI::Option* seconds =
@@ -255,7 +256,6 @@ void AddCheckCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_flag("--json", args->json, "print the result as JSON");
   c->add_flag("--allow-unchecked", args->allow_unchecked,
               "exit 0 even when a part of the check had nothing to check (it is still said)");
-  c->callback([args, done] { done(Check(*args)); });
 }
 
 }  // namespace vistream::tools

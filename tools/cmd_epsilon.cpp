@@ -131,8 +131,9 @@ int Epsilon(const EpsilonArgs& a) {
 }  // namespace
 
 void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done) {
-  auto args = std::make_shared<EpsilonArgs>();
-  CLI::App* c = app.add_subcommand("epsilon", "ε-superset: triangles visible from a small box (Cohen-Or & Zadicario)");
+  auto [c, args] = AddSubcommand<EpsilonArgs>(
+      &app, "epsilon", "ε-superset: triangles visible from a small box (Cohen-Or & Zadicario)",
+      Epsilon, done);
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->required();
   c->add_option("--at", args->at, "centre of the neighbourhood X,Y,Z (scene-local metres)")->required();
   c->add_option("--size", args->size, "edge of the neighbourhood box in metres (0: one viewpoint)")
@@ -142,8 +143,8 @@ void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done) {
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "boxes", "occluders", "rays", "paper", "all"}));
   c->add_flag("--json", args->json, "print one JSON object");
-  c->add_option("--map", args->map, "write a top view: neighbourhood green, visible objects blue, hidden red");
-  c->callback([args, done] { done(Epsilon(*args)); });
+  c->add_option("--map", args->map,
+                "write a top view: neighbourhood green, visible objects blue, hidden red");
 }
 
 }  // namespace vistream::tools

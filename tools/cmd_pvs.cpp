@@ -344,8 +344,9 @@ int Pvs(const PvsArgs& a) {
 }  // namespace
 
 void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
-  auto args = std::make_shared<PvsArgs>();
-  CLI::App* c = app.add_subcommand("pvs", "potentially visible set of one viewcell, or of all (dual ray space)");
+  auto [c, args] = AddSubcommand<PvsArgs>(
+      &app, "pvs", "potentially visible set of one viewcell, or of all (dual ray space)", Pvs,
+      done);
   c->add_option("--scene", args->scene, ".glb/.gltf file or catalog name")->required();
   CLI::Option* cell = c->add_option("--cell", args->cell, "viewcell grid coordinates I,J");
   c->add_flag("--all", args->all, "every viewcell of the grid, written to -o as a PVS file (vistream-server --pvs-file) or to --store")
@@ -369,9 +370,9 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");
   c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");
-  c->add_option("--map-size", args->map_size, "the --map's pixels on its longer side (default 2048)")
+  c->add_option("--map-size", args->map_size,
+                "the --map's pixels on its longer side (default 2048)")
       ->check(WholeRange(16, 16384));
-  c->callback([args, done] { done(Pvs(*args)); });
 }
 
 }  // namespace vistream::tools

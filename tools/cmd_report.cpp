@@ -490,13 +490,14 @@ int Report(const ReportArgs& given) {
 }  // namespace
 
 void AddReportCommand(CLI::App& app, std::function<void(int)> done) {
-  auto args = std::make_shared<ReportArgs>();
-  CLI::App* c = app.add_subcommand(
-      "report", "regenerate every published figure: report.md with PNG plots and maps, stamped with date, commit, machine");
+  auto [c, args] =
+      AddSubcommand<ReportArgs>(&app, "report",
+                                "regenerate every published figure: report.md with PNG plots and "
+                                "maps, stamped with date, commit, machine",
+                                Report, done);
   c->add_option("--out", args->out, "folder for report.md and the PNGs (default: bench/figures, with --quick bench/figures/quick)");
   c->add_flag("--quick", args->quick, "small scenes and counts (minutes; for CI)");
   c->add_flag("--json", args->json, "print a JSON summary (steps, times, files)");
-  c->callback([args, done] { done(Report(*args)); });
 }
 
 }  // namespace vistream::tools

@@ -641,18 +641,20 @@ int Map(const MapArgs& a) {
 }  // namespace
 
 void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
-  CLI::App* scene = app.add_subcommand("scene", "generate, load and inspect scenes");
-  scene->require_subcommand(1);
+  CLI::App* scene = AddCommandGroup(app, "scene", "generate, load and inspect scenes");
 
-  auto gen = std::make_shared<GenerateArgs>();
-  CLI::App* g = scene->add_subcommand("generate", "generate a city (a catalog name or city1, city2, london, streets)");
+  auto [g, gen] = AddSubcommand<GenerateArgs>(
+      scene, "generate", "generate a city (a catalog name or city1, city2, london, streets)",
+      Generate, done);
   g->add_option("NAME", gen->name, "catalog entry (scenes/NAME.json) or generator name")->required();
   g->add_option("--seed", gen->seed, "random seed (default: the catalog's, else 1)")->check(WholeRange(0, kMaxSeed));
-  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
-  g->callback([gen, done] { done(Generate(*gen)); });
+  g->add_option("-o,--output", gen->output, "output file, .glb or .gltf")
+      ->required()
+      ->check(SceneOutputPath());
 
-  auto imp = std::make_shared<ImportArgs>();
-  CLI::App* o = scene->add_subcommand("import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene");
+  auto [o, imp] = AddSubcommand<ImportArgs>(
+      scene, "import-osm", "import OpenStreetMap buildings (.osm or .osm.pbf) into a scene",
+      ImportOsm, done);
   o->add_option("IN", imp->input, "OpenStreetMap file: .osm (XML), .osm.pbf, .osm.bz2 or .osm.gz")->required();
   o->add_option("-o,--output", imp->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   o->add_option("--bbox", imp->bbox, "keep buildings inside MIN_LON,MIN_LAT,MAX_LON,MAX_LAT (degrees)");
@@ -662,12 +664,13 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
       ->check(FiniteRange(10.0, 10000.0));
   o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)");
   o->add_flag("--json", imp->json, "print the summary as one JSON object");
-  o->callback([imp, done] { done(ImportOsm(*imp)); });
 
-  auto city = std::make_shared<ImportCityArgs>();
-  CLI::App* c = scene->add_subcommand(
-      "import-city", "import a 3D city model (CityGML .gml/.xml, CityJSON .json/.city.json): buildings, parts, terrain, "
-                     "with occluders synthesized from the solids");
+  auto [c, city] =
+      AddSubcommand<ImportCityArgs>(scene, "import-city",
+                                    "import a 3D city model (CityGML .gml/.xml, CityJSON "
+                                    ".json/.city.json): buildings, parts, terrain, "
+                                    "with occluders synthesized from the solids",
+                                    ImportCity, done);
   c->add_option("IN", city->input, "CityGML 1.0/2.0 (.gml, .xml) or CityJSON 0.x-2.0 (.json, .city.json)")->required();
   c->add_option("-o,--output", city->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   c->add_option("--lod", city->lod, "level of detail to draw (its integer part: 1, 2); default: each object's highest")
@@ -688,37 +691,34 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
       ->capture_default_str();
   c->add_flag("--keep-going", city->keep_going, "leave out objects with malformed geometry (counted) instead of failing");
   c->add_flag("--json", city->json, "print the summary as one JSON object");
-  c->callback([city, done] { done(ImportCity(*city)); });
 
-  auto occ = std::make_shared<OccludersArgs>();
-  CLI::App* oc = scene->add_subcommand("occluders", "synthesize occluders from a glTF scene's closed meshes");
+  auto [oc, occ] = AddSubcommand<OccludersArgs>(
+      scene, "occluders", "synthesize occluders from a glTF scene's closed meshes", Occluders,
+      done);
   oc->add_option("IN", occ->input, ".glb or .gltf file")->required();
   oc->add_option("-o,--output", occ->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   oc->add_flag("--keep", occ->keep, "keep the file's occluders (synthesize only for objects without); default: replace them");
   oc->add_flag("--json", occ->json, "print the summary as one JSON object");
-  oc->callback([occ, done] { done(Occluders(*occ)); });
 
-  auto ext = std::make_shared<ExtrudeArgs>();
-  CLI::App* ex = scene->add_subcommand(
-      "extrude", "a city model as OpenStreetMap draws it: each building its footprint's prism, ground to top, flat ground");
+  auto [ex, ext] =
+      AddSubcommand<ExtrudeArgs>(scene, "extrude",
+                                 "a city model as OpenStreetMap draws it: each building its "
+                                 "footprint's prism, ground to top, flat ground",
+                                 Extrude, done);
   ex->add_option("IN", ext->input, ".glb/.gltf file, catalog name or catalog .json")->required();
   ex->add_option("-o,--output", ext->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   ex->add_flag("--json", ext->json, "print the summary as one JSON object");
-  ex->callback([ext, done] { done(Extrude(*ext)); });
 
-  auto info = std::make_shared<InfoArgs>();
-  CLI::App* i = scene->add_subcommand("info", "print a scene's statistics");
+  auto [i, info] = AddSubcommand<InfoArgs>(scene, "info", "print a scene's statistics", Info, done);
   i->add_option("FILE", info->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   i->add_flag("--json", info->json, "print one JSON object");
   i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(WholeRange(1, 1024));
-  i->callback([info, done] { done(Info(*info)); });
 
-  auto map = std::make_shared<MapArgs>();
-  CLI::App* m = scene->add_subcommand("map", "write a top-view PNG: footprints by height, walk paths in red");
+  auto [m, map] = AddSubcommand<MapArgs>(
+      scene, "map", "write a top-view PNG: footprints by height, walk paths in red", Map, done);
   m->add_option("FILE", map->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   m->add_option("-o,--output", map->output, "output .png")->required()->check(OutputPath());
   m->add_option("--size", map->size, "pixels on the longer side")->check(WholeRange(16, 16384));
-  m->callback([map, done] { done(Map(*map)); });
 }
 
 }  // namespace vistream::tools

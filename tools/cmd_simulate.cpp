@@ -471,27 +471,32 @@ int Simulate(const SimulateArgs& a) {
 }  // namespace
 
 void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
-  auto args = std::make_shared<SimulateArgs>();
-  CLI::App* c = app.add_subcommand(
-      "simulate", "discrete-event simulation of a catalog walk: stalls, arrival margins, bytes, triangles drawn");
+  auto [c, args] = AddSubcommand<SimulateArgs>(&app, "simulate",
+                                               "discrete-event simulation of a catalog walk: "
+                                               "stalls, arrival margins, bytes, triangles drawn",
+                                               Simulate, done);
   c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
-  const CLI::Option* path = c->add_option("--path", args->path, "the entry's walk (default: its first)");
-  const CLI::Option* speed = c->add_option("--speed", args->speed,
-                "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls, and for "
-                "pvs+eps also the highest with zero hole frames (bisection in [1, 500] km/h to 1%)");
-  const CLI::Option* speeds = c->add_option("--speeds", args->speeds,
-                "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
-                "whose PVSs serve them all");
-  const CLI::Option* link = c->add_option("--link", args->link,
-                "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: "
-                "the declared link, none: ideal");
-  const CLI::Option* bandwidths = c->add_option("--bandwidths", args->bandwidths,
-                "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
-                "link's latency, jitter and loss");
-  const CLI::Option* scheme = c->add_option("--scheme", args->scheme,
-                "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
-  const CLI::Option* schemes =
-      c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
+  // A text option: given empty, it is an error rather than the default (Simulate checks `texts`).
+  auto add_text = [app = c, held = args.get()](const char* name, std::string* value,
+                                               const std::string& description) {
+    held->texts.emplace_back(app->add_option(name, *value, description), value);
+  };
+  add_text("--path", &args->path, "the entry's walk (default: its first)");
+  add_text("--speed", &args->speed,
+           "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls, and for "
+           "pvs+eps also the highest with zero hole frames (bisection in [1, 500] km/h to 1%)");
+  add_text("--speeds", &args->speeds,
+           "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process whose "
+           "PVSs serve them all");
+  add_text("--link", &args->link,
+           "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: the "
+           "declared link, none: ideal");
+  add_text("--bandwidths", &args->bandwidths,
+           "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
+           "link's latency, jitter and loss");
+  add_text("--scheme", &args->scheme,
+           "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
+  add_text("--schemes", &args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "the dual ray space's finest raster")->capture_default_str()->check(PowerOfTwo(1, 256));
@@ -501,17 +506,12 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--compute-ms", args->compute_ms,
                 "charge this many ms per PVS and ε-mask instead of the measured time (machine-independent runs)")
       ->check(FiniteRange(0.0, 1e7));
-  const CLI::Option* log = c->add_option(
-      "--log", args->log, "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
-  const CLI::Option* series = c->add_option(
-      "--series", args->series,
-      "write every sampled frame (10 Hz) of each run: metres along the walk, seconds, triangles drawn, triangles "
-      "without masks, masked, hole; one whitespace-separated block per run (gnuplot's index)");
-  args->texts = {{path, &args->path},         {speed, &args->speed},   {speeds, &args->speeds},
-                 {link, &args->link},         {bandwidths, &args->bandwidths}, {scheme, &args->scheme},
-                 {schemes, &args->schemes},   {log, &args->log},       {series, &args->series}};
+  add_text("--log", &args->log,
+           "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
+  add_text("--series", &args->series,
+           "write every sampled frame (10 Hz) of each run: metres along the walk, seconds, triangles drawn, "
+           "triangles without masks, masked, hole; one whitespace-separated block per run (gnuplot's index)");
   c->add_flag("--json", args->json, "print one JSON object");
-  c->callback([args, done] { done(Simulate(*args)); });
 }
 
 }  // namespace vistream::tools

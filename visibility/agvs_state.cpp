@@ -15,28 +15,11 @@ std::string GlobalSampler::SaveState() const {
   const Impl& m = *impl_;
   ByteWriter w;
   w.PutRaw(std::string_view(kStateMagic, 8));
-  w.Put<uint64_t>(pvs_.object_count());
-  w.Put<uint64_t>(pvs_.cell_count());
-  w.Put(grid_.cell_size());
-  w.Put(grid_.corner().x);
-  w.Put(grid_.corner().y);
-  w.Put<uint32_t>(static_cast<uint32_t>(options_.strategy));
-  w.Put(options_.seed);
-  w.Put(stats_.batches);
-  w.Put(stats_.samples);
-  w.Put(stats_.rays);
-  w.Put(stats_.discarded_samples);
-  w.Put(stats_.seconds);
-  for (const DistributionStats& d : stats_.distributions) {
-    w.Put(d.samples);
-    w.Put(d.rays);
-    w.Put(d.contribution);
-    w.Put(d.probability);
-  }
-  for (size_t k = 0; k < kDistributionCount; ++k) {
-    w.Put(m.ema_contribution[k]);
-    w.Put(m.ema_cost[k]);
-  }
+  w.Put(static_cast<uint64_t>(pvs_.object_count()), static_cast<uint64_t>(pvs_.cell_count()), grid_.cell_size(),
+        grid_.corner().x, grid_.corner().y, static_cast<uint32_t>(options_.strategy), options_.seed);
+  w.Put(stats_.batches, stats_.samples, stats_.rays, stats_.discarded_samples, stats_.seconds);
+  for (const DistributionStats& d : stats_.distributions) w.Put(d.samples, d.rays, d.contribution, d.probability);
+  for (size_t k = 0; k < kDistributionCount; ++k) w.Put(m.ema_contribution[k], m.ema_cost[k]);
   w.PutVarint(m.estimator_window.size());
   for (const auto& [n, nc] : m.estimator_window) {
     w.PutVarint(n);
@@ -46,12 +29,7 @@ std::string GlobalSampler::SaveState() const {
   for (uint64_t n : m.object_hits) w.PutVarint(n);
   w.PutVarint(m.buffer.size());
   m.buffer.ForEach([&](const Candidate& c, uint32_t mutations) {
-    w.Put(c.from);
-    w.Put(c.to);
-    w.Put(c.r_from);
-    w.Put(c.r_to);
-    w.Put(c.object);
-    w.Put(mutations);
+    w.Put(c.from, c.to, c.r_from, c.r_to, c.object, mutations);
   });
   EncodeSets(pvs_, &w);
   return std::move(w.bytes());
@@ -67,13 +45,8 @@ absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string&
   double size = 0, cx = 0, cy = 0;
   uint32_t strategy = 0;
   uint64_t seed = 0;
-  absl::Status st = r.Get(&objects, "the object count");
-  if (st.ok()) st = r.Get(&cells, "the cell count");
-  if (st.ok()) st = r.Get(&size, "the cell size");
-  if (st.ok()) st = r.Get(&cx, "the corner x");
-  if (st.ok()) st = r.Get(&cy, "the corner y");
-  if (st.ok()) st = r.Get(&strategy, "the strategy");
-  if (st.ok()) st = r.Get(&seed, "the seed");
+  absl::Status st = r.Get(&objects, "the object count", &cells, "the cell count", &size, "the cell size", &cx,
+                          "the corner x", &cy, "the corner y", &strategy, "the strategy", &seed, "the seed");
   if (!st.ok()) return st;
   if (objects != pvs_.object_count() || cells != pvs_.cell_count() || size != grid_.cell_size() ||
       cx != grid_.corner().x || cy != grid_.corner().y) {
@@ -85,21 +58,17 @@ absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string&
     return r.Error(absl::StrCat("made with strategy ", strategy, " and seed ", seed, "; resume with the same ones"));
   }
   AgvsStats s;
-  st = r.Get(&s.batches, "batches");
-  if (st.ok()) st = r.Get(&s.samples, "samples");
-  if (st.ok()) st = r.Get(&s.rays, "rays");
-  if (st.ok()) st = r.Get(&s.discarded_samples, "discarded samples");
-  if (st.ok()) st = r.Get(&s.seconds, "seconds");
+  st = r.Get(&s.batches, "batches", &s.samples, "samples", &s.rays, "rays", &s.discarded_samples,
+             "discarded samples", &s.seconds, "seconds");
   for (DistributionStats& d : s.distributions) {
-    if (st.ok()) st = r.Get(&d.samples, "distribution samples");
-    if (st.ok()) st = r.Get(&d.rays, "distribution rays");
-    if (st.ok()) st = r.Get(&d.contribution, "distribution contribution");
-    if (st.ok()) st = r.Get(&d.probability, "distribution probability");
+    if (st.ok()) {
+      st = r.Get(&d.samples, "distribution samples", &d.rays, "distribution rays", &d.contribution,
+                 "distribution contribution", &d.probability, "distribution probability");
+    }
   }
   std::array<double, kDistributionCount> ema_c{}, ema_cost{};
   for (size_t k = 0; k < kDistributionCount && st.ok(); ++k) {
-    st = r.Get(&ema_c[k], "mixture weights");
-    if (st.ok()) st = r.Get(&ema_cost[k], "mixture costs");
+    st = r.Get(&ema_c[k], "mixture weights", &ema_cost[k], "mixture costs");
   }
   uint64_t window = 0;
   if (st.ok()) st = r.GetVarint(&window, "the estimator window");
@@ -124,12 +93,8 @@ absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string&
   MutationBuffer buffer(options_.mutation_buffer);
   for (uint64_t i = 0; i < candidates && st.ok(); ++i) {
     Candidate c;
-    st = r.Get(&c.from, "a candidate");
-    if (st.ok()) st = r.Get(&c.to, "a candidate");
-    if (st.ok()) st = r.Get(&c.r_from, "a candidate");
-    if (st.ok()) st = r.Get(&c.r_to, "a candidate");
-    if (st.ok()) st = r.Get(&c.object, "a candidate");
-    if (st.ok()) st = r.Get(&c.mutations, "a candidate");
+    st = r.Get(&c.from, "a candidate", &c.to, "a candidate", &c.r_from, "a candidate", &c.r_to, "a candidate",
+               &c.object, "a candidate", &c.mutations, "a candidate");
     if (st.ok() && c.object >= objects) st = r.Error(absl::StrCat("candidate ", i, " names object ", c.object));
     const double len = glm::length(c.to - c.from);
     if (st.ok() && !(len > 1e-6 && std::isfinite(len) && c.r_from >= 0 && c.r_to >= 0 && std::isfinite(c.r_from) &&

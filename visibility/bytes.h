@@ -15,12 +15,14 @@ namespace vistream::visibility {
 
 class ByteWriter {
  public:
-  template <typename T>
-  void Put(T value) {
+  // Appends each value's bytes, in order.
+  template <typename T, typename... More>
+  void Put(T value, More... more) {
     static_assert(std::is_trivially_copyable_v<T>);
     char b[sizeof(T)];
     std::memcpy(b, &value, sizeof(T));
     out_.append(b, sizeof(T));
+    if constexpr (sizeof...(More) > 0) Put(more...);
   }
   void PutVarint(uint64_t v) {
     while (v >= 0x80) {
@@ -44,12 +46,15 @@ class ByteReader {
  public:
   ByteReader(std::string_view bytes, std::string where) : in_(bytes), where_(std::move(where)) {}
 
-  template <typename T>
-  absl::Status Get(T* value, const std::string& what) {
+  // Reads `value`, then each further (pointer, what) pair in order; stops at the first that the
+  // bytes cannot hold, with "truncated while reading <its what>".
+  template <typename T, typename... More>
+  absl::Status Get(T* value, const std::string& what, More... more) {
     static_assert(std::is_trivially_copyable_v<T>);
     if (in_.size() - pos_ < sizeof(T)) return Truncated(what);
     std::memcpy(value, in_.data() + pos_, sizeof(T));
     pos_ += sizeof(T);
+    if constexpr (sizeof...(More) > 0) return Get(more...);
     return absl::OkStatus();
   }
   absl::Status GetVarint(uint64_t* value, const std::string& what) {

@@ -188,23 +188,11 @@ std::string EncodePvsFile(const PvsFile& f) {
   w.PutRaw(std::string_view(kMagic, sizeof(kMagic)));
   w.Put<uint32_t>(f.bands.empty() ? kVersion : kBandsVersion);
   w.PutString(f.scene);
-  w.Put<uint64_t>(f.sets.object_count());
-  w.Put<uint64_t>(f.scene_fingerprint);
-  w.Put(f.cell_size);
-  w.Put(f.base_z);
-  w.Put(f.height);
-  w.Put(f.corner_x);
-  w.Put(f.corner_y);
-  w.Put(f.nx);
-  w.Put(f.ny);
-  for (const CellBand& b : f.bands) {
-    w.Put(b.z0);
-    w.Put(b.z1);
-  }
+  w.Put(static_cast<uint64_t>(f.sets.object_count()), uint64_t{f.scene_fingerprint}, f.cell_size, f.base_z, f.height,
+        f.corner_x, f.corner_y, f.nx, f.ny);
+  for (const CellBand& b : f.bands) w.Put(b.z0, b.z1);
   w.PutString(f.strategy);
-  w.Put(f.samples);
-  w.Put(f.seconds);
-  w.Put(f.estimated_pixel_error);
+  w.Put(f.samples, f.seconds, f.estimated_pixel_error);
   EncodeSets(f.sets, &w);
   return std::move(w.bytes());
 }
@@ -224,13 +212,10 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
   if (st.ok()) st = r.Get(&objects, "the object count");
   if (st.ok() && objects > kMaxObjects) st = r.Error(absl::StrCat("object count ", objects, " is too large"));
   if (st.ok() && version >= 2) st = r.Get(&f.scene_fingerprint, "the scene fingerprint");
-  if (st.ok()) st = r.Get(&f.cell_size, "the cell size");
-  if (st.ok()) st = r.Get(&f.base_z, "the base z");
-  if (st.ok()) st = r.Get(&f.height, "the height");
-  if (st.ok()) st = r.Get(&f.corner_x, "the corner x");
-  if (st.ok()) st = r.Get(&f.corner_y, "the corner y");
-  if (st.ok()) st = r.Get(&f.nx, "nx");
-  if (st.ok()) st = r.Get(&f.ny, "ny");
+  if (st.ok()) {
+    st = r.Get(&f.cell_size, "the cell size", &f.base_z, "the base z", &f.height, "the height", &f.corner_x,
+               "the corner x", &f.corner_y, "the corner y", &f.nx, "nx", &f.ny, "ny");
+  }
   if (!st.ok()) return st;
   if (!(std::isfinite(f.cell_size) && f.cell_size > 0 && std::isfinite(f.height) && f.height > 0 &&
         std::isfinite(f.base_z) && std::isfinite(f.corner_x) && std::isfinite(f.corner_y))) {
@@ -246,17 +231,17 @@ absl::StatusOr<PvsFile> DecodePvsFile(std::string_view bytes, const std::string&
     f.bands.resize(cells);
     for (uint64_t c = 0; c < cells; ++c) {
       CellBand& b = f.bands[c];
-      if (st = r.Get(&b.z0, "the bands"); !st.ok()) return st;
-      if (st = r.Get(&b.z1, "the bands"); !st.ok()) return st;
+      if (st = r.Get(&b.z0, "the bands", &b.z1, "the bands"); !st.ok()) return st;
       if (!(std::isfinite(b.z0) && std::isfinite(b.z1) && b.z0 < b.z1)) {
         return r.Error(absl::StrCat("cell ", c, "'s band [", b.z0, ", ", b.z1, "] is empty or not finite"));
       }
     }
   }
   st = r.GetString(&f.strategy, "the strategy", 64);
-  if (st.ok()) st = r.Get(&f.samples, "the sample count");
-  if (st.ok()) st = r.Get(&f.seconds, "the seconds");
-  if (st.ok()) st = r.Get(&f.estimated_pixel_error, "the estimated pixel error");
+  if (st.ok()) {
+    st = r.Get(&f.samples, "the sample count", &f.seconds, "the seconds", &f.estimated_pixel_error,
+               "the estimated pixel error");
+  }
   if (!st.ok()) return st;
   // Every cell takes at least one byte: refuse what the remaining bytes cannot hold before
   // allocating the sets.
