@@ -2,7 +2,7 @@
 // The overlay's minimap (client/overlay.h, M in the window): the viewcells around the eye,
 // north up, each coloured by what the client holds of it, the walk followed and the eye. Its
 // cell states are kept here, a bounded amount of work a frame; the panel itself is drawn by the
-// overlay (client/minimap.cpp, with these).
+// overlay (client/overlay_minimap.cpp, with these).
 
 #include <array>
 #include <cstddef>

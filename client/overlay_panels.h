@@ -1,6 +1,6 @@
 #pragma once
-// What the overlay's panel files (client/overlay.cpp, client/minimap.cpp) share: ImGui window
-// flags, colours, and the minimap's panel. Inside the client library only; called between
+// What the overlay's panel files (client/overlay.cpp, client/overlay_minimap.cpp) share: ImGui
+// window flags, colours, and the minimap's panel. Inside the client library only; called between
 // ImGui::NewFrame and ImGui::Render of the overlay's context.
 
 #include <array>
@@ -9,9 +9,10 @@
 #include <imgui.h>
 
 #include "client/minimap.h"
-#include "client/overlay.h"
 
 namespace vistream::client {
+
+struct OverlayStatus;  // client/overlay.h (not included: overlay.cpp includes this file)
 
 // Windows in fixed places, sized to what they hold; the panels also never take the focus.
 constexpr ImGuiWindowFlags kOverlayFixed = ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize |

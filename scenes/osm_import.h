@@ -50,19 +50,12 @@
 #include <string_view>
 #include <vector>
 
+#include "scenes/osm_import_types.h"
 #include "scenes/osm_tags.h"
 #include "scenes/progress.h"
 #include "scenes/scene.h"
 
 namespace vistream::scenes {
-
-// Longitude and latitude in degrees.
-struct GeoBox {
-  double min_lon = 0.0, min_lat = 0.0, max_lon = 0.0, max_lat = 0.0;
-};
-
-// "min_lon,min_lat,max_lon,max_lat" (osmium's order); an error names the problem.
-absl::StatusOr<GeoBox> ParseGeoBox(std::string_view text);
 
 struct OsmImportOptions {
   std::optional<GeoBox> bbox;  // keep only buildings with every node inside
@@ -72,44 +65,6 @@ struct OsmImportOptions {
   double max_height_m = 1000.0;
   std::string name;  // the scene's name; default: the file's stem
   size_t walks = 3;  // walks derived from the highway ways, at most; 0: none
-};
-
-// One derived walk, for the summary.
-struct OsmWalkSummary {
-  std::string name;
-  double length_m = 0.0;
-};
-
-struct OsmImportSummary {
-  uint64_t buildings = 0;  // objects in the scene
-  uint64_t from_ways = 0, from_relations = 0;
-  uint64_t outer_rings = 0, inner_rings = 0;
-  uint64_t occluders = 0;
-  uint64_t height_tagged = 0, levels_tagged = 0, height_by_rule = 0;
-  uint64_t raised = 0;  // base above the ground: no occluder
-  uint64_t parts = 0;   // building:part objects (also counted in buildings)
-  uint64_t outlines_hidden_by_parts = 0;  // outlines wholly covered by their parts: not drawn
-  uint64_t outlines_cut_by_parts = 0;     // outlines drawn only where no part covers them
-  uint64_t merged_way_outlines = 0;       // ways that are also a building relation's outline
-  // Repairs (the building was kept).
-  uint64_t repaired_duplicate_points = 0, repaired_spikes = 0;
-  uint64_t dropped_inner_rings = 0;  // not simple or not inside the outer ring after snapping
-  uint64_t bad_height_tags = 0;      // unreadable height/levels values, the next rule used
-  uint64_t implausible_heights = 0;  // values above max_height_m, the next rule used
-  uint64_t min_height_above_height = 0;  // base at or above the top: base dropped, no occluder
-  // Skipped buildings or rings, by reason.
-  std::map<std::string, uint64_t> skipped;
-  std::string utm_zone;  // e.g. "32N"
-  uint64_t highway_ways = 0;   // walkable highway ways read (tunnels and indoor ways left out)
-  uint64_t street_edges = 0;   // edges of the street graph (inside the buildings' bounds)
-  std::vector<OsmWalkSummary> walks;  // the scene's paths, in order
-  std::vector<std::string> walk_notes;  // why fewer or shorter walks (DerivedWalks::notes)
-  double seconds = 0.0;
-
-  uint64_t Repaired() const {
-    return repaired_duplicate_points + repaired_spikes + dropped_inner_rings;
-  }
-  uint64_t Skipped() const;
 };
 
 // Imports `path` (.osm, .osm.pbf, .pbf, .osm.bz2, .osm.gz; by extension). Errors name the

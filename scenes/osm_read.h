@@ -12,7 +12,7 @@
 #include <string_view>
 #include <vector>
 
-#include "scenes/osm_import.h"
+#include "scenes/osm_import_types.h"
 #include "scenes/osm_tags.h"
 #include "scenes/progress.h"
 
