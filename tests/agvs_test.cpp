@@ -6,6 +6,7 @@
 #include <fstream>
 #include <set>
 
+#include <absl/strings/str_cat.h>
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
@@ -284,10 +285,27 @@ TEST_F(Agvs, BadStatesAreRejectedNamingTheSourceAndOffset) {
   // Another seed, another grid.
   AgvsOptions other_seed;
   other_seed.seed = 9;
-  EXPECT_NE(Sampler(s, g, other_seed)->LoadState(state, "s").message().find("seed"), std::string::npos);
+  const absl::Status seed = Sampler(s, g, other_seed)->LoadState(state, "s");
+  EXPECT_NE(seed.message().find("made with strategy agvs and seed 1; this run has strategy agvs and seed 9"),
+            std::string::npos)
+      << seed;
+  AgvsOptions other_strategy;
+  other_strategy.strategy = SamplingStrategy::kRef;
+  const absl::Status strategy = Sampler(s, g, other_strategy)->LoadState(state, "s");
+  EXPECT_NE(strategy.message().find("made with strategy agvs and seed 1; this run has strategy ref"), std::string::npos)
+      << strategy;
   const ViewcellGrid g5 = *ViewcellGrid::Create(s.bounds, 5.0, 0.5, 2.0);
   const absl::Status other_grid = Sampler(s, g5)->LoadState(state, "s");
   EXPECT_NE(other_grid.message().find("cells"), std::string::npos) << other_grid;
+  // The same cells moved: the corners differ, and the message shows both (not two equal halves).
+  const ViewcellGrid shifted = Grid(glm::dvec2(g.cell_size(), 0.0));
+  ASSERT_EQ(shifted.CellCount(), g.CellCount());
+  ASSERT_NE(shifted.corner().x, g.corner().x);
+  const absl::Status other_corner = Sampler(s, shifted)->LoadState(state, "s");
+  EXPECT_NE(other_corner.message().find(absl::StrCat("from (", g.corner().x, ", ")), std::string::npos)
+      << other_corner;
+  EXPECT_NE(other_corner.message().find(absl::StrCat("from (", shifted.corner().x, ", ")), std::string::npos)
+      << other_corner;
 }
 
 TEST_F(Agvs, InsertingAWallRemovesWhatItHidesAndSamplingRestoresTheRest) {

@@ -64,6 +64,23 @@ TEST(CliWrites, AnEmptyOutputPathIsABadOption) {
   ExpectBadOption("scene map city1 -o ''", "--output: an empty path");
 }
 
+// So are the other paths and names a command writes or is given: empty, each is refused before
+// any work rather than taken as "none" or the default (a report into bench/figures, say).
+TEST(CliWrites, AnEmptyPathOrNameIsABadOptionNotTheDefault) {
+  ExpectBadOption("report --out ''", "--out: an empty path");
+  ExpectBadOption("agvs --scene city1 --seconds 1 -o ''", "-o: an empty path");
+  ExpectBadOption("agvs --scene city1 --seconds 1 --state ''", "--state: an empty path");
+  ExpectBadOption("agvs heatmap --scene city1 --seconds 1 -o ''", "-o: an empty path");
+  ExpectBadOption("pvs --scene city1 --all -o ''", "--out: an empty path");
+  ExpectBadOption("pvs --scene city1 --cell 0,0 --map ''", "--map: an empty path");
+  ExpectBadOption("epsilon --scene city1 --at 0,0,1.7 --size 1 --map ''", "--map: an empty path");
+  ExpectBadOption("bench agvs --plot ''", "--plot: an empty path");
+  ExpectBadOption("bench server --log ''", "--log: an empty path");
+  ExpectBadOption("bench client --path ''", "--path: an empty walk name");
+  ExpectBadOption("scene import-osm x.osm -o x.glb --name ''", "--name: an empty name");
+  ExpectBadOption("scene import-city x.gml -o x.glb --name ''", "--name: an empty name");
+}
+
 // A sampler's state that cannot be saved whole is not lost: the state saved before is kept,
 // and sampling resumes from it.
 TEST(CliWrites, AnAgvsStateSaveCutShortKeepsTheStateSavedBefore) {

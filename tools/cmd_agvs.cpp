@@ -208,8 +208,9 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(FiniteRange(1e-9, 1024.0 * 1024.0));
   c->add_option("--samples", args->samples, "stop after this many samples")->check(WholeRange(1, kMaxSamples));
   c->add_option("--strategy", args->strategy, "agvs (adaptive mixture), sgvs (view space-direction only), ref (per cell)");
-  c->add_option("-o", args->out, "write the PVS file a server serves from");
-  c->add_option("--state", args->state, "resume from this state file if it exists, and save the state there");
+  c->add_option("-o", args->out, "write the PVS file a server serves from")->check(OutputPath());
+  c->add_option("--state", args->state, "resume from this state file if it exists, and save the state there")
+      ->check(OutputPath());
   c->add_option("--filter", args->filter, "visibility filter applied to the output: none, object, view, both");
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
@@ -231,7 +232,7 @@ void AddAgvsCommand(CLI::App& app, std::function<void(int)> done) {
   hm->add_option("--cell-size", h->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   hm->add_option("--seed", h->seed, "random seed")->check(WholeRange(0, kMaxSeed));
-  hm->add_option("-o", h->out, "the PNG to write")->required();
+  hm->add_option("-o", h->out, "the PNG to write")->required()->check(OutputPath());
   hm->add_option("--size", h->size,
                  absl::StrFormat("the map's pixels on its longer side (default 2048); footprints are outlined only "
                                  "below %g m per pixel", TopViewMap::kOutlineMetresPerPixel))

@@ -346,7 +346,7 @@ void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done) {
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--seed", args->seed, "random seed")->check(WholeRange(0, kMaxSeed));
   c->add_option("--threads", args->threads, "worker threads (0: one per core)")->check(WholeRange(0, 1024));
-  c->add_option("--plot", args->plot, "write the convergence plot (PNG)");
+  c->add_option("--plot", args->plot, "write the convergence plot (PNG)")->check(OutputPath());
   c->add_flag("--json", args->json, "print the result as JSON");
 }
 

@@ -792,7 +792,7 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--threads", args->threads, "server PVS workers (0: one per core)")->check(WholeRange(0, 1024))
       ->capture_default_str();
   c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();
-  c->add_option("--log", args->log, "write the server's log here");
+  c->add_option("--log", args->log, "write the server's log here")->check(OutputPath());
   c->add_flag("--json", args->json, "print one JSON object");
   c->add_option("--masks", args->masks, "on | off: whether the walkers ask for ε-masks (Hello.epsilon_masks)")
       ->check(CLI::IsMember({"on", "off"}))

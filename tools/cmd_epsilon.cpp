@@ -143,8 +143,8 @@ void AddEpsilonCommand(CLI::App& app, std::function<void(int)> done) {
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "boxes", "occluders", "rays", "paper", "all"}));
   c->add_flag("--json", args->json, "print one JSON object");
-  c->add_option("--map", args->map,
-                "write a top view: neighbourhood green, visible objects blue, hidden red");
+  c->add_option("--map", args->map, "write a top view: neighbourhood green, visible objects blue, hidden red")
+      ->check(OutputPath());
 }
 
 }  // namespace vistream::tools

@@ -351,7 +351,7 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
   CLI::Option* cell = c->add_option("--cell", args->cell, "viewcell grid coordinates I,J");
   c->add_flag("--all", args->all, "every viewcell of the grid, written to -o as a PVS file (vistream-server --pvs-file) or to --store")
       ->excludes(cell);
-  c->add_option("-o,--out", args->out, "with --all: the PVS file to write");
+  c->add_option("-o,--out", args->out, "with --all: the PVS file to write")->check(OutputPath());
   c->add_option("--store", args->store,
                 "with --all: fill the PVS store replicas share (Redis host:port or unix:PATH; password from "
                 "$VISTREAM_STORE_PASSWORD); cells already stored are skipped");
@@ -369,7 +369,8 @@ void AddPvsCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(PowerOfTwo(1, 256));
   c->add_option("--backend", args->backend, "cpu | gl | exact")->check(CLI::IsMember({"cpu", "gl", "exact"}));
   c->add_flag("--json", args->json, "print one JSON object");
-  c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red");
+  c->add_option("--map", args->map, "write a top view: viewcell green, visible blue, occluded red")
+      ->check(OutputPath());
   c->add_option("--map-size", args->map_size,
                 "the --map's pixels on its longer side (default 2048)")
       ->check(WholeRange(16, 16384));

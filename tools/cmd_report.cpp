@@ -495,7 +495,8 @@ void AddReportCommand(CLI::App& app, std::function<void(int)> done) {
                                 "regenerate every published figure: report.md with PNG plots and "
                                 "maps, stamped with date, commit, machine",
                                 Report, done);
-  c->add_option("--out", args->out, "folder for report.md and the PNGs (default: bench/figures, with --quick bench/figures/quick)");
+  c->add_option("--out", args->out, "folder for report.md and the PNGs (default: bench/figures, with --quick bench/figures/quick)")
+      ->check(OutputPath());
   c->add_flag("--quick", args->quick, "small scenes and counts (minutes; for CI)");
   c->add_flag("--json", args->json, "print a JSON summary (steps, times, files)");
 }

@@ -50,12 +50,18 @@ absl::Status GlobalSampler::LoadState(std::string_view bytes, const std::string&
   if (!st.ok()) return st;
   if (objects != pvs_.object_count() || cells != pvs_.cell_count() || size != grid_.cell_size() ||
       cx != grid_.corner().x || cy != grid_.corner().y) {
-    return r.Error(absl::StrCat("made for ", objects, " objects and ", cells, " cells of ", size,
-                                " m; this scene has ", pvs_.object_count(), " objects and ", pvs_.cell_count(),
-                                " cells of ", grid_.cell_size(), " m"));
+    return r.Error(absl::StrCat("made for ", objects, " objects and ", cells, " cells of ", size, " m from (", cx, ", ",
+                                cy, "); this scene has ", pvs_.object_count(), " objects and ", pvs_.cell_count(),
+                                " cells of ", grid_.cell_size(), " m from (", grid_.corner().x, ", ",
+                                grid_.corner().y, ")"));
   }
   if (strategy != static_cast<uint32_t>(options_.strategy) || seed != options_.seed) {
-    return r.Error(absl::StrCat("made with strategy ", strategy, " and seed ", seed, "; resume with the same ones"));
+    const std::string made = strategy <= static_cast<uint32_t>(SamplingStrategy::kRef)
+                                 ? StrategyName(static_cast<SamplingStrategy>(strategy))
+                                 : absl::StrCat("number ", strategy);
+    return r.Error(absl::StrCat("made with strategy ", made, " and seed ", seed, "; this run has strategy ",
+                                StrategyName(options_.strategy), " and seed ", options_.seed,
+                                ": resume with the same ones"));
   }
   AgvsStats s;
   st = r.Get(&s.batches, "batches", &s.samples, "samples", &s.rays, "rays", &s.discarded_samples,
