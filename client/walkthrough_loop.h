@@ -11,7 +11,8 @@
 //   client/walkthrough_window.cpp  the window: its key presses (client/window_keys.h), its size,
 //                                  the overlay's status and walk list
 // Screenshots (client/screenshots.h), --verify (client/verification.h) and the summary
-// (client/walkthrough_summary.h) are functions of their own that the loop calls.
+// (client/walkthrough_summary.h) are functions of their own that the loop calls; what a run is
+// asked to do is client/walkthrough_options.h.
 
 #include <cstdio>
 #include <memory>
