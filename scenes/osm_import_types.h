@@ -2,8 +2,8 @@
 // What an OpenStreetMap import is bounded by and what it reports: the box of longitudes and
 // latitudes it keeps (GeoBox, the catalog's "bbox" and `scene import-osm --bbox`) and its
 // summary (OsmImportSummary), shared by the reader (scenes/osm_read.h, which fills the summary's
-// reading counts) and the import (scenes/osm_import.h, the rest), so that neither includes
-// the other's header.
+// reading counts) and the import (scenes/osm_import.h, the rest): the import calls the reader,
+// and the reader needs nothing of the import's header.
 
 #include <absl/status/statusor.h>
 
