@@ -30,11 +30,6 @@ struct Camera {
   // The view frustum (its side planes and the near plane; the far plane is beyond the scene),
   // for culling many boxes.
   scenes::ViewFrustum Frustum() const;
-  // Whether any part of the box may be inside the view frustum. Conservative: false only when
-  // the box is wholly outside one plane.
-  bool MayOverlap(const glm::dvec3& box_min, const glm::dvec3& box_max) const {
-    return Frustum().MayOverlap(box_min, box_max);
-  }
 };
 
 }  // namespace vistream::client
