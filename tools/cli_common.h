@@ -55,16 +55,16 @@ int BadOption(const std::string& command, const std::string& option, const std::
 // kBadOptionExit after printing the error as BadOption does.
 int ParseFailure(const CLI::App& app, const CLI::ParseError& e);
 
-// Text that is not empty; given empty, the option is bad ("an empty <what>", exit 2) rather than
-// its default.
-inline CLI::Validator NonEmpty(const std::string& what, const std::string& value_name = "") {
-  return CLI::Validator([what](std::string& text) -> std::string { return text.empty() ? "an empty " + what : ""; },
+// Text that is not empty: given empty, the option is bad ("<option>: <message>", exit 2) rather
+// than its default.
+inline CLI::Validator NonEmpty(const std::string& message, const std::string& value_name = "") {
+  return CLI::Validator([message](std::string& text) -> std::string { return text.empty() ? message : ""; },
                         value_name);
 }
 
 // An output file's path: not empty (an empty -o is a bad option, exit 2, not a file named by
 // the extension alone, the default, or a write error).
-inline CLI::Validator OutputPath() { return NonEmpty("path", "PATH"); }
+inline CLI::Validator OutputPath() { return NonEmpty("an empty path", "PATH"); }
 
 // A scene file to write: a path ending in .glb or .gltf (any case) that is not a folder.
 CLI::Validator SceneOutputPath();

@@ -181,7 +181,7 @@ void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
       bench, "client", "the headless client along a walk: PVS+ε, PVS, whole scene", BenchClient,
       done);
   c->add_option("--scene", args->scene, "catalog name")->capture_default_str();
-  c->add_option("--path", args->path, "walk of the catalog entry (default: its first)")->check(NonEmpty("walk name"));
+  c->add_option("--path", args->path, "walk of the catalog entry (default: its first)")->check(NonEmpty("an empty walk name"));
   c->add_option("--size", args->size, "frame size, WIDTHxHEIGHT")->capture_default_str();
   c->add_option("--speed", args->speed_kmh, "walking speed, km/h")->check(FiniteRange(0.1, 1000.0))
       ->capture_default_str();

@@ -663,7 +663,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
                 "plausible limit in metres: taller height or levels tags are bad data (counted; the next rule is used)")
       ->check(FiniteRange(10.0, 10000.0));
   o->add_option("--name", imp->name, "the scene's name (default: the file name up to its first dot)")
-      ->check(NonEmpty("name"));
+      ->check(NonEmpty("an empty name"));
   o->add_flag("--json", imp->json, "print the summary as one JSON object");
 
   auto [c, city] =
@@ -677,7 +677,7 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--lod", city->lod, "level of detail to draw (its integer part: 1, 2); default: each object's highest")
       ->check(WholeRange(0, 4));
   c->add_option("--name", city->name, "the scene's name (default: the file name up to its first dot)")
-      ->check(NonEmpty("name"));
+      ->check(NonEmpty("an empty name"));
   c->add_option("--crs", city->crs, "the coordinate reference system when the file names none (EPSG:28992)")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {

@@ -36,8 +36,6 @@ struct SimulateArgs {
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
-  // The text options, with their values: one given empty is an error, not the default.
-  std::vector<std::pair<const CLI::Option*, const std::string*>> texts;
 };
 
 double Pct(const std::vector<double>& v, double q) {
@@ -171,11 +169,6 @@ int Simulate(const SimulateArgs& a) {
   // over every link (the declared or --link one, or each of --bandwidths at its latency).
   std::vector<double> speeds_kmh;
   std::string why;
-  for (const auto& [opt, value] : a.texts) {
-    if (opt->count() > 0 && value->empty()) {
-      return BadOption("simulate", opt->get_name(), "empty: leave the option out for the default");
-    }
-  }
   if (!a.speed.empty() && !a.speeds.empty()) return BadOption("simulate", "--speeds", "give --speed or --speeds, not both");
   if (!a.speed.empty() && !search) {
     const std::optional<double> v = ParseSpeed(a.speed, &why);
@@ -476,27 +469,30 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
                                                "stalls, arrival margins, bytes, triangles drawn",
                                                Simulate, done);
   c->add_option("--scene", args->scene, "catalog name or .json entry")->required();
-  // A text option: given empty, it is an error rather than the default (Simulate checks `texts`).
-  auto add_text = [app = c, held = args.get()](const char* name, std::string* value,
-                                               const std::string& description) {
-    held->texts.emplace_back(app->add_option(name, *value, description), value);
-  };
-  add_text("--path", &args->path, "the entry's walk (default: its first)");
-  add_text("--speed", &args->speed,
-           "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls, and for "
-           "pvs+eps also the highest with zero hole frames (bisection in [1, 500] km/h to 1%)");
-  add_text("--speeds", &args->speeds,
-           "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process whose "
-           "PVSs serve them all");
-  add_text("--link", &args->link,
-           "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: the "
-           "declared link, none: ideal");
-  add_text("--bandwidths", &args->bandwidths,
-           "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
-           "link's latency, jitter and loss");
-  add_text("--scheme", &args->scheme,
-           "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)");
-  add_text("--schemes", &args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)");
+  // The text options: given empty, each is an error rather than the default.
+  const CLI::Validator given = NonEmpty("empty: leave the option out for the default");
+  c->add_option("--path", args->path, "the entry's walk (default: its first)")->check(given);
+  c->add_option("--speed", args->speed,
+                "walking speed in km/h, 1 to 1000 (default: the walk's), or max: the highest with zero stalls, and for "
+                "pvs+eps also the highest with zero hole frames (bisection in [1, 500] km/h to 1%)")
+      ->check(given);
+  c->add_option("--speeds", args->speeds,
+                "several speeds in km/h, comma-separated: one run each (per scheme, per bandwidth), in one process "
+                "whose PVSs serve them all")
+      ->check(given);
+  c->add_option("--link", args->link,
+                "BPS,LATENCY_MS over the declared link's bandwidth and latency (its jitter and loss kept); default: the "
+                "declared link, none: ideal")
+      ->check(given);
+  c->add_option("--bandwidths", args->bandwidths,
+                "several link bandwidths in bits per second (k/M/G suffixes), comma-separated: one run each at the "
+                "link's latency, jitter and loss")
+      ->check(given);
+  c->add_option("--scheme", args->scheme,
+                "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)")
+      ->check(given);
+  c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)")
+      ->check(given);
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
       ->check(FiniteRange(kMinCellSize, kMaxCellSize));
   c->add_option("--res", args->res, "the dual ray space's finest raster")->capture_default_str()->check(PowerOfTwo(1, 256));
@@ -506,11 +502,13 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--compute-ms", args->compute_ms,
                 "charge this many ms per PVS and ε-mask instead of the measured time (machine-independent runs)")
       ->check(FiniteRange(0.0, 1e7));
-  add_text("--log", &args->log,
-           "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines");
-  add_text("--series", &args->series,
-           "write every sampled frame (10 Hz) of each run: metres along the walk, seconds, triangles drawn, "
-           "triangles without masks, masked, hole; one whitespace-separated block per run (gnuplot's index)");
+  c->add_option("--log", args->log,
+                "write the simulator's events (deliveries with jitter, computations, cells) as JSON lines")
+      ->check(given);
+  c->add_option("--series", args->series,
+                "write every sampled frame (10 Hz) of each run: metres along the walk, seconds, triangles drawn, "
+                "triangles without masks, masked, hole; one whitespace-separated block per run (gnuplot's index)")
+      ->check(given);
   c->add_flag("--json", args->json, "print one JSON object");
 }
 
