@@ -3,6 +3,7 @@
 #include "scenes/gltf_accessor.h"
 #include "scenes/gltf_decode.h"
 #include "scenes/gltf_frame.h"
+#include "scenes/levels.h"
 
 #include <cmath>
 #include <cstring>
@@ -64,6 +65,8 @@ struct PendingObject {
   // scene-local (exact doubles: nothing added and taken away again).
   bool occluders_local = false;
   std::string type;                    // extras.vistream.type
+  std::vector<int> lod_nodes;          // MSFT_lod ids: its coarser levels, finest first
+  glm::dmat4 gltf_parent{1.0};         // the frame its LOD nodes are in (its parent's, glTF)
 };
 
 class GltfImporter {
@@ -119,6 +122,7 @@ class GltfImporter {
         origin_node_ = index;
         origin_ = ZupFromGltf(glm::dvec3(local[3]));
         origin_world_ = kZupFromGltf * world;
+        origin_gltf_world_ = world;
         name_ = node.name;
         const tinygltf::Value& crs = VistreamExtra(node, "crs");
         if (crs.IsString()) crs_ = crs.Get<std::string>();
@@ -126,7 +130,7 @@ class GltfImporter {
         ReadPaths(index);
       }
     }
-    if (node.mesh >= 0) ImportMesh(index, world);
+    if (node.mesh >= 0) ImportMesh(index, parent, world);
     else if (Occluders(node).IsArray()) Warn(absl::StrCat(NodeName(index), ": occluders on a node without a mesh ignored"));
     for (int c : node.children) Visit(c, world, depth + 1);
     on_path_.erase(index);
@@ -192,18 +196,59 @@ class GltfImporter {
     }
   }
 
-  void ImportMesh(int node_index, const glm::dmat4& gltf_world) {
+  void ImportMesh(int node_index, const glm::dmat4& gltf_parent, const glm::dmat4& gltf_world) {
     const tinygltf::Node& node = model_.nodes[node_index];
     const std::string what = NodeName(node_index);
+    PendingObject obj;
+    ReadTriangles(node_index, gltf_world, what, &obj);
+    obj.name = node.name.empty() ? model_.meshes[node.mesh].name : node.name;
+    if (obj.name.empty()) obj.name = absl::StrCat("object", pending_.size());
+    const glm::dmat4 world = kZupFromGltf * gltf_world;
+    ImportOccluders(node, world, what, &obj);
+    if (obj.indices.empty()) {
+      Warn(absl::StrCat(what, ": no triangles; skipped"));
+      return;
+    }
+    const tinygltf::Value& terrain = VistreamExtra(node, "terrain");
+    if (terrain.IsBool()) obj.terrain = terrain.Get<bool>();
+    else if (terrain.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.terrain is not a boolean; ignored"));
+    const tinygltf::Value& type = VistreamExtra(node, "type");
+    if (type.IsString()) obj.type = type.Get<std::string>();
+    else if (type.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.type is not a string; ignored"));
+    obj.lod_nodes = LodNodes(node, what);
+    obj.gltf_parent = gltf_parent;
+    pending_.push_back(std::move(obj));
+  }
+
+  // MSFT_lod's ids of `node` (its coarser levels, finest first); empty without the extension.
+  std::vector<int> LodNodes(const tinygltf::Node& node, const std::string& what) const {
+    const auto it = node.extensions.find("MSFT_lod");
+    if (it == node.extensions.end()) return {};
+    const tinygltf::Value& ids = it->second.IsObject() && it->second.Has("ids") ? it->second.Get("ids") : tinygltf::Value();
+    if (!ids.IsArray()) throw LoadError{absl::StrCat(what, ": MSFT_lod has no array of ids")};
+    std::vector<int> out;
+    for (size_t k = 0; k < ids.ArrayLen(); ++k) {
+      const tinygltf::Value& id = ids.Get(static_cast<int>(k));
+      if (!id.IsInt() || id.Get<int>() < 0 || id.Get<int>() >= static_cast<int>(model_.nodes.size()) ||
+          model_.nodes[id.Get<int>()].mesh < 0) {
+        throw LoadError{absl::StrCat(what, ": MSFT_lod id ", k, " is not a node with a mesh")};
+      }
+      out.push_back(id.Get<int>());
+    }
+    return out;
+  }
+
+  // The triangles of node `node_index`'s mesh, in `gltf_world` (the node's glTF world matrix),
+  // appended to `obj` as z-up world positions and unit normals.
+  void ReadTriangles(int node_index, const glm::dmat4& gltf_world, const std::string& what, PendingObject* out) {
+    const tinygltf::Node& node = model_.nodes[node_index];
     if (node.mesh >= static_cast<int>(model_.meshes.size())) {
       throw LoadError{absl::StrCat(what, ": mesh ", node.mesh, " does not exist")};
     }
+    PendingObject& obj = *out;
     const glm::dmat4 world = kZupFromGltf * gltf_world;                 // glTF local -> z-up world
     const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
     const bool mirrored = glm::determinant(glm::dmat3(world)) < 0.0;
-    PendingObject obj;
-    obj.name = node.name.empty() ? model_.meshes[node.mesh].name : node.name;
-    if (obj.name.empty()) obj.name = absl::StrCat("object", pending_.size());
     const tinygltf::Mesh& mesh = model_.meshes[node.mesh];
     for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
       const tinygltf::Primitive& prim = mesh.primitives[pi];
@@ -299,18 +344,6 @@ class GltfImporter {
         }
       }
     }
-    ImportOccluders(node, world, what, &obj);
-    if (obj.indices.empty()) {
-      Warn(absl::StrCat(what, ": no triangles; skipped"));
-      return;
-    }
-    const tinygltf::Value& terrain = VistreamExtra(node, "terrain");
-    if (terrain.IsBool()) obj.terrain = terrain.Get<bool>();
-    else if (terrain.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.terrain is not a boolean; ignored"));
-    const tinygltf::Value& type = VistreamExtra(node, "type");
-    if (type.IsString()) obj.type = type.Get<std::string>();
-    else if (type.Type() != tinygltf::NULL_TYPE) Warn(absl::StrCat(what, ": extras.vistream.type is not a string; ignored"));
-    pending_.push_back(std::move(obj));
   }
 
   void ImportOccluders(const tinygltf::Node& node, const glm::dmat4& world, const std::string& what,
@@ -404,7 +437,81 @@ class GltfImporter {
       }
     }
     NormalizeOccluders(&scene);
+    ReadLevels(&scene);
     return scene;
+  }
+
+  // One coarser level: node `index`'s mesh in `gltf_parent`'s frame, with its measured error
+  // (extras.vistream.lod_error_m, required).
+  MeshLevel ReadLevel(int index, const glm::dmat4& gltf_parent, const std::string& what) {
+    PendingObject tmp;
+    ReadTriangles(index, gltf_parent * LocalMatrix(model_.nodes[index]), what, &tmp);
+    const tinygltf::Value& error = VistreamExtra(model_.nodes[index], "lod_error_m");
+    if (error.Type() == tinygltf::NULL_TYPE) throw LoadError{absl::StrCat(what, ": extras.vistream.lod_error_m is missing")};
+    if (!error.IsNumber() || !std::isfinite(error.GetNumberAsDouble()) || !(error.GetNumberAsDouble() > 0.0)) {
+      throw LoadError{absl::StrCat(what, ": extras.vistream.lod_error_m is not a finite number of metres above 0")};
+    }
+    MeshLevel level;
+    level.error_m = error.GetNumberAsDouble();
+    for (const auto& p : tmp.positions) level.mesh.positions.emplace_back(glm::vec3(p - origin_));
+    for (const auto& n : tmp.normals) level.mesh.normals.emplace_back(glm::vec3(n));
+    level.mesh.indices = std::move(tmp.indices);
+    return level;
+  }
+
+  // Levels of detail (scenes/level_types.h): MSFT_lod on object nodes, clusters in the origin
+  // node's extras.vistream.clusters ([{"objects": [ids], "nodes": [LOD nodes, finest first]}],
+  // their nodes in the origin node's frame). Checked with ValidateLevels.
+  void ReadLevels(Scene* scene) {
+    const tinygltf::Value& clusters =
+        origin_node_ >= 0 ? VistreamExtra(model_.nodes[origin_node_], "clusters") : tinygltf::Value();
+    const bool any = clusters.Type() != tinygltf::NULL_TYPE ||
+                     std::any_of(pending_.begin(), pending_.end(), [](const PendingObject& o) { return !o.lod_nodes.empty(); });
+    if (!any) return;
+    SceneLevels& levels = scene->levels;
+    levels.objects.resize(scene->objects.size());
+    for (size_t i = 0; i < pending_.size(); ++i) {
+      const auto& ids = pending_[i].lod_nodes;
+      for (size_t k = 0; k < ids.size(); ++k) {
+        const std::string what = absl::StrCat("object ", i, " ('", scene->objects[i].name, "'), level ", k + 1, " (",
+                                              NodeName(ids[k]), ")");
+        levels.objects[i].push_back(ReadLevel(ids[k], pending_[i].gltf_parent, what));
+      }
+    }
+    if (clusters.Type() != tinygltf::NULL_TYPE) {
+      if (!clusters.IsArray()) throw LoadError{"extras.vistream.clusters of the origin node is not an array"};
+      for (size_t c = 0; c < clusters.ArrayLen(); ++c) {
+        const tinygltf::Value& entry = clusters.Get(static_cast<int>(c));
+        const std::string what = absl::StrCat("cluster ", c);
+        if (!entry.IsObject() || !entry.Has("objects") || !entry.Get("objects").IsArray() || !entry.Has("nodes") ||
+            !entry.Get("nodes").IsArray()) {
+          throw LoadError{absl::StrCat(what, ": needs arrays \"objects\" and \"nodes\"")};
+        }
+        Cluster cluster;
+        const tinygltf::Value& objects = entry.Get("objects");
+        for (size_t k = 0; k < objects.ArrayLen(); ++k) {
+          const tinygltf::Value& o = objects.Get(static_cast<int>(k));
+          if (!o.IsInt() || o.Get<int>() < 0) throw LoadError{absl::StrCat(what, ": object ", k, " is not an object id")};
+          cluster.objects.push_back(static_cast<uint32_t>(o.Get<int>()));
+        }
+        const tinygltf::Value& nodes = entry.Get("nodes");
+        for (size_t k = 0; k < nodes.ArrayLen(); ++k) {
+          const tinygltf::Value& n = nodes.Get(static_cast<int>(k));
+          if (!n.IsInt() || n.Get<int>() < 0 || n.Get<int>() >= static_cast<int>(model_.nodes.size()) ||
+              model_.nodes[n.Get<int>()].mesh < 0) {
+            throw LoadError{absl::StrCat(what, ": node ", k, " is not a node with a mesh")};
+          }
+          cluster.levels.push_back(
+              ReadLevel(n.Get<int>(), origin_gltf_world_, absl::StrCat(what, ", level ", k + 1, " (", NodeName(n.Get<int>()), ")")));
+        }
+        for (const uint32_t o : cluster.objects) {
+          if (o < scene->objects.size()) cluster.bounds.Extend(scene->objects[o].bounds);
+        }
+        for (const MeshLevel& l : cluster.levels) cluster.bounds.Extend(l.mesh.Bounds());
+        levels.clusters.push_back(std::move(cluster));
+      }
+    }
+    if (absl::Status s = ValidateLevels(levels, *scene, "levels"); !s.ok()) throw LoadError{std::string(s.message())};
   }
 
   const tinygltf::Model& model_;
@@ -415,6 +522,7 @@ class GltfImporter {
   int origin_node_ = -1;
   glm::dvec3 origin_{0.0};
   glm::dmat4 origin_world_{1.0};  // the origin node's world matrix, z-up (as ImportMesh's `world`)
+  glm::dmat4 origin_gltf_world_{1.0};  // the same in glTF's frame
   std::string name_;
   std::string crs_;
   std::vector<ScenePath> paths_;

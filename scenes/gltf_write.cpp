@@ -1,6 +1,7 @@
 #include "scenes/gltf_io.h"
 
 #include "scenes/gltf_frame.h"
+#include "scenes/levels.h"
 
 #include <cerrno>
 #include <charconv>
@@ -53,20 +54,31 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
   model.buffers.resize(1);
   tinygltf::Buffer& buffer = model.buffers[0];
 
-  // Three interleaving-free streams, each one bufferView; each object's accessors are ranges
+  if (absl::Status s = ValidateLevels(scene.levels, scene, path); !s.ok()) return s;
+  // Every mesh written: the objects', then each object's levels, then each cluster's levels.
+  std::vector<const Mesh*> meshes;
+  for (const Object& o : scene.objects) meshes.push_back(&o.mesh);
+  for (const auto& chain : scene.levels.objects) {
+    for (const MeshLevel& l : chain) meshes.push_back(&l.mesh);
+  }
+  for (const Cluster& c : scene.levels.clusters) {
+    for (const MeshLevel& l : c.levels) meshes.push_back(&l.mesh);
+  }
+  // Three interleaving-free streams, each one bufferView; each mesh's accessors are ranges
   // of them, so that every mesh has its own vertex count and bounds (viewers cull by them).
   std::vector<glm::vec3> positions, normals;
   std::vector<uint32_t> indices;
-  positions.reserve(scene.VertexCount());
-  normals.reserve(scene.VertexCount());
-  indices.reserve(scene.TriangleCount() * 3);
-  if (scene.VertexCount() > std::numeric_limits<uint32_t>::max()) {
+  size_t vertex_total = 0;
+  for (const Mesh* m : meshes) vertex_total += m->positions.size();
+  if (vertex_total > std::numeric_limits<uint32_t>::max()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": more than 2^32 vertices"));
   }
-  for (const Object& o : scene.objects) {
-    for (const glm::vec3& p : o.mesh.positions) positions.emplace_back(GltfFromZup(glm::dvec3(p)));
-    for (const glm::vec3& n : o.mesh.normals) normals.emplace_back(GltfFromZup(glm::dvec3(n)));
-    indices.insert(indices.end(), o.mesh.indices.begin(), o.mesh.indices.end());  // object-local
+  positions.reserve(vertex_total);
+  normals.reserve(vertex_total);
+  for (const Mesh* m : meshes) {
+    for (const glm::vec3& p : m->positions) positions.emplace_back(GltfFromZup(glm::dvec3(p)));
+    for (const glm::vec3& n : m->normals) normals.emplace_back(GltfFromZup(glm::dvec3(n)));
+    indices.insert(indices.end(), m->indices.begin(), m->indices.end());  // mesh-local
   }
   const size_t pos_off = AppendBytes(positions, &buffer.data);
   const size_t nrm_off = AppendBytes(normals, &buffer.data);
@@ -123,8 +135,9 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
     return static_cast<int>(model.accessors.size() - 1);
   };
   size_t vertex_base = 0, index_base = 0;
-  for (const Object& o : scene.objects) {
-    const size_t nv = o.mesh.positions.size(), ni = o.mesh.indices.size();
+  // The glTF mesh of the next entry of `meshes` (called in their order).
+  auto add_mesh = [&](const Mesh& m) {
+    const size_t nv = m.positions.size(), ni = m.indices.size();
     const int pa = add_accessor(0, vertex_base * sizeof(glm::vec3), nv, TINYGLTF_COMPONENT_TYPE_FLOAT,
                                 TINYGLTF_TYPE_VEC3);
     glm::dvec3 lo(INFINITY), hi(-INFINITY);  // POSITION needs min and max (glTF 2.0, 3.6.2.4)
@@ -149,10 +162,13 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
     tinygltf::Mesh mesh;
     mesh.primitives.push_back(prim);
     model.meshes.push_back(std::move(mesh));
-
+    return static_cast<int>(model.meshes.size() - 1);
+  };
+  std::vector<int> object_nodes;
+  for (const Object& o : scene.objects) {
     tinygltf::Node node;
     node.name = o.name;
-    node.mesh = static_cast<int>(model.meshes.size() - 1);
+    node.mesh = add_mesh(o.mesh);
     tinygltf::Value::Object extras;
     if (!o.type.empty()) extras.emplace("type", tinygltf::Value(o.type));
     if (std::binary_search(scene.terrain.begin(), scene.terrain.end(), o.id)) {
@@ -176,7 +192,47 @@ absl::Status SaveGltf(const Scene& scene, const std::string& path) {
     }
     model.nodes.push_back(std::move(node));
     model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));
+    object_nodes.push_back(static_cast<int>(model.nodes.size() - 1));
   }
+  // Levels: nodes outside the scene's hierarchy, in the origin node's frame (no transform of
+  // their own), each with its measured error; an object's listed by MSFT_lod on its node.
+  auto add_level = [&](const MeshLevel& l, const std::string& name) {
+    tinygltf::Node node;
+    node.name = name;
+    node.mesh = add_mesh(l.mesh);
+    node.extras = tinygltf::Value(
+        tinygltf::Value::Object{{"vistream", tinygltf::Value(tinygltf::Value::Object{{"lod_error_m", tinygltf::Value(l.error_m)}})}});
+    model.nodes.push_back(std::move(node));
+    return static_cast<int>(model.nodes.size() - 1);
+  };
+  bool lod = false;
+  for (size_t i = 0; i < scene.levels.objects.size(); ++i) {
+    tinygltf::Value::Array ids;
+    for (size_t k = 0; k < scene.levels.objects[i].size(); ++k) {
+      ids.emplace_back(add_level(scene.levels.objects[i][k], absl::StrCat(scene.objects[i].name, " level ", k + 1)));
+    }
+    if (ids.empty()) continue;
+    lod = true;
+    model.nodes[object_nodes[i]].extensions["MSFT_lod"] =
+        tinygltf::Value(tinygltf::Value::Object{{"ids", tinygltf::Value(std::move(ids))}});
+  }
+  if (!scene.levels.clusters.empty()) {
+    tinygltf::Value::Array clusters;
+    for (size_t c = 0; c < scene.levels.clusters.size(); ++c) {
+      const Cluster& cl = scene.levels.clusters[c];
+      tinygltf::Value::Array objects, nodes;
+      for (const uint32_t o : cl.objects) objects.emplace_back(static_cast<int>(o));
+      for (size_t k = 0; k < cl.levels.size(); ++k) {
+        nodes.emplace_back(add_level(cl.levels[k], absl::StrCat("cluster ", c, " level ", k + 1)));
+      }
+      clusters.emplace_back(tinygltf::Value::Object{{"objects", tinygltf::Value(std::move(objects))},
+                                                    {"nodes", tinygltf::Value(std::move(nodes))}});
+    }
+    auto origin_extras = model.nodes[0].extras.Get("vistream").Get<tinygltf::Value::Object>();
+    origin_extras.emplace("clusters", tinygltf::Value(std::move(clusters)));
+    model.nodes[0].extras = tinygltf::Value(tinygltf::Value::Object{{"vistream", tinygltf::Value(std::move(origin_extras))}});
+  }
+  if (lod) model.extensionsUsed.push_back("MSFT_lod");
   tinygltf::Scene s;
   s.name = scene.name;
   s.nodes = {0};

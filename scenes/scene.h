@@ -13,6 +13,7 @@
 #include <glm/vec3.hpp>
 
 #include "scenes/aabb.h"
+#include "scenes/level_types.h"
 #include "scenes/mesh.h"
 
 namespace vistream::scenes {
@@ -62,6 +63,10 @@ struct Scene {
   // Walks the data gives (ScenePath); empty when it gives none. Not part of SceneFingerprint:
   // they do not change what is visible.
   std::vector<ScenePath> paths;
+  // Levels of detail (scenes/levels.h makes them; glTF keeps them, MSFT_lod); empty when the
+  // scene has none. Not part of SceneFingerprint: levels change what is drawn, not what is
+  // visible.
+  SceneLevels levels;
 
   size_t TriangleCount() const;
   size_t VertexCount() const;

@@ -1,4 +1,4 @@
-// vistream scene generate | import-osm | import-city | occluders | extrude | info | map
+// vistream scene generate | import-osm | import-city | occluders | extrude | levels | info | map
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -22,6 +22,7 @@
 #include "scenes/city_import.h"
 #include "scenes/footprint_extrusion.h"
 #include "scenes/gltf_io.h"
+#include "scenes/levels.h"
 #include "scenes/osm_import.h"
 #include "scenes/progress.h"
 #include "visibility/kdtree.h"
@@ -452,6 +453,72 @@ int Extrude(const ExtrudeArgs& a) {
   return 0;
 }
 
+uint64_t ObjectLevelCount(const scenes::SceneLevels& levels) {
+  uint64_t n = 0;
+  for (const auto& chain : levels.objects) n += chain.size();
+  return n;
+}
+
+struct LevelsArgs {
+  std::string input, output;
+  double tile_m = 250.0;
+  bool no_clusters = false;
+  bool json = false;
+};
+
+// vistream scene levels: every object's chain of coarser meshes and the clusters (issue 45),
+// measured, saved with the scene (glTF MSFT_lod).
+int Levels(const LevelsArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  double load_s = 0.0;
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.input, &load_s);
+  if (!scene.ok()) return Fail(scene.status());
+  scenes::LevelOptions options;
+  if (a.no_clusters) options.cluster_tiles_m.clear();
+  else options.cluster_tiles_m = {a.tile_m, 4.0 * a.tile_m};
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<scenes::SceneLevels> levels = scenes::MakeLevels(*scene, options, ToolRun());
+  if (!levels.ok()) return Fail(levels.status());
+  const double make_s = SecondsSince(start);
+  scene->levels = *std::move(levels);
+  if (std::optional<int> failed = SaveSceneOutput(*scene, a.output, "levels")) return *failed;
+  const scenes::SceneLevels& l = scene->levels;
+  const uint64_t object_levels = ObjectLevelCount(l);
+  uint64_t with = 0, cluster_levels = 0;
+  for (const auto& chain : l.objects) with += chain.empty() ? 0 : 1;
+  for (const auto& c : l.clusters) cluster_levels += c.levels.size();
+  double max_error = 0.0;
+  for (const auto& chain : l.objects) {
+    for (const auto& lv : chain) max_error = std::max(max_error, lv.error_m);
+  }
+  struct rusage usage {};
+  getrusage(RUSAGE_SELF, &usage);
+  const double peak_mb = static_cast<double>(usage.ru_maxrss) / 1024.0;
+  if (a.json) {
+    const nlohmann::json j = {{"input", a.input},
+                              {"output", a.output},
+                              {"objects", scene->objects.size()},
+                              {"objects_with_levels", with},
+                              {"object_levels", object_levels},
+                              {"clusters", l.clusters.size()},
+                              {"cluster_levels", cluster_levels},
+                              {"level_bytes", scenes::LevelBytes(l)},
+                              {"largest_object_error_m", max_error},
+                              {"load_s", load_s},
+                              {"levels_s", make_s},
+                              {"peak_rss_mb", peak_mb}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s: %llu of %zu objects have levels (%llu levels), %zu clusters (%llu levels); levels hold %.1f MB; "
+              "made in %.1f s, peak memory %.0f MB; saved %s\n",
+              a.input.c_str(), static_cast<unsigned long long>(with), scene->objects.size(),
+              static_cast<unsigned long long>(object_levels), l.clusters.size(),
+              static_cast<unsigned long long>(cluster_levels), static_cast<double>(scenes::LevelBytes(l)) / 1e6, make_s,
+              peak_mb, a.output.c_str());
+  return 0;
+}
+
 struct InfoArgs {
   std::string file;
   bool json = false;
@@ -482,6 +549,8 @@ int Info(const InfoArgs& a) {
     j["triangles"] = scene->TriangleCount();
     j["vertices"] = scene->VertexCount();
     j["occluders"] = scene->occluders.size();
+    j["object_levels"] = ObjectLevelCount(scene->levels);
+    j["clusters"] = scene->levels.clusters.size();
     j["objects_with_several_occluders"] = tiered;
     j["bounds"] = {{"min", {b.min.x, b.min.y, b.min.z}}, {"max", {b.max.x, b.max.y, b.max.z}}};
     j["origin"] = {scene->origin.x, scene->origin.y, scene->origin.z};
@@ -515,6 +584,11 @@ int Info(const InfoArgs& a) {
               static_cast<unsigned long long>(st.objects_with_occluder),
               static_cast<unsigned long long>(st.non_terrain_objects), st.occluder_volume_m3, st.solid_volume_m3,
               100.0 * occluding_share);
+  if (!scene->levels.empty()) {
+    std::printf("levels      %llu object levels, %zu clusters (%.1f MB)\n",
+                static_cast<unsigned long long>(ObjectLevelCount(scene->levels)), scene->levels.clusters.size(),
+                static_cast<double>(scenes::LevelBytes(scene->levels)) / 1e6);
+  }
   if (st.objects_by_type.size() > 1 || !st.objects_by_type.count("object")) {
     std::printf("types      ");
     for (const auto& [type, n] : st.objects_by_type) std::printf(" %s %llu", type.c_str(), static_cast<unsigned long long>(n));
@@ -710,6 +784,19 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   ex->add_option("IN", ext->input, ".glb/.gltf file, catalog name or catalog .json")->required();
   ex->add_option("-o,--output", ext->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
   ex->add_flag("--json", ext->json, "print the summary as one JSON object");
+
+  auto [lv, lev] = AddSubcommand<LevelsArgs>(
+      scene, "levels",
+      "make levels of detail: each object's coarser meshes and merged clusters of nearby objects, each with its "
+      "measured error in metres, saved with the scene (glTF MSFT_lod)",
+      Levels, done);
+  lv->add_option("IN", lev->input, ".glb/.gltf file, catalog name or catalog .json")->required();
+  lv->add_option("-o,--output", lev->output, "output file, .glb or .gltf")->required()->check(SceneOutputPath());
+  lv->add_option("--tile", lev->tile_m, "edge of the small cluster tiles in metres (large tiles: 4 times)")
+      ->check(FiniteRange(10.0, 100000.0))
+      ->capture_default_str();
+  lv->add_flag("--no-clusters", lev->no_clusters, "object levels only");
+  lv->add_flag("--json", lev->json, "print the summary as one JSON object");
 
   auto [i, info] = AddSubcommand<InfoArgs>(scene, "info", "print a scene's statistics", Info, done);
   i->add_option("FILE", info->file, ".glb/.gltf file, catalog name or catalog .json")->required();

@@ -1,0 +1,146 @@
+#include "scenes/level_choice.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+#include <glm/common.hpp>
+
+#include "scenes/geometry_codec.h"
+
+namespace vistream::scenes {
+
+double ScreenSpec::MaxPixelsPerRadian() const {
+  const double t = std::tan(0.5 * vertical_fov_rad);
+  const double focal_px = 0.5 * static_cast<double>(height_px) / t;
+  const double aspect = height_px > 0 ? static_cast<double>(width_px) / static_cast<double>(height_px) : 1.0;
+  const double corner_tan2 = t * t * (1.0 + aspect * aspect);
+  return focal_px * (1.0 + corner_tan2);
+}
+
+double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen) {
+  if (!(distance_m > error_m)) return std::numeric_limits<double>::infinity();
+  return error_m * screen.MaxPixelsPerRadian() / (distance_m - error_m);
+}
+
+double BoxDistance(const Aabb& a, const Aabb& b) {
+  const glm::dvec3 gap = glm::max(glm::dvec3(0.0), glm::max(a.min - b.max, b.min - a.max));
+  return std::sqrt(gap.x * gap.x + gap.y * gap.y + gap.z * gap.z);
+}
+
+LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels) : scene_(&scene), levels_(&levels) {
+  object_bytes_.resize(scene.objects.size());
+  for (size_t o = 0; o < scene.objects.size(); ++o) {
+    object_bytes_[o].push_back(EncodeMesh(scene.objects[o].mesh).EncodedBytes());
+    if (o < levels.objects.size()) {
+      for (const MeshLevel& l : levels.objects[o]) object_bytes_[o].push_back(EncodeLevelMesh(l.mesh).EncodedBytes());
+    }
+  }
+  cluster_bytes_.resize(levels.clusters.size());
+  std::vector<uint32_t> count(scene.objects.size() + 1, 0);
+  for (size_t c = 0; c < levels.clusters.size(); ++c) {
+    for (const MeshLevel& l : levels.clusters[c].levels) cluster_bytes_[c].push_back(EncodeLevelMesh(l.mesh).EncodedBytes());
+    for (uint32_t o : levels.clusters[c].objects) ++count[o + 1];
+  }
+  cluster_offsets_.assign(scene.objects.size() + 1, 0);
+  for (size_t o = 0; o < scene.objects.size(); ++o) cluster_offsets_[o + 1] = cluster_offsets_[o] + count[o + 1];
+  cluster_ids_.resize(cluster_offsets_.back());
+  std::vector<uint32_t> fill(cluster_offsets_.begin(), cluster_offsets_.end() - 1);
+  std::vector<uint32_t> by_size(levels.clusters.size());
+  for (uint32_t c = 0; c < by_size.size(); ++c) by_size[c] = c;
+  std::stable_sort(by_size.begin(), by_size.end(), [&](uint32_t a, uint32_t b) {
+    return levels.clusters[a].objects.size() < levels.clusters[b].objects.size();
+  });
+  for (uint32_t c : by_size) {
+    for (uint32_t o : levels.clusters[c].objects) cluster_ids_[fill[o]++] = c;
+  }
+}
+
+std::span<const uint32_t> LevelIndex::ClustersOf(uint32_t o) const {
+  return {cluster_ids_.data() + cluster_offsets_[o], cluster_ids_.data() + cluster_offsets_[o + 1]};
+}
+
+std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
+                                   const ScreenSpec& screen, double tau_px) {
+  const Scene& scene = index.scene();
+  const SceneLevels& levels = index.levels();
+  // Each PVS object's own coarsest allowed level.
+  std::unordered_map<uint32_t, uint32_t> own_level;
+  own_level.reserve(pvs.size());
+  for (const uint32_t o : pvs) {
+    uint32_t level = 0;
+    if (o < levels.objects.size()) {
+      const double d = BoxDistance(eye_region, scene.objects[o].bounds);
+      const auto& chain = levels.objects[o];
+      for (size_t k = chain.size(); k > 0; --k) {
+        if (ErrorPixels(chain[k - 1].error_m, d, screen) <= tau_px) {
+          level = static_cast<uint32_t>(k);
+          break;
+        }
+      }
+    }
+    own_level.emplace(o, level);
+  }
+  // Clusters, fewest objects first: chosen where allowed, self-contained and no dearer.
+  std::vector<uint32_t> candidates;
+  for (const uint32_t o : pvs) {
+    const auto cs = index.ClustersOf(o);
+    candidates.insert(candidates.end(), cs.begin(), cs.end());
+  }
+  std::sort(candidates.begin(), candidates.end());
+  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  std::stable_sort(candidates.begin(), candidates.end(), [&](uint32_t a, uint32_t b) {
+    return levels.clusters[a].objects.size() < levels.clusters[b].objects.size();
+  });
+  std::unordered_map<uint32_t, uint32_t> owner;              // PVS object -> chosen cluster
+  std::unordered_map<uint32_t, uint32_t> chosen;             // chosen cluster -> its level
+  std::vector<uint32_t> members;
+  for (const uint32_t c : candidates) {
+    const Cluster& cluster = levels.clusters[c];
+    const double d = BoxDistance(eye_region, cluster.bounds);
+    uint32_t level = 0;
+    for (size_t k = cluster.levels.size(); k > 0; --k) {
+      if (ErrorPixels(cluster.levels[k - 1].error_m, d, screen) <= tau_px) {
+        level = static_cast<uint32_t>(k);
+        break;
+      }
+    }
+    if (level == 0) continue;
+    members.clear();
+    std::set_intersection(cluster.objects.begin(), cluster.objects.end(), pvs.begin(), pvs.end(),
+                          std::back_inserter(members));
+    uint64_t replaced = 0;
+    std::vector<uint32_t> inner;  // chosen clusters it would replace
+    bool contained = true;
+    for (const uint32_t o : members) {
+      const auto it = owner.find(o);
+      if (it == owner.end()) {
+        replaced += index.ObjectBytes(o, own_level.at(o));
+        continue;
+      }
+      if (std::find(inner.begin(), inner.end(), it->second) != inner.end()) continue;
+      const Cluster& other = levels.clusters[it->second];
+      if (!std::includes(cluster.objects.begin(), cluster.objects.end(), other.objects.begin(), other.objects.end())) {
+        contained = false;
+        break;
+      }
+      inner.push_back(it->second);
+      replaced += index.ClusterBytes(it->second, chosen.at(it->second));
+    }
+    if (!contained || index.ClusterBytes(c, level) > replaced) continue;
+    for (const uint32_t r : inner) chosen.erase(r);
+    for (const uint32_t o : members) owner[o] = c;
+    chosen[c] = level;
+  }
+  std::vector<DrawItem> items;
+  items.reserve(pvs.size() - owner.size() + chosen.size());
+  for (const uint32_t o : pvs) {
+    if (!owner.contains(o)) items.push_back({DrawItem::Kind::kObject, o, own_level.at(o)});
+  }
+  for (const auto& [c, level] : chosen) items.push_back({DrawItem::Kind::kCluster, c, level});
+  std::sort(items.begin(), items.end());
+  return items;
+}
+
+}  // namespace vistream::scenes

@@ -1,0 +1,86 @@
+#pragma once
+// Which level of detail to draw of each object a region's PVS holds (issue 45; DESIGN.md
+// "Levels of detail"): conservatively for every eye point of the region (a viewcell's eye band,
+// or an ε-neighbourhood's box), the coarsest level whose geometric error projects to at most τ
+// pixels of the client's viewport; a cluster (HLOD) where that holds for the whole cluster and it
+// costs fewer bytes than what it replaces. Levels never change what is visible, only what is
+// drawn: every object of the PVS stays drawn, at some level or within a chosen cluster.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "scenes/aabb.h"
+#include "scenes/level_types.h"
+#include "scenes/scene.h"
+
+namespace vistream::scenes {
+
+// The client's viewport (Hello).
+struct ScreenSpec {
+  uint32_t width_px = 1280;
+  uint32_t height_px = 720;
+  double vertical_fov_rad = 1.0471975511965976;  // 60 degrees
+
+  // The most pixels a small length at distance 1 m, perpendicular to the view ray, spans
+  // anywhere on this screen: the focal length in pixels, (height / 2) / tan(fov / 2), times
+  // 1 + tan^2 of the screen corner's angle off the axis (a perspective projection stretches the
+  // image towards the corners by that much). Pixels per metre at distance d is this over d.
+  double MaxPixelsPerRadian() const;
+};
+
+// The most pixels a geometric error of `error_m` can shift the image of a surface whose
+// original lies at least `distance_m` from the eye: error * MaxPixelsPerRadian / (distance -
+// error); infinity when distance <= error.
+double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen);
+
+// The distance, metres, between the closest points of two boxes (0 when they overlap).
+double BoxDistance(const Aabb& a, const Aabb& b);
+
+// What the choice reads, built once per scene: per level its encoded size (the bytes the wire
+// carries), and per object the clusters that stand for it, smallest first.
+class LevelIndex {
+ public:
+  // `scene` and `levels` must outlive the index. levels.objects empty: every object full.
+  LevelIndex(const Scene& scene, const SceneLevels& levels);
+
+  const Scene& scene() const { return *scene_; }
+  const SceneLevels& levels() const { return *levels_; }
+  // Encoded bytes (scenes::EncodeMesh) of object `o` at `level` (0: the full mesh).
+  uint64_t ObjectBytes(uint32_t o, uint32_t level) const { return object_bytes_[o][level]; }
+  // Encoded bytes of cluster `c` at `level` (1 .. levels.size()).
+  uint64_t ClusterBytes(uint32_t c, uint32_t level) const { return cluster_bytes_[c][level - 1]; }
+  // The clusters standing for `o`, fewest objects first.
+  std::span<const uint32_t> ClustersOf(uint32_t o) const;
+
+ private:
+  const Scene* scene_;
+  const SceneLevels* levels_;
+  std::vector<std::vector<uint64_t>> object_bytes_;   // [object][level], level 0 the full mesh
+  std::vector<std::vector<uint64_t>> cluster_bytes_;  // [cluster][level - 1]
+  std::vector<uint32_t> cluster_offsets_;             // CSR over objects
+  std::vector<uint32_t> cluster_ids_;
+};
+
+// One thing to draw: an object at a level (0: its full mesh; k: levels.objects[id][k - 1]) or a
+// cluster at a level (k >= 1: levels.clusters[id].levels[k - 1]).
+struct DrawItem {
+  enum class Kind : uint8_t { kObject, kCluster };
+  Kind kind = Kind::kObject;
+  uint32_t id = 0;
+  uint32_t level = 0;
+  friend bool operator==(const DrawItem&, const DrawItem&) = default;
+  friend auto operator<=>(const DrawItem&, const DrawItem&) = default;
+};
+
+// The levels to draw for `pvs` (sorted object ids) seen from anywhere in `eye_region` (scene-local
+// box: a viewcell's eye band or a neighbourhood) on `screen` at screen error `tau_px` (> 0):
+// objects of the PVS not in a chosen cluster at the coarsest level with ErrorPixels(error,
+// BoxDistance(eye_region, object bounds)) <= tau_px; a cluster at its coarsest such level (with
+// its bounds) where every object of the PVS it stands for is not already in another chosen
+// cluster it does not contain and its bytes are at most those of what it replaces (clusters
+// considered fewest objects first). Sorted; every PVS object is drawn by exactly one item.
+std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
+                                   const ScreenSpec& screen, double tau_px);
+
+}  // namespace vistream::scenes
