@@ -44,22 +44,27 @@ bool CellComplete(const std::vector<uint32_t>* list, Held&& held) {
 class CellCompletion {
  public:
   struct Object {
-    double arrival_s = 0.0;  // the latest arrival
+    double arrival_s = 0.0;  // the latest arrival (a finer level of a held object does not move it)
     bool held = false;       // now
     bool ever = false;       // at some time
+    uint32_t level = 0;      // the level of detail held (0: full; issue 45)
   };
 
   // Hears of every cell that becomes complete (a list arriving whole, or the last object of
   // a list arriving), with the time it did; may be empty.
   std::function<void(uint32_t cell, double t_s)> on_complete;
 
-  // The PVS list of `cell` (object ids, distinct) arrived at `t_s`, replacing an earlier one.
-  void SetList(uint32_t cell, std::span<const uint32_t> objects, double t_s);
+  // The PVS list of `cell` (object ids, distinct) arrived at `t_s`, replacing an earlier one;
+  // `levels`, when not empty, the level each object needs there (ViewcellPvs.object_levels,
+  // one per object; empty: full detail).
+  void SetList(uint32_t cell, std::span<const uint32_t> objects, double t_s, std::span<const uint32_t> levels = {});
   // The caller forgot `cell`'s list (nothing: no list is held).
   void DropList(uint32_t cell);
-  // Object `id` arrived at `t_s` (again while held: its arrival moves to `t_s`). Returns true
-  // the first time the object is held in this tracker's life.
-  bool Arrive(uint32_t id, double t_s);
+  // Object `id` arrived at `t_s` at `level` (0: full). Again at the same level while held: its
+  // arrival moves to `t_s`; at another level while held: the level changes, the arrival stays
+  // (a level replaces the one held, which was drawable all along). Returns true the first time
+  // the object is held in this tracker's life.
+  bool Arrive(uint32_t id, double t_s, uint32_t level = 0);
   // The caller dropped object `id` (not held: nothing happens).
   void Drop(uint32_t id);
 
@@ -78,6 +83,9 @@ class CellCompletion {
   bool Complete(uint32_t cell) const;
   // The objects of `cell`'s list not held (0 without a list).
   size_t Missing(uint32_t cell) const;
+  // The objects of `cell`'s list held at a coarser level than the list asks (drawn until the
+  // finer one arrives: a coarse frame; 0 without a list).
+  size_t Coarse(uint32_t cell) const;
   // When `cell` is complete: the latest arrival among its list and the objects it names.
   std::optional<double> CompleteAt(uint32_t cell) const;
 
@@ -85,11 +93,12 @@ class CellCompletion {
   struct CellList {
     std::vector<uint32_t> objects;
     size_t missing = 0;
+    size_t coarse = 0;
     double latest_s = 0.0;  // the latest arrival among the list and its held objects
   };
   struct ObjectEntry {
     Object state;
-    std::vector<uint32_t> cells;  // cells whose list names it
+    std::vector<std::pair<uint32_t, uint32_t>> cells;  // cells whose list names it, and the level each needs
   };
   std::unordered_map<uint32_t, ObjectEntry> entries_;  // every object held or named by a list
   std::unordered_map<uint32_t, CellList> lists_;

@@ -16,6 +16,13 @@ v1::Hello MakeHello(const HelloSettings& settings) {
   h.set_triangle_budget(settings.triangle_budget);
   h.set_epsilon_masks(settings.epsilon_masks);
   h.mutable_held_objects()->Add(settings.held_objects.begin(), settings.held_objects.end());
+  if (settings.screen_error_px > 0.0) {
+    v1::LevelRequest* l = h.mutable_levels();
+    l->set_viewport_width_px(settings.viewport_width_px);
+    l->set_viewport_height_px(settings.viewport_height_px);
+    l->set_vertical_fov_rad(settings.vertical_fov_rad);
+    l->set_screen_error_px(settings.screen_error_px);
+  }
   return h;
 }
 

@@ -32,6 +32,12 @@ struct HelloSettings {
   uint64_t triangle_budget = 0;      // triangles a frame; 0 unlimited
   bool epsilon_masks = false;        // the client draws ε-masks (the server sends none otherwise)
   std::vector<uint32_t> held_objects;  // on resume: the objects it still holds, any order
+  // Levels of detail (Hello.levels; issue 45): the screen error tau in pixels the client accepts
+  // on its viewport; 0: off (every object at full detail).
+  double screen_error_px = 0.0;
+  uint32_t viewport_width_px = 1280;
+  uint32_t viewport_height_px = 720;
+  double vertical_fov_rad = 1.0471975511965976;  // 60 degrees
 };
 
 // The Hello of the current protocol version (PROTOCOL_VERSION_CURRENT) with `settings`.

@@ -2,6 +2,7 @@
 // Axis-aligned boxes in double precision, scene-local metres, z up.
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include <glm/vec3.hpp>
@@ -40,5 +41,13 @@ struct Aabb {
   }
   friend bool operator==(const Aabb&, const Aabb&) = default;
 };
+
+// The distance in metres between the closest points of two boxes (0 when they touch or overlap).
+inline double BoxDistance(const Aabb& a, const Aabb& b) {
+  const double dx = std::max({0.0, a.min.x - b.max.x, b.min.x - a.max.x});
+  const double dy = std::max({0.0, a.min.y - b.max.y, b.min.y - a.max.y});
+  const double dz = std::max({0.0, a.min.z - b.max.z, b.min.z - a.max.z});
+  return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
 
 }  // namespace vistream::scenes

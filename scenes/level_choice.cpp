@@ -5,8 +5,6 @@
 #include <limits>
 #include <unordered_map>
 
-#include <glm/common.hpp>
-
 #include "scenes/geometry_codec.h"
 
 namespace vistream::scenes {
@@ -22,11 +20,6 @@ double ScreenSpec::MaxPixelsPerRadian() const {
 double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen) {
   if (!(distance_m > error_m)) return std::numeric_limits<double>::infinity();
   return error_m * screen.MaxPixelsPerRadian() / (distance_m - error_m);
-}
-
-double BoxDistance(const Aabb& a, const Aabb& b) {
-  const glm::dvec3 gap = glm::max(glm::dvec3(0.0), glm::max(a.min - b.max, b.min - a.max));
-  return std::sqrt(gap.x * gap.x + gap.y * gap.y + gap.z * gap.z);
 }
 
 LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels) : scene_(&scene), levels_(&levels) {
@@ -62,7 +55,7 @@ std::span<const uint32_t> LevelIndex::ClustersOf(uint32_t o) const {
 }
 
 std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
-                                   const ScreenSpec& screen, double tau_px) {
+                                   const ScreenSpec& screen, double tau_px, bool clusters) {
   const Scene& scene = index.scene();
   const SceneLevels& levels = index.levels();
   // Each PVS object's own coarsest allowed level.
@@ -84,7 +77,7 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
   }
   // Clusters, fewest objects first: chosen where allowed, self-contained and no dearer.
   std::vector<uint32_t> candidates;
-  for (const uint32_t o : pvs) {
+  for (const uint32_t o : clusters ? pvs : std::span<const uint32_t>()) {
     const auto cs = index.ClustersOf(o);
     candidates.insert(candidates.end(), cs.begin(), cs.end());
   }

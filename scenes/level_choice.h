@@ -34,9 +34,6 @@ struct ScreenSpec {
 // error); infinity when distance <= error.
 double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen);
 
-// The distance, metres, between the closest points of two boxes (0 when they overlap).
-double BoxDistance(const Aabb& a, const Aabb& b);
-
 // What the choice reads, built once per scene: per level its encoded size (the bytes the wire
 // carries), and per object the clusters that stand for it, smallest first.
 class LevelIndex {
@@ -80,7 +77,8 @@ struct DrawItem {
 // its bounds) where every object of the PVS it stands for is not already in another chosen
 // cluster it does not contain and its bytes are at most those of what it replaces (clusters
 // considered fewest objects first). Sorted; every PVS object is drawn by exactly one item.
+// With `clusters` false only objects' own levels are chosen.
 std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
-                                   const ScreenSpec& screen, double tau_px);
+                                   const ScreenSpec& screen, double tau_px, bool clusters = true);
 
 }  // namespace vistream::scenes

@@ -6,6 +6,7 @@
 #include <absl/strings/str_format.h>
 
 #include "proto/scene_info.h"
+#include "scenes/levels.h"
 #include "server/wire.h"
 #include "visibility/parallel.h"
 
@@ -70,6 +71,25 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   visibility::ParallelFor(objects, 0, [&] {
     return [&](size_t i) { s->geometry_[i] = scenes::EncodeMesh(s->scene_.objects[i].mesh); };
   });
+  // Levels of detail: the scene's own, or made now; encoded once like the full meshes.
+  if (s->scene_.levels.empty() && options.make_levels) {
+    scenes::LevelOptions lo;
+    lo.cluster_tiles_m.clear();  // sessions draw object levels (clusters: issue 45, later)
+    absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(s->scene_, lo, run);
+    if (!made.ok()) return made.status();
+    s->scene_.levels = *std::move(made);
+  }
+  if (!s->scene_.levels.objects.empty()) {
+    s->level_geometry_.resize(objects);
+    visibility::ParallelFor(objects, 0, [&] {
+      return [&](size_t i) {
+        for (const scenes::MeshLevel& l : s->scene_.levels.objects[i]) {
+          s->level_geometry_[i].push_back(scenes::EncodeLevelMesh(l.mesh));
+        }
+      };
+    });
+    s->level_index_ = std::make_unique<scenes::LevelIndex>(s->scene_, s->scene_.levels);
+  }
   absl::StatusOr<std::unique_ptr<visibility::EpsilonSuperset>> eps = visibility::EpsilonSuperset::Create(s->scene_);
   if (!eps.ok()) return eps.status();
   s->epsilon_ = std::move(*eps);
@@ -99,6 +119,12 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     if (!probe.ok()) return probe.status();
   }
   return s;
+}
+
+uint64_t ServedScene::RawBytes(uint32_t object, uint32_t level) const {
+  if (level == 0) return geometry_[object].RawBytes();
+  const scenes::Mesh& m = scene_.levels.objects[object][level - 1].mesh;
+  return scenes::RawMeshBytes(m.positions.size(), m.indices.size());
 }
 
 CellPvs ServedScene::ComputePvs(CellId cell, unsigned worker) const {

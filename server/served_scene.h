@@ -13,6 +13,7 @@
 #include "proto/walkthrough.pb.h"
 #include "scenes/catalog.h"
 #include "scenes/geometry_codec.h"
+#include "scenes/level_choice.h"
 #include "scenes/progress.h"
 #include "scenes/terrain.h"
 #include "server/pvs_scheduler.h"
@@ -46,6 +47,9 @@ struct ServedSceneOptions {
   // False: ordinary threads, for tests whose machine other work shares, where idle threads
   // would wait for it (what they test is which masks are sent and drawn, not their priority).
   bool idle_priority_masks = true;
+  // Levels of detail (issue 45): a scene without levels of its own gets them at start
+  // (scenes/levels.h MakeLevels, object levels only); false: only a scene's own are served.
+  bool make_levels = false;
 };
 
 class ServedScene {
@@ -64,6 +68,14 @@ class ServedScene {
   const scenes::ViewcellSpec& viewcell() const { return viewcell_; }
   const vistream::v1::SceneInfo& scene_info() const { return scene_info_; }
   const scenes::EncodedMesh& geometry(uint32_t object) const { return geometry_[object]; }
+  // Levels of detail: null when the scene has none (every session then gets full detail).
+  const scenes::LevelIndex* levels() const { return level_index_.get(); }
+  // Object `object`'s level `level` >= 1 encoded for the wire (EncodeLevelMesh).
+  const scenes::EncodedLevelMesh& level_geometry(uint32_t object, uint32_t level) const {
+    return level_geometry_[object][level - 1];
+  }
+  // What object `object` at `level` (0: full) takes decoded (RawMeshBytes: the memory budget's unit).
+  uint64_t RawBytes(uint32_t object, uint32_t level) const;
   const visibility::EpsilonSuperset* epsilon() const { return epsilon_.get(); }
   PvsScheduler& scheduler() { return *scheduler_; }
   // Where ε-masks are computed: idle-priority threads, one per core.
@@ -98,6 +110,8 @@ class ServedScene {
   visibility::CellQueryOptions query_;
   std::unique_ptr<visibility::PvsFile> file_;
   std::vector<scenes::EncodedMesh> geometry_;
+  std::unique_ptr<scenes::LevelIndex> level_index_;
+  std::vector<std::vector<scenes::EncodedLevelMesh>> level_geometry_;
   std::unique_ptr<visibility::EpsilonSuperset> epsilon_;
   vistream::v1::SceneInfo scene_info_;
   std::string pvs_source_;

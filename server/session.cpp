@@ -167,6 +167,25 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     }
     if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
   }
+  if (hello.has_levels() && hello.levels().screen_error_px() != 0.0) {
+    const v1::LevelRequest& l = hello.levels();
+    if (l.viewport_width_px() < 1 || l.viewport_width_px() > 16384 || l.viewport_height_px() < 1 ||
+        l.viewport_height_px() > 16384) {
+      return absl::InvalidArgumentError(absl::StrCat("Hello.levels: viewport ", l.viewport_width_px(), " x ",
+                                                     l.viewport_height_px(), " px is outside 1 to 16384"));
+    }
+    if (!(l.vertical_fov_rad() > 0.0 && l.vertical_fov_rad() < 3.14159)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("Hello.levels.vertical_fov_rad = ", l.vertical_fov_rad(), ": expected an angle in (0, pi)"));
+    }
+    if (!(l.screen_error_px() > 0.0 && l.screen_error_px() <= 1000.0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("Hello.levels.screen_error_px = ", l.screen_error_px(), ": expected 0 (off) or (0, 1000] pixels"));
+    }
+    screen_ = {l.viewport_width_px(), l.viewport_height_px(), l.vertical_fov_rad()};
+    tau_px_ = l.screen_error_px();
+    levels_on_ = scene_->levels() != nullptr;
+  }
   hello_ = true;
   planner_.set_on(hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr);
   stats_.set_scene(scene_->name());
@@ -279,6 +298,7 @@ void Session::SetWanted(double now) {
   // Forget what no longer matters: requests, PVSs, their queued lists and geometry.
   auto unwanted = [&](CellId c) { return std::find(wanted_.begin(), wanted_.end(), c) == wanted_.end(); };
   std::erase_if(received_, [&](const auto& entry) { return unwanted(entry.first); });
+  std::erase_if(cell_levels_, [&](const auto& entry) { return unwanted(entry.first); });
   std::erase_if(requested_, unwanted);
   std::erase_if(emitted_, unwanted);
   std::erase_if(pending_geometry_, [&](const auto& entry) { return unwanted(entry.first); });
@@ -301,7 +321,7 @@ void Session::SetWanted(double now) {
     std::deque<uint32_t>& q = pending_geometry_[c];
     const std::unordered_set<uint32_t> queued(q.begin(), q.end());
     for (uint32_t o : it->second->objects) {
-      if (sent_.count(o) == 0 && queued.count(o) == 0) q.push_back(o);
+      if (!Satisfied(c, o) && queued.count(o) == 0) q.push_back(o);
     }
   }
 }
@@ -325,6 +345,18 @@ void Session::RequestCell(CellId cell, double deadline) {
 void Session::OnCellReady(const CellPvsPtr& pvs, bool from_cache) {
   if (requested_.erase(pvs->cell) == 0) return;  // no longer wanted
   received_[pvs->cell] = pvs;
+  if (levels_on_) {
+    // The coarsest level of each object that holds from anywhere in the cell's eye band.
+    const std::vector<scenes::DrawItem> items =
+        scenes::ChooseLevels(*scene_->levels(), pvs->objects, scene_->grid().CellBox(pvs->cell), screen_, tau_px_,
+                             /*clusters=*/false);
+    std::vector<uint32_t>& levels = cell_levels_[pvs->cell];
+    levels.assign(pvs->objects.size(), 0);
+    for (const scenes::DrawItem& it : items) {
+      const auto at = std::lower_bound(pvs->objects.begin(), pvs->objects.end(), it.id);
+      levels[static_cast<size_t>(at - pvs->objects.begin())] = it.level;
+    }
+  }
   if (log_ != nullptr) {
     const visibility::CellCoord c = scene_->grid().Coord(pvs->cell);
     log_->Write(id_, "pvs", {{"cell", absl::StrCat(c.i, ",", c.j)},
@@ -355,12 +387,16 @@ void Session::Emit(CellId cell) {
   list->set_cell_id(cell);
   list->mutable_object_ids()->Add(pvs->objects.begin(), pvs->objects.end());
   list->set_compute_s(pvs->compute_s);
+  if (levels_on_) {
+    const std::vector<uint32_t>& levels = cell_levels_.at(cell);
+    list->mutable_object_levels()->Add(levels.begin(), levels.end());
+  }
   QueueControl(std::move(m));
   control_.back().cell = cell;
   emitted_.insert(cell);
   std::deque<uint32_t>& q = pending_geometry_[cell];
   for (uint32_t o : pvs->objects) {
-    if (sent_.count(o) == 0) q.push_back(o);
+    if (!Satisfied(cell, o)) q.push_back(o);
   }
   stats_.set_pvs_sent(stats_.pvs_sent() + 1);
 }
@@ -368,8 +404,9 @@ void Session::Emit(CellId cell) {
 v1::ServerMessage Session::Forget(std::vector<uint32_t> objects, const char* reason) {
   std::sort(objects.begin(), objects.end());
   for (uint32_t o : objects) {
+    held_bytes_ -= scene_->RawBytes(o, HeldLevel(o));
     sent_.erase(o);
-    held_bytes_ -= scene_->geometry(o).RawBytes();
+    held_level_.erase(o);
   }
   v1::ServerMessage m;
   m.mutable_evict()->mutable_object_ids()->Add(objects.begin(), objects.end());
@@ -404,7 +441,7 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
   for (const auto& [at, o] : candidates) {
     if (held_bytes_ - freed + bytes <= memory_budget_) break;
     evict.push_back(o);
-    freed += scene_->geometry(o).RawBytes();
+    freed += scene_->RawBytes(o, HeldLevel(o));
   }
   if (evict.empty() || held_bytes_ - freed + bytes > memory_budget_) return std::nullopt;  // cannot fit
   // Evicted objects of wanted cells are queued again at the next crossing or turn (SetWanted).
@@ -452,32 +489,76 @@ void Session::PostMasks() {
 }
 
 std::optional<v1::ServerMessage> Session::SendObject(uint32_t o, size_t rank, bool* sent) {
+  return SendLevel(o, rank < wanted_.size() ? NeededLevel(wanted_[rank], o) : 0, rank, sent);
+}
+
+std::optional<v1::ServerMessage> Session::SendLevel(uint32_t o, uint32_t level, size_t rank, bool* sent) {
   *sent = false;
-  const scenes::EncodedMesh& g = scene_->geometry(o);
-  if (memory_budget_ != 0 && held_bytes_ + g.RawBytes() > memory_budget_) {
+  // A level replaces the one held: the budget counts the difference.
+  const uint64_t raw = scene_->RawBytes(o, level);
+  const uint64_t replaced = sent_.count(o) > 0 ? scene_->RawBytes(o, HeldLevel(o)) : 0;
+  if (memory_budget_ != 0 && held_bytes_ - replaced + raw > memory_budget_) {
     // Room is made by evicting what the client needs later than this cell (the Evict goes
     // first, the object right after it); without such objects it waits for the next crossing.
-    return MakeRoom(g.RawBytes(), rank);
+    return MakeRoom(raw - std::min(raw, replaced), rank);
   }
   v1::ServerMessage m;
   v1::ObjectGeometry* geo = m.mutable_geometry();
   geo->set_object_id(o);
-  geo->set_vertex_count(g.vertex_count);
-  geo->set_index_count(g.index_count);
-  geo->set_vertices(g.vertices);
-  geo->set_indices(g.indices);
+  size_t encoded = 0;
+  if (level == 0) {
+    const scenes::EncodedMesh& g = scene_->geometry(o);
+    geo->set_vertex_count(g.vertex_count);
+    geo->set_index_count(g.index_count);
+    geo->set_vertices(g.vertices);
+    geo->set_indices(g.indices);
+    encoded = g.EncodedBytes();
+  } else {
+    const scenes::EncodedLevelMesh& g = scene_->level_geometry(o, level);
+    geo->set_level(level);
+    geo->set_vertex_count(g.vertex_count);
+    geo->set_index_count(g.index_count);
+    geo->set_vertices(g.vertices);
+    geo->set_indices(g.indices);
+    geo->set_step_log2(g.step_log2);
+    geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
+    geo->set_wide(g.wide);
+    encoded = g.EncodedBytes();
+  }
   const scenes::Aabb& b = scene_->scene().objects[o].bounds;
   SetVec(b.min, geo->mutable_bounds_min());
   SetVec(b.max, geo->mutable_bounds_max());
   sent_.insert(o);
-  held_bytes_ += g.RawBytes();
+  if (level == 0) held_level_.erase(o);
+  else held_level_[o] = level;
+  held_bytes_ += raw - replaced;
   const size_t bytes = m.ByteSizeLong();
-  credit_ -= static_cast<int64_t>(g.EncodedBytes());
+  credit_ -= static_cast<int64_t>(encoded);
   stats_.set_objects_sent(stats_.objects_sent() + 1);
-  stats_.set_geometry_bytes_sent(stats_.geometry_bytes_sent() + g.EncodedBytes());
+  stats_.set_geometry_bytes_sent(stats_.geometry_bytes_sent() + encoded);
   stats_.set_bytes_sent(stats_.bytes_sent() + bytes);
   *sent = true;
   return m;
+}
+
+uint32_t Session::HeldLevel(uint32_t o) const {
+  const auto it = held_level_.find(o);
+  return it == held_level_.end() ? 0 : it->second;
+}
+
+uint32_t Session::NeededLevel(CellId cell, uint32_t o) const {
+  if (!levels_on_) return 0;
+  const auto lv = cell_levels_.find(cell);
+  const auto pvs = received_.find(cell);
+  if (lv == cell_levels_.end() || pvs == received_.end()) return 0;
+  const std::vector<uint32_t>& objects = pvs->second->objects;
+  const auto at = std::lower_bound(objects.begin(), objects.end(), o);
+  if (at == objects.end() || *at != o) return 0;
+  return lv->second[static_cast<size_t>(at - objects.begin())];
+}
+
+bool Session::Satisfied(CellId cell, uint32_t o) const {
+  return sent_.count(o) > 0 && (!levels_on_ || HeldLevel(o) <= NeededLevel(cell, o));
 }
 
 void Session::QueueControl(v1::ServerMessage message) {
@@ -495,7 +576,7 @@ bool Session::Served(CellId cell) const {
   if (emitted_.count(cell) == 0) return false;
   auto it = pending_geometry_.find(cell);
   if (it == pending_geometry_.end()) return true;
-  return std::all_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return sent_.count(o) > 0; });
+  return std::all_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return Satisfied(cell, o); });
 }
 
 void Session::NoteServedCrossings(double now) {
@@ -552,9 +633,9 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     while (!q.empty()) {
       const uint32_t o = q.front();
       q.pop_front();
-      if (sent_.count(o) > 0) continue;
+      if (Satisfied(c, o)) continue;
       bool sent = false;
-      std::optional<v1::ServerMessage> m = SendObject(o, rank, &sent);
+      std::optional<v1::ServerMessage> m = SendLevel(o, NeededLevel(c, o), rank, &sent);
       if (!m.has_value()) continue;  // no room: it waits for the next crossing
       if (!sent) q.push_front(o);    // the Evict goes first, the object right after it
       return m;

@@ -132,7 +132,15 @@ class Session : public std::enable_shared_from_this<Session> {
   // sent within the memory budget), charged to the credit; `rank`: the position in wanted_ of
   // the cell it is sent for.
   std::optional<vistream::v1::ServerMessage> SendObject(uint32_t o, size_t rank, bool* sent);  // lock held
+  // The same at `level` (0: full).
+  std::optional<vistream::v1::ServerMessage> SendLevel(uint32_t o, uint32_t level, size_t rank, bool* sent);  // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
+  // The level object `o` needs for `cell` (0: full; always 0 without levels).
+  uint32_t NeededLevel(CellId cell, uint32_t o) const;       // lock held
+  // Whether the client holds `o` at a level `cell` accepts (that level or finer).
+  bool Satisfied(CellId cell, uint32_t o) const;             // lock held
+  // The level the client holds `o` at (0 also when it does not hold it).
+  uint32_t HeldLevel(uint32_t o) const;                      // lock held
   // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
   bool Served(CellId cell) const;                            // lock held
   // Reports crossings whose new cells are all served now (SessionSeams::crossing_served).
@@ -169,7 +177,13 @@ class Session : public std::enable_shared_from_this<Session> {
   std::set<CellId> requested_;                 // asked of the scheduler, not arrived
   std::set<CellId> emitted_;                   // PVS message queued or sent
   std::map<CellId, std::deque<uint32_t>> pending_geometry_;  // per wanted cell, not yet sent
-  std::unordered_set<uint32_t> sent_;          // geometry the client holds (sent or held on resume)
+  std::unordered_set<uint32_t> sent_;          // geometry the client holds (sent or held on resume), any level
+  // Levels of detail (Hello.levels; issue 45): on when the client asked and the scene has them.
+  bool levels_on_ = false;
+  scenes::ScreenSpec screen_;
+  double tau_px_ = 0.0;
+  std::unordered_map<uint32_t, uint32_t> held_level_;  // level of each held object (absent: full)
+  std::map<CellId, std::vector<uint32_t>> cell_levels_;  // per received cell: the level each PVS object needs
   uint64_t held_bytes_ = 0;                    // decoded bytes of sent_
   int64_t credit_ = 0;
 

@@ -14,13 +14,6 @@ double WallSeconds() {
 
 }  // namespace
 
-double BoxDistance(const scenes::Aabb& a, const scenes::Aabb& b) {
-  const double dx = std::max({0.0, a.min.x - b.max.x, b.min.x - a.max.x});
-  const double dy = std::max({0.0, a.min.y - b.max.y, b.min.y - a.max.y});
-  const double dz = std::max({0.0, a.min.z - b.max.z, b.min.z - a.max.z});
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
 // EventQueue
 
 void EventQueue::At(double t, std::function<void()> fn) { events_.push(Event{std::max(t, now_), seq_++, std::move(fn)}); }
@@ -52,7 +45,7 @@ const PvsMemo::Entry& PvsMemo::GetRadius(const server::ServedScene& scene, CellI
   pvs->cell = cell;
   const scenes::Aabb box = scene.grid().CellBox(cell);
   for (const scenes::Object& o : scene.scene().objects) {
-    if (BoxDistance(box, o.bounds) <= radius_m) pvs->objects.push_back(o.id);
+    if (scenes::BoxDistance(box, o.bounds) <= radius_m) pvs->objects.push_back(o.id);
   }
   const double seconds = WallSeconds() - start;
   return radius_entries_.emplace(std::make_pair(cell, radius_m), Entry{std::move(pvs), seconds}).first->second;

@@ -28,9 +28,6 @@ namespace vistream::simulation {
 using server::CellId;
 using server::CellPvsPtr;
 
-// The distance between two boxes (metres; 0 when they touch or overlap).
-double BoxDistance(const scenes::Aabb& a, const scenes::Aabb& b);
-
 // Simulated time: events run in time order (ties in the order they were added).
 class EventQueue {
  public:

@@ -92,7 +92,7 @@ absl::StatusOr<double> NoHoleRadius(ServedScene& scene, const scenes::CatalogEnt
   for (CellId c : walk->CellsAlong(scene.grid().cell_size(), [&](const glm::dvec2& p) { return scene.grid().CellAt(p); })) {
     if (!seen.insert(c).second) continue;
     const scenes::Aabb box = scene.grid().CellBox(c);
-    for (uint32_t o : memo->Get(scene, c).pvs->objects) r = std::max(r, BoxDistance(box, scene.scene().objects[o].bounds));
+    for (uint32_t o : memo->Get(scene, c).pvs->objects) r = std::max(r, scenes::BoxDistance(box, scene.scene().objects[o].bounds));
   }
   return r;
 }
@@ -168,7 +168,12 @@ class Run {
     const client::CellCompletion::Object* h = completion_.Held(o);
     return h != nullptr && FrameCeil(h->arrival_s) <= t + 1e-9;
   }
-  uint64_t TrianglesOf(uint32_t o) const { return scene_.scene().objects[o].mesh.indices.size() / 3; }
+  // Triangles of object `o` as held (its level's).
+  uint64_t TrianglesOf(uint32_t o) const {
+    const client::CellCompletion::Object* h = completion_.Held(o);
+    if (h != nullptr && h->level > 0) return scene_.scene().levels.objects[o][h->level - 1].mesh.TriangleCount();
+    return scene_.scene().objects[o].mesh.indices.size() / 3;
+  }
   // Drops the masks of cells other than the client's and the 8 around it, then the oldest
   // over MaskHoldings::kMaxMasks.
   void KeepMasks() { masks_held_.KeepNear(cell_.has_value() ? cell_ : start_cell_, scene_.grid()); }
@@ -235,11 +240,13 @@ void Run::Receive(const v1::ServerMessage& m) {
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
       const v1::ViewcellPvs& p = m.pvs();
-      completion_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t);
+      completion_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t,
+                          std::span<const uint32_t>(p.object_levels().data(), p.object_levels().size()));
       break;
     }
     case v1::ServerMessage::kGeometry: {
-      if (completion_.Arrive(m.geometry().object_id(), t)) ++r_.distinct_objects;
+      if (completion_.Arrive(m.geometry().object_id(), t, m.geometry().level())) ++r_.distinct_objects;
+      if (m.geometry().level() > 0) ++r_.level_objects_received;
       r_.geometry_bytes += client::ChargedBytes(m);
       ++r_.objects_received;
       break;
@@ -350,6 +357,8 @@ void Run::Frame(double t) {
     complete = false;
     ++r_.stalls;
     r_.stall_s += r_.frame_s;
+  } else if (cell_.has_value() && completion_.Coarse(*cell_) > 0) {
+    ++r_.coarse_frames;
   }
   // The mask drawn, by the client model's rule (client/mask_holdings.h), of the masks whose
   // objects have arrived and been uploaded.
@@ -388,7 +397,12 @@ void Run::Frame(double t) {
     if (mask != nullptr) {
       tris = 0;
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
-        if (seen(mask->object_ids[k])) tris += mask->object_triangles[k];
+        const uint32_t o = mask->object_ids[k];
+        if (!seen(o)) continue;
+        // The first level keeps the object's triangles (the mask's bits hold); a coarser one
+        // is drawn whole.
+        const client::CellCompletion::Object* h = completion_.Held(o);
+        tris += h != nullptr && h->level > 1 ? TrianglesOf(o) : mask->object_triangles[k];
       }
     }
     triangles_sum_ += static_cast<double>(tris);
@@ -480,6 +494,11 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   client::HelloSettings hello;
   hello.scene = scene_.scene().name;
   hello.epsilon_masks = opt_.scheme == Scheme::kPvsEps;
+  hello.screen_error_px = opt_.lod_tau_px;
+  r_.lod_tau_px = opt_.lod_tau_px;
+  if (opt_.lod_tau_px > 0.0 && scene_.levels() == nullptr) {
+    return absl::FailedPreconditionError("levels of detail asked for, but the scene has none");
+  }
   if (sim.client.has_value() && sim.client->memory_mb.has_value()) {
     hello.memory_budget_bytes = static_cast<uint64_t>(*sim.client->memory_mb * 1048576.0);
   }

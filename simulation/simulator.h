@@ -76,6 +76,10 @@ struct SimulationOptions {
   std::shared_ptr<PvsMemo> memo; // shared by the runs of one process; null: a fresh one
   double startup_limit_s = 3600.0;  // simulated seconds the first viewcell may take
   bool count_triangles = true;   // false: skip the per-frame culling (speed search probes)
+  // Levels of detail (issue 45): the client's screen error tau in pixels on a 1280x720 viewport
+  // with a 60 degree vertical field of view; 0: off. The scene must have levels
+  // (ServedSceneOptions::make_levels, or its own).
+  double lod_tau_px = 0.0;
 };
 
 struct SimulationResult {
@@ -137,6 +141,12 @@ struct SimulationResult {
     bool hole = false;
   };
   std::vector<TriangleSample> triangle_samples;  // empty when count_triangles is false
+  // Levels of detail: frames drawn in a complete viewcell while an object of its PVS was held at
+  // a coarser level than the cell's list asks (the finer one on its way), and geometry messages
+  // that carried a level coarser than full.
+  uint64_t coarse_frames = 0;
+  uint64_t level_objects_received = 0;
+  double lod_tau_px = 0.0;
   uint64_t jitter_draws = 0;     // messages delayed by a jitter draw > 0
   uint64_t lost_segments = 0;
   double radius_m = 0.0;         // the radius scheme's R

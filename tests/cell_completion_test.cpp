@@ -120,6 +120,33 @@ TEST(CellCompletion, ALaterArrivalOfAHeldObjectMovesTheCellsCompletionTime) {
   EXPECT_FALSE(h.Complete(0));
 }
 
+// Levels of detail (issue 45): an object held coarser than a list asks completes the cell (it is
+// drawn) and counts as coarse until the finer level arrives, which does not move the cell's
+// completion time; dropping it makes it missing.
+TEST(CellCompletion, ACoarserLevelCompletesTheCellAndCountsAsCoarse) {
+  CellCompletion h;
+  const std::vector<uint32_t> objects{1, 2}, levels{0, 2};
+  h.SetList(7, objects, 0.5, levels);
+  h.Arrive(1, 1.0, 3);  // coarser than 0
+  h.Arrive(2, 2.0, 2);  // as asked
+  EXPECT_TRUE(h.Complete(7));
+  EXPECT_EQ(h.Coarse(7), 1u);
+  EXPECT_EQ(*h.CompleteAt(7), 2.0);
+  h.Arrive(1, 3.0, 0);  // the finer level
+  EXPECT_EQ(h.Coarse(7), 0u);
+  EXPECT_EQ(*h.CompleteAt(7), 2.0);
+  EXPECT_EQ(h.Held(1)->level, 0u);
+  h.Arrive(2, 4.0, 1);  // finer than asked: not coarse
+  EXPECT_EQ(h.Coarse(7), 0u);
+  // Another list naming object 2 at full detail sees it coarse.
+  h.SetList(8, std::vector<uint32_t>{2}, 5.0, std::vector<uint32_t>{0});
+  EXPECT_EQ(h.Coarse(8), 1u);
+  h.Drop(2);
+  EXPECT_EQ(h.Coarse(8), 0u);
+  EXPECT_EQ(h.Missing(8), 1u);
+  EXPECT_FALSE(h.Complete(7));
+}
+
 TEST(CellCompletion, AnEmptyListIsCompleteWhenItArrives) {
   CellCompletion h;
   std::vector<uint32_t> heard;

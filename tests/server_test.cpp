@@ -306,6 +306,34 @@ std::vector<BadInput> BadInputs() {
       {"held_object_out_of_range",
        [](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1", {5, 999999})); },
        grpc::StatusCode::INVALID_ARGUMENT, "held_objects[1] = 999999"},
+      {"levels_with_a_zero_viewport",
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1");
+         h.mutable_levels()->set_screen_error_px(1.0);
+         h.mutable_levels()->set_vertical_fov_rad(1.0);
+         Hello(w, h);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "Hello.levels: viewport 0 x 0 px is outside 1 to 16384"},
+      {"levels_with_a_negative_screen_error",
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1");
+         h.mutable_levels()->set_screen_error_px(-2.0);
+         h.mutable_levels()->set_viewport_width_px(1280);
+         h.mutable_levels()->set_viewport_height_px(720);
+         h.mutable_levels()->set_vertical_fov_rad(1.0);
+         Hello(w, h);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "Hello.levels.screen_error_px = -2"},
+      {"levels_with_a_field_of_view_of_nan",
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1");
+         h.mutable_levels()->set_screen_error_px(1.0);
+         h.mutable_levels()->set_viewport_width_px(1280);
+         h.mutable_levels()->set_viewport_height_px(720);
+         h.mutable_levels()->set_vertical_fov_rad(NAN);
+         Hello(w, h);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "Hello.levels.vertical_fov_rad = nan"},
       {"oversized_message",
        [](SessionStream& w) {
          v1::Hello h = SessionStream::HelloFor("city1");

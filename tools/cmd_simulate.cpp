@@ -33,6 +33,7 @@ constexpr double kMinKmh = kMinSearchKmh, kMaxKmh = 1000.0;
 
 struct SimulateArgs {
   std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log, series;
+  std::string lod = "off";
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -95,6 +96,10 @@ nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme 
   j["mask_compute_ms_mean"] = r.masks_computed > 0 ? 1000.0 * r.mask_compute_s / static_cast<double>(r.masks_computed) : 0.0;
   j["frame_ms"] = r.frame_s * 1000.0;
   j["frame_declared"] = r.frame_declared;
+  // Levels of detail (issue 45): null tau when off.
+  j["lod_tau_px"] = r.lod_tau_px > 0.0 ? nlohmann::json(r.lod_tau_px) : nlohmann::json();
+  j["coarse_frames"] = r.coarse_frames;
+  j["level_objects_received"] = r.level_objects_received;
   j["jitter_draws"] = r.jitter_draws;
   j["lost_segments"] = r.lost_segments;
   if (scheme == simulation::Scheme::kRadius) j["radius_m"] = r.radius_m;
@@ -254,6 +259,19 @@ int Simulate(const SimulateArgs& a) {
     links.push_back(*l);
   }
   if (links.empty()) links.push_back(link);
+  // Levels of detail: each of --lod is a run (off, or tau in pixels).
+  std::vector<double> taus;
+  const std::vector<std::string> lod_texts = absl::StrSplit(a.lod, ',');
+  for (const std::string& text : lod_texts) {
+    double tau = 0.0;
+    if (text != "off" && (!cli::internal::ParseFinite(text, &tau) || !(tau > 0.0) || tau > 1000.0)) {
+      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is not a screen error: expected off or pixels in (0, 1000]"));
+    }
+    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
+      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is listed twice"));
+    }
+    taus.push_back(tau);
+  }
   // Generated scenes have only the walks their entry declares: checked before the scene is
   // built. Imported ones may have walks of their own (Scene::paths): checked once loaded.
   if (absl::StatusOr<const scenes::WalkPath*> walk = simulation::FindWalk(*entry, a.path);
@@ -303,6 +321,7 @@ int Simulate(const SimulateArgs& a) {
   so.cell_size = a.cell_size;
   so.res = static_cast<uint32_t>(a.res);
   so.threads = 1;  // the simulator computes on its own thread; simulated workers are --threads
+  so.make_levels = std::any_of(taus.begin(), taus.end(), [](double t) { return t > 0.0; });
   absl::StatusOr<std::unique_ptr<server::ServedScene>> scene = server::ServedScene::Create(so, ToolRun());
   if (!scene.ok()) return Fail(scene.status());
   std::fprintf(stderr, "simulate: %s ready after %.1f s (%s, %zu objects)\n", entry->name.c_str(), SecondsSince(start),
@@ -327,16 +346,20 @@ int Simulate(const SimulateArgs& a) {
     simulation::Scheme scheme;
     double speed_kmh;
     std::optional<scenes::LinkSpec> link;
+    double tau_px;
   };
   std::vector<Point> points;
   for (const auto& l : links) {
     for (double v : speeds_kmh) {
-      for (simulation::Scheme scheme : schemes) points.push_back({scheme, v, l});
+      for (double tau : taus) {
+        for (simulation::Scheme scheme : schemes) points.push_back({scheme, v, l, tau});
+      }
     }
   }
   for (const Point& point : points) {
     const simulation::Scheme scheme = point.scheme;
     opt.scheme = scheme;
+    opt.lod_tau_px = point.tau_px;
     opt.speed_mps = point.speed_kmh / 3.6;
     opt.link = point.link;
     const auto t0 = std::chrono::steady_clock::now();
@@ -491,6 +514,10 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--scheme", args->scheme,
                 "pvs+eps (the server's; the default) | pvs (no ε-masks) | radius | plain (the paper's)")
       ->check(given);
+  c->add_option("--lod", args->lod,
+                "levels of detail: the screen error tau in pixels (1280x720, 60 degrees vertical), or off; several, "
+                "comma-separated, one run each (default: off; levels are made at start when the scene has none)")
+      ->capture_default_str();
   c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)")
       ->check(given);
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")

@@ -102,14 +102,7 @@ inline std::pair<double, double> Gaussians(Rng& rng) {
 
 inline double BoxRadius(const Aabb& b) { return 0.5 * glm::length(b.Extent()); }
 
-inline double BoxDistance(const Aabb& a, const Aabb& b) {
-  double s = 0.0;
-  for (int k = 0; k < 3; ++k) {
-    const double gap = std::max({0.0, a.min[k] - b.max[k], b.min[k] - a.max[k]});
-    s += gap * gap;
-  }
-  return std::sqrt(s);
-}
+using scenes::BoxDistance;
 
 // The part [*a, *b] of the line origin + t dir inside box `vs` (the view space, frame-relative
 // metres; dir need not be unit length, t is in its units); false, leaving them unspecified,
