@@ -2,7 +2,10 @@
 
 #include <algorithm>
 
+#include <absl/strings/str_cat.h>
+
 #include "proto/vec3.h"
+#include "scenes/geometry_codec.h"
 
 namespace vistream::client {
 
@@ -71,6 +74,34 @@ v1::ClientMessage CreditMessage(uint64_t bytes) {
   v1::ClientMessage m;
   m.mutable_credit()->set_bytes(bytes);
   return m;
+}
+
+absl::StatusOr<DecodedObject> DecodeObjectGeometry(const v1::ObjectGeometry& g) {
+  const std::string where = absl::StrCat("object ", g.object_id(), g.level() > 0 ? absl::StrCat(", level ", g.level()) : "");
+  DecodedObject o;
+  o.id = g.object_id();
+  o.level = g.level();
+  if (g.level() == 0) {
+    absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeMesh(g.vertex_count(), g.index_count(), g.vertices(), g.indices(), where);
+    if (!mesh.ok()) return mesh.status();
+    o.mesh = *std::move(mesh);
+    o.bounds_min = {g.bounds_min().x(), g.bounds_min().y(), g.bounds_min().z()};
+    o.bounds_max = {g.bounds_max().x(), g.bounds_max().y(), g.bounds_max().z()};
+  } else {
+    if (g.origin_size() != 3) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.origin_size(), " origin values (expected 3)"));
+    }
+    const int64_t origin[3] = {g.origin(0), g.origin(1), g.origin(2)};
+    absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeLevelMesh(g.vertex_count(), g.index_count(), g.step_log2(), origin,
+                                                                g.wide(), g.vertices(), g.indices(), where);
+    if (!mesh.ok()) return mesh.status();
+    o.mesh = *std::move(mesh);
+    const scenes::Aabb b = o.mesh.Bounds();
+    o.bounds_min = b.Empty() ? glm::dvec3(0.0) : b.min;
+    o.bounds_max = b.Empty() ? glm::dvec3(0.0) : b.max;
+  }
+  o.raw_bytes = scenes::RawMeshBytes(o.mesh.positions.size(), o.mesh.indices.size());
+  return o;
 }
 
 }  // namespace vistream::client

@@ -19,7 +19,10 @@
 
 #include <glm/vec3.hpp>
 
+#include <absl/status/statusor.h>
+
 #include "proto/walkthrough.pb.h"
+#include "scenes/mesh.h"
 
 namespace vistream::client {
 
@@ -110,6 +113,22 @@ class CreditWindow {
 // Bytes a server message costs the credit: an object's encoded geometry (its vertex and index
 // bytes) and an ε-mask's run-length triangle bytes; every other message is free.
 uint64_t ChargedBytes(const vistream::v1::ServerMessage& m);
+
+// ---- Geometry ----
+
+// An ObjectGeometry decoded: the mesh to draw (scene-local metres), its bounds, the level of
+// detail it is (0: full) and what it takes in memory (RawMeshBytes of the decoded mesh).
+struct DecodedObject {
+  uint32_t id = 0;
+  uint32_t level = 0;
+  scenes::Mesh mesh;
+  glm::dvec3 bounds_min{0.0}, bounds_max{0.0};
+  uint64_t raw_bytes = 0;
+};
+// Full meshes by scenes::DecodeMesh with the message's bounds; levels by DecodeLevelMesh, their
+// bounds their mesh's. Errors (INVALID_ARGUMENT) name the object: bytes that are no mesh, a
+// level without its three origin values.
+absl::StatusOr<DecodedObject> DecodeObjectGeometry(const vistream::v1::ObjectGeometry& g);
 
 vistream::v1::ClientMessage HelloMessage(const HelloSettings& settings);
 vistream::v1::ClientMessage PoseMessage(const vistream::v1::Pose& pose);

@@ -318,8 +318,7 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
       }
       case v1::ServerMessage::kGeometry: {
         const v1::ObjectGeometry& g = m.geometry();
-        absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeMesh(g.vertex_count(), g.index_count(), g.vertices(),
-                                                               g.indices(), absl::StrCat("object ", g.object_id()));
+        absl::StatusOr<DecodedObject> mesh = DecodeObjectGeometry(g);
         if (!mesh.ok()) {
           // The server sent bytes that are no mesh: nothing later can be trusted.
           std::lock_guard lock(mu_);
@@ -332,10 +331,10 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         }
         ReceivedObject o;
         o.id = g.object_id();
-        o.mesh = std::move(*mesh);
-        o.bounds_min = {g.bounds_min().x(), g.bounds_min().y(), g.bounds_min().z()};
-        o.bounds_max = {g.bounds_max().x(), g.bounds_max().y(), g.bounds_max().z()};
-        o.raw_bytes = scenes::RawMeshBytes(g.vertex_count(), g.index_count());
+        o.mesh = std::move(mesh->mesh);
+        o.bounds_min = mesh->bounds_min;
+        o.bounds_max = mesh->bounds_max;
+        o.raw_bytes = mesh->raw_bytes;
         const uint64_t encoded = ChargedBytes(m);
         std::lock_guard lock(mu_);
         if (!held_.insert(o.id).second) ++stats_.duplicates;

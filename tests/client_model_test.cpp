@@ -10,6 +10,7 @@
 
 #include "client/mask_holdings.h"
 #include "scenes/geometry_codec.h"
+#include "scenes/mesh.h"
 #include "visibility/mask_codec.h"
 
 namespace vistream::client {
@@ -106,6 +107,50 @@ v1::EpsilonMask Mask(uint32_t id, uint32_t cell, double x0) {
   std::vector<visibility::MaskObject> objects = {{1, {0x3}}, {2, {0x1}}};
   m.set_triangles(visibility::EncodeMaskRuns(objects));
   return m;
+}
+
+// Levels of detail (issue 45): Hello asks for them only with a screen error; a level's geometry
+// decodes to its mesh, its bounds its own; a level without its origin is an error naming it.
+TEST(ClientModel, HelloAsksForLevelsOnlyWithAScreenError) {
+  HelloSettings s;
+  s.scene = "london";
+  EXPECT_FALSE(MakeHello(s).has_levels());
+  s.screen_error_px = 2.0;
+  const v1::Hello h = MakeHello(s);
+  ASSERT_TRUE(h.has_levels());
+  EXPECT_EQ(h.levels().viewport_width_px(), 1280u);
+  EXPECT_EQ(h.levels().viewport_height_px(), 720u);
+  EXPECT_DOUBLE_EQ(h.levels().screen_error_px(), 2.0);
+}
+
+TEST(ClientModel, ALevelsGeometryDecodesToItsMeshWithItsOwnBounds) {
+  scenes::Mesh box;
+  scenes::AppendConvexPrism(std::vector<glm::dvec2>{{0, 0}, {8, 0}, {8, 6}, {0, 6}}, 0.0, 12.5, &box);
+  for (auto& p : box.positions) p += glm::vec3(1000.25f, -500.5f, 0.0f);
+  const scenes::EncodedLevelMesh e = scenes::EncodeLevelMesh(box);
+  v1::ObjectGeometry g;
+  g.set_object_id(42);
+  g.set_level(1);
+  g.set_vertex_count(e.vertex_count);
+  g.set_index_count(e.index_count);
+  g.set_vertices(e.vertices);
+  g.set_indices(e.indices);
+  g.set_step_log2(e.step_log2);
+  g.mutable_origin()->Add(std::begin(e.origin), std::end(e.origin));
+  g.set_wide(e.wide);
+  const absl::StatusOr<DecodedObject> o = DecodeObjectGeometry(g);
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->id, 42u);
+  EXPECT_EQ(o->level, 1u);
+  EXPECT_EQ(o->mesh.TriangleCount(), box.TriangleCount());
+  EXPECT_EQ(o->bounds_min, glm::dvec3(1000.25, -500.5, 0.0));
+  EXPECT_EQ(o->bounds_max, glm::dvec3(1008.25, -494.5, 12.5));
+  EXPECT_EQ(o->raw_bytes, scenes::RawMeshBytes(o->mesh.positions.size(), o->mesh.indices.size()));
+  EXPECT_LT(e.EncodedBytes(), scenes::EncodeMesh(box).EncodedBytes() / 2);
+  g.mutable_origin()->RemoveLast();
+  const absl::StatusOr<DecodedObject> bad = DecodeObjectGeometry(g);
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("object 42, level 1: 2 origin values"), std::string::npos) << bad.status();
 }
 
 TEST(MaskHoldings, KeepsTheMasksOfTheCellAndItsNeighboursAndChoosesAReadyOne) {
