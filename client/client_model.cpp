@@ -18,6 +18,7 @@ v1::Hello MakeHello(const HelloSettings& settings) {
   h.set_memory_budget_bytes(settings.memory_budget_bytes);
   h.set_triangle_budget(settings.triangle_budget);
   h.set_epsilon_masks(settings.epsilon_masks);
+  h.set_pvs_deltas(settings.pvs_deltas);
   h.mutable_held_objects()->Add(settings.held_objects.begin(), settings.held_objects.end());
   if (settings.screen_error_px > 0.0) {
     v1::LevelRequest* l = h.mutable_levels();

@@ -35,6 +35,7 @@ struct HelloSettings {
   uint64_t triangle_budget = 0;      // triangles a frame; 0 unlimited
   bool epsilon_masks = false;        // the client draws ε-masks (the server sends none otherwise)
   std::vector<uint32_t> held_objects;  // on resume: the objects it still holds, any order
+  bool pvs_deltas = false;             // takes PVS lists as differences (proto/pvs_delta.h)
   // Levels of detail (Hello.levels; issue 45): the screen error tau in pixels the client accepts
   // on its viewport; 0: off (every object at full detail).
   double screen_error_px = 0.0;

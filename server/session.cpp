@@ -186,6 +186,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     tau_px_ = l.screen_error_px();
     levels_on_ = scene_->levels() != nullptr;
   }
+  pvs_deltas_ = hello.pvs_deltas();
   hello_ = true;
   planner_.set_on(hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr);
   stats_.set_scene(scene_->name());
@@ -603,6 +604,20 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     Control c = std::move(control_.front());
     control_.pop_front();
     control_bytes_ -= c.bytes;
+    if (c.message.has_pvs() && pvs_deltas_) {
+      // The difference from the list sent before, where that is shorter (decided as it goes
+      // out: a queued list may be dropped before it is sent).
+      v1::ViewcellPvs* list = c.message.mutable_pvs();
+      proto::PvsList next{list->cell_id(), {list->object_ids().begin(), list->object_ids().end()},
+                          {list->object_levels().begin(), list->object_levels().end()}};
+      if (previous_list_.has_value()) {
+        v1::ViewcellPvs delta = *list;
+        proto::EncodePvsDelta(*previous_list_, next, &delta);
+        if (delta.ByteSizeLong() < list->ByteSizeLong()) *list = std::move(delta);
+      }
+      previous_list_ = std::move(next);
+      c.bytes = c.message.ByteSizeLong();
+    }
     stats_.set_bytes_sent(stats_.bytes_sent() + c.bytes);
     return std::move(c.message);
   }

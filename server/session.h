@@ -35,6 +35,7 @@
 #include <absl/status/status.h>
 #include <glm/vec3.hpp>
 
+#include "proto/pvs_delta.h"
 #include "proto/walkthrough.pb.h"
 #include "server/event_log.h"
 #include "server/mask_planner.h"
@@ -178,6 +179,9 @@ class Session : public std::enable_shared_from_this<Session> {
   std::set<CellId> emitted_;                   // PVS message queued or sent
   std::map<CellId, std::deque<uint32_t>> pending_geometry_;  // per wanted cell, not yet sent
   std::unordered_set<uint32_t> sent_;          // geometry the client holds (sent or held on resume), any level
+  // Hello.pvs_deltas: lists go as differences from the one sent before (proto/pvs_delta.h).
+  bool pvs_deltas_ = false;
+  std::optional<proto::PvsList> previous_list_;  // the last list handed to the transport
   // Levels of detail (Hello.levels; issue 45): on when the client asked and the scene has them.
   bool levels_on_ = false;
   scenes::ScreenSpec screen_;

@@ -17,6 +17,7 @@
 #include "client/cell_completion.h"
 #include "client/client_model.h"
 #include "client/mask_holdings.h"
+#include "proto/pvs_delta.h"
 #include "scenes/walk.h"
 #include "server/emulated_link.h"
 #include "server/link_model.h"
@@ -158,6 +159,7 @@ class Run {
   // The client: the client model's rules (client/client_model.h, mask_holdings.h,
   // cell_completion.h), on simulated time.
   client::CellCompletion completion_;  // lists and objects held, with their arrival times
+  proto::PvsListDecoder lists_;        // lists sent as differences (Hello.pvs_deltas)
   client::MaskHoldings masks_held_;
   std::set<uint64_t> masks_drawn_;     // keys of the held masks drawn on some frame
   client::CreditWindow credit_;
@@ -239,9 +241,12 @@ void Run::Receive(const v1::ServerMessage& m) {
   if (credit_.GrantDue()) SendUp(client::CreditMessage(credit_.TakeGrant()), "credit");
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
-      const v1::ViewcellPvs& p = m.pvs();
-      completion_.SetList(p.cell_id(), std::span<const uint32_t>(p.object_ids().data(), p.object_ids().size()), t,
-                          std::span<const uint32_t>(p.object_levels().data(), p.object_levels().size()));
+      absl::StatusOr<proto::PvsList> list = lists_.Decode(m.pvs());
+      if (!list.ok()) {
+        failure_ = absl::InternalError(absl::StrCat("the simulated client cannot read a PVS list: ", list.status().message()));
+        break;
+      }
+      completion_.SetList(list->cell, list->objects, t, list->levels);
       break;
     }
     case v1::ServerMessage::kGeometry: {
@@ -495,6 +500,8 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   hello.scene = scene_.scene().name;
   hello.epsilon_masks = opt_.scheme == Scheme::kPvsEps;
   hello.screen_error_px = opt_.lod_tau_px;
+  // The levels-aware client also takes its lists as differences (both: issue 45's byte budget).
+  hello.pvs_deltas = opt_.lod_tau_px > 0.0;
   r_.lod_tau_px = opt_.lod_tau_px;
   if (opt_.lod_tau_px > 0.0 && scene_.levels() == nullptr) {
     return absl::FailedPreconditionError("levels of detail asked for, but the scene has none");
