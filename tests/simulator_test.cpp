@@ -617,6 +617,11 @@ TEST(SimulateCli, BadOptionsExitTwoNamingTheOption) {
   ExpectBadOption("simulate --scene city1 --bandwidths 16k,,1M", "--bandwidths: '16k,,1M' has an empty item");
   ExpectBadOption("simulate --scene city1 --bandwidths 1M,1000k", "--bandwidths: '1000k' is listed twice");
   ExpectBadOption("simulate --scene city1 --bandwidths 1", "--bandwidths: '1' is not a bandwidth: ");
+  ExpectBadOption("simulate --scene city1 --lod ''", "--lod: empty");
+  ExpectBadOption("simulate --scene city1 --lod 0", "--lod: '0' is not a screen error: expected off or pixels in (0, 1000]");
+  ExpectBadOption("simulate --scene city1 --lod off,sharp", "--lod: 'sharp' is not a screen error");
+  ExpectBadOption("simulate --scene city1 --lod 1,1", "--lod: '1' is listed twice");
+  ExpectBadOption("simulate --scene city1 --lod off,", "--lod: '' is not a screen error");
 }
 
 // --speeds and --bandwidths: one run per scheme, speed and bandwidth, in that nesting, each the

@@ -517,7 +517,8 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
   c->add_option("--lod", args->lod,
                 "levels of detail: the screen error tau in pixels (1280x720, 60 degrees vertical), or off; several, "
                 "comma-separated, one run each (default: off; levels are made at start when the scene has none)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(given);
   c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)")
       ->check(given);
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
