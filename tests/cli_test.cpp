@@ -445,13 +445,13 @@ TEST(Cli, CheckConservativeFindsNoViolationOnALondonSubset) {
 
 // Levels of detail (issue 45): made with progress, saved with the scene, read back; bad input.
 TEST(Cli, SceneLevelsMakesMeasuredLevelsAndSavesThem) {
-  const std::string out = Tmp("city1_levels.glb");
-  const RunResult r = Vistream("scene levels city1 -o " + out + " --tile 200 --json");
+  const std::string out = Tmp("streets_levels.glb");
+  const RunResult r = Vistream("scene levels streets -o " + out + " --tile 100 --json");
   ASSERT_EQ(r.exit_code, 0) << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out);
-  EXPECT_EQ(j.at("objects").get<int>(), 2128);
-  EXPECT_EQ(j.at("objects_with_levels").get<int>(), 2128);
-  EXPECT_GT(j.at("object_levels").get<int>(), 2128);
+  EXPECT_EQ(j.at("objects").get<int>(), 319);
+  EXPECT_EQ(j.at("objects_with_levels").get<int>(), 319);
+  EXPECT_GT(j.at("object_levels").get<int>(), 319);
   EXPECT_GT(j.at("clusters").get<int>(), 0);
   EXPECT_GT(j.at("largest_object_error_m").get<double>(), 0.0);
   EXPECT_GT(j.at("peak_rss_mb").get<double>(), 0.0);
@@ -461,13 +461,13 @@ TEST(Cli, SceneLevelsMakesMeasuredLevelsAndSavesThem) {
   EXPECT_EQ(i.at("object_levels"), j.at("object_levels"));
   EXPECT_EQ(i.at("clusters"), j.at("clusters"));
   // Progress on a terminal's stream (stderr), both tasks.
-  const RunResult plain = Vistream("scene levels city1 -o " + out + " --no-clusters");
+  const RunResult plain = Vistream("scene levels streets -o " + out + " --no-clusters");
   ASSERT_EQ(plain.exit_code, 0) << plain.out;
   EXPECT_NE(plain.out.find("levels: objects"), std::string::npos) << plain.out;
   EXPECT_NE(plain.out.find("0 clusters"), std::string::npos) << plain.out;
 
-  ExpectBadOption("scene levels city1 -o " + out + " --tile 0", "--tile");
-  ExpectBadOption("scene levels city1 -o ''", "--output");
+  ExpectBadOption("scene levels streets -o " + out + " --tile 0", "--tile");
+  ExpectBadOption("scene levels streets -o ''", "--output");
   ExpectRunTimeError("scene levels " + Tmp("missing.glb") + " -o " + out, "missing.glb");
 }
 
