@@ -444,6 +444,10 @@ std::vector<ServerSetting> MakeSettings() {
                {.kind = OK::kChoice, .choices = {"cpu", "gl", "exact"}, .show_default = true}, 6});
   t.push_back({"scenes", "cache_mb", &SceneConfig::cache_mb, FileRange(FK::kNumber, 1.0, 1e6), "--cache-mb",
                "PVS cache budget of each scene in MiB", Option(OK::kNumber, 1, 1e6, kShowDefault), 9});
+  t.push_back({"scenes", "levels", &SceneConfig::levels, File(FK::kBool), "--levels",
+               "make levels of detail at start for scenes without their own (vistream scene levels makes them "
+               "ahead), so that clients asking for a screen error get them",
+               Option(OK::kFlag), 28});
   return t;
 }
 

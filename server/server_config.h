@@ -41,6 +41,7 @@ struct SceneConfig {
   uint32_t res = 128;        // dual-ray-space raster, a power of two from 1 to 256
   std::string backend = "cpu";  // cpu | gl | exact
   double cache_mb = 256.0;   // this scene's PVS cache, MiB
+  bool levels = false;       // make levels of detail at start when the scene has none (issue 45)
   int line = 0;              // where the table starts in the file (0: not from a file)
   // What LoadScene reads: `file`, else `name`.
   const std::string& source() const { return file.empty() ? name : file; }
@@ -151,7 +152,7 @@ struct OptionRule {
 // every [[scenes]] table; its option applies to every scene).
 using SettingField = std::variant<std::string ServerConfig::*, bool ServerConfig::*, unsigned ServerConfig::*,
                                   uint64_t ServerConfig::*, double ServerConfig::*, std::string SceneConfig::*,
-                                  uint32_t SceneConfig::*, double SceneConfig::*>;
+                                  uint32_t SceneConfig::*, double SceneConfig::*, bool SceneConfig::*>;
 
 struct ServerSetting {
   const char* table;  // the file's table: "" (top level), "limits", "tls", ..., "scenes" ([[scenes]])

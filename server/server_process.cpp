@@ -242,7 +242,8 @@ int RunServerProcess(const ServerProcessOptions& run) {
                                .pvs_file = sc.pvs_file,
                                .cache_bytes = static_cast<size_t>(sc.cache_mb * (1 << 20)),
                                .pool = &pool,
-                               .store = sc.pvs_file.empty() ? store.get() : nullptr};
+                               .store = sc.pvs_file.empty() ? store.get() : nullptr,
+                               .make_levels = sc.levels};
     log.Write(0, "loading", {{"scene", sc.name}, {"source", o.scene}});
     const auto load_start = std::chrono::steady_clock::now();
     absl::StatusOr<std::unique_ptr<ServedScene>> scene =

@@ -77,6 +77,7 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
                            "[[scenes]]\n"
                            "name = \"london\"\n"
                            "cache_mb = 512\n"
+                           "levels = true\n"
                            "[[scenes]]\n"
                            "name = \"town\"\n"
                            "file = \"a.pem\"\n"
@@ -115,6 +116,8 @@ TEST(ServerConfig, AFullFileSetsEveryKey) {
   EXPECT_EQ(c->scenes[0].name, "london");
   EXPECT_EQ(c->scenes[0].source(), "london");
   EXPECT_EQ(c->scenes[0].cache_mb, 512.0);
+  EXPECT_TRUE(c->scenes[0].levels);
+  EXPECT_FALSE(c->scenes[1].levels);
   EXPECT_EQ(c->scenes[0].res, 128u);  // the default
   EXPECT_EQ(c->scenes[0].line, 31);
   EXPECT_EQ(c->scenes[1].name, "town");
@@ -189,6 +192,7 @@ TEST(ServerConfig, EveryKeyRefusesBadValuesNamingFileLineAndKey) {
       {"[[scenes]]\nname = \"a\"\nres = 512", ":3: scenes[1].res: 512 is out of range (1 to 256)"},
       {"[[scenes]]\nname = \"a\"\nbackend = \"gpu\"", ":3: scenes[1].backend: 'gpu' is not one of cpu, gl, exact"},
       {"[[scenes]]\nname = \"a\"\ncache_mb = 0", ":3: scenes[1].cache_mb: 0 is out of range (1 to 1e+06)"},
+      {"[[scenes]]\nname = \"a\"\nlevels = 1", ":3: scenes[1].levels: expected"},
       {"[[scenes]]\nname = \"a\"\n[[scenes]]\nname = \"b\"\n[[scenes]]\nname = \"a\"",
        ":5: scenes[3].name: a second scene named 'a' (the first is at line 1)"},
       {"scenes = \"london\"", ":1: scenes: expected [[scenes]] tables, got a string"},

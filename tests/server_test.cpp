@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "client/client_model.h"
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
 #include "scenes/catalog.h"
@@ -93,6 +94,56 @@ TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
     EXPECT_EQ(m->indices, want.indices);
   }
   EXPECT_TRUE(client->Finish().ok());
+}
+
+// Levels of detail over the wire (issue 45): a server that makes levels at start sends a client
+// that asks for a screen error each object at a level, which decodes to the scene's level mesh;
+// a client that does not ask gets full meshes from the same server.
+TEST(Server, AClientAskingForAScreenErrorGetsLevelsThatDecode) {
+  ServedSceneOptions o;
+  o.scene = "city1";
+  o.threads = 2;
+  o.idle_priority_masks = false;
+  o.make_levels = true;
+  absl::StatusOr<std::unique_ptr<ServedScene>> scene = ServedScene::Create(o);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(scene->get(), options, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  const CellId here = (*scene)->grid().Id({3, 3});
+  for (const bool levels : {true, false}) {
+    SessionStream client((*server)->address());
+    v1::Hello hello = SessionStream::HelloFor("city1");
+    if (levels) {
+      client::HelloSettings settings;
+      settings.scene = "city1";
+      settings.screen_error_px = 1.0;
+      hello = client::MakeHello(settings);
+    }
+    client.Start(hello, true);
+    client.SendCredit(uint64_t{1} << 40);
+    ASSERT_TRUE(client.SendPose(Centre(3, 3)));
+    ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return r.CellComplete(here); }, kWait));
+    const SessionRecord r = client.Snapshot();
+    size_t leveled = 0;
+    for (const auto& [id, g] : r.geometry) {
+      const absl::StatusOr<client::DecodedObject> d = client::DecodeObjectGeometry(g);
+      ASSERT_TRUE(d.ok()) << d.status();
+      if (g.level() == 0) continue;
+      ++leveled;
+      ASSERT_LE(g.level(), (*scene)->scene().levels.objects[id].size());
+      const scenes::Mesh& want = (*scene)->scene().levels.objects[id][g.level() - 1].mesh;
+      EXPECT_EQ(d->mesh.TriangleCount(), want.TriangleCount());
+      EXPECT_EQ(d->raw_bytes, (*scene)->RawBytes(id, g.level()));
+    }
+    if (levels) {
+      EXPECT_GT(leveled, r.geometry.size() / 2);
+    } else {
+      EXPECT_EQ(leveled, 0u);
+    }
+    EXPECT_TRUE(client.Finish().ok());
+  }
 }
 
 TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
