@@ -146,16 +146,22 @@ Mesh ShadeByCreases(const std::vector<glm::vec3>& positions, const std::vector<u
   return mesh;
 }
 
+WeldedMesh WeldPositions(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices) {
+  std::vector<uint32_t> remap(positions.size());
+  const size_t unique = meshopt_generateVertexRemap(remap.data(), indices.data(), indices.size(), positions.data(),
+                                                    positions.size(), sizeof(glm::vec3));
+  WeldedMesh w;
+  w.positions.resize(unique);
+  meshopt_remapVertexBuffer(w.positions.data(), positions.data(), positions.size(), sizeof(glm::vec3), remap.data());
+  w.indices.resize(indices.size());
+  meshopt_remapIndexBuffer(w.indices.data(), indices.data(), indices.size(), remap.data());
+  return w;
+}
+
 EncodedLevelMesh EncodeLevelMesh(const Mesh& mesh) {
-  // Weld: one vertex per distinct position, numbered in order of first use by the triangles.
-  std::vector<uint32_t> remap(mesh.positions.size());
-  const size_t unique = meshopt_generateVertexRemap(remap.data(), mesh.indices.data(), mesh.indices.size(),
-                                                    mesh.positions.data(), mesh.positions.size(), sizeof(glm::vec3));
-  std::vector<glm::vec3> welded(unique);
-  meshopt_remapVertexBuffer(welded.data(), mesh.positions.data(), mesh.positions.size(), sizeof(glm::vec3),
-                            remap.data());
-  std::vector<uint32_t> indices(mesh.indices.size());
-  meshopt_remapIndexBuffer(indices.data(), mesh.indices.data(), mesh.indices.size(), remap.data());
+  const WeldedMesh w = WeldPositions(mesh.positions, mesh.indices);
+  const std::vector<glm::vec3>& welded = w.positions;
+  const std::vector<uint32_t>& indices = w.indices;
   EncodedLevelMesh out;
   out.vertex_count = static_cast<uint32_t>(welded.size());
   out.index_count = static_cast<uint32_t>(indices.size());

@@ -51,6 +51,16 @@ absl::StatusOr<Mesh> DecodeMesh(uint32_t vertex_count, uint32_t index_count, std
 // maker did, so a level's mesh comes back with the same triangles in the same order, each the
 // same three points (its first corner perhaps another of them), the same normals at each point.
 
+// Positions and a triangle list welded: one vertex per distinct position (normals ignored),
+// numbered in order of first use by the triangles; the triangles in the same order and corner
+// order (meshoptimizer's vertex remap). What the simplifiers see of a mesh's connectivity, and
+// what a level's wire form holds.
+struct WeldedMesh {
+  std::vector<glm::vec3> positions;
+  std::vector<uint32_t> indices;
+};
+WeldedMesh WeldPositions(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices);
+
 // The drawable mesh of welded `positions` and the triangle list `indices` (indices below
 // positions.size()): triangles in the same order and corner order; one vertex per welded position
 // and group of its corners whose faces' normals lie within 30 degrees of the group's first

@@ -26,33 +26,21 @@ namespace {
 using Kernel = CGAL::Simple_cartesian<double>;
 using SurfaceMesh = CGAL::Surface_mesh<Kernel::Point_3>;
 
-// Positions shared by every corner at the same place (normals ignored): what the simplifiers
-// need to see a mesh's connectivity.
-struct Welded {
+// The union of `meshes`, welded (WeldPositions).
+WeldedMesh Weld(const std::vector<const Mesh*>& meshes) {
   std::vector<glm::vec3> positions;
   std::vector<uint32_t> indices;
-};
-
-Welded Weld(const std::vector<const Mesh*>& meshes) {
-  Welded w;
   for (const Mesh* m : meshes) {
-    const auto base = static_cast<uint32_t>(w.positions.size());
-    w.positions.insert(w.positions.end(), m->positions.begin(), m->positions.end());
-    for (uint32_t i : m->indices) w.indices.push_back(base + i);
+    const auto base = static_cast<uint32_t>(positions.size());
+    positions.insert(positions.end(), m->positions.begin(), m->positions.end());
+    for (uint32_t i : m->indices) indices.push_back(base + i);
   }
-  std::vector<uint32_t> remap(w.positions.size());
-  const size_t unique = meshopt_generateVertexRemap(remap.data(), w.indices.data(), w.indices.size(),
-                                                    w.positions.data(), w.positions.size(), sizeof(glm::vec3));
-  std::vector<glm::vec3> positions(unique);
-  meshopt_remapVertexBuffer(positions.data(), w.positions.data(), w.positions.size(), sizeof(glm::vec3), remap.data());
-  meshopt_remapIndexBuffer(w.indices.data(), w.indices.data(), w.indices.size(), remap.data());
-  w.positions = std::move(positions);
-  return w;
+  return WeldPositions(positions, indices);
 }
 
 // The triangles of `w` simplified to within `error_m` (meshoptimizer's own estimate): the
 // topology-preserving simplifier, or the sloppy one (which merges nearby parts) when `sloppy`.
-std::vector<uint32_t> Simplify(const Welded& w, double error_m, bool sloppy) {
+std::vector<uint32_t> Simplify(const WeldedMesh& w, double error_m, bool sloppy) {
   if (w.indices.empty()) return {};
   const float scale = meshopt_simplifyScale(&w.positions[0].x, w.positions.size(), sizeof(glm::vec3));
   const float relative = scale > 0.0f ? static_cast<float>(error_m / scale) : 0.0f;
@@ -84,14 +72,8 @@ Mesh BuildLevelMesh(const std::vector<glm::vec3>& welded, const std::vector<uint
   for (size_t i = 0; i < welded.size(); ++i) {
     for (int a = 0; a < 3; ++a) pos[i][a] = static_cast<float>(std::round(welded[i][a] / step_m) * step_m);
   }
-  std::vector<uint32_t> remap(pos.size());
-  const size_t unique = meshopt_generateVertexRemap(remap.data(), indices.data(), indices.size(), pos.data(),
-                                                    pos.size(), sizeof(glm::vec3));
-  std::vector<glm::vec3> snapped(unique);
-  meshopt_remapVertexBuffer(snapped.data(), pos.data(), pos.size(), sizeof(glm::vec3), remap.data());
-  std::vector<uint32_t> idx(indices.size());
-  meshopt_remapIndexBuffer(idx.data(), indices.data(), indices.size(), remap.data());
-  return ShadeByCreases(snapped, idx);
+  const WeldedMesh snapped = WeldPositions(pos, indices);
+  return ShadeByCreases(snapped.positions, snapped.indices);
 }
 
 // Adds the non-degenerate triangles of `mesh` to `out`, each with its own three vertices,
@@ -148,7 +130,7 @@ bool ParallelFor(size_t count, unsigned threads, Progress& progress, const std::
 // error is not above the level before replaces it.
 std::vector<MeshLevel> MakeChain(const std::vector<const Mesh*>& originals, const std::vector<double>& targets_m,
                                  double max_share, bool sloppy_first) {
-  const Welded w = Weld(originals);
+  const WeldedMesh w = Weld(originals);
   size_t previous = w.indices.size() / 3;
   std::vector<MeshLevel> chain;
   for (size_t t = 0; t < targets_m.size(); ++t) {
@@ -283,26 +265,11 @@ absl::Status ValidateLevels(const SceneLevels& levels, const Scene& scene, const
                                                        previous_error, " m"));
       }
       const Mesh& m = l.mesh;
-      if (m.indices.empty() || m.indices.size() % 3 != 0) {
-        return absl::InvalidArgumentError(absl::StrCat(lw, ": ", m.indices.size(), " indices are not whole triangles"));
-      }
+      if (absl::Status st = ValidateMesh(m, lw); !st.ok()) return st;
+      if (m.indices.empty()) return absl::InvalidArgumentError(absl::StrCat(lw, ": no triangles"));
       if (m.TriangleCount() > previous_triangles) {
         return absl::InvalidArgumentError(absl::StrCat(lw, ": ", m.TriangleCount(),
                                                        " triangles, more than the finer level's ", previous_triangles));
-      }
-      if (m.normals.size() != m.positions.size()) {
-        return absl::InvalidArgumentError(absl::StrCat(lw, ": ", m.normals.size(), " normals for ", m.positions.size(), " positions"));
-      }
-      for (size_t i = 0; i < m.indices.size(); ++i) {
-        if (m.indices[i] >= m.positions.size()) {
-          return absl::InvalidArgumentError(
-              absl::StrCat(lw, ": index ", i, " is ", m.indices[i], ", beyond the ", m.positions.size(), " vertices"));
-        }
-      }
-      for (const glm::vec3& p : m.positions) {
-        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-          return absl::InvalidArgumentError(absl::StrCat(lw, ": a position is not finite"));
-        }
       }
       previous_error = l.error_m;
       previous_triangles = m.TriangleCount();

@@ -40,6 +40,32 @@ bool Finite(const glm::vec3& p) {
 
 }  // namespace
 
+absl::Status ValidateMesh(const Mesh& m, const std::string& what) {
+  if (m.indices.size() % 3 != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(what, ": index count ", m.indices.size(), " is not a multiple of 3"));
+  }
+  if (m.normals.size() != m.positions.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, ": ", m.normals.size(), " normals for ", m.positions.size(), " positions"));
+  }
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    if (!Finite(m.positions[v])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": vertex ", v, " has a non-finite (NaN or infinite) coordinate"));
+    }
+    if (!Finite(m.normals[v])) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": normal ", v, " has a non-finite coordinate"));
+    }
+  }
+  for (size_t k = 0; k < m.indices.size(); ++k) {
+    if (m.indices[k] >= m.positions.size()) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": index ", k, " = ", m.indices[k], " is out of range (",
+                                                     m.positions.size(), " vertices)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 absl::Status ValidateScene(const Scene& scene, const std::string& where) {
   if (scene.objects.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(where, ": scene has no objects"));
@@ -52,33 +78,7 @@ absl::Status ValidateScene(const Scene& scene, const std::string& where) {
     const Object& o = scene.objects[i];
     const std::string what = absl::StrCat(where, ": object ", i, " ('", o.name, "')");
     if (o.id != i) return absl::InternalError(absl::StrCat(what, ": id ", o.id, " is not dense"));
-    const Mesh& m = o.mesh;
-    if (m.indices.size() % 3 != 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(what, ": index count ", m.indices.size(), " is not a multiple of 3"));
-    }
-    if (m.normals.size() != m.positions.size()) {
-      return absl::InvalidArgumentError(absl::StrCat(what, ": ", m.normals.size(),
-                                                     " normals for ", m.positions.size(),
-                                                     " positions"));
-    }
-    for (size_t v = 0; v < m.positions.size(); ++v) {
-      if (!Finite(m.positions[v])) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(what, ": vertex ", v, " has a non-finite (NaN or infinite) coordinate"));
-      }
-      if (!Finite(m.normals[v])) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(what, ": normal ", v, " has a non-finite coordinate"));
-      }
-    }
-    for (size_t k = 0; k < m.indices.size(); ++k) {
-      if (m.indices[k] >= m.positions.size()) {
-        return absl::InvalidArgumentError(absl::StrCat(what, ": index ", k, " = ", m.indices[k],
-                                                       " is out of range (", m.positions.size(),
-                                                       " vertices)"));
-      }
-    }
+    if (absl::Status st = ValidateMesh(o.mesh, what); !st.ok()) return st;
   }
   for (size_t i = 0; i < scene.occluders.size(); ++i) {
     const Occluder25D& oc = scene.occluders[i];

@@ -74,6 +74,10 @@ struct Scene {
   ObjectId AddObject(std::string name, Mesh mesh);
 };
 
+// Checks one mesh: whole triangles, a normal per position, finite positions and normals,
+// indices in range. INVALID_ARGUMENT starting with `what` (a file and an object, say).
+absl::Status ValidateMesh(const Mesh& mesh, const std::string& what);
+
 // Checks the invariants every consumer relies on: at least one object, dense ids, finite
 // coordinates, indices in range, normals per position, finite occluders referencing existing
 // objects, terrain ids sorted, distinct and existing, paths named with at least 2 finite

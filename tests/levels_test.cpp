@@ -223,7 +223,7 @@ TEST(Levels, ValidateNamesTheBadLevel) {
   expect_bad(bad, object + "2: ");
   bad = good.scene.levels;
   bad.objects[o][0].mesh.indices[4] = 100000;
-  expect_bad(bad, object + "1: index 4 is 100000");
+  expect_bad(bad, object + "1: index 4 = 100000 is out of range");
   bad = good.scene.levels;
   bad.objects.pop_back();
   expect_bad(bad, "levels for 29 objects, but the scene has 30");
