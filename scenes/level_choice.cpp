@@ -5,7 +5,6 @@
 #include <limits>
 #include <unordered_map>
 
-#include "scenes/geometry_codec.h"
 
 namespace vistream::scenes {
 
@@ -22,18 +21,20 @@ double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen) 
   return error_m * screen.MaxPixelsPerRadian() / (distance_m - error_m);
 }
 
-LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels) : scene_(&scene), levels_(&levels) {
-  object_bytes_.resize(scene.objects.size());
-  for (size_t o = 0; o < scene.objects.size(); ++o) {
-    object_bytes_[o].push_back(EncodeMesh(scene.objects[o].mesh).EncodedBytes());
-    if (o < levels.objects.size()) {
-      for (const MeshLevel& l : levels.objects[o]) object_bytes_[o].push_back(EncodeLevelMesh(l.mesh).EncodedBytes());
-    }
+LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels, std::vector<uint64_t> full_bytes)
+    : scene_(&scene), levels_(&levels), full_bytes_(std::move(full_bytes)) {
+  if (full_bytes_.size() != scene.objects.size()) {
+    full_bytes_.clear();
+    for (const Object& o : scene.objects) full_bytes_.push_back(EncodeMesh(o.mesh).EncodedBytes());
   }
-  cluster_bytes_.resize(levels.clusters.size());
+  object_levels_.resize(scene.objects.size());
+  for (size_t o = 0; o < levels.objects.size(); ++o) {
+    for (const MeshLevel& l : levels.objects[o]) object_levels_[o].push_back(EncodeLevelMesh(l.mesh));
+  }
+  cluster_levels_.resize(levels.clusters.size());
   std::vector<uint32_t> count(scene.objects.size() + 1, 0);
   for (size_t c = 0; c < levels.clusters.size(); ++c) {
-    for (const MeshLevel& l : levels.clusters[c].levels) cluster_bytes_[c].push_back(EncodeLevelMesh(l.mesh).EncodedBytes());
+    for (const MeshLevel& l : levels.clusters[c].levels) cluster_levels_[c].push_back(EncodeLevelMesh(l.mesh));
     for (uint32_t o : levels.clusters[c].objects) ++count[o + 1];
   }
   cluster_offsets_.assign(scene.objects.size() + 1, 0);

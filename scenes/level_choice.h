@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "scenes/aabb.h"
+#include "scenes/geometry_codec.h"
 #include "scenes/level_types.h"
 #include "scenes/scene.h"
 
@@ -34,28 +35,36 @@ struct ScreenSpec {
 // error); infinity when distance <= error.
 double ErrorPixels(double error_m, double distance_m, const ScreenSpec& screen);
 
-// What the choice reads, built once per scene: per level its encoded size (the bytes the wire
-// carries), and per object the clusters that stand for it, smallest first.
+// What the choice reads, built once per scene: every level encoded for the wire (EncodeLevelMesh:
+// the server sends these, the choice weighs their bytes), the full meshes' encoded sizes, and per
+// object the clusters that stand for it, smallest first.
 class LevelIndex {
  public:
   // `scene` and `levels` must outlive the index. levels.objects empty: every object full.
-  LevelIndex(const Scene& scene, const SceneLevels& levels);
+  // `full_bytes`: each object's full mesh's encoded bytes (EncodeMesh) where the caller has them
+  // encoded already (one per object); empty: encoded here.
+  LevelIndex(const Scene& scene, const SceneLevels& levels, std::vector<uint64_t> full_bytes = {});
 
   const Scene& scene() const { return *scene_; }
   const SceneLevels& levels() const { return *levels_; }
-  // Encoded bytes (scenes::EncodeMesh) of object `o` at `level` (0: the full mesh).
-  uint64_t ObjectBytes(uint32_t o, uint32_t level) const { return object_bytes_[o][level]; }
+  // Encoded bytes of object `o` at `level` (0: the full mesh, EncodeMesh).
+  uint64_t ObjectBytes(uint32_t o, uint32_t level) const {
+    return level == 0 ? full_bytes_[o] : object_levels_[o][level - 1].EncodedBytes();
+  }
+  // Object `o`'s level `level` >= 1 encoded for the wire.
+  const EncodedLevelMesh& ObjectLevel(uint32_t o, uint32_t level) const { return object_levels_[o][level - 1]; }
   // Encoded bytes of cluster `c` at `level` (1 .. levels.size()).
-  uint64_t ClusterBytes(uint32_t c, uint32_t level) const { return cluster_bytes_[c][level - 1]; }
+  uint64_t ClusterBytes(uint32_t c, uint32_t level) const { return cluster_levels_[c][level - 1].EncodedBytes(); }
   // The clusters standing for `o`, fewest objects first.
   std::span<const uint32_t> ClustersOf(uint32_t o) const;
 
  private:
   const Scene* scene_;
   const SceneLevels* levels_;
-  std::vector<std::vector<uint64_t>> object_bytes_;   // [object][level], level 0 the full mesh
-  std::vector<std::vector<uint64_t>> cluster_bytes_;  // [cluster][level - 1]
-  std::vector<uint32_t> cluster_offsets_;             // CSR over objects
+  std::vector<uint64_t> full_bytes_;                           // [object]
+  std::vector<std::vector<EncodedLevelMesh>> object_levels_;   // [object][level - 1]
+  std::vector<std::vector<EncodedLevelMesh>> cluster_levels_;  // [cluster][level - 1]
+  std::vector<uint32_t> cluster_offsets_;                      // CSR over objects
   std::vector<uint32_t> cluster_ids_;
 };
 

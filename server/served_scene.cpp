@@ -80,15 +80,9 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     s->scene_.levels = *std::move(made);
   }
   if (!s->scene_.levels.objects.empty()) {
-    s->level_geometry_.resize(objects);
-    visibility::ParallelFor(objects, 0, [&] {
-      return [&](size_t i) {
-        for (const scenes::MeshLevel& l : s->scene_.levels.objects[i]) {
-          s->level_geometry_[i].push_back(scenes::EncodeLevelMesh(l.mesh));
-        }
-      };
-    });
-    s->level_index_ = std::make_unique<scenes::LevelIndex>(s->scene_, s->scene_.levels);
+    std::vector<uint64_t> full_bytes(objects);
+    for (size_t i = 0; i < objects; ++i) full_bytes[i] = s->geometry_[i].EncodedBytes();
+    s->level_index_ = std::make_unique<scenes::LevelIndex>(s->scene_, s->scene_.levels, std::move(full_bytes));
   }
   absl::StatusOr<std::unique_ptr<visibility::EpsilonSuperset>> eps = visibility::EpsilonSuperset::Create(s->scene_);
   if (!eps.ok()) return eps.status();

@@ -72,7 +72,7 @@ class ServedScene {
   const scenes::LevelIndex* levels() const { return level_index_.get(); }
   // Object `object`'s level `level` >= 1 encoded for the wire (EncodeLevelMesh).
   const scenes::EncodedLevelMesh& level_geometry(uint32_t object, uint32_t level) const {
-    return level_geometry_[object][level - 1];
+    return level_index_->ObjectLevel(object, level);
   }
   // What object `object` at `level` (0: full) takes decoded (RawMeshBytes: the memory budget's unit).
   uint64_t RawBytes(uint32_t object, uint32_t level) const;
@@ -110,8 +110,7 @@ class ServedScene {
   visibility::CellQueryOptions query_;
   std::unique_ptr<visibility::PvsFile> file_;
   std::vector<scenes::EncodedMesh> geometry_;
-  std::unique_ptr<scenes::LevelIndex> level_index_;
-  std::vector<std::vector<scenes::EncodedLevelMesh>> level_geometry_;
+  std::unique_ptr<scenes::LevelIndex> level_index_;  // also the levels encoded for the wire
   std::unique_ptr<visibility::EpsilonSuperset> epsilon_;
   vistream::v1::SceneInfo scene_info_;
   std::string pvs_source_;
