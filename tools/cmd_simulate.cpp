@@ -213,6 +213,19 @@ int Simulate(const SimulateArgs& a) {
     if (!scheme.ok()) return BadOption("simulate", "--scheme", std::string(scheme.status().message()));
     schemes.push_back(*scheme);
   }
+  // Levels of detail: each of --lod is a run (off, or tau in pixels).
+  std::vector<double> taus;
+  const std::vector<std::string> lod_texts = absl::StrSplit(a.lod, ',');
+  for (const std::string& text : lod_texts) {
+    double tau = 0.0;
+    if (text != "off" && (!cli::internal::ParseFinite(text, &tau) || !(tau > 0.0) || tau > 1000.0)) {
+      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is not a screen error: expected off or pixels in (0, 1000]"));
+    }
+    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
+      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is listed twice"));
+    }
+    taus.push_back(tau);
+  }
   if (scenes::IsGltfPath(a.scene)) {
     return BadOption("simulate", "--scene",
                      absl::StrCat("'", a.scene, "' is a glTF file, which has no walks: simulate needs a catalog entry "
@@ -259,19 +272,6 @@ int Simulate(const SimulateArgs& a) {
     links.push_back(*l);
   }
   if (links.empty()) links.push_back(link);
-  // Levels of detail: each of --lod is a run (off, or tau in pixels).
-  std::vector<double> taus;
-  const std::vector<std::string> lod_texts = absl::StrSplit(a.lod, ',');
-  for (const std::string& text : lod_texts) {
-    double tau = 0.0;
-    if (text != "off" && (!cli::internal::ParseFinite(text, &tau) || !(tau > 0.0) || tau > 1000.0)) {
-      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is not a screen error: expected off or pixels in (0, 1000]"));
-    }
-    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
-      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is listed twice"));
-    }
-    taus.push_back(tau);
-  }
   // Generated scenes have only the walks their entry declares: checked before the scene is
   // built. Imported ones may have walks of their own (Scene::paths): checked once loaded.
   if (absl::StatusOr<const scenes::WalkPath*> walk = simulation::FindWalk(*entry, a.path);
