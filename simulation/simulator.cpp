@@ -404,10 +404,10 @@ void Run::Frame(double t) {
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
         const uint32_t o = mask->object_ids[k];
         if (!seen(o)) continue;
-        // The first level keeps the object's triangles (the mask's bits hold); a coarser one
-        // is drawn whole.
-        const client::CellCompletion::Object* h = completion_.Held(o);
-        tris += h != nullptr && h->level > 1 ? TrianglesOf(o) : mask->object_triangles[k];
+        // A level that keeps the object's triangles (the first one MakeLevels makes: the same
+        // triangles, snapped) keeps the mask's bits; a simplified one is drawn whole.
+        const uint64_t held = TrianglesOf(o);
+        tris += held != scene_.scene().objects[o].mesh.TriangleCount() ? held : mask->object_triangles[k];
       }
     }
     triangles_sum_ += static_cast<double>(tris);
