@@ -75,4 +75,17 @@ inline CLI::Validator PowerOfTwo(int64_t lo, int64_t hi) {
                             "a power of two", "POWER OF TWO");
 }
 
+// A screen error for levels of detail (issue 45): "off" (0) or tau in pixels, (0, 1000] (the
+// range Hello.levels takes). False for anything else.
+inline bool ParseScreenError(std::string_view text, double* tau_px) {
+  if (text == "off") {
+    *tau_px = 0.0;
+    return true;
+  }
+  double v = 0.0;
+  if (!internal::ParseFinite(text, &v) || !(v > 0.0) || v > 1000.0) return false;
+  *tau_px = v;
+  return true;
+}
+
 }  // namespace vistream::cli

@@ -25,6 +25,19 @@ size_t MissingObjects(const std::vector<uint32_t>& list, Held&& held) {
   return n;
 }
 
+// The objects of `list` drawn at a coarser level of detail than the list asks (a coarse frame
+// draws them until the finer level arrives; issue 45): `levels` one per object of `list` (the
+// level each needs, 0 full), `held_level(o)` the level held, or none when not held.
+template <typename HeldLevel>
+size_t CoarseObjects(const std::vector<uint32_t>& list, const std::vector<uint32_t>& levels, HeldLevel&& held_level) {
+  size_t n = 0;
+  for (size_t k = 0; k < list.size() && k < levels.size(); ++k) {
+    const std::optional<uint32_t> held = held_level(list[k]);
+    n += held.has_value() && *held > levels[k] ? 1 : 0;
+  }
+  return n;
+}
+
 // Whether a cell whose PVS list is `list` (null: not held) is complete: the list is held and
 // `held` holds for every object on it.
 template <typename Held>

@@ -120,6 +120,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--no-masks", no_masks,
                "ask the server for no ε-masks (Hello.epsilon_masks false) and draw the viewcell PVS whole (a baseline)");
+  std::string lod = "1";
+  app.add_option("--lod", lod,
+                 "levels of detail: the screen error in pixels the client accepts (tau, in (0, 1000]), or off for "
+                 "full detail; a server without levels sends full detail")
+      ->capture_default_str();
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
   app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
@@ -158,6 +163,9 @@ int main(int argc, char** argv) {
       return bad_option("--pose: '" + pose + "': expected X,Y,Z,YAW,PITCH (metres, degrees; pitch within +-89)");
     }
     o.pose = p;
+  }
+  if (!vistream::cli::ParseScreenError(lod, &o.lod_tau_px)) {
+    return bad_option("--lod: '" + lod + "': expected off or a screen error in pixels in (0, 1000]");
   }
   if (o.frames > 0 && !o.pose.has_value()) return bad_option("--frames: needs --pose");
   if (!o.overlay_dump.empty() && o.headless && !o.overlay) return bad_option("--overlay-dump: headless, needs --overlay");

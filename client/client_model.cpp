@@ -20,6 +20,9 @@ v1::Hello MakeHello(const HelloSettings& settings) {
   h.set_epsilon_masks(settings.epsilon_masks);
   h.set_pvs_deltas(settings.pvs_deltas);
   h.mutable_held_objects()->Add(settings.held_objects.begin(), settings.held_objects.end());
+  if (std::any_of(settings.held_levels.begin(), settings.held_levels.end(), [](uint32_t l) { return l != 0; })) {
+    h.mutable_held_levels()->Add(settings.held_levels.begin(), settings.held_levels.end());
+  }
   if (settings.screen_error_px > 0.0) {
     v1::LevelRequest* l = h.mutable_levels();
     l->set_viewport_width_px(settings.viewport_width_px);
@@ -100,6 +103,9 @@ absl::StatusOr<DecodedObject> DecodeObjectGeometry(const v1::ObjectGeometry& g) 
     const scenes::Aabb b = o.mesh.Bounds();
     o.bounds_min = b.Empty() ? glm::dvec3(0.0) : b.min;
     o.bounds_max = b.Empty() ? glm::dvec3(0.0) : b.max;
+    o.keeps_triangles = g.keeps_triangles();
+    const uint64_t own = g.vertices().size() + g.indices().size();
+    o.saved_bytes = g.full_bytes() > own ? g.full_bytes() - own : 0;
   }
   o.raw_bytes = scenes::RawMeshBytes(o.mesh.positions.size(), o.mesh.indices.size());
   return o;

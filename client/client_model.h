@@ -35,6 +35,7 @@ struct HelloSettings {
   uint64_t triangle_budget = 0;      // triangles a frame; 0 unlimited
   bool epsilon_masks = false;        // the client draws ε-masks (the server sends none otherwise)
   std::vector<uint32_t> held_objects;  // on resume: the objects it still holds, any order
+  std::vector<uint32_t> held_levels;   // with levels: each held object's level (0 full); empty: all full
   bool pvs_deltas = false;             // takes PVS lists as differences (proto/pvs_delta.h)
   // Levels of detail (Hello.levels; issue 45): the screen error tau in pixels the client accepts
   // on its viewport; 0: off (every object at full detail).
@@ -122,6 +123,12 @@ uint64_t ChargedBytes(const vistream::v1::ServerMessage& m);
 struct DecodedObject {
   uint32_t id = 0;
   uint32_t level = 0;
+  // Whether an ε-mask's triangle bits apply to this mesh (the full mesh, or a level that keeps
+  // its triangles in order: ObjectGeometry.keeps_triangles); false: a masked frame draws it whole.
+  bool keeps_triangles = true;
+  // A level: the encoded bytes it saved the link against the full mesh (ObjectGeometry.full_bytes
+  // less its own; 0 for the full mesh).
+  uint64_t saved_bytes = 0;
   scenes::Mesh mesh;
   glm::dvec3 bounds_min{0.0}, bounds_max{0.0};
   uint64_t raw_bytes = 0;

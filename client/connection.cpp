@@ -234,7 +234,16 @@ grpc::Status Connection::RunSession(bool* answered) {
     settings.memory_budget_bytes = options_.memory_budget_bytes;
     settings.triangle_budget = options_.triangle_budget;
     settings.epsilon_masks = options_.epsilon_masks;
-    settings.held_objects.assign(held_.begin(), held_.end());
+    settings.pvs_deltas = options_.screen_error_px > 0.0;
+    settings.screen_error_px = options_.screen_error_px;
+    settings.viewport_width_px = options_.viewport_width_px;
+    settings.viewport_height_px = options_.viewport_height_px;
+    settings.vertical_fov_rad = options_.vertical_fov_rad;
+    for (const auto& [id, level] : held_) {
+      settings.held_objects.push_back(id);
+      settings.held_levels.push_back(level);
+    }
+    lists_.Clear();  // a new session's first list is whole
     hello = HelloMessage(settings);
     credit = CreditMessage(credit_.Open());
   }
@@ -286,6 +295,15 @@ grpc::Status Connection::RunSession(bool* answered) {
   return st;
 }
 
+void Connection::Fail(const std::string& why) {
+  // Bad data from the server: nothing later can be trusted.
+  std::lock_guard lock(mu_);
+  final_status_ = absl::DataLossError(why);
+  inbox_.push_back(SessionEnded{final_status_});
+  stop_ = true;
+  if (context_ != nullptr) context_->TryCancel();
+}
+
 void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::ServerMessage>* stream) {
   v1::ServerMessage m;
   while (stream->Read(&m)) {
@@ -296,9 +314,21 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
       case v1::ServerMessage::kSceneInfo:
         event = m.scene_info();
         break;
-      case v1::ServerMessage::kPvs:
-        event = std::move(*m.mutable_pvs());
+      case v1::ServerMessage::kPvs: {
+        // Whole, with each object's level (a difference from the list before applied).
+        absl::StatusOr<proto::PvsList> list = lists_.Decode(m.pvs());
+        if (!list.ok()) {
+          Fail(absl::StrCat("the server sent a malformed PVS list: ", list.status().message()));
+          break;
+        }
+        v1::ViewcellPvs whole;
+        whole.set_cell_id(list->cell);
+        whole.set_compute_s(m.pvs().compute_s());
+        whole.mutable_object_ids()->Add(list->objects.begin(), list->objects.end());
+        whole.mutable_object_levels()->Add(list->levels.begin(), list->levels.end());
+        event = std::move(whole);
         break;
+      }
       case v1::ServerMessage::kEpsilonMask: {
         // The server charged the mask's triangle bytes to the credit: they are consumed, as
         // geometry is, or the credit would leak away and the session stall for good.
@@ -320,13 +350,7 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         const v1::ObjectGeometry& g = m.geometry();
         absl::StatusOr<DecodedObject> mesh = DecodeObjectGeometry(g);
         if (!mesh.ok()) {
-          // The server sent bytes that are no mesh: nothing later can be trusted.
-          std::lock_guard lock(mu_);
-          final_status_ = absl::DataLossError(absl::StrCat("the server sent a malformed geometry message: ",
-                                                           mesh.status().message()));
-          inbox_.push_back(SessionEnded{final_status_});
-          stop_ = true;
-          if (context_ != nullptr) context_->TryCancel();
+          Fail(absl::StrCat("the server sent a malformed geometry message: ", mesh.status().message()));
           break;
         }
         ReceivedObject o;
@@ -335,9 +359,18 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         o.bounds_min = mesh->bounds_min;
         o.bounds_max = mesh->bounds_max;
         o.raw_bytes = mesh->raw_bytes;
+        o.level = mesh->level;
+        o.keeps_triangles = mesh->keeps_triangles;
+        o.saved_bytes = mesh->saved_bytes;
         const uint64_t encoded = ChargedBytes(m);
         std::lock_guard lock(mu_);
-        if (!held_.insert(o.id).second) ++stats_.duplicates;
+        const auto [at, first] = held_.emplace(o.id, o.level);
+        if (!first && at->second == o.level) ++stats_.duplicates;
+        at->second = o.level;
+        if (o.level > 0) {
+          ++stats_.level_objects;
+          stats_.level_bytes_saved += o.saved_bytes;
+        }
         ++stats_.objects_received;
         stats_.geometry_bytes += encoded;
         credit_.Consume(encoded);

@@ -11,6 +11,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -27,6 +28,7 @@
 
 #include "client/channel_security.h"
 #include "client/client_model.h"
+#include "proto/pvs_delta.h"
 #include "proto/walkthrough.grpc.pb.h"
 #include "scenes/mesh.h"
 
@@ -40,6 +42,11 @@ struct ConnectionOptions {
   double pose_rate_hz = kPoseRateHz;   // poses sent per second (the server allows 120)
   uint64_t credit_window_bytes = CreditWindow::kDefaultBytes;  // encoded geometry and mask bytes in flight at most
   bool epsilon_masks = false;          // Hello: the client draws ε-masks (the server sends none otherwise)
+  // Hello.levels (issue 45): the screen error tau in pixels the client accepts on its viewport
+  // (0: full detail); with levels the lists come as differences (Hello.pvs_deltas).
+  double screen_error_px = 0.0;
+  uint32_t viewport_width_px = 1280, viewport_height_px = 720;
+  double vertical_fov_rad = 1.0471975511965976;
   double connect_timeout_s = 10.0;     // per attempt
   double max_backoff_s = 4.0;          // reconnect back-off doubles from 0.25 s up to this
   ChannelSecurity security;            // TLS and the bearer token (client/channel_security.h)
@@ -51,6 +58,9 @@ struct ReceivedObject {
   scenes::Mesh mesh;
   glm::dvec3 bounds_min{0.0}, bounds_max{0.0};
   uint64_t raw_bytes = 0;  // scenes::RawMeshBytes: the server's accounting
+  uint32_t level = 0;      // its level of detail (0: full)
+  bool keeps_triangles = true;  // ε-mask bits apply (DecodedObject::keeps_triangles)
+  uint64_t saved_bytes = 0;     // what the level saved the link (DecodedObject::saved_bytes)
 };
 
 struct SessionEnded {
@@ -67,7 +77,9 @@ struct ConnectionStats {
   uint64_t mask_bytes = 0;       // ε-masks' run-length triangle bytes (EpsilonMask.triangles): credit consumed
   uint64_t masks_received = 0;
   uint64_t objects_received = 0;
-  uint64_t duplicates = 0;       // geometry received for an object already held
+  uint64_t duplicates = 0;       // geometry received for an object already held at the same level
+  uint64_t level_objects = 0;    // geometry received at a coarser level than full (issue 45)
+  uint64_t level_bytes_saved = 0;  // encoded bytes those levels saved against full meshes
   uint64_t reconnects = 0;       // sessions after the first that the server answered
   uint64_t poses_sent = 0;
   double backoff_s = 0.0;        // the last wait before a reconnect attempt (0.25 s doubling to max_backoff_s)
@@ -125,6 +137,8 @@ class Connection {
   // One session from connect to end; returns its status, and whether the server answered.
   grpc::Status RunSession(bool* answered);
   void ReadLoop(grpc::ClientReaderWriter<vistream::v1::ClientMessage, vistream::v1::ServerMessage>* stream);
+  // Ends the session for good on bad data from the server (DATA_LOSS with `why`).
+  void Fail(const std::string& why);
   void Push(Event e);
 
   ConnectionOptions options_;
@@ -138,7 +152,8 @@ class Connection {
   bool stop_ = false;
   bool have_pose_ = false;
   vistream::v1::Pose pose_;
-  std::set<uint32_t> held_;            // received and not evicted: Hello.held_objects on resume
+  std::map<uint32_t, uint32_t> held_;  // received and not evicted, with its level: Hello.held_objects on resume
+  proto::PvsListDecoder lists_;        // the session's PVS lists (differences, with levels)
   CreditWindow credit_;                // the session's grants (client/client_model.h)
   bool reader_done_ = false;
   grpc::ClientContext* context_ = nullptr;  // of the session in progress, for Stop/Drop

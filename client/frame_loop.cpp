@@ -15,6 +15,7 @@
 #include "client/screenshots.h"
 #include "client/verification.h"
 #include "client/walkthrough_loop.h"
+#include "scenes/levels.h"
 
 namespace vistream::client {
 
@@ -103,6 +104,8 @@ absl::Status WalkthroughLoop::Walkthrough() {
     if (!p->complete) {
       ++sum_->stalls;
       sum_->stall_s += end - prev_end;
+    } else if (p->coarse > 0) {
+      ++sum_->coarse_frames;
     }
     prev_end = end;
     tally.triangles += fs.triangles_drawn;
@@ -281,13 +284,47 @@ absl::Status WalkthroughLoop::Screenshot(double t) {
 }
 
 absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMaskSet* mask) {
+  if (!ids_->has_levels() &&
+      std::any_of(drawn.begin(), drawn.end(), [](const DrawnObject& d) { return d.level > 0; })) {
+    // The server sends levels it made at start: the check makes the same ones here, once.
+    if (full_scene_->levels.empty()) {
+      Log(absl::StrCat("--verify: making the levels of detail of '", sum_->scene, "' as a server does"));
+      absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(*full_scene_, scenes::SessionLevelOptions());
+      if (!made.ok()) return made.status();
+      if (!owned_scene_.has_value()) owned_scene_ = *full_scene_;  // the caller's scene is not ours to change
+      owned_scene_->levels = *std::move(made);
+      full_scene_ = &*owned_scene_;
+    }
+    ids_.reset();
+    absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1, /*levels=*/true);
+    if (!ids.ok()) return ids.status();
+    ids_ = std::move(*ids);
+  }
+  // A level drawn is the local scene's level only if the server made the same: the triangle
+  // counts must agree (a server's levels made with other options would make the check wrong).
+  for (const DrawnObject& d : drawn) {
+    const StoredObject* o = d.level > 0 ? store_->Find(d.id) : nullptr;
+    if (o == nullptr || o->data.level != d.level || d.id >= full_scene_->levels.objects.size() ||
+        d.level > full_scene_->levels.objects[d.id].size()) {
+      continue;  // CompareWithFullScene says what is missing
+    }
+    const size_t local = full_scene_->levels.objects[d.id][d.level - 1].mesh.TriangleCount();
+    if (o->data.mesh.TriangleCount() != local) {
+      return absl::FailedPreconditionError(absl::StrFormat(
+          "--verify: object %d's level %d has %d triangles from the server and %d in the local scene: the server "
+          "made its levels otherwise (check with --lod off, or give the client the server's scene file)",
+          d.id, d.level, o->data.mesh.TriangleCount(), local));
+    }
+  }
   absl::StatusOr<PixelComparison> c = CompareWithFullScene(*ids_, *full_scene_, camera_, drawn, mask);
   if (!c.ok()) return c.status();
   sum_->pixel_error += c->differ;
   sum_->checked_pixels += c->pixels;
   ++sum_->checked_frames;
+  sum_->max_silhouette_px = std::max(sum_->max_silhouette_px, c->max_silhouette_px);
   if (c->differ > 0) {
-    Log(absl::StrFormat("verify: %d pixels differ at (%.1f, %.1f)", c->differ, camera_.eye.x, camera_.eye.y));
+    Log(absl::StrFormat("verify: %d pixels differ at (%.1f, %.1f), the farthest %.1f px from a full-detail silhouette",
+                        c->differ, camera_.eye.x, camera_.eye.y, c->max_silhouette_px));
   }
   return context_->MakeCurrent();
 }
@@ -358,6 +395,10 @@ absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upl
     p.missing = MissingObjects(*p.pvs, [&](uint32_t id) { return renderer_->Uploaded(id); });
   }
   p.complete = opt_.draw_everything ? renderer_->pending_uploads() == 0 : p.pvs != nullptr && p.missing == 0;
+  if (const std::vector<uint32_t>* levels = p.cell.has_value() ? store_->PvsLevels(*p.cell) : nullptr;
+      p.pvs != nullptr && levels != nullptr) {
+    p.coarse = CoarseObjects(*p.pvs, *levels, [&](uint32_t id) { return renderer_->UploadedLevel(id); });
+  }
   return p;
 }
 

@@ -30,6 +30,11 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       masks_.NewSession();  // a session starts here; its masks number from 1 again
     } else if (auto* pvs = std::get_if<v1::ViewcellPvs>(&e)) {
       pvs_[pvs->cell_id()].assign(pvs->object_ids().begin(), pvs->object_ids().end());
+      if (pvs->object_levels_size() == pvs->object_ids_size() && pvs->object_levels_size() > 0) {
+        pvs_levels_[pvs->cell_id()].assign(pvs->object_levels().begin(), pvs->object_levels().end());
+      } else {
+        pvs_levels_.erase(pvs->cell_id());
+      }
     } else if (auto* object = std::get_if<ReceivedObject>(&e)) {
       const uint32_t id = object->id;
       if (objects_.count(id) > 0) Remove(id);  // a resent object replaces the old copy
@@ -57,6 +62,7 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       const visibility::CellCoord e = grid_.Coord(entry.first);
       return std::max(std::abs(e.i - c.i), std::abs(e.j - c.j)) >= 3;
     });
+    std::erase_if(pvs_levels_, [&](const auto& entry) { return pvs_.count(entry.first) == 0; });
   }
   masks_.KeepNear(scene_info_.has_value() ? current_cell : std::nullopt, grid_);
   return EnforceBudget(current_cell);
@@ -131,6 +137,11 @@ StoredObject* ObjectStore::Find(uint32_t id) {
 const std::vector<uint32_t>* ObjectStore::Pvs(uint32_t cell) const {
   auto it = pvs_.find(cell);
   return it == pvs_.end() ? nullptr : &it->second;
+}
+
+const std::vector<uint32_t>* ObjectStore::PvsLevels(uint32_t cell) const {
+  auto it = pvs_levels_.find(cell);
+  return it == pvs_levels_.end() ? nullptr : &it->second;
 }
 
 bool ObjectStore::CellComplete(uint32_t cell) const {

@@ -59,6 +59,9 @@ class ObjectStore {
   const std::vector<uint32_t>* Pvs(uint32_t cell) const;
   // Every PVS list held, by cell.
   const std::map<uint32_t, std::vector<uint32_t>>& pvs_lists() const { return pvs_; }
+  // With levels of detail (issue 45): the level each object of `cell`'s list needs there
+  // (ViewcellPvs.object_levels, one per object); null without levels or without the list.
+  const std::vector<uint32_t>* PvsLevels(uint32_t cell) const;
   // Whether `cell`'s PVS list and every object on it are held.
   bool CellComplete(uint32_t cell) const;
 
@@ -102,6 +105,7 @@ class ObjectStore {
   visibility::ViewcellGrid grid_;
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
+  std::map<uint32_t, std::vector<uint32_t>> pvs_levels_;  // cells whose list came with levels
   MaskHoldings masks_;
   std::vector<uint32_t> removed_, added_;
   uint64_t held_bytes_ = 0, max_held_bytes_ = 0;

@@ -48,6 +48,10 @@ struct OverlayStatus {
   uint64_t held_bytes = 0, memory_budget_bytes = 0;  // budget 0: none
   uint64_t bytes_received = 0;     // since the start (the overlay derives the rate)
   uint64_t frames = 0, stalls = 0, hole_frames = 0, frames_masked = 0;
+  // Levels of detail (issue 45): the screen error asked for (0: off), frames drawing a coarser
+  // level than the cell asks, objects received at a level and the bytes those levels saved.
+  double lod_tau_px = 0.0;
+  uint64_t coarse_frames = 0, level_objects = 0, level_bytes_saved = 0;
   double stall_s = 0.0;
   bool masked = false, hole = false;  // what this frame drew
   uint32_t mask_id = 0;               // masked: the server's id of the ε-mask drawn

@@ -201,7 +201,10 @@ void Renderer::Free(Gpu& g) {
 }
 
 void Renderer::Upload(uint32_t id, const StoredObject& o) {
+  if (auto old = gpu_.find(id); old != gpu_.end()) Free(old->second);  // the level it replaces
   Gpu g;
+  g.level = o.data.level;
+  g.keeps_triangles = o.data.keeps_triangles;
   const scenes::Mesh& mesh = o.data.mesh;
   gl_.GenVertexArrays(1, &g.vao);
   gl_.BindVertexArray(g.vao);
@@ -221,15 +224,20 @@ void Renderer::Upload(uint32_t id, const StoredObject& o) {
 }
 
 uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes) {
+  const std::vector<uint32_t> added = store.TakeAdded();
+  const std::set<uint32_t> again(added.begin(), added.end());
   for (uint32_t id : store.TakeRemoved()) {
+    pending_.erase(id);
+    // Replaced by another level (or sent again): the copy uploaded is drawn until its
+    // successor goes up (Upload frees it then).
+    if (again.count(id) > 0 && store.Find(id) != nullptr) continue;
     auto it = gpu_.find(id);
     if (it != gpu_.end()) {
       Free(it->second);
       gpu_.erase(it);
     }
-    pending_.erase(id);
   }
-  for (uint32_t id : store.TakeAdded()) pending_.insert(id);
+  for (uint32_t id : added) pending_.insert(id);
   if (const std::vector<uint64_t> dropped = store.TakeDroppedMasks(); !dropped.empty()) {
     const std::set<uint64_t> keys(dropped.begin(), dropped.end());
     for (auto& [id, g] : gpu_) {
@@ -351,10 +359,14 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     if (mask != nullptr) {
       const std::vector<uint8_t>* bits = mask->Bits(id);
       if (bits == nullptr) continue;  // no triangle of it can be seen from the box
-      const MaskedIndices& m = MaskedFor(g, *o, *bits, mask->key, frame);
-      masked = true;
-      count = m.count;
-      masked_ibo = m.ibo;
+      // The bits name the full mesh's triangles: they apply to the copy uploaded only if it
+      // keeps them and is the store's (whose indices MaskedFor reads); else it is drawn whole.
+      if (g.keeps_triangles && g.level == o->data.level && !pending_.count(id)) {
+        const MaskedIndices& m = MaskedFor(g, *o, *bits, mask->key, frame);
+        masked = true;
+        count = m.count;
+        masked_ibo = m.ibo;
+      }
     }
     if (count == 0) continue;
     gl_.BindVertexArray(g.vao);
@@ -366,7 +378,7 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     o->last_drawn_frame = frame;
     ++stats.objects_drawn;
     stats.triangles_drawn += count / 3;
-    if (drawn != nullptr) drawn->push_back({id, masked});
+    if (drawn != nullptr) drawn->push_back({id, masked, g.level});
   }
   gl_.BindVertexArray(0);
   return stats;

@@ -28,6 +28,7 @@ namespace vistream::client {
 struct DrawnObject {
   uint32_t id = 0;
   bool masked = false;
+  uint32_t level = 0;  // the level of detail drawn (0: full; issue 45)
 };
 
 struct FrameStats {
@@ -55,12 +56,21 @@ class Renderer {
   // `first` before any other, at most `budget_bytes` of vertex and index data a call (at least
   // one object, so that an object larger than the budget still goes up). Returns bytes uploaded.
   uint64_t Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes);
+  // Whether `id` can be drawn: uploaded. An object the store replaced by another level stays
+  // drawable at the level uploaded before until the new one goes up (never a gap).
   bool Uploaded(uint32_t id) const { return gpu_.count(id) > 0; }
+  // The level of detail of `id` on the GPU (0: full); none when not uploaded.
+  std::optional<uint32_t> UploadedLevel(uint32_t id) const {
+    auto it = gpu_.find(id);
+    return it == gpu_.end() ? std::nullopt : std::optional<uint32_t>(it->second.level);
+  }
   size_t pending_uploads() const { return pending_.size(); }
 
   // Draws `objects` (ids; those not uploaded are skipped) as seen by `camera`; with `mask`, only
   // the masked triangles of masked objects (objects the mask lists no triangle of are not
-  // drawn). `drawn`, if given, receives what was drawn. `frame` stamps the objects' last use.
+  // drawn); an object held at a level that does not keep its triangles
+  // (ReceivedObject::keeps_triangles), or still drawn at the level it had before a new one
+  // arrived, is drawn whole when the mask lists it. `drawn`, if given, receives what was drawn. `frame` stamps the objects' last use.
   // The masked index lists are built on first use and kept per object for the last few masks
   // (by EpsilonMaskSet::key), so that frames switching between masks build nothing.
   FrameStats Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
@@ -105,6 +115,8 @@ class Renderer {
   struct Gpu {
     unsigned vao = 0, vbo = 0, ibo = 0;
     uint32_t index_count = 0;
+    uint32_t level = 0;            // the level of detail uploaded
+    bool keeps_triangles = true;   // mask bits apply to it (while it is the store's level)
     std::vector<MaskedIndices> masked;  // at most kMaskedPerObject, the least recently drawn replaced
   };
   Renderer(gl::GlContext* context, const gl::GlFunctions& gl) : context_(context), gl_(gl) {}

@@ -1,8 +1,68 @@
 #include "client/verification.h"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <absl/strings/str_cat.h>
+
 #include "visibility/mask_codec.h"
 
 namespace vistream::client {
+
+namespace {
+
+// Stands for "no source pixel": far above any squared distance of a frame (8192^2 * 2), and
+// finite, so that the envelope's intersections stay numbers.
+constexpr double kFar = 1e20;
+
+// The 1-D squared distance transform of `f` (n samples) into `d` (Felzenszwalb & Huttenlocher,
+// section 2.1): d[q] = min over p of (q - p)^2 + f[p]. `v`, `z` are scratch of n and n + 1.
+void Transform1d(const double* f, int n, double* d, std::vector<int>& v, std::vector<double>& z) {
+  auto meet = [&](int q, int p) { return ((f[q] + double(q) * q) - (f[p] + double(p) * p)) / (2.0 * q - 2.0 * p); };
+  int k = 0;
+  v[0] = 0;
+  z[0] = -std::numeric_limits<double>::infinity();
+  z[1] = std::numeric_limits<double>::infinity();
+  for (int q = 1; q < n; ++q) {
+    double s = meet(q, v[k]);
+    while (s <= z[k]) {
+      --k;
+      s = meet(q, v[k]);
+    }
+    ++k;
+    v[k] = q;
+    z[k] = s;
+    z[k + 1] = std::numeric_limits<double>::infinity();
+  }
+  k = 0;
+  for (int q = 0; q < n; ++q) {
+    while (z[k + 1] < q) ++k;
+    const double dq = double(q) - v[k];
+    d[q] = std::min(kFar, dq * dq + f[v[k]]);
+  }
+}
+
+}  // namespace
+
+std::vector<double> SquaredDistanceTransform(const std::vector<uint8_t>& source, int width, int height) {
+  const auto w = static_cast<size_t>(width), h = static_cast<size_t>(height);
+  std::vector<double> out(w * h);
+  for (size_t k = 0; k < out.size(); ++k) out[k] = source[k] != 0 ? 0.0 : kFar;
+  const int n = std::max(width, height);
+  std::vector<double> f(n), d(n), z(n + 1);
+  std::vector<int> v(n);
+  for (size_t x = 0; x < w; ++x) {  // columns
+    for (size_t y = 0; y < h; ++y) f[y] = out[y * w + x];
+    Transform1d(f.data(), height, d.data(), v, z);
+    for (size_t y = 0; y < h; ++y) out[y * w + x] = d[y];
+  }
+  for (size_t y = 0; y < h; ++y) {  // rows
+    Transform1d(&out[y * w], width, d.data(), v, z);
+    std::copy(d.begin(), d.begin() + width, out.begin() + static_cast<std::ptrdiff_t>(y * w));
+  }
+  return out;
+}
 
 absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const scenes::Scene& scene,
                                                      const Camera& camera, const std::vector<DrawnObject>& drawn,
@@ -10,8 +70,17 @@ absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const 
   std::vector<uint8_t> flags(ids.triangle_count(), 0);
   for (const DrawnObject& d : drawn) {
     if (d.id >= scene.objects.size()) continue;
-    const uint64_t first = ids.FirstTriangle(d.id);
-    const size_t n = scene.objects[d.id].mesh.TriangleCount();
+    size_t n = scene.objects[d.id].mesh.TriangleCount();
+    if (d.level > 0) {
+      const size_t levels = d.id < scene.levels.objects.size() ? scene.levels.objects[d.id].size() : 0;
+      if (!ids.has_levels() || d.level > levels) {
+        return absl::FailedPreconditionError(absl::StrCat(
+            "--verify: object ", d.id, " was drawn at level ", d.level, ", which the local scene ",
+            d.level > levels ? absl::StrCat("does not have (it has ", levels, ")") : "holds but the check was not given"));
+      }
+      n = scene.levels.objects[d.id][d.level - 1].mesh.TriangleCount();
+    }
+    const uint64_t first = ids.FirstTriangle(d.id, d.level);
     const std::vector<uint8_t>* bits = nullptr;
     if (d.masked && mask != nullptr) bits = mask->Bits(d.id);
     for (size_t t = 0; t < n; ++t) {
@@ -28,6 +97,31 @@ absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const 
   PixelComparison c;
   for (size_t k = 0; k < full->size(); ++k) c.differ += (*full)[k] != (*part)[k] ? 1 : 0;
   c.pixels = full->size();
+  if (c.differ == 0) return c;
+  // How far the differing pixels lie from the full frame's silhouettes.
+  const int w = camera.width, h = camera.height;
+  std::vector<uint8_t> edge(full->size(), 0);
+  bool any = false;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const size_t k = static_cast<size_t>(y) * w + x;
+      const bool right = x + 1 < w && (*full)[k] != (*full)[k + 1];
+      const bool above = y + 1 < h && (*full)[k] != (*full)[k + w];
+      if (right) edge[k] = edge[k + 1] = 1;
+      if (above) edge[k] = edge[k + w] = 1;
+      any = any || right || above;
+    }
+  }
+  if (!any) {
+    c.max_silhouette_px = std::hypot(double(w), double(h));
+    return c;
+  }
+  const std::vector<double> d2 = SquaredDistanceTransform(edge, w, h);
+  double worst = 0.0;
+  for (size_t k = 0; k < full->size(); ++k) {
+    if ((*full)[k] != (*part)[k]) worst = std::max(worst, d2[k]);
+  }
+  c.max_silhouette_px = std::sqrt(worst);
   return c;
 }
 

@@ -60,6 +60,7 @@ absl::Status WalkthroughLoop::Prepare() {
   triangle_budget_ =
       opt_.triangle_budget.value_or(client.has_value() ? client->triangle_budget.value_or(0) : uint64_t{0});
   sum_->memory_budget_bytes = memory_budget_;
+  sum_->lod_tau_px = opt_.lod_tau_px;
   sum_->triangle_budget = triangle_budget_;
 
   if (opt_.verify || opt_.draw_everything) {
@@ -86,7 +87,10 @@ absl::Status WalkthroughLoop::Prepare() {
     camera_.eye = walk_->At(0.0).eye;
   }
   if (opt_.verify) {
-    absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1);
+    // With the scene's own levels, if it has them; a server that made its own at start gets
+    // them made here when its first level is drawn (WalkthroughLoop::Verify).
+    absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids =
+        gl::IdRenderer::Create(*full_scene_, 1, /*levels=*/!full_scene_->levels.empty());
     if (!ids.ok()) return ids.status();
     ids_ = std::move(*ids);
     sum_->verified = true;
@@ -157,6 +161,10 @@ absl::Status WalkthroughLoop::Prepare() {
   co.connect_timeout_s = opt_.connect_timeout_s;
   co.security = opt_.security;
   co.epsilon_masks = opt_.use_masks;
+  co.screen_error_px = opt_.lod_tau_px;
+  co.viewport_width_px = static_cast<uint32_t>(width);
+  co.viewport_height_px = static_cast<uint32_t>(height);
+  co.vertical_fov_rad = camera_.fov_y_rad;
   store_ = std::make_unique<ObjectStore>(memory_budget_);
   if (opt_.draw_everything) return PreloadEverything();
   connection_ = std::make_unique<Connection>(co);
@@ -200,6 +208,8 @@ absl::Status WalkthroughLoop::Run() {
     sum_->geometry_bytes = c.geometry_bytes;
     sum_->objects_received = c.objects_received;
     sum_->duplicates = c.duplicates;
+    sum_->level_objects_received = c.level_objects;
+    sum_->level_bytes_saved = c.level_bytes_saved;
     sum_->reconnects = c.reconnects;
     if (s.ok() && !end.ok() && end.code() != absl::StatusCode::kUnavailable) s = end;
   }

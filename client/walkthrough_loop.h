@@ -48,6 +48,7 @@ struct Pumped {
   std::optional<uint32_t> cell;
   const std::vector<uint32_t>* pvs = nullptr;
   size_t missing = 0;  // of the PVS list, objects not here and uploaded
+  size_t coarse = 0;   // of the PVS list, objects uploaded at a coarser level than it asks
   bool complete = false;
 };
 

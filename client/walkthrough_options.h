@@ -48,6 +48,10 @@ struct WalkthroughOptions {
   uint64_t upload_budget_bytes = uint64_t{4} << 20;  // GPU uploads per frame
   double max_fps = 60.0;        // 0: as fast as it draws
   bool use_masks = true;        // false: ask for no ε-mask and draw the viewcell PVS whole (a baseline)
+  // Levels of detail (issue 45): the screen error tau, pixels, the client accepts (Hello.levels
+  // with the frame's size and field of view); 0: every object at full detail. A server without
+  // levels sends full detail whatever is asked.
+  double lod_tau_px = 1.0;
   // A baseline: no server geometry; the whole scene (loaded locally, or local_scene) is
   // uploaded before the walk and drawn every frame with frustum culling.
   bool draw_everything = false;

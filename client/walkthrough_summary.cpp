@@ -76,6 +76,11 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["masks_received"] = s.masks_received;
   j["frames_masked"] = s.frames_masked;
   j["hole_frames"] = s.hole_frames;
+  j["lod_tau_px"] = s.lod_tau_px > 0.0 ? nlohmann::ordered_json(s.lod_tau_px) : nlohmann::ordered_json(nullptr);
+  j["coarse_frames"] = s.coarse_frames;
+  j["level_objects_received"] = s.level_objects_received;
+  j["level_bytes_saved"] = s.level_bytes_saved;
+  j["max_silhouette_px"] = s.verified ? nlohmann::ordered_json(s.max_silhouette_px) : nlohmann::ordered_json(nullptr);
   j["cells_visited"] = s.cells_visited;
   j["startup_s"] = s.startup_s;
   j["walk_s"] = s.walk_s;
@@ -128,9 +133,21 @@ std::string SummaryText(const WalkthroughSummary& s) {
                         s.mean_triangles_without_masks > 0
                             ? 100.0 * s.mean_triangles_drawn / s.mean_triangles_without_masks
                             : 0.0);
+  if (s.lod_tau_px > 0.0) {
+    absl::StrAppendFormat(&out,
+                          "  levels of detail at tau %.2f px: %d objects received at a level (%.1f MB saved), %d "
+                          "coarse frames\n",
+                          s.lod_tau_px, s.level_objects_received, s.level_bytes_saved / 1e6, s.coarse_frames);
+  } else {
+    out += "  levels of detail: off (full detail)\n";
+  }
   if (s.verified) {
-    absl::StrAppendFormat(&out, "  pixel error: %d of %d pixels in %d checked frames\n", s.pixel_error,
-                          s.checked_pixels, s.checked_frames);
+    absl::StrAppendFormat(&out, "  pixel error: %d of %d pixels in %d checked frames%s\n", s.pixel_error,
+                          s.checked_pixels, s.checked_frames,
+                          s.pixel_error > 0
+                              ? absl::StrFormat("; the farthest %.1f px from a full-detail silhouette",
+                                                s.max_silhouette_px)
+                              : std::string());
   } else {
     out += "  pixel error: not checked (--verify checks it)\n";
   }

@@ -30,6 +30,14 @@ struct WalkthroughSummary {
   uint64_t pixel_error = 0, checked_frames = 0, checked_pixels = 0;
   uint64_t masks_received = 0, frames_masked = 0, cells_visited = 0;
   uint64_t hole_frames = 0;  // neither a usable mask nor the complete viewcell PVS
+  // Levels of detail (issue 45): the screen error asked for (0: off); frames of a complete
+  // viewcell drawing some object at a coarser level than its list asks (the finer one on its
+  // way); geometry received at a level and the encoded bytes those levels saved.
+  double lod_tau_px = 0.0;
+  uint64_t coarse_frames = 0, level_objects_received = 0, level_bytes_saved = 0;
+  // --verify: the largest distance, pixels, of a differing pixel from the nearest full-detail
+  // silhouette over the checked frames (0: none differed).
+  double max_silhouette_px = 0.0;
   // The same frames' viewcell PVS after view-frustum culling (what a PVS-only client would
   // draw: on a stall, what is held); equal to mean_triangles_drawn without masks.
   double mean_triangles_without_masks = 0.0;

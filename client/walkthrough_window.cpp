@@ -125,6 +125,8 @@ OverlayStatus WalkthroughLoop::Status(const Pumped& p, const FrameStats& fs, con
     const ConnectionStats c = connection_->stats();
     st.reconnects = std::max<uint64_t>(c.reconnects, reconnected_);
     st.bytes_received = c.bytes_received;
+    st.level_objects = c.level_objects;
+    st.level_bytes_saved = c.level_bytes_saved;
     st.backoff_s = c.backoff_s;
     st.link = link_up_ ? OverlayStatus::Link::kConnected
               : gave_up_flag_ ? OverlayStatus::Link::kGivenUp
@@ -152,6 +154,8 @@ OverlayStatus WalkthroughLoop::Status(const Pumped& p, const FrameStats& fs, con
   st.stalls = sum_->stalls + (p.complete ? 0 : 1);
   st.stall_s = sum_->stall_s;
   st.hole_frames = sum_->hole_frames + (hole ? 1 : 0);
+  st.lod_tau_px = opt_.lod_tau_px;
+  st.coarse_frames = sum_->coarse_frames + (p.complete && p.coarse > 0 ? 1 : 0);
   st.frames_masked = sum_->frames_masked + (fs.mask_used ? 1 : 0);
   st.masks_received = masks_seen_;
   st.masked = mask != nullptr;

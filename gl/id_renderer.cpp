@@ -108,7 +108,7 @@ IdRenderer::~IdRenderer() {
   }
 }
 
-absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Scene& scene, int size) {
+absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Scene& scene, int size, bool levels) {
   if (size < 1 || size > 4096) return absl::InvalidArgumentError(absl::StrCat("id renderer: face size ", size));
   auto r = std::unique_ptr<IdRenderer>(new IdRenderer());
   absl::StatusOr<std::unique_ptr<GlContext>> context = GlContext::CreateOffscreen();
@@ -117,11 +117,11 @@ absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Sce
   r->size_ = size;
   r->clip_control_ = GlContext::ProcAddress("glClipControl");
   if (r->clip_control_ == nullptr) return absl::UnavailableError("id renderer: the GL has no glClipControl");
-  if (absl::Status s = r->Init(scene); !s.ok()) return s;
+  if (absl::Status s = r->Init(scene, levels); !s.ok()) return s;
   return r;
 }
 
-absl::Status IdRenderer::Init(const scenes::Scene& scene) {
+absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
   absl::StatusOr<GLuint> program = LinkProgram(kVertexShader, kFragmentShader, "id renderer");
   if (!program.ok()) return program.status();
   program_ = *program;
@@ -136,6 +136,19 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene) {
     const auto base = static_cast<uint32_t>(vertices.size());
     for (const glm::vec3& p : o.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
     for (uint32_t i : o.mesh.indices) indices.push_back(base + i);
+  }
+  full_index_count_ = indices.size();
+  if (levels && !scene.levels.objects.empty()) {
+    level_first_triangle_.resize(scene.objects.size());
+    for (const scenes::Object& o : scene.objects) {
+      if (o.id >= scene.levels.objects.size()) continue;
+      for (const scenes::MeshLevel& level : scene.levels.objects[o.id]) {
+        level_first_triangle_[o.id].push_back(indices.size() / 3);
+        const auto base = static_cast<uint32_t>(vertices.size());
+        for (const glm::vec3& p : level.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
+        for (uint32_t i : level.mesh.indices) indices.push_back(base + i);
+      }
+    }
   }
   index_count_ = indices.size();
   glGenVertexArrays(1, &vao_);
@@ -189,7 +202,7 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
   for (int f = 0; f < 6; ++f) {
     double m[16];
     PinholeReversedInfinite(eye, forward[f], up[f], 1.0, 1.0, kNear, m);  // a 90-degree face
-    DrawAndRead(m, size_, size_, &faces[f]);
+    DrawAndRead(m, size_, size_, full_index_count_, &faces[f]);
   }
   if (absl::Status ended = EndPass(); !ended.ok()) return ended;
   return faces;
@@ -218,7 +231,7 @@ absl::Status IdRenderer::EndPass() {
   return absl::OkStatus();
 }
 
-void IdRenderer::DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out) {
+void IdRenderer::DrawAndRead(const double m[16], int w, int h, size_t index_count, std::vector<uint32_t>* out) {
   float mf[16];
   for (int k = 0; k < 16; ++k) mf[k] = static_cast<float>(m[k]);
   glUniformMatrix4fv(loc_view_projection_, 1, GL_FALSE, mf);
@@ -226,7 +239,7 @@ void IdRenderer::DrawAndRead(const double m[16], int w, int h, std::vector<uint3
   glClearBufferuiv(GL_COLOR, 0, zero);
   const GLfloat far_depth = 0.0f;
   glClearBufferfv(GL_DEPTH, 0, &far_depth);
-  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(index_count_), GL_UNSIGNED_INT, nullptr);
+  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(index_count), GL_UNSIGNED_INT, nullptr);
   out->resize(static_cast<size_t>(w) * h);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
   glReadPixels(0, 0, w, h, GL_RED_INTEGER, GL_UNSIGNED_INT, out->data());
@@ -274,7 +287,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
   double m[16];
   PinholeReversedInfinite(eye, forward, up, fx, fy, kNear, m);
   std::vector<uint32_t> out;
-  DrawAndRead(m, width, height, &out);
+  DrawAndRead(m, width, height, triangles != nullptr ? index_count_ : full_index_count_, &out);
   if (absl::Status ended = EndPass(); !ended.ok()) return ended;
   return out;
 }

@@ -25,9 +25,13 @@ inline constexpr uint32_t kBackFace = 0x80000000u;
 
 class IdRenderer {
  public:
-  // Uploads the scene's triangles; faces of `size` x `size` pixels. Errors: no context, a
-  // size outside 1..4096, GL failing.
-  static absl::StatusOr<std::unique_ptr<IdRenderer>> Create(const scenes::Scene& scene, int size);
+  // Uploads the scene's triangles; faces of `size` x `size` pixels. With `levels`, each
+  // object's levels of detail (scene.levels.objects, issue 45) go up too, after the scene's
+  // triangles and tagged with their object: RenderView's flags may then pick a level's
+  // triangles instead of the full mesh's (a client drawing levels against the full scene).
+  // Errors: no context, a size outside 1..4096, GL failing.
+  static absl::StatusOr<std::unique_ptr<IdRenderer>> Create(const scenes::Scene& scene, int size,
+                                                            bool levels = false);
   ~IdRenderer();
   IdRenderer(const IdRenderer&) = delete;
   IdRenderer& operator=(const IdRenderer&) = delete;
@@ -38,35 +42,44 @@ class IdRenderer {
   absl::StatusOr<std::array<std::vector<uint32_t>, 6>> RenderCube(const glm::dvec3& eye);
   // What each pixel of a pinhole view sees (row by row, bottom row first; values as above):
   // the eye at `eye` looking along unit `forward` with `up` (scene-local, z up), vertical field
-  // of view `fov_y_rad`, `width` x `height` pixels. With `triangles`, only the triangles whose
-  // flag is non-zero are drawn (one byte per triangle of the scene, in the order of
-  // FirstTriangle): the client's drawn set against the full scene. Errors: sizes outside
-  // 1..8192, a flag array of the wrong length, GL failing.
+  // of view `fov_y_rad`, `width` x `height` pixels. Without `triangles`, the full scene (no
+  // level). With `triangles`, only the triangles whose flag is non-zero are drawn (one byte per
+  // triangle uploaded, triangle_count(), in the order of FirstTriangle, levels after the
+  // scene's): the client's drawn set against the full scene. Errors: sizes outside 1..8192, a
+  // flag array of the wrong length, GL failing.
   absl::StatusOr<std::vector<uint32_t>> RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
                                                    const glm::dvec3& up, double fov_y_rad, int width, int height,
                                                    const std::vector<uint8_t>* triangles);
-  // The index of object `id`'s first triangle among the scene's triangles.
-  uint64_t FirstTriangle(uint32_t id) const { return first_triangle_[id]; }
+  // The index of object `id`'s first triangle among the triangles uploaded: its full mesh's
+  // (level 0), or, when made with levels, its level `level`'s (1 .. its level count).
+  uint64_t FirstTriangle(uint32_t id, uint32_t level = 0) const {
+    return level == 0 ? first_triangle_[id] : level_first_triangle_[id][level - 1];
+  }
+  // Triangles uploaded: the scene's, and with levels theirs.
   uint64_t triangle_count() const { return index_count_ / 3; }
+  // Whether the levels went up (Create's `levels`).
+  bool has_levels() const { return !level_first_triangle_.empty(); }
   // The solid angle of pixel (x, y) of any face; the 6 size² weights sum to 4 pi.
   double PixelSolidAngle(int x, int y) const { return weights_[static_cast<size_t>(y) * size_ + x]; }
 
  private:
   IdRenderer() = default;
-  absl::Status Init(const scenes::Scene& scene);
+  absl::Status Init(const scenes::Scene& scene, bool levels);
 
   std::unique_ptr<GlContext> context_;
   int size_ = 0;
   unsigned program_ = 0, vao_ = 0, vbo_ = 0, ibo_ = 0, fbo_ = 0, ids_ = 0, depth_ = 0;
-  size_t index_count_ = 0;
+  size_t index_count_ = 0;       // every triangle uploaded
+  size_t full_index_count_ = 0;  // the scene's own (the full view, the cube)
   std::vector<uint64_t> first_triangle_;
+  std::vector<std::vector<uint64_t>> level_first_triangle_;  // [object][level - 1]
   int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1;
   unsigned mask_buffer_ = 0, mask_texture_ = 0;
   unsigned view_fbo_ = 0, view_ids_ = 0, view_depth_ = 0;
   int view_width_ = 0, view_height_ = 0;
-  // Draws the scene with `m` (column-major, reversed infinite depth) into the bound
-  // framebuffer of `w` x `h` and reads it back.
-  void DrawAndRead(const double m[16], int w, int h, std::vector<uint32_t>* out);
+  // Draws the first `index_count` indices with `m` (column-major, reversed infinite depth)
+  // into the bound framebuffer of `w` x `h` and reads it back.
+  void DrawAndRead(const double m[16], int w, int h, size_t index_count, std::vector<uint32_t>* out);
   // The GL state of a pass into `fbo` of `w` x `h` (reversed depth, the scene's program and
   // buffers, no mask), and back to the defaults after it, with GL's error if any.
   void BeginPass(unsigned fbo, int w, int h);

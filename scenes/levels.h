@@ -35,6 +35,15 @@ struct LevelOptions {
   unsigned threads = 0;  // 0: one per core
 };
 
+// The levels a server makes at start for a scene without its own (vistream-server --levels),
+// which a client checking its frames (--verify) makes alike: object levels only (sessions send
+// no cluster yet).
+inline LevelOptions SessionLevelOptions() {
+  LevelOptions o;
+  o.cluster_tiles_m.clear();
+  return o;
+}
+
 // An upper bound, in metres, on the symmetric Hausdorff distance between the surface of `level`
 // and the union of the surfaces of `originals` (scene-local metres; zero-area triangles carry no
 // surface and are ignored): CGAL's bounded-error estimate computed to within `tolerance_m`, plus

@@ -73,9 +73,7 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   });
   // Levels of detail: the scene's own, or made now; encoded once like the full meshes.
   if (s->scene_.levels.empty() && options.make_levels) {
-    scenes::LevelOptions lo;
-    lo.cluster_tiles_m.clear();  // sessions draw object levels (clusters: issue 45, later)
-    absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(s->scene_, lo, run);
+    absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(s->scene_, scenes::SessionLevelOptions(), run);
     if (!made.ok()) return made.status();
     s->scene_.levels = *std::move(made);
   }

@@ -159,13 +159,10 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
         absl::StrCat("scene '", hello.scene(), "' is not served here: this server serves '", scene_->name(), "'"));
   }
   const scenes::Scene& scene = scene_->scene();
-  for (int k = 0; k < hello.held_objects_size(); ++k) {
-    const uint32_t o = hello.held_objects(k);
-    if (o >= scene.objects.size()) {
-      return absl::InvalidArgumentError(absl::StrCat("Hello.held_objects[", k, "] = ", o, ": the scene has ",
-                                                     scene.objects.size(), " objects"));
-    }
-    if (sent_.insert(o).second) held_bytes_ += scene_->geometry(o).RawBytes();
+  if (hello.held_levels_size() != 0 && hello.held_levels_size() != hello.held_objects_size()) {
+    return absl::InvalidArgumentError(absl::StrCat("Hello.held_levels has ", hello.held_levels_size(),
+                                                   " entries for ", hello.held_objects_size(),
+                                                   " held_objects: expected one each, or none"));
   }
   if (hello.has_levels() && hello.levels().screen_error_px() != 0.0) {
     const v1::LevelRequest& l = hello.levels();
@@ -185,6 +182,26 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     screen_ = {l.viewport_width_px(), l.viewport_height_px(), l.vertical_fov_rad()};
     tau_px_ = l.screen_error_px();
     levels_on_ = scene_->levels() != nullptr;
+  }
+  for (int k = 0; k < hello.held_objects_size(); ++k) {
+    const uint32_t o = hello.held_objects(k);
+    if (o >= scene.objects.size()) {
+      return absl::InvalidArgumentError(absl::StrCat("Hello.held_objects[", k, "] = ", o, ": the scene has ",
+                                                     scene.objects.size(), " objects"));
+    }
+    const uint32_t level = hello.held_levels_size() != 0 ? hello.held_levels(k) : 0;
+    if (level != 0) {
+      // A level the session can have sent: levels asked for, and one the object has.
+      const size_t count = levels_on_ ? scene_->levels()->levels().objects[o].size() : 0;
+      if (level > count) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "Hello.held_levels[", k, "] = ", level, " for object ", o, ": ",
+            levels_on_ ? absl::StrCat("it has ", count, " levels") : "this session has no levels (Hello.levels)"));
+      }
+    }
+    if (!sent_.insert(o).second) continue;  // named twice: the first counts
+    if (level != 0) held_level_[o] = level;
+    held_bytes_ += scene_->RawBytes(o, level);
   }
   pvs_deltas_ = hello.pvs_deltas();
   hello_ = true;
@@ -524,6 +541,8 @@ std::optional<v1::ServerMessage> Session::SendLevel(uint32_t o, uint32_t level, 
     geo->set_step_log2(g.step_log2);
     geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
     geo->set_wide(g.wide);
+    geo->set_keeps_triangles(g.index_count == scene_->scene().objects[o].mesh.indices.size());
+    geo->set_full_bytes(scene_->geometry(o).EncodedBytes());
     encoded = g.EncodedBytes();
   }
   if (level == 0) {

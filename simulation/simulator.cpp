@@ -5,6 +5,7 @@
 #include <cmath>
 #include <set>
 #include <thread>
+#include <unordered_set>
 
 #include <absl/strings/str_cat.h>
 #include <google/protobuf/descriptor.h>
@@ -164,6 +165,7 @@ class Run {
   std::set<uint64_t> masks_drawn_;     // keys of the held masks drawn on some frame
   client::CreditWindow credit_;
   client::PoseCadence poses_;
+  std::unordered_set<uint32_t> drawn_whole_;  // held at a level a mask's bits do not apply to
   // Whether object `o` is held and uploaded by a frame at `t` (with a declared frame time, an
   // object is uploaded at the first frame after its arrival).
   bool Ready(uint32_t o, double t) const {
@@ -251,13 +253,22 @@ void Run::Receive(const v1::ServerMessage& m) {
     }
     case v1::ServerMessage::kGeometry: {
       if (completion_.Arrive(m.geometry().object_id(), t, m.geometry().level())) ++r_.distinct_objects;
+      // A level that does not keep the full mesh's triangles is drawn whole under a mask.
+      if (m.geometry().level() > 0 && !m.geometry().keeps_triangles()) {
+        drawn_whole_.insert(m.geometry().object_id());
+      } else {
+        drawn_whole_.erase(m.geometry().object_id());
+      }
       if (m.geometry().level() > 0) ++r_.level_objects_received;
       r_.geometry_bytes += client::ChargedBytes(m);
       ++r_.objects_received;
       break;
     }
     case v1::ServerMessage::kEvict:
-      for (uint32_t o : m.evict().object_ids()) completion_.Drop(o);
+      for (uint32_t o : m.evict().object_ids()) {
+        completion_.Drop(o);
+        drawn_whole_.erase(o);
+      }
       break;
     case v1::ServerMessage::kEpsilonMask: {
       const v1::EpsilonMask& e = m.epsilon_mask();
@@ -404,10 +415,9 @@ void Run::Frame(double t) {
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
         const uint32_t o = mask->object_ids[k];
         if (!seen(o)) continue;
-        // A level that keeps the object's triangles (the first one MakeLevels makes: the same
-        // triangles, snapped) keeps the mask's bits; a simplified one is drawn whole.
-        const uint64_t held = TrianglesOf(o);
-        tris += held != scene_.scene().objects[o].mesh.TriangleCount() ? held : mask->object_triangles[k];
+        // A level that keeps the object's triangles (ObjectGeometry.keeps_triangles) keeps the
+        // mask's bits; another is drawn whole (as client/renderer.h draws it).
+        tris += drawn_whole_.count(o) > 0 ? TrianglesOf(o) : mask->object_triangles[k];
       }
     }
     triangles_sum_ += static_cast<double>(tris);

@@ -2,7 +2,10 @@
 // keeps those of the nine cells around the eye (at most 64) and picks, for an eye, the mask a
 // frame may draw; a walker on city1 at 6 km/h through a real server on loopback draws masked
 // frames, no hole frame and no pixel error; mask bytes are credit consumed (a 2 KB window keeps
-// flowing); without masks the server sends none.
+// flowing); without masks the server sends none. Levels of detail (issue 45) through a real
+// server: walkers on a london-generated town and on Den Haag draw levels within tau + 1 px of
+// every full-detail silhouette, without a stall or a hole; a resumed session says the levels
+// it holds.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -312,6 +315,7 @@ struct MaskedWalk {
   std::string frame_log;    // empty: none
   bool use_masks = true;    // false: Hello.epsilon_masks false
   bool verify = true;
+  double lod_tau_px = 1.0;  // levels of detail asked for (0: off); a scene without levels sends full detail
 };
 absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
   absl::StatusOr<LoopbackServer> server = StartOnLoopback(w.scene);
@@ -328,6 +332,7 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
   o.every_s = w.every_s;
   o.frame_log = w.frame_log;
   o.use_masks = w.use_masks;
+  o.lod_tau_px = w.lod_tau_px;
   o.catalog_dir = w.catalog_dir;
   o.local_scene = &w.scene->scene();
   absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
@@ -342,6 +347,15 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
                 s->mean_triangles_without_masks,
                 s->mean_triangles_without_masks > 0 ? s->mean_triangles_drawn / s->mean_triangles_without_masks : 0.0,
                 static_cast<unsigned long long>(s->pixel_error), static_cast<unsigned long long>(s->checked_frames));
+    if (s->lod_tau_px > 0.0) {
+      std::printf("  levels at tau %g px: %llu objects at a level, %llu bytes saved, geometry %llu bytes, %llu coarse "
+                  "frames, differing pixels %.4f%% of those checked, the farthest %.2f px from a silhouette\n",
+                  s->lod_tau_px, static_cast<unsigned long long>(s->level_objects_received),
+                  static_cast<unsigned long long>(s->level_bytes_saved),
+                  static_cast<unsigned long long>(s->geometry_bytes), static_cast<unsigned long long>(s->coarse_frames),
+                  s->checked_pixels > 0 ? 100.0 * static_cast<double>(s->pixel_error) / s->checked_pixels : 0.0,
+                  s->max_silhouette_px);
+    }
   }
   return s;
 }
@@ -574,6 +588,173 @@ TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
   EXPECT_TRUE(m->Contains(b));
   EXPECT_FALSE(m->Contains(a));
   EXPECT_TRUE(connection.Stop().ok());
+}
+
+// ---- Levels of detail (issue 45) ----
+
+// A server with levels made at start (vistream-server --levels) for `scene`.
+absl::StatusOr<std::unique_ptr<server::ServedScene>> ServeWithLevels(const std::string& scene, uint32_t res = 64) {
+  server::ServedSceneOptions o;
+  o.scene = scene;
+  o.res = res;
+  o.threads = 2;
+  o.idle_priority_masks = false;
+  o.make_levels = true;
+  return server::ServedScene::Create(o);
+}
+
+// What a levels walk must show: no stall, no hole, levels received and bytes saved, coarse
+// frames rare (at most 1 in 100), and every differing pixel of every checked frame within
+// tau + 1 px of a full-detail silhouette (no object missing, none grown by more than its error).
+void ExpectLevelsHold(const WalkthroughSummary& s, double tau_px, const std::string& what) {
+  EXPECT_EQ(s.stalls, 0u) << what;
+  EXPECT_EQ(s.hole_frames, 0u) << what;
+  EXPECT_GT(s.level_objects_received, 0u) << what;
+  EXPECT_GT(s.level_bytes_saved, 0u) << what;
+  EXPECT_LE(static_cast<double>(s.coarse_frames), 0.01 * static_cast<double>(s.frames)) << what;
+  EXPECT_GE(s.checked_frames, 8u) << what;
+  EXPECT_LE(s.max_silhouette_px, tau_px + 1.0) << what;
+}
+
+// A london-generated town (tests/simulator/london_small.json: irregular streets, 1.6 km square)
+// served with levels, a walker across it at 6 and 60 km/h asking for tau = 1 px: the levels hold
+// (ExpectLevelsHold); the same walk with levels off draws the full scene exactly (pixel error 0)
+// and takes more geometry bytes.
+TEST(ClientLevels, ALondonTownWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhouette) {
+  const std::string dir = vistream::testing::ProcessTempDir() + "/levels_catalog";
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
+                             dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeWithLevels(dir + "/london-small.json");
+  ASSERT_TRUE(town.ok()) << town.status();
+  ASSERT_NE((*town)->levels(), nullptr);
+  uint64_t bytes_at_6 = 0;
+  for (const double kmh : {6.0, 60.0}) {
+    MaskedWalk w(town->get(), kmh, 15.0, 1.5, dir);
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(w);
+    ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_EQ(s->path, "across");
+    EXPECT_GT(s->frames, 150u) << kmh;
+    ExpectLevelsHold(*s, 1.0, absl::StrCat("london-small at ", kmh, " km/h"));
+    if (kmh == 6.0) bytes_at_6 = s->geometry_bytes;
+  }
+  MaskedWalk off(town->get(), 6.0, 15.0, 1.5, dir);
+  off.lod_tau_px = 0.0;
+  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(off);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(s->stalls, 0u);
+  EXPECT_EQ(s->hole_frames, 0u);
+  EXPECT_EQ(s->pixel_error, 0u);
+  EXPECT_GE(s->checked_frames, 8u);
+  EXPECT_EQ(s->level_objects_received, 0u);
+  EXPECT_GT(s->geometry_bytes, bytes_at_6);
+}
+
+// Den Haag's LoD2 tile (real data, terrain) served with levels: a walker along the derived walk
+// at 6 and 60 km/h asking for tau = 1 px; the levels hold (ExpectLevelsHold).
+TEST(ClientLevels, ADenHaagWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhouette) {
+  const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
+  if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeWithLevels("denhaag", 128);
+  ASSERT_TRUE(city.ok()) << city.status();
+  for (const double kmh : {6.0, 60.0}) {
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 15.0, 1.5));
+    ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_GT(s->frames, 150u) << kmh;
+    ExpectLevelsHold(*s, 1.0, absl::StrCat("denhaag at ", kmh, " km/h"));
+  }
+}
+
+// A client resuming with levels tells the server the level of each object it holds
+// (Hello.held_levels): the server sends a finer level where a cell needs one, and never the
+// same level again.
+TEST(ClientLevels, AResumedSessionSaysTheLevelsItHoldsAndGetsOnlyFinerOnes) {
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeWithLevels("default", 64);
+  ASSERT_TRUE(town.ok()) << town.status();
+  absl::StatusOr<LoopbackServer> server = StartOnLoopback(town->get());
+  ASSERT_TRUE(server.ok()) << server.status();
+  ConnectionOptions co;
+  co.address = server->address;
+  co.scene = "default";
+  co.screen_error_px = 1.0;
+  co.viewport_width_px = 320;
+  co.viewport_height_px = 180;
+  co.pose_rate_hz = 20.0;
+  Connection connection(co);
+  connection.Start();
+  ObjectStore store(0);
+  const visibility::ViewcellGrid& grid = (*town)->grid();
+  const uint32_t cell = grid.Id({10, 10});
+  const scenes::Aabb box = grid.CellBox(cell);
+  const glm::dvec3 eye(0.5 * (box.min.x + box.max.x), 0.5 * (box.min.y + box.max.y), grid.base_z() + 1.2);
+  auto until = [&](const std::function<bool()>& done) {
+    for (int k = 0; k < 600; ++k) {
+      connection.SetPose(eye, glm::dvec3(0.0), 0.0, 0.0, 0.05 * k);
+      store.Apply(connection.Take(), cell);
+      if (done()) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  };
+  ASSERT_TRUE(until([&] { return store.CellComplete(cell); }));
+  const std::vector<uint32_t>* levels = store.PvsLevels(cell);
+  ASSERT_NE(levels, nullptr);
+  ASSERT_EQ(levels->size(), store.Pvs(cell)->size());
+  size_t at_level = 0;
+  for (size_t k = 0; k < levels->size(); ++k) {
+    const StoredObject* o = store.Find((*store.Pvs(cell))[k]);
+    ASSERT_NE(o, nullptr);
+    EXPECT_LE(o->data.level, (*levels)[k]) << "object " << o->data.id;
+    at_level += o->data.level > 0 ? 1 : 0;
+  }
+  EXPECT_GT(at_level, 0u);
+  const ConnectionStats before = connection.stats();
+  EXPECT_GT(before.level_objects, 0u);
+  EXPECT_GT(before.level_bytes_saved, 0u);
+  // Drop the link: the client resumes saying what it holds at which level.
+  connection.DropForTest();
+  bool resumed = false;  // the new session's SceneInfo arrived
+  for (int k = 0; k < 600 && !resumed; ++k) {
+    connection.SetPose(eye, glm::dvec3(0.0), 0.0, 0.0, 30.0 + 0.05 * k);
+    std::vector<Event> events = connection.Take();
+    for (const Event& e : events) resumed = resumed || std::holds_alternative<v1::SceneInfo>(e);
+    store.Apply(std::move(events), cell);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(resumed);
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  store.Apply(connection.Take(), cell);
+  EXPECT_EQ(connection.stats().duplicates, 0u) << "the resumed session sent a level the client held";
+  EXPECT_TRUE(store.CellComplete(cell));
+  // Two cells on, the objects near there need finer levels than the client held: the resumed
+  // server, told which, sends them (one told "full" would send none).
+  const uint32_t next = grid.Id({12, 10});
+  const scenes::Aabb nb = grid.CellBox(next);
+  const glm::dvec3 there(0.5 * (nb.min.x + nb.max.x), 0.5 * (nb.min.y + nb.max.y), eye.z);
+  size_t finer_needed = 0;
+  auto at_levels = [&]() {
+    if (!store.CellComplete(next) || store.PvsLevels(next) == nullptr) return false;
+    const std::vector<uint32_t>& list = *store.Pvs(next);
+    for (size_t k = 0; k < list.size(); ++k) {
+      if (store.Find(list[k])->data.level > (*store.PvsLevels(next))[k]) return false;
+    }
+    return true;
+  };
+  for (int k = 0; k < 600 && !at_levels(); ++k) {
+    connection.SetPose(there, glm::dvec3(0.0), 0.0, 0.0, 100.0 + 0.05 * k);
+    std::vector<Event> events = connection.Take();
+    for (const Event& e : events) {
+      if (const ReceivedObject* o = std::get_if<ReceivedObject>(&e); o != nullptr && store.Find(o->id) != nullptr &&
+                                                                     o->level < store.Find(o->id)->data.level) {
+        ++finer_needed;
+      }
+    }
+    store.Apply(std::move(events), next);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_TRUE(at_levels()) << "the resumed session left objects coarser than the cell asks";
+  EXPECT_GT(finer_needed, 0u) << "no object needed a finer level: the walk shows nothing";
+  ASSERT_TRUE(connection.Stop().ok());
 }
 
 }  // namespace

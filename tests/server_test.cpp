@@ -17,6 +17,7 @@
 
 #include <glm/geometric.hpp>
 #include <grpcpp/generic/generic_stub.h>
+#include <absl/strings/str_cat.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -136,6 +137,11 @@ TEST(Server, AClientAskingForAScreenErrorGetsLevelsThatDecode) {
       const scenes::Mesh& want = (*scene)->scene().levels.objects[id][g.level() - 1].mesh;
       EXPECT_EQ(d->mesh.TriangleCount(), want.TriangleCount());
       EXPECT_EQ(d->raw_bytes, (*scene)->RawBytes(id, g.level()));
+      // Mask bits apply exactly to a level with the full mesh's triangles; what it saved is
+      // the full mesh's encoded bytes less its own.
+      EXPECT_EQ(g.keeps_triangles(), want.TriangleCount() == (*scene)->scene().objects[id].mesh.TriangleCount());
+      EXPECT_EQ(g.full_bytes(), (*scene)->geometry(id).EncodedBytes());
+      EXPECT_EQ(d->saved_bytes, g.full_bytes() - (g.vertices().size() + g.indices().size()));
     }
     if (levels) {
       EXPECT_GT(leveled, r.geometry.size() / 2);
@@ -144,6 +150,20 @@ TEST(Server, AClientAskingForAScreenErrorGetsLevelsThatDecode) {
     }
     EXPECT_TRUE(client.Finish().ok());
   }
+  // A resuming client claiming a level its object lacks ends its session, naming it.
+  SessionStream bad((*server)->address());
+  client::HelloSettings settings;
+  settings.scene = "city1";
+  settings.screen_error_px = 1.0;
+  settings.held_objects = {7};
+  settings.held_levels = {99};
+  bad.Start(client::MakeHello(settings), true);
+  const grpc::Status st = bad.AwaitEnd(kWait);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+  EXPECT_NE(st.error_message().find(absl::StrCat("Hello.held_levels[0] = 99 for object 7: it has ",
+                                                 (*scene)->scene().levels.objects[7].size(), " levels")),
+            std::string::npos)
+      << st.error_message();
 }
 
 TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
@@ -357,6 +377,21 @@ std::vector<BadInput> BadInputs() {
       {"held_object_out_of_range",
        [](SessionStream& w) { Hello(w, SessionStream::HelloFor("city1", {5, 999999})); },
        grpc::StatusCode::INVALID_ARGUMENT, "held_objects[1] = 999999"},
+      {"held_levels_not_one_per_held_object",
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1", {5, 6});
+         h.add_held_levels(1);
+         Hello(w, h);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "Hello.held_levels has 1 entries for 2 held_objects"},
+      {"held_level_without_levels",
+       [](SessionStream& w) {
+         v1::Hello h = SessionStream::HelloFor("city1", {5, 6});
+         h.add_held_levels(0);
+         h.add_held_levels(2);
+         Hello(w, h);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "Hello.held_levels[1] = 2 for object 6: this session has no levels"},
       {"levels_with_a_zero_viewport",
        [](SessionStream& w) {
          v1::Hello h = SessionStream::HelloFor("city1");

@@ -218,7 +218,7 @@ int Simulate(const SimulateArgs& a) {
   const std::vector<std::string> lod_texts = absl::StrSplit(a.lod, ',');
   for (const std::string& text : lod_texts) {
     double tau = 0.0;
-    if (text != "off" && (!cli::internal::ParseFinite(text, &tau) || !(tau > 0.0) || tau > 1000.0)) {
+    if (!cli::ParseScreenError(text, &tau)) {
       return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is not a screen error: expected off or pixels in (0, 1000]"));
     }
     if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {

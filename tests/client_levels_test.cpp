@@ -1,0 +1,245 @@
+// The thin client's side of levels of detail (issue 45), without a server: the check that a
+// frame drawn with levels differs from the full scene only near silhouettes (the distance
+// transform against brute force; a level grown by a metre measured at its projected size; a
+// missing object caught), the id renderer holding levels apart from the full scene, the store's
+// per-cell levels and the coarse objects they make, and the renderer drawing an object's old
+// level until its new one is uploaded.
+#include <array>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <optional>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "client/cell_completion.h"
+#include "client/object_store.h"
+#include "client/renderer.h"
+#include "client/verification.h"
+#include "gl/gl_context.h"
+#include "gl/id_renderer.h"
+#include "scenes/mesh.h"
+#include "scenes/scene.h"
+
+namespace vistream::client {
+namespace {
+
+namespace v1 = vistream::v1;
+
+TEST(Verification, TheDistanceTransformIsTheBruteForceDistanceToTheNearestSetPixel) {
+  std::mt19937 rng(7);
+  for (const double density : {0.002, 0.05, 0.5}) {
+    const int w = 37, h = 23;
+    std::vector<uint8_t> source(static_cast<size_t>(w) * h, 0);
+    std::bernoulli_distribution set(density);
+    for (uint8_t& s : source) s = set(rng) ? 1 : 0;
+    source[5 * w + 9] = 1;  // at least one
+    const std::vector<double> d2 = SquaredDistanceTransform(source, w, h);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        double best = 1e30;
+        for (int v = 0; v < h; ++v) {
+          for (int u = 0; u < w; ++u) {
+            if (source[static_cast<size_t>(v) * w + u] != 0) best = std::min(best, double((u - x) * (u - x) + (v - y) * (v - y)));
+          }
+        }
+        ASSERT_EQ(d2[static_cast<size_t>(y) * w + x], best) << "pixel " << x << "," << y << " density " << density;
+      }
+    }
+  }
+  // No source: every pixel far.
+  const std::vector<double> none = SquaredDistanceTransform(std::vector<uint8_t>(12, 0), 4, 3);
+  for (double v : none) EXPECT_GE(v, 1e19);
+}
+
+// A 10 m box 50 m ahead of the origin (x 50..60, y and z -5..5) with one level: the same box
+// grown by `grow_m` on every side (error grow_m * sqrt(3)).
+scenes::Scene BoxWithGrownLevel(double grow_m) {
+  scenes::Scene s;
+  s.name = "box";
+  scenes::Mesh m;
+  const std::vector<glm::dvec2> box = {{50, -5}, {60, -5}, {60, 5}, {50, 5}};
+  scenes::AppendConvexPrism(box, -5.0, 5.0, &m);
+  s.AddObject("box", std::move(m));
+  scenes::Mesh level;
+  const double g = grow_m;
+  const std::vector<glm::dvec2> grown = {{50 - g, -5 - g}, {60 + g, -5 - g}, {60 + g, 5 + g}, {50 - g, 5 + g}};
+  scenes::AppendConvexPrism(grown, -5.0 - g, 5.0 + g, &level);
+  s.levels.objects.resize(1);
+  s.levels.objects[0].push_back(scenes::MeshLevel{std::move(level), grow_m * std::sqrt(3.0)});
+  return s;
+}
+
+Camera LookingAlongX() {
+  Camera c;
+  c.eye = glm::dvec3(0.0);
+  c.width = 640;
+  c.height = 360;
+  return c;
+}
+
+TEST(Verification, ALevelGrownByAMetreDiffersByItsProjectedSizeFromTheSilhouetteAndAMissingObjectByFar) {
+  const scenes::Scene s = BoxWithGrownLevel(1.0);
+  absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(s, 1, /*levels=*/true);
+  ASSERT_TRUE(ids.ok()) << ids.status();
+  ASSERT_TRUE((*ids)->has_levels());
+  EXPECT_EQ((*ids)->triangle_count(), 2 * s.objects[0].mesh.TriangleCount());
+  EXPECT_EQ((*ids)->FirstTriangle(0, 1), s.objects[0].mesh.TriangleCount());
+  const Camera camera = LookingAlongX();
+
+  // The full mesh: nothing differs.
+  absl::StatusOr<PixelComparison> full = CompareWithFullScene(**ids, s, camera, {{0, false, 0}}, nullptr);
+  ASSERT_TRUE(full.ok()) << full.status();
+  EXPECT_EQ(full->differ, 0u);
+  EXPECT_EQ(full->max_silhouette_px, 0.0);
+
+  // The grown level: its near face's edges at y, z = +-6, x = 49 against the box's at +-5,
+  // x = 50, each f (6/49 - 5/50) = 7.0 px out (f = 180 / tan 30 deg); the farthest pixel is at
+  // a corner, sqrt 2 times that from the box's. Within the level's error seen from the eye
+  // (f e / (d - e), e = sqrt 3 m at d = 49 m: 11.4 px), as the server's choice assumes.
+  absl::StatusOr<PixelComparison> grown = CompareWithFullScene(**ids, s, camera, {{0, false, 1}}, nullptr);
+  ASSERT_TRUE(grown.ok()) << grown.status();
+  const double f = 180.0 / std::tan(M_PI / 6.0);
+  const double expected = std::sqrt(2.0) * f * (6.0 / 49.0 - 5.0 / 50.0);
+  EXPECT_GT(grown->differ, 0u);
+  EXPECT_NEAR(grown->max_silhouette_px, expected, 1.5);
+  const double e = s.levels.objects[0][0].error_m;
+  EXPECT_LE(grown->max_silhouette_px, f * e / (49.0 - e));
+
+  // Nothing drawn: the box's pixels all differ, its middle half its width from an edge.
+  absl::StatusOr<PixelComparison> missing = CompareWithFullScene(**ids, s, camera, {}, nullptr);
+  ASSERT_TRUE(missing.ok()) << missing.status();
+  EXPECT_NEAR(missing->max_silhouette_px, f * 5.0 / 50.0, 1.5);
+
+  // A level the id renderer was not given is an error, not a pass.
+  absl::StatusOr<std::unique_ptr<gl::IdRenderer>> plain = gl::IdRenderer::Create(s, 1);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_FALSE((*plain)->has_levels());
+  absl::StatusOr<PixelComparison> refused = CompareWithFullScene(**plain, s, camera, {{0, false, 1}}, nullptr);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find("object 0 was drawn at level 1"), std::string::npos)
+      << refused.status();
+  absl::StatusOr<PixelComparison> past = CompareWithFullScene(**ids, s, camera, {{0, false, 2}}, nullptr);
+  EXPECT_EQ(past.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(past.status().message().find("does not have (it has 1)"), std::string::npos) << past.status();
+}
+
+TEST(Verification, TheFullViewOfAnIdRendererWithLevelsDrawsNoLevel) {
+  const scenes::Scene s = BoxWithGrownLevel(2.0);
+  absl::StatusOr<std::unique_ptr<gl::IdRenderer>> with = gl::IdRenderer::Create(s, 1, true);
+  absl::StatusOr<std::unique_ptr<gl::IdRenderer>> without = gl::IdRenderer::Create(s, 1, false);
+  ASSERT_TRUE(with.ok() && without.ok());
+  const Camera c = LookingAlongX();
+  absl::StatusOr<std::vector<uint32_t>> a =
+      (*with)->RenderView(c.eye, c.Forward(), c.Up(), c.fov_y_rad, c.width, c.height, nullptr);
+  absl::StatusOr<std::vector<uint32_t>> b =
+      (*without)->RenderView(c.eye, c.Forward(), c.Up(), c.fov_y_rad, c.width, c.height, nullptr);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(*a, *b);
+  // The cube (AGVS's sampler) likewise.
+  absl::StatusOr<std::array<std::vector<uint32_t>, 6>> ca = (*with)->RenderCube(glm::dvec3(0.0));
+  absl::StatusOr<std::array<std::vector<uint32_t>, 6>> cb = (*without)->RenderCube(glm::dvec3(0.0));
+  ASSERT_TRUE(ca.ok() && cb.ok());
+  EXPECT_EQ(*ca, *cb);
+}
+
+// Five cells of 10 m in a row (RowOfCells in client_masks_test.cpp).
+v1::SceneInfo Row() {
+  v1::SceneInfo info;
+  info.set_name("row");
+  info.set_object_count(10);
+  info.set_triangle_count(100);
+  v1::ViewcellGrid* grid = info.mutable_grid();
+  grid->set_cell_size_m(10);
+  grid->set_nx(5);
+  grid->set_ny(1);
+  grid->set_height_m(2);
+  return info;
+}
+
+TEST(ObjectStoreLevels, AListsLevelsAreKeptWithItAndCoarserHeldObjectsCounted) {
+  ObjectStore store(0);
+  std::vector<Event> events;
+  events.emplace_back(Row());
+  v1::ViewcellPvs list;
+  list.set_cell_id(1);
+  for (uint32_t o : {2, 4, 6}) list.add_object_ids(o);
+  for (uint32_t l : {0, 2, 1}) list.add_object_levels(l);
+  events.emplace_back(list);
+  v1::ViewcellPvs plain;
+  plain.set_cell_id(2);
+  plain.add_object_ids(3);
+  events.emplace_back(plain);
+  store.Apply(std::move(events), 1u);
+  ASSERT_NE(store.PvsLevels(1), nullptr);
+  EXPECT_EQ(*store.PvsLevels(1), (std::vector<uint32_t>{0, 2, 1}));
+  EXPECT_EQ(store.PvsLevels(2), nullptr);  // a list without levels
+  // Held: 2 at level 1 (coarser than 0), 4 at level 2 (as asked), 6 not held.
+  const std::map<uint32_t, uint32_t> held = {{2, 1}, {4, 2}};
+  auto level_of = [&](uint32_t id) -> std::optional<uint32_t> {
+    auto it = held.find(id);
+    return it == held.end() ? std::nullopt : std::optional<uint32_t>(it->second);
+  };
+  EXPECT_EQ(CoarseObjects(*store.Pvs(1), *store.PvsLevels(1), level_of), 1u);
+  // A list sent again without levels drops them.
+  std::vector<Event> again;
+  list.clear_object_levels();
+  again.emplace_back(list);
+  store.Apply(std::move(again), 1u);
+  EXPECT_EQ(store.PvsLevels(1), nullptr);
+}
+
+ReceivedObject Triangle(uint32_t id, uint32_t level, float x) {
+  ReceivedObject o;
+  o.id = id;
+  o.level = level;
+  o.keeps_triangles = false;
+  o.mesh.positions = {{x, 0, 0}, {x + 1, 0, 0}, {x, 1, 0}};
+  o.mesh.normals = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+  o.mesh.indices = {0, 1, 2};
+  o.bounds_min = {x, 0, 0};
+  o.bounds_max = {x + 1, 1, 0};
+  o.raw_bytes = 84;
+  return o;
+}
+
+TEST(RendererLevels, AnObjectReplacedByAnotherLevelStaysDrawableAtTheOldOneUntilTheNewOneIsUploaded) {
+  absl::StatusOr<std::unique_ptr<gl::GlContext>> context = gl::GlContext::CreateOffscreen();
+  ASSERT_TRUE(context.ok()) << context.status();
+  absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(context->get(), 64, 64, true);
+  ASSERT_TRUE(renderer.ok()) << renderer.status();
+  ObjectStore store(0);
+  std::vector<Event> first;
+  first.emplace_back(Row());
+  first.emplace_back(Triangle(1, 3, 0.0f));
+  store.Apply(std::move(first), 0u);
+  (*renderer)->Sync(store, {}, 1);
+  EXPECT_EQ((*renderer)->UploadedLevel(1), std::optional<uint32_t>(3));
+  // A finer level of 1 and a new object 2 arrive; one upload a call, 2 first.
+  std::vector<Event> next;
+  next.emplace_back(Triangle(1, 1, 0.0f));
+  next.emplace_back(Triangle(2, 0, 5.0f));
+  store.Apply(std::move(next), 0u);
+  (*renderer)->Sync(store, {2}, 1);
+  EXPECT_TRUE((*renderer)->Uploaded(2));
+  EXPECT_TRUE((*renderer)->Uploaded(1)) << "a level being replaced left a gap";
+  EXPECT_EQ((*renderer)->UploadedLevel(1), std::optional<uint32_t>(3));
+  EXPECT_EQ((*renderer)->pending_uploads(), 1u);
+  (*renderer)->Sync(store, {}, 1);
+  EXPECT_EQ((*renderer)->UploadedLevel(1), std::optional<uint32_t>(1));
+  EXPECT_EQ((*renderer)->pending_uploads(), 0u);
+  // Evicted: gone at once.
+  std::vector<Event> evict;
+  v1::Evict e;
+  e.add_object_ids(1);
+  evict.emplace_back(e);
+  store.Apply(std::move(evict), 0u);
+  (*renderer)->Sync(store, {}, 1);
+  EXPECT_FALSE((*renderer)->Uploaded(1));
+  EXPECT_EQ((*renderer)->UploadedLevel(1), std::nullopt);
+}
+
+}  // namespace
+}  // namespace vistream::client
