@@ -91,21 +91,30 @@ void SessionStream::ReadLoop() {
         r.order.emplace_back('S', 0);
         break;
       case v1::ServerMessage::kPvs: {
-        const uint32_t cell = m.pvs().cell_id();
-        r.pvs[cell].assign(m.pvs().object_ids().begin(), m.pvs().object_ids().end());
+        absl::StatusOr<proto::PvsList> list = lists_.Decode(m.pvs());
+        if (!list.ok()) {
+          r.bad_data = std::string(list.status().message());
+          break;
+        }
+        const uint32_t cell = list->cell;
+        r.pvs[cell] = list->objects;
         r.pvs_order.push_back(cell);
         r.order.emplace_back('P', cell);
-        r.completion_.SetList(cell, r.pvs[cell], now);
+        r.completion_.SetList(cell, r.pvs[cell], now, list->levels);
         break;
       }
       case v1::ServerMessage::kGeometry: {
         const uint32_t id = m.geometry().object_id();
-        if (!r.held.insert(id).second) ++r.duplicates;
+        const CellCompletion::Object* before = r.completion_.Held(id);
+        // Held already: at the same level, or named in Hello (whose level this record keeps not).
+        if (before != nullptr ? before->level == m.geometry().level() : r.held.count(id) > 0) ++r.duplicates;
+        r.held.insert(id);
+        if (m.geometry().level() > 0) ++r.level_objects;
         r.geometry_bytes += ChargedBytes(m);
         r.raw_geometry_bytes += scenes::RawMeshBytes(m.geometry().vertex_count(), m.geometry().index_count());
         if (keep_geometry_) r.geometry[id] = m.geometry();
         r.order.emplace_back('G', id);
-        r.completion_.Arrive(id, now);
+        r.completion_.Arrive(id, now, m.geometry().level());
         break;
       }
       case v1::ServerMessage::kEvict:
@@ -125,6 +134,10 @@ void SessionStream::ReadLoop() {
         break;
     }
     cv_.notify_all();
+    if (!r.bad_data.empty()) {
+      context_.TryCancel();  // nothing after a list that does not decode can be trusted
+      break;
+    }
   }
   std::lock_guard lock(mu_);
   received_.ended = true;

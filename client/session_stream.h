@@ -22,6 +22,7 @@
 #include "client/cell_completion.h"
 #include "client/channel_security.h"
 #include "client/client_model.h"
+#include "proto/pvs_delta.h"
 #include "proto/walkthrough.grpc.pb.h"
 
 namespace vistream::client {
@@ -36,7 +37,11 @@ struct SessionRecord {
   std::vector<uint32_t> pvs_order;                // cells in arrival order
   std::map<uint32_t, vistream::v1::ObjectGeometry> geometry;  // latest per object
   std::set<uint32_t> held;                        // received and not evicted
-  uint64_t duplicates = 0;                        // geometry received while held
+  uint64_t duplicates = 0;                        // geometry received while held at the same level
+  uint64_t level_objects = 0;                     // geometry received at a level of detail (issue 45)
+  // PVS lists as the server sent them may be differences (Hello.pvs_deltas); `pvs` holds them
+  // whole. A list that does not decode ends the reading: why, here.
+  std::string bad_data;
   uint64_t geometry_bytes = 0;
   std::vector<vistream::v1::EpsilonMask> masks;
   uint64_t mask_bytes = 0;  // the masks' run-length triangle bytes: credit they consumed
@@ -116,6 +121,7 @@ class SessionStream {
   mutable std::mutex mu_;
   std::condition_variable cv_;
   SessionRecord received_;
+  proto::PvsListDecoder lists_;  // the session's PVS lists (differences, with levels)
   double time_s_ = 0.0;
   bool finished_ = false;
   bool keep_geometry_ = true;

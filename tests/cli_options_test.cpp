@@ -115,6 +115,8 @@ TEST(Cli, NanInfinityAndOutOfRangeNumbersAreRejectedNamingTheOption) {
       {"bench server --res 0", "--res: '0' is not a power of two from 1 to 256"},
       {"bench client --threads 0", "--threads: '0' is not a whole number from 1 to 256"},
       {"bench client --seconds inf", "--seconds: 'inf' is not a number"},
+      {"bench client --lod 0", "--lod: '0' is not a screen error"},
+      {"bench server --lod -1", "--lod: '-1' is not a screen error"},
   };
   for (const auto& c : cases) ExpectBadOption(c.args, c.message);
 }

@@ -630,15 +630,15 @@ TEST(ClientLevels, ALondonTownWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhou
   ASSERT_NE((*town)->levels(), nullptr);
   uint64_t bytes_at_6 = 0;
   for (const double kmh : {6.0, 60.0}) {
-    MaskedWalk w(town->get(), kmh, 15.0, 1.5, dir);
+    MaskedWalk w(town->get(), kmh, 9.0, 1.0, dir);
     const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(w);
     ASSERT_TRUE(s.ok()) << s.status();
     EXPECT_EQ(s->path, "across");
-    EXPECT_GT(s->frames, 150u) << kmh;
+    EXPECT_GT(s->frames, 100u) << kmh;
     ExpectLevelsHold(*s, 1.0, absl::StrCat("london-small at ", kmh, " km/h"));
     if (kmh == 6.0) bytes_at_6 = s->geometry_bytes;
   }
-  MaskedWalk off(town->get(), 6.0, 15.0, 1.5, dir);
+  MaskedWalk off(town->get(), 6.0, 9.0, 1.0, dir);
   off.lod_tau_px = 0.0;
   const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(off);
   ASSERT_TRUE(s.ok()) << s.status();
@@ -658,9 +658,9 @@ TEST(ClientLevels, ADenHaagWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhouett
   absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeWithLevels("denhaag", 128);
   ASSERT_TRUE(city.ok()) << city.status();
   for (const double kmh : {6.0, 60.0}) {
-    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 15.0, 1.5));
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 10.0, 1.0));
     ASSERT_TRUE(s.ok()) << s.status();
-    EXPECT_GT(s->frames, 150u) << kmh;
+    EXPECT_GT(s->frames, 100u) << kmh;
     ExpectLevelsHold(*s, 1.0, absl::StrCat("denhaag at ", kmh, " km/h"));
   }
 }

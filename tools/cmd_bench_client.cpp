@@ -1,8 +1,11 @@
 // vistream bench client: the headless client along a catalog walk through a real server on
 // loopback (in this process), measured three ways in one run: the viewcell PVS narrowed by
 // ε-masks (what the client does), the viewcell PVS whole, and the whole scene drawn every frame
-// (frustum culling only). Reports fps, frame-time median and p99, triangles drawn a frame, and
-// masked and hole frames; then fps and frame-time p99 with masks against without, side by side.
+// (frustum culling only); with --lod TAU (default 1 px; issue 45) first the PVS narrowed by
+// ε-masks drawn at levels of detail (the server makes the scene's levels at start). Reports fps,
+// frame-time median and p99, triangles drawn a frame, bytes received, and masked, hole and
+// coarse frames; then fps and frame-time p99 with masks against without, and levels against
+// full detail, side by side.
 
 #include <algorithm>
 #include <cstdio>
@@ -11,6 +14,7 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
 
 #include "client/walkthrough.h"
@@ -31,6 +35,8 @@ struct BenchClientArgs {
   double speed_kmh = 30.0;
   double seconds = 60.0;
   unsigned threads = 2;
+  std::string lod = "1";
+  bool verify = false;
   bool json = false;
 };
 
@@ -41,10 +47,21 @@ int BenchClient(const BenchClientArgs& a) {
     std::fprintf(stderr, "vistream: error: --size '%s': expected WIDTHxHEIGHT, e.g. 1280x720\n", a.size.c_str());
     return 2;
   }
+  // Each screen error of --lod is a mode of its own, first (off: none).
+  std::vector<double> taus;
+  for (const std::string& text : std::vector<std::string>(absl::StrSplit(a.lod, ','))) {
+    double tau = 0.0;
+    if (!cli::ParseScreenError(text, &tau)) {
+      return BadOption("bench client", "--lod", "'" + text + "' is not a screen error: expected off or pixels in (0, 1000]");
+    }
+    if (tau > 0.0 && std::find(taus.begin(), taus.end(), tau) == taus.end()) taus.push_back(tau);
+  }
+  const double tau_px = taus.empty() ? 0.0 : taus.front();
   TerminalProgress progress;
   server::ServedSceneOptions so;
   so.scene = a.scene;
   so.threads = a.threads;
+  so.make_levels = tau_px > 0.0;
   scenes::RunControl run;
   run.progress = &progress;
   absl::StatusOr<std::unique_ptr<server::ServedScene>> served = server::ServedScene::Create(so, run);
@@ -61,10 +78,19 @@ int BenchClient(const BenchClientArgs& a) {
     return 1;
   }
   struct Mode {
-    const char* name;
+    std::string name;
     bool masks, everything;
+    double tau_px;
   };
-  const Mode modes[] = {{"pvs+eps", true, false}, {"pvs", false, false}, {"whole scene", false, true}};
+  std::vector<Mode> modes;
+  for (double tau : taus) {
+    modes.push_back(Mode{taus.size() == 1 ? std::string("pvs+eps+lod") : absl::StrFormat("pvs+eps+lod %g", tau), true,
+                         false, tau});
+  }
+  const size_t first = modes.size();  // the modes at full detail follow
+  modes.push_back({"pvs+eps", true, false, 0.0});
+  modes.push_back({"pvs", false, false, 0.0});
+  modes.push_back({"whole scene", false, true, 0.0});
   nlohmann::ordered_json out;
   out["scene"] = a.scene;
   out["size"] = a.size;
@@ -82,14 +108,17 @@ int BenchClient(const BenchClientArgs& a) {
     o.max_fps = 0.0;  // as fast as it draws: the measure
     o.use_masks = m.masks;
     o.draw_everything = m.everything;
+    o.lod_tau_px = m.tau_px;
+    o.verify = a.verify && !m.everything;  // the whole scene drawn is the reference itself
+    o.every_s = 1.0;
     o.local_scene = &(*served)->scene();
-    o.log = [&](const std::string& line) { std::fprintf(stderr, "  %s: %s\n", m.name, line.c_str()); };
-    std::fprintf(stderr, "bench client: %s ...\n", m.name);
+    o.log = [&](const std::string& line) { std::fprintf(stderr, "  %s: %s\n", m.name.c_str(), line.c_str()); };
+    std::fprintf(stderr, "bench client: %s ...\n", m.name.c_str());
     const server::TaskStats masks_before = (*served)->masks().stats();
     absl::StatusOr<client::WalkthroughSummary> s = client::RunWalkthrough(o);
     const server::TaskStats masks_after = (*served)->masks().stats();
     if (!s.ok()) {
-      std::fprintf(stderr, "vistream: error: %s: %s\n", m.name, std::string(s.status().message()).c_str());
+      std::fprintf(stderr, "vistream: error: %s: %s\n", m.name.c_str(), std::string(s.status().message()).c_str());
       return 1;
     }
     results.push_back(*s);
@@ -117,7 +146,22 @@ int BenchClient(const BenchClientArgs& a) {
                             {"server_masks_computed", masks_after.computed - masks_before.computed},
                             {"server_masks_dropped", masks_after.dropped - masks_before.dropped},
                             {"server_mask_cpu_s", masks_after.cpu_s - masks_before.cpu_s},
-                            {"bytes_received", s->bytes_received}};
+                            {"bytes_received", s->bytes_received},
+                            {"geometry_bytes", s->geometry_bytes},
+                            {"lod_tau_px", m.tau_px > 0.0 ? nlohmann::ordered_json(m.tau_px) : nlohmann::ordered_json()},
+                            {"coarse_frames", s->coarse_frames},
+                            {"level_objects_received", s->level_objects_received},
+                            {"level_bytes_saved", s->level_bytes_saved},
+                            // --verify: differing pixels against the full scene, their share and
+                            // the farthest from a full-detail silhouette (null unchecked).
+                            {"checked_frames", s->checked_frames},
+                            {"pixel_error", s->verified ? nlohmann::ordered_json(s->pixel_error) : nlohmann::ordered_json()},
+                            {"differing_share", s->verified && s->checked_pixels > 0
+                                                    ? nlohmann::ordered_json(static_cast<double>(s->pixel_error) /
+                                                                             static_cast<double>(s->checked_pixels))
+                                                    : nlohmann::ordered_json()},
+                            {"max_silhouette_px", s->verified ? nlohmann::ordered_json(s->max_silhouette_px)
+                                                              : nlohmann::ordered_json()}};
     if (!out.contains("path")) {
       out["path"] = s->path;
       out["speed_kmh"] = s->speed_kmh;
@@ -125,10 +169,29 @@ int BenchClient(const BenchClientArgs& a) {
       out["scene_triangles"] = s->scene_triangles;
     }
   }
-  // results[0] drew with masks, results[1] the same walk without.
-  const client::WalkthroughSummary& with = results[0];
-  const client::WalkthroughSummary& without = results[1];
+  // With --lod the first results drew levels; then the same walk with masks at full detail, without masks.
+  const client::WalkthroughSummary& with = results[first];
+  const client::WalkthroughSummary& without = results[first + 1];
   auto ratio = [](double x, double y) { return y > 0.0 ? x / y : 0.0; };
+  if (tau_px > 0.0) {
+    const client::WalkthroughSummary& lod = results[0];
+    out["levels_against_full"] = {
+        {"lod_tau_px", tau_px},
+        {"fps_with_levels", lod.fps},
+        {"fps_full", with.fps},
+        {"fps_ratio", ratio(lod.fps, with.fps)},
+        {"frame_ms_p99_with_levels", lod.frame_ms_p99},
+        {"frame_ms_p99_full", with.frame_ms_p99},
+        {"mean_triangles_with_levels", lod.mean_triangles_drawn},
+        {"mean_triangles_full", with.mean_triangles_drawn},
+        {"triangle_ratio", ratio(lod.mean_triangles_drawn, with.mean_triangles_drawn)},
+        {"bytes_received_with_levels", lod.bytes_received},
+        {"bytes_received_full", with.bytes_received},
+        {"bytes_ratio", ratio(static_cast<double>(lod.bytes_received), static_cast<double>(with.bytes_received))},
+        {"coarse_frames", lod.coarse_frames},
+        {"stalls_with_levels", lod.stalls},
+        {"hole_frames_with_levels", lod.hole_frames}};
+  }
   out["masks_against_pvs"] = {{"fps_with_masks", with.fps},
                               {"fps_without_masks", without.fps},
                               {"fps_ratio", ratio(with.fps, without.fps)},
@@ -149,17 +212,28 @@ int BenchClient(const BenchClientArgs& a) {
   }
   std::printf("bench client: %s along '%s' at %.0f km/h for %.0f s, %s, headless (OSMesa)\n", a.scene.c_str(),
               results.front().path.c_str(), results.front().speed_kmh, results.front().walk_s, a.size.c_str());
-  std::printf("%-12s %8s %8s %10s %10s %10s %9s %14s %9s %7s %8s %7s\n", "mode", "frames", "fps", "fps(p50)",
-              "p50 ms", "p99 ms", "p99/p50", "triangles", "% scene", "stalls", "masked", "holes");
+  std::printf("%-16s %8s %8s %10s %10s %10s %9s %14s %9s %7s %8s %7s %7s %11s\n", "mode", "frames", "fps", "fps(p50)",
+              "p50 ms", "p99 ms", "p99/p50", "triangles", "% scene", "stalls", "masked", "holes", "coarse", "MB down");
   for (size_t k = 0; k < results.size(); ++k) {
     const client::WalkthroughSummary& s = results[k];
-    std::printf("%-12s %8llu %8.1f %10.1f %10.2f %10.2f %9.2f %14.0f %8.3f%% %7llu %8llu %7llu\n", modes[k].name,
+    std::printf("%-16s %8llu %8.1f %10.1f %10.2f %10.2f %9.2f %14.0f %8.3f%% %7llu %8llu %7llu %7llu %11.2f\n", modes[k].name.c_str(),
                 static_cast<unsigned long long>(s.frames), s.fps, s.frame_ms_p50 > 0 ? 1000.0 / s.frame_ms_p50 : 0.0,
                 s.frame_ms_p50, s.frame_ms_p99, s.frame_ms_p50 > 0 ? s.frame_ms_p99 / s.frame_ms_p50 : 0.0,
                 s.mean_triangles_drawn,
                 s.scene_triangles > 0 ? 100.0 * s.mean_triangles_drawn / static_cast<double>(s.scene_triangles) : 0.0,
                 static_cast<unsigned long long>(s.stalls), static_cast<unsigned long long>(s.frames_masked),
-                static_cast<unsigned long long>(s.hole_frames));
+                static_cast<unsigned long long>(s.hole_frames), static_cast<unsigned long long>(s.coarse_frames),
+                s.bytes_received / 1e6);
+  }
+  if (tau_px > 0.0) {
+    const client::WalkthroughSummary& lod = results[0];
+    std::printf("levels at tau %g px against full detail (both with masks): %.1f against %.1f fps (x%.2f), %.0f against "
+                "%.0f triangles a frame (x%.2f), %.2f against %.2f MB received (x%.2f); %llu coarse frames\n",
+                tau_px, lod.fps, with.fps, ratio(lod.fps, with.fps), lod.mean_triangles_drawn, with.mean_triangles_drawn,
+                ratio(lod.mean_triangles_drawn, with.mean_triangles_drawn), lod.bytes_received / 1e6,
+                with.bytes_received / 1e6,
+                ratio(static_cast<double>(lod.bytes_received), static_cast<double>(with.bytes_received)),
+                static_cast<unsigned long long>(lod.coarse_frames));
   }
   std::printf(
       "with masks against without: %.1f against %.1f fps (x%.2f), frame time p99 %.2f against %.2f ms (x%.2f), "
@@ -188,6 +262,13 @@ void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--seconds", args->seconds, "seconds of the walk per mode (0: all of it)")
       ->check(FiniteRange(0.0, 86400.0))->capture_default_str();
   c->add_option("--threads", args->threads, "server PVS workers")->check(WholeRange(1, 256))->capture_default_str();
+  c->add_option("--lod", args->lod,
+                 "levels of detail, first modes (pvs+eps+lod): screen errors in pixels (several: one mode each), or "
+                 "off (the server makes the scene's levels at start)")
+      ->capture_default_str();
+  c->add_flag("--verify", args->verify,
+               "check every second's frame against the full scene in the object-id buffer (differing pixels' share, "
+               "farthest from a silhouette)");
   c->add_flag("--json", args->json, "print one JSON object");
 }
 

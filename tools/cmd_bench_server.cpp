@@ -5,7 +5,9 @@
 // --tls on (or both, side by side in one run) the server serves TLS with a certificate made for
 // the run by `openssl`, and every walker connects with its CA. With --replicas N --balancer
 // haproxy the walkers go through a real HAProxy to N replicas; with --store they share a PVS
-// store in Redis, cold, or warmed first by the same walks (--warm).
+// store in Redis, cold, or warmed first by the same walks (--warm). With --lod off,1 (issue 45)
+// the same walkers ask for full detail and for levels at tau = 1 px (the server made with
+// --levels), side by side in one run.
 
 #include <fcntl.h>
 #include <signal.h>
@@ -26,6 +28,7 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
 
 #include "client/channel_security.h"
@@ -62,6 +65,7 @@ struct BenchServerArgs {
   std::string store = "none";     // none | redis (a redis-server of the run's own) | HOST:PORT
   bool warm = false;              // fill the store with the same walks first
   std::string masks = "on";       // on | off: the walkers' Hello.epsilon_masks (issue 34)
+  std::string lod = "off";        // off, or tau in pixels, or several: one run each (issue 45)
 };
 
 // What the passes of one bench run share: the PVS store's address and key prefix (empty: no
@@ -231,17 +235,24 @@ struct SessionResult {
   std::vector<double> crossing_ms;
   uint64_t geometry_bytes = 0, raw_geometry_bytes = 0;  // after start-up
   uint64_t masks = 0, mask_bytes = 0;                   // ε-masks received, their triangle bytes
+  uint64_t level_objects = 0;                           // geometry received at a level of detail
 };
 
 SessionResult RunSession(const std::string& address, const client::ChannelSecurity& security,
                          const std::string& scene_name, const Streets& streets, const visibility::ViewcellGrid& grid,
                          const scenes::TerrainHeight& terrain, uint64_t seed, double speed, double seconds, bool masks,
-                         const std::atomic<bool>& cancel) {
+                         double tau_px, const std::atomic<bool>& cancel) {
   SessionResult out;
   client::SessionStream s(address, security);
   s.set_keep_geometry(false);
-  v1::Hello hello = client::SessionStream::HelloFor(scene_name);
-  hello.set_epsilon_masks(masks);
+  // A 1280 x 720 client, 60 degrees high (the client model's defaults), with levels at tau_px
+  // when asked (and then its lists as differences, as the native client takes them).
+  client::HelloSettings settings;
+  settings.scene = scene_name;
+  settings.epsilon_masks = masks;
+  settings.screen_error_px = tau_px;
+  settings.pvs_deltas = tau_px > 0.0;
+  const v1::Hello hello = client::MakeHello(settings);
   s.Start(hello);
   s.SendCredit(uint64_t{1} << 50);
   Walker walker(streets, seed, speed);
@@ -337,6 +348,8 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
   out.raw_geometry_bytes = end.raw_geometry_bytes - at_start.raw_geometry_bytes;
   out.masks = end.masks.size();
   out.mask_bytes = end.mask_bytes;
+  out.level_objects = end.level_objects;
+  if (!end.bad_data.empty() && out.error.empty()) out.error = "a PVS list that does not decode: " + end.bad_data;
   const grpc::Status st = s.Finish();
   if (!st.ok() && out.error.empty()) out.error = st.error_message();
   return out;
@@ -376,7 +389,7 @@ uint64_t RssKiB(pid_t pid) {
 
 // One run: a server (TLS when `tls`), the walkers, their figures as JSON in `*j`. 0 or the
 // tool's exit code.
-int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann::json* result) {
+int RunOnce(const BenchServerArgs& a, bool tls, double tau_px, const RunContext& run, nlohmann::json* result) {
   // The server: the vistream-server beside this executable, on a free loopback port.
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe");
   const std::string server_bin = (self.parent_path() / "vistream-server").string();
@@ -410,6 +423,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
                                    "--max-sessions", std::to_string(a.sessions + 8),
                                    "--drain", "0"};
   args.insert(args.end(), tls_args.begin(), tls_args.end());
+  if (tau_px > 0.0) args.push_back("--levels");
   if (!run.store_address.empty()) args.insert(args.end(), {"--store", run.store_address, "--store-prefix", run.store_prefix});
   if (!run.store_password_file.empty()) args.insert(args.end(), {"--store-password-file", run.store_password_file});
   Replicas replicas;
@@ -497,7 +511,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     for (size_t k = 0; k < a.sessions; ++k) {
       threads.emplace_back([&, k] {
         results[k] = RunSession(address, security, scene->name, streets, *grid, terrain, a.seed * 1000003 + k,
-                                a.speed_kmh / 3.6, a.seconds, a.masks == "on", CancelFlag());
+                                a.speed_kmh / 3.6, a.seconds, a.masks == "on", tau_px, CancelFlag());
         ++finished;
       });
     }
@@ -547,7 +561,7 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   if (CancelFlag().load()) return Fail(absl::CancelledError("bench server stopped"));
 
   uint64_t late = 0, entered = 0, crossings = 0, incomplete = 0, started = 0, without_late = 0, bytes = 0, raw = 0;
-  uint64_t masks = 0, mask_bytes = 0;
+  uint64_t masks = 0, mask_bytes = 0, level_objects = 0;
   std::vector<double> crossing_ms, startup_s;
   std::string first_error;
   for (const SessionResult& r : results) {
@@ -565,12 +579,15 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
     raw += r.raw_geometry_bytes;
     masks += r.masks;
     mask_bytes += r.mask_bytes;
+    level_objects += r.level_objects;
   }
   const double hits = static_cast<double>(stats.pvs_cache_hits());
   const double computed = static_cast<double>(stats.pvs_computed());
   nlohmann::json& j = *result;
   j["scene"] = scene->name;
   j["tls"] = tls;
+  j["lod_tau_px"] = tau_px > 0.0 ? nlohmann::json(tau_px) : nlohmann::json();
+  j["level_objects_received"] = level_objects;
   j["sessions"] = a.sessions;
   j["sessions_started"] = started;
   j["sessions_without_late_cells"] = without_late;
@@ -632,8 +649,12 @@ int RunOnce(const BenchServerArgs& a, bool tls, const RunContext& run, nlohmann:
   j["cores"] = cores;
   if (!first_error.empty()) j["first_error"] = first_error;
   if (!a.json && !run.warmup) {
-    std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2%s\n", scene->name.c_str(), a.sessions,
-                a.speed_kmh, a.seconds, grid->cell_size(), a.res, tls ? ", TLS" : "");
+    std::printf("%s, %zu sessions at %g km/h for %g s, %g m viewcells at %u^2%s%s\n", scene->name.c_str(), a.sessions,
+                a.speed_kmh, a.seconds, grid->cell_size(), a.res, tls ? ", TLS" : "",
+                (tau_px > 0.0 ? absl::StrFormat(", levels at tau %g px (%llu objects at a level)", tau_px,
+                                                static_cast<unsigned long long>(level_objects))
+                              : std::string(", full detail"))
+                    .c_str());
     std::printf("  sessions started %llu, without a late cell %llu; cells entered %llu, late %llu\n",
                 static_cast<unsigned long long>(started), static_cast<unsigned long long>(without_late),
                 static_cast<unsigned long long>(entered), static_cast<unsigned long long>(late));
@@ -691,6 +712,21 @@ int BenchServer(const BenchServerArgs& a) {
   }
   if (a.warm && a.store == "none") return BadOption("bench server", "--warm", "warms the PVS store: give --store");
   if (a.warm && a.tls == "both") return BadOption("bench server", "--warm", "one run at a time: not with --tls both");
+  // Levels of detail: each of --lod is a run, side by side (off, or tau in pixels).
+  std::vector<double> taus;
+  for (const std::string& text : std::vector<std::string>(absl::StrSplit(a.lod, ','))) {
+    double tau = 0.0;
+    if (!cli::ParseScreenError(text, &tau)) {
+      return BadOption("bench server", "--lod", "'" + text + "' is not a screen error: expected off or pixels in (0, 1000]");
+    }
+    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
+      return BadOption("bench server", "--lod", "'" + text + "' is listed twice");
+    }
+    taus.push_back(tau);
+  }
+  if (taus.size() > 1 && (a.tls == "both" || a.warm)) {
+    return BadOption("bench server", "--lod", "several runs: not with --tls both or --warm");
+  }
   InstallCancelHandler();
   // The store: a redis-server of the run's own (empty at the start: a cold store), or the one
   // given, under a key prefix of this run's own (cold there too).
@@ -741,18 +777,59 @@ int BenchServer(const BenchServerArgs& a) {
     RunContext warmup = run;
     warmup.warmup = true;
     nlohmann::json ignored;
-    if (const int rc = RunOnce(a, a.tls == "on", warmup, &ignored); rc != 0) return rc;
+    if (const int rc = RunOnce(a, a.tls == "on", taus.front(), warmup, &ignored); rc != 0) return rc;
+  }
+  if (taus.size() > 1) {
+    // Side by side in one run: the same walkers (same seed) at each screen error.
+    nlohmann::json j;
+    j["runs"] = nlohmann::json::array();
+    for (double tau : taus) {
+      nlohmann::json r;
+      if (const int rc = RunOnce(a, a.tls == "on", tau, run, &r); rc != 0) return rc;
+      j["runs"].push_back(r);
+    }
+    // Each run with levels against the first run at full detail, if there is one.
+    auto full = std::find(taus.begin(), taus.end(), 0.0);
+    if (full != taus.end()) {
+      const nlohmann::json& f = j["runs"][static_cast<size_t>(full - taus.begin())];
+      auto ratio = [&](const nlohmann::json& x, const char* key) {
+        const double d = f[key].get<double>();
+        return d > 0.0 ? x[key].get<double>() / d : 0.0;
+      };
+      j["levels_over_full"] = nlohmann::json::array();
+      for (size_t k = 0; k < taus.size(); ++k) {
+        if (taus[k] == 0.0) continue;
+        const nlohmann::json& x = j["runs"][k];
+        j["levels_over_full"].push_back({{"lod_tau_px", taus[k]},
+                                         {"bytes_per_crossing", ratio(x, "bytes_per_crossing")},
+                                         {"bytes_per_s", ratio(x, "bytes_per_s")},
+                                         {"crossing_p50_ms", ratio(x, "crossing_p50_ms")},
+                                         {"crossing_p99_ms", ratio(x, "crossing_p99_ms")},
+                                         {"rss_mb", ratio(x, "rss_mb")},
+                                         {"late_cells", x["late_cells"]},
+                                         {"late_cells_full", f["late_cells"]}});
+        if (!a.json) {
+          std::printf("levels at tau %g px over full detail: bytes per crossing %.3f, bytes/s %.3f, crossing p50 %.3f, "
+                      "p99 %.3f, server RSS %.3f; late cells %llu against %llu\n",
+                      taus[k], ratio(x, "bytes_per_crossing"), ratio(x, "bytes_per_s"), ratio(x, "crossing_p50_ms"),
+                      ratio(x, "crossing_p99_ms"), ratio(x, "rss_mb"), x["late_cells"].get<unsigned long long>(),
+                      f["late_cells"].get<unsigned long long>());
+        }
+      }
+    }
+    if (a.json) std::printf("%s\n", j.dump(2).c_str());
+    return 0;
   }
   if (a.tls != "both") {
     nlohmann::json j;
-    if (const int rc = RunOnce(a, a.tls == "on", run, &j); rc != 0) return rc;
+    if (const int rc = RunOnce(a, a.tls == "on", taus.front(), run, &j); rc != 0) return rc;
     if (a.json) std::printf("%s\n", j.dump(2).c_str());
     return 0;
   }
   // Side by side in one run: plaintext, then TLS, the same walkers (same seed).
   nlohmann::json plain, tls;
-  if (const int rc = RunOnce(a, false, run, &plain); rc != 0) return rc;
-  if (const int rc = RunOnce(a, true, run, &tls); rc != 0) return rc;
+  if (const int rc = RunOnce(a, false, taus.front(), run, &plain); rc != 0) return rc;
+  if (const int rc = RunOnce(a, true, taus.front(), run, &tls); rc != 0) return rc;
   auto ratio = [](const nlohmann::json& x, const nlohmann::json& y, const char* key) {
     const double d = y[key].get<double>();
     return d > 0.0 ? x[key].get<double>() / d : 0.0;
@@ -794,6 +871,10 @@ void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--seed", args->seed, "walkers' seed")->check(WholeRange(0, kMaxSeed))->capture_default_str();
   c->add_option("--log", args->log, "write the server's log here")->check(OutputPath());
   c->add_flag("--json", args->json, "print one JSON object");
+  c->add_option("--lod", args->lod,
+                 "levels of detail the walkers ask for: off, or a screen error in pixels, or several (off,1): one run "
+                 "each, side by side (the server made with --levels)")
+      ->capture_default_str();
   c->add_option("--masks", args->masks, "on | off: whether the walkers ask for ε-masks (Hello.epsilon_masks)")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();

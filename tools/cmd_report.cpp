@@ -32,6 +32,7 @@
 #include "tools/commands.h"
 #include "tools/gnuplot.h"
 #include "tools/report_latency.h"
+#include "tools/report_levels.h"
 #include "tools/report_pace.h"
 #include "tools/report_page.h"
 #include "tools/subprocess.h"
@@ -62,6 +63,7 @@ struct Plan {
   std::string city_scene;  // an imported city model (issue 35)
   LatencyPlan latency;
   PacePlan pace;
+  LevelsPlan levels;
 };
 
 Plan PlanFor(bool quick) {
@@ -90,6 +92,7 @@ Plan PlanFor(bool quick) {
   p.city_scene = quick ? "delft" : "denhaag";
   p.latency = LatencyPlanFor(quick);
   p.pace = PacePlanFor(quick);
+  p.levels = LevelsPlanFor(quick);
   return p;
 }
 
@@ -443,6 +446,7 @@ int Report(const ReportArgs& given) {
   EpsilonSection(page, plan);
   AgvsSection(page, plan);
   PaceSection(page, plan.pace);
+  LevelsSection(page, plan.levels);
   LatencySection(page, plan.latency);
   MapsSection(page, plan);
   HeatmapSection(page, plan);
