@@ -141,7 +141,8 @@ std::optional<v1::ServerMessage> MaskPlanner::NextObject(const std::unordered_se
 std::optional<MaskPlanner::Sent> MaskPlanner::NextMask(const std::vector<CellId>& wanted,
                                                        const std::set<CellId>& emitted,
                                                        const std::unordered_set<uint32_t>& held,
-                                                       v1::SessionStats* stats) {
+                                                       v1::SessionStats* stats,
+                                                       const std::function<uint32_t(CellId, uint32_t)>& whole) {
   while (!ready_.empty()) {
     ReadyMask ready = std::move(ready_.front());
     ready_.erase(ready_.begin());
@@ -153,6 +154,14 @@ std::optional<MaskPlanner::Sent> MaskPlanner::NextMask(const std::vector<CellId>
     BuiltMask& mask = ready.mask;
     v1::EpsilonMask* e = mask.message.mutable_epsilon_mask();
     e->set_mask_id(next_mask_id_++);
+    if (whole) {
+      for (visibility::MaskObject& o : mask.sets) {
+        const uint32_t n = whole(ready.cell, o.object);
+        if (n == 0) continue;
+        o.bits.assign((n + 7) / 8, 0xff);
+        if (n % 8 != 0) o.bits.back() = static_cast<uint8_t>((1u << (n % 8)) - 1);
+      }
+    }
     // The sets, or their difference from the last mask of the cell, whichever is shorter.
     std::string bytes = visibility::EncodeMaskRuns(mask.sets);
     if (auto last = last_sent_.find(ready.cell); last != last_sent_.end()) {

@@ -108,8 +108,13 @@ class MaskPlanner {
     CellId cell = 0;
     double compute_ms = 0.0;
   };
+  // `whole(cell, object)`, when given: the object's triangle count where the client draws it
+  // whole from this cell's mask (a level of detail that does not keep the full mesh's
+  // triangles, issue 45), 0 where the mask's bits apply; such an object's set is sent as all
+  // of its triangles (a few bytes, unchanged from one box to the next: nothing in a delta).
   std::optional<Sent> NextMask(const std::vector<CellId>& wanted, const std::set<CellId>& emitted,
-                               const std::unordered_set<uint32_t>& held, vistream::v1::SessionStats* stats);
+                               const std::unordered_set<uint32_t>& held, vistream::v1::SessionStats* stats,
+                               const std::function<uint32_t(CellId, uint32_t)>& whole = {});
 
  private:
   void Drop(uint64_t id, vistream::v1::SessionStats* stats);
