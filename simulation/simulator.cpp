@@ -240,9 +240,11 @@ void Run::Receive(const v1::ServerMessage& m) {
   const double t = q_.now();
   // What the message costs the credit; a grant goes back as the client grants it.
   credit_.Consume(client::ChargedBytes(m));
+  ++r_.messages;
   if (credit_.GrantDue()) SendUp(client::CreditMessage(credit_.TakeGrant()), "credit");
   switch (m.body_case()) {
     case v1::ServerMessage::kPvs: {
+      r_.list_bytes += m.ByteSizeLong();
       absl::StatusOr<proto::PvsList> list = lists_.Decode(m.pvs());
       if (!list.ok()) {
         failure_ = absl::InternalError(absl::StrCat("the simulated client cannot read a PVS list: ", list.status().message()));

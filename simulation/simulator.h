@@ -123,6 +123,8 @@ struct SimulationResult {
   // all arrived): misses of ε-first geometry rather than of the chain of neighbourhoods.
   uint64_t frames_in_unready_mask = 0;
   uint64_t mask_bytes = 0;       // EpsilonMask.triangles bytes received (charged to the credit)
+  uint64_t list_bytes = 0;       // ViewcellPvs messages received (serialized; whole or differences)
+  uint64_t messages = 0;         // server messages received (each costs its framing on the wire)
   uint64_t masks_used = 0;       // masks drawn on at least one frame
   uint64_t masks_computed = 0;   // ε-mask computations run by the simulated mask worker
   uint64_t masks_dropped = 0;    // neighbourhoods the session gave up before their mask was sent

@@ -22,6 +22,7 @@
 #include "gl/id_renderer.h"
 #include "scenes/mesh.h"
 #include "scenes/scene.h"
+#include "tests/client_test_util.h"
 
 namespace vistream::client {
 namespace {
@@ -145,24 +146,10 @@ TEST(Verification, TheFullViewOfAnIdRendererWithLevelsDrawsNoLevel) {
   EXPECT_EQ(*ca, *cb);
 }
 
-// Five cells of 10 m in a row (RowOfCells in client_masks_test.cpp).
-v1::SceneInfo Row() {
-  v1::SceneInfo info;
-  info.set_name("row");
-  info.set_object_count(10);
-  info.set_triangle_count(100);
-  v1::ViewcellGrid* grid = info.mutable_grid();
-  grid->set_cell_size_m(10);
-  grid->set_nx(5);
-  grid->set_ny(1);
-  grid->set_height_m(2);
-  return info;
-}
-
 TEST(ObjectStoreLevels, AListsLevelsAreKeptWithItAndCoarserHeldObjectsCounted) {
   ObjectStore store(0);
   std::vector<Event> events;
-  events.emplace_back(Row());
+  events.emplace_back(RowOfCells());
   v1::ViewcellPvs list;
   list.set_cell_id(1);
   for (uint32_t o : {2, 4, 6}) list.add_object_ids(o);
@@ -212,7 +199,7 @@ TEST(RendererLevels, AnObjectReplacedByAnotherLevelStaysDrawableAtTheOldOneUntil
   ASSERT_TRUE(renderer.ok()) << renderer.status();
   ObjectStore store(0);
   std::vector<Event> first;
-  first.emplace_back(Row());
+  first.emplace_back(RowOfCells());
   first.emplace_back(Triangle(1, 3, 0.0f));
   store.Apply(std::move(first), 0u);
   (*renderer)->Sync(store, {}, 1);

@@ -25,6 +25,7 @@
 #include "scenes/walk.h"
 #include "server/served_scene.h"
 #include "server/service.h"
+#include "tests/client_test_util.h"
 #include "tests/temp_dir.h"
 #include "visibility/mask_codec.h"
 
@@ -32,20 +33,6 @@ namespace vistream::client {
 namespace {
 
 namespace v1 = vistream::v1;
-
-// Five cells of 10 m in a row (x from 0 to 50), a 2 m band from z = 0; 10 objects, 100 triangles.
-v1::SceneInfo RowOfCells() {
-  v1::SceneInfo info;
-  info.set_name("row");
-  info.set_object_count(10);
-  info.set_triangle_count(100);
-  v1::ViewcellGrid* grid = info.mutable_grid();
-  grid->set_cell_size_m(10);
-  grid->set_nx(5);
-  grid->set_ny(1);
-  grid->set_height_m(2);
-  return info;
-}
 
 ReceivedObject Object(uint32_t id) {
   ReceivedObject o;
@@ -470,53 +457,6 @@ TEST(ClientMasks, ACity1WalkerAt60KmhDrawsMaskedFramesWithoutHolesOrPixelError) 
   EXPECT_LT(s->mean_triangles_drawn, s->mean_triangles_without_masks);
 }
 
-// A town of london's generator (1.6 km, 100 m viewcells, tests/simulator/london_small.json) on
-// its diagonal walk, at 6 and at 60 km/h.
-TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
-  const std::string dir = vistream::testing::ProcessTempDir() + "/london_town_catalog";
-  std::filesystem::create_directories(dir);
-  std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
-                             dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeForMasks(dir + "/london-small.json", 64);
-  ASSERT_TRUE(town.ok()) << town.status();
-  for (const double kmh : {6.0, 60.0}) {
-    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(town->get(), kmh, kmh < 10 ? 40.0 : 20.0, 2.0, dir));
-    ASSERT_TRUE(s.ok()) << s.status();
-    EXPECT_GT(s->frames, 300u) << kmh;
-    EXPECT_GT(static_cast<double>(s->frames_masked), (kmh < 10 ? 0.95 : 0.80) * static_cast<double>(s->frames)) << kmh;
-    EXPECT_EQ(s->hole_frames, 0u) << kmh;
-    EXPECT_EQ(s->pixel_error, 0u) << kmh;
-    EXPECT_GE(s->checked_frames, 10u) << kmh;
-    EXPECT_LT(s->mean_triangles_drawn, s->mean_triangles_without_masks) << kmh;
-  }
-}
-
-// A real city model (issue 35): Den Haag's tile 01 served from the catalog (imported from
-// ../shared/data/citymodels: LoD2 buildings on a TIN, cells following it), the walker along
-// the walk the server derived from the data ("walk 1": the catalog entry has none of its own,
-// so the client takes the server's first) at 6 and 30 km/h: no stall, no hole, pixel error 0,
-// the eye over the terrain inside each cell's band.
-TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesWithoutStallsOrPixelError) {
-  const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
-  if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeForMasks("denhaag");
-  ASSERT_TRUE(city.ok()) << city.status();
-  ASSERT_FALSE((*city)->scene().paths.empty()) << "no walk derived from the data";
-  ASSERT_FALSE((*city)->scene().terrain.empty());
-  // 15 s at each speed (30 s each took a minute of CI): at 30 km/h, 125 m, three 50 m cells.
-  for (const double kmh : {6.0, 30.0}) {
-    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 15.0, 1.0));
-    ASSERT_TRUE(s.ok()) << s.status();
-    EXPECT_EQ(s->path, "walk 1");
-    EXPECT_GT(s->frames, 150u) << kmh;
-    EXPECT_EQ(s->stalls, 0u) << kmh;
-    EXPECT_GT(static_cast<double>(s->frames_masked), 0.8 * static_cast<double>(s->frames)) << kmh;
-    EXPECT_EQ(s->hole_frames, 0u) << kmh;
-    EXPECT_EQ(s->pixel_error, 0u) << kmh;
-    EXPECT_GE(s->checked_frames, 10u) << kmh;
-  }
-}
-
 // A walker at 60 km/h who turns back twice, then turns a corner into a street the boxes ahead
 // did not cover: no hole, no stall, no pixel error. (Turning back is covered by the masks of
 // the boxes behind, which the client still holds.)
@@ -545,6 +485,19 @@ TEST(ClientMasks, AWalkerWhoTurnsACornerFallsBackToThePvsWithoutAHole) {
   EXPECT_GE(s->checked_frames, 15u);
 }
 
+// Stands at `eye` (reporting it 20 times a second, the store taking what arrives as in `cell`)
+// until `done` holds; false after 30 s.
+bool StandUntil(Connection& connection, ObjectStore& store, const glm::dvec3& eye, uint32_t cell,
+                const std::function<bool()>& done) {
+  for (int k = 0; k < 600; ++k) {
+    connection.SetPose(eye, glm::dvec3(0.0), 0.0, 0.0, 0.05 * k);
+    store.Apply(connection.Take(), cell);
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
 // A client that jumps 20 m within its viewcell: at the new eye it holds no usable mask (the eye
 // is in none of their boxes) but the cell's PVS is complete, so its frames draw the PVS, not a
 // hole (client/frame_loop.cpp: a hole is no usable mask and an incomplete PVS); the server
@@ -566,13 +519,7 @@ TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
   const glm::dvec3 a(box.min.x + 15.0, 0.5 * (box.min.y + box.max.y), grid.base_z() + 1.2), b = a + glm::dvec3(20.0, 0.0, 0.0);
   // Stands at a until the cell is complete and a mask holds the eye.
   auto until = [&](const glm::dvec3& eye, const std::function<bool()>& done) {
-    for (int k = 0; k < 600; ++k) {
-      connection.SetPose(eye, glm::dvec3(0.0), 0.0, 0.0, 0.05 * k);
-      store.Apply(connection.Take(), cell);
-      if (done()) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    return false;
+    return StandUntil(connection, store, eye, cell, done);
   };
   ASSERT_TRUE(until(a, [&] { return store.CellComplete(cell) && store.ChooseMask(a).mask != nullptr; }));
   const uint32_t mask_a = store.ChooseMask(a).mask->mask_id;
@@ -616,50 +563,70 @@ void ExpectLevelsHold(const WalkthroughSummary& s, double tau_px, const std::str
   EXPECT_LE(s.max_silhouette_px, tau_px + 1.0) << what;
 }
 
-// A london-generated town (tests/simulator/london_small.json: irregular streets, 1.6 km square)
-// served with levels, a walker across it at 6 and 60 km/h asking for tau = 1 px: the levels hold
-// (ExpectLevelsHold); the same walk with levels off draws the full scene exactly (pixel error 0)
-// and takes more geometry bytes.
-TEST(ClientLevels, ALondonTownWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhouette) {
-  const std::string dir = vistream::testing::ProcessTempDir() + "/levels_catalog";
+// A town of london's generator (1.6 km, 100 m viewcells, tests/simulator/london_small.json:
+// irregular streets) on its diagonal walk, served with levels of detail. Asking for none (--lod
+// off), at 6 and at 60 km/h: masked frames, no hole, pixel error 0 (the full scene exactly).
+// Asking for tau = 1 px, at 6 and 60 km/h: the levels hold (ExpectLevelsHold).
+TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTauOfEverySilhouette) {
+  const std::string dir = vistream::testing::ProcessTempDir() + "/london_town_catalog";
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
                              dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
   absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeWithLevels(dir + "/london-small.json");
   ASSERT_TRUE(town.ok()) << town.status();
   ASSERT_NE((*town)->levels(), nullptr);
-  uint64_t bytes_at_6 = 0;
   for (const double kmh : {6.0, 60.0}) {
-    MaskedWalk w(town->get(), kmh, 9.0, 1.0, dir);
-    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(w);
+    MaskedWalk off(town->get(), kmh, kmh < 10 ? 30.0 : 20.0, 2.0, dir);
+    off.lod_tau_px = 0.0;
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(off);
     ASSERT_TRUE(s.ok()) << s.status();
     EXPECT_EQ(s->path, "across");
+    EXPECT_GT(s->frames, 300u) << kmh;
+    EXPECT_GT(static_cast<double>(s->frames_masked), (kmh < 10 ? 0.95 : 0.80) * static_cast<double>(s->frames)) << kmh;
+    EXPECT_EQ(s->hole_frames, 0u) << kmh;
+    EXPECT_EQ(s->pixel_error, 0u) << kmh;
+    EXPECT_GE(s->checked_frames, 10u) << kmh;
+    EXPECT_LT(s->mean_triangles_drawn, s->mean_triangles_without_masks) << kmh;
+    EXPECT_EQ(s->level_objects_received, 0u) << kmh;
+  }
+  for (const double kmh : {6.0, 60.0}) {
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(town->get(), kmh, 9.0, 1.0, dir));
+    ASSERT_TRUE(s.ok()) << s.status();
     EXPECT_GT(s->frames, 100u) << kmh;
     ExpectLevelsHold(*s, 1.0, absl::StrCat("london-small at ", kmh, " km/h"));
-    if (kmh == 6.0) bytes_at_6 = s->geometry_bytes;
   }
-  MaskedWalk off(town->get(), 6.0, 9.0, 1.0, dir);
-  off.lod_tau_px = 0.0;
-  const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(off);
-  ASSERT_TRUE(s.ok()) << s.status();
-  EXPECT_EQ(s->stalls, 0u);
-  EXPECT_EQ(s->hole_frames, 0u);
-  EXPECT_EQ(s->pixel_error, 0u);
-  EXPECT_GE(s->checked_frames, 8u);
-  EXPECT_EQ(s->level_objects_received, 0u);
-  EXPECT_GT(s->geometry_bytes, bytes_at_6);
 }
 
-// Den Haag's LoD2 tile (real data, terrain) served with levels: a walker along the derived walk
-// at 6 and 60 km/h asking for tau = 1 px; the levels hold (ExpectLevelsHold).
-TEST(ClientLevels, ADenHaagWalkerAt6And60KmhDrawsLevelsWithinTauOfEverySilhouette) {
+// A real city model (issue 35): Den Haag's tile 01 served from the catalog (imported from
+// ../shared/data/citymodels: LoD2 buildings on a TIN, cells following it) with levels of detail,
+// the walker along the walk the server derived from the data ("walk 1": the catalog entry has
+// none of its own, so the client takes the server's first). Asking for none, at 6 km/h: no
+// stall, no hole, pixel error 0, the eye over the terrain inside each cell's band. Asking for
+// tau = 1 px at 6 and 60 km/h: the levels hold (ExpectLevelsHold).
+TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesAndLevelsWithinTauOfEverySilhouette) {
   const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
   if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
   absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeWithLevels("denhaag", 128);
   ASSERT_TRUE(city.ok()) << city.status();
+  ASSERT_FALSE((*city)->scene().paths.empty()) << "no walk derived from the data";
+  ASSERT_FALSE((*city)->scene().terrain.empty());
+  {
+    MaskedWalk off(city->get(), 6.0, 15.0, 1.0);
+    off.lod_tau_px = 0.0;
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(off);
+    ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_EQ(s->path, "walk 1");
+    EXPECT_GT(s->frames, 150u);
+    EXPECT_EQ(s->stalls, 0u);
+    EXPECT_GT(static_cast<double>(s->frames_masked), 0.8 * static_cast<double>(s->frames));
+    EXPECT_EQ(s->hole_frames, 0u);
+    EXPECT_EQ(s->pixel_error, 0u);
+    EXPECT_GE(s->checked_frames, 10u);
+  }
   for (const double kmh : {6.0, 60.0}) {
     const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(MaskedWalk(city->get(), kmh, 10.0, 1.0));
     ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_EQ(s->path, "walk 1");
     EXPECT_GT(s->frames, 100u) << kmh;
     ExpectLevelsHold(*s, 1.0, absl::StrCat("denhaag at ", kmh, " km/h"));
   }
@@ -687,15 +654,7 @@ TEST(ClientLevels, AResumedSessionSaysTheLevelsItHoldsAndGetsOnlyFinerOnes) {
   const uint32_t cell = grid.Id({10, 10});
   const scenes::Aabb box = grid.CellBox(cell);
   const glm::dvec3 eye(0.5 * (box.min.x + box.max.x), 0.5 * (box.min.y + box.max.y), grid.base_z() + 1.2);
-  auto until = [&](const std::function<bool()>& done) {
-    for (int k = 0; k < 600; ++k) {
-      connection.SetPose(eye, glm::dvec3(0.0), 0.0, 0.0, 0.05 * k);
-      store.Apply(connection.Take(), cell);
-      if (done()) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    return false;
-  };
+  auto until = [&](const std::function<bool()>& done) { return StandUntil(connection, store, eye, cell, done); };
   ASSERT_TRUE(until([&] { return store.CellComplete(cell); }));
   const std::vector<uint32_t>* levels = store.PvsLevels(cell);
   ASSERT_NE(levels, nullptr);

@@ -429,6 +429,13 @@ TEST(ClientProcess, BadInputGetsAClearMessageAndANonZeroExit) {
         << r.output;
     EXPECT_NE(r.output.find("Run 'vistream-client --help' for the options."), std::string::npos) << r.output;
   }
+  for (const char* lod : {"0", "-1", "1001", "nan", "one"}) {
+    r = RunCommand(Client() + real + " --lod " + lod);
+    EXPECT_EQ(r.rc, 2) << lod << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string("--lod: '") + lod + "': expected off or a screen error in pixels"),
+              std::string::npos)
+        << r.output;
+  }
   for (const char* address : {"127.0.0.1:99999", "127.0.0.1", "127.0.0.1:", "127.0.0.1:80x"}) {
     r = RunCommand(Client() + " --headless --server " + address);
     EXPECT_EQ(r.rc, 2) << address << ": " << r.output;

@@ -90,6 +90,8 @@ nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme 
   j["masks_received"] = r.masks;
   j["masks_used"] = r.masks_used;
   j["mask_bytes"] = r.mask_bytes;
+  j["list_bytes"] = r.list_bytes;
+  j["messages"] = r.messages;
   j["masks_computed"] = r.masks_computed;
   j["masks_dropped"] = r.masks_dropped;
   j["mask_compute_s"] = r.mask_compute_s;
