@@ -70,7 +70,8 @@ class Renderer {
   // the masked triangles of masked objects (objects the mask lists no triangle of are not
   // drawn); an object held at a level that does not keep its triangles
   // (ReceivedObject::keeps_triangles), or still drawn at the level it had before a new one
-  // arrived, is drawn whole when the mask lists it. `drawn`, if given, receives what was drawn. `frame` stamps the objects' last use.
+  // arrived, is drawn whole when the mask lists it. `drawn`, if given, receives what was drawn.
+  // `frame` stamps the objects' last use.
   // The masked index lists are built on first use and kept per object for the last few masks
   // (by EpsilonMaskSet::key), so that frames switching between masks build nothing.
   FrameStats Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,

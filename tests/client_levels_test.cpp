@@ -43,7 +43,8 @@ TEST(Verification, TheDistanceTransformIsTheBruteForceDistanceToTheNearestSetPix
         double best = 1e30;
         for (int v = 0; v < h; ++v) {
           for (int u = 0; u < w; ++u) {
-            if (source[static_cast<size_t>(v) * w + u] != 0) best = std::min(best, double((u - x) * (u - x) + (v - y) * (v - y)));
+            if (source[static_cast<size_t>(v) * w + u] == 0) continue;
+            best = std::min(best, double((u - x) * (u - x) + (v - y) * (v - y)));
           }
         }
         ASSERT_EQ(d2[static_cast<size_t>(y) * w + x], best) << "pixel " << x << "," << y << " density " << density;

@@ -245,13 +245,16 @@ TEST(ObjectStoreMasks, TheUsableMaskHoldsTheEyeHasEveryObjectReadyAndTheFewestTr
 // city1 as the server's tests serve it (50 m viewcells), shared by the tests here.
 // `scene` (a catalog name or entry) served as these tests serve it: two PVS workers, masks on
 // ordinary threads (the shares of masked frames asserted here must not depend on what else
-// loads the machine; SCHED_IDLE's effect is MaskQueue's test).
-absl::StatusOr<std::unique_ptr<server::ServedScene>> ServeForMasks(const std::string& scene, uint32_t res = 128) {
+// loads the machine; SCHED_IDLE's effect is MaskQueue's test). With `levels`, its levels of
+// detail made at start, as vistream-server --levels makes them.
+absl::StatusOr<std::unique_ptr<server::ServedScene>> ServeForMasks(const std::string& scene, uint32_t res = 128,
+                                                                    bool levels = false) {
   server::ServedSceneOptions o;
   o.scene = scene;
   o.res = res;
   o.threads = 2;
   o.idle_priority_masks = false;
+  o.make_levels = levels;
   return server::ServedScene::Create(o);
 }
 
@@ -539,17 +542,6 @@ TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
 
 // ---- Levels of detail (issue 45) ----
 
-// A server with levels made at start (vistream-server --levels) for `scene`.
-absl::StatusOr<std::unique_ptr<server::ServedScene>> ServeWithLevels(const std::string& scene, uint32_t res = 64) {
-  server::ServedSceneOptions o;
-  o.scene = scene;
-  o.res = res;
-  o.threads = 2;
-  o.idle_priority_masks = false;
-  o.make_levels = true;
-  return server::ServedScene::Create(o);
-}
-
 // What a levels walk must show: no stall, no hole, levels received and bytes saved, coarse
 // frames rare (at most 1 in 100), and every differing pixel of every checked frame within
 // tau + 1 px of a full-detail silhouette (no object missing, none grown by more than its error).
@@ -572,7 +564,8 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTa
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
                              dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeWithLevels(dir + "/london-small.json");
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town =
+      ServeForMasks(dir + "/london-small.json", 64, /*levels=*/true);
   ASSERT_TRUE(town.ok()) << town.status();
   ASSERT_NE((*town)->levels(), nullptr);
   for (const double kmh : {6.0, 60.0}) {
@@ -606,7 +599,7 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTa
 TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesAndLevelsWithinTauOfEverySilhouette) {
   const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
   if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeWithLevels("denhaag", 128);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeForMasks("denhaag", 128, /*levels=*/true);
   ASSERT_TRUE(city.ok()) << city.status();
   ASSERT_FALSE((*city)->scene().paths.empty()) << "no walk derived from the data";
   ASSERT_FALSE((*city)->scene().terrain.empty());
@@ -636,7 +629,7 @@ TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesAndLevelsWithi
 // (Hello.held_levels): the server sends a finer level where a cell needs one, and never the
 // same level again.
 TEST(ClientLevels, AResumedSessionSaysTheLevelsItHoldsAndGetsOnlyFinerOnes) {
-  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeWithLevels("default", 64);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town = ServeForMasks("default", 64, /*levels=*/true);
   ASSERT_TRUE(town.ok()) << town.status();
   absl::StatusOr<LoopbackServer> server = StartOnLoopback(town->get());
   ASSERT_TRUE(server.ok()) << server.status();
