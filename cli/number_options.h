@@ -5,6 +5,7 @@
 // They reject NaN, infinities, text and values outside [lo, hi]: CLI11's own Range and
 // PositiveNumber let NaN through and print their bounds with 300 digits.
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -12,10 +13,12 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
+#include <absl/strings/str_split.h>
 
 namespace vistream::cli {
 
@@ -85,6 +88,28 @@ inline bool ParseScreenError(std::string_view text, double* tau_px) {
   double v = 0.0;
   if (!internal::ParseFinite(text, &v) || !(v > 0.0) || v > 1000.0) return false;
   *tau_px = v;
+  return true;
+}
+
+// A comma-separated list of ParseScreenError values ("off,1,16": one run each). False, with
+// *why saying which item and what is wrong, for an item that is no screen error, or (with
+// `refuse_repeats`) one listed twice.
+inline bool ParseScreenErrors(std::string_view text, bool refuse_repeats, std::vector<double>* taus_px,
+                              std::string* why) {
+  taus_px->clear();
+  for (absl::string_view part : absl::StrSplit(absl::string_view(text.data(), text.size()), ',')) {
+    const std::string_view item(part.data(), part.size());
+    double tau = 0.0;
+    if (!ParseScreenError(item, &tau)) {
+      *why = absl::StrCat("'", part, "' is not a screen error: expected off or pixels in (0, 1000]");
+      return false;
+    }
+    if (refuse_repeats && std::find(taus_px->begin(), taus_px->end(), tau) != taus_px->end()) {
+      *why = absl::StrCat("'", part, "' is listed twice");
+      return false;
+    }
+    taus_px->push_back(tau);
+  }
   return true;
 }
 

@@ -14,7 +14,6 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
-#include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
 
 #include "client/walkthrough.h"
@@ -48,12 +47,11 @@ int BenchClient(const BenchClientArgs& a) {
     return 2;
   }
   // Each screen error of --lod is a mode of its own, first (off: none).
-  std::vector<double> taus;
-  for (const std::string& text : std::vector<std::string>(absl::StrSplit(a.lod, ','))) {
-    double tau = 0.0;
-    if (!cli::ParseScreenError(text, &tau)) {
-      return BadOption("bench client", "--lod", "'" + text + "' is not a screen error: expected off or pixels in (0, 1000]");
-    }
+  std::vector<double> listed, taus;
+  if (std::string why; !cli::ParseScreenErrors(a.lod, /*refuse_repeats=*/false, &listed, &why)) {
+    return BadOption("bench client", "--lod", why);
+  }
+  for (double tau : listed) {
     if (tau > 0.0 && std::find(taus.begin(), taus.end(), tau) == taus.end()) taus.push_back(tau);
   }
   const double tau_px = taus.empty() ? 0.0 : taus.front();

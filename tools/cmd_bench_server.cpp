@@ -28,7 +28,6 @@
 
 #include <CLI/CLI.hpp>
 #include <absl/strings/str_format.h>
-#include <absl/strings/str_split.h>
 #include <nlohmann/json.hpp>
 
 #include "client/channel_security.h"
@@ -714,15 +713,8 @@ int BenchServer(const BenchServerArgs& a) {
   if (a.warm && a.tls == "both") return BadOption("bench server", "--warm", "one run at a time: not with --tls both");
   // Levels of detail: each of --lod is a run, side by side (off, or tau in pixels).
   std::vector<double> taus;
-  for (const std::string& text : std::vector<std::string>(absl::StrSplit(a.lod, ','))) {
-    double tau = 0.0;
-    if (!cli::ParseScreenError(text, &tau)) {
-      return BadOption("bench server", "--lod", "'" + text + "' is not a screen error: expected off or pixels in (0, 1000]");
-    }
-    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
-      return BadOption("bench server", "--lod", "'" + text + "' is listed twice");
-    }
-    taus.push_back(tau);
+  if (std::string why; !cli::ParseScreenErrors(a.lod, /*refuse_repeats=*/true, &taus, &why)) {
+    return BadOption("bench server", "--lod", why);
   }
   if (taus.size() > 1 && (a.tls == "both" || a.warm)) {
     return BadOption("bench server", "--lod", "several runs: not with --tls both or --warm");

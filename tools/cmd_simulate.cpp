@@ -217,16 +217,8 @@ int Simulate(const SimulateArgs& a) {
   }
   // Levels of detail: each of --lod is a run (off, or tau in pixels).
   std::vector<double> taus;
-  const std::vector<std::string> lod_texts = absl::StrSplit(a.lod, ',');
-  for (const std::string& text : lod_texts) {
-    double tau = 0.0;
-    if (!cli::ParseScreenError(text, &tau)) {
-      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is not a screen error: expected off or pixels in (0, 1000]"));
-    }
-    if (std::find(taus.begin(), taus.end(), tau) != taus.end()) {
-      return BadOption("simulate", "--lod", absl::StrCat("'", text, "' is listed twice"));
-    }
-    taus.push_back(tau);
+  if (std::string why; !cli::ParseScreenErrors(a.lod, /*refuse_repeats=*/true, &taus, &why)) {
+    return BadOption("simulate", "--lod", why);
   }
   if (scenes::IsGltfPath(a.scene)) {
     return BadOption("simulate", "--scene",
