@@ -217,7 +217,7 @@ int Simulate(const SimulateArgs& a) {
   }
   // Levels of detail: each of --lod is a run (off, or tau in pixels).
   std::vector<double> taus;
-  if (std::string why; !cli::ParseScreenErrors(a.lod, /*refuse_repeats=*/true, &taus, &why)) {
+  if (!cli::ParseScreenErrors(a.lod, /*refuse_repeats=*/true, &taus, &why)) {
     return BadOption("simulate", "--lod", why);
   }
   if (scenes::IsGltfPath(a.scene)) {
