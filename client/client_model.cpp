@@ -18,7 +18,9 @@ v1::Hello MakeHello(const HelloSettings& settings) {
   h.set_memory_budget_bytes(settings.memory_budget_bytes);
   h.set_triangle_budget(settings.triangle_budget);
   h.set_epsilon_masks(settings.epsilon_masks);
-  h.set_pvs_deltas(settings.pvs_deltas);
+  // A client that takes levels takes its lists as differences too (issue 45's byte budget); one
+  // without keeps today's full lists (levels off: the same bytes as before levels).
+  h.set_pvs_deltas(settings.screen_error_px > 0.0);
   h.mutable_held_objects()->Add(settings.held_objects.begin(), settings.held_objects.end());
   if (std::any_of(settings.held_levels.begin(), settings.held_levels.end(), [](uint32_t l) { return l != 0; })) {
     h.mutable_held_levels()->Add(settings.held_levels.begin(), settings.held_levels.end());

@@ -36,9 +36,9 @@ struct HelloSettings {
   bool epsilon_masks = false;        // the client draws ε-masks (the server sends none otherwise)
   std::vector<uint32_t> held_objects;  // on resume: the objects it still holds, any order
   std::vector<uint32_t> held_levels;   // with levels: each held object's level (0 full); empty: all full
-  bool pvs_deltas = false;             // takes PVS lists as differences (proto/pvs_delta.h)
   // Levels of detail (Hello.levels; issue 45): the screen error tau in pixels the client accepts
-  // on its viewport; 0: off (every object at full detail).
+  // on its viewport; 0: off (every object at full detail). With levels the client also takes PVS
+  // lists as differences (Hello.pvs_deltas, proto/pvs_delta.h).
   double screen_error_px = 0.0;
   uint32_t viewport_width_px = 1280;
   uint32_t viewport_height_px = 720;

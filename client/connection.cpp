@@ -234,7 +234,6 @@ grpc::Status Connection::RunSession(bool* answered) {
     settings.memory_budget_bytes = options_.memory_budget_bytes;
     settings.triangle_budget = options_.triangle_budget;
     settings.epsilon_masks = options_.epsilon_masks;
-    settings.pvs_deltas = options_.screen_error_px > 0.0;
     settings.screen_error_px = options_.screen_error_px;
     settings.viewport_width_px = options_.viewport_width_px;
     settings.viewport_height_px = options_.viewport_height_px;

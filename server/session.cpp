@@ -638,10 +638,30 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     return std::move(c.message);
   }
   if (credit_ <= 0 || !current_.has_value()) return std::nullopt;
+  // The link budget: while the client's cell or the next lacks geometry, masks take at most
+  // their share, and objects it lacks go before finer levels.
+  const bool urgent = Urgent();
+  if (!urgent) mask_tokens_ = 0.0;
+  auto earn = [&](const std::optional<v1::ServerMessage>& m) {
+    if (urgent && m.has_value() && m->has_geometry()) {
+      const double bytes = static_cast<double>(m->geometry().vertices().size() + m->geometry().indices().size());
+      mask_tokens_ = std::min(mask_tokens_ + bytes * kUrgentMaskShare / (1.0 - kUrgentMaskShare), 65536.0);
+    }
+  };
+  if (urgent && mask_tokens_ < 0.0) {
+    std::optional<v1::ServerMessage> m = NextMissingObject();
+    if (m.has_value()) {
+      earn(m);
+      return m;
+    }
+  }
   // ε-first: the objects the last mask sent needs, then the next mask, soonest reached first.
   if (std::optional<v1::ServerMessage> m = planner_.NextObject(
           sent_, [this](uint32_t o, size_t rank, bool* sent) { return SendObject(o, rank, sent); });
       m.has_value()) {
+    if (urgent && m->has_geometry()) {
+      mask_tokens_ -= static_cast<double>(m->geometry().vertices().size() + m->geometry().indices().size());
+    }
     return m;
   }
   // With levels, an object whose level for the mask's cell does not keep the full mesh's
@@ -658,6 +678,7 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       mask.has_value()) {
     const v1::EpsilonMask& e = mask->message.epsilon_mask();
     credit_ -= static_cast<int64_t>(e.triangles().size());
+    if (urgent) mask_tokens_ -= static_cast<double>(e.triangles().size());
     if (log_ != nullptr) {
       const visibility::CellCoord c = scene_->grid().Coord(mask->cell);
       log_->Write(id_, "mask", {{"cell", absl::StrCat(c.i, ",", c.j)},
@@ -669,7 +690,15 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
     }
     return std::move(mask->message);
   }
-  // Geometry: the current cell's first, then the others in the order they will be reached.
+  // Geometry: the current cell's first, then the others in the order they will be reached;
+  // while urgent, what the client lacks there before finer levels.
+  if (urgent) {
+    std::optional<v1::ServerMessage> m = NextMissingObject();
+    if (m.has_value()) {
+      earn(m);
+      return m;
+    }
+  }
   for (size_t rank = 0; rank < wanted_.size(); ++rank) {
     const CellId c = wanted_[rank];
     auto it = pending_geometry_.find(c);
@@ -683,7 +712,42 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       std::optional<v1::ServerMessage> m = SendLevel(o, NeededLevel(c, o), rank, &sent);
       if (!m.has_value()) continue;  // no room: it waits for the next crossing
       if (!sent) q.push_front(o);    // the Evict goes first, the object right after it
+      earn(m);
       return m;
+    }
+  }
+  return std::nullopt;
+}
+
+bool Session::LacksGeometry(CellId cell) const {
+  if (emitted_.count(cell) == 0) return false;
+  auto it = pending_geometry_.find(cell);
+  if (it == pending_geometry_.end()) return false;
+  return std::any_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return sent_.count(o) == 0; });
+}
+
+bool Session::Urgent() const {
+  for (size_t rank = 0; rank < std::min<size_t>(2, wanted_.size()); ++rank) {
+    if (LacksGeometry(wanted_[rank])) return true;
+  }
+  return false;
+}
+
+std::optional<v1::ServerMessage> Session::NextMissingObject() {
+  for (size_t rank = 0; rank < std::min<size_t>(2, wanted_.size()); ++rank) {
+    const CellId c = wanted_[rank];
+    auto it = pending_geometry_.find(c);
+    if (it == pending_geometry_.end()) continue;
+    std::deque<uint32_t>& q = it->second;
+    for (auto at = q.begin(); at != q.end(); ++at) {
+      const uint32_t o = *at;
+      if (sent_.count(o) > 0) continue;  // held at some level: a finer one waits its turn
+      bool sent = false;
+      std::optional<v1::ServerMessage> m = SendLevel(o, NeededLevel(c, o), rank, &sent);
+      if (m.has_value() && !sent) return m;  // the Evict first; the object stays queued
+      q.erase(at);                           // sent, or no room: it waits for the next crossing
+      if (m.has_value()) return m;
+      break;  // the iterator is gone; the next call looks again
     }
   }
   return std::nullopt;

@@ -144,6 +144,13 @@ class Session : public std::enable_shared_from_this<Session> {
   uint32_t HeldLevel(uint32_t o) const;                      // lock held
   // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
   bool Served(CellId cell) const;                            // lock held
+  // Whether `cell`'s list went out and some object on it is not held at any level: a client
+  // there stalls (a coarser level held is drawn: a coarse frame, not a stall).
+  bool LacksGeometry(CellId cell) const;                     // lock held
+  // The link budget (issue 45): whether the client's cell or the next it reaches lacks geometry.
+  bool Urgent() const;                                       // lock held
+  // While Urgent(): the next object of wanted_[0] or wanted_[1] the client holds at no level.
+  std::optional<vistream::v1::ServerMessage> NextMissingObject();  // lock held
   // Reports crossings whose new cells are all served now (SessionSeams::crossing_served).
   void NoteServedCrossings(double now);                      // lock held
 
@@ -190,6 +197,11 @@ class Session : public std::enable_shared_from_this<Session> {
   std::map<CellId, std::vector<uint32_t>> cell_levels_;  // per received cell: the level each PVS object needs
   uint64_t held_bytes_ = 0;                    // decoded bytes of sent_
   int64_t credit_ = 0;
+  // The link budget (issue 45): while Urgent(), ε-masks (with the objects they pull) take at
+  // most kUrgentMaskShare of the bytes sent; geometry sent then earns them tokens, a mask spends
+  // them (it goes while they are not negative). Reset when nothing is urgent.
+  static constexpr double kUrgentMaskShare = 0.25;
+  double mask_tokens_ = 0.0;
 
   // An Evict of held objects needed later than wanted_[rank] (or not at all), freeing enough
   // of the memory budget for `bytes` more; none when that cannot be done. Caller holds mu_.

@@ -512,8 +512,6 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   hello.scene = scene_.scene().name;
   hello.epsilon_masks = opt_.scheme == Scheme::kPvsEps;
   hello.screen_error_px = opt_.lod_tau_px;
-  // The levels-aware client also takes its lists as differences (both: issue 45's byte budget).
-  hello.pvs_deltas = opt_.lod_tau_px > 0.0;
   r_.lod_tau_px = opt_.lod_tau_px;
   if (opt_.lod_tau_px > 0.0 && scene_.levels() == nullptr) {
     return absl::FailedPreconditionError("levels of detail asked for, but the scene has none");

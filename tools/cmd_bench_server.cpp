@@ -250,7 +250,6 @@ SessionResult RunSession(const std::string& address, const client::ChannelSecuri
   settings.scene = scene_name;
   settings.epsilon_masks = masks;
   settings.screen_error_px = tau_px;
-  settings.pvs_deltas = tau_px > 0.0;
   const v1::Hello hello = client::MakeHello(settings);
   s.Start(hello);
   s.SendCredit(uint64_t{1} << 50);
