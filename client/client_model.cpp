@@ -18,6 +18,7 @@ v1::Hello MakeHello(const HelloSettings& settings) {
   h.set_memory_budget_bytes(settings.memory_budget_bytes);
   h.set_triangle_budget(settings.triangle_budget);
   h.set_epsilon_masks(settings.epsilon_masks);
+  h.set_deflated_masks(settings.epsilon_masks);  // every client that draws masks inflates them
   // A client that takes levels takes its lists as differences too (issue 45's byte budget); one
   // without keeps today's full lists (levels off: the same bytes as before levels).
   h.set_pvs_deltas(settings.screen_error_px > 0.0);

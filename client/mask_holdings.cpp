@@ -5,6 +5,8 @@
 #include <iterator>
 #include <utility>
 
+#include <absl/strings/str_cat.h>
+
 #include "proto/vec3.h"
 
 namespace vistream::client {
@@ -17,9 +19,19 @@ const std::vector<uint8_t>* EpsilonMaskSet::Bits(uint32_t object) const {
   return it != objects.end() && it->object == object ? &it->bits : nullptr;
 }
 
+absl::StatusOr<std::string> MaskRunBytes(const v1::EpsilonMask& m, uint32_t object_count, uint64_t triangle_count) {
+  if (!m.deflated()) return m.triangles();
+  absl::StatusOr<std::string> runs = visibility::InflateMaskBytes(
+      m.triangles(), static_cast<size_t>(visibility::MaxMaskRunBytes(object_count, triangle_count)));
+  if (!runs.ok()) return absl::InvalidArgumentError(absl::StrCat("ε-mask ", m.mask_id(), ": ", runs.status().message()));
+  return runs;
+}
+
 absl::Status MaskHoldings::Add(const v1::EpsilonMask& m, uint32_t object_count, uint64_t triangle_count) {
+  absl::StatusOr<std::string> runs = MaskRunBytes(m, object_count, triangle_count);
+  if (!runs.ok()) return runs.status();
   absl::StatusOr<visibility::DecodedMask> decoded =
-      bases_.Decode(m.cell_id(), m.mask_id(), m.base_mask_id(), m.triangles(), object_count, triangle_count);
+      bases_.Decode(m.cell_id(), m.mask_id(), m.base_mask_id(), *runs, object_count, triangle_count);
   if (!decoded.ok()) return decoded.status();
   EpsilonMaskSet set;
   set.mask_id = m.mask_id();

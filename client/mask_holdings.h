@@ -51,6 +51,12 @@ struct MaskChoice {
   bool in_box = false;                   // the eye is inside the box of some held mask
 };
 
+// The run-length bytes of `m` (visibility/mask_codec.h): its `triangles`, inflated when it
+// came deflated (EpsilonMask.deflated). `object_count` and `triangle_count` are the scene's,
+// bounding what inflating may allocate. Errors: visibility::InflateMaskBytes's, naming the mask.
+absl::StatusOr<std::string> MaskRunBytes(const vistream::v1::EpsilonMask& m, uint32_t object_count,
+                                         uint64_t triangle_count);
+
 class MaskHoldings {
  public:
   // At most this many masks are held.
@@ -58,9 +64,9 @@ class MaskHoldings {
 
   // Decodes and holds `m` (a mask id held already comes from a new session, whose ids start
   // again at 1: the new one replaces it). `object_count` and `triangle_count` are the scene's
-  // (SceneInfo), bounding what decoding accepts. Errors: visibility::MaskBases::Decode's
-  // (INVALID_ARGUMENT for bytes that do not decode, FAILED_PRECONDITION for a delta whose base
-  // is not held); nothing is held then.
+  // (SceneInfo), bounding what decoding accepts. Errors: MaskRunBytes's and
+  // visibility::MaskBases::Decode's (INVALID_ARGUMENT for bytes that do not decode,
+  // FAILED_PRECONDITION for a delta whose base is not held); nothing is held then.
   absl::Status Add(const vistream::v1::EpsilonMask& m, uint32_t object_count, uint64_t triangle_count);
   // A new session starts: its masks number from 1 again, so no delta may refer to an old base.
   void NewSession() { bases_.Clear(); }

@@ -171,6 +171,13 @@ std::optional<MaskPlanner::Sent> MaskPlanner::NextMask(const std::vector<CellId>
         e->set_base_mask_id(last->second.id);
       }
     }
+    if (deflate_) {
+      std::string deflated = visibility::DeflateMaskBytes(bytes);
+      if (deflated.size() < bytes.size()) {
+        bytes = std::move(deflated);
+        e->set_deflated(true);
+      }
+    }
     e->set_triangles(std::move(bytes));
     objects_cell_ = ready.cell;
     objects_rank_ = static_cast<size_t>(w - wanted.begin());

@@ -58,6 +58,8 @@ class MaskPlanner {
   // is planned.
   bool on() const { return on_; }
   void set_on(bool on) { on_ = on; }
+  // Whether masks go deflated where that is shorter (Hello.deflated_masks; EpsilonMask.deflated).
+  void set_deflate(bool deflate) { deflate_ = deflate; }
 
   // Moves the chain along with a client at `position` moving at `velocity` (its pose at `now`):
   // plans a mask for each neighbourhood the chain adds (due when the eye reaches it, at the
@@ -120,6 +122,7 @@ class MaskPlanner {
   void Drop(uint64_t id, vistream::v1::SessionStats* stats);
 
   bool on_ = false;
+  bool deflate_ = false;
   NeighbourhoodChain chain_;
   glm::dvec3 chain_eye_{0.0};                  // where the chain was last advanced
   double chain_s_ = -1.0;

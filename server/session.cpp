@@ -5,6 +5,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <tuple>
 #include <unordered_map>
 
 #include <glm/geometric.hpp>
@@ -202,6 +203,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
   }
   pvs_deltas_ = hello.pvs_deltas();
   hello_ = true;
+  planner_.set_deflate(hello.deflated_masks());
   planner_.set_on(hello.epsilon_masks() && seams_.epsilon_masks && scene_->epsilon() != nullptr && masks_ != nullptr);
   stats_.set_scene(scene_->name());
   memory_budget_ = hello.memory_budget_bytes();
@@ -435,7 +437,8 @@ v1::ServerMessage Session::Forget(std::vector<uint32_t> objects, const char* rea
 std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
   // Rank what the client holds by when it is needed (the position of its earliest wanted cell;
   // the current cell is 0): objects of no wanted cell first, then latest needed first, and
-  // never one needed as soon as `rank` or sooner.
+  // never one needed as soon as `rank` or sooner; among those needed alike, the largest held
+  // first (with levels: the finer levels of objects gone far away, issue 45).
   const size_t kNever = wanted_.size();
   std::unordered_map<uint32_t, size_t> needed_at;  // object -> position of its first wanted cell
   for (size_t k = 0; k < wanted_.size(); ++k) {
@@ -443,20 +446,21 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
     if (it == received_.end()) continue;
     for (uint32_t o : it->second->objects) needed_at.emplace(o, k);  // keeps the earliest
   }
-  std::vector<std::pair<size_t, uint32_t>> candidates;  // (need rank, object), latest need first
+  // (need rank, bytes held, object): latest need first, then largest first.
+  std::vector<std::tuple<size_t, uint64_t, uint32_t>> candidates;
   for (uint32_t o : sent_) {
     auto it = needed_at.find(o);
     const size_t at = it == needed_at.end() ? kNever : it->second;
     if (at <= rank) continue;
-    candidates.emplace_back(at, o);
+    candidates.emplace_back(at, scene_->RawBytes(o, HeldLevel(o)), o);
   }
   std::sort(candidates.begin(), candidates.end(), std::greater<>());
   std::vector<uint32_t> evict;
   size_t freed = 0;
-  for (const auto& [at, o] : candidates) {
+  for (const auto& [at, held, o] : candidates) {
     if (held_bytes_ - freed + bytes <= memory_budget_) break;
     evict.push_back(o);
-    freed += scene_->RawBytes(o, HeldLevel(o));
+    freed += held;
   }
   if (evict.empty() || held_bytes_ - freed + bytes > memory_budget_) return std::nullopt;  // cannot fit
   // Evicted objects of wanted cells are queued again at the next crossing or turn (SetWanted).

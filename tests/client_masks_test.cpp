@@ -1,7 +1,7 @@
 // The thin client's ε-masks (issue 34): the object store decodes the server's run-length masks,
 // keeps those of the nine cells around the eye (at most 64) and picks, for an eye, the mask a
 // frame may draw; a walker on city1 at 6 km/h through a real server on loopback draws masked
-// frames, no hole frame and no pixel error; mask bytes are credit consumed (a 2 KB window keeps
+// frames, no hole frame and no pixel error; mask bytes are credit consumed (a 512-byte window keeps
 // flowing); without masks the server sends none. Levels of detail (issue 45) through a real
 // server: walkers on a london-generated town and on Den Haag draw levels within tau + 1 px of
 // every full-detail silhouette, without a stall or a hole; a resumed session says the levels
@@ -392,8 +392,9 @@ TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
 }
 
 TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiving) {
-  // A 2 KB credit window: masks the client did not count as consumed would leak that much
-  // credit after a few masks, and the server would send nothing more.
+  // A 512-byte credit window (masks come deflated: a few hundred bytes each): masks the client
+  // did not count as consumed would leak that much credit after a few masks, and the server
+  // would send nothing more.
   absl::StatusOr<LoopbackServer> server = StartOnLoopback(&City1());
   ASSERT_TRUE(server.ok()) << server.status();
   absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
@@ -403,7 +404,7 @@ TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiv
   ConnectionOptions co;
   co.address = server->address;
   co.scene = "city1";
-  co.credit_window_bytes = 2048;
+  co.credit_window_bytes = 512;
   co.epsilon_masks = true;
   co.pose_rate_hz = 20.0;
   Connection connection(co);

@@ -182,6 +182,47 @@ TEST(MaskCodec, ADeltaPastTheSceneIsRefused) {
 }
 
 
+// Deflated masks (EpsilonMask.deflated): box-like objects' runs repeat, so about half of the
+// bytes go; inflating gives them back exactly; a stream that is not one, is cut, has bytes
+// after it, or would inflate past the scene's bound is refused, saying which.
+TEST(MaskCodec, DeflatedRunsInflateExactlyAndBadStreamsAreRefused) {
+  std::vector<MaskObject> boxes;  // 400 boxes of 12 triangles, faces 0-1, 4-5 and 10-11 seen
+  for (uint32_t o = 0; o < 400; ++o) boxes.push_back({o * 3, Bits({0, 1, 4, 5, 10, 11})});
+  const std::string runs = EncodeMaskRuns(boxes);
+  const std::string deflated = DeflateMaskBytes(runs);
+  EXPECT_LT(deflated.size(), runs.size() / 2) << deflated.size() << " of " << runs.size();
+  const uint64_t bound = MaxMaskRunBytes(1200, 1200 * 12);
+  ASSERT_GE(bound, runs.size());
+  absl::StatusOr<std::string> back = InflateMaskBytes(deflated, bound);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, runs);
+  // Random sets too (and the empty mask).
+  scenes::Rng rng(7);
+  for (int k = 0; k < 20; ++k) {
+    const std::string r = EncodeMaskRuns(RandomMask(rng, 300, 0.5));
+    absl::StatusOr<std::string> b = InflateMaskBytes(DeflateMaskBytes(r), MaxMaskRunBytes(300, 300 * 200));
+    ASSERT_TRUE(b.ok()) << b.status();
+    EXPECT_EQ(*b, r);
+  }
+  struct Case {
+    std::string bytes;
+    size_t max_bytes;
+    const char* says;
+  };
+  const Case cases[] = {
+      {"not a zlib stream", bound, "corrupt"},
+      {deflated.substr(0, deflated.size() / 2), bound, "truncated"},
+      {deflated + "xx", bound, "2 bytes after the end"},
+      {DeflateMaskBytes(std::string(1 << 20, '\0')), 1000, "inflates past 1000 bytes"},
+  };
+  for (const Case& c : cases) {
+    const absl::StatusOr<std::string> d = InflateMaskBytes(c.bytes, c.max_bytes);
+    ASSERT_FALSE(d.ok()) << c.says;
+    EXPECT_EQ(d.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(d.status().message().find(c.says), std::string::npos) << d.status();
+  }
+}
+
 TEST(MaskBases, DeltasApplyToTheLatestMaskOfTheirCellOnly) {
   const std::vector<MaskObject> a{{2, Bits({0, 1})}}, b{{2, Bits({1})}, {4, Bits({3})}}, c{{4, Bits({3, 4})}};
   MaskBases bases(2);

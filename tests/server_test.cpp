@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "client/client_model.h"
+#include "client/mask_holdings.h"
 #include "gl/pvs_backend.h"
 #include "scenes/geometry_codec.h"
 #include "scenes/catalog.h"
@@ -183,6 +184,55 @@ TEST(Server, AClientAskingForAScreenErrorGetsLevelsThatDecode) {
     }
     EXPECT_TRUE(resumed.Finish().ok());
   }
+  // Within a memory budget, what went far away goes first, and of that the largest holdings
+  // (an object's finer levels) first: a client resuming with objects no cell around it needs,
+  // half held full and half at their first level, and room for little more than those, is told
+  // to drop them largest first (their held bytes never increase along the Evicts).
+  std::set<uint32_t> around;
+  {
+    SessionStream probe((*server)->address());
+    client::HelloSettings settings;
+    settings.scene = "city1";
+    settings.screen_error_px = 1.0;
+    probe.Start(client::MakeHello(settings), true);
+    probe.SendCredit(uint64_t{1} << 40);
+    ASSERT_TRUE(probe.SendPose(Centre(3, 3)));
+    ASSERT_TRUE(probe.WaitFor([&](const SessionRecord& r) { return r.AllComplete(Around(here)); }, kWait));
+    for (const auto& [cell, list] : probe.Snapshot().pvs) around.insert(list.begin(), list.end());
+    EXPECT_TRUE(probe.Finish().ok());
+  }
+  client::HelloSettings far;
+  far.scene = "city1";
+  far.screen_error_px = 1.0;
+  std::map<uint32_t, uint64_t> far_bytes;  // object -> bytes held
+  for (uint32_t id = 0; id < (*scene)->scene().objects.size() && far.held_objects.size() < 24; ++id) {
+    if (around.count(id) > 0 || (*scene)->scene().levels.objects[id].empty()) continue;
+    const uint32_t level = far.held_objects.size() % 2;  // full and first level, alternately
+    far.held_objects.push_back(id);
+    far.held_levels.push_back(level);
+    far_bytes[id] = (*scene)->RawBytes(id, level);
+  }
+  ASSERT_EQ(far.held_objects.size(), 24u);
+  uint64_t held = 0;
+  for (const auto& [id, bytes] : far_bytes) held += bytes;
+  far.memory_budget_bytes = held + (held / 4);  // less than the cell's objects need
+  SessionStream resumed((*server)->address());
+  resumed.Start(client::MakeHello(far), true);
+  resumed.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(resumed.SendPose(Centre(3, 3)));
+  ASSERT_TRUE(resumed.WaitFor([&](const SessionRecord& r) { return r.evicted.size() >= 4; }, kWait));
+  const SessionRecord r = resumed.Snapshot();
+  std::vector<uint64_t> dropped;  // held bytes of the far objects, in the order they were dropped
+  for (uint32_t id : r.evicted) {
+    if (far_bytes.count(id) > 0) dropped.push_back(far_bytes[id]);
+  }
+  ASSERT_GE(dropped.size(), 4u);
+  EXPECT_TRUE(std::is_sorted(dropped.rbegin(), dropped.rend())) << "the far objects were not dropped largest first";
+  std::vector<uint64_t> all;
+  for (const auto& [id, bytes] : far_bytes) all.push_back(bytes);
+  std::sort(all.rbegin(), all.rend());
+  EXPECT_EQ(dropped.front(), all.front());
+  EXPECT_TRUE(resumed.Finish().ok());
 }
 
 TEST(Server, AStraightCrossingBringsThreeCellsADiagonalOneFive) {
@@ -742,9 +792,12 @@ std::vector<visibility::DecodedMask> DecodeAll(const std::vector<v1::EpsilonMask
   visibility::MaskBases bases;
   std::vector<visibility::DecodedMask> out;
   for (const v1::EpsilonMask& m : masks) {
+    const auto objects = static_cast<uint32_t>(City1().scene().objects.size());
+    absl::StatusOr<std::string> runs = client::MaskRunBytes(m, objects, City1().scene().TriangleCount());
+    EXPECT_TRUE(runs.ok()) << runs.status();
     absl::StatusOr<visibility::DecodedMask> d =
-        bases.Decode(m.cell_id(), m.mask_id(), m.base_mask_id(), m.triangles(),
-                     static_cast<uint32_t>(City1().scene().objects.size()), City1().scene().TriangleCount());
+        bases.Decode(m.cell_id(), m.mask_id(), m.base_mask_id(), runs.ok() ? *runs : std::string(), objects,
+                     City1().scene().TriangleCount());
     EXPECT_TRUE(d.ok()) << d.status();
     out.push_back(d.ok() ? *std::move(d) : visibility::DecodedMask{});
   }
@@ -786,7 +839,28 @@ TEST(Server, AStandingClientGetsAnEpsilonMaskOfTheBoxAroundIt) {
   EXPECT_LT(d.triangles, total);
   std::printf("mask: %llu of the PVS's %llu triangles, %zu bytes\n", static_cast<unsigned long long>(d.triangles),
               static_cast<unsigned long long>(total), m.triangles().size());
+  EXPECT_FALSE(m.deflated());  // this client did not say it inflates
   EXPECT_TRUE(client->Finish().ok());
+  // A client that inflates masks (every client model's Hello) gets the same sets in fewer bytes.
+  client::HelloSettings settings;
+  settings.scene = "city1";
+  settings.epsilon_masks = true;
+  SessionStream deflating(server->address());
+  deflating.Start(client::MakeHello(settings), true);
+  deflating.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(deflating.SendPose(p));
+  ASSERT_TRUE(deflating.WaitFor([&](const SessionRecord& s) { return !s.masks.empty(); }, kWait));
+  const v1::EpsilonMask deflated = deflating.Snapshot().masks.front();
+  EXPECT_TRUE(deflated.deflated());
+  EXPECT_LT(deflated.triangles().size(), m.triangles().size());
+  const visibility::DecodedMask same = DecodeAll({deflated}).front();
+  EXPECT_EQ(same.triangles, d.triangles);
+  ASSERT_EQ(same.objects.size(), d.objects.size());
+  for (size_t k = 0; k < d.objects.size(); ++k) {
+    EXPECT_EQ(same.objects[k].object, d.objects[k].object);
+    EXPECT_EQ(same.objects[k].bits, d.objects[k].bits);
+  }
+  EXPECT_TRUE(deflating.Finish().ok());
 }
 
 TEST(Server, AnEpsilonMaskNeverReachesPastTheCellWhosePvsItNarrows) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include <absl/strings/str_cat.h>
+#include <zlib.h>
 
 #include "visibility/bytes.h"
 
@@ -168,6 +169,57 @@ absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_
     out.objects.push_back(std::move(m));
   }
   return out;
+}
+
+std::string DeflateMaskBytes(std::string_view runs) {
+  uLongf size = compressBound(static_cast<uLong>(runs.size()));
+  std::string out(size, '\0');
+  const int rc = compress2(reinterpret_cast<Bytef*>(out.data()), &size, reinterpret_cast<const Bytef*>(runs.data()),
+                           static_cast<uLong>(runs.size()), Z_BEST_COMPRESSION);
+  if (rc != Z_OK) return std::string(runs);  // cannot happen with compressBound's room; sent plain
+  out.resize(size);
+  return out;
+}
+
+absl::StatusOr<std::string> InflateMaskBytes(std::string_view deflated, size_t max_bytes) {
+  z_stream z{};
+  if (inflateInit(&z) != Z_OK) return absl::InternalError("deflated ε-mask: zlib could not start inflating");
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(deflated.data()));
+  z.avail_in = static_cast<uInt>(deflated.size());
+  std::string out;
+  int rc = Z_OK;
+  while (rc == Z_OK) {
+    if (out.size() >= max_bytes) {
+      inflateEnd(&z);
+      return absl::InvalidArgumentError(
+          absl::StrCat("deflated ε-mask: inflates past ", max_bytes, " bytes, more than any mask of this scene"));
+    }
+    const size_t at = out.size();
+    const size_t room = std::min<size_t>(max_bytes - at, std::max<size_t>(4096, at));
+    out.resize(at + room);
+    z.next_out = reinterpret_cast<Bytef*>(out.data() + at);
+    z.avail_out = static_cast<uInt>(room);
+    rc = inflate(&z, Z_NO_FLUSH);
+    out.resize(at + room - z.avail_out);
+  }
+  const size_t used = deflated.size() - z.avail_in;
+  inflateEnd(&z);
+  if (rc == Z_BUF_ERROR) {
+    return absl::InvalidArgumentError(absl::StrCat("deflated ε-mask: truncated after ", deflated.size(), " bytes"));
+  }
+  if (rc != Z_STREAM_END) {
+    return absl::InvalidArgumentError(absl::StrCat("deflated ε-mask: corrupt near byte ", used, " (",
+                                                   z.msg != nullptr ? z.msg : "zlib error", ")"));
+  }
+  if (used != deflated.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("deflated ε-mask: ", deflated.size() - used, " bytes after the end of its stream"));
+  }
+  return out;
+}
+
+uint64_t MaxMaskRunBytes(uint32_t object_count, uint64_t max_triangles) {
+  return 10 * static_cast<uint64_t>(object_count) + 10 * max_triangles;
 }
 
 absl::StatusOr<DecodedMask> MaskBases::Decode(uint32_t cell, uint32_t mask_id, uint32_t base_mask_id,

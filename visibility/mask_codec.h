@@ -64,6 +64,19 @@ struct DecodedMask {
 // runs past max_triangles.
 absl::StatusOr<DecodedMask> DecodeMaskRuns(std::string_view bytes, uint32_t object_count, uint64_t max_triangles);
 
+// Deflated run-length bytes (EpsilonMask.deflated): zlib's format (RFC 1950) at its best
+// compression. Run-length masks repeat their gap and run values from object to object (a box's
+// faces, a terrace's walls): about half of their bytes go.
+std::string DeflateMaskBytes(std::string_view runs);
+// The run-length bytes back. INVALID_ARGUMENT naming what is wrong: not a zlib stream, corrupt,
+// truncated, bytes after its end, or more than `max_bytes` once inflated (what decoding
+// allocates stays within it).
+absl::StatusOr<std::string> InflateMaskBytes(std::string_view deflated, size_t max_bytes);
+// The most bytes the run-length coding of any mask (sets or a delta) can take over a scene of
+// `object_count` objects and `max_triangles` triangles: per object a gap and a pair count, per
+// triangle at most one pair (each run at least one triangle), each varint at most 5 bytes.
+uint64_t MaxMaskRunBytes(uint32_t object_count, uint64_t max_triangles);
+
 // Masks along a path differ little from one box to the next: the later can go as its
 // difference from the earlier. EncodeMaskDelta codes, per object, the XOR of the two bit sets
 // (objects whose sets are equal are left out) exactly as EncodeMaskRuns codes a set; both
