@@ -179,6 +179,14 @@ TEST(MaskCodec, ADeltaPastTheSceneIsRefused) {
   const absl::StatusOr<DecodedMask> big = ApplyMaskDelta(*base, delta, 6, 50);
   ASSERT_FALSE(big.ok());
   EXPECT_EQ(big.status().code(), absl::StatusCode::kInvalidArgument);
+  // Bounded exactly as DecodeMaskRuns bounds the same sets (found by fuzzing: the bound once
+  // counted whole bytes, letting a delta's result reach up to 7 triangles an object further).
+  // The result reaches 2 + 91 = 93 triangles: refused under 92, as its runs would be.
+  const std::vector<MaskObject> result{{2, Bits({0, 1})}, {5, Bits({90})}};
+  EXPECT_TRUE(DecodeMaskRuns(EncodeMaskRuns(result), 6, 93).ok());
+  EXPECT_TRUE(ApplyMaskDelta(*base, delta, 6, 93).ok());
+  EXPECT_FALSE(DecodeMaskRuns(EncodeMaskRuns(result), 6, 92).ok());
+  EXPECT_FALSE(ApplyMaskDelta(*base, delta, 6, 92).ok());
 }
 
 

@@ -1,6 +1,7 @@
 #include "visibility/mask_codec.h"
 
 #include <algorithm>
+#include <bit>
 
 #include <absl/strings/str_cat.h>
 #include <zlib.h>
@@ -118,6 +119,12 @@ std::vector<uint8_t> Xor(const std::vector<uint8_t>& a, const std::vector<uint8_
   return out;
 }
 
+// One past the highest set bit of `bits` (whose last byte is not 0: Xor's results): the
+// triangle indices the object's runs reach, as DecodeMaskRuns counts them.
+uint64_t Reach(const std::vector<uint8_t>& bits) {
+  return bits.empty() ? 0 : 8 * (bits.size() - 1) + static_cast<uint64_t>(std::bit_width(bits.back()));
+}
+
 uint64_t Popcount(const std::vector<uint8_t>& bits) {
   uint64_t n = 0;
   for (uint8_t b : bits) n += static_cast<uint64_t>(__builtin_popcount(b));
@@ -160,8 +167,8 @@ absl::StatusOr<DecodedMask> ApplyMaskDelta(const DecodedMask& base, std::string_
     if (take_base) ++i;
     if (take_delta) ++j;
     if (m.bits.empty()) continue;
-    spanned += 8 * m.bits.size();
-    if (spanned > max_triangles + 8 * (out.objects.size() + 1)) {
+    spanned += Reach(m.bits);  // bounded as DecodeMaskRuns bounds a mask's runs
+    if (spanned > max_triangles) {
       return absl::InvalidArgumentError(absl::StrCat("ε-mask delta: object ", m.object, " takes the mask past ",
                                                      max_triangles, " triangles (more than the scene has)"));
     }
