@@ -649,7 +649,7 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
   auto earn = [&](const std::optional<v1::ServerMessage>& m) {
     if (urgent && m.has_value() && m->has_geometry()) {
       const double bytes = static_cast<double>(m->geometry().vertices().size() + m->geometry().indices().size());
-      mask_tokens_ = std::min(mask_tokens_ + bytes * kUrgentMaskShare / (1.0 - kUrgentMaskShare), 65536.0);
+      mask_tokens_ = std::min(mask_tokens_ + bytes * kUrgentMaskShare / (1.0 - kUrgentMaskShare), kMaxMaskTokens);
     }
   };
   if (urgent && mask_tokens_ < 0.0) {

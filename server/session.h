@@ -199,8 +199,10 @@ class Session : public std::enable_shared_from_this<Session> {
   int64_t credit_ = 0;
   // The link budget (issue 45): while Urgent(), ε-masks (with the objects they pull) take at
   // most kUrgentMaskShare of the bytes sent; geometry sent then earns them tokens, a mask spends
-  // them (it goes while they are not negative). Reset when nothing is urgent.
+  // them (it goes while they are not negative); at most 64 KiB are banked. Reset when nothing
+  // is urgent.
   static constexpr double kUrgentMaskShare = 0.25;
+  static constexpr double kMaxMaskTokens = 65536.0;
   double mask_tokens_ = 0.0;
 
   // An Evict of held objects needed later than wanted_[rank] (or not at all), freeing enough
