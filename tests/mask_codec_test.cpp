@@ -4,18 +4,12 @@
 #include <gtest/gtest.h>
 
 #include "scenes/random.h"
+#include "tests/mask_bits.h"
 
 namespace vistream::visibility {
 namespace {
 
-std::vector<uint8_t> Bits(std::initializer_list<uint32_t> set) {
-  std::vector<uint8_t> b;
-  for (uint32_t t : set) {
-    if (b.size() <= t / 8) b.resize(t / 8 + 1, 0);
-    b[t / 8] = static_cast<uint8_t>(b[t / 8] | (1u << (t % 8)));
-  }
-  return b;
-}
+std::vector<uint8_t> Bits(std::initializer_list<uint32_t> set) { return vistream::testing::MaskBits(set); }
 
 TEST(MaskCodec, RandomSetsSurviveTheRoundTripAndBothEncodersAgree) {
   scenes::Rng rng(34);

@@ -13,6 +13,7 @@
 #include <string_view>
 #include <vector>
 
+#include "tests/mask_bits.h"
 #include "visibility/mask_codec.h"
 
 namespace {
@@ -20,14 +21,7 @@ namespace {
 constexpr uint32_t kObjects = 200;
 constexpr uint64_t kTriangles = 4000;
 
-std::vector<uint8_t> Bits(std::initializer_list<uint32_t> set) {
-  std::vector<uint8_t> b;
-  for (uint32_t t : set) {
-    if (b.size() <= t / 8) b.resize(t / 8 + 1, 0);
-    b[t / 8] = static_cast<uint8_t>(b[t / 8] | (1u << (t % 8)));
-  }
-  return b;
-}
+std::vector<uint8_t> Bits(std::initializer_list<uint32_t> set) { return vistream::testing::MaskBits(set); }
 
 const vistream::visibility::DecodedMask& Base() {
   static const vistream::visibility::DecodedMask* base = [] {
