@@ -36,6 +36,12 @@ absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
   return absl::OkStatus();
 }
 
+// The encoded geometry bytes `m` carries (what the credit charges an ObjectGeometry); 0 for any
+// other message.
+double GeometryBytes(const v1::ServerMessage& m) {
+  return m.has_geometry() ? static_cast<double>(m.geometry().vertices().size() + m.geometry().indices().size()) : 0.0;
+}
+
 }  // namespace
 
 ServedScene* SceneDirectory::Find(std::string_view name) const {
@@ -647,10 +653,9 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
   const bool urgent = Urgent();
   if (!urgent) mask_tokens_ = 0.0;
   auto earn = [&](const std::optional<v1::ServerMessage>& m) {
-    if (urgent && m.has_value() && m->has_geometry()) {
-      const double bytes = static_cast<double>(m->geometry().vertices().size() + m->geometry().indices().size());
-      mask_tokens_ = std::min(mask_tokens_ + bytes * kUrgentMaskShare / (1.0 - kUrgentMaskShare), kMaxMaskTokens);
-    }
+    if (!urgent || !m.has_value()) return;
+    mask_tokens_ =
+        std::min(mask_tokens_ + GeometryBytes(*m) * kUrgentMaskShare / (1.0 - kUrgentMaskShare), kMaxMaskTokens);
   };
   if (urgent && mask_tokens_ < 0.0) {
     std::optional<v1::ServerMessage> m = NextMissingObject();
@@ -663,9 +668,7 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
   if (std::optional<v1::ServerMessage> m = planner_.NextObject(
           sent_, [this](uint32_t o, size_t rank, bool* sent) { return SendObject(o, rank, sent); });
       m.has_value()) {
-    if (urgent && m->has_geometry()) {
-      mask_tokens_ -= static_cast<double>(m->geometry().vertices().size() + m->geometry().indices().size());
-    }
+    if (urgent) mask_tokens_ -= GeometryBytes(*m);
     return m;
   }
   // With levels, an object whose level for the mask's cell does not keep the full mesh's
@@ -731,14 +734,14 @@ bool Session::LacksGeometry(CellId cell) const {
 }
 
 bool Session::Urgent() const {
-  for (size_t rank = 0; rank < std::min<size_t>(2, wanted_.size()); ++rank) {
+  for (size_t rank = 0; rank < std::min(kUrgentCells, wanted_.size()); ++rank) {
     if (LacksGeometry(wanted_[rank])) return true;
   }
   return false;
 }
 
 std::optional<v1::ServerMessage> Session::NextMissingObject() {
-  for (size_t rank = 0; rank < std::min<size_t>(2, wanted_.size()); ++rank) {
+  for (size_t rank = 0; rank < std::min(kUrgentCells, wanted_.size()); ++rank) {
     const CellId c = wanted_[rank];
     auto it = pending_geometry_.find(c);
     if (it == pending_geometry_.end()) continue;

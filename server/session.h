@@ -201,6 +201,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // most kUrgentMaskShare of the bytes sent; geometry sent then earns them tokens, a mask spends
   // them (it goes while they are not negative); at most 64 KiB are banked. Reset when nothing
   // is urgent.
+  static constexpr size_t kUrgentCells = 2;  // the client's cell and the next it reaches (wanted_[0], [1])
   static constexpr double kUrgentMaskShare = 0.25;
   static constexpr double kMaxMaskTokens = 65536.0;
   double mask_tokens_ = 0.0;
