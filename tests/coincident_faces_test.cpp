@@ -121,5 +121,66 @@ TEST(CoincidentFaces, PointOnTriangleWithinTheTolerance) {
   EXPECT_FALSE(PointOnTriangle({2, 2, 0}, a, b, b, 1e-3));      // degenerate
 }
 
+
+// A flat ground rectangle (two triangles facing up) under the floors of 36 houses: each ground
+// triangle has dozens of partners, so PartnerLookup answers from a kd-tree of their boxes. Its
+// answers are the brute-force scan's (PointOnTriangle over every partner) at points on the
+// ground, on the floors' edges, in the streets and a little above and below the plane; the
+// houses' own triangles, with one partner each, are answered by the scan.
+TEST(CoincidentFaces, ALookupOverManyPartnersAnswersAsTheScanDoes) {
+  std::vector<scenes::Mesh> meshes;
+  for (int i = 0; i < 6; ++i) {
+    for (int j = 0; j < 6; ++j) meshes.push_back(Box(16.0 * i + 4, 16.0 * j + 4, 16.0 * i + 14, 16.0 * j + 14, 0, 6 + (i + j) % 3));
+  }
+  scenes::Mesh ground;
+  ground.positions = {{0, 0, 0}, {96, 0, 0}, {96, 96, 0}, {0, 96, 0}};
+  ground.normals.assign(4, glm::vec3(0, 0, 1));
+  ground.indices = {0, 1, 2, 0, 2, 3};
+  meshes.push_back(ground);
+  const uint32_t g = static_cast<uint32_t>(meshes.size() - 1);
+  std::vector<MeshView> views;
+  for (const scenes::Mesh& m : meshes) views.push_back({m.positions, m.indices});
+  const CoincidentFaces faces = FindCoincidentFaces(views, 0.01);
+  const PartnerLookup lookup(faces, views);
+  ASSERT_GT(faces.Partners(g, 0).size(), PartnerLookup::kIndexedPartners);
+  ASSERT_GT(faces.Partners(g, 1).size(), PartnerLookup::kIndexedPartners);
+  EXPECT_EQ(lookup.IndexedTriangles(), 2u);
+  auto scan = [&](uint32_t m, uint32_t t, const glm::dvec3& p, double tol) {
+    for (const CoincidentFaces::Entry& e : faces.Partners(m, t)) {
+      const MeshView& v = views[e.partner.mesh];
+      const uint32_t* k = &v.indices[3 * e.partner.triangle];
+      if (PointOnTriangle(p, glm::dvec3(v.positions[k[0]]), glm::dvec3(v.positions[k[1]]), glm::dvec3(v.positions[k[2]]), tol)) {
+        return true;
+      }
+    }
+    return false;
+  };
+  size_t on = 0, off = 0;
+  for (int i = 0; i <= 960; ++i) {
+    for (int j = 0; j <= 960; j += 7) {
+      // A lattice of 0.1 m (it meets the floors' edges at x, y = 16 k + 4 and 16 k + 14), and
+      // shifted off it by less and more than the tolerance (just outside a floor's box), at
+      // heights on the plane, within the tolerance and beyond it.
+      for (const glm::dvec3 d : {glm::dvec3(0, 0, 0), glm::dvec3(-0.005, 0.005, 0.004), glm::dvec3(0.006, -0.004, -0.009),
+                                 glm::dvec3(0, 0, 0.02), glm::dvec3(-0.02, 0, 0)}) {
+        const glm::dvec3 p = glm::dvec3(0.1 * i, 0.1 * j, 0.0) + d;
+        for (uint32_t t = 0; t < 2; ++t) {
+          const bool expected = scan(g, t, p, 0.01);
+          ASSERT_EQ(lookup.OnPartner(g, t, p, 0.01), expected) << "ground triangle " << t << " at " << p.x << ", " << p.y << ", " << p.z;
+          (expected ? on : off) += 1;
+        }
+      }
+    }
+  }
+  EXPECT_GT(on, 10000u);
+  EXPECT_GT(off, 10000u);
+  // A house's floor (one partner, the ground triangle under it; two where a diagonal crosses).
+  for (uint32_t t = 0; t < meshes[0].TriangleCount(); ++t) {
+    for (const glm::dvec3 p : {glm::dvec3(5, 5, 0), glm::dvec3(13, 13, 0), glm::dvec3(9, 9, 3), glm::dvec3(9, 4, 0)}) {
+      EXPECT_EQ(lookup.OnPartner(0, t, p, 0.01), scan(0, t, p, 0.01)) << "house 0 triangle " << t;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace vistream::visibility

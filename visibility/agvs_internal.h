@@ -392,6 +392,8 @@ struct GlobalSampler::Impl {
   // behind its partner, but Embree may report the partner's front face: the ray's sample is
   // discarded like one that hits a back face.
   CoincidentFaces coincident;
+  std::vector<MeshView> coincident_meshes;  // what `coincident` was found in
+  PartnerLookup partners;                   // over `coincident`
   std::vector<const uint32_t*> coincident_quads;
 
   // The surface table, the kd-tree and the coincident faces, rebuilt after every edit, never
@@ -407,6 +409,8 @@ struct GlobalSampler::Impl {
     }
     tree = KdTree::Build(boxes);
     coincident = FindCoincidentFaces(meshes, kCoincidentTolerance);
+    coincident_meshes = std::move(meshes);
+    partners = PartnerLookup(coincident, coincident_meshes);
     coincident_quads.assign(objects.size(), nullptr);
     for (ObjectId o = 0; o < objects.size(); ++o) {
       std::vector<uint32_t>& q = objects[o].quads;
@@ -428,15 +432,7 @@ struct GlobalSampler::Impl {
   // Whether frame-relative point `p` on triangle `triangle` of `object` also lies on a face of
   // opposite orientation lying on that triangle.
   bool OnCoincidentFace(ObjectId object, uint32_t triangle, const glm::dvec3& p) const {
-    for (const CoincidentFaces::Entry& e : coincident.Partners(object, triangle)) {
-      const Object& o = objects[e.partner.mesh];
-      const uint32_t* t = &o.indices[3 * e.partner.triangle];
-      if (PointOnTriangle(p, glm::dvec3(o.verts[t[0]]), glm::dvec3(o.verts[t[1]]), glm::dvec3(o.verts[t[2]]),
-                          kCoincidentTolerance)) {
-        return true;
-      }
-    }
-    return false;
+    return partners.OnPartner(object, triangle, p, kCoincidentTolerance);
   }
 
   ~Impl() {

@@ -1,12 +1,15 @@
 #include "visibility/coincident_faces.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <tuple>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
+
+#include "visibility/kdtree.h"
 
 namespace vistream::visibility {
 
@@ -190,6 +193,76 @@ CoincidentFaces FindCoincidentFaces(std::span<const MeshView> meshes, double tol
     });
   }
   return out;
+}
+
+struct PartnerLookup::Indexed {
+  std::vector<FaceRef> partners;
+  KdTree tree;  // over the partners' boxes; its ids index `partners`
+};
+
+PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::span<const MeshView> meshes)
+    : faces_(&faces), meshes_(meshes) {
+  for (uint32_t m = 0; m < faces.of_mesh.size(); ++m) {
+    const std::vector<CoincidentFaces::Entry>& entries = faces.of_mesh[m];
+    for (size_t i = 0, j = 0; i < entries.size(); i = j) {
+      while (j < entries.size() && entries[j].triangle == entries[i].triangle) ++j;
+      if (j - i <= kIndexedPartners) continue;
+      auto indexed = std::make_shared<Indexed>();
+      std::vector<scenes::Aabb> boxes;
+      for (size_t k = i; k < j; ++k) {
+        const FaceRef f = entries[k].partner;
+        const MeshView& mesh = meshes[f.mesh];
+        scenes::Aabb box;
+        for (int v = 0; v < 3; ++v) box.Extend(glm::dvec3(mesh.positions[mesh.indices[3 * f.triangle + v]]));
+        indexed->partners.push_back(f);
+        boxes.push_back(box);
+      }
+      indexed->tree = KdTree::Build(boxes);
+      indexed_.emplace(static_cast<uint64_t>(m) << 32 | entries[i].triangle, std::move(indexed));
+    }
+  }
+}
+
+bool PartnerLookup::OnFace(const FaceRef& f, const glm::dvec3& p, double tolerance) const {
+  const MeshView& mesh = meshes_[f.mesh];
+  const uint32_t* t = &mesh.indices[3 * f.triangle];
+  return PointOnTriangle(p, glm::dvec3(mesh.positions[t[0]]), glm::dvec3(mesh.positions[t[1]]),
+                         glm::dvec3(mesh.positions[t[2]]), tolerance);
+}
+
+bool PartnerLookup::OnPartner(uint32_t m, uint32_t t, const glm::dvec3& p, double tolerance) const {
+  if (faces_ == nullptr) return false;
+  const auto found = indexed_.find(static_cast<uint64_t>(m) << 32 | t);
+  if (found == indexed_.end()) {
+    for (const CoincidentFaces::Entry& e : faces_->Partners(m, t)) {
+      if (OnFace(e.partner, p, tolerance)) return true;
+    }
+    return false;
+  }
+  // The partners whose box, grown by the tolerance, holds p: PointOnTriangle is false beyond it.
+  const Indexed& ix = *found->second;
+  if (ix.tree.empty()) return false;
+  auto near = [&](const scenes::Aabb& b) {
+    return p.x >= b.min.x - tolerance && p.x <= b.max.x + tolerance && p.y >= b.min.y - tolerance &&
+           p.y <= b.max.y + tolerance && p.z >= b.min.z - tolerance && p.z <= b.max.z + tolerance;
+  };
+  // Depth first: at most one pending sibling a level (KdTreeOptions::max_depth is 48).
+  std::array<int32_t, 128> stack;
+  size_t top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const KdNode& n = ix.tree.nodes()[static_cast<size_t>(stack[--top])];
+    if (!near(n.bounds)) continue;
+    if (!n.IsLeaf()) {
+      stack[top++] = n.left;
+      stack[top++] = n.right;
+      continue;
+    }
+    for (const ObjectId k : ix.tree.LeafObjects(n)) {
+      if (OnFace(ix.partners[k], p, tolerance)) return true;
+    }
+  }
+  return false;
 }
 
 bool PointOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,

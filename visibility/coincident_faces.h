@@ -9,7 +9,9 @@
 // 2009, section 8: samples that start inside objects are discarded).
 
 #include <cstdint>
+#include <memory>
 #include <span>
+#include <unordered_map>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -41,6 +43,36 @@ struct CoincidentFaces {
 
   // The partners of triangle `t` of mesh `m`.
   std::span<const Entry> Partners(uint32_t m, uint32_t t) const;
+};
+
+// Asks whether a point lies on one of a triangle's partners (PointOnTriangle over
+// CoincidentFaces::Partners), answering from the few whose box holds the point where a triangle
+// has many: a flat ground rectangle under the floors of every building standing on it (`scene
+// extrude`'s ground) has thousands, and a ray sampler asks at every hit on it.
+class PartnerLookup {
+ public:
+  // A triangle with more partners than this has its partners' boxes in a kd-tree.
+  static constexpr size_t kIndexedPartners = 16;
+
+  PartnerLookup() = default;
+  // `faces` as FindCoincidentFaces found them in `meshes`; both must outlive the lookup and
+  // stay unchanged (build a new lookup after an edit).
+  PartnerLookup(const CoincidentFaces& faces, std::span<const MeshView> meshes);
+
+  // Whether `p` (the meshes' frame, metres) lies on a partner of triangle `t` of mesh `m`, up
+  // to `tolerance` metres (PointOnTriangle): the same answer as testing every partner.
+  bool OnPartner(uint32_t m, uint32_t t, const glm::dvec3& p, double tolerance) const;
+
+  // Triangles whose partners are in a kd-tree.
+  size_t IndexedTriangles() const { return indexed_.size(); }
+
+ private:
+  struct Indexed;
+  bool OnFace(const FaceRef& f, const glm::dvec3& p, double tolerance) const;
+
+  const CoincidentFaces* faces_ = nullptr;
+  std::span<const MeshView> meshes_;
+  std::unordered_map<uint64_t, std::shared_ptr<const Indexed>> indexed_;  // key: mesh << 32 | triangle
 };
 
 // Finds the coincident pairs: planes within `tolerance` metres of each other (every corner of
