@@ -305,7 +305,7 @@ std::string CatalogDirFrom(const char* env, const fs::path& exe, const std::stri
 std::string CatalogDir() {
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return CatalogDirFrom(std::getenv("VISTREAM_SCENES"), ec ? fs::path() : exe, std::string(VISTREAM_SOURCE_DIR) + "/scenes");
+  return CatalogDirFrom(std::getenv("VISTREAM_SCENES"), ec ? fs::path() : exe, std::string(VISTREAM_SOURCE_DIR "/scenes"));
 }
 
 absl::StatusOr<CatalogEntry> FindCatalogEntry(std::string_view name_or_path, const std::string& catalog_dir) {

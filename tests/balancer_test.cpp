@@ -49,7 +49,7 @@ std::unique_ptr<test::Balancer> StartBalanced(const std::string& test_name, cons
   o.replica_args = {"--scene", "default", "--threads", "1", "--drain", drain};
   if (!store.empty()) o.replica_args.insert(o.replica_args.end(), {"--store", store});
   o.server_bin = VISTREAM_SERVER_BIN;
-  o.config_template = std::string(VISTREAM_SOURCE_DIR) + "/deploy/haproxy.cfg";
+  o.config_template = std::string(VISTREAM_SOURCE_DIR "/deploy/haproxy.cfg");
   o.haproxy = VISTREAM_HAPROXY;
   o.dir = testing::ProcessTempDir() + "/" + test_name;
   return test::Balancer::Start(o, error);
@@ -158,10 +158,10 @@ std::string ValueOn(const std::string& text, const std::string& line, const std:
 // /healthz over HTTP/1.1, never cuts a DOWN replica's streams or buffers a stream's body, and
 // its checks take a draining replica out well within the default drain (deploy/server.toml).
 TEST(Balancer, TheExampleConfigurationIsValidAndTakesADrainingReplicaOutWithinTheDefaultDrain) {
-  const std::string path = std::string(VISTREAM_SOURCE_DIR) + "/deploy/haproxy.cfg";
+  const std::string path = std::string(VISTREAM_SOURCE_DIR "/deploy/haproxy.cfg");
   ASSERT_EQ(access(VISTREAM_HAPROXY, X_OK), 0) << "HAProxy is missing: " << VISTREAM_HAPROXY
                                                 << " (Debian package haproxy; ./vistream.sh installs it)";
-  std::FILE* p = popen((std::string(VISTREAM_HAPROXY) + " -c -f " + path + " 2>&1").c_str(), "r");
+  std::FILE* p = popen((std::string(VISTREAM_HAPROXY " -c -f ") + path + " 2>&1").c_str(), "r");
   ASSERT_NE(p, nullptr);
   std::string out;
   char buf[512];
@@ -207,7 +207,7 @@ TEST(Balancer, TheExampleConfigurationIsValidAndTakesADrainingReplicaOutWithinTh
   ASSERT_GT(check, 0.0);
   const double down_s = inter + fastinter * (fall - 1);
   std::smatch drain;
-  const std::string toml = read(std::string(VISTREAM_SOURCE_DIR) + "/deploy/server.toml");
+  const std::string toml = read(std::string(VISTREAM_SOURCE_DIR "/deploy/server.toml"));
   ASSERT_TRUE(std::regex_search(toml, drain, std::regex(R"(\ndrain_s = ([0-9.]+)\n)")));
   EXPECT_GT(std::stod(drain[1]), down_s + check)
       << "HAProxy takes up to " << down_s << " s (+ " << check << " s for a slow check) to mark a replica DOWN";

@@ -295,7 +295,7 @@ TEST(Catalog, DefaultFolderIsTheEnvironmentThenTheInstalledCatalogThenTheSourceT
   // This test program lives in the build tree: the compiled-in source tree's scenes/ (or the
   // variable, when the run sets it).
   const char* env = std::getenv("VISTREAM_SCENES");
-  EXPECT_EQ(CatalogDir(), env != nullptr && *env != '\0' ? std::string(env) : std::string(VISTREAM_SOURCE_DIR) + "/scenes");
+  EXPECT_EQ(CatalogDir(), env != nullptr && *env != '\0' ? std::string(env) : std::string(VISTREAM_SOURCE_DIR "/scenes"));
 }
 
 TEST(Catalog, LoadSceneTakesNamesPathsAndAnotherCatalogFolder) {

@@ -24,8 +24,8 @@
 namespace vistream::scenes {
 namespace {
 
-const std::string kShapes = std::string(VISTREAM_SOURCE_DIR) + "/tests/citymodel/";
-const std::string kData = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/";
+const std::string kShapes = std::string(VISTREAM_SOURCE_DIR "/tests/citymodel/");
+const std::string kData = std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/");
 
 const Object* Find(const Scene& scene, const std::string& name) {
   for (const Object& o : scene.objects) {

@@ -24,10 +24,10 @@ namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
 std::string Shapes(const std::string& name) {
-  return std::string(VISTREAM_SOURCE_DIR) + "/tests/citymodel/" + name;
+  return std::string(VISTREAM_SOURCE_DIR "/tests/citymodel/") + name;
 }
 std::string RealData(const std::string& name) {
-  return std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/" + name;
+  return std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/") + name;
 }
 
 std::string Slurp(const std::string& path) {

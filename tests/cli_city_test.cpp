@@ -22,7 +22,7 @@ using vistream::testing::RunResult;
 using vistream::testing::Tmp;
 using vistream::testing::Vistream;
 
-const std::string kDenHaag = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
+const std::string kDenHaag = std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/denhaag_01.city.json");
 
 // `data` imported by the CLI into Tmp(`glb`) with `options`, its --json summary checked by
 // `check`: the path, or "" if the import failed (the failure is reported there). Called once per
@@ -49,7 +49,7 @@ const std::string& DenHaag() {
 // Delft (delft.city.json: 160 LoD1 buildings without floors, no TIN): closed with their floors
 // and standing on the terrain the import derives from them and the roads, land use and water,
 // every building occludes (README "Your own city").
-const std::string kDelft = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/delft.city.json";
+const std::string kDelft = std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/delft.city.json");
 
 const std::string& Delft() {
   static const std::string path = Import(kDelft, "delft.glb", "", [](const nlohmann::json& j, const std::string& out) {

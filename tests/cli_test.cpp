@@ -530,7 +530,7 @@ TEST(Cli, ImportOsmMaxHeightDecidesWhatIsImplausible) {
 
 // The whole pipeline on a real city: the Monaco extract (../shared/data/osm, ODbL), a viewcell
 // on Rue Grimaldi (the catalog's walk) with each backend, and the inclusion check.
-const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
+const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR "/../shared/data/osm/monaco.osm.pbf");
 
 TEST(Cli, MonacoPvsWithEachBackend) {
   if (!std::filesystem::exists(kMonaco)) GTEST_SKIP() << kMonaco << " is absent: the Monaco pipeline is not tested";

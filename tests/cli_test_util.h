@@ -38,7 +38,7 @@ inline std::string ShellOutput(const std::string& cmd) {
 // `shell` runs in the shell first (e.g. "ulimit -f 64; "), and applies to the tool.
 inline RunResult Vistream(const std::string& args, const std::string& shell = "") {
   // exec: the shell becomes the tool, so a crash shows as the tool's signal, not as sh's status.
-  const std::string cmd = shell + "exec " + std::string(VISTREAM_BIN) + " " + args + " 2>&1";
+  const std::string cmd = shell + "exec " + std::string(VISTREAM_BIN " ") + args + " 2>&1";
   FILE* pipe = popen(cmd.c_str(), "r");
   EXPECT_NE(pipe, nullptr);
   std::string out;

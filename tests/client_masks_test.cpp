@@ -468,7 +468,7 @@ TEST(ClientMasks, AWalkerWhoTurnsACornerFallsBackToThePvsWithoutAHole) {
   const std::string dir = vistream::testing::ProcessTempDir() + "/turning_catalog";
   std::filesystem::create_directories(dir);
   {
-    std::ifstream in(std::string(VISTREAM_SOURCE_DIR) + "/scenes/city1.json");
+    std::ifstream in(std::string(VISTREAM_SOURCE_DIR "/scenes/city1.json"));
     nlohmann::json j = nlohmann::json::parse(in);
     j["walks"] = nlohmann::json::parse(
         R"([{"name": "back-and-forth", "speed_mps": 16.7,
@@ -563,7 +563,7 @@ void ExpectLevelsHold(const WalkthroughSummary& s, double tau_px, const std::str
 TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTauOfEverySilhouette) {
   const std::string dir = vistream::testing::ProcessTempDir() + "/london_town_catalog";
   std::filesystem::create_directories(dir);
-  std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json",
+  std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR "/tests/simulator/london_small.json"),
                              dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
   absl::StatusOr<std::unique_ptr<server::ServedScene>> town =
       ServeForMasks(dir + "/london-small.json", 64, /*levels=*/true);
@@ -598,7 +598,7 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTa
 // stall, no hole, pixel error 0, the eye over the terrain inside each cell's band. Asking for
 // tau = 1 px at 6 and 60 km/h: the levels hold (ExpectLevelsHold).
 TEST(ClientMasks, ADenHaagWalkerAlongADerivedWalkDrawsMaskedFramesAndLevelsWithinTauOfEverySilhouette) {
-  const std::string data = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/citymodels/denhaag_01.city.json";
+  const std::string data = std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/denhaag_01.city.json");
   if (!std::filesystem::exists(data)) GTEST_SKIP() << data << " is absent: Den Haag is not walked";
   absl::StatusOr<std::unique_ptr<server::ServedScene>> city = ServeForMasks("denhaag", 128, /*levels=*/true);
   ASSERT_TRUE(city.ok()) << city.status();

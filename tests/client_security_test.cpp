@@ -75,7 +75,7 @@ struct Ran {
 
 Ran Client(const std::string& args) {
   Ran r;
-  std::FILE* p = popen((std::string(VISTREAM_CLIENT_BIN) + " " + args + " 2>&1").c_str(), "r");
+  std::FILE* p = popen((std::string(VISTREAM_CLIENT_BIN " ") + args + " 2>&1").c_str(), "r");
   if (p == nullptr) return r;
   char buf[4096];
   for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) r.output.append(buf, n);

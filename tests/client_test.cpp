@@ -667,7 +667,7 @@ class ServedWalks : public ::testing::Test {
     scenes::OsmImportOptions io;
     io.name = "osmwalks";  // in no catalog
     absl::StatusOr<scenes::Scene> scene =
-        scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/streets.osm", io);
+        scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR "/tests/osm/streets.osm"), io);
     ASSERT_TRUE(scene.ok()) << scene.status();
     ASSERT_EQ(scene->paths.size(), 2u);
     const std::string glb = vistream::testing::ProcessTempDir() + "/osmwalks.glb";

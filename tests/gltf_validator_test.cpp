@@ -64,7 +64,7 @@ nlohmann::json Validate(const std::string& file) {
 // No errors, no warnings; and the validator counts the vertices and draw calls the scene has
 // (one shared vertex accessor made it count every object's reference to all of them).
 void ExpectCleanReport(const std::string& glb) {
-  const RunResult info = RunCommand(std::string(VISTREAM_BIN) + " scene info '" + glb + "' --json", false);
+  const RunResult info = RunCommand(std::string(VISTREAM_BIN " scene info '") + glb + "' --json", false);
   ASSERT_EQ(info.exit_code, 0) << info.out;
   const nlohmann::json scene = nlohmann::json::parse(info.out);
   const nlohmann::json report = Validate(glb);
@@ -80,14 +80,14 @@ void ExpectCleanReport(const std::string& glb) {
 
 TEST(GltfValidator, GeneratedCityHasNoErrorsOrWarnings) {
   const std::string glb = Tmp("city1.glb");
-  const RunResult gen = RunCommand(std::string(VISTREAM_BIN) + " scene generate city1 -o '" + glb + "'", true);
+  const RunResult gen = RunCommand(std::string(VISTREAM_BIN " scene generate city1 -o '") + glb + "'", true);
   ASSERT_EQ(gen.exit_code, 0) << gen.out;
   ExpectCleanReport(glb);
 }
 
 TEST(GltfValidator, OsmImportHasNoErrorsOrWarnings) {
   const std::string glb = Tmp("terrace.glb");
-  const RunResult imp = RunCommand(std::string(VISTREAM_BIN) + " scene import-osm '" + VISTREAM_TESTS_DIR +
+  const RunResult imp = RunCommand(std::string(VISTREAM_BIN " scene import-osm '") + VISTREAM_TESTS_DIR +
                                 "/osm/multipolygon.osm' -o '" + glb + "'", true);
   ASSERT_EQ(imp.exit_code, 0) << imp.out;
   ExpectCleanReport(glb);
@@ -96,7 +96,7 @@ TEST(GltfValidator, OsmImportHasNoErrorsOrWarnings) {
 TEST(GltfValidator, ValidatorReportsAnErrorInABrokenFile) {
   // The check can fail: a .glb whose index points past its mesh's vertices is an error.
   const std::string glb = Tmp("broken.glb");
-  const RunResult gen = RunCommand(std::string(VISTREAM_BIN) + " scene generate city1 -o '" + glb + "'", true);
+  const RunResult gen = RunCommand(std::string(VISTREAM_BIN " scene generate city1 -o '") + glb + "'", true);
   ASSERT_EQ(gen.exit_code, 0) << gen.out;
   std::string bytes;
   {

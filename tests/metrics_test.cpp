@@ -297,7 +297,7 @@ std::pair<int, std::string> Promtool(const std::string& exposition) {
   std::ofstream(file) << exposition;
   std::string out;
   std::FILE* p =
-      popen((std::string(VISTREAM_PROMTOOL) + " check metrics < " + file + " 2>&1").c_str(), "r");
+      popen((std::string(VISTREAM_PROMTOOL " check metrics < ") + file + " 2>&1").c_str(), "r");
   if (p == nullptr) return {-1, "popen failed"};
   char buf[1024];
   for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);

@@ -94,7 +94,7 @@ TEST(OccluderSet, BoundsMatchThePieces) {
 // their occluders touch along whole walls, so they fuse into one blocker.
 TEST(OccluderSet, ImportedTerraceTouchesAlongItsPartyWalls) {
   const absl::StatusOr<scenes::Scene> scene =
-      scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/terrace.osm", {});
+      scenes::ImportOsm(std::string(VISTREAM_SOURCE_DIR "/tests/osm/terrace.osm"), {});
   ASSERT_TRUE(scene.ok()) << scene.status();
   ASSERT_EQ(scene->objects.size(), 3u);
   const OccluderSet set = OccluderSet::Build(*scene);

@@ -23,9 +23,9 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string Data(const std::string& name) {
-  return std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/" + name;
+  return std::string(VISTREAM_SOURCE_DIR "/tests/osm/") + name;
 }
-const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
+const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR "/../shared/data/osm/monaco.osm.pbf");
 
 Scene Import(const std::string& path, OsmImportSummary* sum, const OsmImportOptions& options = {}) {
   absl::StatusOr<Scene> s = ImportOsm(path, options, sum);

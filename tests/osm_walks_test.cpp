@@ -17,8 +17,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-const std::string kStreets = std::string(VISTREAM_SOURCE_DIR) + "/tests/osm/streets.osm";
-const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR) + "/../shared/data/osm/monaco.osm.pbf";
+const std::string kStreets = std::string(VISTREAM_SOURCE_DIR "/tests/osm/streets.osm");
+const std::string kMonaco = std::string(VISTREAM_SOURCE_DIR "/../shared/data/osm/monaco.osm.pbf");
 
 // A node's scene-local position as the import makes it: UTM in the scene's zone, less the
 // origin, snapped to 1/256 m.

@@ -21,7 +21,7 @@ namespace vistream::server::test {
 // code (-1 if it did not exit) and everything it printed.
 inline std::pair<int, std::string> RunServer(const std::string& args) {
   std::string out;
-  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN) + " " + args + " 2>&1").c_str(), "r");
+  std::FILE* p = popen((std::string(VISTREAM_SERVER_BIN " ") + args + " 2>&1").c_str(), "r");
   if (p == nullptr) return {-1, out};
   char buf[1024];
   for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);

@@ -30,7 +30,7 @@ using server::ServedSceneOptions;
 
 // A london-generated city of 1.6 km x 1.6 km (the generator at a smaller size, not a crop of
 // london) with london's declared link and client (tests/simulator/london_small.json).
-std::string LondonSmallPath() { return std::string(VISTREAM_SOURCE_DIR) + "/tests/simulator/london_small.json"; }
+std::string LondonSmallPath() { return std::string(VISTREAM_SOURCE_DIR "/tests/simulator/london_small.json"); }
 
 struct Prepared {
   scenes::CatalogEntry entry;

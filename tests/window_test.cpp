@@ -841,7 +841,7 @@ TEST(HeadlessPicture, MultisamplingSmoothsEdgesOnlyAndFogFadesOnlyTheDistance) {
   EXPECT_LT(edges, static_cast<size_t>(640 * 360 / 10));
   // Fog where the scene's catalog entry declares it (a copy of the catalog, default with fog).
   const std::string catalog = TempDir("fog-catalog");
-  nlohmann::json entry = nlohmann::json::parse(ReadFile(std::string(VISTREAM_SOURCE_DIR) + "/scenes/default.json"));
+  nlohmann::json entry = nlohmann::json::parse(ReadFile(std::string(VISTREAM_SOURCE_DIR "/scenes/default.json")));
   entry["effects"] = {{"fog", {{"start_m", 30.0}, {"end_m", 400.0}}}};
   std::ofstream(catalog + "/default.json") << entry.dump(2);
   const RgbImage fog = HeadlessShot(address, TempDir("fog"),
