@@ -174,6 +174,31 @@ TEST(CoincidentFaces, ALookupOverManyPartnersAnswersAsTheScanDoes) {
   }
   EXPECT_GT(on, 10000u);
   EXPECT_GT(off, 10000u);
+  // Beyond a sharp corner PointOnTriangle reaches farther than the tolerance: the three edges'
+  // offset lines meet tolerance / sin(angle / 2) out (2.6 cm at a floor triangle's 45 degree
+  // corners). Points around every floor corner, 1 to 3 tolerances out in 16 directions.
+  size_t corner_hits = 0;
+  for (int i = 0; i < 6; ++i) {
+    for (int j = 0; j < 6; ++j) {
+      for (const double cx : {16.0 * i + 4, 16.0 * i + 14}) {
+        for (const double cy : {16.0 * j + 4, 16.0 * j + 14}) {
+          for (int a = 0; a < 16; ++a) {
+            for (const double r : {0.012, 0.016, 0.02, 0.025, 0.03}) {
+              const double angle = a * 3.14159265358979 / 8 + 0.1;
+              const glm::dvec3 p(cx + r * std::cos(angle), cy + r * std::sin(angle), 0.0);
+              for (uint32_t t = 0; t < 2; ++t) {
+                const bool expected = scan(g, t, p, 0.01);
+                ASSERT_EQ(lookup.OnPartner(g, t, p, 0.01), expected)
+                    << "ground triangle " << t << " at " << p.x << ", " << p.y << " (a floor's corner)";
+                corner_hits += expected ? 1 : 0;
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(corner_hits, 0u);
   // A house's floor (one partner, the ground triangle under it; two where a diagonal crosses).
   for (uint32_t t = 0; t < meshes[0].TriangleCount(); ++t) {
     for (const glm::dvec3 p : {glm::dvec3(5, 5, 0), glm::dvec3(13, 13, 0), glm::dvec3(9, 9, 3), glm::dvec3(9, 4, 0)}) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <tuple>
 
 #include <glm/common.hpp>
@@ -198,7 +199,30 @@ CoincidentFaces FindCoincidentFaces(std::span<const MeshView> meshes, double tol
 struct PartnerLookup::Indexed {
   std::vector<FaceRef> partners;
   KdTree tree;  // over the partners' boxes; its ids index `partners`
+  // PointOnTriangle accepts a point whose projection lies within the triangle's edges offset
+  // outward by the tolerance (they meet tolerance / sin(angle / 2) beyond a corner) and within
+  // the tolerance of its plane: it lies within (1 + 1 / sin(smallest angle / 2)) tolerances of
+  // the triangle's box, per axis. The largest such factor of the partners.
+  double reach = 1.0;
 };
+
+namespace {
+
+// 1 + 1 / sin(a / 2) for the smallest angle a of triangle (p, q, r); infinity when degenerate.
+double CornerReach(const glm::dvec3& p, const glm::dvec3& q, const glm::dvec3& r) {
+  const glm::dvec3* v[3] = {&p, &q, &r};
+  double smallest_half_sine = 1.0;
+  for (int k = 0; k < 3; ++k) {
+    const glm::dvec3 a = *v[(k + 1) % 3] - *v[k], b = *v[(k + 2) % 3] - *v[k];
+    const double la = glm::length(a), lb = glm::length(b);
+    if (!(la > 0.0 && lb > 0.0)) return std::numeric_limits<double>::infinity();
+    const double cosine = std::clamp(glm::dot(a, b) / (la * lb), -1.0, 1.0);
+    smallest_half_sine = std::min(smallest_half_sine, std::sqrt(0.5 * (1.0 - cosine)));  // sin(a / 2)
+  }
+  return smallest_half_sine > 0.0 ? 1.0 + 1.0 / smallest_half_sine : std::numeric_limits<double>::infinity();
+}
+
+}  // namespace
 
 PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::span<const MeshView> meshes)
     : faces_(&faces), meshes_(meshes) {
@@ -212,11 +236,18 @@ PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::span<const MeshV
       for (size_t k = i; k < j; ++k) {
         const FaceRef f = entries[k].partner;
         const MeshView& mesh = meshes[f.mesh];
+        glm::dvec3 corner[3];
         scenes::Aabb box;
-        for (int v = 0; v < 3; ++v) box.Extend(glm::dvec3(mesh.positions[mesh.indices[3 * f.triangle + v]]));
+        for (int v = 0; v < 3; ++v) {
+          corner[v] = glm::dvec3(mesh.positions[mesh.indices[3 * f.triangle + v]]);
+          box.Extend(corner[v]);
+        }
+        indexed->reach = std::max(indexed->reach, CornerReach(corner[0], corner[1], corner[2]));
         indexed->partners.push_back(f);
         boxes.push_back(box);
       }
+      // A sliver (its reach unbounded) leaves the triangle to the scan.
+      if (!(indexed->reach < 1e6)) continue;
       indexed->tree = KdTree::Build(boxes);
       indexed_.emplace(static_cast<uint64_t>(m) << 32 | entries[i].triangle, std::move(indexed));
     }
@@ -239,12 +270,13 @@ bool PartnerLookup::OnPartner(uint32_t m, uint32_t t, const glm::dvec3& p, doubl
     }
     return false;
   }
-  // The partners whose box, grown by the tolerance, holds p: PointOnTriangle is false beyond it.
+  // The partners whose box, grown by their reach, holds p: PointOnTriangle is false beyond it.
   const Indexed& ix = *found->second;
   if (ix.tree.empty()) return false;
+  const double grow = ix.reach * tolerance;
   auto near = [&](const scenes::Aabb& b) {
-    return p.x >= b.min.x - tolerance && p.x <= b.max.x + tolerance && p.y >= b.min.y - tolerance &&
-           p.y <= b.max.y + tolerance && p.z >= b.min.z - tolerance && p.z <= b.max.z + tolerance;
+    return p.x >= b.min.x - grow && p.x <= b.max.x + grow && p.y >= b.min.y - grow && p.y <= b.max.y + grow &&
+           p.z >= b.min.z - grow && p.z <= b.max.z + grow;
   };
   // Depth first: at most one pending sibling a level (KdTreeOptions::max_depth is 48).
   std::array<int32_t, 128> stack;
