@@ -392,8 +392,7 @@ struct GlobalSampler::Impl {
   // behind its partner, but Embree may report the partner's front face: the ray's sample is
   // discarded like one that hits a back face.
   CoincidentFaces coincident;
-  std::vector<MeshView> coincident_meshes;  // what `coincident` was found in
-  PartnerLookup partners;                   // over `coincident`
+  PartnerLookup partners;  // over `coincident`
   std::vector<const uint32_t*> coincident_quads;
 
   // The surface table, the kd-tree and the coincident faces, rebuilt after every edit, never
@@ -409,8 +408,7 @@ struct GlobalSampler::Impl {
     }
     tree = KdTree::Build(boxes);
     coincident = FindCoincidentFaces(meshes, kCoincidentTolerance);
-    coincident_meshes = std::move(meshes);
-    partners = PartnerLookup(coincident, coincident_meshes);
+    partners = PartnerLookup(coincident, std::move(meshes));
     coincident_quads.assign(objects.size(), nullptr);
     for (ObjectId o = 0; o < objects.size(); ++o) {
       std::vector<uint32_t>& q = objects[o].quads;

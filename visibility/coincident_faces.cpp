@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
+#include <utility>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -224,8 +225,8 @@ double CornerReach(const glm::dvec3& p, const glm::dvec3& q, const glm::dvec3& r
 
 }  // namespace
 
-PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::span<const MeshView> meshes)
-    : faces_(&faces), meshes_(meshes) {
+PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::vector<MeshView> meshes)
+    : faces_(&faces), meshes_(std::move(meshes)) {
   for (uint32_t m = 0; m < faces.of_mesh.size(); ++m) {
     const std::vector<CoincidentFaces::Entry>& entries = faces.of_mesh[m];
     for (size_t i = 0, j = 0; i < entries.size(); i = j) {
@@ -235,7 +236,7 @@ PartnerLookup::PartnerLookup(const CoincidentFaces& faces, std::span<const MeshV
       std::vector<scenes::Aabb> boxes;
       for (size_t k = i; k < j; ++k) {
         const FaceRef f = entries[k].partner;
-        const MeshView& mesh = meshes[f.mesh];
+        const MeshView& mesh = meshes_[f.mesh];
         glm::dvec3 corner[3];
         scenes::Aabb box;
         for (int v = 0; v < 3; ++v) {
@@ -263,9 +264,12 @@ bool PartnerLookup::OnFace(const FaceRef& f, const glm::dvec3& p, double toleran
 
 bool PartnerLookup::OnPartner(uint32_t m, uint32_t t, const glm::dvec3& p, double tolerance) const {
   if (faces_ == nullptr) return false;
-  const auto found = indexed_.find(static_cast<uint64_t>(m) << 32 | t);
+  const std::span<const CoincidentFaces::Entry> partners = faces_->Partners(m, t);
+  // Few partners (or a sliver among many): every one tested.
+  const auto found = partners.size() > kIndexedPartners ? indexed_.find(static_cast<uint64_t>(m) << 32 | t)
+                                                        : indexed_.end();
   if (found == indexed_.end()) {
-    for (const CoincidentFaces::Entry& e : faces_->Partners(m, t)) {
+    for (const CoincidentFaces::Entry& e : partners) {
       if (OnFace(e.partner, p, tolerance)) return true;
     }
     return false;

@@ -55,9 +55,9 @@ class PartnerLookup {
   static constexpr size_t kIndexedPartners = 16;
 
   PartnerLookup() = default;
-  // `faces` as FindCoincidentFaces found them in `meshes`; both must outlive the lookup and
-  // stay unchanged (build a new lookup after an edit).
-  PartnerLookup(const CoincidentFaces& faces, std::span<const MeshView> meshes);
+  // `faces` as FindCoincidentFaces found them in `meshes`: the faces and the meshes' data must
+  // outlive the lookup and stay unchanged (build a new lookup after an edit).
+  PartnerLookup(const CoincidentFaces& faces, std::vector<MeshView> meshes);
 
   // Whether `p` (the meshes' frame, metres) lies on a partner of triangle `t` of mesh `m`, up
   // to `tolerance` metres (PointOnTriangle): the same answer as testing every partner.
@@ -71,7 +71,7 @@ class PartnerLookup {
   bool OnFace(const FaceRef& f, const glm::dvec3& p, double tolerance) const;
 
   const CoincidentFaces* faces_ = nullptr;
-  std::span<const MeshView> meshes_;
+  std::vector<MeshView> meshes_;
   std::unordered_map<uint64_t, std::shared_ptr<const Indexed>> indexed_;  // key: mesh << 32 | triangle
 };
 
