@@ -69,8 +69,12 @@ class CellCompletion {
 
   // The PVS list of `cell` (object ids, distinct) arrived at `t_s`, replacing an earlier one;
   // `levels`, when not empty, the level each object needs there (ViewcellPvs.object_levels,
-  // one per object; empty: full detail).
-  void SetList(uint32_t cell, std::span<const uint32_t> objects, double t_s, std::span<const uint32_t> levels = {});
+  // one per object; empty: full detail); `cluster_ids` and `cluster_levels` (one per id) the
+  // clusters chosen for the cell and the level each needs (ViewcellPvs.cluster_ids: an object
+  // of the list a held chosen cluster stands for is complete when the cluster is held at its
+  // level or finer, drawable when it is held at all).
+  void SetList(uint32_t cell, std::span<const uint32_t> objects, double t_s, std::span<const uint32_t> levels = {},
+               std::span<const uint32_t> cluster_ids = {}, std::span<const uint32_t> cluster_levels = {});
   // The caller forgot `cell`'s list (nothing: no list is held).
   void DropList(uint32_t cell);
   // Object `id` arrived at `t_s` at `level` (0: full). Again at the same level while held: its
@@ -80,6 +84,22 @@ class CellCompletion {
   bool Arrive(uint32_t id, double t_s, uint32_t level = 0);
   // The caller dropped object `id` (not held: nothing happens).
   void Drop(uint32_t id);
+  // Cluster `id` arrived at `t_s` at `level` (>= 1), standing for `objects` (ClusterGeometry:
+  // ascending); it replaces a level held.
+  void ArriveCluster(uint32_t id, double t_s, uint32_t level, std::span<const uint32_t> objects);
+  // The caller dropped cluster `id` (not held: nothing happens).
+  void DropCluster(uint32_t id);
+  struct Cluster {
+    uint32_t level = 0;      // held (>= 1)
+    double arrival_s = 0.0;  // the latest arrival
+    std::vector<uint32_t> objects;
+  };
+  // Cluster `id` while held, else null.
+  const Cluster* HeldCluster(uint32_t id) const;
+  // The held cluster that `cell`'s list chose for object `o` (drawn in its place), or none.
+  std::optional<uint32_t> CoveringCluster(uint32_t cell, uint32_t o) const;
+  // The clusters `cell`'s list chose, with the level each needs (empty without a list).
+  std::span<const std::pair<uint32_t, uint32_t>> ListClusters(uint32_t cell) const;
 
   // The object's entry while held, else null.
   const Object* Held(uint32_t id) const;
@@ -105,16 +125,26 @@ class CellCompletion {
  private:
   struct CellList {
     std::vector<uint32_t> objects;
+    std::vector<uint32_t> levels;                          // one per object (0 without levels)
+    std::vector<std::pair<uint32_t, uint32_t>> clusters;   // chosen (cluster, level), ascending
+    std::unordered_map<uint32_t, uint32_t> cover;          // object -> the held chosen cluster standing for it
     size_t missing = 0;
     size_t coarse = 0;
-    double latest_s = 0.0;  // the latest arrival among the list and its held objects
+    double latest_s = 0.0;  // the latest arrival among the list, its held objects and clusters
   };
   struct ObjectEntry {
     Object state;
     std::vector<std::pair<uint32_t, uint32_t>> cells;  // cells whose list names it, and the level each needs
   };
+  // How an object of a list stands there: not drawable, drawn coarser than needed, complete.
+  enum class Standing : uint8_t { kMissing, kCoarse, kComplete };
+  Standing StandingOf(const CellList& list, uint32_t o, uint32_t needed, const Object& state) const;
+  // Rebuilds `cell`'s cover and counts after a cluster event at `t_s`.
+  void Recount(uint32_t cell, double t_s);
   std::unordered_map<uint32_t, ObjectEntry> entries_;  // every object held or named by a list
   std::unordered_map<uint32_t, CellList> lists_;
+  std::unordered_map<uint32_t, Cluster> clusters_;                      // held clusters
+  std::unordered_map<uint32_t, std::vector<uint32_t>> cluster_cells_;  // cluster -> cells whose list chose it
 };
 
 }  // namespace vistream::client

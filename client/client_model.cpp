@@ -32,6 +32,9 @@ v1::Hello MakeHello(const HelloSettings& settings) {
     l->set_viewport_height_px(settings.viewport_height_px);
     l->set_vertical_fov_rad(settings.vertical_fov_rad);
     l->set_screen_error_px(settings.screen_error_px);
+    l->set_clusters(settings.clusters);
+    h.mutable_held_clusters()->Add(settings.held_clusters.begin(), settings.held_clusters.end());
+    h.mutable_held_cluster_levels()->Add(settings.held_cluster_levels.begin(), settings.held_cluster_levels.end());
   }
   return h;
 }
@@ -58,6 +61,8 @@ uint64_t ChargedBytes(const v1::ServerMessage& m) {
   switch (m.body_case()) {
     case v1::ServerMessage::kGeometry:
       return m.geometry().vertices().size() + m.geometry().indices().size();
+    case v1::ServerMessage::kCluster:
+      return m.cluster().vertices().size() + m.cluster().indices().size();
     case v1::ServerMessage::kEpsilonMask:
       return m.epsilon_mask().triangles().size();
     default:
@@ -112,6 +117,53 @@ absl::StatusOr<DecodedObject> DecodeObjectGeometry(const v1::ObjectGeometry& g) 
   }
   o.raw_bytes = scenes::RawMeshBytes(o.mesh.positions.size(), o.mesh.indices.size());
   return o;
+}
+
+absl::StatusOr<DecodedCluster> DecodeClusterGeometry(const v1::ClusterGeometry& g) {
+  const std::string where = absl::StrCat("cluster ", g.cluster_id(), ", level ", g.level());
+  if (g.level() == 0) return absl::InvalidArgumentError(absl::StrCat(where, ": a cluster's levels start at 1"));
+  if (g.objects_size() < 2) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": stands for ", g.objects_size(), " objects (at least 2)"));
+  }
+  for (int k = 1; k < g.objects_size(); ++k) {
+    if (g.objects(k) <= g.objects(k - 1)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": objects do not ascend (", g.objects(k - 1), " then ", g.objects(k), ")"));
+    }
+  }
+  if (g.origin_size() != 3) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.origin_size(), " origin values (expected 3)"));
+  }
+  DecodedCluster c;
+  c.id = g.cluster_id();
+  c.level = g.level();
+  c.objects.assign(g.objects().begin(), g.objects().end());
+  const int64_t origin[3] = {g.origin(0), g.origin(1), g.origin(2)};
+  absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeLevelMesh(g.vertex_count(), g.index_count(), g.step_log2(), origin,
+                                                              g.wide(), g.vertices(), g.indices(), where);
+  if (!mesh.ok()) return mesh.status();
+  c.mesh = *std::move(mesh);
+  if (g.keeps_triangles()) {
+    if (g.object_triangles_size() != g.objects_size()) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.object_triangles_size(),
+                                                     " object triangle counts for ", g.objects_size(), " objects"));
+    }
+    uint64_t sum = 0;
+    for (uint32_t n : g.object_triangles()) sum += n;
+    if (sum != c.mesh.TriangleCount()) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": its objects' triangles sum to ", sum,
+                                                     ", its mesh has ", c.mesh.TriangleCount()));
+    }
+    c.first_triangle.assign(1, 0);
+    for (uint32_t n : g.object_triangles()) c.first_triangle.push_back(c.first_triangle.back() + n);
+  }
+  const scenes::Aabb b = c.mesh.Bounds();
+  c.bounds_min = b.Empty() ? glm::dvec3(0.0) : b.min;
+  c.bounds_max = b.Empty() ? glm::dvec3(0.0) : b.max;
+  const uint64_t own = g.vertices().size() + g.indices().size();
+  c.saved_bytes = g.full_bytes() > own ? g.full_bytes() - own : 0;
+  c.raw_bytes = scenes::RawMeshBytes(c.mesh.positions.size(), c.mesh.indices.size());
+  return c;
 }
 
 }  // namespace vistream::client

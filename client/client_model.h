@@ -40,6 +40,11 @@ struct HelloSettings {
   // on its viewport; 0: off (every object at full detail). With levels the client also takes PVS
   // lists as differences (Hello.pvs_deltas, proto/pvs_delta.h).
   double screen_error_px = 0.0;
+  // With levels: the client draws cluster levels too (LevelRequest.clusters; ClusterGeometry in
+  // place of the objects a cell's list lets it stand for).
+  bool clusters = false;
+  std::vector<uint32_t> held_clusters;        // on resume: the clusters it still holds
+  std::vector<uint32_t> held_cluster_levels;  // the level of each (one per held cluster)
   uint32_t viewport_width_px = 1280;
   uint32_t viewport_height_px = 720;
   double vertical_fov_rad = 1.0471975511965976;  // 60 degrees
@@ -112,8 +117,8 @@ class CreditWindow {
   uint64_t consumed_ = 0;
 };
 
-// Bytes a server message costs the credit: an object's encoded geometry (its vertex and index
-// bytes) and an ε-mask's run-length triangle bytes; every other message is free.
+// Bytes a server message costs the credit: an object's or a cluster's encoded geometry (its
+// vertex and index bytes) and an ε-mask's run-length triangle bytes; every other message is free.
 uint64_t ChargedBytes(const vistream::v1::ServerMessage& m);
 
 // ---- Geometry ----
@@ -137,6 +142,24 @@ struct DecodedObject {
 // bounds their mesh's. Errors (INVALID_ARGUMENT) name the object: bytes that are no mesh, a
 // level without its three origin values.
 absl::StatusOr<DecodedObject> DecodeObjectGeometry(const vistream::v1::ObjectGeometry& g);
+
+// A ClusterGeometry decoded (issue 45): one mesh standing for `objects` (ascending).
+struct DecodedCluster {
+  uint32_t id = 0;
+  uint32_t level = 0;  // >= 1
+  std::vector<uint32_t> objects;
+  // ClusterGeometry.keeps_triangles: objects[k]'s triangles are the mesh's triangles from
+  // first_triangle[k] to first_triangle[k + 1] (objects.size() + 1 entries); empty: drawn whole.
+  std::vector<uint32_t> first_triangle;
+  uint64_t saved_bytes = 0;  // ClusterGeometry.full_bytes less its own encoded bytes
+  scenes::Mesh mesh;
+  glm::dvec3 bounds_min{0.0}, bounds_max{0.0};  // its mesh's
+  uint64_t raw_bytes = 0;
+};
+// By DecodeLevelMesh. Errors (INVALID_ARGUMENT) name the cluster: level 0, fewer than 2 objects
+// or objects that do not ascend, no three origin values, bytes that are no mesh, object_triangles
+// not one per object or not summing to the mesh's triangles.
+absl::StatusOr<DecodedCluster> DecodeClusterGeometry(const vistream::v1::ClusterGeometry& g);
 
 vistream::v1::ClientMessage HelloMessage(const HelloSettings& settings);
 vistream::v1::ClientMessage PoseMessage(const vistream::v1::Pose& pose);

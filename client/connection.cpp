@@ -376,6 +376,11 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         event = std::move(o);
         break;
       }
+      case v1::ServerMessage::kCluster:
+        // Sent only to a Hello with LevelRequest.clusters, which this client does not set yet.
+        Fail(absl::StrCat("the server sent cluster ", m.cluster().cluster_id(),
+                          ", which this client did not ask for (LevelRequest.clusters)"));
+        break;
       case v1::ServerMessage::BODY_NOT_SET:
         break;
     }

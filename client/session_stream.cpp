@@ -64,6 +64,12 @@ void SessionStream::Start(const v1::Hello& hello, bool read) {
   if (read) reader_ = std::thread([this] { ReadLoop(); });
 }
 
+void SessionStream::HoldCluster(uint32_t cluster, uint32_t level, std::vector<uint32_t> objects) {
+  std::lock_guard lock(mu_);
+  received_.clusters[cluster] = level;
+  received_.completion_.ArriveCluster(cluster, 0.0, level, objects);
+}
+
 void SessionStream::StartRaw(const v1::ClientMessage& first) {
   OpenStream();
   stream_->Write(first);
@@ -100,7 +106,19 @@ void SessionStream::ReadLoop() {
         r.pvs[cell] = list->objects;
         r.pvs_order.push_back(cell);
         r.order.emplace_back('P', cell);
-        r.completion_.SetList(cell, r.pvs[cell], now, list->levels);
+        r.pvs_clusters[cell] = {list->cluster_ids, list->cluster_levels};
+        r.completion_.SetList(cell, r.pvs[cell], now, list->levels, list->cluster_ids, list->cluster_levels);
+        break;
+      }
+      case v1::ServerMessage::kCluster: {
+        const v1::ClusterGeometry& g = m.cluster();
+        r.clusters[g.cluster_id()] = g.level();
+        ++r.cluster_levels;
+        r.geometry_bytes += ChargedBytes(m);
+        r.raw_geometry_bytes += scenes::RawMeshBytes(g.vertex_count(), g.index_count());
+        r.order.emplace_back('C', g.cluster_id());
+        if (keep_geometry_) r.cluster_geometry[g.cluster_id()] = g;
+        r.completion_.ArriveCluster(g.cluster_id(), now, g.level(), std::span<const uint32_t>(g.objects().data(), static_cast<size_t>(g.objects().size())));
         break;
       }
       case v1::ServerMessage::kGeometry: {
@@ -122,6 +140,11 @@ void SessionStream::ReadLoop() {
           r.held.erase(o);
           r.evicted.push_back(o);
           r.completion_.Drop(o);
+        }
+        for (uint32_t c : m.evict().cluster_ids()) {
+          r.clusters.erase(c);
+          r.evicted_clusters.push_back(c);
+          r.completion_.DropCluster(c);
         }
         r.order.emplace_back('E', 0);
         break;

@@ -30,8 +30,8 @@ namespace vistream::client {
 struct SessionRecord {
   bool scene_info = false;
   vistream::v1::SceneInfo info;
-  // Every message kind in arrival order: 'S' scene info, 'P' PVS, 'G' geometry, 'E' evict,
-  // 'M' ε-mask; with the cell, object or mask id.
+  // Every message kind in arrival order: 'S' scene info, 'P' PVS, 'G' geometry, 'C' cluster
+  // geometry, 'E' evict, 'M' ε-mask; with the cell, object, cluster or mask id.
   std::vector<std::pair<char, uint32_t>> order;
   std::map<uint32_t, std::vector<uint32_t>> pvs;  // latest list per cell
   std::vector<uint32_t> pvs_order;                // cells in arrival order
@@ -39,6 +39,11 @@ struct SessionRecord {
   std::set<uint32_t> held;                        // received and not evicted
   uint64_t duplicates = 0;                        // geometry received while held at the same level
   uint64_t level_objects = 0;                     // geometry received at a level of detail (issue 45)
+  std::map<uint32_t, uint32_t> clusters;          // cluster levels held (not evicted): id -> level
+  std::map<uint32_t, vistream::v1::ClusterGeometry> cluster_geometry;  // latest per cluster (with geometry kept)
+  std::vector<uint32_t> evicted_clusters;
+  uint64_t cluster_levels = 0;                    // ClusterGeometry messages received
+  std::map<uint32_t, std::pair<std::vector<uint32_t>, std::vector<uint32_t>>> pvs_clusters;  // per cell: ids, levels
   // PVS lists as the server sent them may be differences (Hello.pvs_deltas); `pvs` holds them
   // whole. A list that does not decode ends the reading: why, here.
   std::string bad_data;
@@ -84,6 +89,9 @@ class SessionStream {
   // UNAVAILABLE.
   static constexpr double kConnectTimeoutS = 10.0;
   void Start(const vistream::v1::Hello& hello, bool read = true);
+  // Before Start: a cluster level the resuming client holds (as its Hello.held_clusters says),
+  // with the objects it stands for (what its ClusterGeometry said), so that its record counts it.
+  void HoldCluster(uint32_t cluster, uint32_t level, std::vector<uint32_t> objects);
   // Opens the session with `first` as its first message, whatever it is (bad-input tests).
   void StartRaw(const vistream::v1::ClientMessage& first);
   // A Hello for `scene` with the current protocol version (client/client_model.h MakeHello).

@@ -122,6 +122,22 @@ absl::StatusOr<PvsList> PvsListDecoder::Decode(const v1::ViewcellPvs& m) {
       list.levels[static_cast<size_t>(at - list.objects.begin())] = m.level_values(static_cast<int>(k));
     }
   }
+  if (m.cluster_levels_size() != m.cluster_ids_size()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": ", m.cluster_levels_size(), " cluster levels for ",
+                                                   m.cluster_ids_size(), " clusters"));
+  }
+  for (int k = 0; k < m.cluster_ids_size(); ++k) {
+    if (k > 0 && m.cluster_ids(k) <= m.cluster_ids(k - 1)) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": cluster ids that do not ascend (", m.cluster_ids(k - 1),
+                                                     " then ", m.cluster_ids(k), ")"));
+    }
+    if (m.cluster_levels(k) == 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": cluster ", m.cluster_ids(k), " at level 0 (a cluster's levels start at 1)"));
+    }
+  }
+  list.cluster_ids.assign(m.cluster_ids().begin(), m.cluster_ids().end());
+  list.cluster_levels.assign(m.cluster_levels().begin(), m.cluster_levels().end());
   previous_ = list;
   has_previous_ = true;
   return list;

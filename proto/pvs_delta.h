@@ -14,11 +14,15 @@
 
 namespace vistream::proto {
 
-// A whole list: its cell, objects ascending, each object's level (empty without levels).
+// A whole list: its cell, objects ascending, each object's level (empty without levels), and
+// the clusters chosen for the cell with their levels (ViewcellPvs.cluster_ids, cluster_levels:
+// sent whole in every list, deltas too; the encoder leaves them to the caller's message).
 struct PvsList {
   uint32_t cell = 0;
   std::vector<uint32_t> objects;
   std::vector<uint32_t> levels;
+  std::vector<uint32_t> cluster_ids;
+  std::vector<uint32_t> cluster_levels;
 };
 
 // Fills out's removed, added, level_ids and level_values (and delta) for `next` after `previous`
@@ -33,7 +37,8 @@ class PvsListDecoder {
   // becomes the previous list. Errors (INVALID_ARGUMENT naming the cell): a delta before any
   // list, a removed id the previous list lacks or an added one it has, a gap of 0 (or one past
   // 2^32), level_values not one per level_ids entry, a level named for an object not on the list,
-  // object_levels neither empty nor one per object.
+  // object_levels neither empty nor one per object, cluster ids that do not ascend, cluster_levels
+  // not one per cluster id or a cluster level of 0.
   absl::StatusOr<PvsList> Decode(const vistream::v1::ViewcellPvs& m);
   // A new session: no previous list.
   void Clear() { has_previous_ = false; }

@@ -5,6 +5,7 @@
 #include <limits>
 #include <unordered_map>
 
+#include <glm/geometric.hpp>
 
 namespace vistream::scenes {
 
@@ -51,9 +52,40 @@ LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels, std::vecto
   }
 }
 
+bool LevelIndex::ClusterKeepsTriangles(uint32_t c, uint32_t level) const {
+  const Cluster& cluster = levels_->clusters[c];
+  size_t full = 0;
+  for (uint32_t o : cluster.objects) full += scene_->objects[o].mesh.TriangleCount();
+  return cluster.levels[level - 1].mesh.TriangleCount() == full;
+}
+
 std::span<const uint32_t> LevelIndex::ClustersOf(uint32_t o) const {
   return {cluster_ids_.data() + cluster_offsets_[o], cluster_ids_.data() + cluster_offsets_[o + 1]};
 }
+
+namespace {
+
+// The triangles of `mesh` whose front may face some point of `region` (a corner of the box in
+// front of the triangle's plane; degenerate ones count as seen): an upper bound on what an
+// ε-mask of a neighbourhood inside the region keeps of it. Relative to each triangle's first
+// corner (translation-invariant).
+uint64_t FrontFacingTriangles(const Mesh& mesh, const Aabb& region) {
+  uint64_t n = 0;
+  for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+    const glm::dvec3 a(mesh.positions[mesh.indices[t]]);
+    const glm::dvec3 normal =
+        glm::cross(glm::dvec3(mesh.positions[mesh.indices[t + 1]]) - a, glm::dvec3(mesh.positions[mesh.indices[t + 2]]) - a);
+    // The largest of dot(normal, corner - a) over the box's corners.
+    double best = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      best += std::max(normal[k] * (region.min[k] - a[k]), normal[k] * (region.max[k] - a[k]));
+    }
+    n += best > 0.0 || normal == glm::dvec3(0.0) ? 1 : 0;
+  }
+  return n;
+}
+
+}  // namespace
 
 std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
                                    const ScreenSpec& screen, double tau_px, bool clusters) {
@@ -104,13 +136,19 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
     members.clear();
     std::set_intersection(cluster.objects.begin(), cluster.objects.end(), pvs.begin(), pvs.end(),
                           std::back_inserter(members));
-    uint64_t replaced = 0;
+    uint64_t replaced = 0, replaced_triangles = 0;
     std::vector<uint32_t> inner;  // chosen clusters it would replace
     bool contained = true;
+    // Whether a mask draws the same triangles of it as of what it replaces.
+    bool same_triangles = index.ClusterKeepsTriangles(c, level);
     for (const uint32_t o : members) {
       const auto it = owner.find(o);
       if (it == owner.end()) {
-        replaced += index.ObjectBytes(o, own_level.at(o));
+        const uint32_t own = own_level.at(o);
+        replaced += index.ObjectBytes(o, own);
+        const Mesh& drawn = own == 0 ? scene.objects[o].mesh : levels.objects[o][own - 1].mesh;
+        same_triangles = same_triangles && drawn.TriangleCount() == scene.objects[o].mesh.TriangleCount();
+        replaced_triangles += FrontFacingTriangles(drawn, eye_region);
         continue;
       }
       if (std::find(inner.begin(), inner.end(), it->second) != inner.end()) continue;
@@ -121,8 +159,13 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
       }
       inner.push_back(it->second);
       replaced += index.ClusterBytes(it->second, chosen.at(it->second));
+      replaced_triangles += other.levels[chosen.at(it->second) - 1].mesh.TriangleCount();
+      same_triangles = same_triangles && index.ClusterKeepsTriangles(it->second, chosen.at(it->second));
     }
-    if (!contained || index.ClusterBytes(c, level) > replaced) continue;
+    if (!contained || index.ClusterBytes(c, level) > replaced ||
+        (!same_triangles && cluster.levels[level - 1].mesh.TriangleCount() > replaced_triangles)) {
+      continue;
+    }
     for (const uint32_t r : inner) chosen.erase(r);
     for (const uint32_t o : members) owner[o] = c;
     chosen[c] = level;

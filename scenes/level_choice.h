@@ -3,8 +3,9 @@
 // "Levels of detail"): conservatively for every eye point of the region (a viewcell's eye band,
 // or an ε-neighbourhood's box), the coarsest level whose geometric error projects to at most τ
 // pixels of the client's viewport; a cluster (HLOD) where that holds for the whole cluster and it
-// costs fewer bytes than what it replaces. Levels never change what is visible, only what is
-// drawn: every object of the PVS stays drawn, at some level or within a chosen cluster.
+// costs no more bytes and no more triangles than what it replaces. Levels never change what is
+// visible, only what is drawn: every object of the PVS stays drawn, at some level or within a
+// chosen cluster.
 
 #include <cstdint>
 #include <span>
@@ -55,8 +56,14 @@ class LevelIndex {
   const EncodedLevelMesh& ObjectLevel(uint32_t o, uint32_t level) const { return object_levels_[o][level - 1]; }
   // Encoded bytes of cluster `c` at `level` (1 .. levels.size()).
   uint64_t ClusterBytes(uint32_t c, uint32_t level) const { return cluster_levels_[c][level - 1].EncodedBytes(); }
+  // Cluster `c`'s level `level` >= 1 encoded for the wire.
+  const EncodedLevelMesh& ClusterLevel(uint32_t c, uint32_t level) const { return cluster_levels_[c][level - 1]; }
   // The clusters standing for `o`, fewest objects first.
   std::span<const uint32_t> ClustersOf(uint32_t o) const;
+  // Whether cluster `c`'s `level` keeps its objects' full triangles in their order (objects
+  // ascending, each one's triangles in its own order; positions only snapped): an ε-mask's
+  // triangle bits for its objects then apply to it.
+  bool ClusterKeepsTriangles(uint32_t c, uint32_t level) const;
 
  private:
   const Scene* scene_;
@@ -84,8 +91,11 @@ struct DrawItem {
 // objects of the PVS not in a chosen cluster at the coarsest level with ErrorPixels(error,
 // BoxDistance(eye_region, object bounds)) <= tau_px; a cluster at its coarsest such level (with
 // its bounds) where every object of the PVS it stands for is not already in another chosen
-// cluster it does not contain and its bytes are at most those of what it replaces (clusters
-// considered fewest objects first). Sorted; every PVS object is drawn by exactly one item.
+// cluster it does not contain, its bytes are at most those of what it replaces, and it draws no
+// more triangles: either the level keeps its objects' triangles (ClusterKeepsTriangles: a mask
+// draws the same triangles of it) and so does every level it replaces, or its triangles (drawn
+// whole) are at most those of what it replaces that may face the region (what an ε-mask could
+// keep of them). Clusters are considered fewest objects first. Sorted; every PVS object is drawn by exactly one item.
 // With `clusters` false only objects' own levels are chosen.
 std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
                                    const ScreenSpec& screen, double tau_px, bool clusters = true);

@@ -36,13 +36,8 @@ struct LevelOptions {
 };
 
 // The levels a server makes at start for a scene without its own (vistream-server --levels),
-// which a client checking its frames (--verify) makes alike: object levels only (sessions send
-// no cluster yet).
-inline LevelOptions SessionLevelOptions() {
-  LevelOptions o;
-  o.cluster_tiles_m.clear();
-  return o;
-}
+// which a client checking its frames (--verify) makes alike: object levels and clusters.
+inline LevelOptions SessionLevelOptions() { return LevelOptions{}; }
 
 // An upper bound, in metres, on the symmetric Hausdorff distance between the surface of `level`
 // and the union of the surfaces of `originals` (scene-local metres; zero-area triangles carry no

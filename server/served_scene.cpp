@@ -119,6 +119,11 @@ uint64_t ServedScene::RawBytes(uint32_t object, uint32_t level) const {
   return scenes::RawMeshBytes(m.positions.size(), m.indices.size());
 }
 
+uint64_t ServedScene::ClusterRawBytes(uint32_t cluster, uint32_t level) const {
+  const scenes::Mesh& m = scene_.levels.clusters[cluster].levels[level - 1].mesh;
+  return scenes::RawMeshBytes(m.positions.size(), m.indices.size());
+}
+
 CellPvs ServedScene::ComputePvs(CellId cell, unsigned worker) const {
   CellPvs out;
   out.cell = cell;

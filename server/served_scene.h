@@ -48,7 +48,7 @@ struct ServedSceneOptions {
   // would wait for it (what they test is which masks are sent and drawn, not their priority).
   bool idle_priority_masks = true;
   // Levels of detail (issue 45): a scene without levels of its own gets them at start
-  // (scenes/levels.h MakeLevels, object levels only); false: only a scene's own are served.
+  // (scenes/levels.h MakeLevels, SessionLevelOptions); false: only a scene's own are served.
   bool make_levels = false;
 };
 
@@ -76,6 +76,11 @@ class ServedScene {
   }
   // What object `object` at `level` (0: full) takes decoded (RawMeshBytes: the memory budget's unit).
   uint64_t RawBytes(uint32_t object, uint32_t level) const;
+  // Cluster `cluster`'s level `level` >= 1 encoded for the wire, and what it takes decoded.
+  const scenes::EncodedLevelMesh& cluster_geometry(uint32_t cluster, uint32_t level) const {
+    return level_index_->ClusterLevel(cluster, level);
+  }
+  uint64_t ClusterRawBytes(uint32_t cluster, uint32_t level) const;
   const visibility::EpsilonSuperset* epsilon() const { return epsilon_.get(); }
   PvsScheduler& scheduler() { return *scheduler_; }
   // Where ε-masks are computed: idle-priority threads, one per core.

@@ -39,7 +39,64 @@ absl::Status CheckFinite(const v1::Vec3& v, const char* what, uint64_t pose) {
 // The encoded geometry bytes `m` carries (what the credit charges an ObjectGeometry); 0 for any
 // other message.
 double GeometryBytes(const v1::ServerMessage& m) {
+  if (m.has_cluster()) return static_cast<double>(m.cluster().vertices().size() + m.cluster().indices().size());
   return m.has_geometry() ? static_cast<double>(m.geometry().vertices().size() + m.geometry().indices().size()) : 0.0;
+}
+
+// Object `o`'s geometry at `level` (0: full) for the wire (ObjectGeometry); returns its encoded
+// bytes (what the credit charges).
+size_t FillObject(const ServedScene& scene, uint32_t o, uint32_t level, v1::ObjectGeometry* geo) {
+  geo->set_object_id(o);
+  if (level == 0) {
+    const scenes::EncodedMesh& g = scene.geometry(o);
+    geo->set_vertex_count(g.vertex_count);
+    geo->set_index_count(g.index_count);
+    geo->set_vertices(g.vertices);
+    geo->set_indices(g.indices);
+    // A level's bounds are its mesh's, which the receiver has (58 bytes a message saved).
+    const scenes::Aabb& b = scene.scene().objects[o].bounds;
+    SetVec(b.min, geo->mutable_bounds_min());
+    SetVec(b.max, geo->mutable_bounds_max());
+    return g.EncodedBytes();
+  }
+  const scenes::EncodedLevelMesh& g = scene.level_geometry(o, level);
+  geo->set_level(level);
+  geo->set_vertex_count(g.vertex_count);
+  geo->set_index_count(g.index_count);
+  geo->set_vertices(g.vertices);
+  geo->set_indices(g.indices);
+  geo->set_step_log2(g.step_log2);
+  geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
+  geo->set_wide(g.wide);
+  geo->set_keeps_triangles(g.index_count == scene.scene().objects[o].mesh.indices.size());
+  geo->set_full_bytes(scene.geometry(o).EncodedBytes());
+  return g.EncodedBytes();
+}
+
+// Cluster `c`'s geometry at `level` >= 1 for the wire (ClusterGeometry); returns its encoded bytes.
+size_t FillCluster(const ServedScene& scene, uint32_t c, uint32_t level, v1::ClusterGeometry* geo) {
+  const scenes::EncodedLevelMesh& g = scene.cluster_geometry(c, level);
+  geo->set_cluster_id(c);
+  geo->set_level(level);
+  const std::vector<uint32_t>& objects = scene.scene().levels.clusters[c].objects;
+  geo->mutable_objects()->Add(objects.begin(), objects.end());
+  geo->set_vertex_count(g.vertex_count);
+  geo->set_index_count(g.index_count);
+  geo->set_vertices(g.vertices);
+  geo->set_indices(g.indices);
+  geo->set_step_log2(g.step_log2);
+  geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
+  geo->set_wide(g.wide);
+  uint64_t full = 0;
+  for (uint32_t o : objects) full += scene.geometry(o).EncodedBytes();
+  geo->set_full_bytes(full);
+  if (scene.levels()->ClusterKeepsTriangles(c, level)) {
+    geo->set_keeps_triangles(true);
+    for (uint32_t o : objects) {
+      geo->add_object_triangles(static_cast<uint32_t>(scene.scene().objects[o].mesh.TriangleCount()));
+    }
+  }
+  return g.EncodedBytes();
 }
 
 }  // namespace
@@ -189,6 +246,26 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
     screen_ = {l.viewport_width_px(), l.viewport_height_px(), l.vertical_fov_rad()};
     tau_px_ = l.screen_error_px();
     levels_on_ = scene_->levels() != nullptr;
+    clusters_on_ = levels_on_ && l.clusters() && !scene.levels.clusters.empty();
+  }
+  if (hello.held_cluster_levels_size() != hello.held_clusters_size()) {
+    return absl::InvalidArgumentError(absl::StrCat("Hello.held_cluster_levels has ", hello.held_cluster_levels_size(),
+                                                   " entries for ", hello.held_clusters_size(),
+                                                   " held_clusters: expected one each"));
+  }
+  for (int k = 0; k < hello.held_clusters_size(); ++k) {
+    const uint32_t c = hello.held_clusters(k), level = hello.held_cluster_levels(k);
+    if (c >= kClusterKey) {
+      return absl::InvalidArgumentError(absl::StrCat("Hello.held_clusters[", k, "] = ", c, " is not a cluster id"));
+    }
+    // A cluster or level this session could not have sent counts as not held.
+    if (!clusters_on_ || c >= scene.levels.clusters.size() || level < 1 ||
+        level > scene.levels.clusters[c].levels.size()) {
+      continue;
+    }
+    if (!sent_.insert(kClusterKey | c).second) continue;
+    held_level_[kClusterKey | c] = level;
+    held_bytes_ += scene_->ClusterRawBytes(c, level);
   }
   for (int k = 0; k < hello.held_objects_size(); ++k) {
     const uint32_t o = hello.held_objects(k);
@@ -343,7 +420,16 @@ void Session::SetWanted(double now) {
     if (it == received_.end() || emitted_.count(c) == 0) continue;
     std::deque<uint32_t>& q = pending_geometry_[c];
     const std::unordered_set<uint32_t> queued(q.begin(), q.end());
+    const auto lv = cell_levels_.find(c);
+    const CellLevels* levels = lv == cell_levels_.end() ? nullptr : &lv->second;
+    if (levels != nullptr) {
+      for (const auto& [cluster, level] : levels->clusters) {
+        const uint32_t key = kClusterKey | cluster;
+        if (!Satisfied(c, key) && queued.count(key) == 0) q.push_back(key);
+      }
+    }
     for (uint32_t o : it->second->objects) {
+      if (levels != nullptr && levels->cover.contains(o)) continue;
       if (!Satisfied(c, o) && queued.count(o) == 0) q.push_back(o);
     }
   }
@@ -370,14 +456,30 @@ void Session::OnCellReady(const CellPvsPtr& pvs, bool from_cache) {
   received_[pvs->cell] = pvs;
   if (levels_on_) {
     // The coarsest level of each object that holds from anywhere in the cell's eye band.
+    const scenes::Aabb box = scene_->grid().CellBox(pvs->cell);
     const std::vector<scenes::DrawItem> items =
-        scenes::ChooseLevels(*scene_->levels(), pvs->objects, scene_->grid().CellBox(pvs->cell), screen_, tau_px_,
-                             /*clusters=*/false);
-    std::vector<uint32_t>& levels = cell_levels_[pvs->cell];
-    levels.assign(pvs->objects.size(), 0);
+        scenes::ChooseLevels(*scene_->levels(), pvs->objects, box, screen_, tau_px_, /*clusters=*/false);
+    CellLevels& levels = cell_levels_[pvs->cell];
+    levels = CellLevels{};
+    levels.objects.assign(pvs->objects.size(), 0);
     for (const scenes::DrawItem& it : items) {
       const auto at = std::lower_bound(pvs->objects.begin(), pvs->objects.end(), it.id);
-      levels[static_cast<size_t>(at - pvs->objects.begin())] = it.level;
+      levels.objects[static_cast<size_t>(at - pvs->objects.begin())] = it.level;
+    }
+    // Clusters where they cost no more bytes and triangles than the objects' own levels; each
+    // object keeps its own level too (a client holding it there need not get the cluster).
+    if (clusters_on_) {
+      const std::vector<scenes::DrawItem> with =
+          scenes::ChooseLevels(*scene_->levels(), pvs->objects, box, screen_, tau_px_, /*clusters=*/true);
+      for (const scenes::DrawItem& it : with) {
+        if (it.kind != scenes::DrawItem::Kind::kCluster) continue;
+        levels.clusters.emplace_back(it.id, it.level);
+        std::vector<uint32_t>& members = levels.members[it.id];
+        const std::vector<uint32_t>& all = scene_->scene().levels.clusters[it.id].objects;
+        std::set_intersection(all.begin(), all.end(), pvs->objects.begin(), pvs->objects.end(),
+                              std::back_inserter(members));
+        for (uint32_t o : members) levels.cover.emplace(o, it.id);
+      }
     }
   }
   if (log_ != nullptr) {
@@ -410,29 +512,129 @@ void Session::Emit(CellId cell) {
   list->set_cell_id(cell);
   list->mutable_object_ids()->Add(pvs->objects.begin(), pvs->objects.end());
   list->set_compute_s(pvs->compute_s);
+  const CellLevels* levels = nullptr;
   if (levels_on_) {
-    const std::vector<uint32_t>& levels = cell_levels_.at(cell);
-    list->mutable_object_levels()->Add(levels.begin(), levels.end());
+    if (clusters_on_) {
+      AdoptHeldClusters(cell);
+      DropDearClusters(cell);
+    }
+    levels = &cell_levels_.at(cell);
+    list->mutable_object_levels()->Add(levels->objects.begin(), levels->objects.end());
+    for (const auto& [c, level] : levels->clusters) {
+      list->add_cluster_ids(c);
+      list->add_cluster_levels(level);
+    }
   }
   QueueControl(std::move(m));
   control_.back().cell = cell;
   emitted_.insert(cell);
+  // What the cell needs: its chosen clusters (each standing for its objects), then the others.
   std::deque<uint32_t>& q = pending_geometry_[cell];
+  if (levels != nullptr) {
+    for (const auto& [c, level] : levels->clusters) {
+      if (!Satisfied(cell, kClusterKey | c)) q.push_back(kClusterKey | c);
+    }
+  }
   for (uint32_t o : pvs->objects) {
+    if (levels != nullptr && levels->cover.contains(o)) continue;
     if (!Satisfied(cell, o)) q.push_back(o);
   }
   stats_.set_pvs_sent(stats_.pvs_sent() + 1);
 }
 
+void Session::AdoptHeldClusters(CellId cell) {
+  CellLevels& levels = cell_levels_.at(cell);
+  const scenes::LevelIndex& index = *scene_->levels();
+  const scenes::Scene& scene = scene_->scene();
+  const std::vector<uint32_t>& pvs = received_.at(cell)->objects;
+  const scenes::Aabb box = scene_->grid().CellBox(cell);
+  std::vector<std::pair<uint32_t, uint32_t>> held;  // (cluster, level), ascending
+  for (const auto& [key, level] : held_level_) {
+    if ((key & kClusterKey) != 0) held.emplace_back(key & ~kClusterKey, level);
+  }
+  std::sort(held.begin(), held.end());
+  bool adopted = false;
+  for (const auto& [c, level] : held) {
+    const scenes::Cluster& cluster = scene.levels.clusters[c];
+    if (levels.members.contains(c) || !index.ClusterKeepsTriangles(c, level)) continue;
+    if (scenes::ErrorPixels(cluster.levels[level - 1].error_m, scenes::BoxDistance(box, cluster.bounds), screen_) >
+        tau_px_) {
+      continue;  // too coarse from here
+    }
+    std::vector<uint32_t> members;
+    std::set_intersection(cluster.objects.begin(), cluster.objects.end(), pvs.begin(), pvs.end(),
+                          std::back_inserter(members));
+    // Only where it draws what the objects' own levels would (their triangles, masked alike).
+    const bool fits = !members.empty() && std::all_of(members.begin(), members.end(), [&](uint32_t o) {
+      const uint32_t own = NeededLevel(cell, o);
+      const size_t full = scene.objects[o].mesh.TriangleCount();
+      return own == 0 || scene.levels.objects[o][own - 1].mesh.TriangleCount() == full;
+    });
+    if (!fits) continue;
+    // It replaces the chosen clusters that share an object with it (not yet sent: it is held).
+    std::erase_if(levels.clusters, [&](const std::pair<uint32_t, uint32_t>& other) {
+      const std::vector<uint32_t>& theirs = levels.members.at(other.first);
+      const bool shares = std::any_of(theirs.begin(), theirs.end(), [&](uint32_t o) {
+        return std::binary_search(members.begin(), members.end(), o);
+      });
+      if (!shares) return false;
+      for (uint32_t o : theirs) levels.cover.erase(o);
+      levels.members.erase(other.first);
+      return true;
+    });
+    for (uint32_t o : members) levels.cover[o] = c;
+    levels.members[c] = std::move(members);
+    levels.clusters.emplace_back(c, level);
+    adopted = true;
+  }
+  if (adopted) std::sort(levels.clusters.begin(), levels.clusters.end());
+}
+
+void Session::DropDearClusters(CellId cell) {
+  CellLevels& levels = cell_levels_.at(cell);
+  const scenes::LevelIndex& index = *scene_->levels();
+  std::erase_if(levels.clusters, [&](const std::pair<uint32_t, uint32_t>& chosen) {
+    const auto [c, level] = chosen;
+    if (HeldLevel(kClusterKey | c) != 0 && HeldLevel(kClusterKey | c) <= level) return false;  // held: free
+    uint64_t missing = 0;
+    std::vector<uint32_t>& members = levels.members.at(c);
+    for (uint32_t o : members) {
+      const uint32_t own = NeededLevel(cell, o);
+      if (sent_.count(o) > 0 && HeldLevel(o) <= own) continue;
+      // An object another wanted cell needs on its own (not through this cluster) comes anyway.
+      bool needed_elsewhere = false;
+      for (const auto& [other, other_levels] : cell_levels_) {
+        if (other == cell || other_levels.objects.empty()) continue;
+        const std::vector<uint32_t>& pvs = received_.at(other)->objects;
+        if (!std::binary_search(pvs.begin(), pvs.end(), o)) continue;
+        const auto cover = other_levels.cover.find(o);
+        if (cover == other_levels.cover.end() || cover->second != c) {
+          needed_elsewhere = true;
+          break;
+        }
+      }
+      if (!needed_elsewhere) missing += index.ObjectBytes(o, own);
+    }
+    if (index.ClusterBytes(c, level) <= missing) return false;
+    for (uint32_t o : members) levels.cover.erase(o);
+    levels.members.erase(c);
+    return true;
+  });
+}
+
 v1::ServerMessage Session::Forget(std::vector<uint32_t> objects, const char* reason) {
   std::sort(objects.begin(), objects.end());
-  for (uint32_t o : objects) {
-    held_bytes_ -= scene_->RawBytes(o, HeldLevel(o));
-    sent_.erase(o);
-    held_level_.erase(o);
-  }
   v1::ServerMessage m;
-  m.mutable_evict()->mutable_object_ids()->Add(objects.begin(), objects.end());
+  for (uint32_t key : objects) {
+    held_bytes_ -= RawBytesOf(key, HeldLevel(key));
+    sent_.erase(key);
+    held_level_.erase(key);
+    if ((key & kClusterKey) != 0) {
+      m.mutable_evict()->add_cluster_ids(key & ~kClusterKey);
+    } else {
+      m.mutable_evict()->add_object_ids(key);
+    }
+  }
   stats_.set_evicted_objects(stats_.evicted_objects() + objects.size());
   if (log_ != nullptr) {
     log_->Write(id_, "evict", {{"objects", static_cast<uint64_t>(objects.size())}, {"reason", reason}});
@@ -451,6 +653,9 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
     auto it = received_.find(wanted_[k]);
     if (it == received_.end()) continue;
     for (uint32_t o : it->second->objects) needed_at.emplace(o, k);  // keeps the earliest
+    if (auto lv = cell_levels_.find(wanted_[k]); lv != cell_levels_.end()) {
+      for (const auto& [c, level] : lv->second.clusters) needed_at.emplace(kClusterKey | c, k);
+    }
   }
   // (need rank, bytes held, object): latest need first, then largest first.
   std::vector<std::tuple<size_t, uint64_t, uint32_t>> candidates;
@@ -458,7 +663,7 @@ std::optional<v1::ServerMessage> Session::MakeRoom(size_t bytes, size_t rank) {
     auto it = needed_at.find(o);
     const size_t at = it == needed_at.end() ? kNever : it->second;
     if (at <= rank) continue;
-    candidates.emplace_back(at, scene_->RawBytes(o, HeldLevel(o)), o);
+    candidates.emplace_back(at, RawBytesOf(o, HeldLevel(o)), o);
   }
   std::sort(candidates.begin(), candidates.end(), std::greater<>());
   std::vector<uint32_t> evict;
@@ -514,53 +719,35 @@ void Session::PostMasks() {
 }
 
 std::optional<v1::ServerMessage> Session::SendObject(uint32_t o, size_t rank, bool* sent) {
-  return SendLevel(o, rank < wanted_.size() ? NeededLevel(wanted_[rank], o) : 0, rank, sent);
+  if (rank >= wanted_.size()) return SendLevel(o, 0, rank, sent);
+  const CellId cell = wanted_[rank];
+  if (auto lv = cell_levels_.find(cell); lv != cell_levels_.end()) {
+    if (auto c = lv->second.cover.find(o); c != lv->second.cover.end()) {
+      const uint32_t key = kClusterKey | c->second;
+      *sent = false;
+      if (sent_.count(key) > 0) return std::nullopt;  // drawn by the cluster held
+      return SendLevel(key, NeededLevel(cell, key), rank, sent);
+    }
+  }
+  return SendLevel(o, NeededLevel(cell, o), rank, sent);
 }
 
-std::optional<v1::ServerMessage> Session::SendLevel(uint32_t o, uint32_t level, size_t rank, bool* sent) {
+std::optional<v1::ServerMessage> Session::SendLevel(uint32_t key, uint32_t level, size_t rank, bool* sent) {
   *sent = false;
   // A level replaces the one held: the budget counts the difference.
-  const uint64_t raw = scene_->RawBytes(o, level);
-  const uint64_t replaced = sent_.count(o) > 0 ? scene_->RawBytes(o, HeldLevel(o)) : 0;
+  const uint64_t raw = RawBytesOf(key, level);
+  const uint64_t replaced = sent_.count(key) > 0 ? RawBytesOf(key, HeldLevel(key)) : 0;
   if (memory_budget_ != 0 && held_bytes_ - replaced + raw > memory_budget_) {
     // Room is made by evicting what the client needs later than this cell (the Evict goes
     // first, the object right after it); without such objects it waits for the next crossing.
     return MakeRoom(raw - std::min(raw, replaced), rank);
   }
   v1::ServerMessage m;
-  v1::ObjectGeometry* geo = m.mutable_geometry();
-  geo->set_object_id(o);
-  size_t encoded = 0;
-  if (level == 0) {
-    const scenes::EncodedMesh& g = scene_->geometry(o);
-    geo->set_vertex_count(g.vertex_count);
-    geo->set_index_count(g.index_count);
-    geo->set_vertices(g.vertices);
-    geo->set_indices(g.indices);
-    encoded = g.EncodedBytes();
-  } else {
-    const scenes::EncodedLevelMesh& g = scene_->level_geometry(o, level);
-    geo->set_level(level);
-    geo->set_vertex_count(g.vertex_count);
-    geo->set_index_count(g.index_count);
-    geo->set_vertices(g.vertices);
-    geo->set_indices(g.indices);
-    geo->set_step_log2(g.step_log2);
-    geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
-    geo->set_wide(g.wide);
-    geo->set_keeps_triangles(g.index_count == scene_->scene().objects[o].mesh.indices.size());
-    geo->set_full_bytes(scene_->geometry(o).EncodedBytes());
-    encoded = g.EncodedBytes();
-  }
-  if (level == 0) {
-    // A level's bounds are its mesh's, which the receiver has (58 bytes a message saved).
-    const scenes::Aabb& b = scene_->scene().objects[o].bounds;
-    SetVec(b.min, geo->mutable_bounds_min());
-    SetVec(b.max, geo->mutable_bounds_max());
-  }
-  sent_.insert(o);
-  if (level == 0) held_level_.erase(o);
-  else held_level_[o] = level;
+  const size_t encoded = (key & kClusterKey) != 0 ? FillCluster(*scene_, key & ~kClusterKey, level, m.mutable_cluster())
+                                                  : FillObject(*scene_, key, level, m.mutable_geometry());
+  sent_.insert(key);
+  if (level == 0) held_level_.erase(key);
+  else held_level_[key] = level;
   held_bytes_ += raw - replaced;
   const size_t bytes = m.ByteSizeLong();
   credit_ -= static_cast<int64_t>(encoded);
@@ -576,19 +763,55 @@ uint32_t Session::HeldLevel(uint32_t o) const {
   return it == held_level_.end() ? 0 : it->second;
 }
 
-uint32_t Session::NeededLevel(CellId cell, uint32_t o) const {
+uint64_t Session::RawBytesOf(uint32_t key, uint32_t level) const {
+  return (key & kClusterKey) != 0 ? scene_->ClusterRawBytes(key & ~kClusterKey, level) : scene_->RawBytes(key, level);
+}
+
+uint32_t Session::NeededLevel(CellId cell, uint32_t key) const {
   if (!levels_on_) return 0;
   const auto lv = cell_levels_.find(cell);
   const auto pvs = received_.find(cell);
   if (lv == cell_levels_.end() || pvs == received_.end()) return 0;
+  if ((key & kClusterKey) != 0) {
+    const auto& clusters = lv->second.clusters;
+    const auto at = std::lower_bound(clusters.begin(), clusters.end(), std::pair{key & ~kClusterKey, uint32_t{0}});
+    return at != clusters.end() && at->first == (key & ~kClusterKey) ? at->second : 0;
+  }
   const std::vector<uint32_t>& objects = pvs->second->objects;
-  const auto at = std::lower_bound(objects.begin(), objects.end(), o);
-  if (at == objects.end() || *at != o) return 0;
-  return lv->second[static_cast<size_t>(at - objects.begin())];
+  const auto at = std::lower_bound(objects.begin(), objects.end(), key);
+  if (at == objects.end() || *at != key) return 0;
+  return lv->second.objects[static_cast<size_t>(at - objects.begin())];
 }
 
-bool Session::Satisfied(CellId cell, uint32_t o) const {
-  return sent_.count(o) > 0 && (!levels_on_ || HeldLevel(o) <= NeededLevel(cell, o));
+bool Session::Satisfied(CellId cell, uint32_t key) const {
+  // Held at the level the cell needs, or finer (a cluster's level 0 is never needed).
+  auto held_for = [&](uint32_t k) {
+    return sent_.count(k) > 0 && (!levels_on_ || HeldLevel(k) <= NeededLevel(cell, k));
+  };
+  if (held_for(key)) return true;
+  if (!clusters_on_) return false;
+  const auto lv = cell_levels_.find(cell);
+  if (lv == cell_levels_.end()) return false;
+  if ((key & kClusterKey) != 0) {
+    const auto members = lv->second.members.find(key & ~kClusterKey);
+    return members != lv->second.members.end() && std::all_of(members->second.begin(), members->second.end(), held_for);
+  }
+  const auto c = lv->second.cover.find(key);
+  return c != lv->second.cover.end() && held_for(kClusterKey | c->second);
+}
+
+bool Session::Drawable(CellId cell, uint32_t key) const {
+  if (sent_.count(key) > 0) return true;
+  if (!clusters_on_) return false;
+  const auto lv = cell_levels_.find(cell);
+  if (lv == cell_levels_.end()) return false;
+  if ((key & kClusterKey) != 0) {
+    const auto members = lv->second.members.find(key & ~kClusterKey);
+    return members != lv->second.members.end() &&
+           std::all_of(members->second.begin(), members->second.end(), [&](uint32_t o) { return sent_.count(o) > 0; });
+  }
+  const auto c = lv->second.cover.find(key);
+  return c != lv->second.cover.end() && sent_.count(kClusterKey | c->second) > 0;
 }
 
 void Session::QueueControl(v1::ServerMessage message) {
@@ -635,7 +858,9 @@ std::optional<v1::ServerMessage> Session::NextMessage() {
       // out: a queued list may be dropped before it is sent).
       v1::ViewcellPvs* list = c.message.mutable_pvs();
       proto::PvsList next{list->cell_id(), {list->object_ids().begin(), list->object_ids().end()},
-                          {list->object_levels().begin(), list->object_levels().end()}};
+                          {list->object_levels().begin(), list->object_levels().end()},
+                          {list->cluster_ids().begin(), list->cluster_ids().end()},
+                          {list->cluster_levels().begin(), list->cluster_levels().end()}};
       if (previous_list_.has_value()) {
         v1::ViewcellPvs delta = *list;
         proto::EncodePvsDelta(*previous_list_, next, &delta);
@@ -730,7 +955,7 @@ bool Session::LacksGeometry(CellId cell) const {
   if (emitted_.count(cell) == 0) return false;
   auto it = pending_geometry_.find(cell);
   if (it == pending_geometry_.end()) return false;
-  return std::any_of(it->second.begin(), it->second.end(), [&](uint32_t o) { return sent_.count(o) == 0; });
+  return std::any_of(it->second.begin(), it->second.end(), [&](uint32_t key) { return !Drawable(cell, key); });
 }
 
 bool Session::Urgent() const {
@@ -748,7 +973,7 @@ std::optional<v1::ServerMessage> Session::NextMissingObject() {
     std::deque<uint32_t>& q = it->second;
     for (auto at = q.begin(); at != q.end(); ++at) {
       const uint32_t o = *at;
-      if (sent_.count(o) > 0) continue;  // held at some level: a finer one waits its turn
+      if (Drawable(c, o)) continue;  // held at some level: a finer one waits its turn
       bool sent = false;
       std::optional<v1::ServerMessage> m = SendLevel(o, NeededLevel(c, o), rank, &sent);
       if (m.has_value() && !sent) return m;  // the Evict first; the object stays queued

@@ -125,23 +125,39 @@ class Session : public std::enable_shared_from_this<Session> {
   void OnCellReady(const CellPvsPtr& pvs, bool from_cache);  // lock held
   void EmitReady();                                          // lock held
   void Emit(CellId cell);                                    // lock held
+  // Drops from `cell`'s chosen clusters those that cost more bytes than the objects they stand
+  // for that the client does not hold at their own level already (the choice is per cell; this
+  // is per session, as the list goes out).
+  void DropDearClusters(CellId cell);                        // lock held
+  // Adds to `cell`'s chosen clusters those the client holds at a level fine enough from the cell
+  // that keeps its objects' triangles (drawn as their own levels would be, at no byte cost),
+  // in place of chosen clusters sharing an object with them.
+  void AdoptHeldClusters(CellId cell);                       // lock held
   // Moves the chain of neighbourhoods along with the client; posts the masks it can.
   void UpdateMasks(double now);                              // lock held
   // Posts the masks whose cells' PVS lists went out to the scene's mask workers.
   void PostMasks();                                          // lock held
   // Geometry of `o` for the wire (or the Evict that must go before it; none when it cannot be
   // sent within the memory budget), charged to the credit; `rank`: the position in wanted_ of
-  // the cell it is sent for.
+  // the cell it is sent for. An object a cluster chosen for that cell stands for: the cluster
+  // (none when the client holds it at some level).
   std::optional<vistream::v1::ServerMessage> SendObject(uint32_t o, size_t rank, bool* sent);  // lock held
-  // The same at `level` (0: full).
-  std::optional<vistream::v1::ServerMessage> SendLevel(uint32_t o, uint32_t level, size_t rank, bool* sent);  // lock held
+  // Geometry of `key` (an object, or kClusterKey | cluster) at `level` (0: an object's full mesh).
+  std::optional<vistream::v1::ServerMessage> SendLevel(uint32_t key, uint32_t level, size_t rank, bool* sent);  // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
-  // The level object `o` needs for `cell` (0: full; always 0 without levels).
-  uint32_t NeededLevel(CellId cell, uint32_t o) const;       // lock held
-  // Whether the client holds `o` at a level `cell` accepts (that level or finer).
-  bool Satisfied(CellId cell, uint32_t o) const;             // lock held
-  // The level the client holds `o` at (0 also when it does not hold it).
-  uint32_t HeldLevel(uint32_t o) const;                      // lock held
+  // The level `key` needs for `cell` (an object: 0 full, always 0 without levels; a cluster: its
+  // chosen level, 0 when the cell did not choose it).
+  uint32_t NeededLevel(CellId cell, uint32_t key) const;     // lock held
+  // Whether the client holds what `cell` needs of `key` (ViewcellPvs.cluster_ids' rule): an
+  // object at its level or finer, or the cluster the cell chose for it at the cluster's level or
+  // finer; a chosen cluster at its level or finer, or all the cell's objects it stands for.
+  bool Satisfied(CellId cell, uint32_t key) const;           // lock held
+  // Whether the client can draw what `cell` needs of `key` at some level (else a stall).
+  bool Drawable(CellId cell, uint32_t key) const;            // lock held
+  // The level the client holds `key` at (0 also when it does not hold it).
+  uint32_t HeldLevel(uint32_t key) const;                    // lock held
+  // What `key` at `level` takes decoded (RawMeshBytes: the memory budget's unit).
+  uint64_t RawBytesOf(uint32_t key, uint32_t level) const;   // lock held
   // Whether `cell`'s PVS list and geometry have been handed out (emitted, nothing pending).
   bool Served(CellId cell) const;                            // lock held
   // Whether `cell`'s list went out and some object on it is not held at any level: a client
@@ -184,17 +200,27 @@ class Session : public std::enable_shared_from_this<Session> {
   std::map<CellId, CellPvsPtr> received_;      // PVSs of wanted cells that arrived
   std::set<CellId> requested_;                 // asked of the scheduler, not arrived
   std::set<CellId> emitted_;                   // PVS message queued or sent
-  std::map<CellId, std::deque<uint32_t>> pending_geometry_;  // per wanted cell, not yet sent
-  std::unordered_set<uint32_t> sent_;          // geometry the client holds (sent or held on resume), any level
+  // Geometry is named by keys: an object by its id, a cluster level (issue 45) by kClusterKey | id.
+  static constexpr uint32_t kClusterKey = uint32_t{1} << 31;
+  std::map<CellId, std::deque<uint32_t>> pending_geometry_;  // per wanted cell, keys not yet sent
+  std::unordered_set<uint32_t> sent_;          // keys the client holds (sent or held on resume), any level
   // Hello.pvs_deltas: lists go as differences from the one sent before (proto/pvs_delta.h).
   bool pvs_deltas_ = false;
   std::optional<proto::PvsList> previous_list_;  // the last list handed to the transport
   // Levels of detail (Hello.levels; issue 45): on when the client asked and the scene has them.
   bool levels_on_ = false;
+  bool clusters_on_ = false;  // LevelRequest.clusters, and the scene has clusters
   scenes::ScreenSpec screen_;
   double tau_px_ = 0.0;
-  std::unordered_map<uint32_t, uint32_t> held_level_;  // level of each held object (absent: full)
-  std::map<CellId, std::vector<uint32_t>> cell_levels_;  // per received cell: the level each PVS object needs
+  std::unordered_map<uint32_t, uint32_t> held_level_;  // level of each held key (absent: an object's full mesh)
+  // Per received cell: what its list asks of each level (scenes/level_choice.h ChooseLevels).
+  struct CellLevels {
+    std::vector<uint32_t> objects;                           // each PVS object's own level
+    std::vector<std::pair<uint32_t, uint32_t>> clusters;     // chosen (cluster, level), ascending
+    std::unordered_map<uint32_t, uint32_t> cover;            // PVS object -> the chosen cluster standing for it
+    std::unordered_map<uint32_t, std::vector<uint32_t>> members;  // chosen cluster -> the PVS objects it stands for
+  };
+  std::map<CellId, CellLevels> cell_levels_;
   uint64_t held_bytes_ = 0;                    // decoded bytes of sent_
   int64_t credit_ = 0;
   // The link budget (issue 45): while Urgent(), ε-masks (with the objects they pull) take at

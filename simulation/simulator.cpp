@@ -166,11 +166,15 @@ class Run {
   client::CreditWindow credit_;
   client::PoseCadence poses_;
   std::unordered_set<uint32_t> drawn_whole_;  // held at a level a mask's bits do not apply to
+  std::unordered_set<uint32_t> clusters_whole_;  // clusters held at a level a mask's bits do not apply to
   // Whether object `o` is held and uploaded by a frame at `t` (with a declared frame time, an
   // object is uploaded at the first frame after its arrival).
   bool Ready(uint32_t o, double t) const {
     const client::CellCompletion::Object* h = completion_.Held(o);
-    return h != nullptr && FrameCeil(h->arrival_s) <= t + 1e-9;
+    if (h != nullptr && FrameCeil(h->arrival_s) <= t + 1e-9) return true;
+    // Or drawn by a held cluster the cell's list chose for it.
+    const std::optional<uint32_t> c = cell_.has_value() ? completion_.CoveringCluster(*cell_, o) : std::nullopt;
+    return c.has_value() && FrameCeil(completion_.HeldCluster(*c)->arrival_s) <= t + 1e-9;
   }
   // Triangles of object `o` as held (its level's).
   uint64_t TrianglesOf(uint32_t o) const {
@@ -250,7 +254,20 @@ void Run::Receive(const v1::ServerMessage& m) {
         failure_ = absl::InternalError(absl::StrCat("the simulated client cannot read a PVS list: ", list.status().message()));
         break;
       }
-      completion_.SetList(list->cell, list->objects, t, list->levels);
+      completion_.SetList(list->cell, list->objects, t, list->levels, list->cluster_ids, list->cluster_levels);
+      break;
+    }
+    case v1::ServerMessage::kCluster: {
+      const v1::ClusterGeometry& g = m.cluster();
+      if (g.keeps_triangles()) {
+        clusters_whole_.erase(g.cluster_id());
+      } else {
+        clusters_whole_.insert(g.cluster_id());
+      }
+      completion_.ArriveCluster(g.cluster_id(), t, g.level(), std::span<const uint32_t>(g.objects().data(), static_cast<size_t>(g.objects().size())));
+      ++r_.cluster_levels_received;
+      r_.geometry_bytes += client::ChargedBytes(m);
+      ++r_.objects_received;
       break;
     }
     case v1::ServerMessage::kGeometry: {
@@ -270,6 +287,10 @@ void Run::Receive(const v1::ServerMessage& m) {
       for (uint32_t o : m.evict().object_ids()) {
         completion_.Drop(o);
         drawn_whole_.erase(o);
+      }
+      for (uint32_t c : m.evict().cluster_ids()) {
+        completion_.DropCluster(c);
+        clusters_whole_.erase(c);
       }
       break;
     case v1::ServerMessage::kEpsilonMask: {
@@ -401,10 +422,26 @@ void Run::Frame(double t) {
     const scenes::ViewFrustum frustum = camera.Frustum();
     const auto& objects = scene_.scene().objects;
     auto seen = [&](uint32_t o) { return frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max); };
+    const scenes::SceneLevels& levels = scene_.scene().levels;
+    // A held cluster the cell's list chose stands for its objects there: drawn once, whole.
+    std::unordered_set<uint32_t> clusters_drawn;
+    auto cluster_triangles = [&](uint32_t o) -> std::optional<uint64_t> {
+      if (!cell_.has_value()) return std::nullopt;
+      const std::optional<uint32_t> c = completion_.CoveringCluster(*cell_, o);
+      if (!c.has_value()) return std::nullopt;
+      if (!clusters_drawn.insert(*c).second) return 0;
+      const scenes::Cluster& cluster = levels.clusters[*c];
+      if (!frustum.MayOverlap(cluster.bounds.min, cluster.bounds.max)) return 0;
+      return cluster.levels[completion_.HeldCluster(*c)->level - 1].mesh.TriangleCount();
+    };
     uint64_t without = 0;
     if (complete && cell_.has_value()) {
       for (uint32_t o : *completion_.List(*cell_)) {
-        if (completion_.Held(o) != nullptr && seen(o)) without += TrianglesOf(o);
+        if (const std::optional<uint64_t> n = cluster_triangles(o)) {
+          without += *n;
+        } else if (completion_.Held(o) != nullptr && seen(o)) {
+          without += TrianglesOf(o);
+        }
       }
     } else {
       completion_.ForEachHeld([&](uint32_t o, const client::CellCompletion::Object&) {
@@ -414,9 +451,19 @@ void Run::Frame(double t) {
     uint64_t tris = without;
     if (mask != nullptr) {
       tris = 0;
+      clusters_drawn.clear();
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
         const uint32_t o = mask->object_ids[k];
+        const std::optional<uint32_t> c = completion_.CoveringCluster(*cell_, o);
+        if (c.has_value() && clusters_whole_.count(*c) > 0) {
+          tris += *cluster_triangles(o);  // a cluster seen in the mask (any of its objects is) is drawn whole
+          continue;
+        }
         if (!seen(o)) continue;
+        if (c.has_value()) {
+          tris += mask->object_triangles[k];  // the cluster keeps the object's triangles: the mask's bits apply
+          continue;
+        }
         // A level that keeps the object's triangles (ObjectGeometry.keeps_triangles) keeps the
         // mask's bits; another is drawn whole (as client/renderer.h draws it).
         tris += drawn_whole_.count(o) > 0 ? TrianglesOf(o) : mask->object_triangles[k];
@@ -512,6 +559,7 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   hello.scene = scene_.scene().name;
   hello.epsilon_masks = opt_.scheme == Scheme::kPvsEps;
   hello.screen_error_px = opt_.lod_tau_px;
+  hello.clusters = opt_.lod_clusters;
   r_.lod_tau_px = opt_.lod_tau_px;
   if (opt_.lod_tau_px > 0.0 && scene_.levels() == nullptr) {
     return absl::FailedPreconditionError("levels of detail asked for, but the scene has none");

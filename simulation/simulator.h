@@ -80,6 +80,9 @@ struct SimulationOptions {
   // with a 60 degree vertical field of view; 0: off. The scene must have levels
   // (ServedSceneOptions::make_levels, or its own).
   double lod_tau_px = 0.0;
+  // With levels: the client draws cluster levels (HelloSettings::clusters); the scene's levels
+  // must have clusters for any to be sent.
+  bool lod_clusters = true;
 };
 
 struct SimulationResult {
@@ -148,6 +151,7 @@ struct SimulationResult {
   // that carried a level coarser than full.
   uint64_t coarse_frames = 0;
   uint64_t level_objects_received = 0;
+  uint64_t cluster_levels_received = 0;  // ClusterGeometry messages
   double lod_tau_px = 0.0;
   uint64_t jitter_draws = 0;     // messages delayed by a jitter draw > 0
   uint64_t lost_segments = 0;

@@ -157,5 +157,127 @@ TEST(CellCompletion, AnEmptyListIsCompleteWhenItArrives) {
   EXPECT_EQ(heard, (std::vector<uint32_t>{4}));
 }
 
+// Cluster levels (issue 45): an object of a list that a held cluster chosen by the list stands
+// for is drawable (not missing), complete when the cluster is held at the level the list asks or
+// finer; the counts agree with scanning the list through random arrivals and drops of objects
+// and clusters, and new lists.
+TEST(CellCompletion, ClustersCountAsTheListsRuleSaysThroughRandomEvents) {
+  std::mt19937 rng(11);
+  auto pick = [&](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  constexpr uint32_t kObjects = 40, kClusters = 6, kCells = 4;
+  // Fixed cluster membership: cluster c stands for objects c * 6 .. c * 6 + 8 (overlapping).
+  auto members = [](uint32_t c) {
+    std::vector<uint32_t> m;
+    for (uint32_t o = c * 6; o < c * 6 + 9 && o < kObjects; ++o) m.push_back(o);
+    return m;
+  };
+  CellCompletion h;
+  std::map<uint32_t, uint32_t> held, held_clusters;  // id -> level
+  struct List {
+    std::vector<uint32_t> objects, levels, clusters, cluster_levels;
+  };
+  std::map<uint32_t, List> lists;
+  size_t covered_checks = 0;
+  for (int step = 0; step < 4000; ++step) {
+    const uint32_t what = pick(10);
+    if (what == 0) {
+      List l;
+      for (uint32_t o = 0; o < kObjects; ++o) {
+        if (pick(2) == 0) {
+          l.objects.push_back(o);
+          l.levels.push_back(pick(3));
+        }
+      }
+      // Chosen clusters share no object of the list.
+      std::vector<bool> taken(kObjects, false);
+      for (uint32_t c = 0; c < kClusters; ++c) {
+        if (pick(2) != 0) continue;
+        const std::vector<uint32_t> m = members(c);
+        if (std::any_of(m.begin(), m.end(), [&](uint32_t o) { return taken[o]; })) continue;
+        for (uint32_t o : m) taken[o] = true;
+        l.clusters.push_back(c);
+        l.cluster_levels.push_back(1 + pick(3));
+      }
+      const uint32_t cell = pick(kCells);
+      h.SetList(cell, l.objects, step, l.levels, l.clusters, l.cluster_levels);
+      lists[cell] = l;
+    } else if (what < 5) {
+      const uint32_t o = pick(kObjects), level = pick(4);
+      h.Arrive(o, step, level);
+      held[o] = level;
+    } else if (what < 7) {
+      const uint32_t o = pick(kObjects);
+      h.Drop(o);
+      held.erase(o);
+    } else if (what < 9) {
+      const uint32_t c = pick(kClusters), level = 1 + pick(3);
+      const std::vector<uint32_t> m = members(c);
+      h.ArriveCluster(c, step, level, m);
+      held_clusters[c] = level;
+    } else {
+      const uint32_t c = pick(kClusters);
+      h.DropCluster(c);
+      held_clusters.erase(c);
+    }
+    for (const auto& [cell, l] : lists) {
+      size_t missing = 0, coarse = 0;
+      for (size_t k = 0; k < l.objects.size(); ++k) {
+        const uint32_t o = l.objects[k];
+        int own = 0;  // 0 missing, 1 coarse, 2 complete
+        if (auto it = held.find(o); it != held.end()) own = it->second <= l.levels[k] ? 2 : 1;
+        int by_cluster = 0;
+        std::optional<uint32_t> covering;
+        for (size_t c = 0; c < l.clusters.size(); ++c) {
+          const std::vector<uint32_t> m = members(l.clusters[c]);
+          auto it = held_clusters.find(l.clusters[c]);
+          if (it == held_clusters.end() || !std::binary_search(m.begin(), m.end(), o)) continue;
+          by_cluster = it->second <= l.cluster_levels[c] ? 2 : 1;
+          covering = l.clusters[c];
+        }
+        EXPECT_EQ(h.CoveringCluster(cell, o), covering) << "cell " << cell << " object " << o;
+        covered_checks += covering.has_value() ? 1 : 0;
+        const int st = std::max(own, by_cluster);
+        missing += st == 0 ? 1 : 0;
+        coarse += st == 1 ? 1 : 0;
+      }
+      ASSERT_EQ(h.Missing(cell), missing) << "step " << step << " cell " << cell;
+      ASSERT_EQ(h.Coarse(cell), coarse) << "step " << step << " cell " << cell;
+      ASSERT_EQ(h.Complete(cell), missing == 0);
+    }
+  }
+  EXPECT_GT(covered_checks, 1000u);
+}
+
+TEST(CellCompletion, AClusterCompletesTheObjectsItStandsForAndItsDropMakesThemMissing) {
+  CellCompletion h;
+  std::vector<double> heard;
+  h.on_complete = [&](uint32_t, double t) { heard.push_back(t); };
+  const std::vector<uint32_t> objects{1, 2, 3}, levels{1, 1, 0}, clusters{5}, cluster_levels{2};
+  h.SetList(0, objects, 1.0, levels, clusters, cluster_levels);
+  h.Arrive(3, 2.0);
+  EXPECT_EQ(h.Missing(0), 2u);
+  h.ArriveCluster(5, 3.0, 4, std::vector<uint32_t>{1, 2, 9});  // coarser than the list asks
+  EXPECT_TRUE(h.Complete(0));
+  EXPECT_EQ(h.Coarse(0), 2u);
+  EXPECT_EQ(*h.CompleteAt(0), 3.0);
+  EXPECT_EQ(heard, (std::vector<double>{3.0}));
+  EXPECT_EQ(h.CoveringCluster(0, 1), 5u);
+  EXPECT_FALSE(h.CoveringCluster(0, 3).has_value());
+  h.ArriveCluster(5, 4.0, 2, std::vector<uint32_t>{1, 2, 9});  // as asked
+  EXPECT_EQ(h.Coarse(0), 0u);
+  ASSERT_NE(h.HeldCluster(5), nullptr);
+  EXPECT_EQ(h.HeldCluster(5)->level, 2u);
+  h.Arrive(1, 5.0, 1);  // held on its own too
+  h.DropCluster(5);
+  EXPECT_EQ(h.HeldCluster(5), nullptr);
+  EXPECT_EQ(h.Missing(0), 1u);  // object 2
+  EXPECT_FALSE(h.Complete(0));
+  // A list that does not choose the cluster does not count it.
+  h.ArriveCluster(5, 6.0, 1, std::vector<uint32_t>{1, 2, 9});
+  h.SetList(1, std::vector<uint32_t>{2}, 7.0);
+  EXPECT_EQ(h.Missing(1), 1u);
+  EXPECT_TRUE(h.Complete(0));
+}
+
 }  // namespace
 }  // namespace vistream::client

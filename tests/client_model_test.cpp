@@ -96,6 +96,65 @@ TEST(ClientModel, GeometryAndMasksCostTheCreditAndNothingElseDoes) {
   EXPECT_EQ(scenes::RawMeshBytes(10, 30), 10u * 24 + 30u * 4);
 }
 
+// Cluster levels (issue 45): they cost the credit as geometry does; a cluster that keeps its
+// objects' triangles decodes with each object's range; bad ones are errors naming the cluster.
+TEST(ClientModel, AClusterCostsTheCreditAndDecodesWithItsObjectsRanges) {
+  scenes::Mesh union_mesh;
+  scenes::AppendConvexPrism(std::vector<glm::dvec2>{{0, 0}, {8, 0}, {8, 6}, {0, 6}}, 0.0, 12.5, &union_mesh);
+  scenes::AppendConvexPrism(std::vector<glm::dvec2>{{20, 0}, {28, 0}, {28, 6}, {20, 6}}, 0.0, 9.0, &union_mesh);
+  const scenes::EncodedLevelMesh e = scenes::EncodeLevelMesh(union_mesh);
+  v1::ServerMessage m;
+  v1::ClusterGeometry& g = *m.mutable_cluster();
+  g.set_cluster_id(3);
+  g.set_level(1);
+  for (uint32_t o : {10u, 11u}) g.add_objects(o);
+  g.set_vertex_count(e.vertex_count);
+  g.set_index_count(e.index_count);
+  g.set_vertices(e.vertices);
+  g.set_indices(e.indices);
+  g.set_step_log2(e.step_log2);
+  g.mutable_origin()->Add(std::begin(e.origin), std::end(e.origin));
+  g.set_wide(e.wide);
+  g.set_keeps_triangles(true);
+  g.add_object_triangles(12);
+  g.add_object_triangles(12);
+  g.set_full_bytes(10000);
+  EXPECT_EQ(ChargedBytes(m), e.EncodedBytes());
+  const absl::StatusOr<DecodedCluster> c = DecodeClusterGeometry(g);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->objects, (std::vector<uint32_t>{10, 11}));
+  EXPECT_EQ(c->first_triangle, (std::vector<uint32_t>{0, 12, 24}));
+  EXPECT_EQ(c->mesh.TriangleCount(), 24u);
+  EXPECT_EQ(c->saved_bytes, 10000 - e.EncodedBytes());
+  EXPECT_EQ(c->bounds_max, glm::dvec3(28.0, 6.0, 12.5));
+  auto expect = [](const v1::ClusterGeometry& bad, const std::string& needle) {
+    const absl::Status s = DecodeClusterGeometry(bad).status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << needle;
+    EXPECT_NE(s.message().find(needle), std::string::npos) << s;
+  };
+  v1::ClusterGeometry bad = g;
+  bad.set_object_triangles(1, 11);
+  expect(bad, "cluster 3, level 1: its objects' triangles sum to 23, its mesh has 24");
+  bad = g;
+  bad.add_object_triangles(0);
+  expect(bad, "3 object triangle counts for 2 objects");
+  bad = g;
+  bad.set_objects(1, 10);
+  expect(bad, "objects do not ascend (10 then 10)");
+  bad = g;
+  bad.set_level(0);
+  expect(bad, "cluster 3, level 0: a cluster's levels start at 1");
+  bad = g;
+  bad.mutable_objects()->RemoveLast();
+  expect(bad, "stands for 1 objects (at least 2)");
+  bad = g;
+  bad.mutable_origin()->RemoveLast();
+  expect(bad, "2 origin values (expected 3)");
+  bad = g;
+  bad.set_index_count(bad.index_count() + 3);
+  EXPECT_FALSE(DecodeClusterGeometry(bad).ok());
+}
+
 v1::EpsilonMask Mask(uint32_t id, uint32_t cell, double x0) {
   v1::EpsilonMask m;
   m.set_mask_id(id);

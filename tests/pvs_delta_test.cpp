@@ -112,6 +112,44 @@ TEST(PvsDelta, BadDifferencesAreErrorsNamingTheCell) {
   for (uint32_t o : {1u, 2u}) whole.add_object_ids(o);
   whole.add_object_levels(1);
   expect(whole, "1 levels for 2 objects");
+  // Cluster levels (issue 45): one level (>= 1) per cluster id, ids ascending.
+  bad = first;
+  bad.add_cluster_ids(4);
+  expect(bad, "0 cluster levels for 1 clusters");
+  bad.add_cluster_levels(0);
+  expect(bad, "cluster 4 at level 0");
+  bad.set_cluster_levels(0, 2);
+  bad.add_cluster_ids(4);
+  bad.add_cluster_levels(1);
+  expect(bad, "cluster ids that do not ascend (4 then 4)");
+}
+
+// A list's clusters come whole with every list, deltas too, and decode as sent.
+TEST(PvsDelta, ClustersComeWithEveryListWhole) {
+  PvsListDecoder decoder;
+  const PvsList a{7, {1, 2, 3}, {1, 1, 0}, {4, 9}, {1, 3}};
+  const PvsList b{8, {1, 2, 5}, {1, 2, 0}, {9}, {2}};
+  v1::ViewcellPvs first;
+  first.set_cell_id(a.cell);
+  first.mutable_object_ids()->Add(a.objects.begin(), a.objects.end());
+  first.mutable_object_levels()->Add(a.levels.begin(), a.levels.end());
+  first.mutable_cluster_ids()->Add(a.cluster_ids.begin(), a.cluster_ids.end());
+  first.mutable_cluster_levels()->Add(a.cluster_levels.begin(), a.cluster_levels.end());
+  absl::StatusOr<PvsList> got = decoder.Decode(first);
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->cluster_ids, a.cluster_ids);
+  EXPECT_EQ(got->cluster_levels, a.cluster_levels);
+  v1::ViewcellPvs delta;
+  delta.set_cell_id(b.cell);
+  EncodePvsDelta(a, b, &delta);
+  delta.mutable_cluster_ids()->Add(b.cluster_ids.begin(), b.cluster_ids.end());
+  delta.mutable_cluster_levels()->Add(b.cluster_levels.begin(), b.cluster_levels.end());
+  got = decoder.Decode(delta);
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->objects, b.objects);
+  EXPECT_EQ(got->levels, b.levels);
+  EXPECT_EQ(got->cluster_ids, b.cluster_ids);
+  EXPECT_EQ(got->cluster_levels, b.cluster_levels);
 }
 
 }  // namespace

@@ -98,6 +98,140 @@ TEST(Server, FirstPoseBringsNineCellsCurrentFirstWithExactGeometry) {
   EXPECT_TRUE(client->Finish().ok());
 }
 
+// Cluster levels over the wire (issue 45): along city2's walk at 1 px a client that draws
+// clusters gets the clusters its lists choose, each decoding to the scene's cluster level with
+// its objects (and their triangle ranges where it keeps their triangles); every cell completes by
+// the lists' rule; chosen clusters share no object of a list. Resuming with a cluster held at a
+// level it could have, it is not sent again; claimed at a level past its levels, it comes again.
+// A client whose memory budget is full of far clusters is told to drop them.
+TEST(Server, ClusterLevelsArriveAsTheListsChooseThemAndResumeAndEvict) {
+  ServedSceneOptions o;
+  o.scene = "city2";
+  o.threads = 2;
+  o.idle_priority_masks = false;
+  o.make_levels = true;
+  absl::StatusOr<std::unique_ptr<ServedScene>> scene = ServedScene::Create(o);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_FALSE((*scene)->scene().levels.clusters.empty());
+  ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> server = WalkthroughServer::Start(scene->get(), options, nullptr);
+  ASSERT_TRUE(server.ok()) << server.status();
+  const visibility::ViewcellGrid& grid = (*scene)->grid();
+  const scenes::SceneLevels& levels = (*scene)->scene().levels;
+  client::HelloSettings settings;
+  settings.scene = "city2";
+  settings.screen_error_px = 1.0;
+  settings.clusters = true;
+  // Along the walk's first leg, a pose every cell.
+  std::vector<glm::dvec3> poses;
+  for (double y = -700.0; y <= 700.0; y += 50.0) poses.push_back({-1000.0, y, grid.base_z() + 1.2});
+  std::map<uint32_t, uint32_t> chosen;  // cluster -> a level some list chose it at
+  std::optional<CellId> chose_at;
+  {
+    SessionStream client((*server)->address());
+    client.Start(client::MakeHello(settings), true);
+    client.SendCredit(uint64_t{1} << 40);
+    for (const glm::dvec3& p : poses) {
+      const std::optional<CellId> cell = grid.CellAt(glm::dvec2(p));
+      ASSERT_TRUE(cell.has_value());
+      ASSERT_TRUE(client.SendPose(p));
+      ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return r.CellComplete(*cell); }, kWait));
+      const SessionRecord r = client.Snapshot();
+      const auto& [ids, lv] = r.pvs_clusters.at(*cell);
+      std::set<uint32_t> seen;
+      for (size_t k = 0; k < ids.size(); ++k) {
+        chosen.emplace(ids[k], lv[k]);
+        if (!chose_at.has_value()) chose_at = *cell;
+        for (uint32_t m : levels.clusters[ids[k]].objects) {
+          const std::vector<uint32_t>& list = r.pvs.at(*cell);
+          if (std::binary_search(list.begin(), list.end(), m)) {
+            EXPECT_TRUE(seen.insert(m).second) << "object " << m;
+          }
+        }
+      }
+    }
+    const SessionRecord r = client.Snapshot();
+    EXPECT_GT(r.cluster_levels, 0u);
+    EXPECT_EQ(r.duplicates, 0u);
+    EXPECT_TRUE(client.Finish().ok());
+  }
+  ASSERT_FALSE(chosen.empty()) << "no list along the walk chose a cluster";
+  // The cluster messages themselves, kept whole by a session that asks for them.
+  {
+    SessionStream client((*server)->address());
+    client.Start(client::MakeHello(settings), true);
+    client.SendCredit(uint64_t{1} << 40);
+    ASSERT_TRUE(client.SendPose(poses[0]));
+    for (const glm::dvec3& p : poses) {
+      const CellId cell = *grid.CellAt(glm::dvec2(p));
+      ASSERT_TRUE(client.SendPose(p));
+      ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return r.CellComplete(cell); }, kWait));
+      if (cell == *chose_at) break;
+    }
+    const SessionRecord r = client.Snapshot();
+    ASSERT_FALSE(r.cluster_geometry.empty());
+    for (const auto& [id, g] : r.cluster_geometry) {
+      const absl::StatusOr<client::DecodedCluster> d = client::DecodeClusterGeometry(g);
+      ASSERT_TRUE(d.ok()) << d.status();
+      ASSERT_LT(id, levels.clusters.size());
+      ASSERT_LE(g.level(), levels.clusters[id].levels.size());
+      EXPECT_EQ(d->objects, levels.clusters[id].objects);
+      EXPECT_EQ(d->mesh.TriangleCount(), levels.clusters[id].levels[g.level() - 1].mesh.TriangleCount());
+      EXPECT_EQ(g.keeps_triangles(), (*scene)->levels()->ClusterKeepsTriangles(id, g.level()));
+      if (g.keeps_triangles()) {
+        for (size_t k = 0; k < d->objects.size(); ++k) {
+          EXPECT_EQ(d->first_triangle[k + 1] - d->first_triangle[k],
+                    (*scene)->scene().objects[d->objects[k]].mesh.TriangleCount());
+        }
+      }
+      EXPECT_EQ(d->raw_bytes, (*scene)->ClusterRawBytes(id, g.level()));
+    }
+    EXPECT_TRUE(client.Finish().ok());
+  }
+  // Resume: the first chosen cluster held at its level is not sent again; at level 99 it is.
+  const auto [c, c_level] = *chosen.begin();
+  for (const uint32_t claimed : {c_level, 99u}) {
+    client::HelloSettings resume = settings;
+    resume.held_clusters = {c};
+    resume.held_cluster_levels = {claimed};
+    SessionStream client((*server)->address());
+    if (claimed == c_level) client.HoldCluster(c, claimed, levels.clusters[c].objects);
+    client.Start(client::MakeHello(resume), true);
+    client.SendCredit(uint64_t{1} << 40);
+    for (const glm::dvec3& p : poses) {
+      const CellId cell = *grid.CellAt(glm::dvec2(p));
+      ASSERT_TRUE(client.SendPose(p));
+      ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return r.CellComplete(cell); }, kWait));
+    }
+    const SessionRecord r = client.Snapshot();
+    const bool sent = std::any_of(r.order.begin(), r.order.end(), [&](const auto& e) { return e.first == 'C' && e.second == c; });
+    EXPECT_EQ(sent, claimed == 99u) << "cluster " << c << " claimed at level " << claimed;
+    EXPECT_TRUE(client.Finish().ok());
+  }
+  // Eviction: far clusters held fill the budget; the walk's geometry needs the room.
+  client::HelloSettings full = settings;
+  uint64_t held = 0;
+  for (uint32_t k = 0; k < levels.clusters.size() && full.held_clusters.size() < 8; ++k) {
+    if (chosen.count(k) > 0) continue;
+    full.held_clusters.push_back(k);
+    full.held_cluster_levels.push_back(1);
+    held += (*scene)->ClusterRawBytes(k, 1);
+  }
+  ASSERT_EQ(full.held_clusters.size(), 8u);
+  full.memory_budget_bytes = held + held / 8;
+  SessionStream client((*server)->address());
+  client.Start(client::MakeHello(full), true);
+  client.SendCredit(uint64_t{1} << 40);
+  ASSERT_TRUE(client.SendPose(poses[0]));
+  ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return !r.evicted_clusters.empty(); }, kWait));
+  const SessionRecord r = client.Snapshot();
+  for (uint32_t e : r.evicted_clusters) {
+    EXPECT_NE(std::find(full.held_clusters.begin(), full.held_clusters.end(), e), full.held_clusters.end()) << e;
+  }
+  EXPECT_TRUE(client.Finish().ok());
+}
+
 // Levels of detail over the wire (issue 45): a server that makes levels at start sends a client
 // that asks for a screen error each object at a level, which decodes to the scene's level mesh;
 // a client that does not ask gets full meshes from the same server.

@@ -131,6 +131,38 @@ TEST_F(SimulatorTest, LevelsAtOnePixelStreamFewerBytesAndNeverAHole) {
   }
 }
 
+// Cluster levels (issue 45): on city2 (where lists choose clusters at 1 px) a client drawing
+// them gets some, never a hole and no more stalls than one drawing objects' own levels only;
+// a cluster that keeps its objects' triangles is drawn through the mask's bits, so frames draw
+// no more triangles than without clusters (within the 2% the different arrivals make).
+TEST_F(SimulatorTest, ClusterLevelsArriveAndDrawNoMoreTriangles) {
+  static Prepared* city2 = Prepare("city2", 128, /*levels=*/true);
+  for (const double kmh : {6.0, 60.0}) {
+    SCOPED_TRACE(std::to_string(kmh) + " km/h");
+    SimulationOptions off = Options(*city2, kmh);
+    off.fixed_compute_s = 0.02;
+    off.lod_tau_px = 1.0;
+    off.lod_clusters = false;
+    SimulationOptions on = off;
+    on.lod_clusters = true;
+    const SimulationResult r_off = Run(*city2, off), r_on = Run(*city2, on);
+    EXPECT_EQ(r_off.cluster_levels_received, 0u);
+    EXPECT_GT(r_on.cluster_levels_received, 0u);
+    EXPECT_EQ(r_on.hole_frames, 0u);
+    EXPECT_LE(r_on.stalls, r_off.stalls);
+    if (kmh == 6.0) {
+      EXPECT_EQ(r_on.stalls, 0u);
+    }
+    EXPECT_LE(r_on.coarse_frames, r_on.frames / 20);
+    EXPECT_LE(r_on.mean_triangles_drawn, 1.02 * r_off.mean_triangles_drawn);
+    std::printf("city2 at %.0f km/h, 1 px: clusters off %llu bytes, %.1f triangles a frame; on %llu bytes, %.1f, %llu "
+                "cluster levels\n",
+                kmh, static_cast<unsigned long long>(r_off.bytes), r_off.mean_triangles_drawn,
+                static_cast<unsigned long long>(r_on.bytes), r_on.mean_triangles_drawn,
+                static_cast<unsigned long long>(r_on.cluster_levels_received));
+  }
+}
+
 // The link budget (issue 45): while the walker's cell or the next lacks geometry, ε-masks take
 // at most a quarter of the link and objects it lacks go before finer levels, so that a client
 // drawing masks (and levels) stalls at no lower speed than one drawing the viewcell PVS alone.

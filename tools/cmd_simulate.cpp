@@ -34,6 +34,7 @@ constexpr double kMinKmh = kMinSearchKmh, kMaxKmh = 1000.0;
 struct SimulateArgs {
   std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log, series;
   std::string lod = "off";
+  std::string lod_clusters = "on";
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -102,6 +103,7 @@ nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme 
   j["lod_tau_px"] = r.lod_tau_px > 0.0 ? nlohmann::json(r.lod_tau_px) : nlohmann::json();
   j["coarse_frames"] = r.coarse_frames;
   j["level_objects_received"] = r.level_objects_received;
+  j["cluster_levels_received"] = r.cluster_levels_received;
   j["jitter_draws"] = r.jitter_draws;
   j["lost_segments"] = r.lost_segments;
   if (scheme == simulation::Scheme::kRadius) j["radius_m"] = r.radius_m;
@@ -354,6 +356,7 @@ int Simulate(const SimulateArgs& a) {
     const simulation::Scheme scheme = point.scheme;
     opt.scheme = scheme;
     opt.lod_tau_px = point.tau_px;
+    opt.lod_clusters = a.lod_clusters == "on";
     opt.speed_mps = point.speed_kmh / 3.6;
     opt.link = point.link;
     const auto t0 = std::chrono::steady_clock::now();
@@ -513,6 +516,11 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
                 "comma-separated, one run each (default: off; levels are made at start when the scene has none)")
       ->capture_default_str()
       ->check(given);
+  c->add_option("--lod-clusters", args->lod_clusters,
+                "with --lod: on, the client draws cluster levels (one mesh for a group of far objects) where a "
+                "cell's list chooses them; off, objects' own levels only")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
   c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)")
       ->check(given);
   c->add_option("--cell-size", args->cell_size, "viewcell edge in metres (default: the catalog's)")
