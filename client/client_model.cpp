@@ -143,7 +143,8 @@ absl::StatusOr<DecodedCluster> DecodeClusterGeometry(const v1::ClusterGeometry& 
                                                               g.wide(), g.vertices(), g.indices(), where);
   if (!mesh.ok()) return mesh.status();
   c.mesh = *std::move(mesh);
-  if (g.keeps_triangles()) {
+  c.keeps_triangles = g.keeps_triangles();
+  {
     if (g.object_triangles_size() != g.objects_size()) {
       return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.object_triangles_size(),
                                                      " object triangle counts for ", g.objects_size(), " objects"));

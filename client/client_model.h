@@ -148,9 +148,11 @@ struct DecodedCluster {
   uint32_t id = 0;
   uint32_t level = 0;  // >= 1
   std::vector<uint32_t> objects;
-  // ClusterGeometry.keeps_triangles: objects[k]'s triangles are the mesh's triangles from
-  // first_triangle[k] to first_triangle[k + 1] (objects.size() + 1 entries); empty: drawn whole.
+  // objects[k]'s piece: the mesh's triangles from first_triangle[k] to first_triangle[k + 1]
+  // (objects.size() + 1 entries). keeps_triangles: each piece is its object's full triangles in
+  // order (an ε-mask's bits apply); else a simplified piece, drawn whole.
   std::vector<uint32_t> first_triangle;
+  bool keeps_triangles = false;
   uint64_t saved_bytes = 0;  // ClusterGeometry.full_bytes less its own encoded bytes
   scenes::Mesh mesh;
   glm::dvec3 bounds_min{0.0}, bounds_max{0.0};  // its mesh's

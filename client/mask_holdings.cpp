@@ -75,12 +75,19 @@ void MaskHoldings::KeepNear(std::optional<uint32_t> cell, const visibility::View
 }
 
 MaskChoice MaskHoldings::Choose(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready) const {
+  return Choose(eye, [&](uint32_t o, uint32_t) { return ready(o); });
+}
+
+MaskChoice MaskHoldings::Choose(const glm::dvec3& eye,
+                                const std::function<bool(uint32_t object, uint32_t cell)>& ready) const {
   MaskChoice choice;
   for (const auto& [id, m] : masks_) {
     if (!m.Contains(eye)) continue;
     choice.in_box = true;
     if (choice.mask != nullptr && choice.mask->triangles <= m.triangles) continue;
-    if (std::all_of(m.object_ids.begin(), m.object_ids.end(), ready)) choice.mask = &m;
+    if (std::all_of(m.object_ids.begin(), m.object_ids.end(), [&](uint32_t o) { return ready(o, m.cell); })) {
+      choice.mask = &m;
+    }
   }
   return choice;
 }

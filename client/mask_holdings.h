@@ -77,6 +77,9 @@ class MaskHoldings {
   // the eye and each of whose objects passes `ready`, the one with the fewest triangles (ties:
   // the lower mask id). Also whether the eye is in any held mask's box at all.
   MaskChoice Choose(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready) const;
+  // The same with `ready` told the mask's cell too (an object a cluster of that cell's list
+  // stands for is ready when the cluster is: issue 45).
+  MaskChoice Choose(const glm::dvec3& eye, const std::function<bool(uint32_t object, uint32_t cell)>& ready) const;
 
   // Every mask held, by the server's mask id.
   const std::map<uint32_t, EpsilonMaskSet>& masks() const { return masks_; }

@@ -7,6 +7,8 @@
 
 #include <glm/geometric.hpp>
 
+#include "scenes/cluster_triangles.h"
+
 namespace vistream::scenes {
 
 double ScreenSpec::MaxPixelsPerRadian() const {
@@ -33,9 +35,13 @@ LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels, std::vecto
     for (const MeshLevel& l : levels.objects[o]) object_levels_[o].push_back(EncodeLevelMesh(l.mesh));
   }
   cluster_levels_.resize(levels.clusters.size());
+  cluster_pieces_.resize(levels.clusters.size());
   std::vector<uint32_t> count(scene.objects.size() + 1, 0);
   for (size_t c = 0; c < levels.clusters.size(); ++c) {
-    for (const MeshLevel& l : levels.clusters[c].levels) cluster_levels_[c].push_back(EncodeLevelMesh(l.mesh));
+    for (const MeshLevel& l : levels.clusters[c].levels) {
+      cluster_levels_[c].push_back(EncodeLevelMesh(l.mesh));
+      cluster_pieces_[c].push_back(scenes::ClusterObjectTriangles(scene, levels.clusters[c], l.mesh));
+    }
     for (uint32_t o : levels.clusters[c].objects) ++count[o + 1];
   }
   cluster_offsets_.assign(scene.objects.size() + 1, 0);
@@ -121,34 +127,37 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
   });
   std::unordered_map<uint32_t, uint32_t> owner;              // PVS object -> chosen cluster
   std::unordered_map<uint32_t, uint32_t> chosen;             // chosen cluster -> its level
+  std::unordered_map<uint32_t, uint64_t> inner_triangles;    // chosen cluster -> the triangles it may draw
   std::vector<uint32_t> members;
   for (const uint32_t c : candidates) {
     const Cluster& cluster = levels.clusters[c];
     const double d = BoxDistance(eye_region, cluster.bounds);
-    uint32_t level = 0;
+    uint32_t coarsest = 0;
     for (size_t k = cluster.levels.size(); k > 0; --k) {
       if (ErrorPixels(cluster.levels[k - 1].error_m, d, screen) <= tau_px) {
-        level = static_cast<uint32_t>(k);
+        coarsest = static_cast<uint32_t>(k);
         break;
       }
     }
-    if (level == 0) continue;
+    if (coarsest == 0) continue;
     members.clear();
     std::set_intersection(cluster.objects.begin(), cluster.objects.end(), pvs.begin(), pvs.end(),
                           std::back_inserter(members));
-    uint64_t replaced = 0, replaced_triangles = 0;
+    // Triangles a masked frame may draw: a level that keeps an object's triangles draws those the
+    // mask names, at most the full mesh's that may face the region; another is drawn whole.
+    uint64_t replaced = 0, replaced_triangles = 0, kept_triangles = 0;
     std::vector<uint32_t> inner;  // chosen clusters it would replace
     bool contained = true;
-    // Whether a mask draws the same triangles of it as of what it replaces.
-    bool same_triangles = index.ClusterKeepsTriangles(c, level);
     for (const uint32_t o : members) {
+      const uint64_t facing = FrontFacingTriangles(scene.objects[o].mesh, eye_region);
+      kept_triangles += facing;
       const auto it = owner.find(o);
       if (it == owner.end()) {
         const uint32_t own = own_level.at(o);
         replaced += index.ObjectBytes(o, own);
-        const Mesh& drawn = own == 0 ? scene.objects[o].mesh : levels.objects[o][own - 1].mesh;
-        same_triangles = same_triangles && drawn.TriangleCount() == scene.objects[o].mesh.TriangleCount();
-        replaced_triangles += FrontFacingTriangles(drawn, eye_region);
+        const size_t drawn = own == 0 ? scene.objects[o].mesh.TriangleCount()
+                                      : levels.objects[o][own - 1].mesh.TriangleCount();
+        replaced_triangles += drawn == scene.objects[o].mesh.TriangleCount() ? facing : drawn;
         continue;
       }
       if (std::find(inner.begin(), inner.end(), it->second) != inner.end()) continue;
@@ -159,13 +168,18 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
       }
       inner.push_back(it->second);
       replaced += index.ClusterBytes(it->second, chosen.at(it->second));
-      replaced_triangles += other.levels[chosen.at(it->second) - 1].mesh.TriangleCount();
-      same_triangles = same_triangles && index.ClusterKeepsTriangles(it->second, chosen.at(it->second));
+      replaced_triangles += inner_triangles.at(it->second);
     }
-    if (!contained || index.ClusterBytes(c, level) > replaced ||
-        (!same_triangles && cluster.levels[level - 1].mesh.TriangleCount() > replaced_triangles)) {
-      continue;
+    if (!contained) continue;
+    // The coarsest allowed level that is no dearer in bytes and draws no more triangles.
+    uint32_t level = coarsest;
+    uint64_t triangles = 0;
+    for (; level > 0; --level) {
+      triangles = index.ClusterKeepsTriangles(c, level) ? kept_triangles : cluster.levels[level - 1].mesh.TriangleCount();
+      if (index.ClusterBytes(c, level) <= replaced && triangles <= replaced_triangles) break;
     }
+    if (level == 0) continue;
+    inner_triangles[c] = triangles;
     for (const uint32_t r : inner) chosen.erase(r);
     for (const uint32_t o : members) owner[o] = c;
     chosen[c] = level;

@@ -64,6 +64,11 @@ class LevelIndex {
   // ascending, each one's triangles in its own order; positions only snapped): an ε-mask's
   // triangle bits for its objects then apply to it.
   bool ClusterKeepsTriangles(uint32_t c, uint32_t level) const;
+  // Per object of cluster `c` (its objects' order), its triangles in `level`, each object's in one
+  // run (scenes/cluster_triangles.h; the levels must be grouped: GroupClusterTriangles).
+  const std::vector<uint32_t>& ClusterObjectTriangles(uint32_t c, uint32_t level) const {
+    return cluster_pieces_[c][level - 1];
+  }
 
  private:
   const Scene* scene_;
@@ -71,6 +76,7 @@ class LevelIndex {
   std::vector<uint64_t> full_bytes_;                           // [object]
   std::vector<std::vector<EncodedLevelMesh>> object_levels_;   // [object][level - 1]
   std::vector<std::vector<EncodedLevelMesh>> cluster_levels_;  // [cluster][level - 1]
+  std::vector<std::vector<std::vector<uint32_t>>> cluster_pieces_;  // [cluster][level - 1][object]
   std::vector<uint32_t> cluster_offsets_;                      // CSR over objects
   std::vector<uint32_t> cluster_ids_;
 };
@@ -89,13 +95,12 @@ struct DrawItem {
 // The levels to draw for `pvs` (sorted object ids) seen from anywhere in `eye_region` (scene-local
 // box: a viewcell's eye band or a neighbourhood) on `screen` at screen error `tau_px` (> 0):
 // objects of the PVS not in a chosen cluster at the coarsest level with ErrorPixels(error,
-// BoxDistance(eye_region, object bounds)) <= tau_px; a cluster at its coarsest such level (with
-// its bounds) where every object of the PVS it stands for is not already in another chosen
-// cluster it does not contain, its bytes are at most those of what it replaces, and it draws no
-// more triangles: either the level keeps its objects' triangles (ClusterKeepsTriangles: a mask
-// draws the same triangles of it) and so does every level it replaces, or its triangles (drawn
-// whole) are at most those of what it replaces that may face the region (what an ε-mask could
-// keep of them). Clusters are considered fewest objects first. Sorted; every PVS object is drawn by exactly one item.
+// BoxDistance(eye_region, object bounds)) <= tau_px; a cluster at the coarsest such level (with
+// its bounds) that passes these, where every object of the PVS it stands for is not already in another chosen
+// cluster it does not contain, that level's bytes are at most those of what it replaces, and a
+// masked frame may draw no more of its triangles than of what it replaces (a level keeping the
+// full triangles draws at most those that may face the region; another is drawn whole).
+// Clusters are considered fewest objects first. Sorted; every PVS object is drawn by exactly one item.
 // With `clusters` false only objects' own levels are chosen.
 std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint32_t> pvs, const Aabb& eye_region,
                                    const ScreenSpec& screen, double tau_px, bool clusters = true);

@@ -17,6 +17,7 @@
 #include <glm/geometric.hpp>
 #include <meshoptimizer.h>
 
+#include "scenes/cluster_triangles.h"
 #include "scenes/geometry_codec.h"
 
 namespace vistream::scenes {
@@ -243,6 +244,7 @@ absl::StatusOr<SceneLevels> MakeLevels(const Scene& scene, const LevelOptions& o
   for (Cluster& c : clusters) {
     if (!c.levels.empty()) levels.clusters.push_back(std::move(c));
   }
+  GroupClusterTriangles(scene, &levels);
   return levels;
 }
 

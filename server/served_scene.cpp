@@ -6,6 +6,7 @@
 #include <absl/strings/str_format.h>
 
 #include "proto/scene_info.h"
+#include "scenes/cluster_triangles.h"
 #include "scenes/levels.h"
 #include "server/wire.h"
 #include "visibility/parallel.h"
@@ -78,6 +79,8 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
     s->scene_.levels = *std::move(made);
   }
   if (!s->scene_.levels.objects.empty()) {
+    // Each cluster level's pieces in runs (levels saved before runs were kept are grouped here).
+    scenes::GroupClusterTriangles(s->scene_, &s->scene_.levels);
     std::vector<uint64_t> full_bytes(objects);
     for (size_t i = 0; i < objects; ++i) full_bytes[i] = s->geometry_[i].EncodedBytes();
     s->level_index_ = std::make_unique<scenes::LevelIndex>(s->scene_, s->scene_.levels, std::move(full_bytes));

@@ -90,12 +90,9 @@ size_t FillCluster(const ServedScene& scene, uint32_t c, uint32_t level, v1::Clu
   uint64_t full = 0;
   for (uint32_t o : objects) full += scene.geometry(o).EncodedBytes();
   geo->set_full_bytes(full);
-  if (scene.levels()->ClusterKeepsTriangles(c, level)) {
-    geo->set_keeps_triangles(true);
-    for (uint32_t o : objects) {
-      geo->add_object_triangles(static_cast<uint32_t>(scene.scene().objects[o].mesh.TriangleCount()));
-    }
-  }
+  geo->set_keeps_triangles(scene.levels()->ClusterKeepsTriangles(c, level));
+  const std::vector<uint32_t>& pieces = scene.levels()->ClusterObjectTriangles(c, level);
+  geo->mutable_object_triangles()->Add(pieces.begin(), pieces.end());
   return g.EncodedBytes();
 }
 

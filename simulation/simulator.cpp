@@ -169,11 +169,11 @@ class Run {
   std::unordered_set<uint32_t> clusters_whole_;  // clusters held at a level a mask's bits do not apply to
   // Whether object `o` is held and uploaded by a frame at `t` (with a declared frame time, an
   // object is uploaded at the first frame after its arrival).
-  bool Ready(uint32_t o, double t) const {
+  bool Ready(uint32_t o, double t, std::optional<uint32_t> cell) const {
     const client::CellCompletion::Object* h = completion_.Held(o);
     if (h != nullptr && FrameCeil(h->arrival_s) <= t + 1e-9) return true;
     // Or drawn by a held cluster the cell's list chose for it.
-    const std::optional<uint32_t> c = cell_.has_value() ? completion_.CoveringCluster(*cell_, o) : std::nullopt;
+    const std::optional<uint32_t> c = cell.has_value() ? completion_.CoveringCluster(*cell, o) : std::nullopt;
     return c.has_value() && FrameCeil(completion_.HeldCluster(*c)->arrival_s) <= t + 1e-9;
   }
   // Triangles of object `o` as held (its level's).
@@ -401,7 +401,7 @@ void Run::Frame(double t) {
   }
   // The mask drawn, by the client model's rule (client/mask_holdings.h), of the masks whose
   // objects have arrived and been uploaded.
-  const client::MaskChoice choice = masks_held_.Choose(pose.eye, [&](uint32_t o) { return Ready(o, t); });
+  const client::MaskChoice choice = masks_held_.Choose(pose.eye, [&](uint32_t o, uint32_t mask_cell) { return Ready(o, t, mask_cell); });
   const client::EpsilonMaskSet* mask = choice.mask;
   const bool hole = mask == nullptr && !complete;
   if (mask != nullptr) {
@@ -423,23 +423,24 @@ void Run::Frame(double t) {
     const auto& objects = scene_.scene().objects;
     auto seen = [&](uint32_t o) { return frustum.MayOverlap(objects[o].bounds.min, objects[o].bounds.max); };
     const scenes::SceneLevels& levels = scene_.scene().levels;
-    // A held cluster the cell's list chose stands for its objects there: drawn once, whole.
-    std::unordered_set<uint32_t> clusters_drawn;
-    auto cluster_triangles = [&](uint32_t o) -> std::optional<uint64_t> {
-      if (!cell_.has_value()) return std::nullopt;
-      const std::optional<uint32_t> c = completion_.CoveringCluster(*cell_, o);
-      if (!c.has_value()) return std::nullopt;
-      if (!clusters_drawn.insert(*c).second) return 0;
-      const scenes::Cluster& cluster = levels.clusters[*c];
-      if (!frustum.MayOverlap(cluster.bounds.min, cluster.bounds.max)) return 0;
-      return cluster.levels[completion_.HeldCluster(*c)->level - 1].mesh.TriangleCount();
+    // A held cluster the cell's list chose draws the objects it stands for there as its pieces
+    // (scenes/cluster_triangles.h): the object's run of the cluster level's triangles.
+    // (A masked frame's by the mask's cell's list.)
+    auto covering = [&](std::optional<uint32_t> list_cell, uint32_t o) -> std::optional<uint32_t> {
+      return list_cell.has_value() ? completion_.CoveringCluster(*list_cell, o) : std::nullopt;
+    };
+    auto piece = [&](uint32_t c, uint32_t o) -> uint64_t {
+      const std::vector<uint32_t>& members = levels.clusters[c].objects;
+      const auto at = std::lower_bound(members.begin(), members.end(), o);
+      return scene_.levels()->ClusterObjectTriangles(c, completion_.HeldCluster(c)->level)[at - members.begin()];
     };
     uint64_t without = 0;
     if (complete && cell_.has_value()) {
       for (uint32_t o : *completion_.List(*cell_)) {
-        if (const std::optional<uint64_t> n = cluster_triangles(o)) {
-          without += *n;
-        } else if (completion_.Held(o) != nullptr && seen(o)) {
+        if (!seen(o)) continue;
+        if (const std::optional<uint32_t> c = covering(cell_, o)) {
+          without += piece(*c, o);
+        } else if (completion_.Held(o) != nullptr) {
           without += TrianglesOf(o);
         }
       }
@@ -451,17 +452,13 @@ void Run::Frame(double t) {
     uint64_t tris = without;
     if (mask != nullptr) {
       tris = 0;
-      clusters_drawn.clear();
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
         const uint32_t o = mask->object_ids[k];
-        const std::optional<uint32_t> c = completion_.CoveringCluster(*cell_, o);
-        if (c.has_value() && clusters_whole_.count(*c) > 0) {
-          tris += *cluster_triangles(o);  // a cluster seen in the mask (any of its objects is) is drawn whole
-          continue;
-        }
         if (!seen(o)) continue;
-        if (c.has_value()) {
-          tris += mask->object_triangles[k];  // the cluster keeps the object's triangles: the mask's bits apply
+        if (const std::optional<uint32_t> c = covering(mask->cell, o)) {
+          // A piece of a level that keeps the objects' triangles keeps the mask's bits; a
+          // simplified one is drawn whole.
+          tris += clusters_whole_.count(*c) > 0 ? piece(*c, o) : mask->object_triangles[k];
           continue;
         }
         // A level that keeps the object's triangles (ObjectGeometry.keeps_triangles) keeps the

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "scenes/building.h"
+#include "scenes/cluster_triangles.h"
 #include "scenes/city_generator.h"
 #include "scenes/geometry_codec.h"
 #include "scenes/gltf_io.h"
@@ -202,6 +203,63 @@ Leveled LeveledTown() {
   return l;
 }
 
+// Cluster levels as pieces (issue 45): made levels keep each object's triangles in one run,
+// objects ascending; a level that keeps the objects' triangles gives each its own; a simplified
+// one gives each triangle to the object whose box is nearest its centroid (brute force agrees);
+// grouping again changes nothing.
+TEST(Levels, ClusterLevelsComeInOneRunPerObject) {
+  const Leveled l = LeveledTown();
+  size_t simplified = 0, kept = 0;
+  for (const Cluster& c : l.scene.levels.clusters) {
+    size_t full = 0;
+    for (uint32_t o : c.objects) full += l.scene.objects[o].mesh.TriangleCount();
+    for (const MeshLevel& level : c.levels) {
+      const std::vector<uint32_t> owners = ClusterTriangleOwners(l.scene, c, level.mesh);
+      ASSERT_EQ(owners.size(), level.mesh.TriangleCount());
+      EXPECT_TRUE(std::is_sorted(owners.begin(), owners.end()));
+      const std::vector<uint32_t> counts = ClusterObjectTriangles(l.scene, c, level.mesh);
+      ASSERT_EQ(counts.size(), c.objects.size());
+      if (level.mesh.TriangleCount() == full) {
+        ++kept;
+        for (size_t k = 0; k < c.objects.size(); ++k) {
+          EXPECT_EQ(counts[k], l.scene.objects[c.objects[k]].mesh.TriangleCount());
+        }
+        continue;
+      }
+      ++simplified;
+      for (size_t t = 0; t < owners.size(); ++t) {
+        glm::dvec3 p(0.0);
+        for (int v = 0; v < 3; ++v) p += glm::dvec3(level.mesh.positions[level.mesh.indices[3 * t + v]]);
+        p /= 3.0;
+        double best = 1e300;
+        uint32_t want = 0;
+        for (uint32_t k = 0; k < c.objects.size(); ++k) {
+          Aabb at;
+          at.Extend(p);
+          const double d = BoxDistance(at, l.scene.objects[c.objects[k]].bounds);
+          if (d < best - 1e-9) {
+            best = d;
+            want = k;
+          }
+        }
+        Aabb at;
+        at.Extend(p);
+        EXPECT_NEAR(BoxDistance(at, l.scene.objects[c.objects[owners[t]]].bounds), best, 1e-6)
+            << "triangle " << t << " given to " << owners[t] << ", nearest " << want;
+      }
+    }
+  }
+  EXPECT_GT(kept, 0u);
+  EXPECT_GT(simplified, 0u);
+  SceneLevels again = l.scene.levels;
+  GroupClusterTriangles(l.scene, &again);
+  for (size_t c = 0; c < again.clusters.size(); ++c) {
+    for (size_t k = 0; k < again.clusters[c].levels.size(); ++k) {
+      EXPECT_EQ(again.clusters[c].levels[k].mesh.indices, l.scene.levels.clusters[c].levels[k].mesh.indices);
+    }
+  }
+}
+
 TEST(Levels, ValidateNamesTheBadLevel) {
   const Leveled good = LeveledTown();
   const size_t o = good.simplified_object;
@@ -387,9 +445,9 @@ TEST(LevelChoice, ALargerToleranceNeverChoosesFinerBytes) {
   Aabb region;
   region.Extend(glm::dvec3(l.scene.bounds.min.x - 300, l.scene.bounds.min.y - 300, 0.5));
   region.Extend(glm::dvec3(l.scene.bounds.min.x - 250, l.scene.bounds.min.y - 250, 2.5));
-  auto bytes = [&](double tau) {
+  auto bytes = [&](double tau, bool clusters = false) {
     uint64_t b = 0;
-    for (const DrawItem& it : ChooseLevels(index, pvs, region, ScreenSpec{}, tau)) {
+    for (const DrawItem& it : ChooseLevels(index, pvs, region, ScreenSpec{}, tau, clusters)) {
       b += it.kind == DrawItem::Kind::kObject ? index.ObjectBytes(it.id, it.level) : index.ClusterBytes(it.id, it.level);
     }
     return b;
@@ -400,6 +458,16 @@ TEST(LevelChoice, ALargerToleranceNeverChoosesFinerBytes) {
   EXPECT_LT(b1, full);
   EXPECT_LE(b2, b1);
   EXPECT_LE(b3, b2);
+  // Clusters are taken only where no dearer (and they may be refused for their triangles where
+  // coarse object levels draw fewer, so bytes need not fall with tau there).
+  size_t with_clusters = 0;
+  for (const double tau : {0.5, 2.0, 32.0}) {
+    EXPECT_LE(bytes(tau, true), bytes(tau));
+    for (const DrawItem& it : ChooseLevels(index, pvs, region, ScreenSpec{}, tau)) {
+      with_clusters += it.kind == DrawItem::Kind::kCluster ? 1 : 0;
+    }
+  }
+  EXPECT_GT(with_clusters, 0u);
 }
 
 std::string ReadFile(const std::string& path) {
