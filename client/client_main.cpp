@@ -125,6 +125,12 @@ int main(int argc, char** argv) {
                  "levels of detail: the screen error in pixels the client accepts (tau, in (0, 1000]), or off for "
                  "full detail; a server without levels sends full detail")
       ->capture_default_str();
+  std::string lod_clusters = "on";
+  app.add_option("--lod-clusters", lod_clusters,
+                 "with --lod: on, far groups of objects may come as one cluster level (drawn as each object's piece); "
+                 "off, objects' own levels only")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");
   app.add_option("--frames", o.frames, "with --pose: frames to draw before exiting (headless default 1)")
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
@@ -164,6 +170,7 @@ int main(int argc, char** argv) {
     }
     o.pose = p;
   }
+  o.lod_clusters = lod_clusters == "on";
   if (!vistream::cli::ParseScreenError(lod, &o.lod_tau_px)) {
     return bad_option("--lod: '" + lod + "': expected off or a screen error in pixels in (0, 1000]");
   }

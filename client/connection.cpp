@@ -235,6 +235,11 @@ grpc::Status Connection::RunSession(bool* answered) {
     settings.triangle_budget = options_.triangle_budget;
     settings.epsilon_masks = options_.epsilon_masks;
     settings.screen_error_px = options_.screen_error_px;
+    settings.clusters = options_.clusters;
+    for (const auto& [id, level] : held_clusters_) {
+      settings.held_clusters.push_back(id);
+      settings.held_cluster_levels.push_back(level);
+    }
     settings.viewport_width_px = options_.viewport_width_px;
     settings.viewport_height_px = options_.viewport_height_px;
     settings.vertical_fov_rad = options_.vertical_fov_rad;
@@ -325,6 +330,8 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         whole.set_compute_s(m.pvs().compute_s());
         whole.mutable_object_ids()->Add(list->objects.begin(), list->objects.end());
         whole.mutable_object_levels()->Add(list->levels.begin(), list->levels.end());
+        whole.mutable_cluster_ids()->Add(list->cluster_ids.begin(), list->cluster_ids.end());
+        whole.mutable_cluster_levels()->Add(list->cluster_levels.begin(), list->cluster_levels.end());
         event = std::move(whole);
         break;
       }
@@ -342,6 +349,7 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
       case v1::ServerMessage::kEvict: {
         std::lock_guard lock(mu_);
         for (uint32_t o : m.evict().object_ids()) held_.erase(o);
+        for (uint32_t c : m.evict().cluster_ids()) held_clusters_.erase(c);
         event = m.evict();
         break;
       }
@@ -376,11 +384,22 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         event = std::move(o);
         break;
       }
-      case v1::ServerMessage::kCluster:
-        // Sent only to a Hello with LevelRequest.clusters, which this client does not set yet.
-        Fail(absl::StrCat("the server sent cluster ", m.cluster().cluster_id(),
-                          ", which this client did not ask for (LevelRequest.clusters)"));
+      case v1::ServerMessage::kCluster: {
+        absl::StatusOr<DecodedCluster> cluster = DecodeClusterGeometry(m.cluster());
+        if (!cluster.ok()) {
+          Fail(absl::StrCat("the server sent a malformed cluster message: ", cluster.status().message()));
+          break;
+        }
+        const uint64_t encoded = ChargedBytes(m);
+        std::lock_guard lock(mu_);
+        held_clusters_[cluster->id] = cluster->level;
+        ++stats_.cluster_levels;
+        stats_.level_bytes_saved += cluster->saved_bytes;
+        stats_.geometry_bytes += encoded;
+        credit_.Consume(encoded);
+        event = *std::move(cluster);
         break;
+      }
       case v1::ServerMessage::BODY_NOT_SET:
         break;
     }

@@ -45,6 +45,7 @@ struct ConnectionOptions {
   // Hello.levels (issue 45): the screen error tau in pixels the client accepts on its viewport
   // (0: full detail); with levels the lists come as differences (Hello.pvs_deltas).
   double screen_error_px = 0.0;
+  bool clusters = false;              // with levels: Hello asks for cluster levels (LevelRequest.clusters)
   uint32_t viewport_width_px = 1280, viewport_height_px = 720;
   double vertical_fov_rad = 1.0471975511965976;
   double connect_timeout_s = 10.0;     // per attempt
@@ -67,9 +68,12 @@ struct SessionEnded {
   absl::Status status;  // why the session ended for good (not a dropped connection)
 };
 
+// A cluster level (issue 45): decoded, drawn as one piece per object where a list chooses it.
+using ReceivedCluster = DecodedCluster;
+
 // What the network thread hands the render loop, in arrival order.
 using Event = std::variant<vistream::v1::SceneInfo, vistream::v1::ViewcellPvs, ReceivedObject, vistream::v1::Evict,
-                           vistream::v1::EpsilonMask, SessionEnded>;
+                           vistream::v1::EpsilonMask, SessionEnded, ReceivedCluster>;
 
 struct ConnectionStats {
   uint64_t bytes_received = 0;   // serialized ServerMessage bytes
@@ -79,7 +83,8 @@ struct ConnectionStats {
   uint64_t objects_received = 0;
   uint64_t duplicates = 0;       // geometry received for an object already held at the same level
   uint64_t level_objects = 0;    // geometry received at a coarser level than full (issue 45)
-  uint64_t level_bytes_saved = 0;  // encoded bytes those levels saved against full meshes
+  uint64_t level_bytes_saved = 0;  // encoded bytes those levels (and cluster levels) saved against full meshes
+  uint64_t cluster_levels = 0;   // ClusterGeometry received (issue 45)
   uint64_t reconnects = 0;       // sessions after the first that the server answered
   uint64_t poses_sent = 0;
   double backoff_s = 0.0;        // the last wait before a reconnect attempt (0.25 s doubling to max_backoff_s)
@@ -153,6 +158,7 @@ class Connection {
   bool have_pose_ = false;
   vistream::v1::Pose pose_;
   std::map<uint32_t, uint32_t> held_;  // received and not evicted, with its level: Hello.held_objects on resume
+  std::map<uint32_t, uint32_t> held_clusters_;  // cluster levels likewise: Hello.held_clusters
   proto::PvsListDecoder lists_;        // the session's PVS lists (differences, with levels)
   CreditWindow credit_;                // the session's grants (client/client_model.h)
   bool reader_done_ = false;

@@ -15,6 +15,7 @@
 #include "client/screenshots.h"
 #include "client/verification.h"
 #include "client/walkthrough_loop.h"
+#include "scenes/cluster_triangles.h"
 #include "scenes/levels.h"
 
 namespace vistream::client {
@@ -65,7 +66,8 @@ absl::Status WalkthroughLoop::Walkthrough() {
     // viewcell's PVS once complete; else what is held (a hole frame).
     MaskChoice choice;
     if (opt_.use_masks && !opt_.draw_everything) {
-      choice = store_->ChooseMask(camera_.eye, [this](uint32_t id) { return renderer_->Uploaded(id); });
+      choice = store_->ChooseMask(camera_.eye, [this](uint32_t id) { return renderer_->Uploaded(id); },
+                                  [this](uint32_t c) { return renderer_->ClusterUploaded(c); });
     }
     const EpsilonMaskSet* use_mask = choice.mask;
     const bool hole = use_mask == nullptr && !p->complete;
@@ -79,10 +81,16 @@ absl::Status WalkthroughLoop::Walkthrough() {
     const std::vector<uint32_t>* set = use_mask != nullptr ? &use_mask->object_ids : without_masks;
     const bool check = ids_ != nullptr && (t >= next_check || last);
     drawn.clear();
-    const FrameStats fs = renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr);
+    // Objects a cluster the list chose stands for are drawn as its pieces (the mask's cell's list,
+    // or the complete cell's).
+    const std::optional<uint32_t> list_cell =
+        use_mask != nullptr ? std::optional<uint32_t>(use_mask->cell) : p->complete ? p->cell : std::nullopt;
+    const FrameStats fs =
+        renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr, list_cell);
     // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
-        use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks) : fs.triangles_drawn;
+        use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks, p->complete ? p->cell : std::nullopt)
+                            : fs.triangles_drawn;
     // The window shows the single-sample frame, and the overlay is drawn over it (headless
     // without the overlay, a screenshot resolves the frame it reads).
     if (input_ != nullptr || overlay_ != nullptr) renderer_->Resolve();
@@ -285,7 +293,7 @@ absl::Status WalkthroughLoop::Screenshot(double t) {
 
 absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMaskSet* mask) {
   if (!ids_->has_levels() &&
-      std::any_of(drawn.begin(), drawn.end(), [](const DrawnObject& d) { return d.level > 0; })) {
+      std::any_of(drawn.begin(), drawn.end(), [](const DrawnObject& d) { return d.level > 0 || d.cluster.has_value(); })) {
     // The server sends levels it made at start: the check makes the same ones here, once.
     if (full_scene_->levels.empty()) {
       Log(absl::StrCat("--verify: making the levels of detail of '", sum_->scene, "' as a server does"));
@@ -294,6 +302,22 @@ absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, cons
       if (!owned_scene_.has_value()) owned_scene_ = *full_scene_;  // the caller's scene is not ours to change
       owned_scene_->levels = *std::move(made);
       full_scene_ = &*owned_scene_;
+    } else if (!full_scene_->levels.clusters.empty()) {
+      // Levels from a file made before cluster levels kept each object's triangles in one run:
+      // grouped as a server groups them.
+      scenes::SceneLevels grouped = full_scene_->levels;
+      scenes::GroupClusterTriangles(*full_scene_, &grouped);
+      bool changed = false;
+      for (size_t c = 0; c < grouped.clusters.size() && !changed; ++c) {
+        for (size_t k = 0; k < grouped.clusters[c].levels.size(); ++k) {
+          changed = changed || grouped.clusters[c].levels[k].mesh.indices != full_scene_->levels.clusters[c].levels[k].mesh.indices;
+        }
+      }
+      if (changed) {
+        if (!owned_scene_.has_value()) owned_scene_ = *full_scene_;
+        owned_scene_->levels = std::move(grouped);
+        full_scene_ = &*owned_scene_;
+      }
     }
     ids_.reset();
     absl::StatusOr<std::unique_ptr<gl::IdRenderer>> ids = gl::IdRenderer::Create(*full_scene_, 1, /*levels=*/true);
@@ -303,6 +327,19 @@ absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, cons
   // A level drawn is the local scene's level only if the server made the same: the triangle
   // counts must agree (a server's levels made with other options would make the check wrong).
   for (const DrawnObject& d : drawn) {
+    if (d.cluster.has_value()) {
+      const StoredCluster* held = store_->FindCluster(*d.cluster);
+      const auto& clusters = full_scene_->levels.clusters;
+      if (held == nullptr || *d.cluster >= clusters.size() || d.level > clusters[*d.cluster].levels.size()) continue;
+      const size_t local = clusters[*d.cluster].levels[d.level - 1].mesh.TriangleCount();
+      if (held->data.mesh.TriangleCount() != local || held->data.objects != clusters[*d.cluster].objects) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "--verify: cluster %d's level %d has %d triangles from the server and %d in the local scene: the server "
+            "made its levels otherwise (check with --lod-clusters off, or give the client the server's scene file)",
+            *d.cluster, d.level, held->data.mesh.TriangleCount(), local));
+      }
+      continue;
+    }
     const StoredObject* o = d.level > 0 ? store_->Find(d.id) : nullptr;
     if (o == nullptr || o->data.level != d.level || d.id >= full_scene_->levels.objects.size() ||
         d.level > full_scene_->levels.objects[d.id].size()) {
@@ -392,12 +429,28 @@ absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upl
   static const std::vector<uint32_t> kNone;
   renderer_->Sync(*store_, p.pvs != nullptr ? *p.pvs : kNone, upload_budget);
   if (p.pvs != nullptr) {
-    p.missing = MissingObjects(*p.pvs, [&](uint32_t id) { return renderer_->Uploaded(id); });
+    p.missing = MissingObjects(*p.pvs, [&](uint32_t id) { return Drawable(*p.cell, id); });
   }
   p.complete = opt_.draw_everything ? renderer_->pending_uploads() == 0 : p.pvs != nullptr && p.missing == 0;
   if (const std::vector<uint32_t>* levels = p.cell.has_value() ? store_->PvsLevels(*p.cell) : nullptr;
       p.pvs != nullptr && levels != nullptr) {
     p.coarse = CoarseObjects(*p.pvs, *levels, [&](uint32_t id) { return renderer_->UploadedLevel(id); });
+    // An object drawn as a cluster's piece is coarse where the cluster is held coarser than the
+    // list asks (and it is not held at its own level or finer).
+    if (const auto* chosen = store_->PvsClusters(*p.cell)) {
+      for (size_t k = 0; k < p.pvs->size() && k < levels->size(); ++k) {
+        const uint32_t id = (*p.pvs)[k];
+        const auto piece = store_->CoveringCluster(*p.cell, id);
+        if (!piece.has_value() || !renderer_->ClusterUploaded(piece->first)) continue;
+        const auto own = renderer_->UploadedLevel(id);
+        const bool own_coarse = own.has_value() && *own > (*levels)[k];
+        const auto at = std::lower_bound(chosen->begin(), chosen->end(), std::pair{piece->first, uint32_t{0}});
+        const bool piece_coarse = store_->FindCluster(piece->first)->data.level > at->second;
+        if (own_coarse && !piece_coarse) --p.coarse;  // the piece is drawn, fine enough
+        if (!own.has_value() && piece_coarse) ++p.coarse;
+        if (own.has_value() && !own_coarse && piece_coarse) ++p.coarse;  // the piece is drawn
+      }
+    }
   }
   return p;
 }

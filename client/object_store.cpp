@@ -35,16 +35,44 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       } else {
         pvs_levels_.erase(pvs->cell_id());
       }
+      if (pvs->cluster_ids_size() > 0 && pvs->cluster_ids_size() == pvs->cluster_levels_size()) {
+        auto& chosen = pvs_clusters_[pvs->cell_id()];
+        chosen.clear();
+        for (int k = 0; k < pvs->cluster_ids_size(); ++k) chosen.emplace_back(pvs->cluster_ids(k), pvs->cluster_levels(k));
+      } else {
+        pvs_clusters_.erase(pvs->cell_id());
+      }
     } else if (auto* object = std::get_if<ReceivedObject>(&e)) {
       const uint32_t id = object->id;
       if (objects_.count(id) > 0) Remove(id);  // a resent object replaces the old copy
       held_bytes_ += object->raw_bytes;
       objects_[id] = StoredObject{std::move(*object), 0};
       added_.push_back(id);
+    } else if (auto* cluster = std::get_if<ReceivedCluster>(&e)) {
+      const uint32_t id = cluster->id;
+      RemoveCluster(id);  // a level replaces the one held
+      StoredCluster stored;
+      const scenes::Mesh& mesh = cluster->mesh;
+      for (size_t k = 0; k < cluster->objects.size(); ++k) {
+        scenes::Aabb box;
+        for (size_t t = cluster->first_triangle[k]; t < cluster->first_triangle[k + 1]; ++t) {
+          for (int v = 0; v < 3; ++v) box.Extend(glm::dvec3(mesh.positions[mesh.indices[3 * t + v]]));
+        }
+        stored.piece_bounds.emplace_back(box.Empty() ? glm::dvec3(0.0) : box.min, box.Empty() ? glm::dvec3(0.0) : box.max);
+      }
+      held_bytes_ += cluster->raw_bytes;
+      stored.data = std::move(*cluster);
+      clusters_[id] = std::move(stored);
+      added_clusters_.push_back(id);
     } else if (auto* evict = std::get_if<v1::Evict>(&e)) {
       for (uint32_t id : evict->object_ids()) {
         if (objects_.count(id) == 0) continue;
         Remove(id);
+        ++evicted_by_server_;
+      }
+      for (uint32_t id : evict->cluster_ids()) {
+        if (clusters_.count(id) == 0) continue;
+        RemoveCluster(id);
         ++evicted_by_server_;
       }
     } else if (auto* m = std::get_if<v1::EpsilonMask>(&e)) {
@@ -63,6 +91,7 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       return std::max(std::abs(e.i - c.i), std::abs(e.j - c.j)) >= 3;
     });
     std::erase_if(pvs_levels_, [&](const auto& entry) { return pvs_.count(entry.first) == 0; });
+    std::erase_if(pvs_clusters_, [&](const auto& entry) { return pvs_.count(entry.first) == 0; });
   }
   masks_.KeepNear(scene_info_.has_value() ? current_cell : std::nullopt, grid_);
   return EnforceBudget(current_cell);
@@ -83,8 +112,13 @@ void ObjectStore::AddMask(const v1::EpsilonMask& m) {
   }
 }
 
-MaskChoice ObjectStore::ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready) const {
-  return masks_.Choose(eye, [&](uint32_t o) { return objects_.count(o) > 0 && (!ready || ready(o)); });
+MaskChoice ObjectStore::ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready,
+                                   const std::function<bool(uint32_t)>& cluster_ready) const {
+  return masks_.Choose(eye, [&](uint32_t o, uint32_t cell) {
+    if (objects_.count(o) > 0 && (!ready || ready(o))) return true;
+    const auto piece = CoveringCluster(cell, o);
+    return piece.has_value() && (!cluster_ready || cluster_ready(piece->first));
+  });
 }
 
 std::vector<uint64_t> ObjectStore::TakeDroppedMasks() { return masks_.TakeDropped(); }
@@ -145,8 +179,44 @@ const std::vector<uint32_t>* ObjectStore::PvsLevels(uint32_t cell) const {
 }
 
 bool ObjectStore::CellComplete(uint32_t cell) const {
-  return client::CellComplete(Pvs(cell), [&](uint32_t id) { return objects_.count(id) > 0; });
+  return client::CellComplete(
+      Pvs(cell), [&](uint32_t id) { return objects_.count(id) > 0 || CoveringCluster(cell, id).has_value(); });
 }
+
+const StoredCluster* ObjectStore::FindCluster(uint32_t id) const {
+  auto it = clusters_.find(id);
+  return it == clusters_.end() ? nullptr : &it->second;
+}
+
+const std::vector<std::pair<uint32_t, uint32_t>>* ObjectStore::PvsClusters(uint32_t cell) const {
+  auto it = pvs_clusters_.find(cell);
+  return it == pvs_clusters_.end() ? nullptr : &it->second;
+}
+
+std::optional<std::pair<uint32_t, size_t>> ObjectStore::CoveringCluster(uint32_t cell, uint32_t o) const {
+  const std::vector<std::pair<uint32_t, uint32_t>>* chosen = PvsClusters(cell);
+  if (chosen == nullptr) return std::nullopt;
+  for (const auto& [c, level] : *chosen) {
+    const StoredCluster* held = FindCluster(c);
+    if (held == nullptr) continue;
+    const std::vector<uint32_t>& members = held->data.objects;
+    const auto at = std::lower_bound(members.begin(), members.end(), o);
+    if (at != members.end() && *at == o) return std::pair{c, static_cast<size_t>(at - members.begin())};
+  }
+  return std::nullopt;
+}
+
+void ObjectStore::RemoveCluster(uint32_t id) {
+  auto it = clusters_.find(id);
+  if (it == clusters_.end()) return;
+  held_bytes_ -= it->second.data.raw_bytes;
+  clusters_.erase(it);
+  removed_clusters_.push_back(id);
+}
+
+std::vector<uint32_t> ObjectStore::TakeAddedClusters() { return std::exchange(added_clusters_, {}); }
+
+std::vector<uint32_t> ObjectStore::TakeRemovedClusters() { return std::exchange(removed_clusters_, {}); }
 
 std::vector<uint32_t> ObjectStore::TakeAdded() { return std::exchange(added_, {}); }
 

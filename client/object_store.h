@@ -38,6 +38,14 @@ struct StoredObject {
   uint64_t last_drawn_frame = 0;
 };
 
+// A cluster level held (issue 45): drawn as pieces, one per object of a list that chooses it.
+struct StoredCluster {
+  ReceivedCluster data;
+  // Each piece's bounds (scene-local metres), one per data.objects; a piece without triangles
+  // has an empty box at the origin.
+  std::vector<std::pair<glm::dvec3, glm::dvec3>> piece_bounds;
+};
+
 class ObjectStore {
  public:
   explicit ObjectStore(uint64_t memory_budget_bytes) : budget_(memory_budget_bytes) {}
@@ -62,8 +70,21 @@ class ObjectStore {
   // With levels of detail (issue 45): the level each object of `cell`'s list needs there
   // (ViewcellPvs.object_levels, one per object); null without levels or without the list.
   const std::vector<uint32_t>* PvsLevels(uint32_t cell) const;
-  // Whether `cell`'s PVS list and every object on it are held.
+  // Whether `cell`'s PVS list and every object on it are held (an object a held cluster the list
+  // chose stands for counts as held: ViewcellPvs.cluster_ids' rule).
   bool CellComplete(uint32_t cell) const;
+
+  // Cluster levels (issue 45): those held, by cluster id.
+  const std::unordered_map<uint32_t, StoredCluster>& clusters() const { return clusters_; }
+  const StoredCluster* FindCluster(uint32_t id) const;
+  // The clusters `cell`'s list chose, with the level each needs there (none: empty).
+  const std::vector<std::pair<uint32_t, uint32_t>>* PvsClusters(uint32_t cell) const;
+  // The held cluster `cell`'s list chose that stands for object `o` there (drawn as its piece),
+  // or none; and `o`'s position among that cluster's objects.
+  std::optional<std::pair<uint32_t, size_t>> CoveringCluster(uint32_t cell, uint32_t o) const;
+  // Cluster ids stored or removed since the last call: the renderer uploads or frees them.
+  std::vector<uint32_t> TakeAddedClusters();
+  std::vector<uint32_t> TakeRemovedClusters();
 
   // At most this many masks are held.
   static constexpr size_t kMaxMasks = MaskHoldings::kMaxMasks;
@@ -73,7 +94,10 @@ class ObjectStore {
   // the eye and all of whose objects are held and pass `ready` (the renderer's Uploaded; none:
   // held is enough), the one with the fewest triangles (ties: the lower mask id). Also whether
   // the eye is in any held mask's box at all.
-  MaskChoice ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready = {}) const;
+  // An object a held cluster chosen by the mask's cell's list stands for is held when
+  // `cluster_ready` (the renderer's ClusterUploaded; none: held is enough) says so of the cluster.
+  MaskChoice ChooseMask(const glm::dvec3& eye, const std::function<bool(uint32_t)>& ready = {},
+                        const std::function<bool(uint32_t)>& cluster_ready = {}) const;
   // Keys (EpsilonMaskSet::key) of masks dropped or replaced since the last call: the renderer
   // frees what it built for them.
   std::vector<uint64_t> TakeDroppedMasks();
@@ -106,6 +130,10 @@ class ObjectStore {
   std::unordered_map<uint32_t, StoredObject> objects_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_;
   std::map<uint32_t, std::vector<uint32_t>> pvs_levels_;  // cells whose list came with levels
+  std::map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> pvs_clusters_;  // cells whose list chose clusters
+  std::unordered_map<uint32_t, StoredCluster> clusters_;
+  std::vector<uint32_t> added_clusters_, removed_clusters_;
+  void RemoveCluster(uint32_t id);
   MaskHoldings masks_;
   std::vector<uint32_t> removed_, added_;
   uint64_t held_bytes_ = 0, max_held_bytes_ = 0;

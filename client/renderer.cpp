@@ -186,6 +186,7 @@ absl::Status Renderer::Resize(int width, int height) {
 Renderer::~Renderer() {
   if (context_ == nullptr || !context_->MakeCurrent().ok()) return;
   for (auto& [id, g] : gpu_) Free(g);
+  for (auto& [id, g] : gpu_clusters_) FreeCluster(g);
   gl_.DeleteProgram(program_);
   gl_.DeleteVertexArrays(1, &ground_vao_);
   gl_.DeleteBuffers(1, &ground_vbo_);
@@ -223,7 +224,115 @@ void Renderer::Upload(uint32_t id, const StoredObject& o) {
   gpu_[id] = g;
 }
 
+void Renderer::FreeCluster(GpuCluster& g) {
+  Free(g.gpu);
+  for (auto& [key, m] : g.masked) gl_.DeleteBuffers(1, &m.ibo);
+  g.masked.clear();
+}
+
+void Renderer::UploadCluster(uint32_t id, const StoredCluster& c) {
+  if (auto old = gpu_clusters_.find(id); old != gpu_clusters_.end()) {
+    FreeCluster(old->second);
+    gpu_clusters_.erase(old);
+  }
+  GpuCluster g;
+  const scenes::Mesh& mesh = c.data.mesh;
+  g.gpu.level = c.data.level;
+  g.gpu.keeps_triangles = c.data.keeps_triangles;
+  g.first_triangle = c.data.first_triangle;
+  gl_.GenVertexArrays(1, &g.gpu.vao);
+  gl_.BindVertexArray(g.gpu.vao);
+  gl_.GenBuffers(1, &g.gpu.vbo);
+  gl_.BindBuffer(GL_ARRAY_BUFFER, g.gpu.vbo);
+  gl_.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.positions.size() * sizeof(glm::vec3)),
+                 mesh.positions.data(), GL_STATIC_DRAW);
+  gl_.GenBuffers(1, &g.gpu.ibo);
+  gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.gpu.ibo);
+  gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.indices.size() * sizeof(uint32_t)),
+                 mesh.indices.data(), GL_STATIC_DRAW);
+  gl_.EnableVertexAttribArray(0);
+  gl_.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+  gl_.BindVertexArray(0);
+  g.gpu.index_count = static_cast<uint32_t>(mesh.indices.size());
+  gpu_clusters_[id] = std::move(g);
+}
+
+bool Renderer::DrawPiece(ObjectStore& store, const scenes::ViewFrustum& frustum, uint32_t id, uint32_t c, size_t k,
+                         const EpsilonMaskSet* mask, uint64_t frame, FrameStats* stats,
+                         std::vector<DrawnObject>* drawn) {
+  GpuCluster& g = gpu_clusters_.at(c);
+  const StoredCluster* held = store.FindCluster(c);
+  if (held == nullptr || held->data.level != g.gpu.level) return false;  // the level uploaded is the store's
+  const auto& [lo, hi] = held->piece_bounds[k];
+  const uint32_t first = g.first_triangle[k], triangles = g.first_triangle[k + 1] - first;
+  if (triangles == 0 || !frustum.MayOverlap(lo, hi)) return false;
+  uint32_t count = 3 * triangles;
+  const void* offset = reinterpret_cast<const void*>(static_cast<uintptr_t>(first) * 3 * sizeof(uint32_t));
+  unsigned masked_ibo = 0;
+  bool masked = false;
+  if (mask != nullptr) {
+    const std::vector<uint8_t>* bits = mask->Bits(id);
+    if (bits == nullptr) return false;  // no triangle of it can be seen from the box
+    if (g.gpu.keeps_triangles) {
+      auto [it, fresh] = g.masked.try_emplace({mask->key, k});
+      MaskedIndices& m = it->second;
+      if (fresh) {
+        if (g.masked.size() > kMaskedPerCluster) {
+          // The least recently drawn list goes (not the one just made).
+          auto oldest = g.masked.end();
+          for (auto at = g.masked.begin(); at != g.masked.end(); ++at) {
+            if (at != it && (oldest == g.masked.end() || at->second.last_frame < oldest->second.last_frame)) oldest = at;
+          }
+          gl_.DeleteBuffers(1, &oldest->second.ibo);
+          g.masked.erase(oldest);
+        }
+        std::vector<uint32_t> indices;
+        const std::vector<uint32_t>& all = held->data.mesh.indices;
+        for (uint32_t t = 0; t < triangles; ++t) {
+          if (!visibility::MaskBit(*bits, t)) continue;
+          const size_t at = 3 * (static_cast<size_t>(first) + t);
+          indices.insert(indices.end(), all.begin() + static_cast<std::ptrdiff_t>(at),
+                         all.begin() + static_cast<std::ptrdiff_t>(at + 3));
+        }
+        gl_.GenBuffers(1, &m.ibo);
+        gl_.BindVertexArray(0);
+        gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, m.ibo);
+        gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(indices.size() * sizeof(uint32_t)),
+                       indices.data(), GL_STATIC_DRAW);
+        m.mask_key = mask->key;
+        m.count = static_cast<uint32_t>(indices.size());
+      }
+      m.last_frame = frame;
+      masked = true;
+      count = m.count;
+      masked_ibo = m.ibo;
+      offset = nullptr;
+    }
+  }
+  if (count == 0) return false;
+  gl_.BindVertexArray(g.gpu.vao);
+  if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, masked_ibo);
+  const glm::vec3 colour = ObjectColour(id);
+  gl_.Uniform3f(loc_colour_, colour.x, colour.y, colour.z);
+  gl_.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(count), GL_UNSIGNED_INT, offset);
+  if (masked) gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.gpu.ibo);
+  ++stats->objects_drawn;
+  stats->triangles_drawn += count / 3;
+  if (drawn != nullptr) drawn->push_back({id, masked, g.gpu.level, c});
+  return true;
+}
+
 uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, uint64_t budget_bytes) {
+  // Cluster levels: few and needed whole; freed and uploaded at once.
+  for (uint32_t id : store.TakeRemovedClusters()) {
+    if (auto it = gpu_clusters_.find(id); it != gpu_clusters_.end() && store.FindCluster(id) == nullptr) {
+      FreeCluster(it->second);
+      gpu_clusters_.erase(it);
+    }
+  }
+  for (uint32_t id : store.TakeAddedClusters()) {
+    if (const StoredCluster* c = store.FindCluster(id)) UploadCluster(id, *c);
+  }
   const std::vector<uint32_t> added = store.TakeAdded();
   const std::set<uint32_t> again(added.begin(), added.end());
   for (uint32_t id : store.TakeRemoved()) {
@@ -244,6 +353,13 @@ uint64_t Renderer::Sync(ObjectStore& store, const std::vector<uint32_t>& first, 
       std::erase_if(g.masked, [&](MaskedIndices& m) {
         if (keys.count(m.mask_key) == 0) return false;
         gl_.DeleteBuffers(1, &m.ibo);
+        return true;
+      });
+    }
+    for (auto& [id, g] : gpu_clusters_) {
+      std::erase_if(g.masked, [&](auto& entry) {
+        if (keys.count(entry.first.first) == 0) return false;
+        gl_.DeleteBuffers(1, &entry.second.ibo);
         return true;
       });
     }
@@ -305,7 +421,8 @@ Renderer::MaskedIndices& Renderer::MaskedFor(Gpu& g, const StoredObject& o, cons
 }
 
 FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
-                          const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn) {
+                          const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn,
+                          std::optional<uint32_t> list_cell) {
   FrameStats stats;
   stats.mask_used = mask != nullptr;
   gl_.BindFramebuffer(GL_FRAMEBUFFER, fbo_);  // 0: the window's
@@ -347,6 +464,12 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
 
   const scenes::ViewFrustum frustum = camera.Frustum();
   for (uint32_t id : objects) {
+    if (list_cell.has_value() && !gpu_clusters_.empty()) {
+      if (const auto piece = store.CoveringCluster(*list_cell, id); piece.has_value() && ClusterUploaded(piece->first)) {
+        DrawPiece(store, frustum, id, piece->first, piece->second, mask, frame, &stats, drawn);
+        continue;
+      }
+    }
     auto it = gpu_.find(id);
     if (it == gpu_.end()) continue;
     StoredObject* o = store.Find(id);
@@ -378,17 +501,25 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
     o->last_drawn_frame = frame;
     ++stats.objects_drawn;
     stats.triangles_drawn += count / 3;
-    if (drawn != nullptr) drawn->push_back({id, masked, g.level});
+    if (drawn != nullptr) drawn->push_back({id, masked, g.level, std::nullopt});
   }
   gl_.BindVertexArray(0);
   return stats;
 }
 
-uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera,
-                                  const std::vector<uint32_t>& objects) const {
+uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
+                                  std::optional<uint32_t> list_cell) const {
   const scenes::ViewFrustum frustum = camera.Frustum();
   uint64_t triangles = 0;
   for (uint32_t id : objects) {
+    if (list_cell.has_value() && !gpu_clusters_.empty()) {
+      if (const auto piece = store.CoveringCluster(*list_cell, id); piece.has_value() && ClusterUploaded(piece->first)) {
+        const GpuCluster& g = gpu_clusters_.at(piece->first);
+        const auto& [lo, hi] = store.FindCluster(piece->first)->piece_bounds[piece->second];
+        if (frustum.MayOverlap(lo, hi)) triangles += g.first_triangle[piece->second + 1] - g.first_triangle[piece->second];
+        continue;
+      }
+    }
     auto it = gpu_.find(id);
     if (it == gpu_.end()) continue;
     const StoredObject* o = store.Find(id);

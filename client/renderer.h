@@ -7,6 +7,7 @@
 // calls go through the context's function table (gl/gl_functions.h).
 
 #include <array>
+#include <map>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -28,7 +29,8 @@ namespace vistream::client {
 struct DrawnObject {
   uint32_t id = 0;
   bool masked = false;
-  uint32_t level = 0;  // the level of detail drawn (0: full; issue 45)
+  uint32_t level = 0;  // the level of detail drawn (0: full; issue 45), or the cluster's
+  std::optional<uint32_t> cluster;  // drawn as its piece of this cluster level (issue 45)
 };
 
 struct FrameStats {
@@ -74,11 +76,18 @@ class Renderer {
   // `frame` stamps the objects' last use.
   // The masked index lists are built on first use and kept per object for the last few masks
   // (by EpsilonMaskSet::key), so that frames switching between masks build nothing.
+  // With `list_cell` (issue 45), an object that a cluster chosen by that cell's list stands for
+  // and that is uploaded is drawn as its piece of the cluster (ObjectStore::CoveringCluster;
+  // masked through its bits where the cluster level keeps the objects' triangles, else whole).
   FrameStats Draw(ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
-                  const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn);
+                  const EpsilonMaskSet* mask, uint64_t frame, std::vector<DrawnObject>* drawn,
+                  std::optional<uint32_t> list_cell = std::nullopt);
   // The triangles Draw would draw of `objects` without a mask (uploaded, in the view frustum),
   // counted without drawing.
-  uint64_t CountTriangles(const ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects) const;
+  uint64_t CountTriangles(const ObjectStore& store, const Camera& camera, const std::vector<uint32_t>& objects,
+                          std::optional<uint32_t> list_cell = std::nullopt) const;
+  // Whether cluster `id` is uploaded (its pieces can be drawn).
+  bool ClusterUploaded(uint32_t id) const { return gpu_clusters_.count(id) > 0; }
   // The frame drawn, into the single-sample framebuffer that is read or shown, and binds that
   // (what is drawn over the frame, the overlay, is drawn there after this). Without samples it
   // binds the framebuffer drawn into. Once a frame; ReadRgb calls it.
@@ -144,6 +153,20 @@ class Renderer {
       loc_sky_ = -1;
   std::unordered_map<uint32_t, Gpu> gpu_;
   std::set<uint32_t> pending_;
+  // Cluster levels (issue 45): one buffer set each; masked index lists per (mask, piece).
+  struct GpuCluster {
+    Gpu gpu;
+    std::vector<uint32_t> first_triangle;  // DecodedCluster's
+    std::map<std::pair<uint64_t, size_t>, MaskedIndices> masked;
+  };
+  static constexpr size_t kMaskedPerCluster = 512;
+  std::unordered_map<uint32_t, GpuCluster> gpu_clusters_;
+  void UploadCluster(uint32_t id, const StoredCluster& c);
+  void FreeCluster(GpuCluster& g);
+  // Draws object `id`'s piece of cluster `c` (its `k`-th object); false when there is nothing
+  // to draw of it.
+  bool DrawPiece(ObjectStore& store, const scenes::ViewFrustum& frustum, uint32_t id, uint32_t c, size_t k,
+                 const EpsilonMaskSet* mask, uint64_t frame, FrameStats* stats, std::vector<DrawnObject>* drawn);
 };
 
 }  // namespace vistream::client

@@ -31,8 +31,9 @@ struct PixelComparison {
 
 // Renders the full scene and the drawn set (`drawn`: objects whole, or those marked masked only
 // with their triangles of `mask`, when given; each at its level, which needs an id renderer made
-// with levels) from `camera` (scene-local metres) into `ids`, made from `scene`, and counts the
-// pixels that differ. Ids outside the scene are left out. Leaves the id renderer's context
+// with levels; an object drawn as its piece of a cluster level, DrawnObject::cluster) from
+// `camera` (scene-local metres) into `ids`, made from `scene`, and counts the pixels that differ
+// (a piece's pixel over any object its cluster stands for does not). Ids outside the scene are left out. Leaves the id renderer's context
 // current: the caller makes its own current again. Errors: the id renderer's (GL, sizes);
 // FAILED_PRECONDITION for a drawn level the id renderer does not hold.
 absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const scenes::Scene& scene,

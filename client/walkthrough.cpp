@@ -162,6 +162,7 @@ absl::Status WalkthroughLoop::Prepare() {
   co.security = opt_.security;
   co.epsilon_masks = opt_.use_masks;
   co.screen_error_px = opt_.lod_tau_px;
+  co.clusters = opt_.lod_clusters;
   co.viewport_width_px = static_cast<uint32_t>(width);
   co.viewport_height_px = static_cast<uint32_t>(height);
   co.vertical_fov_rad = camera_.fov_y_rad;
@@ -210,6 +211,7 @@ absl::Status WalkthroughLoop::Run() {
     sum_->duplicates = c.duplicates;
     sum_->level_objects_received = c.level_objects;
     sum_->level_bytes_saved = c.level_bytes_saved;
+    sum_->cluster_levels_received = c.cluster_levels;
     sum_->reconnects = c.reconnects;
     if (s.ok() && !end.ok() && end.code() != absl::StatusCode::kUnavailable) s = end;
   }

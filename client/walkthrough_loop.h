@@ -82,6 +82,13 @@ class WalkthroughLoop {
   // --- client/frame_loop.cpp.
   absl::Status Walkthrough();
   // Takes the network's events into the store and uploads within `upload_budget`.
+  // Whether object `id` of `cell`'s list can be drawn: uploaded, or a held cluster the list
+  // chose stands for it and is uploaded (drawn as its piece; issue 45).
+  bool Drawable(uint32_t cell, uint32_t id) const {
+    if (renderer_->Uploaded(id)) return true;
+    const auto piece = store_->CoveringCluster(cell, id);
+    return piece.has_value() && renderer_->ClusterUploaded(piece->first);
+  }
   absl::StatusOr<Pumped> Pump(const glm::dvec3& eye, uint64_t upload_budget);
   // Moves the eye for the frame at `t` (the run's clock, pauses left out): along the walk, at
   // the fixed pose, or by the keys and mouse (`frame_period` seconds since the last frame).

@@ -42,7 +42,7 @@ absl::Status WalkthroughLoop::Startup() {
     if (!ahead.has_value()) return true;
     const std::vector<uint32_t>* list = store_->Pvs(*ahead);
     return list != nullptr &&
-           std::all_of(list->begin(), list->end(), [&](uint32_t id) { return renderer_->Uploaded(id); });
+           std::all_of(list->begin(), list->end(), [&](uint32_t id) { return Drawable(*ahead, id); });
   };
   for (;;) {
     if (have_start_) SendPose(velocity(), Now() - session_start_);

@@ -80,6 +80,7 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["coarse_frames"] = s.coarse_frames;
   j["level_objects_received"] = s.level_objects_received;
   j["level_bytes_saved"] = s.level_bytes_saved;
+  j["cluster_levels_received"] = s.cluster_levels_received;
   j["max_silhouette_px"] = s.verified ? nlohmann::ordered_json(s.max_silhouette_px) : nlohmann::ordered_json(nullptr);
   j["cells_visited"] = s.cells_visited;
   j["startup_s"] = s.startup_s;
@@ -135,9 +136,10 @@ std::string SummaryText(const WalkthroughSummary& s) {
                             : 0.0);
   if (s.lod_tau_px > 0.0) {
     absl::StrAppendFormat(&out,
-                          "  levels of detail at tau %.2f px: %d objects received at a level (%.1f MB saved), %d "
-                          "coarse frames\n",
-                          s.lod_tau_px, s.level_objects_received, s.level_bytes_saved / 1e6, s.coarse_frames);
+                          "  levels of detail at tau %.2f px: %d objects received at a level, %d cluster levels "
+                          "(%.1f MB saved), %d coarse frames\n",
+                          s.lod_tau_px, s.level_objects_received, s.cluster_levels_received, s.level_bytes_saved / 1e6,
+                          s.coarse_frames);
   } else {
     out += "  levels of detail: off (full detail)\n";
   }

@@ -35,6 +35,7 @@ struct WalkthroughSummary {
   // way); geometry received at a level and the encoded bytes those levels saved.
   double lod_tau_px = 0.0;
   uint64_t coarse_frames = 0, level_objects_received = 0, level_bytes_saved = 0;
+  uint64_t cluster_levels_received = 0;  // ClusterGeometry messages (issue 45)
   // --verify: the largest distance, pixels, of a differing pixel from the nearest full-detail
   // silhouette over the checked frames (0: none differed).
   double max_silhouette_px = 0.0;

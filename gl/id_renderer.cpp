@@ -1,5 +1,7 @@
 #include "gl/id_renderer.h"
 
+#include "scenes/cluster_triangles.h"
+
 #include <cmath>
 #include <string>
 
@@ -147,6 +149,22 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
         const auto base = static_cast<uint32_t>(vertices.size());
         for (const glm::vec3& p : level.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
         for (uint32_t i : level.mesh.indices) indices.push_back(base + i);
+      }
+    }
+    // Cluster levels: each triangle with its own corners, tagged with the object it draws.
+    cluster_first_triangle_.resize(scene.levels.clusters.size());
+    for (size_t c = 0; c < scene.levels.clusters.size(); ++c) {
+      const scenes::Cluster& cluster = scene.levels.clusters[c];
+      for (const scenes::MeshLevel& level : cluster.levels) {
+        cluster_first_triangle_[c].push_back(indices.size() / 3);
+        const std::vector<uint32_t> owners = scenes::ClusterTriangleOwners(scene, cluster, level.mesh);
+        for (size_t t = 0; t < owners.size(); ++t) {
+          for (int v = 0; v < 3; ++v) {
+            const glm::vec3& p = level.mesh.positions[level.mesh.indices[3 * t + v]];
+            indices.push_back(static_cast<uint32_t>(vertices.size()));
+            vertices.push_back({p.x, p.y, p.z, cluster.objects[owners[t]]});
+          }
+        }
       }
     }
   }

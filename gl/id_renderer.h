@@ -55,6 +55,10 @@ class IdRenderer {
   uint64_t FirstTriangle(uint32_t id, uint32_t level = 0) const {
     return level == 0 ? first_triangle_[id] : level_first_triangle_[id][level - 1];
   }
+  // With levels, the first triangle of cluster `c`'s level `level` (1 ..): its triangles as the
+  // scene holds them (each object's run together: scenes/cluster_triangles.h, which the caller's
+  // scene must be grouped by), each tagged with the object it draws.
+  uint64_t FirstClusterTriangle(uint32_t c, uint32_t level) const { return cluster_first_triangle_[c][level - 1]; }
   // Triangles uploaded: the scene's, and with levels theirs.
   uint64_t triangle_count() const { return index_count_ / 3; }
   // Whether the levels went up (Create's `levels`).
@@ -73,6 +77,7 @@ class IdRenderer {
   size_t full_index_count_ = 0;  // the scene's own (the full view, the cube)
   std::vector<uint64_t> first_triangle_;
   std::vector<std::vector<uint64_t>> level_first_triangle_;  // [object][level - 1]
+  std::vector<std::vector<uint64_t>> cluster_first_triangle_;  // [cluster][level - 1]
   int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1;
   unsigned mask_buffer_ = 0, mask_texture_ = 0;
   unsigned view_fbo_ = 0, view_ids_ = 0, view_depth_ = 0;

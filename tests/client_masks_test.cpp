@@ -306,6 +306,7 @@ struct MaskedWalk {
   bool use_masks = true;    // false: Hello.epsilon_masks false
   bool verify = true;
   double lod_tau_px = 1.0;  // levels of detail asked for (0: off); a scene without levels sends full detail
+  bool lod_clusters = true;  // cluster levels asked for with levels
 };
 absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
   absl::StatusOr<LoopbackServer> server = StartOnLoopback(w.scene);
@@ -323,6 +324,7 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
   o.frame_log = w.frame_log;
   o.use_masks = w.use_masks;
   o.lod_tau_px = w.lod_tau_px;
+  o.lod_clusters = w.lod_clusters;
   o.catalog_dir = w.catalog_dir;
   o.local_scene = &w.scene->scene();
   absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(o);
@@ -340,7 +342,7 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
     if (s->lod_tau_px > 0.0) {
       std::printf("  levels at tau %g px: %llu objects at a level, %llu bytes saved, geometry %llu bytes, %llu coarse "
                   "frames, differing pixels %.4f%% of those checked, the farthest %.2f px from a silhouette\n",
-                  s->lod_tau_px, static_cast<unsigned long long>(s->level_objects_received),
+                  s->lod_tau_px, static_cast<unsigned long long>(s->level_objects_received + s->cluster_levels_received),
                   static_cast<unsigned long long>(s->level_bytes_saved),
                   static_cast<unsigned long long>(s->geometry_bytes), static_cast<unsigned long long>(s->coarse_frames),
                   s->checked_pixels > 0 ? 100.0 * static_cast<double>(s->pixel_error) / s->checked_pixels : 0.0,
@@ -588,6 +590,34 @@ TEST(ClientMasks, ALondonTownWalkerAt6And60KmhDrawsMaskedFramesAndLevelsWithinTa
     ASSERT_TRUE(s.ok()) << s.status();
     EXPECT_GT(s->frames, 100u) << kmh;
     ExpectLevelsHold(*s, 1.0, absl::StrCat("london-small at ", kmh, " km/h"));
+  }
+}
+
+// Cluster levels drawn by the native client (issue 45): the london-generated town at 1 px, where
+// lists choose clusters, at 6 and 60 km/h: some arrive, each object a cluster stands for is
+// drawn as its piece (through the mask's bits where the level keeps the triangles), and the
+// frames hold within tau + 1 px of every full-detail silhouette (the object-id buffer names the
+// piece's object); against the same walk without clusters, no more triangles a frame.
+TEST(ClientMasks, ALondonTownWalkerDrawsClusterLevelsAsPiecesWithinTauOfEverySilhouette) {
+  const std::string dir = vistream::testing::ProcessTempDir() + "/london_town_clusters";
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(std::string(VISTREAM_SOURCE_DIR "/tests/simulator/london_small.json"),
+                             dir + "/london-small.json", std::filesystem::copy_options::overwrite_existing);
+  absl::StatusOr<std::unique_ptr<server::ServedScene>> town =
+      ServeForMasks(dir + "/london-small.json", 64, /*levels=*/true);
+  ASSERT_TRUE(town.ok()) << town.status();
+  for (const double kmh : {6.0, 60.0}) {
+    MaskedWalk on(town->get(), kmh, kmh < 10 ? 30.0 : 15.0, 1.0, dir);
+    const absl::StatusOr<WalkthroughSummary> s = WalkWithMasks(on);
+    ASSERT_TRUE(s.ok()) << s.status();
+    EXPECT_GT(s->cluster_levels_received, 0u) << kmh;
+    ExpectLevelsHold(*s, 1.0, absl::StrCat("london-small at ", kmh, " km/h with clusters"));
+    MaskedWalk off = on;
+    off.lod_clusters = false;
+    const absl::StatusOr<WalkthroughSummary> o = WalkWithMasks(off);
+    ASSERT_TRUE(o.ok()) << o.status();
+    EXPECT_EQ(o->cluster_levels_received, 0u) << kmh;
+    EXPECT_LE(s->mean_triangles_drawn, 1.05 * o->mean_triangles_drawn) << kmh;
   }
 }
 
