@@ -125,10 +125,10 @@ int main(int argc, char** argv) {
                  "levels of detail: the screen error in pixels the client accepts (tau, in (0, 1000]), or off for "
                  "full detail; a server without levels sends full detail")
       ->capture_default_str();
-  std::string lod_clusters = "on";
+  std::string lod_clusters = "off";
   app.add_option("--lod-clusters", lod_clusters,
                  "with --lod: on, far groups of objects may come as one cluster level (drawn as each object's piece); "
-                 "off, objects' own levels only")
+                 "off (the default), objects' own levels only")
       ->capture_default_str()
       ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--pose", pose, "stand at X,Y,Z (scene-local m) looking YAW,PITCH (degrees) instead of walking");

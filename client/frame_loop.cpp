@@ -89,8 +89,9 @@ absl::Status WalkthroughLoop::Walkthrough() {
         renderer_->Draw(*store_, camera_, *set, use_mask, sum_->frames + 1, check ? &drawn : nullptr, list_cell);
     // What the PVS alone would have drawn (counted, not drawn).
     const uint64_t triangles_without_masks =
-        use_mask != nullptr ? renderer_->CountTriangles(*store_, camera_, *without_masks, p->complete ? p->cell : std::nullopt)
-                            : fs.triangles_drawn;
+        use_mask != nullptr
+            ? renderer_->CountTriangles(*store_, camera_, *without_masks, p->complete ? p->cell : std::nullopt)
+            : fs.triangles_drawn;
     // The window shows the single-sample frame, and the overlay is drawn over it (headless
     // without the overlay, a screenshot resolves the frame it reads).
     if (input_ != nullptr || overlay_ != nullptr) renderer_->Resolve();
@@ -293,7 +294,8 @@ absl::Status WalkthroughLoop::Screenshot(double t) {
 
 absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, const EpsilonMaskSet* mask) {
   if (!ids_->has_levels() &&
-      std::any_of(drawn.begin(), drawn.end(), [](const DrawnObject& d) { return d.level > 0 || d.cluster.has_value(); })) {
+      std::any_of(drawn.begin(), drawn.end(),
+                  [](const DrawnObject& d) { return d.level > 0 || d.cluster.has_value(); })) {
     // The server sends levels it made at start: the check makes the same ones here, once.
     if (full_scene_->levels.empty()) {
       Log(absl::StrCat("--verify: making the levels of detail of '", sum_->scene, "' as a server does"));
@@ -310,7 +312,8 @@ absl::Status WalkthroughLoop::Verify(const std::vector<DrawnObject>& drawn, cons
       bool changed = false;
       for (size_t c = 0; c < grouped.clusters.size() && !changed; ++c) {
         for (size_t k = 0; k < grouped.clusters[c].levels.size(); ++k) {
-          changed = changed || grouped.clusters[c].levels[k].mesh.indices != full_scene_->levels.clusters[c].levels[k].mesh.indices;
+          const scenes::Mesh& before = full_scene_->levels.clusters[c].levels[k].mesh;
+          changed = changed || grouped.clusters[c].levels[k].mesh.indices != before.indices;
         }
       }
       if (changed) {

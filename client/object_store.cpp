@@ -38,7 +38,9 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
       if (pvs->cluster_ids_size() > 0 && pvs->cluster_ids_size() == pvs->cluster_levels_size()) {
         auto& chosen = pvs_clusters_[pvs->cell_id()];
         chosen.clear();
-        for (int k = 0; k < pvs->cluster_ids_size(); ++k) chosen.emplace_back(pvs->cluster_ids(k), pvs->cluster_levels(k));
+        for (int k = 0; k < pvs->cluster_ids_size(); ++k) {
+          chosen.emplace_back(pvs->cluster_ids(k), pvs->cluster_levels(k));
+        }
       } else {
         pvs_clusters_.erase(pvs->cell_id());
       }
@@ -58,7 +60,8 @@ std::vector<uint32_t> ObjectStore::Apply(std::vector<Event> events, std::optiona
         for (size_t t = cluster->first_triangle[k]; t < cluster->first_triangle[k + 1]; ++t) {
           for (int v = 0; v < 3; ++v) box.Extend(glm::dvec3(mesh.positions[mesh.indices[3 * t + v]]));
         }
-        stored.piece_bounds.emplace_back(box.Empty() ? glm::dvec3(0.0) : box.min, box.Empty() ? glm::dvec3(0.0) : box.max);
+        if (box.Empty()) box = scenes::Aabb{glm::dvec3(0.0), glm::dvec3(0.0)};
+        stored.piece_bounds.emplace_back(box.min, box.max);
       }
       held_bytes_ += cluster->raw_bytes;
       stored.data = std::move(*cluster);

@@ -281,7 +281,8 @@ bool Renderer::DrawPiece(ObjectStore& store, const scenes::ViewFrustum& frustum,
           // The least recently drawn list goes (not the one just made).
           auto oldest = g.masked.end();
           for (auto at = g.masked.begin(); at != g.masked.end(); ++at) {
-            if (at != it && (oldest == g.masked.end() || at->second.last_frame < oldest->second.last_frame)) oldest = at;
+            if (at == it) continue;
+            if (oldest == g.masked.end() || at->second.last_frame < oldest->second.last_frame) oldest = at;
           }
           gl_.DeleteBuffers(1, &oldest->second.ibo);
           g.masked.erase(oldest);
@@ -465,7 +466,8 @@ FrameStats Renderer::Draw(ObjectStore& store, const Camera& camera, const std::v
   const scenes::ViewFrustum frustum = camera.Frustum();
   for (uint32_t id : objects) {
     if (list_cell.has_value() && !gpu_clusters_.empty()) {
-      if (const auto piece = store.CoveringCluster(*list_cell, id); piece.has_value() && ClusterUploaded(piece->first)) {
+      const auto piece = store.CoveringCluster(*list_cell, id);
+      if (piece.has_value() && ClusterUploaded(piece->first)) {
         DrawPiece(store, frustum, id, piece->first, piece->second, mask, frame, &stats, drawn);
         continue;
       }
@@ -513,10 +515,13 @@ uint64_t Renderer::CountTriangles(const ObjectStore& store, const Camera& camera
   uint64_t triangles = 0;
   for (uint32_t id : objects) {
     if (list_cell.has_value() && !gpu_clusters_.empty()) {
-      if (const auto piece = store.CoveringCluster(*list_cell, id); piece.has_value() && ClusterUploaded(piece->first)) {
+      const auto piece = store.CoveringCluster(*list_cell, id);
+      if (piece.has_value() && ClusterUploaded(piece->first)) {
         const GpuCluster& g = gpu_clusters_.at(piece->first);
         const auto& [lo, hi] = store.FindCluster(piece->first)->piece_bounds[piece->second];
-        if (frustum.MayOverlap(lo, hi)) triangles += g.first_triangle[piece->second + 1] - g.first_triangle[piece->second];
+        if (frustum.MayOverlap(lo, hi)) {
+          triangles += g.first_triangle[piece->second + 1] - g.first_triangle[piece->second];
+        }
         continue;
       }
     }

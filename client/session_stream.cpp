@@ -118,7 +118,8 @@ void SessionStream::ReadLoop() {
         r.raw_geometry_bytes += scenes::RawMeshBytes(g.vertex_count(), g.index_count());
         r.order.emplace_back('C', g.cluster_id());
         if (keep_geometry_) r.cluster_geometry[g.cluster_id()] = g;
-        r.completion_.ArriveCluster(g.cluster_id(), now, g.level(), std::span<const uint32_t>(g.objects().data(), static_cast<size_t>(g.objects().size())));
+        const std::span<const uint32_t> objects(g.objects().data(), static_cast<size_t>(g.objects().size()));
+        r.completion_.ArriveCluster(g.cluster_id(), now, g.level(), objects);
         break;
       }
       case v1::ServerMessage::kGeometry: {

@@ -76,8 +76,8 @@ absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const 
       // A cluster level's piece: the object's run of the local cluster level's triangles.
       if (!ids.has_levels() || *d.cluster >= scene.levels.clusters.size() ||
           d.level > scene.levels.clusters[*d.cluster].levels.size()) {
-        return absl::FailedPreconditionError(absl::StrCat("--verify: object ", d.id, " was drawn as its piece of cluster ",
-                                                          *d.cluster, ", level ", d.level,
+        return absl::FailedPreconditionError(absl::StrCat("--verify: object ", d.id, " was drawn as its piece of ",
+                                                          "cluster ", *d.cluster, ", level ", d.level,
                                                           ", which the local scene's levels do not have"));
       }
       const scenes::Cluster& cluster = scene.levels.clusters[*d.cluster];
@@ -89,7 +89,9 @@ absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const 
       uint64_t first = ids.FirstClusterTriangle(*d.cluster, d.level);
       for (size_t j = 0; j < k; ++j) first += counts[j];
       const std::vector<uint8_t>* bits = d.masked && mask != nullptr ? mask->Bits(d.id) : nullptr;
-      for (size_t t = 0; t < counts[k]; ++t) flags[first + t] = bits == nullptr || visibility::MaskBit(*bits, t) ? 1 : 0;
+      for (size_t t = 0; t < counts[k]; ++t) {
+        flags[first + t] = bits == nullptr || visibility::MaskBit(*bits, t) ? 1 : 0;
+      }
       continue;
     }
     size_t n = scene.objects[d.id].mesh.TriangleCount();

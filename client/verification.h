@@ -33,8 +33,8 @@ struct PixelComparison {
 // with their triangles of `mask`, when given; each at its level, which needs an id renderer made
 // with levels; an object drawn as its piece of a cluster level, DrawnObject::cluster) from
 // `camera` (scene-local metres) into `ids`, made from `scene`, and counts the pixels that differ
-// (a piece's pixel over any object its cluster stands for does not). Ids outside the scene are left out. Leaves the id renderer's context
-// current: the caller makes its own current again. Errors: the id renderer's (GL, sizes);
+// (a piece's pixel over any object its cluster stands for does not). Ids outside the scene are
+// left out. Leaves the id renderer's context current: the caller makes its own current again. Errors: the id renderer's (GL, sizes);
 // FAILED_PRECONDITION for a drawn level the id renderer does not hold.
 absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const scenes::Scene& scene,
                                                      const Camera& camera, const std::vector<DrawnObject>& drawn,

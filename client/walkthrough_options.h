@@ -53,8 +53,8 @@ struct WalkthroughOptions {
   // levels sends full detail whatever is asked.
   double lod_tau_px = 1.0;
   // With levels: cluster levels too (LevelRequest.clusters): far groups of objects drawn as one
-  // cluster level's pieces where a cell's list chooses them.
-  bool lod_clusters = true;
+  // cluster level's pieces where a cell's list chooses them (off by default: they save little).
+  bool lod_clusters = false;
   // A baseline: no server geometry; the whole scene (loaded locally, or local_scene) is
   // uploaded before the walk and drawn every frame with frustum culling.
   bool draw_everything = false;

@@ -79,8 +79,8 @@ uint64_t FrontFacingTriangles(const Mesh& mesh, const Aabb& region) {
   uint64_t n = 0;
   for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
     const glm::dvec3 a(mesh.positions[mesh.indices[t]]);
-    const glm::dvec3 normal =
-        glm::cross(glm::dvec3(mesh.positions[mesh.indices[t + 1]]) - a, glm::dvec3(mesh.positions[mesh.indices[t + 2]]) - a);
+    const glm::dvec3 b(mesh.positions[mesh.indices[t + 1]]), c(mesh.positions[mesh.indices[t + 2]]);
+    const glm::dvec3 normal = glm::cross(b - a, c - a);
     // The largest of dot(normal, corner - a) over the box's corners.
     double best = 0.0;
     for (int k = 0; k < 3; ++k) {
@@ -175,7 +175,8 @@ std::vector<DrawItem> ChooseLevels(const LevelIndex& index, std::span<const uint
     uint32_t level = coarsest;
     uint64_t triangles = 0;
     for (; level > 0; --level) {
-      triangles = index.ClusterKeepsTriangles(c, level) ? kept_triangles : cluster.levels[level - 1].mesh.TriangleCount();
+      triangles = index.ClusterKeepsTriangles(c, level) ? kept_triangles
+                                                        : cluster.levels[level - 1].mesh.TriangleCount();
       if (index.ClusterBytes(c, level) <= replaced && triangles <= replaced_triangles) break;
     }
     if (level == 0) continue;

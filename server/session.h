@@ -143,7 +143,8 @@ class Session : public std::enable_shared_from_this<Session> {
   // (none when the client holds it at some level).
   std::optional<vistream::v1::ServerMessage> SendObject(uint32_t o, size_t rank, bool* sent);  // lock held
   // Geometry of `key` (an object, or kClusterKey | cluster) at `level` (0: an object's full mesh).
-  std::optional<vistream::v1::ServerMessage> SendLevel(uint32_t key, uint32_t level, size_t rank, bool* sent);  // lock held
+  std::optional<vistream::v1::ServerMessage> SendLevel(uint32_t key, uint32_t level, size_t rank,
+                                                       bool* sent);  // lock held
   void QueueControl(vistream::v1::ServerMessage message);    // lock held
   // The level `key` needs for `cell` (an object: 0 full, always 0 without levels; a cluster: its
   // chosen level, 0 when the cell did not choose it).

@@ -264,7 +264,8 @@ void Run::Receive(const v1::ServerMessage& m) {
       } else {
         clusters_whole_.insert(g.cluster_id());
       }
-      completion_.ArriveCluster(g.cluster_id(), t, g.level(), std::span<const uint32_t>(g.objects().data(), static_cast<size_t>(g.objects().size())));
+      const std::span<const uint32_t> objects(g.objects().data(), static_cast<size_t>(g.objects().size()));
+      completion_.ArriveCluster(g.cluster_id(), t, g.level(), objects);
       ++r_.cluster_levels_received;
       r_.geometry_bytes += client::ChargedBytes(m);
       ++r_.objects_received;
@@ -401,7 +402,8 @@ void Run::Frame(double t) {
   }
   // The mask drawn, by the client model's rule (client/mask_holdings.h), of the masks whose
   // objects have arrived and been uploaded.
-  const client::MaskChoice choice = masks_held_.Choose(pose.eye, [&](uint32_t o, uint32_t mask_cell) { return Ready(o, t, mask_cell); });
+  const client::MaskChoice choice =
+      masks_held_.Choose(pose.eye, [&](uint32_t o, uint32_t mask_cell) { return Ready(o, t, mask_cell); });
   const client::EpsilonMaskSet* mask = choice.mask;
   const bool hole = mask == nullptr && !complete;
   if (mask != nullptr) {

@@ -101,7 +101,8 @@ TEST(Verification, ALevelGrownByAMetreDiffersByItsProjectedSizeFromTheSilhouette
   // x = 50, each f (6/49 - 5/50) = 7.0 px out (f = 180 / tan 30 deg); the farthest pixel is at
   // a corner, sqrt 2 times that from the box's. Within the level's error seen from the eye
   // (f e / (d - e), e = sqrt 3 m at d = 49 m: 11.4 px), as the server's choice assumes.
-  absl::StatusOr<PixelComparison> grown = CompareWithFullScene(**ids, s, camera, {{0, false, 1, std::nullopt}}, nullptr);
+  absl::StatusOr<PixelComparison> grown =
+      CompareWithFullScene(**ids, s, camera, {{0, false, 1, std::nullopt}}, nullptr);
   ASSERT_TRUE(grown.ok()) << grown.status();
   const double f = 180.0 / std::tan(M_PI / 6.0);
   const double expected = std::sqrt(2.0) * f * (6.0 / 49.0 - 5.0 / 50.0);
@@ -119,7 +120,8 @@ TEST(Verification, ALevelGrownByAMetreDiffersByItsProjectedSizeFromTheSilhouette
   absl::StatusOr<std::unique_ptr<gl::IdRenderer>> plain = gl::IdRenderer::Create(s, 1);
   ASSERT_TRUE(plain.ok()) << plain.status();
   EXPECT_FALSE((*plain)->has_levels());
-  absl::StatusOr<PixelComparison> refused = CompareWithFullScene(**plain, s, camera, {{0, false, 1, std::nullopt}}, nullptr);
+  absl::StatusOr<PixelComparison> refused =
+      CompareWithFullScene(**plain, s, camera, {{0, false, 1, std::nullopt}}, nullptr);
   EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_NE(refused.status().message().find("object 0 was drawn at level 1"), std::string::npos)
       << refused.status();

@@ -205,7 +205,8 @@ TEST(Server, ClusterLevelsArriveAsTheListsChooseThemAndResumeAndEvict) {
       ASSERT_TRUE(client.WaitFor([&](const SessionRecord& r) { return r.CellComplete(cell); }, kWait));
     }
     const SessionRecord r = client.Snapshot();
-    const bool sent = std::any_of(r.order.begin(), r.order.end(), [&](const auto& e) { return e.first == 'C' && e.second == c; });
+    const bool sent =
+        std::any_of(r.order.begin(), r.order.end(), [&](const auto& e) { return e.first == 'C' && e.second == c; });
     EXPECT_EQ(sent, claimed == 99u) << "cluster " << c << " claimed at level " << claimed;
     EXPECT_TRUE(client.Finish().ok());
   }

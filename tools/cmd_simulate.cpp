@@ -34,7 +34,7 @@ constexpr double kMinKmh = kMinSearchKmh, kMaxKmh = 1000.0;
 struct SimulateArgs {
   std::string scene, path, speed, speeds, link, bandwidths, scheme, schemes, log, series;
   std::string lod = "off";
-  std::string lod_clusters = "on";
+  std::string lod_clusters = "off";
   double cell_size = 0.0, compute_ms = -1.0;
   int64_t res = 128, threads = 0, seed = 1;
   bool json = false;
@@ -518,7 +518,7 @@ void AddSimulateCommand(CLI::App& app, std::function<void(int)> done) {
       ->check(given);
   c->add_option("--lod-clusters", args->lod_clusters,
                 "with --lod: on, the client draws cluster levels (one mesh for a group of far objects) where a "
-                "cell's list chooses them; off, objects' own levels only")
+                "cell's list chooses them; off (the default), objects' own levels only")
       ->capture_default_str()
       ->check(CLI::IsMember({"on", "off"}));
   c->add_option("--schemes", args->schemes, "several schemes, comma-separated, side by side (instead of --scheme)")
