@@ -81,7 +81,8 @@ MaskChoice MaskHoldings::Choose(const glm::dvec3& eye, const std::function<bool(
 MaskChoice MaskHoldings::Choose(const glm::dvec3& eye,
                                 const std::function<bool(uint32_t object, uint32_t cell)>& ready) const {
   MaskChoice choice;
-  for (const auto& [id, m] : masks_) {
+  for (const auto& entry : masks_) {
+    const EpsilonMaskSet& m = entry.second;
     if (!m.Contains(eye)) continue;
     choice.in_box = true;
     if (choice.mask != nullptr && choice.mask->triangles <= m.triangles) continue;

@@ -74,7 +74,9 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   });
   // Levels of detail: the scene's own, or made now; encoded once like the full meshes.
   if (s->scene_.levels.empty() && options.make_levels) {
-    absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(s->scene_, scenes::SessionLevelOptions(), run);
+    scenes::LevelOptions lo = scenes::SessionLevelOptions();
+    if (!options.make_clusters) lo.cluster_tiles_m.clear();
+    absl::StatusOr<scenes::SceneLevels> made = scenes::MakeLevels(s->scene_, lo, run);
     if (!made.ok()) return made.status();
     s->scene_.levels = *std::move(made);
   }

@@ -50,6 +50,9 @@ struct ServedSceneOptions {
   // Levels of detail (issue 45): a scene without levels of its own gets them at start
   // (scenes/levels.h MakeLevels, SessionLevelOptions); false: only a scene's own are served.
   bool make_levels = false;
+  // With make_levels: cluster levels too (clients that ask for them get them); false: objects'
+  // levels only (faster and smaller at start, for runs whose clients never ask).
+  bool make_clusters = true;
 };
 
 class ServedScene {

@@ -190,7 +190,7 @@ TEST(Server, ClusterLevelsArriveAsTheListsChooseThemAndResumeAndEvict) {
     EXPECT_TRUE(client.Finish().ok());
   }
   // Resume: the first chosen cluster held at its level is not sent again; at level 99 it is.
-  const auto [c, c_level] = *chosen.begin();
+  const uint32_t c = chosen.begin()->first, c_level = chosen.begin()->second;
   for (const uint32_t claimed : {c_level, 99u}) {
     client::HelloSettings resume = settings;
     resume.held_clusters = {c};

@@ -318,6 +318,7 @@ int Simulate(const SimulateArgs& a) {
   so.res = static_cast<uint32_t>(a.res);
   so.threads = 1;  // the simulator computes on its own thread; simulated workers are --threads
   so.make_levels = std::any_of(taus.begin(), taus.end(), [](double t) { return t > 0.0; });
+  so.make_clusters = a.lod_clusters == "on";
   absl::StatusOr<std::unique_ptr<server::ServedScene>> scene = server::ServedScene::Create(so, ToolRun());
   if (!scene.ok()) return Fail(scene.status());
   std::fprintf(stderr, "simulate: %s ready after %.1f s (%s, %zu objects)\n", entry->name.c_str(), SecondsSince(start),
