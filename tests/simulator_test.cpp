@@ -155,7 +155,7 @@ TEST_F(SimulatorTest, ClusterLevelsArriveAndDrawNoMoreTriangles) {
     }
     EXPECT_LE(r_on.coarse_frames, r_on.frames / 20);
     EXPECT_LE(r_on.mean_triangles_drawn, 1.02 * r_off.mean_triangles_drawn);
-    EXPECT_LT(r_on.bytes, r_off.bytes);  // on this town they save bytes (1.7%)
+    EXPECT_LT(r_on.bytes, r_off.bytes);  // on this town they save bytes (1.7% here)
     std::printf("city2 at %.0f km/h, 1 px: clusters off %llu bytes, %.1f triangles a frame; on %llu bytes, %.1f, %llu "
                 "cluster levels\n",
                 kmh, static_cast<unsigned long long>(r_off.bytes), r_off.mean_triangles_drawn,
