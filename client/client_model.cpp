@@ -88,6 +88,28 @@ v1::ClientMessage CreditMessage(uint64_t bytes) {
   return m;
 }
 
+namespace {
+
+// A level mesh from the fields ObjectGeometry and ClusterGeometry name alike (EncodeLevelMesh's).
+template <typename Message>
+absl::StatusOr<scenes::Mesh> DecodeLevelFields(const Message& g, const std::string& where) {
+  if (g.origin_size() != 3) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.origin_size(), " origin values (expected 3)"));
+  }
+  const int64_t origin[3] = {g.origin(0), g.origin(1), g.origin(2)};
+  return scenes::DecodeLevelMesh(g.vertex_count(), g.index_count(), g.step_log2(), origin, g.wide(), g.vertices(),
+                                 g.indices(), where);
+}
+
+// The encoded bytes a level saved against the full meshes it stands for (full_bytes).
+template <typename Message>
+uint64_t SavedBytes(const Message& g) {
+  const uint64_t own = g.vertices().size() + g.indices().size();
+  return g.full_bytes() > own ? g.full_bytes() - own : 0;
+}
+
+}  // namespace
+
 absl::StatusOr<DecodedObject> DecodeObjectGeometry(const v1::ObjectGeometry& g) {
   const std::string where = absl::StrCat("object ", g.object_id(), g.level() > 0 ? absl::StrCat(", level ", g.level()) : "");
   DecodedObject o;
@@ -100,20 +122,14 @@ absl::StatusOr<DecodedObject> DecodeObjectGeometry(const v1::ObjectGeometry& g) 
     o.bounds_min = {g.bounds_min().x(), g.bounds_min().y(), g.bounds_min().z()};
     o.bounds_max = {g.bounds_max().x(), g.bounds_max().y(), g.bounds_max().z()};
   } else {
-    if (g.origin_size() != 3) {
-      return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.origin_size(), " origin values (expected 3)"));
-    }
-    const int64_t origin[3] = {g.origin(0), g.origin(1), g.origin(2)};
-    absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeLevelMesh(g.vertex_count(), g.index_count(), g.step_log2(), origin,
-                                                                g.wide(), g.vertices(), g.indices(), where);
+    absl::StatusOr<scenes::Mesh> mesh = DecodeLevelFields(g, where);
     if (!mesh.ok()) return mesh.status();
     o.mesh = *std::move(mesh);
     const scenes::Aabb b = o.mesh.Bounds();
     o.bounds_min = b.Empty() ? glm::dvec3(0.0) : b.min;
     o.bounds_max = b.Empty() ? glm::dvec3(0.0) : b.max;
     o.keeps_triangles = g.keeps_triangles();
-    const uint64_t own = g.vertices().size() + g.indices().size();
-    o.saved_bytes = g.full_bytes() > own ? g.full_bytes() - own : 0;
+    o.saved_bytes = SavedBytes(g);
   }
   o.raw_bytes = scenes::RawMeshBytes(o.mesh.positions.size(), o.mesh.indices.size());
   return o;
@@ -131,38 +147,30 @@ absl::StatusOr<DecodedCluster> DecodeClusterGeometry(const v1::ClusterGeometry& 
           absl::StrCat(where, ": objects do not ascend (", g.objects(k - 1), " then ", g.objects(k), ")"));
     }
   }
-  if (g.origin_size() != 3) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.origin_size(), " origin values (expected 3)"));
-  }
+  absl::StatusOr<scenes::Mesh> mesh = DecodeLevelFields(g, where);
+  if (!mesh.ok()) return mesh.status();
   DecodedCluster c;
   c.id = g.cluster_id();
   c.level = g.level();
   c.objects.assign(g.objects().begin(), g.objects().end());
-  const int64_t origin[3] = {g.origin(0), g.origin(1), g.origin(2)};
-  absl::StatusOr<scenes::Mesh> mesh = scenes::DecodeLevelMesh(g.vertex_count(), g.index_count(), g.step_log2(), origin,
-                                                              g.wide(), g.vertices(), g.indices(), where);
-  if (!mesh.ok()) return mesh.status();
   c.mesh = *std::move(mesh);
   c.keeps_triangles = g.keeps_triangles();
-  {
-    if (g.object_triangles_size() != g.objects_size()) {
-      return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.object_triangles_size(),
-                                                     " object triangle counts for ", g.objects_size(), " objects"));
-    }
-    uint64_t sum = 0;
-    for (uint32_t n : g.object_triangles()) sum += n;
-    if (sum != c.mesh.TriangleCount()) {
-      return absl::InvalidArgumentError(absl::StrCat(where, ": its objects' triangles sum to ", sum,
-                                                     ", its mesh has ", c.mesh.TriangleCount()));
-    }
-    c.first_triangle.assign(1, 0);
-    for (uint32_t n : g.object_triangles()) c.first_triangle.push_back(c.first_triangle.back() + n);
+  if (g.object_triangles_size() != g.objects_size()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": ", g.object_triangles_size(),
+                                                   " object triangle counts for ", g.objects_size(), " objects"));
   }
+  uint64_t sum = 0;
+  for (uint32_t n : g.object_triangles()) sum += n;
+  if (sum != c.mesh.TriangleCount()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": its objects' triangles sum to ", sum,
+                                                   ", its mesh has ", c.mesh.TriangleCount()));
+  }
+  c.first_triangle.assign(1, 0);
+  for (uint32_t n : g.object_triangles()) c.first_triangle.push_back(c.first_triangle.back() + n);
   const scenes::Aabb b = c.mesh.Bounds();
   c.bounds_min = b.Empty() ? glm::dvec3(0.0) : b.min;
   c.bounds_max = b.Empty() ? glm::dvec3(0.0) : b.max;
-  const uint64_t own = g.vertices().size() + g.indices().size();
-  c.saved_bytes = g.full_bytes() > own ? g.full_bytes() - own : 0;
+  c.saved_bytes = SavedBytes(g);
   c.raw_bytes = scenes::RawMeshBytes(c.mesh.positions.size(), c.mesh.indices.size());
   return c;
 }

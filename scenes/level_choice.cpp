@@ -36,9 +36,13 @@ LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels, std::vecto
   }
   cluster_levels_.resize(levels.clusters.size());
   cluster_pieces_.resize(levels.clusters.size());
+  cluster_keeps_.resize(levels.clusters.size());
   std::vector<uint32_t> count(scene.objects.size() + 1, 0);
   for (size_t c = 0; c < levels.clusters.size(); ++c) {
+    size_t full = 0;
+    for (uint32_t o : levels.clusters[c].objects) full += scene.objects[o].mesh.TriangleCount();
     for (const MeshLevel& l : levels.clusters[c].levels) {
+      cluster_keeps_[c].push_back(l.mesh.TriangleCount() == full);
       cluster_levels_[c].push_back(EncodeLevelMesh(l.mesh));
       cluster_pieces_[c].push_back(scenes::ClusterObjectTriangles(scene, levels.clusters[c], l.mesh));
     }
@@ -56,13 +60,6 @@ LevelIndex::LevelIndex(const Scene& scene, const SceneLevels& levels, std::vecto
   for (uint32_t c : by_size) {
     for (uint32_t o : levels.clusters[c].objects) cluster_ids_[fill[o]++] = c;
   }
-}
-
-bool LevelIndex::ClusterKeepsTriangles(uint32_t c, uint32_t level) const {
-  const Cluster& cluster = levels_->clusters[c];
-  size_t full = 0;
-  for (uint32_t o : cluster.objects) full += scene_->objects[o].mesh.TriangleCount();
-  return cluster.levels[level - 1].mesh.TriangleCount() == full;
 }
 
 std::span<const uint32_t> LevelIndex::ClustersOf(uint32_t o) const {

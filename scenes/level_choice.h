@@ -63,7 +63,7 @@ class LevelIndex {
   // Whether cluster `c`'s `level` keeps its objects' full triangles in their order (objects
   // ascending, each one's triangles in its own order; positions only snapped): an ε-mask's
   // triangle bits for its objects then apply to it.
-  bool ClusterKeepsTriangles(uint32_t c, uint32_t level) const;
+  bool ClusterKeepsTriangles(uint32_t c, uint32_t level) const { return cluster_keeps_[c][level - 1]; }
   // Per object of cluster `c` (its objects' order), its triangles in `level`, each object's in one
   // run (scenes/cluster_triangles.h; the levels must be grouped: GroupClusterTriangles).
   const std::vector<uint32_t>& ClusterObjectTriangles(uint32_t c, uint32_t level) const {
@@ -77,6 +77,7 @@ class LevelIndex {
   std::vector<std::vector<EncodedLevelMesh>> object_levels_;   // [object][level - 1]
   std::vector<std::vector<EncodedLevelMesh>> cluster_levels_;  // [cluster][level - 1]
   std::vector<std::vector<std::vector<uint32_t>>> cluster_pieces_;  // [cluster][level - 1][object]
+  std::vector<std::vector<bool>> cluster_keeps_;                    // [cluster][level - 1]
   std::vector<uint32_t> cluster_offsets_;                      // CSR over objects
   std::vector<uint32_t> cluster_ids_;
 };

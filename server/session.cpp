@@ -43,6 +43,19 @@ double GeometryBytes(const v1::ServerMessage& m) {
   return m.has_geometry() ? static_cast<double>(m.geometry().vertices().size() + m.geometry().indices().size()) : 0.0;
 }
 
+// A level mesh's fields, which ObjectGeometry and ClusterGeometry name alike.
+template <typename Message>
+void SetLevelMesh(const scenes::EncodedLevelMesh& g, uint32_t level, Message* geo) {
+  geo->set_level(level);
+  geo->set_vertex_count(g.vertex_count);
+  geo->set_index_count(g.index_count);
+  geo->set_vertices(g.vertices);
+  geo->set_indices(g.indices);
+  geo->set_step_log2(g.step_log2);
+  geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
+  geo->set_wide(g.wide);
+}
+
 // Object `o`'s geometry at `level` (0: full) for the wire (ObjectGeometry); returns its encoded
 // bytes (what the credit charges).
 size_t FillObject(const ServedScene& scene, uint32_t o, uint32_t level, v1::ObjectGeometry* geo) {
@@ -60,14 +73,7 @@ size_t FillObject(const ServedScene& scene, uint32_t o, uint32_t level, v1::Obje
     return g.EncodedBytes();
   }
   const scenes::EncodedLevelMesh& g = scene.level_geometry(o, level);
-  geo->set_level(level);
-  geo->set_vertex_count(g.vertex_count);
-  geo->set_index_count(g.index_count);
-  geo->set_vertices(g.vertices);
-  geo->set_indices(g.indices);
-  geo->set_step_log2(g.step_log2);
-  geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
-  geo->set_wide(g.wide);
+  SetLevelMesh(g, level, geo);
   geo->set_keeps_triangles(g.index_count == scene.scene().objects[o].mesh.indices.size());
   geo->set_full_bytes(scene.geometry(o).EncodedBytes());
   return g.EncodedBytes();
@@ -77,16 +83,9 @@ size_t FillObject(const ServedScene& scene, uint32_t o, uint32_t level, v1::Obje
 size_t FillCluster(const ServedScene& scene, uint32_t c, uint32_t level, v1::ClusterGeometry* geo) {
   const scenes::EncodedLevelMesh& g = scene.cluster_geometry(c, level);
   geo->set_cluster_id(c);
-  geo->set_level(level);
+  SetLevelMesh(g, level, geo);
   const std::vector<uint32_t>& objects = scene.scene().levels.clusters[c].objects;
   geo->mutable_objects()->Add(objects.begin(), objects.end());
-  geo->set_vertex_count(g.vertex_count);
-  geo->set_index_count(g.index_count);
-  geo->set_vertices(g.vertices);
-  geo->set_indices(g.indices);
-  geo->set_step_log2(g.step_log2);
-  geo->mutable_origin()->Add(std::begin(g.origin), std::end(g.origin));
-  geo->set_wide(g.wide);
   uint64_t full = 0;
   for (uint32_t o : objects) full += scene.geometry(o).EncodedBytes();
   geo->set_full_bytes(full);
