@@ -195,6 +195,7 @@ class Run {
   uint64_t triangle_every_ = 1;    // frames between two triangle counts (10 Hz)
   uint64_t triangle_samples_ = 0;
   double triangles_sum_ = 0.0;
+  std::array<double, SimulationResult::kTriangleBandsM.size()> triangles_by_distance_sum_{};
   double triangles_without_sum_ = 0.0;
   double crossing_compute_s_ = 0.0;
   bool crossed_ = false;
@@ -436,19 +437,33 @@ void Run::Frame(double t) {
       const auto at = std::lower_bound(members.begin(), members.end(), o);
       return scene_.levels()->ClusterObjectTriangles(c, completion_.HeldCluster(c)->level)[at - members.begin()];
     };
+    // Each drawn object's triangles also by its box's distance from the eye (kTriangleBandsM).
+    using Bands = std::array<uint64_t, SimulationResult::kTriangleBandsM.size()>;
+    auto band = [&](uint32_t o) {
+      const scenes::Aabb& b = objects[o].bounds;
+      const double d = glm::length(glm::clamp(pose.eye, b.min, b.max) - pose.eye);
+      size_t i = 0;
+      while (i + 1 < SimulationResult::kTriangleBandsM.size() && d >= SimulationResult::kTriangleBandsM[i + 1]) ++i;
+      return i;
+    };
+    Bands bands_without{}, bands_masked{};
     uint64_t without = 0;
+    auto add_without = [&](uint32_t o, uint64_t n) {
+      without += n;
+      bands_without[band(o)] += n;
+    };
     if (complete && cell_.has_value()) {
       for (uint32_t o : *completion_.List(*cell_)) {
         if (!seen(o)) continue;
         if (const std::optional<uint32_t> c = covering(cell_, o)) {
-          without += piece(*c, o);
+          add_without(o, piece(*c, o));
         } else if (completion_.Held(o) != nullptr) {
-          without += TrianglesOf(o);
+          add_without(o, TrianglesOf(o));
         }
       }
     } else {
       completion_.ForEachHeld([&](uint32_t o, const client::CellCompletion::Object&) {
-        if (seen(o)) without += TrianglesOf(o);
+        if (seen(o)) add_without(o, TrianglesOf(o));
       });
     }
     uint64_t tris = without;
@@ -457,17 +472,22 @@ void Run::Frame(double t) {
       for (size_t k = 0; k < mask->object_ids.size(); ++k) {
         const uint32_t o = mask->object_ids[k];
         if (!seen(o)) continue;
+        uint64_t n = 0;
         if (const std::optional<uint32_t> c = covering(mask->cell, o)) {
           // A piece of a level that keeps the objects' triangles keeps the mask's bits; a
           // simplified one is drawn whole.
-          tris += clusters_whole_.count(*c) > 0 ? piece(*c, o) : mask->object_triangles[k];
-          continue;
+          n = clusters_whole_.count(*c) > 0 ? piece(*c, o) : mask->object_triangles[k];
+        } else {
+          // A level that keeps the object's triangles (ObjectGeometry.keeps_triangles) keeps
+          // the mask's bits; another is drawn whole (as client/renderer.h draws it).
+          n = drawn_whole_.count(o) > 0 ? TrianglesOf(o) : mask->object_triangles[k];
         }
-        // A level that keeps the object's triangles (ObjectGeometry.keeps_triangles) keeps the
-        // mask's bits; another is drawn whole (as client/renderer.h draws it).
-        tris += drawn_whole_.count(o) > 0 ? TrianglesOf(o) : mask->object_triangles[k];
+        tris += n;
+        bands_masked[band(o)] += n;
       }
     }
+    const Bands& bands = mask != nullptr ? bands_masked : bands_without;
+    for (size_t i = 0; i < bands.size(); ++i) triangles_by_distance_sum_[i] += static_cast<double>(bands[i]);
     triangles_sum_ += static_cast<double>(tris);
     triangles_without_sum_ += static_cast<double>(without);
     ++triangle_samples_;
@@ -607,6 +627,10 @@ absl::Status Run::Go(const scenes::CatalogEntry& entry, const scenes::RunControl
   r_.walk_s = walk_.duration_s();
   r_.sim_s = q_.now();
   r_.mean_triangles_drawn = triangle_samples_ > 0 ? triangles_sum_ / static_cast<double>(triangle_samples_) : 0.0;
+  for (size_t i = 0; i < triangles_by_distance_sum_.size(); ++i) {
+    r_.mean_triangles_by_distance[i] =
+        triangle_samples_ > 0 ? triangles_by_distance_sum_[i] / static_cast<double>(triangle_samples_) : 0.0;
+  }
   r_.mean_triangles_without_masks =
       triangle_samples_ > 0 ? triangles_without_sum_ / static_cast<double>(triangle_samples_) : 0.0;
   r_.masks_computed = masks_->ran();

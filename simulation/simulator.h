@@ -20,6 +20,7 @@
 // Units: seconds of simulated time (0 = the client opens its session), metres in the scene's
 // local frame (z up), bytes.
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -138,6 +139,11 @@ struct SimulationResult {
   // the viewcell PVS, or on a hole frame (and any stall) what is held. Equal for every scheme
   // but pvs+eps.
   double mean_triangles_without_masks = 0.0;
+  // mean_triangles_drawn split by the distance from the eye to each drawn object's box, metres:
+  // bands from kTriangleBandsM[i] up to the next (the last unbounded). Where a frame's triangles
+  // come from: what levels of detail could still save at a screen error (issue 45).
+  static constexpr std::array<double, 4> kTriangleBandsM{0.0, 300.0, 900.0, 2000.0};
+  std::array<double, 4> mean_triangles_by_distance{};
   struct TriangleSample {
     double t_s = 0.0;        // since the walk started
     double along_m = 0.0;    // metres along the walk

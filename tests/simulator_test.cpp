@@ -266,6 +266,12 @@ TEST_F(SimulatorTest, City1WalkerAtSixKmhDrawsMasksAlongTheWay) {
   const double n = static_cast<double>(r.triangle_samples.size());
   EXPECT_NEAR(with / n, r.mean_triangles_drawn, 1e-6 * r.mean_triangles_drawn);
   EXPECT_NEAR(without / n, r.mean_triangles_without_masks, 1e-6 * r.mean_triangles_without_masks);
+  // The same triangles by the drawn objects' distance from the eye: the bands add up to the
+  // mean, and the walker draws its nearest buildings.
+  double banded = 0.0;
+  for (double b : r.mean_triangles_by_distance) banded += b;
+  EXPECT_NEAR(banded, r.mean_triangles_drawn, 1e-6 * r.mean_triangles_drawn);
+  EXPECT_GT(r.mean_triangles_by_distance[0], 0.0);
   EXPECT_GT(masked, 0u);
   // The share of masked samples is the share of masked frames, within sampling.
   EXPECT_NEAR(static_cast<double>(masked) / n, static_cast<double>(r.frames_masked) / static_cast<double>(r.frames),

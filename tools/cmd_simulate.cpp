@@ -65,6 +65,15 @@ nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme 
   j["distinct_objects"] = r.distinct_objects;
   j["mean_triangles_drawn"] = r.mean_triangles_drawn;
   j["max_triangles_drawn"] = r.max_triangles_drawn;
+  // mean_triangles_drawn by the drawn objects' distance from the eye (SimulationResult).
+  auto by_distance = nlohmann::json::array();
+  for (size_t i = 0; i < r.mean_triangles_by_distance.size(); ++i) {
+    const auto& bands = simulation::SimulationResult::kTriangleBandsM;
+    by_distance.push_back({{"from_m", bands[i]},
+                           {"to_m", i + 1 < bands.size() ? nlohmann::json(bands[i + 1]) : nlohmann::json(nullptr)},
+                           {"triangles", r.mean_triangles_by_distance[i]}});
+  }
+  j["mean_triangles_by_distance"] = by_distance;
   j["scene_triangles"] = r.scene_triangles;
   j["triangles_pct"] =
       r.scene_triangles > 0 ? 100.0 * r.mean_triangles_drawn / static_cast<double>(r.scene_triangles) : 0.0;
@@ -150,6 +159,16 @@ void PrintText(const nlohmann::json& j) {
               static_cast<unsigned long long>(j["frames"].get<uint64_t>()), j["masked_frames_pct"].get<double>(),
               static_cast<unsigned long long>(j["hole_frames"].get<uint64_t>()), j["mean_triangles_drawn"].get<double>(),
               j["mean_triangles_without_masks"].get<double>(), j["triangles_with_over_without_masks"].get<double>());
+  {
+    std::string bands;
+    for (const auto& b : j["mean_triangles_by_distance"]) {
+      const double from = b["from_m"].get<double>(), tris = b["triangles"].get<double>();
+      absl::StrAppendFormat(&bands, "%s%.0f ", bands.empty() ? "" : ", ", tris);
+      absl::StrAppend(&bands, b["to_m"].is_null() ? absl::StrFormat("beyond %.0f m", from)
+                                                   : absl::StrFormat("at %.0f-%.0f m", from, b["to_m"].get<double>()));
+    }
+    std::printf("  triangles drawn per frame by the objects' distance: %s\n", bands.c_str());
+  }
   if (j["masks_received"].get<uint64_t>() > 0 || j["masks_computed"].get<uint64_t>() > 0) {
     std::printf("  ε-masks: %llu received (%.1f kB), %llu drawn; %llu computed (%.1f ms each, %.1f s in all), %llu dropped\n",
                 static_cast<unsigned long long>(j["masks_received"].get<uint64_t>()), j["mask_bytes"].get<double>() / 1e3,
