@@ -139,15 +139,43 @@ absl::StatusOr<PixelComparison> CompareWithFullScene(gl::IdRenderer& ids, const 
   for (size_t k = 0; k < full->size(); ++k) c.differ += same((*full)[k], (*part)[k]) ? 0 : 1;
   c.pixels = full->size();
   if (c.differ == 0) return c;
-  // How far the differing pixels lie from the full frame's silhouettes.
+  // How far the differing pixels lie from the full frame's silhouettes: where the object seen
+  // changes, and where one surface of an object passes behind another of it (a building's lower
+  // block in front of its upper one): neighbouring pixels see triangles that do not join, or
+  // join across a contour (one faces the eye, the other away). Triangles join when they share
+  // an edge (two corners at the same position) and face alike.
+  absl::StatusOr<std::vector<uint32_t>> tris =
+      ids.RenderViewTriangles(camera.eye, forward, up, camera.fov_y_rad, camera.width, camera.height);
+  if (!tris.ok()) return tris.status();
+  std::unordered_map<uint64_t, bool> joined_pairs;
+  auto joined = [&](uint32_t a, uint32_t b) {
+    if (a == b) return true;
+    if (a == gl::kNothing || b == gl::kNothing || (a & gl::kBackFace) != (b & gl::kBackFace)) return false;
+    const uint64_t ta = (a & ~gl::kBackFace) - 1, tb = (b & ~gl::kBackFace) - 1;
+    const uint64_t key = std::min(ta, tb) << 32 | std::max(ta, tb);
+    if (const auto it = joined_pairs.find(key); it != joined_pairs.end()) return it->second;
+    const uint32_t oa = ids.ObjectOfTriangle(ta), ob = ids.ObjectOfTriangle(tb);
+    bool shared_edge = false;
+    if (oa == ob) {
+      const scenes::Mesh& m = scene.objects[oa].mesh;
+      const size_t la = 3 * (ta - ids.FirstTriangle(oa)), lb = 3 * (tb - ids.FirstTriangle(ob));
+      int common = 0;
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) common += m.positions[m.indices[la + i]] == m.positions[m.indices[lb + j]] ? 1 : 0;
+      }
+      shared_edge = common >= 2;
+    }
+    joined_pairs.emplace(key, shared_edge);
+    return shared_edge;
+  };
   const int w = camera.width, h = camera.height;
   std::vector<uint8_t> edge(full->size(), 0);
   bool any = false;
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const size_t k = static_cast<size_t>(y) * w + x;
-      const bool right = x + 1 < w && (*full)[k] != (*full)[k + 1];
-      const bool above = y + 1 < h && (*full)[k] != (*full)[k + w];
+      const bool right = x + 1 < w && ((*full)[k] != (*full)[k + 1] || !joined((*tris)[k], (*tris)[k + 1]));
+      const bool above = y + 1 < h && ((*full)[k] != (*full)[k + w] || !joined((*tris)[k], (*tris)[k + w]));
       if (right) edge[k] = edge[k + 1] = 1;
       if (above) edge[k] = edge[k + w] = 1;
       any = any || right || above;

@@ -4,7 +4,8 @@
 // shows at a pixel, so without levels of detail no pixel may differ. With levels (issue 45) an
 // object drawn at a level may differ from its full mesh by the level's error, which the server
 // keeps within the client's screen error tau: a differing pixel then lies within about tau
-// pixels of a full-detail silhouette (an edge of the full frame's object-id buffer), which
+// pixels of a full-detail silhouette (in the full frame, an edge between two objects, or
+// between two surfaces of one object where one passes behind the other), which
 // CompareWithFullScene measures.
 
 #include <cstdint>
@@ -23,9 +24,10 @@ struct PixelComparison {
   uint64_t differ = 0;  // pixels whose object differs between the full scene and the drawn set
   uint64_t pixels = 0;  // pixels compared (camera.width x camera.height)
   // The largest Euclidean distance, in pixels, from a differing pixel to the nearest pixel on a
-  // full-detail silhouette (a pixel whose object differs from a 4-neighbour's in the full
-  // frame); 0 when no pixel differs. With no silhouette in the frame at all, the frame's
-  // diagonal.
+  // full-detail silhouette (in the full frame, a pixel whose object differs from a 4-neighbour's,
+  // or whose triangle does not join the neighbour's: they share no edge, or one faces the eye
+  // and the other away, as where a building's lower block hides the foot of its upper one);
+  // 0 when no pixel differs. With no silhouette in the frame at all, the frame's diagonal.
   double max_silhouette_px = 0.0;
 };
 

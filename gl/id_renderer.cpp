@@ -2,6 +2,7 @@
 
 #include "scenes/cluster_triangles.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -32,11 +33,16 @@ void main() {
 constexpr const char* kFragmentShader = R"(#version 450
 flat in uint id;
 uniform bool use_mask;
+uniform bool triangle_ids;    // each pixel names its triangle instead of its object
 uniform usamplerBuffer mask;  // one flag per triangle of the scene
 layout(location = 0) out uint seen;
 void main() {
   if (use_mask && texelFetch(mask, gl_PrimitiveID).r == 0u) discard;
-  seen = gl_FrontFacing ? id + 1u : 0x80000000u;
+  if (triangle_ids) {
+    seen = (uint(gl_PrimitiveID) + 1u) | (gl_FrontFacing ? 0u : 0x80000000u);
+  } else {
+    seen = gl_FrontFacing ? id + 1u : 0x80000000u;
+  }
 }
 )";
 
@@ -135,6 +141,10 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
   first_triangle_.assign(scene.objects.size(), 0);
   for (const scenes::Object& o : scene.objects) {
     if (o.id < first_triangle_.size()) first_triangle_[o.id] = indices.size() / 3;
+    if (!o.mesh.indices.empty()) {
+      upload_first_.push_back(indices.size() / 3);
+      upload_ids_.push_back(o.id);
+    }
     const auto base = static_cast<uint32_t>(vertices.size());
     for (const glm::vec3& p : o.mesh.positions) vertices.push_back({p.x, p.y, p.z, o.id});
     for (uint32_t i : o.mesh.indices) indices.push_back(base + i);
@@ -187,6 +197,7 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
 
   loc_view_projection_ = glGetUniformLocation(program_, "view_projection");
   loc_use_mask_ = glGetUniformLocation(program_, "use_mask");
+  loc_triangle_ids_ = glGetUniformLocation(program_, "triangle_ids");
   loc_mask_ = glGetUniformLocation(program_, "mask");
   glGenBuffers(1, &mask_buffer_);
   glGenTextures(1, &mask_texture_);
@@ -237,10 +248,12 @@ void IdRenderer::BeginPass(unsigned fbo, int w, int h) {
   glUseProgram(program_);
   glBindVertexArray(vao_);
   glUniform1i(loc_use_mask_, 0);
+  glUniform1i(loc_triangle_ids_, 0);
 }
 
 absl::Status IdRenderer::EndPass() {
   glUniform1i(loc_use_mask_, 0);
+  glUniform1i(loc_triangle_ids_, 0);
   reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_)(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
@@ -266,6 +279,23 @@ void IdRenderer::DrawAndRead(const double m[16], int w, int h, size_t index_coun
 absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
                                                              const glm::dvec3& up, double fov_y_rad, int width,
                                                              int height, const std::vector<uint8_t>* triangles) {
+  return View(eye, forward, up, fov_y_rad, width, height, triangles, /*triangle_ids=*/false);
+}
+
+absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderViewTriangles(const glm::dvec3& eye, const glm::dvec3& forward,
+                                                                      const glm::dvec3& up, double fov_y_rad, int width,
+                                                                      int height) {
+  return View(eye, forward, up, fov_y_rad, width, height, nullptr, /*triangle_ids=*/true);
+}
+
+uint32_t IdRenderer::ObjectOfTriangle(uint64_t t) const {
+  const auto at = std::upper_bound(upload_first_.begin(), upload_first_.end(), t);
+  return upload_ids_[static_cast<size_t>(at - upload_first_.begin()) - 1];
+}
+
+absl::StatusOr<std::vector<uint32_t>> IdRenderer::View(const glm::dvec3& eye, const glm::dvec3& forward,
+                                                       const glm::dvec3& up, double fov_y_rad, int width, int height,
+                                                       const std::vector<uint8_t>* triangles, bool triangle_ids) {
   if (width < 1 || height < 1 || width > 8192 || height > 8192) {
     return absl::InvalidArgumentError(absl::StrCat("id renderer: view size ", width, "x", height));
   }
@@ -301,6 +331,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::RenderView(const glm::dvec3& e
     glUniform1i(loc_mask_, 0);
   }
   glUniform1i(loc_use_mask_, triangles != nullptr ? 1 : 0);
+  glUniform1i(loc_triangle_ids_, triangle_ids ? 1 : 0);
   const double fy = 1.0 / std::tan(0.5 * fov_y_rad), fx = fy * height / width;
   double m[16];
   PinholeReversedInfinite(eye, forward, up, fx, fy, kNear, m);

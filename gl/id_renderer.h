@@ -50,6 +50,17 @@ class IdRenderer {
   absl::StatusOr<std::vector<uint32_t>> RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
                                                    const glm::dvec3& up, double fov_y_rad, int width, int height,
                                                    const std::vector<uint8_t>* triangles);
+  // The full scene from the same pinhole as RenderView without `triangles`, each pixel naming
+  // the triangle it sees instead of its object: kNothing, or the triangle's index among the
+  // scene's uploaded triangles (FirstTriangle(object) + its index in the object's mesh) + 1,
+  // with kBackFace set where the triangle faces away. The same rasterization as RenderView's
+  // full view: pixel for pixel, the object of the triangle is the object RenderView names.
+  // Errors: as RenderView's.
+  absl::StatusOr<std::vector<uint32_t>> RenderViewTriangles(const glm::dvec3& eye, const glm::dvec3& forward,
+                                                            const glm::dvec3& up, double fov_y_rad, int width,
+                                                            int height);
+  // The object whose full mesh holds uploaded triangle `t` (t < the scene's own triangles).
+  uint32_t ObjectOfTriangle(uint64_t t) const;
   // The index of object `id`'s first triangle among the triangles uploaded: its full mesh's
   // (level 0), or, when made with levels, its level `level`'s (1 .. its level count).
   uint64_t FirstTriangle(uint32_t id, uint32_t level = 0) const {
@@ -78,13 +89,20 @@ class IdRenderer {
   std::vector<uint64_t> first_triangle_;
   std::vector<std::vector<uint64_t>> level_first_triangle_;  // [object][level - 1]
   std::vector<std::vector<uint64_t>> cluster_first_triangle_;  // [cluster][level - 1]
-  int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1;
+  int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1, loc_triangle_ids_ = -1;
+  // The scene's objects with triangles in upload order: each one's first triangle and its id.
+  std::vector<uint64_t> upload_first_;
+  std::vector<uint32_t> upload_ids_;
   unsigned mask_buffer_ = 0, mask_texture_ = 0;
   unsigned view_fbo_ = 0, view_ids_ = 0, view_depth_ = 0;
   int view_width_ = 0, view_height_ = 0;
   // Draws the first `index_count` indices with `m` (column-major, reversed infinite depth)
   // into the bound framebuffer of `w` x `h` and reads it back.
   void DrawAndRead(const double m[16], int w, int h, size_t index_count, std::vector<uint32_t>* out);
+  // RenderView and RenderViewTriangles.
+  absl::StatusOr<std::vector<uint32_t>> View(const glm::dvec3& eye, const glm::dvec3& forward, const glm::dvec3& up,
+                                             double fov_y_rad, int width, int height,
+                                             const std::vector<uint8_t>* triangles, bool triangle_ids);
   // The GL state of a pass into `fbo` of `w` x `h` (reversed depth, the scene's program and
   // buffers, no mask), and back to the defaults after it, with GL's error if any.
   void BeginPass(unsigned fbo, int w, int h);
