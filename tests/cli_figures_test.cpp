@@ -345,7 +345,8 @@ TEST(CliFigures, QuickReportWritesThePageAndEveryImageItNames) {
                         " km/h, pvs+eps |", "max speed without a hole frame, km/h",
                         "(latency_speed_default.png)", "(latency_bandwidth_default.png)", "(latency_bytes_default.png)",
                         "(latency_triangles_default.png)", "Triangles drawn per frame along the walk at 6 km/h",
-                        "Machine load: the report's processes used "}) {
+                        "Machine load: the report's processes used ",
+                        "| scene | tau (px) | 0-300 m | 300-900 m | 900-2000 m | beyond 2000 m |"}) {
     EXPECT_NE(md.find(s), std::string::npos) << s;
   }
   EXPECT_FALSE(std::filesystem::exists(dir + "/latency_triangles_default.series")) << "the raw series is not kept";

@@ -55,6 +55,7 @@ void LevelsSection(Page& page, const LevelsPlan& plan) {
     json tau;
     double bytes = 0.0, triangles = 0.0;
     std::optional<double> speed;
+    json by_distance;  // simulate's mean_triangles_by_distance
   };
   std::map<std::string, std::vector<Point>> by_scene;
   for (const std::string& scene : plan.scenes) {
@@ -64,7 +65,7 @@ void LevelsSection(Page& page, const LevelsPlan& plan) {
     const json runs = j->contains("runs") ? j->at("runs") : json::array({*j});
     for (const json& r : runs) {
       by_scene[scene].push_back({r.at("lod_tau_px"), r.at("bytes").get<double>(), r.at("mean_triangles_drawn").get<double>(),
-                                 std::nullopt});
+                                 std::nullopt, r.value("mean_triangles_by_distance", json::array())});
     }
     if (!plan.speed_search) continue;
     const std::optional<json> s = page.Run("simulate levels " + scene + " max speed",
@@ -143,6 +144,29 @@ void LevelsSection(Page& page, const LevelsPlan& plan) {
       "\nunset multiplot\n");
   if (page.Plot("levels plot", plot)) page.Image("levels.png", "Bytes, speed, triangles and differing pixels against tau");
   if (!rows.empty()) page.Table({"scene", "tau (px)", "MB down", "triangles a frame", "highest speed without a stall (km/h)"}, rows);
+  // Where the triangles come from: by the drawn objects' distance from the eye (what levels
+  // can still save: far objects coarsen first).
+  std::vector<std::string> band_header = {"scene", "tau (px)"};
+  std::vector<std::vector<std::string>> band_rows;
+  for (const auto& [scene, points] : by_scene) {
+    for (const Point& p : points) {
+      if (!p.by_distance.is_array() || p.by_distance.empty()) continue;
+      std::vector<std::string> row = {scene, TauText(p.tau)};
+      for (const json& b : p.by_distance) row.push_back(Fixed(b.at("triangles").get<double>(), 0));
+      if (band_header.size() == 2) {
+        for (const json& b : p.by_distance) {
+          band_header.push_back(b.at("to_m").is_null()
+                                    ? absl::StrFormat("beyond %g m", b.at("from_m").get<double>())
+                                    : absl::StrFormat("%g-%g m", b.at("from_m").get<double>(), b.at("to_m").get<double>()));
+        }
+      }
+      band_rows.push_back(std::move(row));
+    }
+  }
+  if (!band_rows.empty()) {
+    page.Text("Triangles drawn a frame (mean) by the distance from the eye to each drawn object's box:");
+    page.Table(band_header, band_rows);
+  }
   if (!check_rows.empty()) {
     page.Table({"scene (client)", "tau (px)", "differing pixels %", "farthest from a silhouette (px)", "bound (px)",
                 "frames checked"},
