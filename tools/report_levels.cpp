@@ -155,9 +155,9 @@ void LevelsSection(Page& page, const LevelsPlan& plan) {
       for (const json& b : p.by_distance) row.push_back(Fixed(b.at("triangles").get<double>(), 0));
       if (band_header.size() == 2) {
         for (const json& b : p.by_distance) {
-          band_header.push_back(b.at("to_m").is_null()
-                                    ? absl::StrFormat("beyond %g m", b.at("from_m").get<double>())
-                                    : absl::StrFormat("%g-%g m", b.at("from_m").get<double>(), b.at("to_m").get<double>()));
+          const double from = b.at("from_m").get<double>();
+          band_header.push_back(b.at("to_m").is_null() ? absl::StrFormat("beyond %g m", from)
+                                                       : absl::StrFormat("%g-%g m", from, b.at("to_m").get<double>()));
         }
       }
       band_rows.push_back(std::move(row));
