@@ -30,7 +30,8 @@ void main() {
 }
 )";
 
-constexpr const char* kFragmentShader = R"(#version 450
+// After "#version 450" and "#define FRONT_FIRST 0 or 1".
+constexpr const char* kFragmentShader = R"(
 flat in uint id;
 uniform bool use_mask;
 uniform bool triangle_ids;    // each pixel names its triangle instead of its object
@@ -38,6 +39,11 @@ uniform usamplerBuffer mask;  // one flag per triangle of the scene
 layout(location = 0) out uint seen;
 void main() {
   if (use_mask && texelFetch(mask, gl_PrimitiveID).r == 0u) discard;
+#if FRONT_FIRST
+  // A face towards the eye wins a tie in depth with one away from it: reversed depth (larger is
+  // nearer), it moves nearer by a millionth of its depth.
+  gl_FragDepth = gl_FrontFacing ? gl_FragCoord.z * 1.000001 : gl_FragCoord.z;
+#endif
   if (triangle_ids) {
     seen = (uint(gl_PrimitiveID) + 1u) | (gl_FrontFacing ? 0u : 0x80000000u);
   } else {
@@ -100,7 +106,8 @@ double CornerAngle(double u, double v) { return std::atan2(u * v, std::sqrt(u * 
 
 IdRenderer::~IdRenderer() {
   if (context_ == nullptr || !context_->MakeCurrent().ok()) return;
-  glDeleteProgram(program_);
+  glDeleteProgram(cube_.id);
+  glDeleteProgram(view_.id);
   glDeleteVertexArrays(1, &vao_);
   glDeleteBuffers(1, &vbo_);
   glDeleteBuffers(1, &ibo_);
@@ -130,9 +137,18 @@ absl::StatusOr<std::unique_ptr<IdRenderer>> IdRenderer::Create(const scenes::Sce
 }
 
 absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
-  absl::StatusOr<GLuint> program = LinkProgram(kVertexShader, kFragmentShader, "id renderer");
-  if (!program.ok()) return program.status();
-  program_ = *program;
+  // The cube's program writes no depth of its own (the GL keeps its early depth test).
+  for (Program* p : {&cube_, &view_}) {
+    const std::string fragment =
+        absl::StrCat("#version 450\n#define FRONT_FIRST ", p == &view_ ? 1 : 0, kFragmentShader);
+    absl::StatusOr<GLuint> program = LinkProgram(kVertexShader, fragment.c_str(), "id renderer");
+    if (!program.ok()) return program.status();
+    p->id = *program;
+    p->view_projection = glGetUniformLocation(p->id, "view_projection");
+    p->use_mask = glGetUniformLocation(p->id, "use_mask");
+    p->triangle_ids = glGetUniformLocation(p->id, "triangle_ids");
+    p->mask = glGetUniformLocation(p->id, "mask");
+  }
 
   std::vector<Vertex> vertices;
   std::vector<uint32_t> indices;
@@ -195,10 +211,6 @@ absl::Status IdRenderer::Init(const scenes::Scene& scene, bool levels) {
   glVertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(Vertex), reinterpret_cast<const void*>(3 * sizeof(float)));
   glBindVertexArray(0);
 
-  loc_view_projection_ = glGetUniformLocation(program_, "view_projection");
-  loc_use_mask_ = glGetUniformLocation(program_, "use_mask");
-  loc_triangle_ids_ = glGetUniformLocation(program_, "triangle_ids");
-  loc_mask_ = glGetUniformLocation(program_, "mask");
   glGenBuffers(1, &mask_buffer_);
   glGenTextures(1, &mask_texture_);
 
@@ -226,18 +238,19 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
   const glm::dvec3 forward[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   const glm::dvec3 up[6] = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 1, 0}, {0, 1, 0}};
   constexpr double kNear = 0.01;  // metres
-  BeginPass(fbo_, size_, size_);
+  BeginPass(fbo_, size_, size_, cube_);
   std::array<std::vector<uint32_t>, 6> faces;
   for (int f = 0; f < 6; ++f) {
     double m[16];
     PinholeReversedInfinite(eye, forward[f], up[f], 1.0, 1.0, kNear, m);  // a 90-degree face
     DrawAndRead(m, size_, size_, full_index_count_, &faces[f]);
   }
-  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
+  if (absl::Status ended = EndPass(cube_); !ended.ok()) return ended;
   return faces;
 }
 
-void IdRenderer::BeginPass(unsigned fbo, int w, int h) {
+void IdRenderer::BeginPass(unsigned fbo, int w, int h, const Program& program) {
+  pass_ = &program;
   glBindFramebuffer(GL_FRAMEBUFFER, fbo);
   glViewport(0, 0, w, h);
   // Reversed depth: 1 at the near plane, 0 at infinity, in a float buffer.
@@ -245,15 +258,15 @@ void IdRenderer::BeginPass(unsigned fbo, int w, int h) {
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_GREATER);
   glDisable(GL_CULL_FACE);
-  glUseProgram(program_);
+  glUseProgram(program.id);
   glBindVertexArray(vao_);
-  glUniform1i(loc_use_mask_, 0);
-  glUniform1i(loc_triangle_ids_, 0);
+  glUniform1i(program.use_mask, 0);
+  glUniform1i(program.triangle_ids, 0);
 }
 
-absl::Status IdRenderer::EndPass() {
-  glUniform1i(loc_use_mask_, 0);
-  glUniform1i(loc_triangle_ids_, 0);
+absl::Status IdRenderer::EndPass(const Program& program) {
+  glUniform1i(program.use_mask, 0);
+  glUniform1i(program.triangle_ids, 0);
   reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_)(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
@@ -265,7 +278,7 @@ absl::Status IdRenderer::EndPass() {
 void IdRenderer::DrawAndRead(const double m[16], int w, int h, size_t index_count, std::vector<uint32_t>* out) {
   float mf[16];
   for (int k = 0; k < 16; ++k) mf[k] = static_cast<float>(m[k]);
-  glUniformMatrix4fv(loc_view_projection_, 1, GL_FALSE, mf);
+  glUniformMatrix4fv(pass_->view_projection, 1, GL_FALSE, mf);
   const GLuint zero[4] = {0, 0, 0, 0};
   glClearBufferuiv(GL_COLOR, 0, zero);
   const GLfloat far_depth = 0.0f;
@@ -321,23 +334,23 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::View(const glm::dvec3& eye, co
     view_height_ = height;
   }
   constexpr double kNear = 0.01;  // metres
-  BeginPass(view_fbo_, width, height);
+  BeginPass(view_fbo_, width, height, view_);
   if (triangles != nullptr) {
     glBindBuffer(GL_TEXTURE_BUFFER, mask_buffer_);
     glBufferData(GL_TEXTURE_BUFFER, static_cast<GLsizeiptr>(triangles->size()), triangles->data(), GL_STREAM_DRAW);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_BUFFER, mask_texture_);
     glTexBuffer(GL_TEXTURE_BUFFER, GL_R8UI, mask_buffer_);
-    glUniform1i(loc_mask_, 0);
+    glUniform1i(view_.mask, 0);
   }
-  glUniform1i(loc_use_mask_, triangles != nullptr ? 1 : 0);
-  glUniform1i(loc_triangle_ids_, triangle_ids ? 1 : 0);
+  glUniform1i(view_.use_mask, triangles != nullptr ? 1 : 0);
+  glUniform1i(view_.triangle_ids, triangle_ids ? 1 : 0);
   const double fy = 1.0 / std::tan(0.5 * fov_y_rad), fx = fy * height / width;
   double m[16];
   PinholeReversedInfinite(eye, forward, up, fx, fy, kNear, m);
   std::vector<uint32_t> out;
   DrawAndRead(m, width, height, triangles != nullptr ? index_count_ : full_index_count_, &out);
-  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
+  if (absl::Status ended = EndPass(view_); !ended.ok()) return ended;
   return out;
 }
 

@@ -45,7 +45,9 @@ class IdRenderer {
   // of view `fov_y_rad`, `width` x `height` pixels. Without `triangles`, the full scene (no
   // level). With `triangles`, only the triangles whose flag is non-zero are drawn (one byte per
   // triangle uploaded, triangle_count(), in the order of FirstTriangle, levels after the
-  // scene's): the client's drawn set against the full scene. Errors: sizes outside 1..8192, a
+  // scene's): the client's drawn set against the full scene. Where a face towards the eye and
+  // one away from it lie at the same depth (a level simplified to a sheet seen from its two
+  // sides, back to back), the face towards the eye is seen. Errors: sizes outside 1..8192, a
   // flag array of the wrong length, GL failing.
   absl::StatusOr<std::vector<uint32_t>> RenderView(const glm::dvec3& eye, const glm::dvec3& forward,
                                                    const glm::dvec3& up, double fov_y_rad, int width, int height,
@@ -83,13 +85,19 @@ class IdRenderer {
 
   std::unique_ptr<GlContext> context_;
   int size_ = 0;
-  unsigned program_ = 0, vao_ = 0, vbo_ = 0, ibo_ = 0, fbo_ = 0, ids_ = 0, depth_ = 0;
+  // A linked program and its uniforms: the cube's, and the views' (a front face wins a tie).
+  struct Program {
+    unsigned id = 0;
+    int view_projection = -1, use_mask = -1, mask = -1, triangle_ids = -1;
+  };
+  Program cube_, view_;
+  const Program* pass_ = nullptr;  // the program of the pass under way
+  unsigned vao_ = 0, vbo_ = 0, ibo_ = 0, fbo_ = 0, ids_ = 0, depth_ = 0;
   size_t index_count_ = 0;       // every triangle uploaded
   size_t full_index_count_ = 0;  // the scene's own (the full view, the cube)
   std::vector<uint64_t> first_triangle_;
   std::vector<std::vector<uint64_t>> level_first_triangle_;  // [object][level - 1]
   std::vector<std::vector<uint64_t>> cluster_first_triangle_;  // [cluster][level - 1]
-  int loc_use_mask_ = -1, loc_mask_ = -1, loc_view_projection_ = -1, loc_triangle_ids_ = -1;
   // The scene's objects with triangles in upload order: each one's first triangle and its id.
   std::vector<uint64_t> upload_first_;
   std::vector<uint32_t> upload_ids_;
@@ -105,8 +113,8 @@ class IdRenderer {
                                              const std::vector<uint8_t>* triangles, bool triangle_ids);
   // The GL state of a pass into `fbo` of `w` x `h` (reversed depth, the scene's program and
   // buffers, no mask), and back to the defaults after it, with GL's error if any.
-  void BeginPass(unsigned fbo, int w, int h);
-  absl::Status EndPass();
+  void BeginPass(unsigned fbo, int w, int h, const Program& program);
+  absl::Status EndPass(const Program& program);
   void* clip_control_ = nullptr;  // glClipControl
   std::vector<double> weights_;
 };
