@@ -450,7 +450,7 @@ void Run::Frame(double t) {
     uint64_t without = 0;
     auto add_without = [&](uint32_t o, uint64_t n) {
       without += n;
-      bands_without[band(o)] += n;
+      if (mask == nullptr) bands_without[band(o)] += n;  // a masked frame's bands are the mask's
     };
     if (complete && cell_.has_value()) {
       for (uint32_t o : *completion_.List(*cell_)) {
