@@ -402,6 +402,7 @@ absl::StatusOr<Pumped> WalkthroughLoop::Pump(const glm::dvec3& eye, uint64_t upl
     const v1::SceneInfo& info = store_->scene_info();
     sum_->scene_objects = info.object_count();
     sum_->scene_triangles = info.triangle_count();
+    sum_->server_levels = info.levels();
     if (full_scene_ != nullptr && (full_scene_->objects.size() != info.object_count() ||
                                     full_scene_->TriangleCount() != info.triangle_count())) {
       return absl::FailedPreconditionError(absl::StrCat(

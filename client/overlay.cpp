@@ -84,7 +84,9 @@ std::vector<std::string> OverlayLines(const OverlayStatus& s, double fps, double
   out.push_back(absl::StrFormat("received %s, %.2f MB/s", Megabytes(s.bytes_received), bytes_per_s / 1e6));
   out.push_back(absl::StrFormat("frames %d, stalls %d (%.2f s), holes %d", s.frames, s.stalls, s.stall_s,
                                 s.hole_frames));
-  out.push_back(s.lod_tau_px > 0.0
+  out.push_back(s.lod_tau_px > 0.0 && s.server_without_levels
+                    ? absl::StrFormat("levels: tau %.2g px asked, the server has none (full detail)", s.lod_tau_px)
+                : s.lod_tau_px > 0.0
                     ? absl::StrFormat("levels: tau %.2g px, %d coarse frames, %d at a level (%s saved)", s.lod_tau_px,
                                       s.coarse_frames, s.level_objects, Megabytes(s.level_bytes_saved))
                     : std::string("levels: off (full detail)"));

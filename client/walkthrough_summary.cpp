@@ -77,6 +77,7 @@ std::string SummaryJson(const WalkthroughSummary& s) {
   j["frames_masked"] = s.frames_masked;
   j["hole_frames"] = s.hole_frames;
   j["lod_tau_px"] = s.lod_tau_px > 0.0 ? nlohmann::ordered_json(s.lod_tau_px) : nlohmann::ordered_json(nullptr);
+  j["server_levels"] = s.server_levels;
   j["coarse_frames"] = s.coarse_frames;
   j["level_objects_received"] = s.level_objects_received;
   j["level_bytes_saved"] = s.level_bytes_saved;
@@ -134,7 +135,12 @@ std::string SummaryText(const WalkthroughSummary& s) {
                         s.mean_triangles_without_masks > 0
                             ? 100.0 * s.mean_triangles_drawn / s.mean_triangles_without_masks
                             : 0.0);
-  if (s.lod_tau_px > 0.0) {
+  if (s.lod_tau_px > 0.0 && !s.server_levels && s.scene_objects > 0) {
+    absl::StrAppendFormat(&out,
+                          "  levels of detail: tau %.2f px asked for, but the server has no levels (vistream-server "
+                          "--levels makes them): full detail\n",
+                          s.lod_tau_px);
+  } else if (s.lod_tau_px > 0.0) {
     absl::StrAppendFormat(&out,
                           "  levels of detail at tau %.2f px: %d objects received at a level, %d cluster levels "
                           "(%.1f MB saved), %d coarse frames\n",

@@ -155,6 +155,7 @@ OverlayStatus WalkthroughLoop::Status(const Pumped& p, const FrameStats& fs, con
   st.stall_s = sum_->stall_s;
   st.hole_frames = sum_->hole_frames + (hole ? 1 : 0);
   st.lod_tau_px = opt_.lod_tau_px;
+  st.server_without_levels = store_->has_scene_info() && !store_->scene_info().levels();
   st.coarse_frames = sum_->coarse_frames + (p.complete && p.coarse > 0 ? 1 : 0);
   st.frames_masked = sum_->frames_masked + (fs.mask_used ? 1 : 0);
   st.masks_received = masks_seen_;

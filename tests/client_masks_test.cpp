@@ -15,6 +15,8 @@
 #include <thread>
 #include <vector>
 
+#include <absl/strings/str_format.h>
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -339,7 +341,7 @@ absl::StatusOr<WalkthroughSummary> WalkWithMasks(const MaskedWalk& w) {
                 s->mean_triangles_without_masks,
                 s->mean_triangles_without_masks > 0 ? s->mean_triangles_drawn / s->mean_triangles_without_masks : 0.0,
                 static_cast<unsigned long long>(s->pixel_error), static_cast<unsigned long long>(s->checked_frames));
-    if (s->lod_tau_px > 0.0) {
+    if (s->lod_tau_px > 0.0 && s->server_levels) {
       std::printf("  levels at tau %g px: %llu objects and cluster levels, %llu bytes saved, geometry %llu bytes, "
                   "%llu coarse frames, differing pixels %.4f%% of those checked, the farthest %.2f px from a silhouette\n",
                   s->lod_tau_px,
@@ -392,6 +394,13 @@ TEST(ClientMasks, ACity1WalkerAt6KmhDrawsMaskedFramesWithoutHolesOrPixelError) {
   EXPECT_EQ(j["hole_frames"], s->hole_frames);
   EXPECT_EQ(j["frames_masked"], s->frames_masked);
   EXPECT_DOUBLE_EQ(j["mean_triangles_without_masks"].get<double>(), s->mean_triangles_without_masks);
+  // Levels asked for (tau 1 px) from a server without any: full detail, and the summary says why.
+  EXPECT_FALSE(s->server_levels);
+  EXPECT_EQ(j["server_levels"], false);
+  EXPECT_EQ(s->level_objects_received, 0u);
+  EXPECT_NE(SummaryText(*s).find("tau 1.00 px asked for, but the server has no levels (vistream-server --levels"),
+            std::string::npos)
+      << SummaryText(*s);
 }
 
 TEST(ClientMasks, MaskBytesAreCreditConsumedSoAWalkerWithASmallWindowKeepsReceiving) {
@@ -552,6 +561,8 @@ TEST(ClientMasks, AClientThatJumpsDrawsThePvsUntilTheMaskOfItsNewBoxArrives) {
 void ExpectLevelsHold(const WalkthroughSummary& s, double tau_px, const std::string& what) {
   EXPECT_EQ(s.stalls, 0u) << what;
   EXPECT_EQ(s.hole_frames, 0u) << what;
+  EXPECT_TRUE(s.server_levels) << what;
+  EXPECT_NE(SummaryText(s).find(absl::StrFormat("levels of detail at tau %.2f px", tau_px)), std::string::npos) << what;
   EXPECT_GT(s.level_objects_received, 0u) << what;
   EXPECT_GT(s.level_bytes_saved, 0u) << what;
   EXPECT_LE(static_cast<double>(s.coarse_frames), 0.01 * static_cast<double>(s.frames)) << what;

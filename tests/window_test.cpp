@@ -713,6 +713,20 @@ TEST(HeadlessOverlay, ALostServerShowsReconnectingWithItsBackOff) {
   EXPECT_NE(ReadFile(dir + "/err.txt").find("no answer for 3 s"), std::string::npos) << ReadFile(dir + "/err.txt");
 }
 
+TEST(OverlayLines, SayTheScreenErrorAndWhetherTheServerHasLevels) {
+  auto has = [](const std::vector<std::string>& lines, const std::string& text) {
+    return std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+  };
+  OverlayStatus s;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "levels: off (full detail)"));
+  s.lod_tau_px = 2.0;
+  s.coarse_frames = 3;
+  s.level_objects = 40;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "levels: tau 2 px, 3 coarse frames, 40 at a level"));
+  s.server_without_levels = true;
+  EXPECT_TRUE(has(OverlayLines(s, 0.0, 0.0, 0.0), "levels: tau 2 px asked, the server has none (full detail)"));
+}
+
 TEST(OverlayLines, SayTheConnectionAndWhatTheFrameDrew) {
   OverlayStatus s;
   s.server = "127.0.0.1:1";
