@@ -74,8 +74,8 @@ absl::Status WalkthroughLoop::ChooseWalk() {
     if (walks_.empty() && !entry_.has_value()) {
       return absl::NotFoundError(absl::StrCat("the server's scene '", sum_->scene,
                                               "' has no entry in the scene catalog (", catalog_status_.message(),
-                                              ") and the server sends no walks: there is no walk to follow; give "
-                                              "--pose instead"));
+                                              ") and the server sends no walks (a glTF file holds those its scene "
+                                              "was saved with): there is no walk to follow; give --pose instead"));
     }
     return absl::NotFoundError(
         opt_.path.empty()

@@ -24,7 +24,12 @@ absl::Status WalkthroughLoop::Prepare() {
   absl::StatusOr<std::string> scene = PickScene(*stats, opt_.scene, opt_.server);
   if (!scene.ok()) return scene.status();
   sum_->scene = *scene;
-  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
+  // A scene the server loaded from a glTF file has no catalog entry: its walks are the file's,
+  // which the server sends (SceneInfo.paths).
+  const bool gltf = scenes::IsGltfPath(sum_->scene);
+  absl::StatusOr<scenes::CatalogEntry> entry =
+      gltf ? absl::StatusOr<scenes::CatalogEntry>(absl::NotFoundError("a glTF file, not a catalog entry"))
+           : scenes::FindCatalogEntry(sum_->scene, opt_.catalog_dir);
   if (entry.ok()) entry_ = std::move(*entry);
 
   // The walks: the catalog entry's now; the server's own (SceneInfo.paths) join them when
@@ -33,8 +38,11 @@ absl::Status WalkthroughLoop::Prepare() {
     walks_ = entry_->walks;
   } else {
     catalog_status_ = entry.status();
-    Log(absl::StrCat("no scene catalog entry for '", sum_->scene, "' (", catalog_status_.message(),
-                     "): no walks, client budgets or effects from the catalog"));
+    Log(gltf ? absl::StrCat("the server's scene is the glTF file '", sum_->scene,
+                            "': walks from the file (the server sends them), no client budgets or effects from the "
+                            "catalog")
+             : absl::StrCat("no scene catalog entry for '", sum_->scene, "' (", catalog_status_.message(),
+                            "): no walks, client budgets or effects from the catalog"));
   }
   const bool follow = !opt_.pose.has_value() && (opt_.headless || !opt_.path.empty());
   if (follow) {

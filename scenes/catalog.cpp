@@ -382,6 +382,19 @@ std::vector<WalkPath> WalksWithScenePaths(const std::vector<WalkPath>& declared,
   return walks;
 }
 
+void AddDeclaredWalks(const std::vector<WalkPath>& declared, Scene* scene) {
+  std::vector<ScenePath> paths;
+  for (const WalkPath& w : declared) {
+    if (w.waypoints.size() >= 2) paths.push_back({w.name, w.waypoints});
+  }
+  for (ScenePath& p : scene->paths) {
+    if (std::none_of(declared.begin(), declared.end(), [&](const WalkPath& w) { return w.name == p.name; })) {
+      paths.push_back(std::move(p));
+    }
+  }
+  scene->paths = std::move(paths);
+}
+
 absl::StatusOr<LoadedScene> LoadScene(std::string_view name_or_path, const LoadOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   LoadedScene out;

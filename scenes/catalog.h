@@ -60,6 +60,12 @@ struct WalkPath {
 std::vector<WalkPath> WalksWithScenePaths(const std::vector<WalkPath>& declared, const Scene& scene,
                                           double speed_mps = 1.4, double eye_height_m = 1.7);
 
+// Puts `declared` (a catalog entry's walks, in order) first among `scene`'s own paths, which keep
+// their order after them but for those whose names `declared` uses: what a scene saved to a file
+// carries, so that its walks outlive the catalog (a generated city saved to .glb). Walks of
+// fewer than 2 waypoints are left out.
+void AddDeclaredWalks(const std::vector<WalkPath>& declared, Scene* scene);
+
 // Each effect is modelled only when its key is present (server/link_model.h says how).
 struct LinkSpec {
   std::optional<double> bandwidth_mbps;  // megabits (10^6) per second, > 0

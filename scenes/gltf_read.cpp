@@ -231,7 +231,9 @@ class GltfImporter {
       const tinygltf::Value& id = ids.Get(static_cast<int>(k));
       if (!id.IsInt() || id.Get<int>() < 0 || id.Get<int>() >= static_cast<int>(model_.nodes.size()) ||
           model_.nodes[id.Get<int>()].mesh < 0) {
-        throw LoadError{absl::StrCat(what, ": MSFT_lod id ", k, " is not a node with a mesh")};
+        const std::string value = id.IsInt() ? std::to_string(id.Get<int>()) : std::string("not a whole number");
+        throw LoadError{absl::StrCat(what, ": MSFT_lod ids[", k, "] (", value, ") is not a node with a mesh (",
+                                     model_.nodes.size(), " nodes)")};
       }
       out.push_back(id.Get<int>());
     }

@@ -405,6 +405,21 @@ TEST(Progress, ReportsToTheCallersSinkAndSaysWhenStoppedEarly) {
 namespace vistream::scenes {
 namespace {
 
+TEST(Catalog, DeclaredWalksGoFirstIntoTheScenesPathsAndReplaceThoseOfTheirNames) {
+  Scene scene;
+  scene.paths = {{"street 1", {{0, 0}, {100, 0}}}, {"street 2", {{0, 0}, {0, 100}}}};
+  WalkPath mine{"mine", 2.5, 1.6, {{1, 1}, {2, 2}}};
+  WalkPath street{"street 1", 1.4, 1.7, {{5, 5}, {6, 6}}};
+  WalkPath dot{"dot", 1.4, 1.7, {{3, 3}}};  // one waypoint: no walk
+  AddDeclaredWalks({mine, street, dot}, &scene);
+  ASSERT_EQ(scene.paths.size(), 3u);
+  EXPECT_EQ(scene.paths[0].name, "mine");
+  EXPECT_EQ(scene.paths[0].waypoints, mine.waypoints);
+  EXPECT_EQ(scene.paths[1].name, "street 1");
+  EXPECT_EQ(scene.paths[1].waypoints, street.waypoints);  // the declared one
+  EXPECT_EQ(scene.paths[2].name, "street 2");
+}
+
 TEST(Catalog, LoadSceneFollowsTheEntrysWalksWithTheScenesOwn) {
   const std::string dir = vistream::testing::ProcessTempDir() + "/catalog_paths";
   std::filesystem::create_directories(dir);

@@ -282,6 +282,21 @@ TEST(CliFigures, BenchEpsilonJsonGivesPerNeighbourhoodFiguresAndSetDigests) {
   EXPECT_NE(t2[0]["per_neighbourhood"][0].at("digest"), t2[0]["per_neighbourhood"][1].at("digest"));
 }
 
+// vistream bench client (issue 45): the modes side by side through a real server on loopback,
+// levels first; with --verify each mode's differing pixels against the full scene, said in the
+// text as well as --json (full detail: none; levels: within a silhouette's reach).
+TEST(CliFigures, BenchClientPutsLevelsBesideFullDetailAndSaysEachCheckedModesDifferingPixels) {
+  const RunResult r = Vistream("bench client --scene city2 --lod 1 --verify --seconds 3 --size 160x90");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  for (const char* mode : {"pvs+eps+lod ", "pvs+eps ", "pvs ", "whole scene "}) {
+    EXPECT_NE(r.out.find(std::string("\n") + mode), std::string::npos) << mode << " row: " << r.out;
+  }
+  EXPECT_NE(r.out.find("pvs+eps+lod      checked against the full scene: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("pvs+eps          checked against the full scene: 0 of "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("pvs              checked against the full scene: 0 of "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("levels at tau 1 px against full detail (both with masks): "), std::string::npos) << r.out;
+}
+
 TEST(CliFigures, ReportRejectsAnOutThatIsNoFolder) {
   const std::string file = Tmp("not_a_folder");
   { std::FILE* f = std::fopen(file.c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }

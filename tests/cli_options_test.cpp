@@ -44,6 +44,9 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
                                                                              "': a scene is written as .glb or .gltf");
   std::filesystem::create_directories(Tmp("folder.glb"));
   ExpectBadOption("scene extrude city1 -o " + Tmp("folder.glb"), "--output: '" + Tmp("folder.glb") + "' is a folder");
+  ExpectBadOption("scene levels city1 -o " + Tmp("nowhere") + "/city1.glb",
+                  "--output: '" + Tmp("nowhere") + "/city1.glb': there is no folder '" + Tmp("nowhere") +
+                      "' to write it in");
   ExpectBadOption("scene generate city1 -o " + Tmp("city1.json"),
                   "--output: '" + Tmp("city1.json") + "': a scene is written as .glb or .gltf");
   ExpectBadOption("pvs --scene city1 --cell 1,1 --bogus", "--bogus: not an option of 'vistream pvs'");

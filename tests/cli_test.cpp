@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "scenes/catalog.h"
 #include "tests/cli_test_util.h"
 #include "visibility/pvs_file.h"
 
@@ -42,6 +43,17 @@ TEST(Cli, GeneratedCity1Reports2128Objects) {
   EXPECT_LT(min[0].get<double>(), max[0].get<double>());
   EXPECT_EQ(min[2].get<double>(), 0.0);
   EXPECT_GT(j.at("kd").at("nodes").get<int>(), 1000);
+  // The catalog entry's walks travel in the file: a server or tool that loads it finds them.
+  absl::StatusOr<vistream::scenes::CatalogEntry> entry = vistream::scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  absl::StatusOr<vistream::scenes::LoadedScene> loaded = vistream::scenes::LoadScene(glb);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  ASSERT_FALSE(entry->walks.empty());
+  ASSERT_EQ(loaded->walks.size(), entry->walks.size());
+  for (size_t k = 0; k < entry->walks.size(); ++k) {
+    EXPECT_EQ(loaded->walks[k].name, entry->walks[k].name);
+    EXPECT_EQ(loaded->walks[k].waypoints, entry->walks[k].waypoints);
+  }
 }
 
 TEST(Cli, SeedChangesTheCity) {

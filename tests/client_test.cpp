@@ -726,5 +726,44 @@ TEST_F(ServedWalks, WithoutAPathTheHeadlessClientTakesTheFirstAndABadNameListsTh
       << bad.status();
 }
 
+// A generated city saved to a file (`vistream scene generate city1 -o city1.glb`) and served from
+// it as vistream-server serves a path (the scene named by the path): the catalog entry's walks
+// travel in the file, the server sends them, and the headless client, which has no catalog entry
+// for a file and does not look for one, follows them (the kind of ../shared/cases' london.glb).
+TEST(ServedFile, AGeneratedCitySavedToAFileKeepsItsCatalogWalksForTheClient) {
+  absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  ASSERT_FALSE(entry->walks.empty());
+  absl::StatusOr<scenes::Scene> scene = scenes::BuildScene(*entry);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  scenes::AddDeclaredWalks(entry->walks, &*scene);
+  const std::string glb = TempDir("served_file") + "/city1.glb";
+  ASSERT_TRUE(scenes::SaveGltf(*scene, glb).ok());
+  server::ServedSceneOptions so;
+  so.scene = glb;
+  so.name = glb;
+  so.threads = 1;
+  absl::StatusOr<std::unique_ptr<ServedScene>> served = ServedScene::Create(so);
+  ASSERT_TRUE(served.ok()) << served.status();
+  server::ServerOptions o;
+  o.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<WalkthroughServer>> w = WalkthroughServer::Start(served->get(), o, nullptr);
+  ASSERT_TRUE(w.ok()) << w.status();
+  WalkthroughOptions c = Headless(Address(**w));
+  std::string log;
+  c.log = [&log](const std::string& line) { log += line + "\n"; };
+  c.path = entry->walks.front().name;
+  c.speed_kmh = 72.0;
+  c.seconds = 2.0;
+  absl::StatusOr<WalkthroughSummary> s = RunWalkthrough(c);
+  ASSERT_TRUE(s.ok()) << s.status() << "\n" << log;
+  EXPECT_EQ(s->scene, glb);
+  EXPECT_EQ(s->path, entry->walks.front().name);
+  EXPECT_GT(s->distance_m, 20.0);
+  EXPECT_EQ(s->stalls, 0u);
+  EXPECT_NE(log.find("the server's scene is the glTF file '" + glb + "': walks from the file"), std::string::npos) << log;
+  EXPECT_EQ(log.find("malformed JSON"), std::string::npos) << log;
+}
+
 }  // namespace
 }  // namespace vistream::client

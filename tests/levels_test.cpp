@@ -537,7 +537,7 @@ TEST(GltfLevels, BadLevelsAreErrorsNamingTheFileAndTheObject) {
   expect_bad(j, object + "2 (node " + std::to_string(second));
   j = good;
   j["nodes"][1 + o]["extensions"]["MSFT_lod"]["ids"] = {100000};
-  expect_bad(j, "MSFT_lod id 0 is not a node with a mesh");
+  expect_bad(j, "MSFT_lod ids[0] (100000) is not a node with a mesh (");
   j = good;
   j["nodes"][0]["extras"]["vistream"]["clusters"][0]["objects"] = {5, 3};
   expect_bad(j, "cluster 0: objects are not sorted");

@@ -780,6 +780,8 @@ TEST(SimulateCli, SeriesHasABlockPerRunAndTextNamesMaskedAndHoleFrames) {
   EXPECT_NE(r.out.find("hole frames: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find(" with masks, "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("ε-masks: "), std::string::npos) << "pvs+eps's mask figures: " << r.out;
+  EXPECT_NE(r.out.find("  levels of detail: off (full detail)\n"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find(" at tau "), std::string::npos) << "no --lod: no level in the run's heading: " << r.out;
   std::ifstream in(series);
   ASSERT_TRUE(in) << series;
   std::string line;

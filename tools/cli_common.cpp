@@ -49,6 +49,9 @@ absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* secon
   if (!loaded.ok()) return loaded.status();
   for (const std::string& w : loaded->warnings) std::fprintf(stderr, "vistream: warning: %s\n", w.c_str());
   if (seconds != nullptr) *seconds = loaded->seconds;
+  // A catalog entry's walks join the scene's own paths: a scene a command saves keeps them
+  // (a server loading the file sends them; vistream-client has no catalog entry for a file).
+  if (loaded->entry.has_value()) scenes::AddDeclaredWalks(loaded->entry->walks, &loaded->scene);
   return std::move(loaded->scene);
 }
 
@@ -182,6 +185,15 @@ CLI::Validator SceneOutputPath() {
         }
         std::error_code ec;
         if (std::filesystem::is_directory(text, ec)) return "'" + text + "' is a folder";
+        // Told before the work (making london's levels takes minutes), not when saving.
+        const std::filesystem::path folder = std::filesystem::path(text).parent_path();
+        if (!folder.empty() && !std::filesystem::is_directory(folder, ec)) {
+          return "'" + text + "': there is no folder '" + folder.string() + "' to write it in";
+        }
+        if (access(folder.empty() ? "." : folder.c_str(), W_OK) != 0) {
+          return "'" + text + "': the folder '" + (folder.empty() ? std::string(".") : folder.string()) +
+                 "' is not writable";
+        }
         return "";
       },
       "FILE.glb|FILE.gltf");

@@ -31,7 +31,8 @@ void InstallCancelHandler();
 // What the tool's long computations report to and poll: the terminal sink and CancelFlag().
 scenes::RunControl ToolRun();
 
-// scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings.
+// scenes::LoadScene with the tool's progress and cancel; prints the loader's warnings. A catalog
+// entry's walks join the scene's own paths (scenes::AddDeclaredWalks), so that a file saved from it keeps them.
 absl::StatusOr<scenes::Scene> LoadSceneArg(const std::string& arg, double* seconds = nullptr);
 
 // Checks for numeric options (cli/number_options.h) and the exit code of a bad option.

@@ -223,6 +223,20 @@ int BenchClient(const BenchClientArgs& a) {
                 static_cast<unsigned long long>(s.hole_frames), static_cast<unsigned long long>(s.coarse_frames),
                 s.bytes_received / 1e6);
   }
+  for (size_t k = 0; k < results.size(); ++k) {
+    const client::WalkthroughSummary& s = results[k];
+    if (!s.verified) continue;
+    std::printf("%-16s checked against the full scene: %llu of %llu pixels differ (%.4f%%) in %llu frames%s\n",
+                modes[k].name.c_str(), static_cast<unsigned long long>(s.pixel_error),
+                static_cast<unsigned long long>(s.checked_pixels),
+                s.checked_pixels > 0 ? 100.0 * static_cast<double>(s.pixel_error) / static_cast<double>(s.checked_pixels)
+                                     : 0.0,
+                static_cast<unsigned long long>(s.checked_frames),
+                s.pixel_error > 0 ? absl::StrFormat(", the farthest %.1f px from a full-detail silhouette",
+                                                    s.max_silhouette_px)
+                                        .c_str()
+                                  : "");
+  }
   if (tau_px > 0.0) {
     const client::WalkthroughSummary& lod = results[0];
     std::printf("levels at tau %g px against full detail (both with masks): %.1f against %.1f fps (x%.2f), %.0f against "

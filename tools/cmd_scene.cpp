@@ -61,6 +61,9 @@ int Generate(const GenerateArgs& a) {
     return Fail(entry.status());
   }
   if (!scene.ok()) return Fail(scene.status());
+  // The entry's walks go into the file (Scene::paths; glTF extras), so that a server loading the
+  // file sends them (SceneInfo.paths) and tools that read it find them by name.
+  if (entry.ok()) scenes::AddDeclaredWalks(entry->walks, &*scene);
   const double generate_s = SecondsSince(start);
   const auto save_start = std::chrono::steady_clock::now();
   if (absl::Status s = scenes::SaveGltf(*scene, a.output); !s.ok()) return Fail(s);

@@ -133,7 +133,9 @@ nlohmann::json ToJson(const simulation::SimulationResult& r, simulation::Scheme 
 }
 
 void PrintText(const nlohmann::json& j) {
-  std::printf("%s on '%s' at %.1f km/h over %s\n", j["scheme"].get<std::string>().c_str(),
+  const bool levels = !j["lod_tau_px"].is_null();
+  std::printf("%s%s on '%s' at %.1f km/h over %s\n", j["scheme"].get<std::string>().c_str(),
+              levels ? absl::StrFormat(" at tau %g px", j["lod_tau_px"].get<double>()).c_str() : "",
               j["path"].get<std::string>().c_str(), j["speed_kmh"].get<double>(),
               j["link"]["described"].get<std::string>().c_str());
   std::printf("  stalls: %llu frames (%.2f s) in %llu of %llu cells entered; first viewcell after %.1f s\n",
@@ -175,6 +177,15 @@ void PrintText(const nlohmann::json& j) {
                 static_cast<unsigned long long>(j["masks_used"].get<uint64_t>()),
                 static_cast<unsigned long long>(j["masks_computed"].get<uint64_t>()), j["mask_compute_ms_mean"].get<double>(),
                 j["mask_compute_s"].get<double>(), static_cast<unsigned long long>(j["masks_dropped"].get<uint64_t>()));
+  }
+  if (levels) {
+    std::printf("  levels of detail at tau %g px: %llu objects received at a level, %llu cluster levels, %llu coarse "
+                "frames\n",
+                j["lod_tau_px"].get<double>(), static_cast<unsigned long long>(j["level_objects_received"].get<uint64_t>()),
+                static_cast<unsigned long long>(j["cluster_levels_received"].get<uint64_t>()),
+                static_cast<unsigned long long>(j["coarse_frames"].get<uint64_t>()));
+  } else {
+    std::printf("  levels of detail: off (full detail)\n");
   }
   if (j.contains("radius_m")) std::printf("  radius: %.1f m (the smallest with no hole on this walk)\n", j["radius_m"].get<double>());
   std::printf("  walk: %.0f m in %.0f s of simulated time\n", j["path_m"].get<double>(), j["sim_s"].get<double>());
