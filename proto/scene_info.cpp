@@ -14,7 +14,6 @@ v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::Viewce
   SetVec(scene.bounds.max, info.mutable_bounds_max());
   info.set_object_count(static_cast<uint32_t>(scene.objects.size()));
   info.set_triangle_count(scene.TriangleCount());
-  info.set_levels(!scene.levels.objects.empty());
   v1::ViewcellGrid* g = info.mutable_grid();
   g->set_cell_size_m(grid.cell_size());
   g->set_x0_m(grid.corner().x);

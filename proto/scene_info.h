@@ -16,8 +16,7 @@ namespace vistream {
 // SceneInfo for `scene` served as `name` over `grid`: origin (the scene's frame in its CRS),
 // bounds, object and triangle counts (scene-local metres), the grid (corner, cell size, cell
 // counts, band; per-cell bands where cells follow terrain, as band_z pairs in cell order) and
-// the scene's own walks (Scene::paths, xy pairs), and whether the scene has levels of detail to
-// serve (Scene::levels; issue 45). Infallible.
+// the scene's own walks (Scene::paths, xy pairs); `levels` is the session's to set. Infallible.
 v1::SceneInfo MakeSceneInfo(const scenes::Scene& scene, const visibility::ViewcellGrid& grid, const std::string& name);
 
 // The client's viewcell grid from what SceneInfo says (the inverse of MakeSceneInfo's grid): the

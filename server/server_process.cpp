@@ -329,9 +329,10 @@ int RunServerProcess(const ServerProcessOptions& run) {
   // One scene: "scene NAME, ..."; several: "N scenes: NAME (...); NAME (...)".
   std::string what;
   for (const ServedScene* s : scenes) {
-    const std::string one = absl::StrFormat("%zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s",
-                                            s->grid().CellCount(), s->grid().cell_size(), s->grid().nx(),
-                                            s->grid().ny(), s->scene().objects.size(), s->pvs_source());
+    const std::string one = absl::StrFormat(
+        "%zu viewcells of %g m (%d x %d), %zu objects, PVSs from %s, %s", s->grid().CellCount(), s->grid().cell_size(),
+        s->grid().nx(), s->grid().ny(), s->scene().objects.size(), s->pvs_source(),
+        s->levels() != nullptr ? "levels of detail" : "no levels of detail (--levels makes them)");
     if (scenes.size() == 1) {
       what = absl::StrFormat("scene %s, %s", s->name(), one);
     } else {

@@ -288,6 +288,7 @@ absl::Status Session::OnHello(const v1::Hello& hello) {
   memory_budget_ = hello.memory_budget_bytes();
   v1::ServerMessage info;
   *info.mutable_scene_info() = scene_->scene_info();
+  info.mutable_scene_info()->set_levels(levels_on_);
   QueueControl(std::move(info));
   if (log_ != nullptr) {
     log_->SetScene(id_, scene_->name());

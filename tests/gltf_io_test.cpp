@@ -73,6 +73,13 @@ TEST(GltfIo, GlbRoundTripKeepsMeshesOccludersAndOrigin) {
   ExpectSameScene(scene, *loaded);
 }
 
+TEST(GltfIo, SavingIntoAMissingFolderSaysItCannotCreateTheFile) {
+  const std::string path = TempDir() + "/no-such-folder/small.glb";
+  const absl::Status s = SaveGltf(SmallScene(), path);
+  EXPECT_EQ(s.code(), absl::StatusCode::kUnavailable) << s;
+  EXPECT_NE(s.message().find(path + ": cannot create: No such file or directory"), std::string::npos) << s;
+}
+
 TEST(GltfIo, GltfWithExternalBufferRoundTrips) {
   const Scene scene = GenerateTestCity(/*dense=*/true, 3);
   const std::string path = TempDir() + "/city1.gltf";
