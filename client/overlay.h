@@ -52,7 +52,7 @@ struct OverlayStatus {
   // level than the cell asks, objects received at a level and the bytes those levels saved.
   double lod_tau_px = 0.0;
   uint64_t coarse_frames = 0, level_objects = 0, level_bytes_saved = 0;
-  bool server_without_levels = false;  // the server said it has none (SceneInfo.levels): full detail
+  bool server_without_levels = false;  // levels asked for, the server has none (SceneInfo.levels false)
   double stall_s = 0.0;
   bool masked = false, hole = false;  // what this frame drew
   uint32_t mask_id = 0;               // masked: the server's id of the ε-mask drawn

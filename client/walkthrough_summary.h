@@ -34,7 +34,7 @@ struct WalkthroughSummary {
   // viewcell drawing some object at a coarser level than its list asks (the finer one on its
   // way); geometry received at a level and the encoded bytes those levels saved.
   double lod_tau_px = 0.0;
-  bool server_levels = false;  // the server said it has levels to send (SceneInfo.levels)
+  bool server_levels = false;  // this session got levels: asked for and the server has them (SceneInfo.levels)
   uint64_t coarse_frames = 0, level_objects_received = 0, level_bytes_saved = 0;
   uint64_t cluster_levels_received = 0;  // ClusterGeometry messages (issue 45)
   // --verify: the largest distance, pixels, of a differing pixel from the nearest full-detail
