@@ -245,7 +245,7 @@ absl::StatusOr<std::array<std::vector<uint32_t>, 6>> IdRenderer::RenderCube(cons
     PinholeReversedInfinite(eye, forward[f], up[f], 1.0, 1.0, kNear, m);  // a 90-degree face
     DrawAndRead(m, size_, size_, full_index_count_, &faces[f]);
   }
-  if (absl::Status ended = EndPass(cube_); !ended.ok()) return ended;
+  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
   return faces;
 }
 
@@ -264,9 +264,9 @@ void IdRenderer::BeginPass(unsigned fbo, int w, int h, const Program& program) {
   glUniform1i(program.triangle_ids, 0);
 }
 
-absl::Status IdRenderer::EndPass(const Program& program) {
-  glUniform1i(program.use_mask, 0);
-  glUniform1i(program.triangle_ids, 0);
+absl::Status IdRenderer::EndPass() {
+  glUniform1i(pass_->use_mask, 0);
+  glUniform1i(pass_->triangle_ids, 0);
   reinterpret_cast<PFNGLCLIPCONTROLPROC>(clip_control_)(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
@@ -350,7 +350,7 @@ absl::StatusOr<std::vector<uint32_t>> IdRenderer::View(const glm::dvec3& eye, co
   PinholeReversedInfinite(eye, forward, up, fx, fy, kNear, m);
   std::vector<uint32_t> out;
   DrawAndRead(m, width, height, triangles != nullptr ? index_count_ : full_index_count_, &out);
-  if (absl::Status ended = EndPass(view_); !ended.ok()) return ended;
+  if (absl::Status ended = EndPass(); !ended.ok()) return ended;
   return out;
 }
 

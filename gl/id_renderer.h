@@ -111,10 +111,10 @@ class IdRenderer {
   absl::StatusOr<std::vector<uint32_t>> View(const glm::dvec3& eye, const glm::dvec3& forward, const glm::dvec3& up,
                                              double fov_y_rad, int width, int height,
                                              const std::vector<uint8_t>* triangles, bool triangle_ids);
-  // The GL state of a pass into `fbo` of `w` x `h` (reversed depth, the scene's program and
-  // buffers, no mask), and back to the defaults after it, with GL's error if any.
+  // The GL state of a pass into `fbo` of `w` x `h` with `program` (reversed depth, the scene's
+  // buffers, no mask), and back to the defaults after it (pass_'s), with GL's error if any.
   void BeginPass(unsigned fbo, int w, int h, const Program& program);
-  absl::Status EndPass(const Program& program);
+  absl::Status EndPass();
   void* clip_control_ = nullptr;  // glClipControl
   std::vector<double> weights_;
 };
