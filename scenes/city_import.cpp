@@ -22,6 +22,7 @@
 #include "scenes/mesh.h"
 #include "scenes/polygon.h"
 #include "scenes/polygon_set.h"
+#include "scenes/shell_closure.h"
 #include "scenes/solid_floor.h"
 
 namespace vistream::scenes {
@@ -102,6 +103,7 @@ bool LexLess(const glm::dvec3& a, const glm::dvec3& b) {
 struct Triangulated {
   std::vector<std::array<glm::dvec3, 3>> triangles;
   glm::dvec3 normal{0.0};  // unit, the ring's (Newell's) orientation
+  bool dropped = false;    // a ring without area (fewer than 3 distinct points, or on a line)
 };
 
 // Removes consecutive duplicates (the closing point too) of a 3D ring; returns how many.
@@ -153,11 +155,21 @@ absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, cons
     std::rotate(ring->begin(), std::min_element(ring->begin(), ring->end(), LexLess), ring->end());
   };
   least_first(&outer);
-  if (outer.size() < 3) return absl::InvalidArgumentError("a ring of fewer than 3 distinct points");
-  const glm::dvec3 n = NewellNormal(outer);
-  const double len = glm::length(n);
-  if (!(len > 0.0)) return absl::InvalidArgumentError("a polygon without area");
   Triangulated out;
+  // A ring of fewer than 3 distinct points, or one whose points all lie on a line (a wall
+  // written as [a, a, b, b]: LoD2 surface models have them), bounds nothing: its edges go
+  // there and back, so leaving it out opens nothing. Dropped, not an error.
+  const glm::dvec3 n = outer.size() < 3 ? glm::dvec3(0.0) : NewellNormal(outer);
+  const double len = glm::length(n);
+  if (!(len > 0.0)) {
+    bool collinear = true;
+    for (size_t i = 2; i < outer.size() && collinear; ++i) {
+      collinear = glm::length(glm::cross(outer[1] - outer[0], outer[i] - outer[0])) == 0.0;
+    }
+    if (!collinear) return absl::InvalidArgumentError("a polygon without area");
+    out.dropped = true;
+    return out;
+  }
   out.normal = n / len;
   // Project on the plane of the dominant axis; keep the 2D -> 3D correspondence.
   const glm::dvec3 an = glm::abs(n);
@@ -457,6 +469,10 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
           ++sum.skipped[absl::StrCat("terrain polygon not triangulated: ", t.status().message())];
           return;
         }
+        if (t->dropped) {
+          ++sum.repaired["rings without area dropped"];
+          return;
+        }
         ++sum.surfaces;
         for (auto tri : t->triangles) {
           // Terrain faces up: wind every triangle counter-clockwise from above.
@@ -490,6 +506,28 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     std::vector<PendingSolid> solids;
   };
   std::vector<PendingObject> pending;
+  // A building shell's floor for the derived ground: its lowest faces (FloorTriangles), or
+  // without any (a floorless shell) the points of its lowest edges. In the mesh's single
+  // precision, so that the terrain meets the floor that is drawn exactly.
+  auto add_ground = [&](const std::vector<std::array<glm::dvec3, 3>>& shell) {
+    std::vector<std::array<glm::dvec3, 3>> f = FloorTriangles(shell);
+    for (auto& t : f) {
+      for (auto& p : t) p = glm::dvec3(glm::vec3(p));
+    }
+    if (!f.empty()) {
+      ground_input.floors.push_back(std::move(f));
+      return;
+    }
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const auto& t : shell) {
+      for (const glm::dvec3& p : t) lowest = std::min(lowest, p.z);
+    }
+    for (const auto& t : shell) {
+      for (const glm::dvec3& p : t) {
+        if (p.z <= lowest + 1e-3) ground_input.points.push_back(glm::dvec3(glm::vec3(p)));
+      }
+    }
+  };
   Progress progress(run, "building the city", 2 * chosen.size() + 1);
   for (const Chosen& c : chosen) {
     if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
@@ -515,6 +553,10 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       if (!t.ok()) {
         ++sum.skipped[absl::StrCat("polygon not triangulated: ", t.status().message())];
         return std::nullopt;
+      }
+      if (t->dropped) {
+        ++sum.repaired["rings without area dropped"];
+        return std::move(*t);
       }
       ++sum.surfaces;
       AppendTriangles(t->triangles, t->normal, &mesh);
@@ -546,13 +588,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
             }
             // The exterior shell's floor is ground (a void's is not). In the mesh's single
             // precision, so that the terrain meets the floor that is drawn exactly.
-            if (derive_ground && IsBuilding(o.type) && sh == 0) {
-              std::vector<std::array<glm::dvec3, 3>> f = FloorTriangles(shell);
-              for (auto& t : f) {
-                for (auto& p : t) p = glm::dvec3(glm::vec3(p));
-              }
-              if (!f.empty()) ground_input.floors.push_back(std::move(f));
-            }
+            if (derive_ground && IsBuilding(o.type) && sh == 0) add_ground(shell);
           }
           out.triangles.insert(out.triangles.end(), shell.begin(), shell.end());
         }
@@ -580,7 +616,12 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     }
     const ObjectId id = scene.AddObject(o.id, std::move(mesh));
     scene.objects[id].type = o.type;
-    if (has_surface_shell) solids.push_back(std::move(surface_shell));
+    if (has_surface_shell) {
+      // A surface model's ground surfaces are ground as a solid's floor is (issue 46: files
+      // without a TIN, such as Rotterdam's LoD2).
+      if (derive_ground) add_ground(surface_shell.triangles);
+      solids.push_back(std::move(surface_shell));
+    }
     pending.push_back({id, IsBuilding(o.type), std::move(solids)});
     progress.Advance();
   }
@@ -619,32 +660,81 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   sum.terrain_triangles = terrain_tris.size();
   const GroundIndex ground(terrain_tris, 25.0);
 
-  // Occluders of the objects' solids, on the ground.
-  for (const PendingObject& po : pending) {
+  // Occluders of the objects' solids, on the ground. First each solid on its own; then the
+  // building shells left open are closed by their neighbours and the ground where those close
+  // them (scenes/shell_closure.h: surface models, issue 46), and synthesized again.
+  struct Attempt {
+    OccluderSynthesis r;
+    std::string why;  // without an occluder: the reason
+  };
+  std::vector<std::vector<Attempt>> attempts(pending.size());
+  std::vector<ShellToClose> shells;
+  std::vector<std::pair<size_t, size_t>> shell_of;  // (pending, solid) of each entry of `shells`
+  std::vector<double> ground_z_of(pending.size());
+  for (size_t k = 0; k < pending.size(); ++k) {
+    const PendingObject& po = pending[k];
     if (progress.Cancelled()) return absl::CancelledError("city import cancelled");
     const Aabb box = scene.objects[po.id].bounds;
-    const double ground_z = ground.LowestUnder(box);
+    const double ground_z = ground_z_of[k] = ground.LowestUnder(box);
     const GroundSurface under = ground.Under(box);
-    bool got_occluder = false;
-    for (const PendingSolid& solid : po.solids) {
-      ++sum.solids;
+    for (size_t i = 0; i < po.solids.size(); ++i) {
+      const PendingSolid& solid = po.solids[i];
+      Attempt& a = attempts[k].emplace_back();
       if (!solid.complete) {
-        ++sum.without_occluder["a polygon could not be triangulated"];
+        a.why = "a polygon could not be triangulated";
         continue;
       }
-      OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(solid.triangles), ground_z, under, options.synthesis);
-      if (r.defect != SolidDefect::kNone) {
-        ++sum.without_occluder[SolidDefectName(r.defect)];
+      a.r = SynthesizeOccluders(SolidFromTriangles(solid.triangles), ground_z, under, options.synthesis);
+      if (a.r.defect != SolidDefect::kNone) a.why = SolidDefectName(a.r.defect);
+      if (po.building) {
+        shells.push_back({&solid.triangles, a.r.defect == SolidDefect::kOpen, under});
+        shell_of.emplace_back(k, i);
+      }
+    }
+    progress.Advance();
+  }
+  const std::vector<ShellClosure> closures = CloseShellsByNeighbours(shells);
+  for (size_t j = 0; j < closures.size(); ++j) {
+    const ShellClosure& c = closures[j];
+    if (c.outcome == ShellClosureOutcome::kNotOpen) continue;
+    const auto [k, i] = shell_of[j];
+    Attempt& a = attempts[k][i];
+    if (c.outcome != ShellClosureOutcome::kClosed) {
+      a.why = ShellClosureName(c.outcome);
+      continue;
+    }
+    OccluderSynthesis r =
+        SynthesizeOccluders(SolidFromTriangles(c.triangles), ground_z_of[k], shells[j].ground, options.synthesis);
+    if (r.defect != SolidDefect::kNone) {
+      a.why = absl::StrCat(SolidDefectName(r.defect), " once closed by neighbours and ground");
+      continue;
+    }
+    ++sum.repaired["shells closed by neighbours and ground"];
+    // The closed shell lies within moved_m of the data: its prisms shrink by that much.
+    r.occluders = ShrinkOccluders(r.occluders, c.moved_m > 0.0 ? c.moved_m + 1e-6 : 0.0, options.synthesis.min_area_m2,
+                                  ground_z_of[k]);
+    if (getenv("VS_DEBUG")) fprintf(stderr, "shell %zu moved %.4f occluders %zu", j, c.moved_m, r.occluders.size());
+    a.r = std::move(r);
+    if (getenv("VS_DEBUG")) fprintf(stderr, " -> %zu\n", a.r.occluders.size());
+    a.why.clear();
+  }
+  for (size_t k = 0; k < pending.size(); ++k) {
+    const PendingObject& po = pending[k];
+    bool got_occluder = false;
+    for (Attempt& a : attempts[k]) {
+      ++sum.solids;
+      if (!a.why.empty()) {
+        ++sum.without_occluder[a.why];
         continue;
       }
-      sum.solid_volume_m3 += r.solid_volume_m3;
-      sum.occluder_volume_m3 += r.occluder_volume_m3;
-      if (r.occluders.empty()) {
+      sum.solid_volume_m3 += a.r.solid_volume_m3;
+      sum.occluder_volume_m3 += a.r.occluder_volume_m3;
+      if (a.r.occluders.empty()) {
         ++sum.without_occluder["no prism large enough"];
         continue;
       }
       got_occluder = true;
-      for (Occluder25D& oc : r.occluders) {
+      for (Occluder25D& oc : a.r.occluders) {
         oc.object = po.id;
         scene.occluders.push_back(std::move(oc));
       }
@@ -653,7 +743,6 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
       ++sum.buildings_drawn;
       sum.buildings_with_occluder += got_occluder;
     }
-    progress.Advance();
   }
 
   // 5. Terrain tiles: objects and their occluders. The ground is solid beneath the surface: where

@@ -1,0 +1,702 @@
+#include "scenes/shell_closure.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <unordered_map>
+#include <utility>
+#include <cstdio>
+#include <cstdlib>
+
+#include <glm/geometric.hpp>
+
+#include "scenes/polygon.h"
+#include "scenes/polygon_set.h"
+
+namespace vistream::scenes {
+
+namespace {
+
+using Tri3 = std::array<glm::dvec3, 3>;
+using Ids = std::array<uint32_t, 3>;
+
+// Union-find over point ids.
+class Clusters {
+ public:
+  explicit Clusters(size_t n) : parent_(n) { std::iota(parent_.begin(), parent_.end(), 0u); }
+  uint32_t Find(uint32_t i) {
+    while (parent_[i] != i) i = parent_[i] = parent_[parent_[i]];
+    return i;
+  }
+  void Join(uint32_t a, uint32_t b) {
+    a = Find(a);
+    b = Find(b);
+    if (a != b) parent_[std::max(a, b)] = std::min(a, b);
+  }
+
+ private:
+  std::vector<uint32_t> parent_;
+};
+
+struct CellKey {
+  int64_t x, y, z;
+  bool operator==(const CellKey& o) const { return x == o.x && y == o.y && z == o.z; }
+};
+struct CellHash {
+  size_t operator()(const CellKey& k) const {
+    return static_cast<size_t>(k.x * 73856093LL ^ k.y * 19349663LL ^ k.z * 83492791LL);
+  }
+};
+
+// An xy grid of items with boxes, for near-point queries.
+class Grid2 {
+ public:
+  explicit Grid2(double cell) : cell_(cell) {}
+  void Add(uint32_t item, double x0, double y0, double x1, double y1) {
+    for (int64_t j = Key(y0); j <= Key(y1); ++j) {
+      for (int64_t i = Key(x0); i <= Key(x1); ++i) cells_[{i, j, 0}].push_back(item);
+    }
+  }
+  template <typename Fn>
+  void ForEachNear(double x0, double y0, double x1, double y1, Fn fn) const {
+    for (int64_t j = Key(y0); j <= Key(y1); ++j) {
+      for (int64_t i = Key(x0); i <= Key(x1); ++i) {
+        auto it = cells_.find({i, j, 0});
+        if (it == cells_.end()) continue;
+        for (uint32_t item : it->second) fn(item);
+      }
+    }
+  }
+
+ private:
+  int64_t Key(double v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
+  double cell_;
+  std::unordered_map<CellKey, std::vector<uint32_t>, CellHash> cells_;
+};
+
+// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+glm::dvec3 ClosestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const glm::dvec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + ab * (d1 / (d1 - d3));
+  const glm::dvec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = va + vb + vc;
+  if (!(denom > 0.0)) return a;  // a degenerate triangle: its first corner
+  return a + ab * (vb / denom) + ac * (vc / denom);
+}
+
+glm::dvec3 Newell(const std::vector<glm::dvec3>& ring) {
+  glm::dvec3 n(0.0);
+  for (size_t i = 0; i < ring.size(); ++i) {
+    const glm::dvec3& a = ring[i];
+    const glm::dvec3& b = ring[(i + 1) % ring.size()];
+    n.x += (a.y - b.y) * (a.z + b.z);
+    n.y += (a.z - b.z) * (a.x + b.x);
+    n.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return n;
+}
+
+// Triangulates a polygon through 3D points by projecting it on the plane of axis `drop`'s
+// normal (0 x, 1 y, 2 z). False when it does not triangulate (crossing, no area).
+bool TriangulateProjected(const std::vector<glm::dvec3>& ring3, int drop, std::vector<Tri3>* out) {
+  const int u = drop == 0 ? 1 : 0, v = drop == 2 ? 1 : 2;
+  std::map<std::pair<double, double>, glm::dvec3> lift;
+  PolygonWithHoles poly;
+  for (const glm::dvec3& p : ring3) {
+    poly.outer.emplace_back(p[u], p[v]);
+    if (!lift.emplace(std::make_pair(p[u], p[v]), p).second) return false;  // two corners project together
+  }
+  CleanRing(&poly.outer);
+  if (poly.outer.size() < 3) return false;
+  double area = 0.0;
+  for (size_t i = 0; i < poly.outer.size(); ++i) {
+    const glm::dvec2& a = poly.outer[i];
+    const glm::dvec2& b = poly.outer[(i + 1) % poly.outer.size()];
+    area += a.x * b.y - a.y * b.x;
+  }
+  if (area == 0.0) return false;
+  if (area < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
+  absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(poly);
+  if (!tris.ok()) return false;
+  for (const Triangle2& t : *tris) {
+    Tri3 t3;
+    for (int i = 0; i < 3; ++i) t3[i] = lift.at({t[i].x, t[i].y});
+    out->push_back(t3);
+  }
+  return true;
+}
+
+// The axis to drop when projecting a polygon of normal `n` on a coordinate plane: its largest.
+int drop_axis(const glm::dvec3& n) {
+  const glm::dvec3 an = glm::abs(n);
+  return an.z >= an.x && an.z >= an.y ? 2 : (an.y >= an.x ? 1 : 0);
+}
+
+// The generalized winding number of `soup` (oriented triangles) at `p`: the sum of their solid
+// angles (Van Oosterom and Strackee, IEEE Trans. Biomed. Eng. 30(2), 1983) over 4 pi; 1 inside
+// a closed outward-oriented surface, 0 outside, near those where small gaps leave it open
+// (Jacobson et al., "Robust inside-outside segmentation using generalized winding numbers",
+// SIGGRAPH 2013).
+double WindingNumber(const std::vector<Tri3>& soup, const glm::dvec3& p) {
+  double sum = 0.0;
+  for (const Tri3& t : soup) {
+    const glm::dvec3 a = t[0] - p, b = t[1] - p, c = t[2] - p;
+    const double la = glm::length(a), lb = glm::length(b), lc = glm::length(c);
+    const double num = glm::dot(a, glm::cross(b, c));
+    const double den = la * lb * lc + glm::dot(a, b) * lc + glm::dot(a, c) * lb + glm::dot(b, c) * la;
+    sum += 2.0 * std::atan2(num, den);
+  }
+  return sum / (4.0 * M_PI);
+}
+
+// Caps a loop that stands vertically over a path in xy (a party wall with a bend): the loop's
+// points, seen from above, go along a path and back within `tol`. The cap is the vertical
+// surface over the path: the loop unrolled to (arc length, z), cut into one strip per leg of
+// the path, each strip triangulated and rolled back onto its leg. `off` is how far a loop
+// point lies from the path. False when the loop is not of that kind.
+bool CurtainCap(const std::vector<glm::dvec3>& ring, double tol, std::vector<Tri3>* out, double* off) {
+  const size_t n = ring.size();
+  if (n < 4) return false;
+  auto xy = [](const glm::dvec3& p) { return glm::dvec2(p.x, p.y); };
+  // The path's ends: the two points farthest apart in xy.
+  size_t ea = 0, eb = 0;
+  double far = -1.0;
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t j = i + 1; j < n; ++j) {
+      const double d = glm::distance(xy(ring[i]), xy(ring[j]));
+      if (d > far) {
+        far = d;
+        ea = i;
+        eb = j;
+      }
+    }
+  }
+  if (!(far > tol)) return false;
+  // The path: the points from ea forward to eb, near repeats merged.
+  std::vector<glm::dvec2> path;
+  for (size_t k = ea;; k = (k + 1) % n) {
+    const glm::dvec2 p = xy(ring[k]);
+    if (path.empty() || glm::distance(path.back(), p) > tol) path.push_back(p);
+    if (k == eb) break;
+  }
+  if (glm::distance(path.back(), xy(ring[eb])) > 0.0) path.back() = xy(ring[eb]);
+  std::vector<double> at(path.size(), 0.0);  // arc length of each path point
+  for (size_t i = 1; i < path.size(); ++i) {
+    const double leg = glm::distance(path[i - 1], path[i]);
+    if (!(leg > 0.0)) return false;
+    at[i] = at[i - 1] + leg;
+  }
+  // Every loop point on the path: its arc length, and how far off it is; the loop's edges
+  // along the path too (their quarter points), or the surface over the path does not meet them.
+  std::vector<glm::dvec2> unrolled(n);
+  *off = 0.0;
+  for (size_t k = 0; k < 4 * n; ++k) {
+    const double f = (k % 4) / 4.0;
+    const glm::dvec2 p = xy(ring[k / 4]) * (1.0 - f) + xy(ring[(k / 4 + 1) % n]) * f;
+    double best = std::numeric_limits<double>::infinity(), s = 0.0;
+    for (size_t i = 0; i + 1 < path.size(); ++i) {
+      const glm::dvec2 d = path[i + 1] - path[i];
+      const double u = std::clamp(glm::dot(p - path[i], d) / glm::dot(d, d), 0.0, 1.0);
+      const double dist = glm::distance(p, path[i] + d * u);
+      if (dist < best) {
+        best = dist;
+        s = at[i] + u * (at[i + 1] - at[i]);
+      }
+    }
+    if (best > tol) return false;
+    *off = std::max(*off, best);
+    if (k % 4 == 0) unrolled[k / 4] = glm::dvec2(s, ring[k / 4].z);
+  }
+  // The unrolled polygon, one strip per leg.
+  PolygonWithHoles poly;
+  std::map<std::pair<double, double>, glm::dvec3> lift;
+  for (size_t k = 0; k < n; ++k) {
+    if (!poly.outer.empty() && poly.outer.back() == unrolled[k]) continue;
+    poly.outer.push_back(unrolled[k]);
+    lift.emplace(std::make_pair(unrolled[k].x, unrolled[k].y), ring[k]);
+  }
+  CleanRing(&poly.outer);
+  if (poly.outer.size() < 3 || !IsSimpleRing(poly.outer)) return false;
+  double area2 = 0.0, lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (size_t i = 0; i < poly.outer.size(); ++i) {
+    const glm::dvec2 &a = poly.outer[i], &b = poly.outer[(i + 1) % poly.outer.size()];
+    area2 += a.x * b.y - a.y * b.x;
+    lo = std::min(lo, a.y);
+    hi = std::max(hi, a.y);
+  }
+  if (area2 < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
+  const double margin = 1.0 + (hi - lo);
+  for (size_t i = 0; i + 1 < path.size(); ++i) {
+    std::vector<PolygonWithHoles> outside;
+    if (i > 0) outside.push_back({{{at[0] - margin, lo - margin}, {at[i], lo - margin}, {at[i], hi + margin},
+                                   {at[0] - margin, hi + margin}}, {}});
+    if (i + 2 < path.size()) {
+      outside.push_back({{{at[i + 1], lo - margin}, {at.back() + margin, lo - margin},
+                          {at.back() + margin, hi + margin}, {at[i + 1], hi + margin}}, {}});
+    }
+    absl::StatusOr<std::vector<PolygonWithHoles>> strip = outside.empty()
+                                                              ? absl::StatusOr<std::vector<PolygonWithHoles>>(
+                                                                    std::vector<PolygonWithHoles>{poly})
+                                                              : Difference(poly, outside);
+    if (!strip.ok()) return false;
+    for (const PolygonWithHoles& piece : *strip) {
+      absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(piece);
+      if (!tris.ok()) return false;
+      for (const Triangle2& t : *tris) {
+        Tri3 t3;
+        for (int c = 0; c < 3; ++c) {
+          auto it = lift.find({t[c].x, t[c].y});
+          if (it != lift.end()) {
+            t3[c] = it->second;
+          } else {
+            const double u = std::clamp((t[c].x - at[i]) / (at[i + 1] - at[i]), 0.0, 1.0);
+            const glm::dvec2 p = path[i] + (path[i + 1] - path[i]) * u;
+            t3[c] = glm::dvec3(p.x, p.y, t[c].y);
+          }
+        }
+        out->push_back(t3);
+      }
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+const char* ShellClosureName(ShellClosureOutcome outcome) {
+  switch (outcome) {
+    case ShellClosureOutcome::kNotOpen:
+    case ShellClosureOutcome::kClosed:
+      return "";
+    case ShellClosureOutcome::kOpenToAir:
+      return "open to the air";
+    case ShellClosureOutcome::kOpeningsTouch:
+      return "open: openings touch";
+    case ShellClosureOutcome::kCapNotPlanar:
+      return "open: opening not planar";
+    case ShellClosureOutcome::kCapFailed:
+      return "open: opening not triangulated";
+  }
+  return "";
+}
+
+double GroundHeightAt(const GroundSurface& ground, double x, double y) {
+  double best = -std::numeric_limits<double>::infinity();
+  for (const Tri3& t : ground.triangles) {
+    const glm::dvec3 &a = t[0], &b = t[1], &c = t[2];
+    const double det = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+    if (det == 0.0) continue;
+    const double l1 = ((x - a.x) * (c.y - a.y) - (c.x - a.x) * (y - a.y)) / det;
+    const double l2 = ((b.x - a.x) * (y - a.y) - (x - a.x) * (b.y - a.y)) / det;
+    const double l0 = 1.0 - l1 - l2;
+    constexpr double kEdge = -1e-9;
+    if (l0 < kEdge || l1 < kEdge || l2 < kEdge) continue;
+    best = std::max(best, l0 * a.z + l1 * b.z + l2 * c.z);
+  }
+  return std::isfinite(best) ? best : ground.flat_z;
+}
+
+std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose>& shells,
+                                                  const ShellClosureOptions& options) {
+  std::vector<ShellClosure> result(shells.size());
+  const double tol = options.weld_m;
+  std::vector<uint32_t> open;
+  for (uint32_t s = 0; s < shells.size(); ++s) {
+    if (shells[s].open && shells[s].triangles != nullptr && !shells[s].triangles->empty()) open.push_back(s);
+  }
+  if (open.empty()) return result;
+
+  // 1. Weld the open shells' corners within `tol`: clusters by a grid of cell `tol`, each to
+  // its lowest point (then the least in x, y).
+  std::vector<glm::dvec3> points;
+  std::map<std::array<double, 3>, uint32_t> point_id;
+  std::vector<std::vector<Ids>> corner_ids(shells.size());
+  for (uint32_t s : open) {
+    for (const Tri3& t : *shells[s].triangles) {
+      Ids ids;
+      for (int i = 0; i < 3; ++i) {
+        auto [it, added] = point_id.emplace(std::array<double, 3>{t[i].x, t[i].y, t[i].z},
+                                            static_cast<uint32_t>(points.size()));
+        if (added) points.push_back(t[i]);
+        ids[i] = it->second;
+      }
+      corner_ids[s].push_back(ids);
+    }
+  }
+  Clusters clusters(points.size());
+  {
+    std::unordered_map<CellKey, std::vector<uint32_t>, CellHash> cells;
+    auto key = [&](const glm::dvec3& p) {
+      return CellKey{static_cast<int64_t>(std::floor(p.x / tol)), static_cast<int64_t>(std::floor(p.y / tol)),
+                     static_cast<int64_t>(std::floor(p.z / tol))};
+    };
+    for (uint32_t i = 0; i < points.size(); ++i) cells[key(points[i])].push_back(i);
+    for (uint32_t i = 0; i < points.size(); ++i) {
+      const CellKey k = key(points[i]);
+      for (int64_t dz = -1; dz <= 1; ++dz) {
+        for (int64_t dy = -1; dy <= 1; ++dy) {
+          for (int64_t dx = -1; dx <= 1; ++dx) {
+            auto it = cells.find({k.x + dx, k.y + dy, k.z + dz});
+            if (it == cells.end()) continue;
+            for (uint32_t j : it->second) {
+              if (j > i && glm::distance(points[i], points[j]) <= tol) clusters.Join(i, j);
+            }
+          }
+        }
+      }
+    }
+  }
+  std::vector<uint32_t> rep(points.size());
+  std::iota(rep.begin(), rep.end(), 0u);
+  auto lower = [&](uint32_t a, uint32_t b) {
+    const glm::dvec3 &p = points[a], &q = points[b];
+    return p.z != q.z ? p.z < q.z : (p.x != q.x ? p.x < q.x : p.y < q.y);
+  };
+  for (uint32_t i = 0; i < points.size(); ++i) {
+    const uint32_t root = clusters.Find(i);
+    if (lower(i, rep[root])) rep[root] = i;
+  }
+  // Welded vertices: one per cluster, numbered by cluster root.
+  std::vector<uint32_t> vertex_of(points.size());
+  std::vector<glm::dvec3> vertices;
+  {
+    std::unordered_map<uint32_t, uint32_t> of_root;
+    for (uint32_t i = 0; i < points.size(); ++i) {
+      const uint32_t root = clusters.Find(i);
+      auto [it, added] = of_root.emplace(root, static_cast<uint32_t>(vertices.size()));
+      if (added) vertices.push_back(points[rep[root]]);
+      vertex_of[i] = it->second;
+    }
+  }
+  std::vector<double> moved(shells.size(), 0.0);
+  for (uint32_t s : open) {
+    for (const Ids& ids : corner_ids[s]) {
+      for (uint32_t i : ids) moved[s] = std::max(moved[s], glm::distance(points[i], vertices[vertex_of[i]]));
+    }
+  }
+
+  // 2. T-junctions: an edge passing within `tol` of a welded vertex is cut there (its triangle
+  // split in two).
+  constexpr double kCell = 2.0;
+  Grid2 vertex_grid(kCell);
+  for (uint32_t v = 0; v < vertices.size(); ++v) {
+    vertex_grid.Add(v, vertices[v].x, vertices[v].y, vertices[v].x, vertices[v].y);
+  }
+  std::vector<std::vector<Ids>> welded(shells.size());
+  for (uint32_t s : open) {
+    std::vector<Ids> queue;
+    for (const Ids& ids : corner_ids[s]) queue.push_back({vertex_of[ids[0]], vertex_of[ids[1]], vertex_of[ids[2]]});
+    size_t budget = 64 * queue.size() + 1024;
+    while (!queue.empty()) {
+      const Ids t = queue.back();
+      queue.pop_back();
+      if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) continue;
+      bool split = false;
+      for (int e = 0; e < 3 && !split && budget > 0; ++e) {
+        const uint32_t ia = t[e], ib = t[(e + 1) % 3], ic = t[(e + 2) % 3];
+        const glm::dvec3 &a = vertices[ia], &b = vertices[ib];
+        const glm::dvec3 ab = b - a;
+        const double len2 = glm::dot(ab, ab);
+        uint32_t best = UINT32_MAX;
+        double best_t = 2.0, best_d = 0.0;
+        vertex_grid.ForEachNear(std::min(a.x, b.x) - tol, std::min(a.y, b.y) - tol, std::max(a.x, b.x) + tol,
+                                std::max(a.y, b.y) + tol, [&](uint32_t v) {
+                                  if (v == ia || v == ib) return;
+                                  const double u = glm::dot(vertices[v] - a, ab) / len2;
+                                  if (!(u > 0.0 && u < 1.0)) return;
+                                  const double d = glm::distance(vertices[v], a + ab * u);
+                                  if (d <= tol && u < best_t) {
+                                    best = v;
+                                    best_t = u;
+                                    best_d = d;
+                                  }
+                                });
+        if (best == UINT32_MAX) continue;
+        split = true;
+        --budget;
+        moved[s] = std::max(moved[s], best_d);
+        queue.push_back({ia, best, ic});
+        queue.push_back({best, ib, ic});
+      }
+      if (!split) welded[s].push_back(t);
+    }
+  }
+
+  // 3. Odd edges, per shell and over all the open shells.
+  using Edge = std::pair<uint32_t, uint32_t>;
+  auto edge = [](uint32_t a, uint32_t b) { return a < b ? Edge{a, b} : Edge{b, a}; };
+  std::map<Edge, int> union_uses;
+  std::map<Edge, std::vector<uint32_t>> odd_in;  // the open shells that have the edge odd
+  std::vector<std::vector<Edge>> odd(shells.size());
+  for (uint32_t s : open) {
+    std::map<Edge, int> uses;
+    for (const Ids& t : welded[s]) {
+      for (int e = 0; e < 3; ++e) ++uses[edge(t[e], t[(e + 1) % 3])];
+    }
+    for (const auto& [e, n] : uses) {
+      union_uses[e] += n;
+      if (n % 2 == 1) {
+        odd[s].push_back(e);
+        odd_in[e].push_back(s);
+      }
+    }
+  }
+
+  // Every shell's triangles as the data gives them, for "lies on another shell's face".
+  Grid2 face_grid(4.0);
+  std::vector<std::pair<uint32_t, uint32_t>> faces;  // shell, triangle
+  for (uint32_t s = 0; s < shells.size(); ++s) {
+    if (shells[s].triangles == nullptr) continue;
+    for (uint32_t k = 0; k < shells[s].triangles->size(); ++k) {
+      const Tri3& t = (*shells[s].triangles)[k];
+      const double x0 = std::min({t[0].x, t[1].x, t[2].x}), x1 = std::max({t[0].x, t[1].x, t[2].x});
+      const double y0 = std::min({t[0].y, t[1].y, t[2].y}), y1 = std::max({t[0].y, t[1].y, t[2].y});
+      face_grid.Add(static_cast<uint32_t>(faces.size()), x0 - tol, y0 - tol, x1 + tol, y1 + tol);
+      faces.emplace_back(s, k);
+    }
+  }
+  auto on_other_face = [&](uint32_t s, const glm::dvec3& p) {
+    bool on = false;
+    face_grid.ForEachNear(p.x, p.y, p.x, p.y, [&](uint32_t f) {
+      if (on || faces[f].first == s) return;
+      const Tri3& t = (*shells[faces[f].first].triangles)[faces[f].second];
+      on = glm::distance(p, ClosestOnTriangle(p, t[0], t[1], t[2])) <= 2.0 * tol;
+    });
+    return on;
+  };
+
+  for (uint32_t s : open) {
+    ShellClosure& r = result[s];
+    if (odd[s].empty()) continue;  // closed once welded: kNotOpen is wrong, it needs the weld
+    const GroundSurface& ground = shells[s].ground;
+    auto on_ground = [&](const glm::dvec3& p) { return p.z <= GroundHeightAt(ground, p.x, p.y) + tol; };
+    // Classify: any air edge leaves the shell open.
+    bool air = false;
+    for (const Edge& e : odd[s]) {
+      if (union_uses[e] % 2 == 0) continue;  // another open shell is open on it too
+      const glm::dvec3 &a = vertices[e.first], &b = vertices[e.second];
+      if (on_ground(a) && on_ground(b) && on_ground((a + b) * 0.5)) continue;
+      bool covered = true;
+      for (double u : {0.0, 0.25, 0.5, 0.75, 1.0}) covered = covered && on_other_face(s, a + (b - a) * u);
+      if (!covered) {
+        air = true;
+        break;
+      }
+    }
+    if (air) {
+      r.outcome = ShellClosureOutcome::kOpenToAir;
+      continue;
+    }
+    // Loops.
+    std::unordered_map<uint32_t, std::vector<uint32_t>> next;
+    for (const Edge& e : odd[s]) {
+      next[e.first].push_back(e.second);
+      next[e.second].push_back(e.first);
+    }
+    bool touching = false;
+    for (const auto& [v, n] : next) touching = touching || n.size() != 2;
+    if (touching) {
+      r.outcome = ShellClosureOutcome::kOpeningsTouch;
+      continue;
+    }
+    std::vector<std::vector<uint32_t>> loops;
+    std::unordered_map<uint32_t, bool> seen;
+    for (const Edge& e : odd[s]) {
+      if (seen[e.first]) continue;
+      std::vector<uint32_t> loop{e.first};
+      seen[e.first] = true;
+      uint32_t prev = e.first, cur = next[e.first][0];
+      while (cur != e.first) {
+        loop.push_back(cur);
+        seen[cur] = true;
+        const uint32_t n = next[cur][0] == prev ? next[cur][1] : next[cur][0];
+        prev = cur;
+        cur = n;
+      }
+      loops.push_back(std::move(loop));
+    }
+    // Caps.
+    std::vector<Tri3> caps;
+    double deviation = 0.0;
+    ShellClosureOutcome failed = ShellClosureOutcome::kClosed;
+    auto planar_cap = [&](const std::vector<uint32_t>& ids) {
+      std::vector<glm::dvec3> ring;
+      for (uint32_t v : ids) ring.push_back(vertices[v]);
+      const glm::dvec3 n = Newell(ring);
+      const double len = glm::length(n);
+      if (!(len > 0.0)) return ShellClosureOutcome::kCapFailed;
+      const glm::dvec3 unit = n / len;
+      glm::dvec3 centre(0.0);
+      for (const glm::dvec3& p : ring) centre += p;
+      centre /= static_cast<double>(ring.size());
+      double dev = 0.0;
+      for (const glm::dvec3& p : ring) dev = std::max(dev, std::abs(glm::dot(p - centre, unit)));
+      if (getenv("VS_DEBUG")) {
+        fprintf(stderr, "shell %u cap %zu pts dev %.4f\n", s, ring.size(), dev);
+        if (dev > 0.01) for (auto& p : ring) fprintf(stderr, "   %.4f %.4f %.4f\n", p.x, p.y, p.z);
+      }
+      if (dev > options.cap_planarity_m) {
+        // A party wall that bends: vertical, over a path in xy; capped by the vertical
+        // surface over that path, one plane per leg.
+        double off = 0.0;
+        if (CurtainCap(ring, options.cap_planarity_m, &caps, &off)) {
+          deviation = std::max(deviation, off);
+          ++r.caps;
+          return ShellClosureOutcome::kClosed;
+        }
+        // Otherwise an opening that neighbours share (both leave their common face out,
+        // whatever its shape) may be capped by any surface inside the two: the loop
+        // triangulated on its mean plane, kept only if every cap triangle's centre lies inside
+        // the shell and those neighbours (their generalized winding number, each oriented by its
+        // volume seen from the opening).
+        std::vector<uint32_t> sharing;
+        for (size_t k = 0; k + 1 < ids.size(); ++k) {
+          auto it = odd_in.find(edge(ids[k], ids[k + 1]));
+          if (it == odd_in.end()) continue;
+          for (uint32_t o : it->second) {
+            if (o != s && std::find(sharing.begin(), sharing.end(), o) == sharing.end()) sharing.push_back(o);
+          }
+        }
+        if (sharing.empty()) return ShellClosureOutcome::kCapNotPlanar;
+        sharing.push_back(s);
+        std::vector<Tri3> bent;
+        if (!TriangulateProjected(ring, drop_axis(n), &bent)) return ShellClosureOutcome::kCapNotPlanar;
+        std::vector<double> sign;
+        for (uint32_t o : sharing) {
+          double volume = 0.0;
+          for (const Tri3& t : *shells[o].triangles) {
+            volume += glm::dot(t[0] - centre, glm::cross(t[1] - centre, t[2] - centre));
+          }
+          if (volume == 0.0) return ShellClosureOutcome::kCapNotPlanar;
+          sign.push_back(volume > 0.0 ? 1.0 : -1.0);
+        }
+        for (const Tri3& t : bent) {
+          const glm::dvec3 q = (t[0] + t[1] + t[2]) / 3.0;
+          double w = 0.0;
+          for (size_t k = 0; k < sharing.size(); ++k) w += sign[k] * WindingNumber(*shells[sharing[k]].triangles, q);
+          if (getenv("VS_DEBUG")) fprintf(stderr, "   bent cap triangle centre winding %.3f\n", w);
+          if (!(w >= 0.5)) return ShellClosureOutcome::kCapNotPlanar;
+        }
+        caps.insert(caps.end(), bent.begin(), bent.end());
+        ++r.caps;
+        return ShellClosureOutcome::kClosed;
+      }
+      deviation = std::max(deviation, dev);
+      if (!TriangulateProjected(ring, drop_axis(n), &caps)) return ShellClosureOutcome::kCapFailed;
+      ++r.caps;
+      return ShellClosureOutcome::kClosed;
+    };
+    for (const std::vector<uint32_t>& loop : loops) {
+      if (failed != ShellClosureOutcome::kClosed) break;
+      std::vector<uint32_t> run;
+      std::vector<bool> grounded(loop.size());
+      size_t on = 0;
+      for (size_t i = 0; i < loop.size(); ++i) on += grounded[i] = on_ground(vertices[loop[i]]);
+      if (on < 2) {
+        failed = planar_cap(loop);
+        continue;
+      }
+      // From a ground point: each run that leaves the ground and comes back is a wall's opening,
+      // capped with its chord; the ground points in order are the floor's.
+      const size_t first = static_cast<size_t>(std::find(grounded.begin(), grounded.end(), true) - grounded.begin());
+      std::vector<glm::dvec3> floor;
+      size_t i = first;
+      do {
+        size_t j = (i + 1) % loop.size();
+        while (!grounded[j]) j = (j + 1) % loop.size();
+        floor.push_back(vertices[loop[i]]);
+        if (j != (i + 1) % loop.size()) {
+          run.clear();
+          for (size_t k = i;; k = (k + 1) % loop.size()) {
+            run.push_back(loop[k]);
+            if (k == j) break;
+          }
+          failed = planar_cap(run);
+          if (failed != ShellClosureOutcome::kClosed) break;
+        }
+        i = j;
+      } while (i != first);
+      if (failed != ShellClosureOutcome::kClosed || floor.size() < 3) continue;
+      double area2 = 0.0;
+      for (size_t k = 0; k < floor.size(); ++k) {
+        const glm::dvec3 &a = floor[k], &b = floor[(k + 1) % floor.size()];
+        area2 += a.x * b.y - a.y * b.x;
+      }
+      if (std::abs(area2) <= tol * tol) continue;  // the chords alone: no floor to make
+      if (!TriangulateProjected(floor, 2, &caps)) {
+        failed = ShellClosureOutcome::kCapFailed;
+      } else {
+        ++r.caps;
+      }
+    }
+    if (failed != ShellClosureOutcome::kClosed) {
+      r.outcome = failed;
+      r.caps = 0;
+      continue;
+    }
+    r.outcome = ShellClosureOutcome::kClosed;
+    for (const Ids& t : welded[s]) r.triangles.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
+    r.triangles.insert(r.triangles.end(), caps.begin(), caps.end());
+    r.moved_m = moved[s] + deviation;
+  }
+  // Open shells that the weld alone closed.
+  for (uint32_t s : open) {
+    if (!odd[s].empty()) continue;
+    ShellClosure& r = result[s];
+    r.outcome = ShellClosureOutcome::kClosed;
+    for (const Ids& t : welded[s]) r.triangles.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
+    r.moved_m = moved[s];
+  }
+  return result;
+}
+
+std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occluders, double by_m, double min_area_m2,
+                                         double min_top_m) {
+  if (!(by_m > 0.0)) return occluders;
+  std::vector<Occluder25D> out;
+  for (const Occluder25D& oc : occluders) {
+    const double height = oc.height - by_m;
+    if (!(height > min_top_m)) continue;
+    std::vector<PolygonWithHoles> band;
+    const size_t n = oc.footprint.size();
+    for (size_t i = 0; i < n; ++i) {
+      const glm::dvec2 a = oc.footprint[i], b = oc.footprint[(i + 1) % n];
+      const double len = glm::length(b - a);
+      if (!(len > 0.0)) continue;
+      // The edge's band: a rectangle reaching by_m beyond it on every side (it holds every
+      // point within by_m of the edge).
+      const glm::dvec2 u = (b - a) / len * by_m, w(-u.y, u.x);
+      band.push_back({{a - u - w, b + u - w, b + u + w, a - u + w}, {}});
+    }
+    absl::StatusOr<std::vector<PolygonWithHoles>> left = Difference({oc.footprint, {}}, band);
+    if (!left.ok()) continue;  // dropped: conservative
+    for (PolygonWithHoles& piece : *left) {
+      if (!piece.holes.empty()) continue;
+      double area2 = 0.0;
+      for (size_t i = 0; i < piece.outer.size(); ++i) {
+        const glm::dvec2 &a = piece.outer[i], &b = piece.outer[(i + 1) % piece.outer.size()];
+        area2 += a.x * b.y - a.y * b.x;
+      }
+      if (area2 * 0.5 < min_area_m2) continue;
+      out.push_back({std::move(piece.outer), height, oc.object});
+    }
+  }
+  return out;
+}
+
+}  // namespace vistream::scenes

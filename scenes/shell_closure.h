@@ -1,0 +1,93 @@
+#pragma once
+// Closing the open shells of city models published as surfaces, by their neighbours and the
+// ground, for the occluder synthesis (scenes/occluder_synthesis.h). DESIGN.md "City models and
+// terrain"; issue 46.
+//
+// Many cities publish LoD2 as surfaces: terraced houses leave out the walls they share, building
+// parts the faces where they touch, some buildings their floor; coordinates of neighbours differ
+// by a millimetre where they meet. Such a shell bounds no volume on its own, but the matter it
+// stands for is closed: by the neighbour whose shell is open on the same face, by a neighbour's
+// face it stands against, or by the ground. An opening towards the air (a missing wall on a
+// street side) is not closed by anything, and such a shell gets no occluder.
+//
+// For each open shell (weld and T-junctions first, within `weld_m`):
+//   1. vertices of all the shells given within `weld_m` of each other are welded (to the lowest
+//      of them, so that floors never rise off the ground), and every edge that passes within
+//      `weld_m` of a vertex is cut there (a T-junction: its triangle is split at the vertex);
+//   2. the shell's odd edges (used by an odd number of its triangles) are classed: *covered*
+//      when another open shell has the same edge odd (the block's union is closed there: two
+//      houses without their party wall) or the edge lies on another shell's face (a part standing
+//      on a closed part); *ground* when its ends and middle lie within `weld_m` of the ground;
+//      *air* otherwise. Any air edge: the shell stays open (kOpenToAir);
+//   3. the odd edges are chained into loops, and each loop is capped: the runs that leave the
+//      ground and come back (a party wall's opening) by a planar polygon through the run and its
+//      chord on the ground; the loop's ground points (a missing floor) by a polygon triangulated
+//      in xy. A run that is not planar within `cap_planarity_m` is not capped (kCapNotPlanar).
+// The closed shell (welded, split, capped) then lies within `moved_m` of the union of the data's
+// shells and the ground: the caller shrinks its occluders by that much (ShrinkOccluders).
+//
+// Conservative as far as the data is what it says: an opening is closed only where another
+// building's boundary or the ground closes it. Exact predicates are not used for the
+// tolerances (they are tolerances); the synthesis afterwards is exact on the closed shell.
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "scenes/occluder_synthesis.h"
+#include "scenes/scene.h"
+
+namespace vistream::scenes {
+
+struct ShellClosureOptions {
+  double weld_m = 2e-3;           // points closer than this are one; edges this near a point are cut there
+  double cap_planarity_m = 1e-2;  // how far a cap's corners may lie off its plane
+};
+
+enum class ShellClosureOutcome {
+  kNotOpen,        // closed already (or not asked to close): untouched, `triangles` empty
+  kClosed,         // closed by neighbours and ground: `triangles`
+  kOpenToAir,      // an opening no neighbour and no ground closes
+  kOpeningsTouch,  // openings that meet at a point (a vertex on four odd edges): not capped
+  kCapNotPlanar,   // an opening towards a neighbour that is not planar within cap_planarity_m
+  kCapFailed,      // a cap that does not triangulate (its outline crosses itself in its plane)
+};
+// "open to the air", "open: openings touch", "open: opening not planar", "open: opening not
+// triangulated"; "" for kNotOpen and kClosed.
+const char* ShellClosureName(ShellClosureOutcome outcome);
+
+// One shell to close, or a closed neighbour that may close others (open false): triangles in
+// scene-local metres (double), any orientation; `ground` the ground under it (its `triangles`
+// may be empty: flat at flat_z).
+struct ShellToClose {
+  const std::vector<std::array<glm::dvec3, 3>>* triangles = nullptr;
+  bool open = false;
+  GroundSurface ground;
+};
+
+struct ShellClosure {
+  ShellClosureOutcome outcome = ShellClosureOutcome::kNotOpen;
+  std::vector<std::array<glm::dvec3, 3>> triangles;  // kClosed: the shell welded, split and capped
+  size_t caps = 0;       // kClosed: polygons added (party walls, floors)
+  double moved_m = 0.0;  // kClosed: farthest any point of `triangles` lies from the data's surfaces
+};
+
+// Closes the open shells of `shells` (one result per shell, in order; closed ones kNotOpen).
+// O(n log n) in the triangles, with grids of the shells' xy extent.
+std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose>& shells,
+                                                  const ShellClosureOptions& options = {});
+
+// The ground's height at (x, y): the highest of `ground`'s triangles over that point, flat_z
+// where none is.
+double GroundHeightAt(const GroundSurface& ground, double x, double y);
+
+// Occluders shrunk by `by_m` >= 0: each footprint less a band of `by_m` along its edges (so
+// every point left is at least by_m inside), its height lowered by `by_m`; pieces under
+// `min_area_m2` or not above `min_top_m` dropped. Footprints CCW and simple in, CCW and simple
+// out (a piece that would have a hole is dropped). For shells that lie within by_m of the data.
+std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occluders, double by_m, double min_area_m2,
+                                         double min_top_m);
+
+}  // namespace vistream::scenes
