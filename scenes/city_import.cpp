@@ -713,10 +713,34 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     // The closed shell lies within moved_m of the data: its prisms shrink by that much.
     r.occluders = ShrinkOccluders(r.occluders, c.moved_m > 0.0 ? c.moved_m + 1e-6 : 0.0, options.synthesis.min_area_m2,
                                   ground_z_of[k]);
-    if (getenv("VS_DEBUG")) fprintf(stderr, "shell %zu moved %.4f occluders %zu", j, c.moved_m, r.occluders.size());
     a.r = std::move(r);
-    if (getenv("VS_DEBUG")) fprintf(stderr, " -> %zu\n", a.r.occluders.size());
     a.why.clear();
+  }
+  // Objects with an open shell draw it welded and split (ShellClosure::drawn): the surface the
+  // occluders were made in, without the data's millimetre cracks between the shell and its
+  // neighbours (through which a rasterizer sees into a building at the odd pixel).
+  {
+    std::map<std::pair<size_t, size_t>, const ShellClosure*> redrawn;
+    for (size_t j = 0; j < closures.size(); ++j) {
+      if (!closures[j].drawn.empty()) redrawn[shell_of[j]] = &closures[j];
+    }
+    for (size_t k = 0; k < pending.size(); ++k) {
+      if (redrawn.lower_bound({k, 0}) == redrawn.lower_bound({k + 1, 0})) continue;
+      Mesh mesh;
+      for (size_t i = 0; i < pending[k].solids.size(); ++i) {
+        auto it = redrawn.find({k, i});
+        const auto& tris = it != redrawn.end() ? it->second->drawn : pending[k].solids[i].triangles;
+        for (const auto& t : tris) {
+          const glm::dvec3 n = glm::cross(t[1] - t[0], t[2] - t[0]);
+          const double len = glm::length(n);
+          AppendTriangles({t}, len > 0.0 ? n / len : glm::dvec3(0.0, 0.0, 1.0), &mesh);
+        }
+      }
+      Object& object = scene.objects[pending[k].id];
+      object.mesh = std::move(mesh);
+      object.bounds = object.mesh.Bounds();
+      ++sum.repaired["objects drawn welded, split at T-junctions"];
+    }
   }
   for (size_t k = 0; k < pending.size(); ++k) {
     const PendingObject& po = pending[k];

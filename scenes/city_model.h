@@ -94,13 +94,14 @@ struct CityReadOptions {
   bool keep_going = false;
 };
 
-// CityJSON 1.0, 1.1, 2.0 and the 0.x files whose geometry is encoded as in 1.0 (0.6 to 0.9;
-// Den Haag's 0.8), as files (.json, .city.json) or bytes; `name` names the source in errors.
-// Objects in file order; templates placed; MultiPoint and MultiLineString skipped and counted;
-// progress one unit per city object. Errors: NOT_FOUND (no such file), INVALID_ARGUMENT
-// naming the file and the JSON path of the problem (truncated or not JSON, "type" not
-// "CityJSON", an unknown version, vertex indices out of range, ...), CANCELLED when run's
-// flag was raised. The details: scenes/cityjson_read.cpp's header comment.
+// CityJSON 0.1 to 0.9, 1.0, 1.1 and 2.0 (0.1 and 0.2 as "type": "CityModel" with a URL
+// version; Den Haag's 0.8), as files (.json, .city.json) or bytes; `name` names the source in
+// errors. Objects in file order; templates placed; MultiPoint and MultiLineString skipped and
+// counted; progress one unit per city object. Errors: NOT_FOUND (no such file),
+// INVALID_ARGUMENT naming the file and the JSON path of the problem (truncated or not JSON,
+// "type" neither "CityJSON" nor "CityModel", a version this reader does not read, vertex
+// indices out of range, ...), CANCELLED when run's flag was raised. The details:
+// scenes/cityjson_read.cpp's header comment.
 absl::StatusOr<CityModel> ReadCityJson(const std::string& path, const CityReadOptions& options = {},
                                        const RunControl& run = {});
 absl::StatusOr<CityModel> ReadCityJsonFromMemory(std::string_view bytes, const std::string& name,

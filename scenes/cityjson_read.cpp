@@ -1,21 +1,28 @@
 // CityJSON reader (scenes/city_model.h): the CityJSON 1.0, 1.1 and 2.0 specifications
 // (https://www.cityjson.org/specs/), sections "CityJSON Object", "Transform Object",
-// "Geometry Objects" and "Geometry templates".
+// "Geometry Objects" and "Geometry templates"; the 0.x ones (github.com/cityjson/specs, tags
+// 0.1 to 0.9) where they differ.
 //
 // What it reads and how:
-// - "type" must be "CityJSON" (CityJSONFeature streams, .jsonl, are not read). "version" is
-//   "1.0", "1.1", "2.0" (a patch suffix such as "1.0.3" is accepted), or "0.6" to "0.9", the
-//   pre-1.0 versions whose geometry is encoded as in 1.0; anything else is refused.
-//   CityModel::format is "CityJSON <version as written>".
+// - CityJSON 0.1 to 0.9, 1.0, 1.1 and 2.0, all of whose geometry is encoded as in 1.0, in the
+//   two headers they were written with; anything else is refused naming the version:
+//   - "type": "CityJSON" with "version" "1.0", "1.1", "2.0" (a patch suffix such as "1.0.3" is
+//     accepted) or "0.3" to "0.9" (of these 0.3, 0.5, 0.6, 0.8 and 0.9 were published);
+//   - "type": "CityModel" with "version" a URL, "http://www.cityjson.org/version/0.1" or
+//     .../0.2 (https, without "www." or with a trailing slash too): the header of 0.1 and 0.2
+//     (0.3 changed it; citygml4j wrote 0.2 so).
+//   CityJSONFeature streams (.jsonl) are not read. CityModel::format is "CityJSON <version>":
+//   as written ("1.0.3"), or the URL's ("0.1").
 // - "vertices" are integers with "transform" (scale, translate; mandatory from 1.1) or plain
 //   numbers without it (1.0 and 0.x); any JSON number is taken either way. Each vertex is
 //   transformed once, up front; a coordinate that is not finite after the transform is an
 //   error only where a ring uses it (it is that object's malformed geometry).
 // - City objects keep the file's order (recorded by a SAX pass, as nlohmann::json sorts an
 //   object's keys), their "type" as written ("+Extension" types too), and their parent from
-//   "parents"[0] (1.0 and later) or "parent" (0.x, Den Haag's 0.8).
-// - "lod" is a number in 1.0 and 0.x and a string from 1.1; either is kept as its text ("2",
-//   "2.2") in any version.
+//   "parents"[0] (0.9 and later) or "parent" (0.8, Den Haag's), or else from the object that
+//   lists it in its "Parts" or "Installations" (0.1 to 0.6: a Building's BuildingParts, ...).
+// - "lod" is a number in 1.0 and 0.x (the 0.1 and 0.2 examples write "2") and a string from
+//   1.1; either is kept as its text ("2", "2.2") in any version.
 // - Solid, MultiSolid, CompositeSolid, MultiSurface, CompositeSurface (a TINRelief's
 //   CompositeSurface is CityGeometryType::kTin) and GeometryInstance: the template
 //   ("geometry-templates": templates and "vertices-templates", which "transform" does not
@@ -23,7 +30,8 @@
 //   an affine map) and then translated by the reference point, the vertex boundaries[0]; the
 //   instance takes the template's type and lod. MultiPoint and MultiLineString geometries, and
 //   types this reader does not know, are left out and counted in CityModel::skipped.
-// - Semantics, materials, textures and attributes are not read.
+// - Semantics (in any version's form: 0.1's nested strings, 0.2's objects, 0.5's "surfaces" and
+//   "values"), materials, textures and attributes are not read.
 // - Rings come out open: a ring whose last point repeats its first has that point dropped,
 //   counted in CityModel::repaired["ring closed by repeating its first point"].
 //
@@ -52,6 +60,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <unordered_set>
 #include <utility>
 #include <vector>
@@ -123,25 +132,56 @@ std::string Expected(const std::string& what, const Json& got) {
 
 std::string Point(const glm::dvec3& p) { return absl::StrCat("(", p.x, ", ", p.y, ", ", p.z, ")"); }
 
-// The version's encoding: true for the versions this reader knows.
-bool KnownVersion(std::string_view version) {
-  // "major.minor" or "major.minor.patch", each a number of at most 3 digits.
-  int n[3] = {0, 0, 0};
-  size_t parts = 0, digits = 0;
+// "major.minor" or "major.minor.patch", each a number of at most 3 digits, into `n`; the
+// number of dots, or -1 for other text.
+int ParseVersion(std::string_view version, int n[3]) {
+  n[0] = n[1] = n[2] = 0;
+  int dots = 0;
+  size_t digits = 0;
   for (const char c : version) {
     if (c == '.') {
-      if (digits == 0 || ++parts == 3) return false;
+      if (digits == 0 || ++dots == 3) return -1;
       digits = 0;
     } else if (c >= '0' && c <= '9' && digits < 3) {
-      n[parts] = n[parts] * 10 + (c - '0');
+      n[dots] = n[dots] * 10 + (c - '0');
       ++digits;
     } else {
-      return false;
+      return -1;
     }
   }
-  if (digits == 0 || parts == 0) return false;
-  if (n[0] == 0) return parts == 1 && n[1] >= 6 && n[1] <= 9;
+  return digits == 0 || dots == 0 ? -1 : dots;
+}
+
+// What this reader reads, for the message that refuses a file. 0.1 and 0.2 wrote the CityModel
+// form (their specifications' "CityJSON Object"; citygml4j wrote 0.2 so), 0.3 changed the
+// header to the CityJSON form; the geometry is encoded as in 1.0 throughout 0.x.
+constexpr char kVersionsRead[] =
+    "this reader reads CityJSON 0.1 and 0.2 (\"type\": \"CityModel\", \"version\": "
+    "\"http://www.cityjson.org/version/0.1\" or .../0.2) and 0.3 to 0.9, 1.0, 1.1 and 2.0 "
+    "(\"type\": \"CityJSON\", \"version\": \"0.3\" to \"2.0\", from 1.0 with or without a patch "
+    "number)";
+
+// "type": "CityJSON": the version as written when this reader knows its encoding.
+bool KnownVersion(std::string_view version) {
+  int n[3];
+  const int dots = ParseVersion(version, n);
+  if (dots < 0) return false;
+  if (n[0] == 0) return dots == 1 && n[1] >= 3 && n[1] <= 9;
   return (n[0] == 1 && (n[1] == 0 || n[1] == 1)) || (n[0] == 2 && n[1] == 0);
+}
+
+// "type": "CityModel" (0.1, 0.2): "http://www.cityjson.org/version/0.1" -> "0.1"; https, no
+// "www." and a trailing slash too; "" for any other text.
+std::string CityModelVersion(std::string_view url) {
+  for (const std::string_view scheme : {"http://", "https://"}) {
+    if (url.starts_with(scheme)) url.remove_prefix(scheme.size());
+  }
+  if (url.starts_with("www.")) url.remove_prefix(4);
+  constexpr std::string_view kPath = "cityjson.org/version/";
+  if (!url.starts_with(kPath)) return "";
+  url.remove_prefix(kPath.size());
+  if (url.ends_with('/')) url.remove_suffix(1);
+  return url == "0.1" || url == "0.2" ? std::string(url) : "";
 }
 
 bool TransformRequired(std::string_view version) {
@@ -244,22 +284,28 @@ class Reader {
 
     const auto type = doc.find("type");
     if (type == doc.end()) return Invalid(name_, root, "no \"type\": not a CityJSON file");
-    if (!type->is_string() || type->get_ref<const std::string&>() != "CityJSON") {
+    // "CityModel": the header of 0.1 and 0.2, with the version as a URL.
+    const bool city_model = type->is_string() && type->get_ref<const std::string&>() == "CityModel";
+    if (!type->is_string() || (!city_model && type->get_ref<const std::string&>() != "CityJSON")) {
       return Invalid(name_, root.Member("type"),
                      absl::StrCat(Shown(*type),
-                                  " is not \"CityJSON\" (CityJSONFeature streams are not read)"));
+                                  " is not \"CityJSON\" (nor \"CityModel\", CityJSON 0.1 and 0.2; "
+                                  "CityJSONFeature streams are not read)"));
     }
     const auto version = doc.find("version");
     if (version == doc.end())
       return Invalid(name_, root, "no \"version\": unknown CityJSON version");
-    if (!version->is_string() || !KnownVersion(version->get_ref<const std::string&>())) {
+    std::string version_text;
+    if (version->is_string()) {
+      const std::string& text = version->get_ref<const std::string&>();
+      version_text = city_model ? CityModelVersion(text) : KnownVersion(text) ? text : "";
+    }
+    if (version_text.empty()) {
       return Invalid(
           name_, root.Member("version"),
-          absl::StrCat(
-              "CityJSON version ", Shown(*version),
-              " is not one this reader knows (1.0, 1.1, 2.0, and 0.6 to 0.9 as encoded like 1.0)"));
+          absl::StrCat(city_model ? "type \"CityModel\" with version " : "CityJSON version ",
+                       Shown(*version), " is not one this reader knows: ", kVersionsRead));
     }
-    const std::string& version_text = version->get_ref<const std::string&>();
     CityModel model;
     model.format = absl::StrCat("CityJSON ", version_text);
 
@@ -289,6 +335,8 @@ class Reader {
       }
     }
 
+    // (index in model.objects of the object that lists it, id): "Parts" and "Installations".
+    std::vector<std::pair<size_t, std::string>> listed;
     Progress progress(run_, absl::StrCat("reading ", name_), in_order.size());
     const JsonPath objects_path = root.Member("CityObjects");
     model.objects.reserve(in_order.size());
@@ -299,9 +347,11 @@ class Reader {
       }
       CityObject object;
       ObjectCounts counts;
+      std::vector<std::string> parts;
       const JsonPath path = objects_path.Quoted(it.key());
-      absl::Status s = ReadObject(it.key(), it.value(), path, &object, &counts);
+      absl::Status s = ReadObject(it.key(), it.value(), path, &object, &counts, &parts);
       if (s.ok()) {
+        for (std::string& part : parts) listed.emplace_back(model.objects.size(), std::move(part));
         model.objects.push_back(std::move(object));
         for (const auto& [reason, n] : counts.skipped) model.skipped[reason] += n;
         for (const auto& [reason, n] : counts.repaired) model.repaired[reason] += n;
@@ -313,7 +363,24 @@ class Reader {
       progress.Advance();
     }
     progress.Finish();
+    SetListedParents(listed, &model);
     return model;
+  }
+
+  // 0.1 to 0.6 list a Building's (Bridge's, Tunnel's) parts and installations on it, and the
+  // listed objects name no parent; from 0.8 each names its own. The parent an object names
+  // wins, then the first object that lists it; an id not in the model is passed over.
+  static void SetListedParents(const std::vector<std::pair<size_t, std::string>>& listed,
+                               CityModel* model) {
+    if (listed.empty()) return;
+    std::unordered_map<std::string_view, size_t> index;
+    for (size_t i = 0; i < model->objects.size(); ++i) index.emplace(model->objects[i].id, i);
+    for (const auto& [owner, id] : listed) {
+      const auto it = index.find(id);
+      if (it == index.end() || it->second == owner) continue;
+      CityObject& child = model->objects[it->second];
+      if (child.parent.empty()) child.parent = model->objects[owner].id;
+    }
   }
 
   absl::Status ReadCrs(const Json& doc, const JsonPath& root, std::string* crs) {
@@ -432,8 +499,9 @@ class Reader {
 
   // ---- one city object ----
 
+  // `parts`: the ids the object lists as its "Parts" and "Installations" (0.1 to 0.6).
   absl::Status ReadObject(const std::string& id, const Json& j, const JsonPath& path,
-                          CityObject* out, ObjectCounts* counts) {
+                          CityObject* out, ObjectCounts* counts, std::vector<std::string>* parts) {
     if (!j.is_object()) return Invalid(name_, path, Expected("a city object", j));
     out->id = id;
     const auto type = j.find("type");
@@ -452,6 +520,17 @@ class Reader {
       if (!parent->is_string())
         return Invalid(name_, path.Member("parent"), Expected("an id", *parent));
       out->parent = parent->get<std::string>();
+    }
+    for (const char* key : {"Parts", "Installations"}) {
+      const auto list = j.find(key);
+      if (list == j.end()) continue;
+      const JsonPath lpath = path.Member(key);
+      if (!list->is_array()) return Invalid(name_, lpath, Expected("an array of ids", *list));
+      for (size_t i = 0; i < list->size(); ++i) {
+        if (!(*list)[i].is_string())
+          return Invalid(name_, lpath.At(i), Expected("an id", (*list)[i]));
+        parts->push_back((*list)[i].get<std::string>());
+      }
     }
     const auto geometry = j.find("geometry");
     if (geometry == j.end()) return absl::OkStatus();

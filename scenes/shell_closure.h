@@ -70,6 +70,11 @@ struct ShellToClose {
 struct ShellClosure {
   ShellClosureOutcome outcome = ShellClosureOutcome::kNotOpen;
   std::vector<std::array<glm::dvec3, 3>> triangles;  // kClosed: the shell welded, split and capped
+  // Every open shell, closed or not: its own triangles welded and split, without the caps, each wound as the
+  // data's triangle it comes from: what to draw, so that the drawn surface has no crack where
+  // the closed shell has none (a millimetre gap between a wall and its ground surface lets a
+  // rasterizer see into the building at the odd pixel, past the occluder inside).
+  std::vector<std::array<glm::dvec3, 3>> drawn;
   size_t caps = 0;       // kClosed: polygons added (party walls, floors)
   double moved_m = 0.0;  // kClosed: farthest any point of `triangles` lies from the data's surfaces
 };
@@ -78,6 +83,14 @@ struct ShellClosure {
 // O(n log n) in the triangles, with grids of the shells' xy extent.
 std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose>& shells,
                                                   const ShellClosureOptions& options = {});
+
+// The generalized winding number at `p` of the shells `which` of `shells` together, each
+// oriented outward by the sign of its volume seen from its mean corner: near 1 inside their
+// union, near 0 outside, also where they are open towards each other (Jacobson et al., "Robust
+// inside-outside segmentation using generalized winding numbers", SIGGRAPH 2013; solid angles
+// by Van Oosterom and Strackee 1983).
+double WindingNumberOf(const std::vector<ShellToClose>& shells, const std::vector<uint32_t>& which,
+                       const glm::dvec3& p);
 
 // The ground's height at (x, y): the highest of `ground`'s triangles over that point, flat_z
 // where none is.

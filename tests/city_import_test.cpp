@@ -511,5 +511,44 @@ TEST(CityImport, DelftBuildingsAreClosedAndStandOnADerivedGround) {
   EXPECT_EQ(fsum.without_occluder["raised above the ground"], 160u);
 }
 
+// A CityJSON 0.1 file ("type": "CityModel", a URL version, no transform, 0.1's string
+// semantics) whose Building lists its one BuildingPart in "Parts": the part is drawn, the
+// Building (no geometry of its own) gives no object.
+TEST(CityImport, CityJson01BuildingDrawnThroughItsListedPart) {
+  const std::string bytes = R"({
+    "type": "CityModel", "version": "http://www.cityjson.org/version/0.1",
+    "metadata": {"crs": {"epsg": 28992}},
+    "CityObjects": {
+      "b1": {"type": "Building", "Parts": ["p1"]},
+      "p1": {"type": "BuildingPart", "geometry": [{"type": "Solid", "lod": 1,
+        "boundaries": [[[[0, 3, 2, 1]], [[0, 1, 5, 4]], [[1, 2, 6, 5]], [[2, 3, 7, 6]],
+                        [[3, 0, 4, 7]], [[4, 5, 6, 7]]]],
+        "semantics": [["GroundSurface", "WallSurface", "WallSurface", "WallSurface",
+                       "WallSurface", "RoofSurface"]]}]}
+    },
+    "vertices": [[85000.0, 446000.0, 0.0], [85010.0, 446000.0, 0.0], [85010.0, 446008.0, 0.0],
+                 [85000.0, 446008.0, 0.0], [85000.0, 446000.0, 6.0], [85010.0, 446000.0, 6.0],
+                 [85010.0, 446008.0, 6.0], [85000.0, 446008.0, 6.0]]
+  })";
+  absl::StatusOr<CityModel> model = ReadCityJsonFromMemory(bytes, "v01.json");
+  ASSERT_TRUE(model.ok()) << model.status();
+  CityImportOptions options;
+  options.ground = CityGround::kNone;
+  options.walks = 0;
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = BuildCityScene(*model, "v01", options, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(sum.format, "CityJSON 0.1");
+  EXPECT_EQ(sum.crs, "EPSG:28992");
+  EXPECT_EQ(sum.buildings, 1u);
+  EXPECT_EQ(sum.building_parts, 1u);
+  EXPECT_EQ(sum.buildings_drawn, 1u);
+  EXPECT_EQ(sum.buildings_with_occluder, 1u);
+  EXPECT_EQ(Find(*scene, "b1"), nullptr);
+  ASSERT_NE(Find(*scene, "p1"), nullptr);
+  EXPECT_EQ(Find(*scene, "p1")->mesh.TriangleCount(), 12u);
+  EXPECT_NEAR(OccluderVolume(*scene, "p1", 0.0), 10.0 * 8.0 * 6.0, 1e-3);
+}
+
 }  // namespace
 }  // namespace vistream::scenes

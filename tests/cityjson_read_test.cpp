@@ -368,7 +368,8 @@ TEST(CityJson, UnknownVersionsAreRejectedNamingTheVersion) {
   ExpectInvalid(ReadDoc(doc), "x.city.json: version: CityJSON version 2.0 is not one");
   doc.erase("version");
   ExpectInvalid(ReadDoc(doc), "x.city.json: no \"version\"");
-  for (const char* v : {"1.0", "1.0.3", "1.1", "1.1.3", "2.0", "2.0.1", "0.9", "0.6"}) {
+  for (const char* v :
+       {"1.0", "1.0.3", "1.1", "1.1.3", "2.0", "2.0.1", "0.9", "0.6", "0.5", "0.3"}) {
     const absl::StatusOr<CityModel> m = ReadDoc(Cube(v));
     ASSERT_TRUE(m.ok()) << v << ": " << m.status();
     EXPECT_EQ(m->format, std::string("CityJSON ") + v);
@@ -715,6 +716,169 @@ TEST(CityJson, ReportsProgressPerObjectAndStopsWhenCancelled) {
   EXPECT_EQ(m.status().code(), absl::StatusCode::kCancelled);
   EXPECT_TRUE(cancelled.ended_);
   EXPECT_FALSE(cancelled.completed_);
+}
+
+// ---- the earliest versions (github.com/cityjson/specs, tags 0.1 to 0.5) ----
+
+// A CityJSON 0.1 file as its specification writes one: "type": "CityModel", the version a URL,
+// the CRS in metadata.crs.epsg, no "transform" (plain coordinates), numeric "lod", semantics as
+// nested strings, and the Building listing its part and installation ("Parts",
+// "Installations") where later versions have the part name its parent.
+Json Version01() {
+  Json doc = {{"type", "CityModel"}, {"version", "http://www.cityjson.org/version/0.1"}};
+  doc["metadata"] = {{"crs", {{"epsg", 7415}}}, {"bbox", {85000, 446000, 0, 85001, 446001, 1}}};
+  doc["vertices"] = Json::array();
+  for (int z : {0, 1}) {
+    for (auto [x, y] : {std::pair{0, 0}, {1, 0}, {1, 1}, {0, 1}})
+      doc["vertices"].push_back({85000.0 + x, 446000.0 + y, 0.5 * z});
+  }
+  const Json shell = {{{0, 3, 2, 1}}, {{0, 1, 5, 4}}, {{1, 2, 6, 5}},
+                      {{2, 3, 7, 6}}, {{3, 0, 4, 7}}, {{4, 5, 6, 7}}};
+  doc["CityObjects"]["b1"] = {{"type", "Building"},
+                              {"attributes", {{"roofType", "flat"}}},
+                              {"Parts", {"p1", "ghost"}},
+                              {"Installations", {"i1"}}};
+  doc["CityObjects"]["p1"] = {
+      {"type", "BuildingPart"},
+      {"geometry",
+       {{{"type", "Solid"},
+         {"lod", 2},
+         {"boundaries", {shell}},
+         {"semantics",
+          {{"GroundSurface", "WallSurface", "WallSurface", "WallSurface", "WallSurface",
+            "RoofSurface"}}},
+         {"material", {{0, 0, 1, 1, 1, 1}}}}}}};
+  doc["CityObjects"]["i1"] = {
+      {"type", "BuildingInstallation"},
+      {"geometry",
+       {{{"type", "MultiSurface"},
+         {"lod", 2},
+         {"boundaries", {{{4, 5, 6, 7}}}},
+         {"semantics", {{"RoofSurface"}}}}}}};
+  return doc;
+}
+
+TEST(CityJson, Version01CityModelIsReadWithItsPartsAndEarlySemantics) {
+  absl::StatusOr<CityModel> m = ReadDoc(Version01());
+  ASSERT_TRUE(m.ok()) << m.status();
+  EXPECT_EQ(m->format, "CityJSON 0.1");
+  EXPECT_EQ(m->crs, "EPSG:7415");
+  ASSERT_EQ(m->objects.size(), 3u);
+  EXPECT_EQ(Get(*m, "b1").parent, "");
+  EXPECT_TRUE(Get(*m, "b1").geometries.empty());
+  EXPECT_EQ(Get(*m, "p1").parent, "b1") << "listed in the Building's \"Parts\"";
+  EXPECT_EQ(Get(*m, "i1").parent, "b1") << "listed in its \"Installations\"";
+  const CityObject& part = Get(*m, "p1");
+  ASSERT_EQ(part.geometries.size(), 1u);
+  EXPECT_EQ(part.geometries[0].type, CityGeometryType::kSolid);
+  EXPECT_EQ(part.geometries[0].lod, "2");
+  const auto& shell = Shell(part);
+  ASSERT_EQ(shell.size(), 6u);
+  ExpectRing(shell[5].outer, {P(0, 0, 0.5), P(1, 0, 0.5), P(1, 1, 0.5), P(0, 1, 0.5)}, "top");
+  EXPECT_EQ(Get(*m, "i1").geometries.at(0).surfaces.size(), 1u);
+  EXPECT_TRUE(m->skipped.empty());
+
+  // The URL as people wrote it: https, without "www.", with a trailing slash.
+  for (const char* v : {"https://www.cityjson.org/version/0.1", "http://cityjson.org/version/0.1",
+                        "http://www.cityjson.org/version/0.1/"}) {
+    Json doc = Version01();
+    doc["version"] = v;
+    absl::StatusOr<CityModel> n = ReadDoc(doc);
+    ASSERT_TRUE(n.ok()) << v << ": " << n.status();
+    EXPECT_EQ(n->format, "CityJSON 0.1") << v;
+  }
+}
+
+TEST(CityJson, PartsListedOnTheParentGiveWayToTheParentAPartNames) {
+  Json doc = Version01();
+  doc["CityObjects"]["p1"]["parent"] = "b0";  // named by the part: kept
+  doc["CityObjects"]["b2"] = {{"type", "Building"}, {"Parts", {"i1", "b2"}}};  // i1 listed twice
+  absl::StatusOr<CityModel> m = ReadDoc(doc);
+  ASSERT_TRUE(m.ok()) << m.status();
+  EXPECT_EQ(Get(*m, "p1").parent, "b0");
+  EXPECT_EQ(Get(*m, "i1").parent, "b1") << "the first object that lists it";
+  EXPECT_EQ(Get(*m, "b2").parent, "") << "an object does not become its own part";
+
+  doc["CityObjects"]["b1"]["Parts"] = "p1";
+  ExpectInvalid(ReadDoc(doc),
+                "x.city.json: CityObjects[\"b1\"].Parts: expected an array of ids, got string "
+                "\"p1\"");
+  doc["CityObjects"]["b1"]["Parts"] = {3};
+  ExpectInvalid(ReadDoc(doc),
+                "x.city.json: CityObjects[\"b1\"].Parts[0]: expected an id, got number 3");
+  CityReadOptions keep_going;
+  keep_going.keep_going = true;
+  absl::StatusOr<CityModel> m2 = ReadDoc(doc, keep_going);
+  ASSERT_TRUE(m2.ok()) << m2.status();
+  EXPECT_EQ(m2->skipped["malformed geometry"], 1u);
+  EXPECT_EQ(Get(*m2, "i1").parent, "b2") << "b1 left out: its list with it";
+}
+
+// 0.2 kept 0.1's header, with a "transform" and semantics as objects (its Delfshaven example,
+// "lod": "2"); 0.3 changed the header to "CityJSON" and "0.3", 0.5 the semantics to
+// "surfaces" and "values". Parts are listed on the Building through 0.6.
+TEST(CityJson, Versions02To05WithTransformAndTheirSemanticsAreRead) {
+  const Json surfaces = {{{"type", "GroundSurface"}}, {{"type", "WallSurface"}},
+                         {{"type", "RoofSurface"}}};
+  for (const char* v : {"0.2", "0.3", "0.5"}) {
+    Json doc = Cube(v);  // a "transform" and integer vertices
+    if (std::string(v) == "0.2") {
+      doc["type"] = "CityModel";
+      doc["version"] = "http://www.cityjson.org/version/0.2";
+    }
+    Json& g = doc["CityObjects"]["b12"]["geometry"][0];
+    g["lod"] = 2;
+    if (std::string(v) == "0.5") {
+      g["semantics"] = {{"surfaces", surfaces}, {"values", {{0, 1, 1, 1, 1, 2}}}};
+    } else {
+      g["semantics"] = {{surfaces[0], surfaces[1], surfaces[1], surfaces[1], surfaces[1],
+                         surfaces[2]}};
+    }
+    doc["CityObjects"]["b0"] = {{"type", "Building"}, {"Parts", {"b12"}}};
+    absl::StatusOr<CityModel> m = ReadDoc(doc);
+    ASSERT_TRUE(m.ok()) << v << ": " << m.status();
+    EXPECT_EQ(m->format, std::string("CityJSON ") + v);
+    EXPECT_EQ(Get(*m, "b12").parent, "b0") << v;
+    ASSERT_EQ(Get(*m, "b12").geometries.size(), 1u) << v;
+    EXPECT_EQ(Get(*m, "b12").geometries[0].lod, "2") << v;
+    ExpectRing(Shell(Get(*m, "b12"))[5].outer, {P(0, 0, 1), P(1, 0, 1), P(1, 1, 1), P(0, 1, 1)},
+               v);
+  }
+}
+
+TEST(CityJson, EarlyHeadersInOtherCombinationsAreRefusedNamingTheVersion) {
+  const std::string reads =
+      " is not one this reader knows: this reader reads CityJSON 0.1 and 0.2 (\"type\": "
+      "\"CityModel\", \"version\": \"http://www.cityjson.org/version/0.1\" or .../0.2) and 0.3 to "
+      "0.9, 1.0, 1.1 and 2.0 (\"type\": \"CityJSON\", \"version\": \"0.3\" to \"2.0\", from 1.0 "
+      "with or without a patch number)";
+  // "CityModel" with anything but a 0.1 or 0.2 URL: 0.3 and later wrote "CityJSON".
+  for (const char* v : {"http://example.org/x", "http://www.cityjson.org/version/0.3",
+                        "http://www.cityjson.org/version/1.0", "ftp://www.cityjson.org/version/0.1",
+                        "http://www.cityjson.org/version/0.1//", "0.1", "0.2", "1.0", "2.0", ""}) {
+    Json doc = Version01();
+    doc["version"] = v;
+    ExpectInvalid(
+        ReadDoc(doc),
+        std::string("x.city.json: version: type \"CityModel\" with version \"") + v + "\"" + reads);
+  }
+  Json doc = Version01();
+  doc["version"] = 0.1;
+  ExpectInvalid(ReadDoc(doc), "x.city.json: version: type \"CityModel\" with version 0.1" + reads);
+  // "CityJSON" with a URL, with 0.1 or 0.2 (never written so), 0.0, or 0.x with a patch.
+  for (const char* v : {"http://www.cityjson.org/version/0.1",
+                        "http://www.cityjson.org/version/0.2", "0.1", "0.2", "0.0", "0.3.1"}) {
+    doc = Version01();
+    doc["type"] = "CityJSON";
+    doc["version"] = v;
+    ExpectInvalid(ReadDoc(doc),
+                  std::string("x.city.json: version: CityJSON version \"") + v + "\"" + reads);
+  }
+  doc["type"] = "CityGML";
+  ExpectInvalid(
+      ReadDoc(doc),
+      "x.city.json: type: \"CityGML\" is not \"CityJSON\" (nor \"CityModel\", CityJSON 0.1 "
+      "and 0.2; CityJSONFeature streams are not read)");
 }
 
 // ---- the real files (../shared/data/citymodels/README.md) ----
