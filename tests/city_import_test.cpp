@@ -358,10 +358,13 @@ TEST(CityImport, FloorlessSolidsAreClosedWithAFloorAndOtherOpenOnesAreNot) {
   EXPECT_TRUE(scene->terrain.empty());
   EXPECT_EQ(sum.terrain_from, "");
   EXPECT_EQ(sum.repaired["solid closed with a floor"], 3u);
-  EXPECT_EQ(sum.Repaired(), 3u);
+  // The open one is given to the closure by neighbours and ground (issue 46), drawn welded
+  // (nothing to weld: the same triangles), and stays open: its missing wall faces the air.
+  EXPECT_EQ(sum.repaired["objects drawn welded, split at T-junctions"], 1u);
+  EXPECT_EQ(sum.Repaired(), 4u);
   EXPECT_EQ(sum.buildings_drawn, 4u);
   EXPECT_EQ(sum.buildings_with_occluder, 3u);
-  EXPECT_EQ(sum.without_occluder, (std::map<std::string, uint64_t>{{"open", 1}})) << "no-wall";
+  EXPECT_EQ(sum.without_occluder, (std::map<std::string, uint64_t>{{"open to the air", 1}})) << "no-wall";
   // Walls two triangles each; roof and floor the footprint's triangles each.
   EXPECT_EQ(Find(*scene, "box")->mesh.TriangleCount(), 4 * 2 + 2 + 2u);
   EXPECT_EQ(Find(*scene, "ell")->mesh.TriangleCount(), 6 * 2 + 4 + 4u);
