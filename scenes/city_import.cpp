@@ -126,18 +126,6 @@ size_t DropDuplicates(std::vector<glm::dvec3>* ring) {
   return dropped;
 }
 
-glm::dvec3 NewellNormal(const std::vector<glm::dvec3>& ring) {
-  glm::dvec3 n(0.0);
-  for (size_t i = 0; i < ring.size(); ++i) {
-    const glm::dvec3& a = ring[i];
-    const glm::dvec3& b = ring[(i + 1) % ring.size()];
-    n.x += (a.y - b.y) * (a.z + b.z);
-    n.y += (a.z - b.z) * (a.x + b.x);
-    n.z += (a.x - b.x) * (a.y + b.y);
-  }
-  return n;
-}
-
 // Triangulates one polygon (local coordinates). On failure returns the reason.
 absl::StatusOr<Triangulated> TriangulateSurface(const CitySurface& surface, const glm::dvec3& origin,
                                                 std::map<std::string, uint64_t>* repaired) {
@@ -586,8 +574,7 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
             } else if (floor.outcome == FloorClosing::kFailed) {
               ++sum.skipped[absl::StrCat("floor not closed: ", floor.why)];
             }
-            // The exterior shell's floor is ground (a void's is not). In the mesh's single
-            // precision, so that the terrain meets the floor that is drawn exactly.
+            // The exterior shell's floor is ground (a void's is not).
             if (derive_ground && IsBuilding(o.type) && sh == 0) add_ground(shell);
           }
           out.triangles.insert(out.triangles.end(), shell.begin(), shell.end());

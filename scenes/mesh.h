@@ -42,4 +42,14 @@ double SignedArea(std::span<const glm::dvec2> polygon);
 // True when the polygon is convex (collinear vertices allowed) and counter-clockwise.
 bool IsConvexCcw(std::span<const glm::dvec2> polygon);
 
+// Newell's normal of a closed ring of 3D points (the first not repeated at the end): twice the
+// vector area, its direction the ring's orientation (counter-clockwise seen from its tip), for
+// planar and nearly planar rings alike; zero for a ring without area (fewer than 3 distinct
+// points, all on a line, or areas that cancel).
+glm::dvec3 NewellNormal(std::span<const glm::dvec3> ring);
+
+// The point of triangle abc nearest to p (Ericson, Real-Time Collision Detection, 5.1.5); a's
+// corner for a degenerate triangle whose interior case is reached. Any frame, metres.
+glm::dvec3 ClosestPointOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c);
+
 }  // namespace vistream::scenes

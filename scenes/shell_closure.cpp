@@ -11,6 +11,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "scenes/mesh.h"
 #include "scenes/polygon.h"
 #include "scenes/polygon_set.h"
 
@@ -75,40 +76,6 @@ class Grid2 {
   std::unordered_map<CellKey, std::vector<uint32_t>, CellHash> cells_;
 };
 
-// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
-glm::dvec3 ClosestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
-  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return a;
-  const glm::dvec3 bp = p - b;
-  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
-  if (d3 >= 0.0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + ab * (d1 / (d1 - d3));
-  const glm::dvec3 cp = p - c;
-  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
-  if (d6 >= 0.0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + ac * (d2 / (d2 - d6));
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  const double denom = va + vb + vc;
-  if (!(denom > 0.0)) return a;  // a degenerate triangle: its first corner
-  return a + ab * (vb / denom) + ac * (vc / denom);
-}
-
-glm::dvec3 Newell(const std::vector<glm::dvec3>& ring) {
-  glm::dvec3 n(0.0);
-  for (size_t i = 0; i < ring.size(); ++i) {
-    const glm::dvec3& a = ring[i];
-    const glm::dvec3& b = ring[(i + 1) % ring.size()];
-    n.x += (a.y - b.y) * (a.z + b.z);
-    n.y += (a.z - b.z) * (a.x + b.x);
-    n.z += (a.x - b.x) * (a.y + b.y);
-  }
-  return n;
-}
-
 // Triangulates a polygon through 3D points by projecting it on the plane of axis `drop`'s
 // normal (0 x, 1 y, 2 z). False when it does not triangulate (crossing, no area).
 bool TriangulateProjected(const std::vector<glm::dvec3>& ring3, int drop, std::vector<Tri3>* out) {
@@ -121,12 +88,7 @@ bool TriangulateProjected(const std::vector<glm::dvec3>& ring3, int drop, std::v
   }
   CleanRing(&poly.outer);
   if (poly.outer.size() < 3) return false;
-  double area = 0.0;
-  for (size_t i = 0; i < poly.outer.size(); ++i) {
-    const glm::dvec2& a = poly.outer[i];
-    const glm::dvec2& b = poly.outer[(i + 1) % poly.outer.size()];
-    area += a.x * b.y - a.y * b.x;
-  }
+  const double area = SignedArea(poly.outer);
   if (area == 0.0) return false;
   if (area < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
   absl::StatusOr<std::vector<Triangle2>> tris = Triangulate(poly);
@@ -143,23 +105,6 @@ bool TriangulateProjected(const std::vector<glm::dvec3>& ring3, int drop, std::v
 int drop_axis(const glm::dvec3& n) {
   const glm::dvec3 an = glm::abs(n);
   return an.z >= an.x && an.z >= an.y ? 2 : (an.y >= an.x ? 1 : 0);
-}
-
-// The generalized winding number of `soup` (oriented triangles) at `p`: the sum of their solid
-// angles (Van Oosterom and Strackee, IEEE Trans. Biomed. Eng. 30(2), 1983) over 4 pi; 1 inside
-// a closed outward-oriented surface, 0 outside, near those where small gaps leave it open
-// (Jacobson et al., "Robust inside-outside segmentation using generalized winding numbers",
-// SIGGRAPH 2013).
-double WindingNumber(const std::vector<Tri3>& soup, const glm::dvec3& p) {
-  double sum = 0.0;
-  for (const Tri3& t : soup) {
-    const glm::dvec3 a = t[0] - p, b = t[1] - p, c = t[2] - p;
-    const double la = glm::length(a), lb = glm::length(b), lc = glm::length(c);
-    const double num = glm::dot(a, glm::cross(b, c));
-    const double den = la * lb * lc + glm::dot(a, b) * lc + glm::dot(a, c) * lb + glm::dot(b, c) * la;
-    sum += 2.0 * std::atan2(num, den);
-  }
-  return sum / (4.0 * M_PI);
 }
 
 // Caps a loop that stands vertically over a path in xy (a party wall with a bend): the loop's
@@ -230,14 +175,12 @@ bool CurtainCap(const std::vector<glm::dvec3>& ring, double tol, std::vector<Tri
   }
   CleanRing(&poly.outer);
   if (poly.outer.size() < 3 || !IsSimpleRing(poly.outer)) return false;
-  double area2 = 0.0, lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (size_t i = 0; i < poly.outer.size(); ++i) {
-    const glm::dvec2 &a = poly.outer[i], &b = poly.outer[(i + 1) % poly.outer.size()];
-    area2 += a.x * b.y - a.y * b.x;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (const glm::dvec2& a : poly.outer) {
     lo = std::min(lo, a.y);
     hi = std::max(hi, a.y);
   }
-  if (area2 < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
+  if (SignedArea(poly.outer) < 0.0) std::reverse(poly.outer.begin(), poly.outer.end());
   const double margin = 1.0 + (hi - lo);
   for (size_t i = 0; i + 1 < path.size(); ++i) {
     std::vector<PolygonWithHoles> outside;
@@ -291,23 +234,6 @@ const char* ShellClosureName(ShellClosureOutcome outcome) {
       return "open: opening not triangulated";
   }
   return "";
-}
-
-double WindingNumberOf(const std::vector<ShellToClose>& shells, const std::vector<uint32_t>& which,
-                       const glm::dvec3& p) {
-  double w = 0.0;
-  for (uint32_t o : which) {
-    const std::vector<Tri3>& soup = *shells[o].triangles;
-    // Outward or inward: the sign of the volume seen from the shell's mean corner (inside a
-    // house, every face of an outward shell adds volume, whatever openings it has).
-    glm::dvec3 centre(0.0);
-    for (const Tri3& t : soup) centre += t[0] + t[1] + t[2];
-    centre /= 3.0 * static_cast<double>(std::max<size_t>(soup.size(), 1));
-    double volume = 0.0;
-    for (const Tri3& t : soup) volume += glm::dot(t[0] - centre, glm::cross(t[1] - centre, t[2] - centre));
-    w += (volume >= 0.0 ? 1.0 : -1.0) * WindingNumber(soup, p);
-  }
-  return w;
 }
 
 double GroundHeightAt(const GroundSurface& ground, double x, double y) {
@@ -486,7 +412,7 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     face_grid.ForEachNear(p.x, p.y, p.x, p.y, [&](uint32_t f) {
       if (on || faces[f].first == s) return;
       const Tri3& t = (*shells[faces[f].first].triangles)[faces[f].second];
-      on = glm::distance(p, ClosestOnTriangle(p, t[0], t[1], t[2])) <= 2.0 * tol;
+      on = glm::distance(p, ClosestPointOnTriangle(p, t[0], t[1], t[2])) <= 2.0 * tol;
     });
     return on;
   };
@@ -549,7 +475,7 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     auto planar_cap = [&](const std::vector<uint32_t>& ids) {
       std::vector<glm::dvec3> ring;
       for (uint32_t v : ids) ring.push_back(vertices[v]);
-      const glm::dvec3 n = Newell(ring);
+      const glm::dvec3 n = NewellNormal(ring);
       const double len = glm::length(n);
       if (!(len > 0.0)) return ShellClosureOutcome::kCapFailed;
       const glm::dvec3 unit = n / len;
@@ -608,12 +534,9 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
         i = j;
       } while (i != first);
       if (failed != ShellClosureOutcome::kClosed || floor.size() < 3) continue;
-      double area2 = 0.0;
-      for (size_t k = 0; k < floor.size(); ++k) {
-        const glm::dvec3 &a = floor[k], &b = floor[(k + 1) % floor.size()];
-        area2 += a.x * b.y - a.y * b.x;
-      }
-      if (std::abs(area2) <= tol * tol) continue;  // the chords alone: no floor to make
+      std::vector<glm::dvec2> plan;
+      for (const glm::dvec3& p : floor) plan.emplace_back(p.x, p.y);
+      if (std::abs(SignedArea(plan)) <= 0.5 * tol * tol) continue;  // the chords alone: no floor to make
       if (!TriangulateProjected(floor, 2, &caps)) {
         failed = ShellClosureOutcome::kCapFailed;
       } else {
@@ -663,12 +586,7 @@ std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occlude
     if (!left.ok()) continue;  // dropped: conservative
     for (PolygonWithHoles& piece : *left) {
       if (!piece.holes.empty()) continue;
-      double area2 = 0.0;
-      for (size_t i = 0; i < piece.outer.size(); ++i) {
-        const glm::dvec2 &a = piece.outer[i], &b = piece.outer[(i + 1) % piece.outer.size()];
-        area2 += a.x * b.y - a.y * b.x;
-      }
-      if (area2 * 0.5 < min_area_m2) continue;
+      if (SignedArea(piece.outer) < min_area_m2) continue;
       out.push_back({std::move(piece.outer), height, oc.object});
     }
   }

@@ -84,14 +84,6 @@ struct ShellClosure {
 std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose>& shells,
                                                   const ShellClosureOptions& options = {});
 
-// The generalized winding number at `p` of the shells `which` of `shells` together, each
-// oriented outward by the sign of its volume seen from its mean corner: near 1 inside their
-// union, near 0 outside, also where they are open towards each other (Jacobson et al., "Robust
-// inside-outside segmentation using generalized winding numbers", SIGGRAPH 2013; solid angles
-// by Van Oosterom and Strackee 1983).
-double WindingNumberOf(const std::vector<ShellToClose>& shells, const std::vector<uint32_t>& which,
-                       const glm::dvec3& p);
-
 // The ground's height at (x, y): the highest of `ground`'s triangles over that point, flat_z
 // where none is.
 double GroundHeightAt(const GroundSurface& ground, double x, double y);

@@ -17,6 +17,7 @@
 #include "scenes/geometry_codec.h"
 #include "scenes/gltf_io.h"
 #include "scenes/level_choice.h"
+#include "scenes/mesh.h"
 #include "scenes/random.h"
 #include "tests/test_util.h"
 
@@ -25,34 +26,13 @@ namespace {
 
 using testing::TempDir;
 
-// The closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
-glm::dvec3 ClosestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
-  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const glm::dvec3 bp = p - b;
-  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-  const glm::dvec3 cp = p - c;
-  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  const double denom = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
 // Brute force: the distance from p to the nearest triangle of `meshes`.
 double DistanceToSurface(const glm::dvec3& p, const std::vector<const Mesh*>& meshes) {
   double best = INFINITY;
   for (const Mesh* m : meshes) {
     for (size_t t = 0; t + 2 < m->indices.size(); t += 3) {
       const glm::dvec3 a(m->positions[m->indices[t]]), b(m->positions[m->indices[t + 1]]), c(m->positions[m->indices[t + 2]]);
-      best = std::min(best, glm::distance(p, ClosestOnTriangle(p, a, b, c)));
+      best = std::min(best, glm::distance(p, ClosestPointOnTriangle(p, a, b, c)));
     }
   }
   return best;
