@@ -681,11 +681,55 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     progress.Advance();
   }
   const std::vector<ShellClosure> closures = CloseShellsByNeighbours(shells);
+  // A block of shells closed together (a bent party wall): its occluders synthesized once, on
+  // the ground under all of it, and each house given the pieces within its own box (the
+  // occluder set holds an occluder inside its object's box).
+  auto close_block = [&](const ShellClosure& c) {
+    Aabb box;
+    for (uint32_t m : c.block) {
+      for (const auto& t : closures[m].drawn) {
+        for (const glm::dvec3& p : t) box.Extend(p);
+      }
+    }
+    const double ground_z = ground.LowestUnder(box);
+    OccluderSynthesis r = SynthesizeOccluders(SolidFromTriangles(c.triangles), ground_z, ground.Under(box),
+                                              options.synthesis);
+    if (r.defect != SolidDefect::kNone) {
+      for (uint32_t m : c.block) {
+        attempts[shell_of[m].first][shell_of[m].second].why =
+            absl::StrCat(SolidDefectName(r.defect), " once closed with its neighbours");
+      }
+      return;
+    }
+    r.occluders = ShrinkOccluders(r.occluders, c.moved_m > 0.0 ? c.moved_m + 1e-6 : 0.0, options.synthesis.min_area_m2,
+                                  ground_z);
+    for (uint32_t m : c.block) {
+      const auto [k, i] = shell_of[m];
+      Aabb own;
+      for (const auto& t : closures[m].drawn) {
+        for (const glm::dvec3& p : t) own.Extend(p);
+      }
+      Attempt& a = attempts[k][i];
+      a.r = OccluderSynthesis{};
+      a.r.occluders = ClipOccluders(r.occluders, glm::dvec2(own.min), glm::dvec2(own.max), options.synthesis.min_area_m2);
+      if (m == c.block.front()) {
+        a.r.solid_volume_m3 = r.solid_volume_m3;
+        a.r.occluder_volume_m3 = r.occluder_volume_m3;
+      }
+      a.why.clear();
+      ++sum.repaired["shells closed by neighbours and ground"];
+      ++sum.repaired["shells closed together with a neighbour (a bent party wall)"];
+    }
+  };
   for (size_t j = 0; j < closures.size(); ++j) {
     const ShellClosure& c = closures[j];
     if (c.outcome == ShellClosureOutcome::kNotOpen) continue;
     const auto [k, i] = shell_of[j];
     Attempt& a = attempts[k][i];
+    if (c.outcome == ShellClosureOutcome::kClosedAsBlock) {
+      if (c.block.front() == j) close_block(c);
+      continue;
+    }
     if (c.outcome != ShellClosureOutcome::kClosed) {
       a.why = ShellClosureName(c.outcome);
       continue;

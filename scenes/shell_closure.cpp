@@ -9,6 +9,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include "scenes/mesh.h"
@@ -223,6 +224,7 @@ const char* ShellClosureName(ShellClosureOutcome outcome) {
   switch (outcome) {
     case ShellClosureOutcome::kNotOpen:
     case ShellClosureOutcome::kClosed:
+    case ShellClosureOutcome::kClosedAsBlock:
       return "";
     case ShellClosureOutcome::kOpenToAir:
       return "open to the air";
@@ -417,12 +419,120 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     return on;
   };
 
+  // Caps the loops of `odd_edges` (edges of a shell, or of a block of shells, used an odd
+  // number of times): kClosed with `caps`, `count` polygons and `deviation` (how far a cap
+  // lies off the loop's points), or why not.
+  auto cap_openings = [&](const std::vector<Edge>& odd_edges, const auto& on_ground, std::vector<Tri3>* caps,
+                          size_t* count, double* deviation) -> ShellClosureOutcome {
+    std::unordered_map<uint32_t, std::vector<uint32_t>> next;
+    for (const Edge& e : odd_edges) {
+      next[e.first].push_back(e.second);
+      next[e.second].push_back(e.first);
+    }
+    for (const auto& [v, n] : next) {
+      if (n.size() != 2) return ShellClosureOutcome::kOpeningsTouch;
+    }
+    std::vector<std::vector<uint32_t>> loops;
+    std::unordered_map<uint32_t, bool> seen;
+    for (const Edge& e : odd_edges) {
+      if (seen[e.first]) continue;
+      std::vector<uint32_t> loop{e.first};
+      seen[e.first] = true;
+      uint32_t prev = e.first, cur = next[e.first][0];
+      while (cur != e.first) {
+        loop.push_back(cur);
+        seen[cur] = true;
+        const uint32_t n = next[cur][0] == prev ? next[cur][1] : next[cur][0];
+        prev = cur;
+        cur = n;
+      }
+      loops.push_back(std::move(loop));
+    }
+    auto planar_cap = [&](const std::vector<uint32_t>& ids) {
+      std::vector<glm::dvec3> ring;
+      for (uint32_t v : ids) ring.push_back(vertices[v]);
+      const glm::dvec3 n = NewellNormal(ring);
+      const double len = glm::length(n);
+      if (!(len > 0.0)) return ShellClosureOutcome::kCapFailed;
+      const glm::dvec3 unit = n / len;
+      glm::dvec3 centre(0.0);
+      for (const glm::dvec3& p : ring) centre += p;
+      centre /= static_cast<double>(ring.size());
+      double dev = 0.0;
+      for (const glm::dvec3& p : ring) dev = std::max(dev, std::abs(glm::dot(p - centre, unit)));
+      if (dev > options.cap_planarity_m) {
+        // A party wall that bends: vertical, over a path in xy; capped by the vertical
+        // surface over that path, one plane per leg.
+        double off = 0.0;
+        if (CurtainCap(ring, options.cap_planarity_m, caps, &off)) {
+          *deviation = std::max(*deviation, off);
+          ++*count;
+          return ShellClosureOutcome::kClosed;
+        }
+        // Otherwise not capped: the shells on either side are closed together (step 4).
+        // (Triangulating such a loop on its mean plane, even checked inside the two houses by
+        // winding numbers at sample points, let Rotterdam's ε-masks hide a wall seen through
+        // the crack between the two: issue 46's note.)
+        return ShellClosureOutcome::kCapNotPlanar;
+      }
+      *deviation = std::max(*deviation, dev);
+      if (!TriangulateProjected(ring, drop_axis(n), caps)) return ShellClosureOutcome::kCapFailed;
+      ++*count;
+      return ShellClosureOutcome::kClosed;
+    };
+    for (const std::vector<uint32_t>& loop : loops) {
+      std::vector<bool> grounded(loop.size());
+      size_t on = 0;
+      for (size_t i = 0; i < loop.size(); ++i) on += grounded[i] = on_ground(vertices[loop[i]]);
+      if (on < 2) {
+        const ShellClosureOutcome o = planar_cap(loop);
+        if (o != ShellClosureOutcome::kClosed) return o;
+        continue;
+      }
+      // From a ground point: each run that leaves the ground and comes back is a wall's opening,
+      // capped with its chord; the ground points in order are the floor's.
+      const size_t first = static_cast<size_t>(std::find(grounded.begin(), grounded.end(), true) - grounded.begin());
+      std::vector<glm::dvec3> floor;
+      std::vector<uint32_t> run;
+      size_t i = first;
+      do {
+        size_t j = (i + 1) % loop.size();
+        while (!grounded[j]) j = (j + 1) % loop.size();
+        floor.push_back(vertices[loop[i]]);
+        if (j != (i + 1) % loop.size()) {
+          run.clear();
+          for (size_t k = i;; k = (k + 1) % loop.size()) {
+            run.push_back(loop[k]);
+            if (k == j) break;
+          }
+          const ShellClosureOutcome o = planar_cap(run);
+          if (o != ShellClosureOutcome::kClosed) return o;
+        }
+        i = j;
+      } while (i != first);
+      if (floor.size() < 3) continue;
+      std::vector<glm::dvec2> plan;
+      for (const glm::dvec3& p : floor) plan.emplace_back(p.x, p.y);
+      if (std::abs(SignedArea(plan)) <= 0.5 * tol * tol) continue;  // the chords alone: no floor to make
+      if (!TriangulateProjected(floor, 2, caps)) return ShellClosureOutcome::kCapFailed;
+      ++*count;
+    }
+    return ShellClosureOutcome::kClosed;
+  };
+  auto on_ground_of = [&](uint32_t s, const glm::dvec3& p) {
+    return p.z <= GroundHeightAt(shells[s].ground, p.x, p.y) + tol;
+  };
+
   for (uint32_t s : open) {
     ShellClosure& r = result[s];
     for (const Ids& t : welded[s]) r.drawn.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
-    if (odd[s].empty()) continue;  // closed by the weld alone: below
-    const GroundSurface& ground = shells[s].ground;
-    auto on_ground = [&](const glm::dvec3& p) { return p.z <= GroundHeightAt(ground, p.x, p.y) + tol; };
+    if (odd[s].empty()) {  // closed by the weld alone
+      r.outcome = ShellClosureOutcome::kClosed;
+      r.triangles = r.drawn;
+      r.moved_m = moved[s];
+      continue;
+    }
+    auto on_ground = [&](const glm::dvec3& p) { return on_ground_of(s, p); };
     // Classify: any air edge leaves the shell open.
     bool air = false;
     for (const Edge& e : odd[s]) {
@@ -440,126 +550,73 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       r.outcome = ShellClosureOutcome::kOpenToAir;
       continue;
     }
-    // Loops.
-    std::unordered_map<uint32_t, std::vector<uint32_t>> next;
-    for (const Edge& e : odd[s]) {
-      next[e.first].push_back(e.second);
-      next[e.second].push_back(e.first);
-    }
-    bool touching = false;
-    for (const auto& [v, n] : next) touching = touching || n.size() != 2;
-    if (touching) {
-      r.outcome = ShellClosureOutcome::kOpeningsTouch;
-      continue;
-    }
-    std::vector<std::vector<uint32_t>> loops;
-    std::unordered_map<uint32_t, bool> seen;
-    for (const Edge& e : odd[s]) {
-      if (seen[e.first]) continue;
-      std::vector<uint32_t> loop{e.first};
-      seen[e.first] = true;
-      uint32_t prev = e.first, cur = next[e.first][0];
-      while (cur != e.first) {
-        loop.push_back(cur);
-        seen[cur] = true;
-        const uint32_t n = next[cur][0] == prev ? next[cur][1] : next[cur][0];
-        prev = cur;
-        cur = n;
-      }
-      loops.push_back(std::move(loop));
-    }
-    // Caps.
     std::vector<Tri3> caps;
     double deviation = 0.0;
-    ShellClosureOutcome failed = ShellClosureOutcome::kClosed;
-    auto planar_cap = [&](const std::vector<uint32_t>& ids) {
-      std::vector<glm::dvec3> ring;
-      for (uint32_t v : ids) ring.push_back(vertices[v]);
-      const glm::dvec3 n = NewellNormal(ring);
-      const double len = glm::length(n);
-      if (!(len > 0.0)) return ShellClosureOutcome::kCapFailed;
-      const glm::dvec3 unit = n / len;
-      glm::dvec3 centre(0.0);
-      for (const glm::dvec3& p : ring) centre += p;
-      centre /= static_cast<double>(ring.size());
-      double dev = 0.0;
-      for (const glm::dvec3& p : ring) dev = std::max(dev, std::abs(glm::dot(p - centre, unit)));
-      if (dev > options.cap_planarity_m) {
-        // A party wall that bends: vertical, over a path in xy; capped by the vertical
-        // surface over that path, one plane per leg.
-        double off = 0.0;
-        if (CurtainCap(ring, options.cap_planarity_m, &caps, &off)) {
-          deviation = std::max(deviation, off);
-          ++r.caps;
-          return ShellClosureOutcome::kClosed;
-        }
-        // Otherwise not capped. (Triangulating such a loop on its mean plane, even checked
-        // inside the two houses by winding numbers at sample points, let Rotterdam's ε-masks
-        // hide a wall seen through the crack between the two: issue 46's note.)
-        return ShellClosureOutcome::kCapNotPlanar;
-      }
-      deviation = std::max(deviation, dev);
-      if (!TriangulateProjected(ring, drop_axis(n), &caps)) return ShellClosureOutcome::kCapFailed;
-      ++r.caps;
-      return ShellClosureOutcome::kClosed;
-    };
-    for (const std::vector<uint32_t>& loop : loops) {
-      if (failed != ShellClosureOutcome::kClosed) break;
-      std::vector<uint32_t> run;
-      std::vector<bool> grounded(loop.size());
-      size_t on = 0;
-      for (size_t i = 0; i < loop.size(); ++i) on += grounded[i] = on_ground(vertices[loop[i]]);
-      if (on < 2) {
-        failed = planar_cap(loop);
-        continue;
-      }
-      // From a ground point: each run that leaves the ground and comes back is a wall's opening,
-      // capped with its chord; the ground points in order are the floor's.
-      const size_t first = static_cast<size_t>(std::find(grounded.begin(), grounded.end(), true) - grounded.begin());
-      std::vector<glm::dvec3> floor;
-      size_t i = first;
-      do {
-        size_t j = (i + 1) % loop.size();
-        while (!grounded[j]) j = (j + 1) % loop.size();
-        floor.push_back(vertices[loop[i]]);
-        if (j != (i + 1) % loop.size()) {
-          run.clear();
-          for (size_t k = i;; k = (k + 1) % loop.size()) {
-            run.push_back(loop[k]);
-            if (k == j) break;
-          }
-          failed = planar_cap(run);
-          if (failed != ShellClosureOutcome::kClosed) break;
-        }
-        i = j;
-      } while (i != first);
-      if (failed != ShellClosureOutcome::kClosed || floor.size() < 3) continue;
-      std::vector<glm::dvec2> plan;
-      for (const glm::dvec3& p : floor) plan.emplace_back(p.x, p.y);
-      if (std::abs(SignedArea(plan)) <= 0.5 * tol * tol) continue;  // the chords alone: no floor to make
-      if (!TriangulateProjected(floor, 2, &caps)) {
-        failed = ShellClosureOutcome::kCapFailed;
-      } else {
-        ++r.caps;
-      }
-    }
-    if (failed != ShellClosureOutcome::kClosed) {
-      r.outcome = failed;
+    r.outcome = cap_openings(odd[s], on_ground, &caps, &r.caps, &deviation);
+    if (r.outcome != ShellClosureOutcome::kClosed) {
       r.caps = 0;
       continue;
     }
-    r.outcome = ShellClosureOutcome::kClosed;
     r.triangles = r.drawn;
     r.triangles.insert(r.triangles.end(), caps.begin(), caps.end());
     r.moved_m = moved[s] + deviation;
   }
-  // Open shells that the weld alone closed.
+
+  // 4. Blocks: shells left open only by openings towards each other that do not cap (a party
+  // wall bent out of any plane and off the vertical) are closed together: their triangles
+  // side by side, where those openings cancel, and the block's other openings capped as above.
+  std::vector<uint32_t> stuck;
   for (uint32_t s : open) {
-    if (!odd[s].empty()) continue;
-    ShellClosure& r = result[s];
-    r.outcome = ShellClosureOutcome::kClosed;
-    r.triangles = r.drawn;
-    r.moved_m = moved[s];
+    const ShellClosureOutcome o = result[s].outcome;
+    if (o == ShellClosureOutcome::kCapNotPlanar || o == ShellClosureOutcome::kCapFailed ||
+        o == ShellClosureOutcome::kOpeningsTouch) {
+      stuck.push_back(s);
+    }
+  }
+  if (stuck.size() >= 2) {
+    Clusters blocks(shells.size());
+    std::map<Edge, uint32_t> first_with;
+    for (uint32_t s : stuck) {
+      for (const Edge& e : odd[s]) {
+        auto [it, added] = first_with.emplace(e, s);
+        if (!added) blocks.Join(it->second, s);
+      }
+    }
+    std::map<uint32_t, std::vector<uint32_t>> members;
+    for (uint32_t s : stuck) members[blocks.Find(s)].push_back(s);
+    for (const auto& [root, block] : members) {
+      if (block.size() < 2) continue;
+      std::map<Edge, int> uses;
+      for (uint32_t s : block) {
+        for (const Edge& e : odd[s]) ++uses[e];
+      }
+      std::vector<Edge> block_odd;
+      for (const auto& [e, n] : uses) {
+        if (n % 2 == 1) block_odd.push_back(e);
+      }
+      auto on_ground = [&](const glm::dvec3& p) {
+        for (uint32_t s : block) {
+          if (on_ground_of(s, p)) return true;
+        }
+        return false;
+      };
+      std::vector<Tri3> caps;
+      size_t count = 0;
+      double deviation = 0.0;
+      if (cap_openings(block_odd, on_ground, &caps, &count, &deviation) != ShellClosureOutcome::kClosed) continue;
+      double moved_m = 0.0;
+      for (uint32_t s : block) moved_m = std::max(moved_m, moved[s]);
+      for (uint32_t s : block) {
+        ShellClosure& r = result[s];
+        r.outcome = ShellClosureOutcome::kClosedAsBlock;
+        r.block = block;
+        r.caps = count;
+        r.moved_m = moved_m + deviation;
+      }
+      ShellClosure& lead = result[block.front()];
+      for (uint32_t s : block) lead.triangles.insert(lead.triangles.end(), result[s].drawn.begin(), result[s].drawn.end());
+      lead.triangles.insert(lead.triangles.end(), caps.begin(), caps.end());
+    }
   }
   return result;
 }
@@ -571,6 +628,7 @@ std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occlude
   for (const Occluder25D& oc : occluders) {
     const double height = oc.height - by_m;
     if (!(height > min_top_m)) continue;
+    if (oc.footprint.size() < 3 || !IsSimpleRing(oc.footprint) || !(SignedArea(oc.footprint) > 0.0)) continue;
     std::vector<PolygonWithHoles> band;
     const size_t n = oc.footprint.size();
     for (size_t i = 0; i < n; ++i) {
@@ -587,7 +645,43 @@ std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occlude
     for (PolygonWithHoles& piece : *left) {
       if (!piece.holes.empty()) continue;
       if (SignedArea(piece.outer) < min_area_m2) continue;
+      if (!IsSimpleRing(piece.outer)) continue;  // rounded to double into a crossing: dropped
       out.push_back({std::move(piece.outer), height, oc.object});
+    }
+  }
+  return out;
+}
+
+std::vector<Occluder25D> ClipOccluders(const std::vector<Occluder25D>& occluders, const glm::dvec2& lo,
+                                       const glm::dvec2& hi, double min_area_m2) {
+  std::vector<Occluder25D> out;
+  for (const Occluder25D& oc : occluders) {
+    glm::dvec2 a = oc.footprint.empty() ? lo : oc.footprint[0], b = a;
+    for (const glm::dvec2& p : oc.footprint) {
+      a = glm::min(a, p);
+      b = glm::max(b, p);
+    }
+    if (a.x >= lo.x && a.y >= lo.y && b.x <= hi.x && b.y <= hi.y) {  // within already
+      out.push_back(oc);
+      continue;
+    }
+    if (b.x <= lo.x || b.y <= lo.y || a.x >= hi.x || a.y >= hi.y) continue;  // outside
+    // CGAL takes only simple CCW rings (it may crash on others): any other is dropped,
+    // which is conservative.
+    if (oc.footprint.size() < 3 || !IsSimpleRing(oc.footprint) || !(SignedArea(oc.footprint) > 0.0)) continue;
+    // The box's outside near the footprint: four bands around it.
+    const glm::dvec2 m0 = glm::min(a, lo) - 1.0, m1 = glm::max(b, hi) + 1.0;
+    const std::vector<PolygonWithHoles> outside = {
+        {{{m0.x, m0.y}, {lo.x, m0.y}, {lo.x, m1.y}, {m0.x, m1.y}}, {}},
+        {{{hi.x, m0.y}, {m1.x, m0.y}, {m1.x, m1.y}, {hi.x, m1.y}}, {}},
+        {{{m0.x, m0.y}, {m1.x, m0.y}, {m1.x, lo.y}, {m0.x, lo.y}}, {}},
+        {{{m0.x, hi.y}, {m1.x, hi.y}, {m1.x, m1.y}, {m0.x, m1.y}}, {}},
+    };
+    absl::StatusOr<std::vector<PolygonWithHoles>> left = Difference({oc.footprint, {}}, outside);
+    if (!left.ok()) continue;  // dropped: conservative
+    for (PolygonWithHoles& piece : *left) {
+      if (!piece.holes.empty() || SignedArea(piece.outer) < min_area_m2 || !IsSimpleRing(piece.outer)) continue;
+      out.push_back({std::move(piece.outer), oc.height, oc.object});
     }
   }
   return out;

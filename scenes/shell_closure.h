@@ -22,7 +22,15 @@
 //   3. the odd edges are chained into loops, and each loop is capped: the runs that leave the
 //      ground and come back (a party wall's opening) by a planar polygon through the run and its
 //      chord on the ground; the loop's ground points (a missing floor) by a polygon triangulated
-//      in xy. A run that is not planar within `cap_planarity_m` is not capped (kCapNotPlanar).
+//      in xy. A run that is not planar within `cap_planarity_m` is capped by the vertical
+//      surface over its path when it stands vertically over one (a party wall with a bend);
+//      otherwise it is not capped (kCapNotPlanar);
+//   4. shells left open only by openings towards each other that do not cap (a party wall
+//      bent out of any plane and off the vertical, as between some of Rotterdam's houses) are
+//      closed together as a block (kClosedAsBlock): their triangles side by side, where those
+//      openings cancel, and the block's other openings capped as in 3. The block's occluders
+//      lie in the union of its houses; the caller gives each house the pieces within its box
+//      (ClipOccluders).
 // The closed shell (welded, split, capped) then lies within `moved_m` of the union of the data's
 // shells and the ground: the caller shrinks its occluders by that much (ShrinkOccluders).
 //
@@ -34,6 +42,7 @@
 #include <string>
 #include <vector>
 
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
 #include "scenes/occluder_synthesis.h"
@@ -53,6 +62,7 @@ enum class ShellClosureOutcome {
   kOpeningsTouch,  // openings that meet at a point (a vertex on four odd edges): not capped
   kCapNotPlanar,   // an opening towards a neighbour that is not planar within cap_planarity_m
   kCapFailed,      // a cap that does not triangulate (its outline crosses itself in its plane)
+  kClosedAsBlock,  // closed together with the other shells of `block`: `triangles` in block's first
 };
 // "open to the air", "open: openings touch", "open: opening not planar", "open: opening not
 // triangulated"; "" for kNotOpen and kClosed.
@@ -75,8 +85,12 @@ struct ShellClosure {
   // the closed shell has none (a millimetre gap between a wall and its ground surface lets a
   // rasterizer see into the building at the odd pixel, past the occluder inside).
   std::vector<std::array<glm::dvec3, 3>> drawn;
-  size_t caps = 0;       // kClosed: polygons added (party walls, floors)
-  double moved_m = 0.0;  // kClosed: farthest any point of `triangles` lies from the data's surfaces
+  size_t caps = 0;       // kClosed, kClosedAsBlock: polygons added (party walls, floors)
+  double moved_m = 0.0;  // kClosed, kClosedAsBlock: farthest any point of `triangles` lies from the data's surfaces
+  // kClosedAsBlock: the shells closed together (indices into the shells given, ascending, this
+  // one among them); `triangles` is the block's closed shell in the first of them, empty in
+  // the others.
+  std::vector<uint32_t> block;
 };
 
 // Closes the open shells of `shells` (one result per shell, in order; closed ones kNotOpen).
@@ -94,5 +108,11 @@ double GroundHeightAt(const GroundSurface& ground, double x, double y);
 // out (a piece that would have a hole is dropped). For shells that lie within by_m of the data.
 std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occluders, double by_m, double min_area_m2,
                                          double min_top_m);
+
+// Occluders cut to the xy box [lo, hi] (scene-local metres): each footprint's part within it,
+// in pieces (CCW, simple; a piece with a hole dropped), pieces under `min_area_m2` dropped;
+// heights and objects kept. For a block's occluders given to each of its houses.
+std::vector<Occluder25D> ClipOccluders(const std::vector<Occluder25D>& occluders, const glm::dvec2& lo,
+                                       const glm::dvec2& hi, double min_area_m2);
 
 }  // namespace vistream::scenes

@@ -249,5 +249,70 @@ TEST(ShellClosure, ShrunkOccludersLieTheDistanceInsideAndLower) {
   EXPECT_TRUE(ShrinkOccluders(in, 2.5, 1.0, 0.0).empty()) << "4 m wide, shrunk by 2.5 m on each side";
 }
 
+// Two houses whose shared opening is bent out of any plane and off the vertical (as between
+// some of Rotterdam's): its ground edge is straight along x = 5, its roof edge goes out to
+// (6, 4); neither house has a wall there. East of x = 10 the second house has its wall, or not.
+std::vector<CityObject> BentPartyWallPair(bool east_wall) {
+  std::vector<CitySurface> a = {
+      {{{0, 0, 0}, {0, 8, 0}, {5, 8, 0}, {5, 0, 0}}, {}},                 // floor
+      {{{0, 0, 6}, {5, 0, 6}, {6, 4, 6}, {5, 8, 6}, {0, 8, 6}}, {}},      // roof, out to the bend
+      {{{0, 0, 0}, {5, 0, 0}, {5, 0, 6}, {0, 0, 6}}, {}},                 // south
+      {{{5, 8, 0}, {0, 8, 0}, {0, 8, 6}, {5, 8, 6}}, {}},                 // north
+      {{{0, 8, 0}, {0, 0, 0}, {0, 0, 6}, {0, 8, 6}}, {}},                 // west
+  };
+  std::vector<CitySurface> b = {
+      {{{5, 0, 0}, {5, 8, 0}, {10, 8, 0}, {10, 0, 0}}, {}},               // floor
+      {{{5, 0, 6}, {10, 0, 6}, {10, 8, 6}, {5, 8, 6}, {6, 4, 6}}, {}},    // roof, in from the bend
+      {{{5, 0, 0}, {10, 0, 0}, {10, 0, 6}, {5, 0, 6}}, {}},               // south
+      {{{10, 8, 0}, {5, 8, 0}, {5, 8, 6}, {10, 8, 6}}, {}},               // north
+  };
+  if (east_wall) b.push_back({{{10, 0, 0}, {10, 8, 0}, {10, 8, 6}, {10, 0, 6}}, {}});
+  return {Building("a", a), Building("b", b)};
+}
+
+TEST(ShellClosure, HousesWhosePartyOpeningBendsOutOfAnyPlaneAreClosedTogether) {
+  Imported r = Import(BentPartyWallPair(true));
+  EXPECT_EQ(r.summary.buildings_with_occluder, 2u);
+  EXPECT_EQ(r.summary.repaired["shells closed together with a neighbour (a bent party wall)"], 2u);
+  EXPECT_TRUE(r.summary.without_occluder.empty());
+  for (const char* name : {"a", "b"}) EXPECT_GT(OccludersOf(r.scene, name), 0u) << name;
+  // Each house holds the block's prisms within its own box only (the occluder set clips an
+  // occluder to its object's box).
+  for (const Occluder25D& o : r.scene.occluders) {
+    const Aabb& box = r.scene.objects[o.object].bounds;
+    for (const glm::dvec2& p : o.footprint) {
+      EXPECT_GE(p.x, box.min.x - 1e-4);
+      EXPECT_LE(p.x, box.max.x + 1e-4);
+      EXPECT_GE(p.y, box.min.y - 1e-4);
+      EXPECT_LE(p.y, box.max.y + 1e-4);
+    }
+  }
+  ExpectPrismsInsideTheBuildingsAndGround(r.scene);
+}
+
+TEST(ShellClosure, ABentPartyOpeningIsNotClosedWhenTheNeighbourIsOpenToTheAir) {
+  Imported r = Import(BentPartyWallPair(false));
+  EXPECT_EQ(r.summary.buildings_with_occluder, 0u);
+  EXPECT_TRUE(r.scene.occluders.empty());
+  EXPECT_EQ(r.summary.without_occluder["open to the air"], 1u);
+  EXPECT_EQ(r.summary.without_occluder["open: opening not planar"], 1u);
+}
+
+TEST(ShellClosure, ClippedOccludersKeepTheirPartWithinTheBox) {
+  const std::vector<Occluder25D> in = {{{{0, 0}, {10, 0}, {10, 4}, {0, 4}}, 6.0, 3},   // half in
+                                       {{{1, 1}, {2, 1}, {2, 2}, {1, 2}}, 5.0, 4},     // within
+                                       {{{20, 0}, {30, 0}, {30, 4}, {20, 4}}, 6.0, 5},  // outside
+                                       {{{0, 0}, {8, 4}, {8, 0}, {0, 4}}, 6.0, 6}};     // crosses itself, half in
+  const std::vector<Occluder25D> out = ClipOccluders(in, {-1.0, -1.0}, {5.0, 5.0}, 1.0);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].object, 3u);
+  EXPECT_DOUBLE_EQ(out[0].height, 6.0);
+  EXPECT_DOUBLE_EQ(SignedArea(out[0].footprint), 20.0);
+  for (const glm::dvec2& p : out[0].footprint) EXPECT_LE(p.x, 5.0);
+  EXPECT_EQ(out[1].object, 4u);
+  EXPECT_EQ(out[1].footprint, in[1].footprint);
+  EXPECT_TRUE(ClipOccluders(in, {-1.0, -1.0}, {1.5, 5.0}, 1.0).size() == 1u) << "the 1.5 m strip of the first only";
+}
+
 }  // namespace
 }  // namespace vistream::scenes
