@@ -419,11 +419,60 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     return on;
   };
 
-  // Caps the loops of `odd_edges` (edges of a shell, or of a block of shells, used an odd
-  // number of times): kClosed with `caps`, `count` polygons and `deviation` (how far a cap
-  // lies off the loop's points), or why not.
-  auto cap_openings = [&](const std::vector<Edge>& odd_edges, const auto& on_ground, std::vector<Tri3>* caps,
-                          size_t* count, double* deviation) -> ShellClosureOutcome {
+  // Openings shared by open shells (an edge odd in several, even over all: neither has a wall
+  // there), and how each open shell's triangles run along their edges (for the caps' winding).
+  std::map<Edge, std::vector<uint32_t>> shared;
+  for (uint32_t s : open) {
+    for (const Edge& e : odd[s]) {
+      if (union_uses[e] % 2 == 0) shared[e].push_back(s);
+    }
+  }
+  auto runs_along = [&](const std::vector<uint32_t>& members, uint32_t a, uint32_t b) {
+    int n = 0;
+    for (uint32_t s : members) {
+      for (const Ids& t : welded[s]) {
+        for (int e = 0; e < 3; ++e) n += (t[e] == a && t[(e + 1) % 3] == b) ? 1 : 0;
+      }
+    }
+    return n;
+  };
+  // Caps the loops of `odd_edges` (edges of `members`' triangles, one shell or a block of them,
+  // used an odd number of times): kClosed with `caps`, `count` polygons and `deviation` (how far
+  // a cap lies off the loop's points), or why not. A cap over an opening shared with a
+  // neighbour open to the air is drawn too (`drawn_caps`, wound to face out of `members`, as
+  // their triangles along the opening run): nothing else closes the shell as drawn there, and
+  // a viewer looking in through that neighbour would see past the occluders into it.
+  auto cap_openings = [&](const std::vector<uint32_t>& members, const std::vector<Edge>& odd_edges,
+                          const auto& on_ground, std::vector<Tri3>* caps,
+                          std::vector<std::pair<uint32_t, Tri3>>* drawn_caps, size_t* count,
+                          double* deviation) -> ShellClosureOutcome {
+    // Draws the caps added since `from` if the polygon `ids` runs along an opening shared with
+    // a neighbour open to the air.
+    auto draw_if_shared_with_air = [&](const std::vector<uint32_t>& ids, size_t from) {
+      bool air = false;
+      int along = 0;  // > 0: the members' triangles run the polygon's edges the other way
+      uint32_t owner = members.front();  // the member whose opening it is
+      for (size_t i = 0; i < ids.size(); ++i) {
+        const uint32_t a = ids[i], b = ids[(i + 1) % ids.size()];
+        auto it = shared.find(edge(a, b));
+        if (it == shared.end()) continue;
+        for (uint32_t n : it->second) {
+          const bool member = std::find(members.begin(), members.end(), n) != members.end();
+          if (member) owner = n;
+          air = air || (!member && result[n].outcome == ShellClosureOutcome::kOpenToAir);
+        }
+        along += runs_along(members, b, a) - runs_along(members, a, b);
+      }
+      if (!air) return;
+      std::vector<glm::dvec3> ring;
+      for (uint32_t v : ids) ring.push_back(vertices[v]);
+      const glm::dvec3 want = NewellNormal(ring) * (along >= 0 ? 1.0 : -1.0);
+      for (size_t k = from; k < caps->size(); ++k) {
+        Tri3 t = (*caps)[k];
+        if (glm::dot(glm::cross(t[1] - t[0], t[2] - t[0]), want) < 0.0) std::swap(t[1], t[2]);
+        drawn_caps->emplace_back(owner, t);
+      }
+    };
     std::unordered_map<uint32_t, std::vector<uint32_t>> next;
     for (const Edge& e : odd_edges) {
       next[e.first].push_back(e.second);
@@ -448,7 +497,9 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       }
       loops.push_back(std::move(loop));
     }
-    auto planar_cap = [&](const std::vector<uint32_t>& ids) {
+    size_t caps_before = 0;
+    auto planar_cap_of = [&](const std::vector<uint32_t>& ids) {
+      caps_before = caps->size();
       std::vector<glm::dvec3> ring;
       for (uint32_t v : ids) ring.push_back(vertices[v]);
       const glm::dvec3 n = NewellNormal(ring);
@@ -479,6 +530,11 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       if (!TriangulateProjected(ring, drop_axis(n), caps)) return ShellClosureOutcome::kCapFailed;
       ++*count;
       return ShellClosureOutcome::kClosed;
+    };
+    auto planar_cap = [&](const std::vector<uint32_t>& ids) {
+      const ShellClosureOutcome o = planar_cap_of(ids);
+      if (o == ShellClosureOutcome::kClosed) draw_if_shared_with_air(ids, caps_before);
+      return o;
     };
     for (const std::vector<uint32_t>& loop : loops) {
       std::vector<bool> grounded(loop.size());
@@ -523,22 +579,15 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     return p.z <= GroundHeightAt(shells[s].ground, p.x, p.y) + tol;
   };
 
+  // Classify: any air edge leaves the shell open to the air.
   for (uint32_t s : open) {
     ShellClosure& r = result[s];
     for (const Ids& t : welded[s]) r.drawn.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
-    if (odd[s].empty()) {  // closed by the weld alone
-      r.outcome = ShellClosureOutcome::kClosed;
-      r.triangles = r.drawn;
-      r.moved_m = moved[s];
-      continue;
-    }
-    auto on_ground = [&](const glm::dvec3& p) { return on_ground_of(s, p); };
-    // Classify: any air edge leaves the shell open.
     bool air = false;
     for (const Edge& e : odd[s]) {
       if (union_uses[e] % 2 == 0) continue;  // another open shell is open on it too
       const glm::dvec3 &a = vertices[e.first], &b = vertices[e.second];
-      if (on_ground(a) && on_ground(b) && on_ground((a + b) * 0.5)) continue;
+      if (on_ground_of(s, a) && on_ground_of(s, b) && on_ground_of(s, (a + b) * 0.5)) continue;
       bool covered = true;
       for (double u : {0.0, 0.25, 0.5, 0.75, 1.0}) covered = covered && on_other_face(s, a + (b - a) * u);
       if (!covered) {
@@ -548,11 +597,22 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     }
     if (air) {
       r.outcome = ShellClosureOutcome::kOpenToAir;
+    }
+  }
+  for (uint32_t s : open) {
+    ShellClosure& r = result[s];
+    if (r.outcome != ShellClosureOutcome::kNotOpen) continue;  // open to the air
+    if (odd[s].empty()) {  // closed by the weld alone
+      r.outcome = ShellClosureOutcome::kClosed;
+      r.triangles = r.drawn;
+      r.moved_m = moved[s];
       continue;
     }
+    auto on_ground = [&](const glm::dvec3& p) { return on_ground_of(s, p); };
     std::vector<Tri3> caps;
+    std::vector<std::pair<uint32_t, Tri3>> drawn_caps;
     double deviation = 0.0;
-    r.outcome = cap_openings(odd[s], on_ground, &caps, &r.caps, &deviation);
+    r.outcome = cap_openings({s}, odd[s], on_ground, &caps, &drawn_caps, &r.caps, &deviation);
     if (r.outcome != ShellClosureOutcome::kClosed) {
       r.caps = 0;
       continue;
@@ -560,6 +620,8 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     r.triangles = r.drawn;
     r.triangles.insert(r.triangles.end(), caps.begin(), caps.end());
     r.moved_m = moved[s] + deviation;
+    for (const auto& [owner, t] : drawn_caps) r.drawn.push_back(t);
+    r.drawn_caps = drawn_caps.size();
   }
 
   // 4. Blocks: shells left open only by openings towards each other that do not cap (a party
@@ -601,9 +663,13 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
         return false;
       };
       std::vector<Tri3> caps;
+      std::vector<std::pair<uint32_t, Tri3>> drawn_caps;
       size_t count = 0;
       double deviation = 0.0;
-      if (cap_openings(block_odd, on_ground, &caps, &count, &deviation) != ShellClosureOutcome::kClosed) continue;
+      if (cap_openings(block, block_odd, on_ground, &caps, &drawn_caps, &count, &deviation) !=
+          ShellClosureOutcome::kClosed) {
+        continue;
+      }
       double moved_m = 0.0;
       for (uint32_t s : block) moved_m = std::max(moved_m, moved[s]);
       for (uint32_t s : block) {
@@ -616,6 +682,10 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       ShellClosure& lead = result[block.front()];
       for (uint32_t s : block) lead.triangles.insert(lead.triangles.end(), result[s].drawn.begin(), result[s].drawn.end());
       lead.triangles.insert(lead.triangles.end(), caps.begin(), caps.end());
+      for (const auto& [owner, t] : drawn_caps) {
+        result[owner].drawn.push_back(t);
+        ++result[owner].drawn_caps;
+      }
     }
   }
   return result;
@@ -688,3 +758,4 @@ std::vector<Occluder25D> ClipOccluders(const std::vector<Occluder25D>& occluders
 }
 
 }  // namespace vistream::scenes
+

@@ -6,9 +6,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <map>
 #include <string>
 #include <vector>
+
+#include <glm/geometric.hpp>
 
 #include "scenes/city_import.h"
 #include "scenes/mesh.h"
@@ -71,11 +76,15 @@ size_t OccludersOf(const Scene& scene, const std::string& name) {
 // `inner` (world coordinates, as the model's): faces parity needs where the union's boundary is
 // not the drawn faces' sum: a second copy of a wall a neighbour's open side stands on, the
 // floor of a floorless building (where it meets the ground block's top).
-void ExpectPrismsInsideTheBuildingsAndGround(const Scene& scene, const std::vector<CitySurface>& inner = {}) {
+// `open` names buildings left out of the union (open to the air: their drawn surface bounds
+// nothing, and each of their neighbours must be closed as drawn without them).
+void ExpectPrismsInsideTheBuildingsAndGround(const Scene& scene, const std::vector<CitySurface>& inner = {},
+                                             const std::vector<std::string>& open = {}) {
   constexpr int points_per_prism = 200;
   Mesh all;
   for (const Object& o : scene.objects) {
     if (o.type != "Building" && o.type != "BuildingPart") continue;
+    if (std::find(open.begin(), open.end(), o.name) != open.end()) continue;
     const uint32_t base = static_cast<uint32_t>(all.positions.size());
     all.positions.insert(all.positions.end(), o.mesh.positions.begin(), o.mesh.positions.end());
     all.normals.insert(all.normals.end(), o.mesh.normals.begin(), o.mesh.normals.end());
@@ -312,6 +321,66 @@ TEST(ShellClosure, ClippedOccludersKeepTheirPartWithinTheBox) {
   EXPECT_EQ(out[1].object, 4u);
   EXPECT_EQ(out[1].footprint, in[1].footprint);
   EXPECT_TRUE(ClipOccluders(in, {-1.0, -1.0}, {1.5, 5.0}, 1.0).size() == 1u) << "the 1.5 m strip of the first only";
+}
+
+TEST(ShellClosure, AHouseWhoseNeighbourIsOpenToTheAirDrawsThePartyWallTheyShare) {
+  // A row of three without party walls whose end house also lacks its end wall (its neighbour
+  // is not in the data): the air reaches b's inside through c, so b draws the wall it shares
+  // with c (facing c) and is closed as drawn; a is closed by b.
+  Imported r = Import({Building("a", Box(0, 0, 0, 6, 10, 9, {"east"})),
+                       Building("b", Box(6, 0, 0, 12, 10, 9, {"west", "east"})),
+                       Building("c", Box(12, 0, 0, 18, 10, 9, {"west", "east"}))});
+  EXPECT_EQ(r.summary.buildings_with_occluder, 2u);
+  EXPECT_EQ(r.summary.without_occluder["open to the air"], 1u);
+  EXPECT_EQ(r.summary.repaired["party walls drawn towards a neighbour open to the air"], 1u);
+  EXPECT_EQ(OccludersOf(r.scene, "c"), 0u);
+  const Object* b = nullptr;
+  for (const Object& o : r.scene.objects) b = o.name == "b" ? &o : b;
+  ASSERT_NE(b, nullptr);
+  // b's data: floor, roof, south and north walls (8 triangles), and the party wall with c (2),
+  // facing c (+x).
+  ASSERT_EQ(b->mesh.TriangleCount(), 10u);
+  int facing_c = 0;
+  for (size_t k = 0; k < b->mesh.indices.size(); k += 3) {
+    const glm::dvec3 p0(b->mesh.positions[b->mesh.indices[k]]), p1(b->mesh.positions[b->mesh.indices[k + 1]]),
+        p2(b->mesh.positions[b->mesh.indices[k + 2]]);
+    const glm::dvec3 n = glm::cross(p1 - p0, p2 - p0);
+    const double x = p0.x + r.scene.origin.x;
+    if (std::abs(x - 12.0) < 1e-6 && std::abs(p1.x - p0.x) < 1e-6 && std::abs(p2.x - p0.x) < 1e-6) {
+      facing_c += n.x > 0.0 ? 1 : -1;
+    }
+  }
+  EXPECT_EQ(facing_c, 2) << "the party wall's two triangles face c";
+  // Without c, a and b (with the wall it draws) are closed as drawn: every prism lies inside.
+  ExpectPrismsInsideTheBuildingsAndGround(r.scene, {}, {"c"});
+}
+
+// The terraces file (tests/citymodel/terraces.city.json, make_terraces_cityjson.py): each kind
+// at once, from CityJSON, as the CLI and the walk tests read it.
+TEST(ShellClosure, TheTerracesFileOccludesWhereItsMatterIsClosedAndNotAtTheOpenEnd) {
+  CityImportOptions options;
+  options.walks = 0;
+  CityImportSummary sum;
+  absl::StatusOr<Scene> scene = ImportCity(VISTREAM_SOURCE_DIR "/tests/citymodel/terraces.city.json", options, &sum);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(sum.buildings_drawn, 9u);
+  EXPECT_EQ(sum.buildings_with_occluder, 8u);
+  EXPECT_EQ(sum.without_occluder, (std::map<std::string, uint64_t>{{"open to the air", 1}}));
+  EXPECT_EQ(OccludersOf(*scene, "r4"), 0u);
+  for (const char* name : {"r1", "r2", "r3", "b1", "b2", "f", "h", "w"}) {
+    EXPECT_GT(OccludersOf(*scene, name), 0u) << name;
+  }
+  EXPECT_EQ(sum.repaired["shells closed by neighbours and ground"], 6u) << "r1, r2, r3, b1, b2, f";
+  EXPECT_EQ(sum.repaired["shells closed together with a neighbour (a bent party wall)"], 2u);
+  EXPECT_EQ(sum.repaired["party walls drawn towards a neighbour open to the air"], 1u) << "r3's, with r4";
+  EXPECT_EQ(sum.terrain_from, "derived");
+  // f has no floor: the ground closes it, and the union's boundary there is the ground block's
+  // top (parity needs that face, as in ABuildingWithoutAFloorIsClosedByTheGround).
+  const glm::dvec3 o(85000.0, 446000.0, 0.0);
+  const CitySurface f_floor{{o + glm::dvec3(60, 0, 0), o + glm::dvec3(60, 8, 0), o + glm::dvec3(68, 8, 0),
+                             o + glm::dvec3(68, 0, 0)},
+                            {}};
+  ExpectPrismsInsideTheBuildingsAndGround(*scene, {f_floor}, {"r4"});
 }
 
 }  // namespace
