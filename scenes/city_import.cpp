@@ -750,10 +750,10 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   // Objects with an open shell draw it welded and split (ShellClosure::drawn): the surface the
   // occluders were made in, without the data's millimetre cracks between the shell and its
   // neighbours (through which a rasterizer sees into a building at the odd pixel), and with the
-  // party walls the data leaves out towards a neighbour open to the air (through which a
+  // party walls the data leaves out towards a neighbour left open (through which a
   // viewer would see into this one).
   for (const ShellClosure& c : closures) {
-    if (c.drawn_caps > 0) ++sum.repaired["party walls drawn towards a neighbour open to the air"];
+    if (c.drawn_caps > 0) ++sum.repaired["party walls drawn towards a neighbour left open"];
   }
   {
     std::map<std::pair<size_t, size_t>, const ShellClosure*> redrawn;

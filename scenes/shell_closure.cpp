@@ -436,43 +436,18 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     }
     return n;
   };
-  // Caps the loops of `odd_edges` (edges of `members`' triangles, one shell or a block of them,
-  // used an odd number of times): kClosed with `caps`, `count` polygons and `deviation` (how far
-  // a cap lies off the loop's points), or why not. A cap over an opening shared with a
-  // neighbour open to the air is drawn too (`drawn_caps`, wound to face out of `members`, as
-  // their triangles along the opening run): nothing else closes the shell as drawn there, and
-  // a viewer looking in through that neighbour would see past the occluders into it.
-  auto cap_openings = [&](const std::vector<uint32_t>& members, const std::vector<Edge>& odd_edges,
-                          const auto& on_ground, std::vector<Tri3>* caps,
-                          std::vector<std::pair<uint32_t, Tri3>>* drawn_caps, size_t* count,
-                          double* deviation) -> ShellClosureOutcome {
-    // Draws the caps added since `from` if the polygon `ids` runs along an opening shared with
-    // a neighbour open to the air.
-    auto draw_if_shared_with_air = [&](const std::vector<uint32_t>& ids, size_t from) {
-      bool air = false;
-      int along = 0;  // > 0: the members' triangles run the polygon's edges the other way
-      uint32_t owner = members.front();  // the member whose opening it is
-      for (size_t i = 0; i < ids.size(); ++i) {
-        const uint32_t a = ids[i], b = ids[(i + 1) % ids.size()];
-        auto it = shared.find(edge(a, b));
-        if (it == shared.end()) continue;
-        for (uint32_t n : it->second) {
-          const bool member = std::find(members.begin(), members.end(), n) != members.end();
-          if (member) owner = n;
-          air = air || (!member && result[n].outcome == ShellClosureOutcome::kOpenToAir);
-        }
-        along += runs_along(members, b, a) - runs_along(members, a, b);
-      }
-      if (!air) return;
-      std::vector<glm::dvec3> ring;
-      for (uint32_t v : ids) ring.push_back(vertices[v]);
-      const glm::dvec3 want = NewellNormal(ring) * (along >= 0 ? 1.0 : -1.0);
-      for (size_t k = from; k < caps->size(); ++k) {
-        Tri3 t = (*caps)[k];
-        if (glm::dot(glm::cross(t[1] - t[0], t[2] - t[0]), want) < 0.0) std::swap(t[1], t[2]);
-        drawn_caps->emplace_back(owner, t);
-      }
-    };
+  // A cap over a wall's opening: its polygon (welded vertex ids) and its triangles [first, last)
+  // among the caps made.
+  struct CapPolygon {
+    std::vector<uint32_t> ids;
+    size_t first = 0, last = 0;
+  };
+  // Caps the loops of `odd_edges` (edges of one shell's or a block's triangles used an odd
+  // number of times): kClosed with `caps`, `count` polygons, `walls` (the caps over walls'
+  // openings, which may have to be drawn: below) and `deviation` (how far a cap lies off the
+  // loop's points), or why not.
+  auto cap_openings = [&](const std::vector<Edge>& odd_edges, const auto& on_ground, std::vector<Tri3>* caps,
+                          std::vector<CapPolygon>* walls, size_t* count, double* deviation) -> ShellClosureOutcome {
     std::unordered_map<uint32_t, std::vector<uint32_t>> next;
     for (const Edge& e : odd_edges) {
       next[e.first].push_back(e.second);
@@ -533,7 +508,7 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     };
     auto planar_cap = [&](const std::vector<uint32_t>& ids) {
       const ShellClosureOutcome o = planar_cap_of(ids);
-      if (o == ShellClosureOutcome::kClosed) draw_if_shared_with_air(ids, caps_before);
+      if (o == ShellClosureOutcome::kClosed) walls->push_back({ids, caps_before, caps->size()});
       return o;
     };
     for (const std::vector<uint32_t>& loop : loops) {
@@ -579,6 +554,9 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     return p.z <= GroundHeightAt(shells[s].ground, p.x, p.y) + tol;
   };
 
+  std::vector<std::vector<Tri3>> caps_of(shells.size());             // closed ones' (a block's: its first's)
+  std::vector<std::vector<CapPolygon>> walls_of(shells.size());      // of those, the walls'
+
   // Classify: any air edge leaves the shell open to the air.
   for (uint32_t s : open) {
     ShellClosure& r = result[s];
@@ -609,19 +587,18 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       continue;
     }
     auto on_ground = [&](const glm::dvec3& p) { return on_ground_of(s, p); };
-    std::vector<Tri3> caps;
-    std::vector<std::pair<uint32_t, Tri3>> drawn_caps;
+    std::vector<Tri3>& caps = caps_of[s];
     double deviation = 0.0;
-    r.outcome = cap_openings({s}, odd[s], on_ground, &caps, &drawn_caps, &r.caps, &deviation);
+    r.outcome = cap_openings(odd[s], on_ground, &caps, &walls_of[s], &r.caps, &deviation);
     if (r.outcome != ShellClosureOutcome::kClosed) {
       r.caps = 0;
+      caps.clear();
+      walls_of[s].clear();
       continue;
     }
     r.triangles = r.drawn;
     r.triangles.insert(r.triangles.end(), caps.begin(), caps.end());
     r.moved_m = moved[s] + deviation;
-    for (const auto& [owner, t] : drawn_caps) r.drawn.push_back(t);
-    r.drawn_caps = drawn_caps.size();
   }
 
   // 4. Blocks: shells left open only by openings towards each other that do not cap (a party
@@ -663,11 +640,10 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
         return false;
       };
       std::vector<Tri3> caps;
-      std::vector<std::pair<uint32_t, Tri3>> drawn_caps;
+      std::vector<CapPolygon> walls;
       size_t count = 0;
       double deviation = 0.0;
-      if (cap_openings(block, block_odd, on_ground, &caps, &drawn_caps, &count, &deviation) !=
-          ShellClosureOutcome::kClosed) {
+      if (cap_openings(block_odd, on_ground, &caps, &walls, &count, &deviation) != ShellClosureOutcome::kClosed) {
         continue;
       }
       double moved_m = 0.0;
@@ -682,7 +658,47 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       ShellClosure& lead = result[block.front()];
       for (uint32_t s : block) lead.triangles.insert(lead.triangles.end(), result[s].drawn.begin(), result[s].drawn.end());
       lead.triangles.insert(lead.triangles.end(), caps.begin(), caps.end());
-      for (const auto& [owner, t] : drawn_caps) {
+      caps_of[block.front()] = std::move(caps);
+      walls_of[block.front()] = std::move(walls);
+    }
+  }
+
+  // 5. A closed shell draws each cap over an opening it shares with a neighbour that is not
+  // closed (open to the air, or open for want of a cap): nothing else closes it as drawn there,
+  // and a viewer looking in through that neighbour would see past its occluders into it. Wound
+  // to face out of it (as its triangles along the opening run), owned by the shell whose
+  // opening it is (in a block, the member).
+  auto closed = [&](uint32_t s) {
+    return result[s].outcome == ShellClosureOutcome::kClosed || result[s].outcome == ShellClosureOutcome::kClosedAsBlock;
+  };
+  for (uint32_t s : open) {
+    if (walls_of[s].empty()) continue;
+    const std::vector<uint32_t> members =
+        result[s].outcome == ShellClosureOutcome::kClosedAsBlock ? result[s].block : std::vector<uint32_t>{s};
+    auto member = [&](uint32_t n) { return std::find(members.begin(), members.end(), n) != members.end(); };
+    for (const CapPolygon& wall : walls_of[s]) {
+      bool draw = false;
+      uint32_t owner = s;
+      for (size_t i = 0; i < wall.ids.size(); ++i) {
+        auto it = shared.find(edge(wall.ids[i], wall.ids[(i + 1) % wall.ids.size()]));
+        if (it == shared.end()) continue;
+        for (uint32_t n : it->second) {
+          if (member(n)) owner = n;
+          draw = draw || (!member(n) && !closed(n));
+        }
+      }
+      if (!draw) continue;
+      int along = 0;  // > 0: the members' triangles run the polygon's edges the other way
+      for (size_t i = 0; i < wall.ids.size(); ++i) {
+        const uint32_t a = wall.ids[i], b = wall.ids[(i + 1) % wall.ids.size()];
+        along += runs_along(members, b, a) - runs_along(members, a, b);
+      }
+      std::vector<glm::dvec3> ring;
+      for (uint32_t v : wall.ids) ring.push_back(vertices[v]);
+      const glm::dvec3 want = NewellNormal(ring) * (along >= 0 ? 1.0 : -1.0);
+      for (size_t k = wall.first; k < wall.last; ++k) {
+        Tri3 t = caps_of[s][k];
+        if (glm::dot(glm::cross(t[1] - t[0], t[2] - t[0]), want) < 0.0) std::swap(t[1], t[2]);
         result[owner].drawn.push_back(t);
         ++result[owner].drawn_caps;
       }

@@ -24,15 +24,16 @@
 //      chord on the ground; the loop's ground points (a missing floor) by a polygon triangulated
 //      in xy. A run that is not planar within `cap_planarity_m` is capped by the vertical
 //      surface over its path when it stands vertically over one (a party wall with a bend);
-//      otherwise it is not capped (kCapNotPlanar). A cap over an opening shared with a
-//      neighbour open to the air is also drawn (`drawn`): the neighbour is open, so a viewer
-//      can look in through it, and nothing else closes this shell as drawn there;
+//      otherwise it is not capped (kCapNotPlanar);
 //   4. shells left open only by openings towards each other that do not cap (a party wall
 //      bent out of any plane and off the vertical, as between some of Rotterdam's houses) are
 //      closed together as a block (kClosedAsBlock): their triangles side by side, where those
 //      openings cancel, and the block's other openings capped as in 3. The block's occluders
 //      lie in the union of its houses; the caller gives each house the pieces within its box
-//      (ClipOccluders).
+//      (ClipOccluders);
+//   5. a closed shell draws each cap over an opening it shares with a neighbour left open (to
+//      the air, or for want of a cap): a viewer can look in through that neighbour, and nothing
+//      else closes this shell as drawn there (`drawn`).
 // The closed shell (welded, split, capped) then lies within `moved_m` of the union of the data's
 // shells and the ground: the caller shrinks its occluders by that much (ShrinkOccluders).
 //
@@ -84,14 +85,14 @@ struct ShellClosure {
   std::vector<std::array<glm::dvec3, 3>> triangles;  // kClosed: the shell welded, split and capped
   // Every open shell, closed or not: its own triangles welded and split, each wound as the
   // data's triangle it comes from, then (closed ones) the caps over openings shared with a
-  // neighbour open to the air (`drawn_caps` of them, last): what to draw, so that the drawn
+  // neighbour left open (`drawn_caps` of them, last): what to draw, so that the drawn
   // surface has no opening where the closed shell has none (a millimetre gap between a wall
   // and its ground surface lets a rasterizer see into the building at the odd pixel, past the
   // occluder inside; a row whose end house lacks a wall lets a viewer see into every house).
   std::vector<std::array<glm::dvec3, 3>> drawn;
   size_t caps = 0;       // kClosed, kClosedAsBlock: polygons added (party walls, floors)
   // kClosed, kClosedAsBlock: triangles of caps also in `drawn` (over openings shared with a
-  // neighbour open to the air: the party wall the data leaves out, drawn facing that neighbour).
+  // neighbour left open: the party wall the data leaves out, drawn facing that neighbour).
   size_t drawn_caps = 0;
   double moved_m = 0.0;  // kClosed, kClosedAsBlock: farthest any point of `triangles` lies from the data's surfaces
   // kClosedAsBlock: the shells closed together (indices into the shells given, ascending, this

@@ -332,7 +332,7 @@ TEST(ShellClosure, AHouseWhoseNeighbourIsOpenToTheAirDrawsThePartyWallTheyShare)
                        Building("c", Box(12, 0, 0, 18, 10, 9, {"west", "east"}))});
   EXPECT_EQ(r.summary.buildings_with_occluder, 2u);
   EXPECT_EQ(r.summary.without_occluder["open to the air"], 1u);
-  EXPECT_EQ(r.summary.repaired["party walls drawn towards a neighbour open to the air"], 1u);
+  EXPECT_EQ(r.summary.repaired["party walls drawn towards a neighbour left open"], 1u);
   EXPECT_EQ(OccludersOf(r.scene, "c"), 0u);
   const Object* b = nullptr;
   for (const Object& o : r.scene.objects) b = o.name == "b" ? &o : b;
@@ -355,6 +355,22 @@ TEST(ShellClosure, AHouseWhoseNeighbourIsOpenToTheAirDrawsThePartyWallTheyShare)
   ExpectPrismsInsideTheBuildingsAndGround(r.scene, {}, {"c"});
 }
 
+TEST(ShellClosure, AHouseWhoseNeighbourIsLeftOpenForWantOfACapDrawsThePartyWallToo) {
+  // c, then the bent pair with b open to the air: a cannot be capped (its bent opening) nor
+  // closed with b, so it stays open; the air reaches a's inside through b, and c's through a
+  // unless c draws the wall it shares with a.
+  std::vector<CityObject> objects = BentPartyWallPair(false);
+  std::vector<CitySurface>& a = objects[0].geometries[0].surfaces;
+  a.pop_back();  // a's west wall: c's opening
+  objects.push_back(Building("c", Box(-6, 0, 0, 0, 8, 6, {"east"})));
+  Imported r = Import(objects);
+  EXPECT_EQ(r.summary.without_occluder["open to the air"], 1u) << "b";
+  EXPECT_EQ(r.summary.without_occluder["open: opening not planar"], 1u) << "a";
+  EXPECT_EQ(r.summary.buildings_with_occluder, 1u) << "c";
+  EXPECT_EQ(r.summary.repaired["party walls drawn towards a neighbour left open"], 1u);
+  ExpectPrismsInsideTheBuildingsAndGround(r.scene, {}, {"a", "b"});
+}
+
 // The terraces file (tests/citymodel/terraces.city.json, make_terraces_cityjson.py): each kind
 // at once, from CityJSON, as the CLI and the walk tests read it.
 TEST(ShellClosure, TheTerracesFileOccludesWhereItsMatterIsClosedAndNotAtTheOpenEnd) {
@@ -372,7 +388,7 @@ TEST(ShellClosure, TheTerracesFileOccludesWhereItsMatterIsClosedAndNotAtTheOpenE
   }
   EXPECT_EQ(sum.repaired["shells closed by neighbours and ground"], 6u) << "r1, r2, r3, b1, b2, f";
   EXPECT_EQ(sum.repaired["shells closed together with a neighbour (a bent party wall)"], 2u);
-  EXPECT_EQ(sum.repaired["party walls drawn towards a neighbour open to the air"], 1u) << "r3's, with r4";
+  EXPECT_EQ(sum.repaired["party walls drawn towards a neighbour left open"], 1u) << "r3's, with r4";
   EXPECT_EQ(sum.terrain_from, "derived");
   // f has no floor: the ground closes it, and the union's boundary there is the ground block's
   // top (parity needs that face, as in ABuildingWithoutAFloorIsClosedByTheGround).
