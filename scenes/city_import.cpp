@@ -14,6 +14,7 @@
 #include <absl/strings/match.h>
 #include <absl/strings/numbers.h>
 #include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
 #include <absl/strings/str_join.h>
 #include <glm/geometric.hpp>
 
@@ -415,16 +416,37 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
   // 2. The frame: origin at the rounded centre, z at the ground level.
   Aabb world;
   Aabb terrain_box;
+  // Per axis, the objects holding the least and the greatest coordinate (for the error below).
+  std::array<const CityObject*, 3> least{}, most{};
   for (const auto* list : {&chosen, &terrain}) {
     for (const Chosen& c : *list) {
       for (const CityGeometry* g : c.geometries) {
         ForEachSurface(*g, [&](const CitySurface& s, int) {
-          for (const glm::dvec3& p : s.outer) {
+          auto extend = [&](const glm::dvec3& p) {
+            for (int k = 0; k < 3; ++k) {
+              if (world.Empty() || p[k] < world.min[k]) least[k] = c.object;
+              if (world.Empty() || p[k] > world.max[k]) most[k] = c.object;
+            }
             world.Extend(p);
             if (list == &terrain) terrain_box.Extend(p);
+          };
+          for (const glm::dvec3& p : s.outer) extend(p);
+          for (const auto& hole : s.holes) {
+            for (const glm::dvec3& p : hole) extend(p);
           }
         });
       }
+    }
+  }
+  // One city: a coordinate thousands of kilometres off the rest is a mistake in the data (and
+  // would leave the scene's single-precision meshes and its grids without meaning).
+  for (int k = 0; k < 3 && !world.Empty(); ++k) {
+    const double span = world.max[k] - world.min[k];
+    if (!(span <= kMaxCitySpanM)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "the data spans %g m in %c, from object '%s' (%.17g) to object '%s' (%.17g): more than %g km; "
+          "is a coordinate wrong?",
+          span, "xyz"[k], least[k]->id, world.min[k], most[k]->id, world.max[k], kMaxCitySpanM / 1000.0));
     }
   }
   if (world.Empty()) {
@@ -1023,6 +1045,29 @@ OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, con
   return sum;
 }
 
+namespace {
+
+// Whether every edge of the mesh (by its corners' positions) is used an even number of times.
+bool IsClosedMesh(const Mesh& m) {
+  using P = std::array<float, 3>;
+  std::map<std::pair<P, P>, int> uses;
+  auto at = [&](uint32_t i) { return P{m.positions[i].x, m.positions[i].y, m.positions[i].z}; };
+  for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
+    for (int e = 0; e < 3; ++e) {
+      P a = at(m.indices[k + e]), b = at(m.indices[k + (e + 1) % 3]);
+      if (a == b) continue;
+      if (b < a) std::swap(a, b);
+      ++uses[{a, b}];
+    }
+  }
+  for (const auto& [edge, n] : uses) {
+    if (n % 2 != 0) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
 OcclusionStats ComputeOcclusionStats(const Scene& scene) {
   OcclusionStats st;
   std::vector<bool> is_terrain(scene.objects.size(), false);
@@ -1086,6 +1131,12 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
     ++st.non_terrain_objects;
     if (!has[o.id]) continue;
     ++st.objects_with_occluder;
+    if (!IsClosedMesh(o.mesh)) {
+      // A surface model's house, closed by its neighbours and the ground (issue 46): its mesh
+      // encloses nothing on its own, so neither its volume nor its occluders' are counted.
+      ++st.open_objects_with_occluder;
+      continue;
+    }
     st.occluder_volume_m3 += occluder_volume(o.id);
     double six_v = 0.0;  // six times the signed volume, relative to the object's box corner
     const glm::dvec3 c = o.bounds.min;

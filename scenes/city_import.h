@@ -136,9 +136,14 @@ struct CityImportSummary {
   uint64_t Repaired() const;
 };
 
+// The most a city model's drawn objects may span along any axis, in metres (1,000 km): one
+// city, whose scene-local single-precision meshes keep centimetres.
+inline constexpr double kMaxCitySpanM = 1e6;
+
 // Builds the scene of a city model; `name` is the scene's name. Errors: INVALID_ARGUMENT when
-// nothing drawable is left (with the skip reasons), or `options` out of range; CANCELLED when
-// run's flag was raised. `summary` is filled on every path after reading.
+// nothing drawable is left (with the skip reasons), when the objects span more than
+// kMaxCitySpanM along an axis (naming the objects at either end), or `options` out of range;
+// CANCELLED when run's flag was raised. `summary` is filled on every path after reading.
 absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& name,
                                      const CityImportOptions& options, CityImportSummary* summary = nullptr,
                                      const RunControl& run = {});
@@ -173,10 +178,12 @@ struct OcclusionStats {
   uint64_t objects_with_occluder = 0;               // non-terrain objects with at least one occluder
   uint64_t non_terrain_objects = 0;
   uint64_t occluders = 0, terrain_occluders = 0;
-  // Of the non-terrain objects with occluders: their meshes' enclosed volume (divergence
-  // theorem, meaningful for closed meshes, which the synthesis requires) and their occluders'
-  // volume above each object's lowest point.
+  // Of the non-terrain objects with occluders whose meshes are closed: their meshes' enclosed
+  // volume (divergence theorem) and their occluders' volume above each object's lowest point.
   double solid_volume_m3 = 0.0, occluder_volume_m3 = 0.0;
+  // Objects with occluders whose meshes are open (surface models closed by their neighbours
+  // and the ground: issue 46), left out of the volumes.
+  uint64_t open_objects_with_occluder = 0;
   uint64_t terrain_objects = 0, terrain_triangles = 0;
   // Of the terrain objects, those of a terrain the import derived (type "DerivedTerrain": the
   // file had no TIN), not read from the file.

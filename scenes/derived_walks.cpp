@@ -286,6 +286,9 @@ class Obstacles {
         hi = glm::max(hi, p);
       }
     }
+    // At most kMaxBuckets² buckets, however far apart the triangles lie.
+    constexpr double kMaxBuckets = 1024.0;
+    bucket_ = std::max({bucket_, (hi.x - lo_.x) / kMaxBuckets, (hi.y - lo_.y) / kMaxBuckets});
     nx_ = static_cast<int64_t>((hi.x - lo_.x) / bucket_) + 1;
     ny_ = static_cast<int64_t>((hi.y - lo_.y) / bucket_) + 1;
     buckets_.resize(static_cast<size_t>(nx_ * ny_));

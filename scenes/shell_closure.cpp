@@ -51,17 +51,31 @@ struct CellHash {
   }
 };
 
-// An xy grid of items with boxes, for near-point queries.
+// An xy grid of items with boxes, for near-point queries. An item whose box covers more than
+// kMaxCells cells is kept aside and offered to every query, and a query that covers more than
+// that is offered every item (a coordinate far off the rest must not cost a cell per metre).
 class Grid2 {
  public:
   explicit Grid2(double cell) : cell_(cell) {}
   void Add(uint32_t item, double x0, double y0, double x1, double y1) {
+    if (Cells(x0, y0, x1, y1) > kMaxCells) {
+      large_.push_back(item);
+      return;
+    }
     for (int64_t j = Key(y0); j <= Key(y1); ++j) {
       for (int64_t i = Key(x0); i <= Key(x1); ++i) cells_[{i, j, 0}].push_back(item);
     }
   }
+  // Calls fn(item) for every item whose box may meet [x0, x1] x [y0, y1] (some more than once).
   template <typename Fn>
   void ForEachNear(double x0, double y0, double x1, double y1, Fn fn) const {
+    for (uint32_t item : large_) fn(item);
+    if (Cells(x0, y0, x1, y1) > kMaxCells) {
+      for (const auto& [key, items] : cells_) {
+        for (uint32_t item : items) fn(item);
+      }
+      return;
+    }
     for (int64_t j = Key(y0); j <= Key(y1); ++j) {
       for (int64_t i = Key(x0); i <= Key(x1); ++i) {
         auto it = cells_.find({i, j, 0});
@@ -72,9 +86,15 @@ class Grid2 {
   }
 
  private:
+  static constexpr double kMaxCells = 4096.0;
+  // Cells a box covers, in double (no overflow for any finite box).
+  double Cells(double x0, double y0, double x1, double y1) const {
+    return (std::floor(x1 / cell_) - std::floor(x0 / cell_) + 1.0) * (std::floor(y1 / cell_) - std::floor(y0 / cell_) + 1.0);
+  }
   int64_t Key(double v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
   double cell_;
   std::unordered_map<CellKey, std::vector<uint32_t>, CellHash> cells_;
+  std::vector<uint32_t> large_;
 };
 
 // Triangulates a polygon through 3D points by projecting it on the plane of axis `drop`'s

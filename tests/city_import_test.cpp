@@ -9,6 +9,8 @@
 #include <algorithm>
 #include <string>
 
+#include <absl/strings/str_cat.h>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -454,13 +456,14 @@ TEST(CityImport, DerivedGroundCarriesFloorlessBuildingsOnASlope) {
 }
 
 // The derived ground's indexes are sized by cell counts, not by the file's extent: land use
-// 2,000 km apart (a bad file, or a fuzzer's) is a few triangles, not a grid of billions of cells.
+// 900 km apart (a bad file, or a fuzzer's; farther is refused, as the next test shows) is a few
+// triangles, not a grid of billions of cells.
 TEST(CityImport, DerivedGroundOverAHugeExtentStaysSmall) {
   CityModel model;
   CityGeometry near, far;
   near.lod = far.lod = "1";
   near.surfaces.push_back({{{0, 0, 0}, {10, 0, 0}, {0, 10, 0}}, {}});
-  far.surfaces.push_back({{{2e6, 2e6, 1}, {2e6 + 10, 2e6, 1}, {2e6, 2e6 + 10, 1}}, {}});
+  far.surfaces.push_back({{{9e5, 9e5, 1}, {9e5 + 10, 9e5, 1}, {9e5, 9e5 + 10, 1}}, {}});
   model.objects.push_back({"near", "LandUse", "", {near}});
   model.objects.push_back({"far", "LandUse", "", {far}});
   CityImportSummary sum;
@@ -551,6 +554,35 @@ TEST(CityImport, CityJson01BuildingDrawnThroughItsListedPart) {
   ASSERT_NE(Find(*scene, "p1"), nullptr);
   EXPECT_EQ(Find(*scene, "p1")->mesh.TriangleCount(), 12u);
   EXPECT_NEAR(OccluderVolume(*scene, "p1", 0.0), 10.0 * 8.0 * 6.0, 1e-3);
+}
+
+// A coordinate far off the rest (a typo, a unit error, garbage) is refused naming the objects at
+// either end, before any grid is sized by the data's extent: 1e12 m once hung the shell
+// closure (a cell per 2 m of a triangle's box), 1e300 m aborted the walks' grid.
+TEST(CityImport, ACoordinateThousandsOfKilometresOffIsRefusedNamingTheObjects) {
+  for (const char* far : {"1e7", "1e12", "1e300"}) {
+    const std::string bytes = absl::StrCat(R"({
+      "type": "CityJSON", "version": "1.0",
+      "CityObjects": {
+        "near": {"type": "Building", "geometry": [{"type": "MultiSurface", "lod": 2,
+          "boundaries": [[[0, 1, 2]], [[0, 2, 3]]]}]},
+        "far": {"type": "Building", "geometry": [{"type": "MultiSurface", "lod": 2,
+          "boundaries": [[[4, 5, 6]]]}]}
+      },
+      "vertices": [[85000.0, 446000.0, 0.0], [85010.0, 446000.0, 0.0], [85010.0, 446008.0, 5.0],
+                   [85000.0, 446008.0, 5.0], [85000.0, 446000.0, 0.0], [)", far, R"(, 446000.0, 0.0],
+                   [85000.0, 446008.0, 3.0]]
+    })");
+    absl::StatusOr<CityModel> model = ReadCityJsonFromMemory(bytes, "far.json");
+    ASSERT_TRUE(model.ok()) << model.status();
+    const absl::StatusOr<Scene> scene = BuildCityScene(*model, "far", CityImportOptions{});
+    ASSERT_FALSE(scene.ok()) << far;
+    EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_THAT(std::string(scene.status().message()),
+                ::testing::AllOf(::testing::HasSubstr("spans"), ::testing::HasSubstr(" in x, from object 'near'"),
+                                 ::testing::HasSubstr("to object 'far'"), ::testing::HasSubstr("more than 1000 km")))
+        << scene.status();
+  }
 }
 
 }  // namespace

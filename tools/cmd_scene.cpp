@@ -566,6 +566,7 @@ int Info(const InfoArgs& a) {
     j["solid_volume_m3"] = st.solid_volume_m3;
     j["occluder_volume_m3"] = st.occluder_volume_m3;
     j["occluder_volume_share"] = occluding_share;
+    j["open_objects_with_occluder"] = st.open_objects_with_occluder;
     j["terrain"] = {{"derived", st.derived_terrain_objects > 0},
                     {"objects", st.terrain_objects},
                     {"triangles", st.terrain_triangles},
@@ -582,11 +583,20 @@ int Info(const InfoArgs& a) {
   std::printf("objects     %zu (%zu with several occluders: stacked or rows)\n", scene->objects.size(), tiered);
   std::printf("triangles   %zu\n", scene->TriangleCount());
   std::printf("vertices    %zu\n", scene->VertexCount());
-  std::printf("occluders   %zu (%llu of terrain); %llu of %llu objects occlude, with %.0f of their %.0f m³ (%.1f%%)\n",
-              scene->occluders.size(), static_cast<unsigned long long>(st.terrain_occluders),
+  std::printf("occluders   %zu (%llu of terrain); %llu of %llu objects occlude", scene->occluders.size(),
+              static_cast<unsigned long long>(st.terrain_occluders),
               static_cast<unsigned long long>(st.objects_with_occluder),
-              static_cast<unsigned long long>(st.non_terrain_objects), st.occluder_volume_m3, st.solid_volume_m3,
-              100.0 * occluding_share);
+              static_cast<unsigned long long>(st.non_terrain_objects));
+  if (st.solid_volume_m3 > 0.0) {
+    std::printf(", with %.0f of their %.0f m³ (%.1f%%)", st.occluder_volume_m3, st.solid_volume_m3,
+                100.0 * occluding_share);
+  }
+  std::printf("\n");
+  if (st.open_objects_with_occluder > 0) {
+    std::printf("            (%llu occluding objects are surfaces closed by their neighbours and the ground: their "
+                "volumes are not measured)\n",
+                static_cast<unsigned long long>(st.open_objects_with_occluder));
+  }
   if (!scene->levels.empty()) {
     std::printf("levels      %llu object levels, %zu clusters (%.1f MB)\n",
                 static_cast<unsigned long long>(ObjectLevelCount(scene->levels)), scene->levels.clusters.size(),

@@ -5,7 +5,7 @@
 #   - a row of four houses without party walls (r1..r4); the end house r4 lacks its end wall
 #     too (its neighbour is not in the data): r4 is open to the air, r1..r3 are closed by each
 #     other and r3 draws the party wall it shares with r4;
-#   - r2's corners on r3's side 1 mm off r3's (welded);
+#   - r3's west corners 1 mm east of r2's east corners (welded);
 #   - two houses whose shared opening is bent out of any plane and off the vertical (b1, b2):
 #     the ground edge straight, the roof edge out to a corner 1 m off it; closed together;
 #   - a house without a floor (f), closed by the ground;
