@@ -643,7 +643,8 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
     }
     std::map<uint32_t, std::vector<uint32_t>> members;
     for (uint32_t s : stuck) members[blocks.Find(s)].push_back(s);
-    for (const auto& [root, block] : members) {
+    for (const auto& entry : members) {
+      const std::vector<uint32_t>& block = entry.second;  // (not a structured binding: lambdas use it)
       if (block.size() < 2) continue;
       std::map<Edge, int> uses;
       for (uint32_t s : block) {
