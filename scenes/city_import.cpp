@@ -24,6 +24,7 @@
 #include "scenes/polygon.h"
 #include "scenes/polygon_set.h"
 #include "scenes/shell_closure.h"
+#include "scenes/solid_check.h"
 #include "scenes/solid_floor.h"
 
 namespace vistream::scenes {
@@ -1045,29 +1046,6 @@ OccluderSynthesisSummary AddSynthesizedOccluders(Scene* scene, bool replace, con
   return sum;
 }
 
-namespace {
-
-// Whether every edge of the mesh (by its corners' positions) is used an even number of times.
-bool IsClosedMesh(const Mesh& m) {
-  using P = std::array<float, 3>;
-  std::map<std::pair<P, P>, int> uses;
-  auto at = [&](uint32_t i) { return P{m.positions[i].x, m.positions[i].y, m.positions[i].z}; };
-  for (size_t k = 0; k + 2 < m.indices.size(); k += 3) {
-    for (int e = 0; e < 3; ++e) {
-      P a = at(m.indices[k + e]), b = at(m.indices[k + (e + 1) % 3]);
-      if (a == b) continue;
-      if (b < a) std::swap(a, b);
-      ++uses[{a, b}];
-    }
-  }
-  for (const auto& [edge, n] : uses) {
-    if (n % 2 != 0) return false;
-  }
-  return true;
-}
-
-}  // namespace
-
 OcclusionStats ComputeOcclusionStats(const Scene& scene) {
   OcclusionStats st;
   std::vector<bool> is_terrain(scene.objects.size(), false);
@@ -1131,7 +1109,7 @@ OcclusionStats ComputeOcclusionStats(const Scene& scene) {
     ++st.non_terrain_objects;
     if (!has[o.id]) continue;
     ++st.objects_with_occluder;
-    if (!IsClosedMesh(o.mesh)) {
+    if (const SolidMesh solid = SolidMeshFromMesh(o.mesh); !ClosesModTwo(solid.vertices, solid.triangles)) {
       // A surface model's house, closed by its neighbours and the ground (issue 46): its mesh
       // encloses nothing on its own, so neither its volume nor its occluders' are counted.
       ++st.open_objects_with_occluder;

@@ -492,9 +492,7 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       }
       loops.push_back(std::move(loop));
     }
-    size_t caps_before = 0;
     auto planar_cap_of = [&](const std::vector<uint32_t>& ids) {
-      caps_before = caps->size();
       std::vector<glm::dvec3> ring;
       for (uint32_t v : ids) ring.push_back(vertices[v]);
       const glm::dvec3 n = NewellNormal(ring);
@@ -527,8 +525,9 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
       return ShellClosureOutcome::kClosed;
     };
     auto planar_cap = [&](const std::vector<uint32_t>& ids) {
+      const size_t first = caps->size();
       const ShellClosureOutcome o = planar_cap_of(ids);
-      if (o == ShellClosureOutcome::kClosed) walls->push_back({ids, caps_before, caps->size()});
+      if (o == ShellClosureOutcome::kClosed) walls->push_back({ids, first, caps->size()});
       return o;
     };
     for (const std::vector<uint32_t>& loop : loops) {
@@ -728,6 +727,13 @@ std::vector<ShellClosure> CloseShellsByNeighbours(const std::vector<ShellToClose
   return result;
 }
 
+namespace {
+
+// Whether CGAL may take the ring (simple and counter-clockwise: it may crash on others).
+bool SimpleCcw(const Ring& ring) { return ring.size() >= 3 && IsSimpleRing(ring) && SignedArea(ring) > 0.0; }
+
+}  // namespace
+
 std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occluders, double by_m, double min_area_m2,
                                          double min_top_m) {
   if (!(by_m > 0.0)) return occluders;
@@ -735,7 +741,7 @@ std::vector<Occluder25D> ShrinkOccluders(const std::vector<Occluder25D>& occlude
   for (const Occluder25D& oc : occluders) {
     const double height = oc.height - by_m;
     if (!(height > min_top_m)) continue;
-    if (oc.footprint.size() < 3 || !IsSimpleRing(oc.footprint) || !(SignedArea(oc.footprint) > 0.0)) continue;
+    if (!SimpleCcw(oc.footprint)) continue;  // dropped: conservative
     std::vector<PolygonWithHoles> band;
     const size_t n = oc.footprint.size();
     for (size_t i = 0; i < n; ++i) {
@@ -773,9 +779,7 @@ std::vector<Occluder25D> ClipOccluders(const std::vector<Occluder25D>& occluders
       continue;
     }
     if (b.x <= lo.x || b.y <= lo.y || a.x >= hi.x || a.y >= hi.y) continue;  // outside
-    // CGAL takes only simple CCW rings (it may crash on others): any other is dropped,
-    // which is conservative.
-    if (oc.footprint.size() < 3 || !IsSimpleRing(oc.footprint) || !(SignedArea(oc.footprint) > 0.0)) continue;
+    if (!SimpleCcw(oc.footprint)) continue;  // dropped: conservative
     // The box's outside near the footprint: four bands around it.
     const glm::dvec2 m0 = glm::min(a, lo) - 1.0, m1 = glm::max(b, hi) + 1.0;
     const std::vector<PolygonWithHoles> outside = {
