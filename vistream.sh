@@ -25,6 +25,7 @@ PACKAGES=(
   stunnel4   # a TLS-only Redis reached through stunnel, as README "Beyond one machine" says (tested)
   libcitygml-dev   # the CityGML reader (scenes/citygml_read.cpp)
   haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
+  libboost-dev   # the web edge (server/web_server.h): Boost.Beast HTTP and WebSocket over Boost.Asio
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
 BUILD_TYPE=${VISTREAM_BUILD_TYPE:-RelWithDebInfo}

@@ -397,6 +397,16 @@ std::vector<ServerSetting> MakeSettings() {
                 .text = {IsHostPort, "not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:9464)", true},
                 .type_name = "HOST:PORT"},
                21});
+  // [web]: the browser client (server/web_server.h)
+  t.push_back({"web", "listen", &ServerConfig::web_listen,
+               {.kind = FK::kText, .text = {IsHostPort, kListenCheck.what, true}}, "--web-listen",
+               "host:port of the browser client: its page over HTTP(S) and its sessions over WebSocket (/session)",
+               {.kind = OK::kText,
+                .text = {IsHostPort, "not host:port with a port from 0 to 65535 (e.g. 127.0.0.1:8080)", true},
+                .type_name = "HOST:PORT"},
+               21});
+  t.push_back({"web", "root", &ServerConfig::web_root, File(FK::kFolder), "--web-root",
+               "folder of the browser client's page (default: the installed or built one)", Option(OK::kAny), 21});
   // [store]
   t.push_back({"store", "address", &ServerConfig::store_address, {.kind = FK::kText, .text = kStoreAddressCheck},
                "--store",

@@ -8,6 +8,7 @@
 //   [tls]      cert, key, client_ca, insecure
 //   [auth]     tokens
 //   [metrics]  listen
+//   [web]      listen, root
 //   [store]    address, key_prefix, connect_timeout_ms, read_timeout_ms, write_timeout_ms,
 //              username, password_file
 //   [log]      format ("text" | "json"), file
@@ -76,6 +77,10 @@ struct ServerConfig {
 
   // [metrics]
   std::string metrics_listen;              // host:port of /metrics and /healthz; empty: off
+
+  // [web]: the browser client (server/web_server.h)
+  std::string web_listen;                  // host:port of the page and its WebSocket sessions; empty: off
+  std::string web_root;                    // the page's folder; empty: DefaultWebRoot()
 
   // [store]: the PVS store shared by replicas (server/pvs_store.h)
   std::string store_address;               // Redis host:port or unix:PATH; empty: no store

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -28,6 +29,7 @@
 #include "server/served_scene.h"
 #include "server/service.h"
 #include "server/service_metrics.h"
+#include "server/web_server.h"
 
 namespace vistream::server {
 
@@ -116,6 +118,23 @@ int RunServerProcess(const ServerProcessOptions& run) {
       return 2;
     }
     server_options.credentials = *std::move(credentials);
+    if (!config.web_listen.empty()) {
+      // The web listener serves with the same [tls] (HTTPS and WSS), and plaintext on loopback
+      // only unless tls.insecure, as the gRPC one.
+      if (absl::Status st = ServerCredentialsFor(tls, config.web_listen).status(); !st.ok()) {
+        std::fprintf(stderr, "vistream-server: error: %sweb.listen: %s\n", in_file.c_str(),
+                     std::string(st.message()).c_str());
+        return 2;
+      }
+      const std::string root = config.web_root.empty() ? DefaultWebRoot() : config.web_root;
+      if (std::error_code ec; !std::filesystem::is_regular_file(std::filesystem::path(root) / "index.html", ec)) {
+        std::fprintf(stderr,
+                     "vistream-server: error: web.root: %s holds no index.html: the page is built by ./vistream.sh "
+                     "(npm and esbuild, into build/web) or installed with the package (share/vistream/web)\n",
+                     root.c_str());
+        return 2;
+      }
+    }
     if (!config.tokens.empty()) {
       absl::StatusOr<std::shared_ptr<TokenStore>> tokens =
           TokenStore::Load(config.tokens);
@@ -326,6 +345,27 @@ int RunServerProcess(const ServerProcessOptions& run) {
     http = std::move(*started);
     log.Write(0, "metrics", {{"address", http->address()}, {"paths", "/metrics /healthz"}});
   }
+  std::unique_ptr<WebServer> web;
+  if (!config.web_listen.empty()) {
+    WebOptions w;
+    w.listen = config.web_listen;
+    w.root = config.web_root.empty() ? DefaultWebRoot() : config.web_root;
+    w.tls_cert = config.tls_cert;
+    w.tls_key = config.tls_key;
+    w.tls_client_ca = config.tls_client_ca;
+    w.hello_timeout_s = config.hello_timeout_s;
+    // As the gRPC listener's limit: 1 MiB plus room for a Hello that lists every object.
+    size_t objects = 0;
+    for (const ServedScene* s : scenes) objects = std::max(objects, s->scene().objects.size());
+    w.max_message_bytes = (size_t{1} << 20) + 5 * objects;
+    absl::StatusOr<std::unique_ptr<WebServer>> started = WebServer::Start(&(*server)->service(), w, &log);
+    if (!started.ok()) {
+      std::fprintf(stderr, "vistream-server: error: web.listen: %s\n", std::string(started.status().message()).c_str());
+      return 1;
+    }
+    web = std::move(*started);
+    log.Write(0, "web", {{"address", web->address()}, {"scheme", web->scheme()}, {"root", w.root}});
+  }
   // One scene: "scene NAME, ..."; several: "N scenes: NAME (...); NAME (...)".
   std::string what;
   for (const ServedScene* s : scenes) {
@@ -340,7 +380,8 @@ int RunServerProcess(const ServerProcessOptions& run) {
                               s->name(), one);
     }
   }
-  const std::string metrics_line = http != nullptr ? "; metrics on http://" + http->address() + "/metrics" : "";
+  std::string metrics_line = http != nullptr ? "; metrics on http://" + http->address() + "/metrics" : "";
+  if (web != nullptr) metrics_line += absl::StrFormat("; web page on %s://%s/", web->scheme(), web->address());
   std::string security_line = config.tls_cert.empty() ? "" : config.tls_client_ca.empty() ? "; TLS" : "; mutual TLS";
   if (server_options.tokens != nullptr) {
     security_line += absl::StrFormat("; tokens (%zu tenants)", server_options.tokens->size());
@@ -361,7 +402,8 @@ int RunServerProcess(const ServerProcessOptions& run) {
   const double held_s = (*server)->HoldDrain(config.drain_s);
   log.Write(0, "ending_sessions", {{"held_s", held_s},
                                    {"sessions", static_cast<uint64_t>((*server)->service().active_sessions())}});
-  (*server)->Shutdown(config.grace_s);
+  (*server)->Shutdown(config.grace_s);  // WebSocket sessions too: each is sent its SessionEnd
+  if (web != nullptr) web->Stop();
   if (http != nullptr) http->Stop();  // its collector reads the service
   server->reset();
   served.clear();  // the scenes' schedulers leave the pool before it stops

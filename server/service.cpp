@@ -33,45 +33,63 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
   if (options_.tokens != nullptr) {
     absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata());
     if (!t.ok()) {
-      Refused(context, "Session", "unauthenticated", std::string(t.status().message()));
+      Refused(context->peer(), "Session", "unauthenticated", std::string(t.status().message()));
       return RefuseSession(ToGrpcStatus(t.status()));
     }
     tenant = *std::move(t);
   }
-  const std::string host = PeerHost(context->peer());
+  absl::StatusOr<Admitted> admitted = Admit(context->peer(), tenant, "grpc");
+  if (!admitted.ok()) return RefuseSession(ToGrpcStatus(admitted.status()));
+  SessionReactorSettings settings;
+  settings.link = options_.link;
+  settings.link_seed = options_.link_seed;
+  settings.max_in_link_bytes = options_.limits.max_queued_bytes;
+  settings.timer = timer_.get();
+  settings.done = [this](uint64_t session_id, const grpc::Status& status, const LinkFigures* figures) {
+    Remove(session_id, status, figures);
+  };
+  return StartSessionReactor(admitted->session, admitted->link, std::move(settings));
+}
+
+absl::StatusOr<WalkthroughService::Admitted> WalkthroughService::Admit(const std::string& peer,
+                                                                     const std::string& tenant,
+                                                                     const std::string& transport) {
+  const std::string host = PeerHost(peer);
   std::lock_guard lock(mu_);
   if (draining_) {
-    Refused(context, "Session", "draining", "the server is shutting down");
-    return RefuseSession(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    Refused(peer, "Session", "draining", "the server is shutting down");
+    return absl::UnavailableError("the server is shutting down");
   }
   if (sessions_.size() >= options_.max_sessions) {
-    Refused(context, "Session", "too_many", "too many sessions");
-    return RefuseSession(grpc::Status(
-        grpc::StatusCode::RESOURCE_EXHAUSTED,
-        absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once")));
+    Refused(peer, "Session", "too_many", "too many sessions");
+    return absl::ResourceExhaustedError(
+        absl::StrCat("too many sessions: this server holds at most ", options_.max_sessions, " at once"));
   }
   if (absl::Status q = quota_.Admit(host, tenant); !q.ok()) {
-    Refused(context, "Session", tenant.empty() || q.message().find("tenant") == absl::string_view::npos ? "per_address"
-                                                                                                      : "per_token",
+    Refused(peer, "Session", tenant.empty() || q.message().find("tenant") == absl::string_view::npos ? "per_address"
+                                                                                                   : "per_token",
             std::string(q.message()));
-    return RefuseSession(ToGrpcStatus(q));
+    return q;
   }
   const uint64_t id = next_id_++;
   ++sessions_total_;
   auto link = std::make_shared<SessionLink>();
   // One scene: the session is bound to it (its Hello must name it); several: Hello picks.
   SessionSeams seams;
-  if (options_.metrics != nullptr) options_.metrics->AddSessionSeams(&seams);
+  if (options_.metrics != nullptr) {
+    options_.metrics->AddSessionSeams(&seams);
+    options_.metrics->SessionStarted(transport);
+  }
   std::shared_ptr<server::Session> session =
       scenes_.scenes.size() == 1
           ? Session::Create(id, scenes_.scenes[0], options_.limits, log_, [link] { link->Pump(); }, std::move(seams))
           : Session::Create(id, &scenes_, options_.limits, log_, [link] { link->Pump(); }, std::move(seams));
-  sessions_[id] = Entry{session, link, context->peer(), host, tenant};
+  sessions_[id] = Entry{session, link, peer, host, tenant, transport};
   if (log_ != nullptr) {
     if (tenant.empty()) {
-      log_->Write(id, "session_start", {{"peer", context->peer()}});
+      log_->Write(id, "session_start", {{"peer", peer}, {"transport", transport}});
     } else {
-      log_->Write(id, "session_start", {{"peer", context->peer()}, {"tenant", tenant}});
+      log_->Write(id, "session_start", {{"peer", peer}, {"transport", transport}, {"tenant", tenant}});
     }
   }
   if (hello_watchdog_ != nullptr) {
@@ -81,15 +99,7 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* WalkthroughService:
       }
     });
   }
-  SessionReactorSettings settings;
-  settings.link = options_.link;
-  settings.link_seed = options_.link_seed;
-  settings.max_in_link_bytes = options_.limits.max_queued_bytes;
-  settings.timer = timer_.get();
-  settings.done = [this](uint64_t session_id, const grpc::Status& status, const LinkFigures* figures) {
-    Remove(session_id, status, figures);
-  };
-  return StartSessionReactor(session, link, std::move(settings));
+  return Admitted{std::move(session), std::move(link)};
 }
 
 void WalkthroughService::Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link) {
@@ -150,7 +160,7 @@ grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerConte
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   if (options_.tokens != nullptr) {
     if (absl::StatusOr<std::string> t = Authenticate(*options_.tokens, context->client_metadata()); !t.ok()) {
-      Refused(context, "GetStats", "unauthenticated", std::string(t.status().message()));
+      Refused(context->peer(), "GetStats", "unauthenticated", std::string(t.status().message()));
       reactor->Finish(ToGrpcStatus(t.status()));
       return reactor;
     }
@@ -160,12 +170,12 @@ grpc::ServerUnaryReactor* WalkthroughService::GetStats(grpc::CallbackServerConte
   return reactor;
 }
 
-void WalkthroughService::Refused(grpc::CallbackServerContext* context, const char* call, const char* reason,
+void WalkthroughService::Refused(const std::string& peer, const char* call, const char* reason,
                                  const std::string& message) {
   if (options_.metrics != nullptr) options_.metrics->SessionRefused(reason);
   if (log_ != nullptr) {
     log_->Write(EventLog::Level::kWarn, 0, "refused",
-                {{"call", call}, {"peer", context->peer()}, {"reason", reason}, {"message", message}});
+                {{"call", call}, {"peer", peer}, {"reason", reason}, {"message", message}});
   }
 }
 
@@ -247,6 +257,8 @@ v1::ServerStats WalkthroughService::Stats() const {
     v1::SessionStats* ss = s.add_sessions();
     *ss = e.session->Stats();
     ss->set_peer(e.peer);
+    ss->set_transport(e.transport);
+    ss->set_tenant(e.tenant);
     bytes += ss->bytes_sent();
     if (auto it = by_name.find(ss->scene()); it != by_name.end()) {
       v1::SceneStats* scene = it->second;

@@ -76,9 +76,25 @@ class WalkthroughService final
   // `session_end` line is written).
   size_t active_sessions() const;
 
+  // A session admitted: what its transport serves it with.
+  struct Admitted {
+    std::shared_ptr<server::Session> session;
+    std::shared_ptr<SessionLink> link;  // the transport attaches itself (SessionLink::Attach)
+  };
+  // Admits a session from `peer` (a gRPC peer string, "ipv4:HOST:PORT" or "ipv6:[HOST]:PORT")
+  // for `tenant` (its token already checked; empty without authentication) over `transport`
+  // ("grpc", "websocket": the session_start line and vistream_sessions_started_total{transport}).
+  // The same rules for every transport: refused while draining (UNAVAILABLE), beyond
+  // max_sessions or a per-address or per-tenant quota (RESOURCE_EXHAUSTED, naming the limit);
+  // a refusal is logged and counted (Refused). The Hello watchdog ends an admitted session
+  // whose Hello does not come in time (through its link). The transport calls Remove when the
+  // session is done.
+  absl::StatusOr<Admitted> Admit(const std::string& peer, const std::string& tenant, const std::string& transport);
   // A call refused before any work: logged (warn, "refused") and counted
-  // (vistream_sessions_refused_total{reason}).
-  void Refused(grpc::CallbackServerContext* context, const char* call, const char* reason, const std::string& message);
+  // (vistream_sessions_refused_total{reason}). `peer` as for Admit.
+  void Refused(const std::string& peer, const char* call, const char* reason, const std::string& message);
+  // The scenes served (a Hello's names).
+  const SceneDirectory& scenes() const { return scenes_; }
   // Called by a session's reactor when it is done (SessionReactorSettings::done); `link` is
   // null without emulation.
   void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
@@ -106,6 +122,7 @@ class WalkthroughService final
     std::shared_ptr<SessionLink> link;
     std::string peer;
     std::string host, tenant;  // as counted by quota_
+    std::string transport;     // "grpc", "websocket"
   };
   std::map<uint64_t, Entry> sessions_;
   SessionQuota quota_;

@@ -39,6 +39,10 @@ ServiceMetrics::ServiceMetrics(MetricsRegistry* registry, const std::vector<std:
                           {{"scene", ""}});
   r.GetCounter("vistream_sessions_refused_total", "Streams refused before a session started, by reason",
                {{"reason", "too_many"}});
+  for (const char* transport : {"grpc", "websocket"}) {
+    r.GetCounter("vistream_sessions_started_total", "Sessions admitted, by transport (grpc, websocket)",
+                 {{"transport", transport}});
+  }
   RegisterProcessMetrics(registry_);
 }
 
@@ -59,6 +63,13 @@ void ServiceMetrics::Collect(const v1::ServerStats& stats) {
     queued[s.scene()] += s.queued_bytes();
   }
   pre_hello_->Set(static_cast<double>(pre_hello));
+  std::map<std::string, uint64_t> by_transport = {{"grpc", 0}, {"websocket", 0}};
+  for (const v1::SessionStats& s : stats.sessions()) ++by_transport[s.transport()];
+  for (const auto& [transport, n] : by_transport) {
+    registry_->GetGauge("vistream_transport_sessions_active", "Sessions open, by transport (grpc, websocket)",
+                        {{"transport", transport}})
+        ->Set(static_cast<double>(n));
+  }
   // Counters from cumulative figures: what grew since the last render.
   auto feed = [](Counter* c, uint64_t now, uint64_t* last) {
     if (now > *last) c->Add(static_cast<double>(now - *last));
@@ -123,6 +134,12 @@ void ServiceMetrics::SessionEnded(const std::string& scene, int grpc_code) {
   const std::string code = absl::StatusCodeToString(static_cast<absl::StatusCode>(grpc_code));
   registry_->GetCounter("vistream_sessions_ended_total", "Sessions ended, by scene and gRPC status code",
                         {{"scene", scene}, {"code", code}})
+      ->Add(1.0);
+}
+
+void ServiceMetrics::SessionStarted(const std::string& transport) {
+  registry_->GetCounter("vistream_sessions_started_total", "Sessions admitted, by transport (grpc, websocket)",
+                        {{"transport", transport}})
       ->Add(1.0);
 }
 

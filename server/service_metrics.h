@@ -16,6 +16,8 @@
 //   vistream_pvs_queue_length{scene}                PVS requests waiting for a worker
 //   vistream_send_queue_bytes{scene}                bytes queued for clients
 //   vistream_pvs_cache_bytes{scene}                 the PVS cache's size
+//   vistream_sessions_started_total{transport}     sessions admitted, by transport (grpc, websocket)
+//   vistream_transport_sessions_active{transport}  sessions open, by transport
 //   vistream_sessions_refused_total{reason}         calls refused before any work (unauthenticated,
 //                                                   too_many, per_address, per_token, draining)
 //   vistream_pvs_store_hits_total{scene}            PVSs read from the shared store, not computed
@@ -56,6 +58,8 @@ class ServiceMetrics {
   // Observes each PVS computation of `scene`'s scheduler (PvsScheduler::SetComputeObserver).
   std::function<void(double)> PvsComputeObserver(const std::string& scene);
   void SessionEnded(const std::string& scene, int grpc_code);
+  // A session was admitted over `transport` ("grpc", "websocket").
+  void SessionStarted(const std::string& transport);
   // `reason`: a short word (draining, too_many, unauthenticated, per_address, per_token, ...).
   void SessionRefused(const std::string& reason);
 

@@ -20,7 +20,7 @@ double SteadySeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
+class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>, public SessionEndpoint {
  public:
   SessionReactor(std::shared_ptr<Session> session, std::shared_ptr<SessionLink> link, SessionReactorSettings settings)
       : settings_(std::move(settings)), session_(std::move(session)), link_(std::move(link)) {
@@ -118,12 +118,12 @@ class SessionReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
 
   // Hands due client messages to the session (emulation), starts the next write if none is in
   // flight, and finishes the call when asked to and idle.
-  void Pump() {
+  void Pump() override {
     if (up_.has_value()) DeliverUpward();
     PumpWrites();
   }
 
-  void EndWith(const grpc::Status& status) {
+  void EndWith(const grpc::Status& status) override {
     {
       std::lock_guard lock(mu_);
       if (finish_requested_) return;
@@ -293,24 +293,24 @@ class RefusedReactor : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::By
 
 }  // namespace
 
-void SessionLink::Attach(SessionReactor* r) {
+void SessionLink::Attach(SessionEndpoint* endpoint) {
   std::lock_guard lock(mu_);
-  reactor_ = r;
+  endpoint_ = endpoint;
 }
 
 void SessionLink::Detach() {
   std::lock_guard lock(mu_);
-  reactor_ = nullptr;
+  endpoint_ = nullptr;
 }
 
 void SessionLink::Pump() {
   std::lock_guard lock(mu_);
-  if (reactor_ != nullptr) reactor_->Pump();
+  if (endpoint_ != nullptr) endpoint_->Pump();
 }
 
 void SessionLink::End(const grpc::Status& status) {
   std::lock_guard lock(mu_);
-  if (reactor_ != nullptr) reactor_->EndWith(status);
+  if (endpoint_ != nullptr) endpoint_->EndWith(status);
 }
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* StartSessionReactor(std::shared_ptr<Session> session,

@@ -42,24 +42,33 @@ struct LinkFigures {
   uint64_t max_in_link_bytes = 0;  // the most that waited in the link at once (bounded)
 };
 
-class SessionReactor;
+// The transport serving one session: the gRPC reactor below, or a WebSocket connection
+// (server/web_server.h). Called through the session's SessionLink, from any thread.
+class SessionEndpoint {
+ public:
+  virtual ~SessionEndpoint() = default;
+  // Delivers due client messages and starts the next write.
+  virtual void Pump() = 0;
+  // Ends the session with `status` (once; later ends are ignored).
+  virtual void EndWith(const grpc::Status& status) = 0;
+};
 
-// Lets worker threads (and the link timer) wake a session's reactor, and outlives it: the
-// reactor detaches itself in OnDone, after which a wake does nothing. The mutex is recursive:
-// with link emulation a wake may hand a client message to the session, whose handler must be
-// free to wake the reactor again.
+// Lets worker threads (and the link timer, the Hello watchdog, a drain) wake a session's
+// transport, and outlives it: the transport detaches itself when it is done, after which a wake
+// does nothing. The mutex is recursive: with link emulation a wake may hand a client message to
+// the session, whose handler must be free to wake the reactor again.
 class SessionLink {
  public:
-  void Attach(SessionReactor* r);
+  void Attach(SessionEndpoint* endpoint);
   void Detach();
-  // Delivers due client messages and starts the next write, if the reactor is still there.
+  // Delivers due client messages and starts the next write, if the transport is still there.
   void Pump();
-  // Ends the session's call with `status` (once; later ends are ignored).
+  // Ends the session with `status` (once; later ends are ignored).
   void End(const grpc::Status& status);
 
  private:
   std::recursive_mutex mu_;
-  SessionReactor* reactor_ = nullptr;
+  SessionEndpoint* endpoint_ = nullptr;
 };
 
 // What a session's reactor runs with.
