@@ -25,6 +25,7 @@ PACKAGES=(
   stunnel4   # a TLS-only Redis reached through stunnel, as README "Beyond one machine" says (tested)
   libcitygml-dev   # the CityGML reader (scenes/citygml_read.cpp)
   haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
+  chromium   # the browser client's tests and `vistream bench web` (headless, WebGL 2 through SwiftShader)
   libboost-dev   # the web edge (server/web_server.h): Boost.Beast HTTP and WebSocket over Boost.Asio
 )
 BUILD_DIR=${VISTREAM_BUILD_DIR:-build}
@@ -69,6 +70,18 @@ install_gltf_validator() {
     "gltf-validator@$GLTF_VALIDATOR_VERSION" >&2
 }
 
+# The browser client's npm packages (three.js, meshoptimizer, protobufjs, esbuild; puppeteer-core
+# for its headless tests), pinned by web/package-lock.json, into web/node_modules (ignored by
+# git); the build bundles the page from them (web/CMakeLists.txt).
+install_web_packages() {
+  # npm ci writes web/node_modules/.package-lock.json: newer than the lock file, nothing to do.
+  if [ -f web/node_modules/.package-lock.json ] && [ web/node_modules/.package-lock.json -nt web/package-lock.json ]; then
+    return 0
+  fi
+  log "installing the browser client's npm packages (web/package-lock.json) into web/node_modules"
+  npm ci --prefix web --no-audit --no-fund --loglevel=error >&2
+}
+
 configure_and_build() {
   local extra=()
   [ "${CI:-}" = "true" ] && extra+=(-DVISTREAM_WERROR=ON)
@@ -89,6 +102,8 @@ cmd=${1:-}
 case "$cmd" in
   run)
     install_packages
+    install_gltf_validator
+    install_web_packages
     configure_and_build
     shift
     # The main job: a walkthrough. A server on the default scene (a free loopback port), the
@@ -151,6 +166,7 @@ case "$cmd" in
   test)
     install_packages
     install_gltf_validator
+    install_web_packages
     configure_and_build
     ctest --test-dir "$BUILD_DIR" --no-tests=error --output-on-failure --parallel "${VISTREAM_JOBS:-2}" \
       --timeout 900

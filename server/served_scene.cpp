@@ -92,6 +92,17 @@ absl::StatusOr<std::unique_ptr<ServedScene>> ServedScene::Create(const ServedSce
   s->epsilon_ = std::move(*eps);
 
   s->scene_info_ = MakeSceneInfo(s->scene_, *s->grid_, s->name_);
+  // Every walk of the scene, the catalog entry's first (LoadedScene::walks): a client without
+  // the catalog (the browser's) follows them by name.
+  s->scene_info_.clear_paths();
+  for (const scenes::WalkPath& w : loaded->walks) {
+    vistream::v1::ScenePathInfo* out = s->scene_info_.add_paths();
+    out->set_name(w.name);
+    for (const glm::dvec2& p : w.waypoints) {
+      out->add_xy(p.x);
+      out->add_xy(p.y);
+    }
+  }
 
   s->masks_ = std::make_unique<MaskQueue>(std::max(1u, std::thread::hardware_concurrency()), 4096,
                                           options.idle_priority_masks);
