@@ -3,7 +3,7 @@
 // web` run it against a real server on loopback.
 //
 //   node web/headless.mjs --url URL [--seconds S] [--until-walk-done] [--size 1280x720]
-//        [--screenshot FILE.png] [--id-passes N] [--chromium PATH] [--kill-at S --restart-cmd ...]
+//        [--screenshot FILE.png] [--id-passes N] [--chromium PATH] [--insecure-tls]
 //
 // Prints one JSON object: the page's window.vistream.summary() at the end, the load timings
 // (navigation to the first drawn frame), and, with --id-passes N, N id passes spread over the
@@ -34,7 +34,9 @@ const browser = await puppeteer.launch({
   headless: true,
   args: ['--no-sandbox', '--enable-unsafe-swiftshader', '--use-angle=swiftshader', '--ignore-gpu-blocklist',
     `--window-size=${width},${height}`, '--disable-background-timer-throttling',
-    '--disable-renderer-backgrounding', '--disable-backgrounding-occluded-windows'],
+    '--disable-renderer-backgrounding', '--disable-backgrounding-occluded-windows',
+    // Tests serve WSS with a certificate of their own CA, which chromium does not know.
+    ...(flag('insecure-tls') ? ['--ignore-certificate-errors'] : [])],
   defaultViewport: { width, height },
   protocolTimeout: 600000,
 });

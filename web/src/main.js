@@ -319,7 +319,7 @@ function connect() {
     summary.state = 'reconnecting';
     say(`Lost the server: reconnecting (holding ${objects.size} objects)...`, 'warn');
     setTimeout(connect, reconnectDelay * 1000);
-    reconnectDelay = Math.min(5, reconnectDelay * 2);
+    reconnectDelay = Math.min(2, reconnectDelay * 2);
   };
 }
 
