@@ -373,6 +373,7 @@ void AddBenchCommands(CLI::App& app, std::function<void(int)> done) {
   AddBenchAgvsCommand(bench, done);
   AddBenchServerCommand(bench, done);
   AddBenchClientCommand(bench, done);
+  AddBenchWebCommand(bench, done);
 }
 
 }  // namespace vistream::tools

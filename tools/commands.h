@@ -24,5 +24,6 @@ void AddBenchAgvsCommand(CLI::App* bench, std::function<void(int)> done);
 void AddBenchServerCommand(CLI::App* bench, std::function<void(int)> done);
 // `bench client`, likewise.
 void AddBenchClientCommand(CLI::App* bench, std::function<void(int)> done);
+void AddBenchWebCommand(CLI::App* bench, std::function<void(int)> done);
 
 }  // namespace vistream::tools

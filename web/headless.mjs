@@ -3,7 +3,7 @@
 // web` run it against a real server on loopback.
 //
 //   node web/headless.mjs --url URL [--seconds S] [--until-walk-done] [--size 1280x720]
-//        [--screenshot FILE.png] [--id-passes N] [--chromium PATH] [--insecure-tls]
+//        [--screenshot FILE.png] [--id-passes N [--id-span S]] [--chromium PATH] [--insecure-tls]
 //
 // Prints one JSON object: the page's window.vistream.summary() at the end, the load timings
 // (navigation to the first drawn frame), and, with --id-passes N, N id passes spread over the
@@ -27,6 +27,8 @@ const seconds = Number(opt('seconds', '10'));
 const [width, height] = opt('size', '1280x720').split('x').map(Number);
 const screenshot = opt('screenshot', '');
 const idPasses = Number(opt('id-passes', '0'));
+// The id passes are spread over this many seconds (default: the whole run).
+const idSpan = Number(opt('id-span', String(seconds)));
 const chromium = opt('chromium', process.env.VISTREAM_CHROMIUM || '/usr/bin/chromium');
 
 const browser = await puppeteer.launch({
@@ -50,7 +52,7 @@ try {
   await page.goto(url, { waitUntil: 'load', timeout: 60000 });
   const passes = [];
   const until = started + seconds * 1000;
-  const step = idPasses > 0 ? (seconds * 1000) / (idPasses + 1) : 0;
+  const step = idPasses > 0 ? (idSpan * 1000) / (idPasses + 1) : 0;
   let nextPass = started + step;
   for (;;) {
     const now = Date.now();

@@ -28,6 +28,7 @@ const options = {
   seconds: Number(params.get('seconds') || 0),
   memoryBudgetBytes: Math.round(Number(params.get('memory_mb') || 0) * 1048576),
   masks: params.get('masks') !== 'off',
+  maxFps: Number(params.get('max_fps') || 0),  // 0: every animation frame
   width: Number(params.get('width') || 0),
   height: Number(params.get('height') || 0),
 };
@@ -94,7 +95,9 @@ if (!gl) {
   say('This browser has no WebGL 2: vistream draws with WebGL 2 (any current Chrome, Firefox or Safari has it).', 'error');
   throw new Error('no WebGL 2');
 }
-const renderer = new THREE.WebGLRenderer({ canvas, context: gl });
+// Reversed depth where the GPU offers it (EXT_clip_control): buildings far apart in depth stay
+// apart, as in the native client's id buffer.
+const renderer = new THREE.WebGLRenderer({ canvas, context: gl, reverseDepthBuffer: true });
 const scene3 = new THREE.Scene();
 scene3.background = new THREE.Color(0xb8d0e8);
 scene3.add(new THREE.HemisphereLight(0xffffff, 0x606060, 2.2));
@@ -424,6 +427,10 @@ const frameState = { mask: null, cell: null, complete: false, hole: false, drawn
 
 function frame() {
   const now = performance.now() / 1000;
+  if (options.maxFps > 0 && now - lastFrame < 1 / options.maxFps - 0.002) {
+    requestAnimationFrame(frame);
+    return;
+  }
   const dt = Math.min(0.25, now - lastFrame);
   lastFrame = now;
   if (grid && !started && startupDone()) {
