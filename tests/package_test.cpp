@@ -93,6 +93,9 @@ std::set<std::string> ExpectedTree() {
       "share/doc/vistream/README.md",
       "share/doc/vistream/tokens.example",
       "share/doc/vistream/haproxy.cfg",
+      // The browser client's page (web/), which vistream-server serves by default from here.
+      "share/vistream/web/app.js",
+      "share/vistream/web/index.html",
   };
   for (const fs::directory_entry& e : fs::directory_iterator(fs::path(VISTREAM_SOURCE_DIR) / "scenes")) {
     if (e.path().extension() == ".json") files.insert("share/vistream/scenes/" + e.path().filename().string());
@@ -152,6 +155,8 @@ TEST_F(Package, InstallPutsTheIssuesFilesBelowThePrefixAndNothingElse) {
   const fs::path deploy = fs::path(VISTREAM_SOURCE_DIR) / "deploy";
   EXPECT_EQ(ReadFile(prefix_ / "etc/vistream/server.toml"), ReadFile(deploy / "server.toml"));
   EXPECT_EQ(ReadFile(prefix_ / "lib/systemd/system/vistream-server.service"), ReadFile(deploy / "vistream-server.service"));
+  // The installed page is the built one.
+  EXPECT_EQ(ReadFile(prefix_ / "share/vistream/web/index.html"), ReadFile(fs::path(VISTREAM_BUILD_DIR) / "web" / "index.html"));
   // The installed monaco reads the extract installed beside the catalog.
   const std::string monaco = ReadFile(prefix_ / "share/vistream/scenes/monaco.json");
   EXPECT_NE(monaco.find(R"("osm": "../data/osm/monaco.osm.pbf")"), std::string::npos) << monaco;

@@ -1093,11 +1093,22 @@ namespace {
 
 // Issue 35: the scene's own walks (Scene::paths) reach the client in SceneInfo.paths; a scene
 // without them sends none.
-TEST(Server, SceneInfoCarriesTheScenesOwnWalks) {
+// SceneInfo.paths: every walk of the scene, the catalog entry's first (a client without the
+// catalog, the browser's, follows them by name), then the scene's own.
+TEST(Server, SceneInfoCarriesTheCatalogsWalksAndTheScenesOwn) {
   auto plain = StartServer();
   auto c = Connect(*plain);
   ASSERT_TRUE(c->WaitFor([](const SessionRecord& r) { return r.scene_info; }, kWait));
-  EXPECT_EQ(c->Snapshot().info.paths_size(), 0);
+  const absl::StatusOr<scenes::CatalogEntry> entry = scenes::FindCatalogEntry("city1");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  ASSERT_FALSE(entry->walks.empty());
+  const v1::SceneInfo catalog_info = c->Snapshot().info;
+  ASSERT_EQ(catalog_info.paths_size(), static_cast<int>(entry->walks.size()));
+  for (size_t k = 0; k < entry->walks.size(); ++k) {
+    EXPECT_EQ(catalog_info.paths(static_cast<int>(k)).name(), entry->walks[k].name);
+    EXPECT_EQ(catalog_info.paths(static_cast<int>(k)).xy_size(), static_cast<int>(2 * entry->walks[k].waypoints.size()));
+    EXPECT_EQ(catalog_info.paths(static_cast<int>(k)).xy(0), entry->walks[k].waypoints.front().x);
+  }
   EXPECT_TRUE(c->Finish().ok());
 
   scenes::Scene scene = City1().scene();

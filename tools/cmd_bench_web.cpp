@@ -1,6 +1,6 @@
 // vistream bench web: the browser client (web/) and the native headless client along the same
-// catalog walk through one real vistream-server on loopback (the executable beside this one,
-// with its web listener), side by side in one run (issue 47):
+// catalog walk, each through a fresh vistream-server on loopback (the executable beside this
+// one, with its web listener), side by side in one run (issue 47):
 //   - the page in Debian's chromium, headless, WebGL 2 through SwiftShader, driven by
 //     puppeteer-core (web/headless.mjs): frames, fps, stalls, hole and masked frames, bytes
 //     received, from opening the URL to the first drawn frame;
@@ -103,18 +103,27 @@ int BenchWeb(const BenchWebArgs& a) {
     memory_mb = *loaded->entry->simulation.client->memory_mb;
   }
 
-  // The server, with its web listener, on free loopback ports.
-  std::string error;
-  std::unique_ptr<RunningServer> server = RunningServer::Start(
-      server_bin, {"--scene", a.scene, "--listen", "127.0.0.1:0", "--web-listen", "127.0.0.1:0"}, &error, "/dev/null");
+  // A server with its web listener on free loopback ports, one for each client: each walks a
+  // cold server (a warm one would have the PVSs and masks the other made).
+  const auto start_server = [&](std::string* web_base, std::string* error) -> std::unique_ptr<RunningServer> {
+    std::unique_ptr<RunningServer> s = RunningServer::Start(
+        server_bin, {"--scene", a.scene, "--listen", "127.0.0.1:0", "--web-listen", "127.0.0.1:0"}, error, "/dev/null");
+    if (s == nullptr) return nullptr;
+    const std::string& ready = s->ready_line();
+    const size_t at = ready.find("web page on ");
+    if (at == std::string::npos) {
+      *error = "no web address in: " + ready;
+      return nullptr;
+    }
+    *web_base = ready.substr(at + 12);
+    while (!web_base->empty() && std::isspace(static_cast<unsigned char>(web_base->back()))) web_base->pop_back();
+    return s;
+  };
+  std::string error, base;
+  std::unique_ptr<RunningServer> server = start_server(&base, &error);
   if (server == nullptr) return Fail("vistream-server did not start: " + error);
-  const std::string& ready = server->ready_line();
-  const size_t at = ready.find("web page on ");
-  if (at == std::string::npos) return Fail("vistream-server gave no web address: " + ready);
-  std::string base = ready.substr(at + 12);
-  while (!base.empty() && std::isspace(static_cast<unsigned char>(base.back()))) base.pop_back();
 
-  // The page first (a cold server: the native client then walks a warm one, which is kinder to it).
+  // The page first, then the native client.
   const std::string url =
       absl::StrFormat("%s?scene=%s&walk=%s&speed=%g&seconds=%g&memory_mb=%g&max_fps=%g", base, UrlEncode(a.scene),
                       UrlEncode(path), a.speed_kmh, a.seconds, memory_mb, a.max_fps);
@@ -137,6 +146,9 @@ int BenchWeb(const BenchWebArgs& a) {
   }
   const nlohmann::json& ps = p["summary"];
 
+  server->Stop(SIGTERM);
+  server = start_server(&base, &error);
+  if (server == nullptr) return Fail("vistream-server did not start again: " + error);
   std::fprintf(stderr, "bench web: the native headless client along '%s' ...\n", path.c_str());
   client::WalkthroughOptions o;
   o.server = server->address();

@@ -104,6 +104,10 @@ scene3.add(new THREE.HemisphereLight(0xffffff, 0x606060, 2.2));
 const sun = new THREE.DirectionalLight(0xffffff, 1.2);
 sun.position.set(0.4, 0.3, 1.0);
 scene3.add(sun);
+// The ground: a plane at z = 0 under everything (no object of the scene: the id pass leaves it out).
+const ground = new THREE.Mesh(new THREE.PlaneGeometry(200000, 200000), new THREE.MeshLambertMaterial({ color: 0x8a9078 }));
+ground.position.z = -0.05;
+scene3.add(ground);
 const camera = new THREE.PerspectiveCamera(60, 16 / 9, 0.5, 20000);
 camera.up.set(0, 0, 1);
 const material = new THREE.MeshLambertMaterial({ color: 0xd8d2c4 });
@@ -515,45 +519,56 @@ function overlay(now) {
   minimap();
 }
 
+// The minimap: 800 m around the eye, north up: viewcells held (green: complete, orange: not
+// yet), the walk, the eye; a scale bar and a legend.
 function minimap() {
   const mc = $('minimap');
   const ctx = mc.getContext('2d');
   const W = mc.width;
   const H = mc.height;
-  ctx.fillStyle = 'rgba(255,255,255,0.85)';
+  const span = 800;  // metres across
+  const scale = W / span;
+  const [ex, ey] = eye.position;
+  const px = (x) => W / 2 + (x - ex) * scale;
+  const py = (y) => (H - 30) / 2 - (y - ey) * scale;
+  ctx.fillStyle = 'rgba(255,255,255,0.9)';
   ctx.fillRect(0, 0, W, H);
-  const gw = grid.nx * grid.size;
-  const gh = grid.ny * grid.size;
-  const scale = Math.min((W - 8) / gw, (H - 24) / gh);
-  const px = (x) => 4 + (x - grid.x0) * scale;
-  const py = (y) => H - 20 - (y - grid.y0) * scale;
-  // Cells: complete (green), listed but incomplete (orange).
   for (const [cell, list] of lists) {
     const [i, j] = grid.coord(cell);
-    ctx.fillStyle = list.every((id) => objects.has(id)) ? 'rgba(60,170,80,0.5)' : 'rgba(240,150,40,0.6)';
-    ctx.fillRect(px(grid.x0 + i * grid.size), py(grid.y0 + (j + 1) * grid.size), grid.size * scale, grid.size * scale);
+    ctx.fillStyle = list.every((id) => objects.has(id)) ? 'rgba(60,170,80,0.45)' : 'rgba(240,150,40,0.6)';
+    const x0 = grid.x0 + i * grid.size;
+    const y1 = grid.y0 + (j + 1) * grid.size;
+    ctx.fillRect(px(x0), py(y1), grid.size * scale, grid.size * scale);
   }
   if (walk) {
     ctx.strokeStyle = '#3060c0';
+    ctx.lineWidth = 2;
     ctx.beginPath();
     walk.points.forEach((p, k) => (k ? ctx.lineTo(px(p[0]), py(p[1])) : ctx.moveTo(px(p[0]), py(p[1]))));
     ctx.stroke();
+    ctx.lineWidth = 1;
   }
   ctx.fillStyle = '#d02020';
   ctx.beginPath();
-  ctx.arc(px(eye.position[0]), py(eye.position[1]), 4, 0, 2 * Math.PI);
+  ctx.arc(px(ex), py(ey), 4, 0, 2 * Math.PI);
   ctx.fill();
-  // Scale bar and legend.
-  const bar = Math.pow(10, Math.floor(Math.log10(gw / 4)));
+  ctx.strokeStyle = '#d02020';
+  ctx.beginPath();
+  ctx.moveTo(px(ex), py(ey));
+  ctx.lineTo(px(ex) + 14 * Math.cos(eye.yaw), py(ey) - 14 * Math.sin(eye.yaw));
+  ctx.stroke();
+  ctx.fillStyle = 'rgba(255,255,255,0.95)';
+  ctx.fillRect(0, H - 30, W, 30);
   ctx.strokeStyle = '#000';
   ctx.beginPath();
-  ctx.moveTo(6, H - 8);
-  ctx.lineTo(6 + bar * scale, H - 8);
+  ctx.moveTo(6, H - 20);
+  ctx.lineTo(6 + 100 * scale, H - 20);
   ctx.stroke();
   ctx.fillStyle = '#000';
   ctx.font = '10px sans-serif';
-  ctx.fillText(`${bar} m`, 10 + bar * scale, H - 5);
-  ctx.fillText('green: cell complete · orange: incomplete · red: you', 60 + bar * scale, H - 5);
+  ctx.fillText('100 m', 10 + 100 * scale, H - 17);
+  ctx.fillText('north up · cells: green complete, orange not yet', 6, H - 5);
+  ctx.fillText('blue: walk · red: you', 70 + 100 * scale, H - 17);
 }
 
 // ---- the object-id pass (tests: the objects the current frame shows) ----
@@ -576,11 +591,16 @@ function idPass() {
   const size = renderer.getSize(new THREE.Vector2());
   idTarget.setSize(size.x, size.y);
   const swapped = [];
+  const hidden = [];
   scene3.traverse((node) => {
-    if (node.isMesh && node.visible) {
-      swapped.push([node, node.material]);
-      node.material = idMaterial(node.userData.id);
+    if (!node.isMesh || !node.visible) return;
+    if (node.userData.id === undefined) {  // the ground: no object
+      node.visible = false;
+      hidden.push(node);
+      return;
     }
+    swapped.push([node, node.material]);
+    node.material = idMaterial(node.userData.id);
   });
   const background = scene3.background;
   scene3.background = new THREE.Color(0, 0, 0);
@@ -594,6 +614,7 @@ function idPass() {
   renderer.outputColorSpace = colorSpace;
   scene3.background = background;
   for (const [node, m] of swapped) node.material = m;
+  for (const node of hidden) node.visible = true;
   const counts = {};
   for (let k = 0; k < pixels.length; k += 4) {
     const v = (pixels[k] << 16) | (pixels[k + 1] << 8) | pixels[k + 2];
