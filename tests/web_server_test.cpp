@@ -226,7 +226,9 @@ class WsClient {
 };
 
 v1::ClientMessage Hello(const std::string& token = "") {
-  v1::ClientMessage m = client::HelloMessage(client::HelloSettings{.scene = "city1"});
+  client::HelloSettings settings;
+  settings.scene = "city1";
+  v1::ClientMessage m = client::HelloMessage(settings);
   if (!token.empty()) m.mutable_hello()->set_token(token);
   return m;
 }
