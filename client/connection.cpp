@@ -400,6 +400,7 @@ void Connection::ReadLoop(grpc::ClientReaderWriter<v1::ClientMessage, v1::Server
         event = *std::move(cluster);
         break;
       }
+      case v1::ServerMessage::kEnd:  // WebSocket sessions only: a gRPC call ends with its status
       case v1::ServerMessage::BODY_NOT_SET:
         break;
     }

@@ -154,6 +154,7 @@ void SessionStream::ReadLoop() {
         r.mask_bytes += ChargedBytes(m);
         r.order.emplace_back('M', m.epsilon_mask().mask_id());
         break;
+      case v1::ServerMessage::kEnd:  // WebSocket sessions only: a gRPC call ends with its status
       case v1::ServerMessage::BODY_NOT_SET:
         break;
     }

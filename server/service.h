@@ -93,8 +93,6 @@ class WalkthroughService final
   // A call refused before any work: logged (warn, "refused") and counted
   // (vistream_sessions_refused_total{reason}). `peer` as for Admit.
   void Refused(const std::string& peer, const char* call, const char* reason, const std::string& message);
-  // The scenes served (a Hello's names).
-  const SceneDirectory& scenes() const { return scenes_; }
   // Called by a session's reactor when it is done (SessionReactorSettings::done); `link` is
   // null without emulation.
   void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
