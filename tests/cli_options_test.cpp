@@ -120,6 +120,11 @@ TEST(Cli, NanInfinityAndOutOfRangeNumbersAreRejectedNamingTheOption) {
       {"bench client --seconds inf", "--seconds: 'inf' is not a number"},
       {"bench client --lod 0", "--lod: '0' is not a screen error"},
       {"bench server --lod -1", "--lod: '-1' is not a screen error"},
+      {"bench web --speed nan", "--speed: 'nan' is not a number"},
+      {"bench web --seconds 0", "--seconds: '0' is not a number"},
+      {"bench web --poses 101", "--poses: '101' is not a whole number from 0 to 100"},
+      {"bench web --max-fps inf", "--max-fps: 'inf' is not a number"},
+      {"bench web --size 10x10", "--size: expected WIDTHxHEIGHT, e.g. 1280x720"},
   };
   for (const auto& c : cases) ExpectBadOption(c.args, c.message);
 }
