@@ -4,6 +4,10 @@
 // The walker is the thin client's headless walk (client/walkthrough.h), as in ClientWalk.*.
 #include <signal.h>
 #include <sys/wait.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/time.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -43,8 +47,9 @@ double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 // rendering client share two cores) behind HAProxy; `drain` is each replica's --drain; with
 // `store`, both share the PVS store at that Redis address.
 std::unique_ptr<test::Balancer> StartBalanced(const std::string& test_name, const std::string& drain,
-                                              std::string* error, const std::string& store = "") {
+                                              std::string* error, const std::string& store = "", bool web = false) {
   test::BalancerOptions o;
+  o.web = web;
   o.replicas = 2;
   o.replica_args = {"--scene", "default", "--threads", "1", "--drain", drain};
   if (!store.empty()) o.replica_args.insert(o.replica_args.end(), {"--store", store});
@@ -186,15 +191,26 @@ TEST(Balancer, TheExampleConfigurationIsValidAndTakesADrainingReplicaOutWithinTh
   EXPECT_NE(directives.find("http-check send meth GET uri /healthz"), std::string::npos);
   EXPECT_EQ(directives.find("shutdown-sessions"), std::string::npos) << "a DOWN replica's walkers would be cut off";
   EXPECT_EQ(directives.find("http-buffer-request"), std::string::npos) << "a stream's body never ends";
-  int servers = 0;
+  int servers = 0, web_servers = 0;
   std::istringstream server_lines(directives);
+  std::string section;
   for (std::string l; std::getline(server_lines, l);) {
+    if (l.starts_with("backend ") || l.starts_with("frontend ")) section = l;
     if (l.find("    server ") != 0) continue;
+    if (section.starts_with("backend web_replicas")) {
+      // The browser client's: HTTP/1.1 (a WebSocket upgrades it), checked on the metrics port.
+      ++web_servers;
+      EXPECT_EQ(l.find(" proto h2"), std::string::npos) << l;
+      EXPECT_NE(l.find(" check port 9464"), std::string::npos) << l;
+      continue;
+    }
     ++servers;
     EXPECT_NE(l.find(" proto h2 "), std::string::npos) << l;
     EXPECT_NE(l.find(" check check-proto h1 port 9464"), std::string::npos) << l;
   }
   EXPECT_GE(servers, 2);
+  EXPECT_GE(web_servers, 2);
+  EXPECT_NE(directives.find("frontend vistream_web"), std::string::npos);
   // DOWN within inter + fastinter x (fall - 1) of the first 503, each check taking up to
   // `timeout check`; the default drain must be longer.
   const double inter = HaproxySeconds(ValueOn(directives, "default-server", "inter"));
@@ -232,6 +248,40 @@ TEST(Balancer, TheHelperStartsReplicasBehindHaproxyThatServeThroughIt) {
   EXPECT_EQ(SessionsOn(*b, 1), 1);
   EXPECT_TRUE(first.Finish().ok());
   EXPECT_TRUE(second.Finish().ok());
+}
+
+// deploy/haproxy.cfg's web frontend: the browser client's page, and the upgrade of /session to a
+// WebSocket, reach the replicas' web listeners through HAProxy.
+TEST(Balancer, TheBrowsersPageAndItsWebSocketGoThroughTheWebFrontend) {
+  std::string error;
+  auto b = StartBalanced("balancer_web", "5", &error, "", /*web=*/true);
+  ASSERT_NE(b, nullptr) << error;
+  const int port = std::stoi(b->web_address().substr(b->web_address().rfind(':') + 1));
+  const auto [status, body] = ::vistream::test::HttpGet(port, "/?scene=default");
+  EXPECT_EQ(status, 200) << body;
+  EXPECT_NE(body.find("<title>vistream</title>"), std::string::npos) << body;
+  // The WebSocket handshake (RFC 6455 section 4), by hand: 101 from a replica through HAProxy.
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(static_cast<uint16_t>(port));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  timeval timeout{10, 0};
+  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+  ASSERT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
+  const std::string upgrade =
+      "GET /session HTTP/1.1\r\nHost: vistream\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
+  ASSERT_EQ(write(fd, upgrade.data(), upgrade.size()), static_cast<ssize_t>(upgrade.size()));
+  char buf[1024];
+  const ssize_t n = read(fd, buf, sizeof(buf));
+  close(fd);
+  ASSERT_GT(n, 0);
+  const std::string reply(buf, static_cast<size_t>(n));
+  EXPECT_EQ(reply.rfind("HTTP/1.1 101", 0), 0u) << reply;
+  // The key's accept value (RFC 6455's own example).
+  EXPECT_NE(reply.find("s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), std::string::npos) << reply;
 }
 
 // Two replicas behind HAProxy sharing one real redis-server: the cells a walker's replica

@@ -267,7 +267,18 @@ struct BalancerOptions {
   std::string config_template;  // the HAProxy configuration to adapt: deploy/haproxy.cfg
   std::string haproxy = "/usr/sbin/haproxy";
   std::string dir;              // a folder for the configuration, the socket and the logs
+  // Each replica also serves the browser client (--web-listen on a free port; the page must be
+  // built), behind HAProxy's web frontend; off: that frontend has no server.
+  bool web = false;
 };
+
+// The web port of a vistream-server ready line ("...; web page on http://HOST:PORT/"); 0 if none.
+inline int WebPortOf(const std::string& ready_line) {
+  const size_t at = ready_line.find("web page on ");
+  if (at == std::string::npos) return 0;
+  const size_t colon = ready_line.find(':', ready_line.find("//", at) + 2);
+  return colon == std::string::npos ? 0 : std::atoi(ready_line.c_str() + colon + 1);
+}
 
 class Balancer {
  public:
@@ -290,6 +301,7 @@ class Balancer {
     }
     b->port_ = FreeLoopbackPort();
     b->address_ = "127.0.0.1:" + std::to_string(b->port_);
+    b->web_address_ = "127.0.0.1:" + std::to_string(FreeLoopbackPort());
     b->socket_ = options.dir + "/haproxy.sock";
     b->log_ = options.dir + "/haproxy.log";
     std::string config;
@@ -354,6 +366,8 @@ class Balancer {
 
   // HAProxy's frontend, for clients.
   const std::string& address() const { return address_; }
+  // HAProxy's web frontend (the browser client's page and WebSocket sessions).
+  const std::string& web_address() const { return web_address_; }
   size_t size() const { return replicas_.size(); }
   // Replica k as HAProxy names it (replica1, replica2, ...).
   const std::string& name(size_t k) const { return replicas_[k].name; }
@@ -379,6 +393,7 @@ class Balancer {
     const bool again = r.metrics_port != 0;
     args.insert(args.end(), {"--listen", again ? r.address : "127.0.0.1:0", "--metrics-listen",
                              "127.0.0.1:" + std::to_string(r.metrics_port)});
+    if (options_.web) args.insert(args.end(), {"--web-listen", "127.0.0.1:" + std::to_string(r.web_port)});
     r.log = options_.dir + "/" + r.name + (again ? "-" + std::to_string(++r.restarts) : "") + ".log";
     std::string why;
     r.server = RunningServer::Start(options_.server_bin, args, &why, r.log);
@@ -390,6 +405,10 @@ class Balancer {
     r.metrics_port = MetricsPortOf(r.server->ready_line());
     if (r.metrics_port == 0) {
       *error = r.name + ": no metrics port in its ready line: " + r.server->ready_line();
+      return false;
+    }
+    if (options_.web && (r.web_port = WebPortOf(r.server->ready_line())) == 0) {
+      *error = r.name + ": no web port in its ready line: " + r.server->ready_line();
       return false;
     }
     return true;
@@ -444,6 +463,7 @@ class Balancer {
   struct Replica {
     std::string name, address, log;
     int metrics_port = 0;
+    int web_port = 0;  // with BalancerOptions::web
     int restarts = 0;
     std::unique_ptr<RunningServer> server;
   };
@@ -482,9 +502,15 @@ class Balancer {
     const std::vector<std::pair<std::string, std::string>> timers = {
         {" inter 2s", " inter 200ms"}, {" fastinter 500ms", " fastinter 100ms"}, {" downinter 2s", " downinter 200ms"}};
     bool bind = false, socket = false, log = false, timed = false, servers = false, maxconn = false;
+    bool web_bind = false, web_servers = false;
+    std::string section;  // "frontend NAME" / "backend NAME" the line is in
     std::ostringstream out;
     for (std::string line; std::getline(in, line);) {
       const std::string t = line.substr(std::min(line.size(), line.find_first_not_of(' ')));
+      if (line.starts_with("frontend ") || line.starts_with("backend ") || line.starts_with("defaults") ||
+          line.starts_with("global")) {
+        section = line;
+      }
       if (t.starts_with("log /dev/log")) {
         out << "    log stderr format raw local0 info\n";
         log = true;
@@ -496,6 +522,18 @@ class Balancer {
         maxconn = true;
       } else if (t == "user haproxy" || t == "group haproxy" || t == "daemon") {
         continue;  // the test's own user, in the foreground
+      } else if (t == "bind :8080") {
+        out << "    bind " << web_address_ << "\n";  // the browser client's frontend
+        web_bind = true;
+      } else if (t.starts_with("server ") && section == "backend web_replicas") {
+        if (web_servers) continue;
+        web_servers = true;
+        // server NAME ADDRESS check port METRICS_PORT: each replica's web listener, checked on
+        // its metrics port; none without BalancerOptions::web.
+        for (const Replica& r : replicas_) {
+          if (r.web_port == 0) continue;
+          out << "    server " << r.name << " 127.0.0.1:" << r.web_port << " check port " << r.metrics_port << "\n";
+        }
       } else if (t.starts_with("bind :50051 ")) {
         out << "    bind " << address_ << t.substr(std::string("bind :50051").size()) << "\n";
         bind = true;
@@ -538,6 +576,8 @@ class Balancer {
     if (!log) return fail("no 'log /dev/log' line");
     if (!socket) return fail("no 'stats socket' line");
     if (!bind) return fail("no 'bind :50051' line");
+    if (!web_bind) return fail("no 'bind :8080' line (the browser client's frontend)");
+    if (!web_servers) return fail("no 'server' line in 'backend web_replicas'");
     if (!timed) return fail("no 'default-server' line");
     if (!servers) return fail("no 'server' line");
     *config = out.str();
@@ -566,7 +606,7 @@ class Balancer {
   BalancerOptions options_;
   std::vector<Replica> replicas_;
   int port_ = 0;
-  std::string address_, socket_, log_;
+  std::string address_, web_address_, socket_, log_;
   pid_t haproxy_pid_ = -1;
 };
 
