@@ -47,6 +47,7 @@ struct BenchWebArgs {
   double seconds = 60.0;
   std::string size = "1280x720";
   int poses = 10;
+  bool masks = true;     // false: both draw the viewcell PVS whole (a baseline)
   double max_fps = 0.0;  // both clients; 0: the page every animation frame (60 Hz), the native as fast as it draws
   std::string screenshot;
   bool json = false;
@@ -125,8 +126,8 @@ int BenchWeb(const BenchWebArgs& a) {
 
   // The page first, then the native client.
   const std::string url =
-      absl::StrFormat("%s?scene=%s&walk=%s&speed=%g&seconds=%g&memory_mb=%g&max_fps=%g", base, UrlEncode(a.scene),
-                      UrlEncode(path), a.speed_kmh, a.seconds, memory_mb, a.max_fps);
+      absl::StrFormat("%s?scene=%s&walk=%s&speed=%g&seconds=%g&memory_mb=%g&max_fps=%g%s", base, UrlEncode(a.scene),
+                      UrlEncode(path), a.speed_kmh, a.seconds, memory_mb, a.max_fps, a.masks ? "" : "&masks=off");
   std::fprintf(stderr, "bench web: the page (chromium, SwiftShader) along '%s' ...\n", path.c_str());
   std::vector<std::string> argv = {"node",   headless, "--url", url, "--seconds", absl::StrFormat("%g", a.seconds + 60),
                                    "--until-walk-done", "--size", a.size, "--id-passes", std::to_string(a.poses),
@@ -159,7 +160,7 @@ int BenchWeb(const BenchWebArgs& a) {
   o.width = width;
   o.height = height;
   o.max_fps = a.max_fps;
-  o.use_masks = true;
+  o.use_masks = a.masks;
   o.lod_tau_px = 0.0;  // full detail, as the page
   o.memory_budget_bytes = static_cast<uint64_t>(memory_mb * 1048576.0);
   o.local_scene = &loaded->scene;
@@ -224,6 +225,7 @@ int BenchWeb(const BenchWebArgs& a) {
   out["size"] = a.size;
   out["memory_mb"] = memory_mb;
   out["max_fps"] = a.max_fps;
+  out["masks"] = a.masks;
   out["page"] = {{"renderer", p["renderer"]},
                  {"frames", ps["frames"]},
                  {"fps", page_frames / page_walk},
@@ -300,6 +302,7 @@ void AddBenchWebCommand(CLI::App* bench, std::function<void(int)> done) {
   c->add_option("--max-fps", args->max_fps,
                 "frame rate cap of both clients (0: the page at every animation frame, the native as fast as it draws)")
       ->check(FiniteRange(0.0, 1000.0))->capture_default_str();
+  c->add_flag("!--no-masks", args->masks, "both clients ask for no ε-masks and draw the viewcell PVS whole");
   c->add_option("--screenshot", args->screenshot, "a PNG of the page at the walk's end");
   c->add_flag("--json", args->json, "print one JSON object");
 }
