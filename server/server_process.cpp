@@ -9,7 +9,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <filesystem>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -92,6 +91,9 @@ int RunServerProcess(const ServerProcessOptions& run) {
   const bool emulate_link = run.emulate_link;
   const double time_scale = run.time_scale;
   const uint64_t link_seed = run.link_seed;
+  // The page's folder, when the web listener is on.
+  const std::string web_root =
+      config.web_listen.empty() ? "" : config.web_root.empty() ? DefaultWebRoot() : config.web_root;
   ServerOptions server_options;
   server_options.listen = config.listen;
   server_options.max_sessions = config.max_sessions;
@@ -126,12 +128,8 @@ int RunServerProcess(const ServerProcessOptions& run) {
                      std::string(st.message()).c_str());
         return 2;
       }
-      const std::string root = config.web_root.empty() ? DefaultWebRoot() : config.web_root;
-      if (std::error_code ec; !std::filesystem::is_regular_file(std::filesystem::path(root) / "index.html", ec)) {
-        std::fprintf(stderr,
-                     "vistream-server: error: web.root: %s holds no index.html: the page is built by ./vistream.sh "
-                     "(npm and esbuild, into build/web) or installed with the package (share/vistream/web)\n",
-                     root.c_str());
+      if (absl::Status st = CheckWebRoot(web_root); !st.ok()) {
+        std::fprintf(stderr, "vistream-server: error: %s\n", std::string(st.message()).c_str());
         return 2;
       }
     }
@@ -349,15 +347,12 @@ int RunServerProcess(const ServerProcessOptions& run) {
   if (!config.web_listen.empty()) {
     WebOptions w;
     w.listen = config.web_listen;
-    w.root = config.web_root.empty() ? DefaultWebRoot() : config.web_root;
+    w.root = web_root;
     w.tls_cert = config.tls_cert;
     w.tls_key = config.tls_key;
     w.tls_client_ca = config.tls_client_ca;
     w.hello_timeout_s = config.hello_timeout_s;
-    // As the gRPC listener's limit: 1 MiB plus room for a Hello that lists every object.
-    size_t objects = 0;
-    for (const ServedScene* s : scenes) objects = std::max(objects, s->scene().objects.size());
-    w.max_message_bytes = (size_t{1} << 20) + 5 * objects;
+    w.max_message_bytes = (*server)->service().max_receive_bytes();  // the gRPC listener's limit
     absl::StatusOr<std::unique_ptr<WebServer>> started = WebServer::Start(&(*server)->service(), w, &log);
     if (!started.ok()) {
       std::fprintf(stderr, "vistream-server: error: web.listen: %s\n", std::string(started.status().message()).c_str());

@@ -189,6 +189,13 @@ void WalkthroughService::Drain() {
   for (auto& [id, e] : open) e.link->End(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
 }
 
+size_t WalkthroughService::max_receive_bytes() const {
+  if (options_.max_receive_bytes != 0) return options_.max_receive_bytes;
+  size_t objects = 0;
+  for (const ServedScene* scene : scenes_.scenes) objects = std::max(objects, scene->scene().objects.size());
+  return (size_t{1} << 20) + 5 * objects;
+}
+
 size_t WalkthroughService::active_sessions() const {
   std::lock_guard lock(mu_);
   return sessions_.size() + ending_;
@@ -313,13 +320,7 @@ absl::StatusOr<std::unique_ptr<WalkthroughServer>> WalkthroughServer::Start(std:
                            options.credentials != nullptr ? options.credentials : grpc::InsecureServerCredentials(),
                            &s->port_);
   builder.RegisterService(s->service_.get());
-  size_t max_receive = options.max_receive_bytes;
-  if (max_receive == 0) {
-    size_t objects = 0;
-    for (const ServedScene* scene : scenes) objects = std::max(objects, scene->scene().objects.size());
-    max_receive = (size_t{1} << 20) + 5 * objects;
-  }
-  builder.SetMaxReceiveMessageSize(static_cast<int>(std::min<size_t>(max_receive, 1u << 30)));
+  builder.SetMaxReceiveMessageSize(static_cast<int>(std::min<size_t>(s->service_->max_receive_bytes(), 1u << 30)));
   // Keepalive: ping an idle client every 20 s, drop it after 10 s without an answer; accept
   // client pings no more often than every 10 s (clients must keep their interval above it).
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 20000);

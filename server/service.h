@@ -97,6 +97,9 @@ class WalkthroughService final
   // null without emulation.
   void Remove(uint64_t id, const grpc::Status& status, const LinkFigures* link = nullptr);
   const ServerOptions& options() const { return options_; }
+  // The largest client message taken (ServerOptions::max_receive_bytes, or its default: 1 MiB
+  // plus room for a Hello that lists every object of the largest scene). Every transport's limit.
+  size_t max_receive_bytes() const;
 
  private:
   SceneDirectory scenes_;

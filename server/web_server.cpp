@@ -28,6 +28,7 @@
 
 #include "proto/walkthrough.pb.h"
 #include "server/security.h"
+#include "server/server_config.h"
 #include "server/session_reactor.h"
 
 namespace vistream::server {
@@ -50,6 +51,15 @@ std::string DefaultWebRoot() {
     if (fs::is_regular_file(installed / "index.html", ec)) return installed.string();
   }
   return VISTREAM_BINARY_DIR "/web";
+}
+
+absl::Status CheckWebRoot(const std::string& root) {
+  std::error_code ec;
+  if (fs::is_regular_file(fs::path(root) / "index.html", ec)) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrCat("web.root '", root,
+                   "' holds no index.html: the page is built by ./vistream.sh (npm and esbuild, into build/web) "
+                   "or installed with the package (share/vistream/web)"));
 }
 
 namespace {
@@ -578,27 +588,15 @@ void WebServer::Impl::Accept() {
 
 absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(WalkthroughService* service, const WebOptions& options,
                                                             EventLog* log) {
-  const size_t colon = options.listen.rfind(':');
-  if (colon == std::string::npos || colon == 0) {
+  if (!IsHostPort(options.listen)) {
     return absl::InvalidArgumentError(absl::StrCat("web.listen '", options.listen,
                                                    "': expected HOST:PORT with a port from 0 to 65535, e.g. 127.0.0.1:8080"));
   }
+  const size_t colon = options.listen.rfind(':');
   std::string host = options.listen.substr(0, colon);
   const std::string port = options.listen.substr(colon + 1);
-  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
-  char* end = nullptr;
-  const long number = port.empty() ? -1 : std::strtol(port.c_str(), &end, 10);
-  if (port.empty() || *end != '\0' || number < 0 || number > 65535) {
-    return absl::InvalidArgumentError(absl::StrCat("web.listen '", options.listen,
-                                                   "': expected HOST:PORT with a port from 0 to 65535, e.g. 127.0.0.1:8080"));
-  }
-  std::error_code fe;
-  if (!fs::is_regular_file(fs::path(options.root) / "index.html", fe)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("web.root '", options.root,
-                     "' holds no index.html: the page is built by ./vistream.sh (npm and esbuild, into build/web) "
-                     "or installed with the package (share/vistream/web)"));
-  }
+  if (host.front() == '[') host = host.substr(1, host.size() - 2);  // [::1]
+  if (absl::Status st = CheckWebRoot(options.root); !st.ok()) return st;
   if (options.threads < 1 || !(options.write_timeout_s > 0.0) || !(options.idle_timeout_s > 0.0)) {
     return absl::InvalidArgumentError("web: threads, the write timeout and the idle timeout must be positive");
   }

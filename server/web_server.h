@@ -56,6 +56,10 @@ struct WebOptions {
 // installed share/vistream/web beside bin/, else the build's web/ folder.
 std::string DefaultWebRoot();
 
+// Whether `root` holds the page (index.html). Errors: INVALID_ARGUMENT "web.root 'ROOT' holds no
+// index.html: ..." saying how the page is built or installed.
+absl::Status CheckWebRoot(const std::string& root);
+
 class WebServer {
  public:
   // Binds `options.listen` and serves until Stop. `service` (not owned) admits and serves the

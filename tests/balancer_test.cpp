@@ -4,10 +4,6 @@
 // The walker is the thin client's headless walk (client/walkthrough.h), as in ClientWalk.*.
 #include <signal.h>
 #include <sys/wait.h>
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <sys/time.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -260,25 +256,13 @@ TEST(Balancer, TheBrowsersPageAndItsWebSocketGoThroughTheWebFrontend) {
   const auto [status, body] = ::vistream::test::HttpGet(port, "/?scene=default");
   EXPECT_EQ(status, 200) << body;
   EXPECT_NE(body.find("<title>vistream</title>"), std::string::npos) << body;
-  // The WebSocket handshake (RFC 6455 section 4), by hand: 101 from a replica through HAProxy.
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  ASSERT_GE(fd, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<uint16_t>(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  timeval timeout{10, 0};
-  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
-  ASSERT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
-  const std::string upgrade =
+  // The WebSocket handshake (RFC 6455 section 4), by hand: 101 from a replica through HAProxy
+  // (which keeps the connection: its first answer is read).
+  const std::string reply = tools::LoopbackExchange(
+      port,
       "GET /session HTTP/1.1\r\nHost: vistream\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
-  ASSERT_EQ(write(fd, upgrade.data(), upgrade.size()), static_cast<ssize_t>(upgrade.size()));
-  char buf[1024];
-  const ssize_t n = read(fd, buf, sizeof(buf));
-  close(fd);
-  ASSERT_GT(n, 0);
-  const std::string reply(buf, static_cast<size_t>(n));
+      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
+      /*first_read_only=*/true, /*timeout_s=*/10);
   EXPECT_EQ(reply.rfind("HTTP/1.1 101", 0), 0u) << reply;
   // The key's accept value (RFC 6455's own example).
   EXPECT_NE(reply.find("s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), std::string::npos) << reply;

@@ -49,26 +49,36 @@ inline int FreeLoopbackPort() {
   return port;
 }
 
-// GET http://127.0.0.1:PORT/PATH over HTTP/1.0 (the server closes after its answer): the status
-// (0 when nothing answers within 5 s) and the body.
-inline std::pair<int, std::string> HttpGet(int port, const std::string& path) {
+// Sends `request` to 127.0.0.1:PORT and returns what comes back: everything until the server
+// closes, or with `first_read_only` what its first read gives (a server that keeps the
+// connection, e.g. after a WebSocket handshake). Empty when nothing answers within `timeout_s`.
+inline std::string LoopbackExchange(int port, const std::string& request, bool first_read_only = false,
+                                    int timeout_s = 5) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return {0, ""};
+  if (fd < 0) return "";
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_port = htons(static_cast<uint16_t>(port));
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  timeval timeout{5, 0};
+  timeval timeout{timeout_s, 0};
   setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
   std::string reply;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0) {
-    const std::string request = "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n";
-    if (write(fd, request.data(), request.size()) == static_cast<ssize_t>(request.size())) {
-      char buf[4096];
-      for (ssize_t n; (n = read(fd, buf, sizeof(buf))) > 0;) reply.append(buf, static_cast<size_t>(n));
+  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0 &&
+      write(fd, request.data(), request.size()) == static_cast<ssize_t>(request.size())) {
+    char buf[4096];
+    for (ssize_t n; (n = read(fd, buf, sizeof(buf))) > 0;) {
+      reply.append(buf, static_cast<size_t>(n));
+      if (first_read_only) break;
     }
   }
   close(fd);
+  return reply;
+}
+
+// GET http://127.0.0.1:PORT/PATH over HTTP/1.0 (the server closes after its answer): the status
+// (0 when nothing answers within 5 s) and the body.
+inline std::pair<int, std::string> HttpGet(int port, const std::string& path) {
+  const std::string reply = LoopbackExchange(port, "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n");
   // "HTTP/1.1 200 OK\r\n...\r\n\r\nBODY"
   const size_t space = reply.find(' ');
   if (!reply.starts_with("HTTP/") || space == std::string::npos) return {0, ""};

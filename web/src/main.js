@@ -219,18 +219,22 @@ function along(w, s) {
 // Start-up (client/walkthrough_startup.cpp): the walk's clock starts once the cell it starts in
 // and the first cell it enters are complete; frames until then are not counted.
 let started = false;
+
+// client/cell_completion.h's rule: a viewcell is complete once its PVS list is held and every
+// object on it (null: outside the grid, never complete).
+function cellComplete(cell) {
+  const list = cell !== null ? lists.get(cell) : undefined;
+  return list !== undefined && list.every((id) => objects.has(id));
+}
+
 function startupDone() {
-  const complete = (cell) => {
-    const list = lists.get(cell);
-    return list !== undefined && list.every((id) => objects.has(id));
-  };
   const here = grid.cellOf(eye.position[0], eye.position[1]);
-  if (here === null || !complete(here)) return false;
+  if (here === null || !cellComplete(here)) return false;
   if (!walk) return true;
   for (let s = 0; s <= walk.length; s += grid.size / 4) {
     const p = along(walk, s);
     const c = grid.cellOf(p.x, p.y);
-    if (c !== null && c !== here) return complete(c);
+    if (c !== null && c !== here) return cellComplete(c);
   }
   return true;
 }
@@ -456,8 +460,8 @@ function draw(now) {
   const start = performance.now();
   const cell = grid.cellOf(eye.position[0], eye.position[1]);
   masks.keepNear(cell, grid);
-  const list = cell !== null ? lists.get(cell) : undefined;
-  const complete = list !== undefined && list.every((id) => objects.has(id));
+  const complete = cellComplete(cell);
+  const list = complete ? lists.get(cell) : undefined;
   const choice = options.masks ? masks.choose(eye.position, (id) => objects.has(id)) : { mask: null };
   const mask = choice.mask;
   const hole = mask === null && !complete;
@@ -533,9 +537,9 @@ function minimap() {
   const py = (y) => (H - 30) / 2 - (y - ey) * scale;
   ctx.fillStyle = 'rgba(255,255,255,0.9)';
   ctx.fillRect(0, 0, W, H);
-  for (const [cell, list] of lists) {
+  for (const cell of lists.keys()) {
     const [i, j] = grid.coord(cell);
-    ctx.fillStyle = list.every((id) => objects.has(id)) ? 'rgba(60,170,80,0.45)' : 'rgba(240,150,40,0.6)';
+    ctx.fillStyle = cellComplete(cell) ? 'rgba(60,170,80,0.45)' : 'rgba(240,150,40,0.6)';
     const x0 = grid.x0 + i * grid.size;
     const y1 = grid.y0 + (j + 1) * grid.size;
     ctx.fillRect(px(x0), py(y1), grid.size * scale, grid.size * scale);
