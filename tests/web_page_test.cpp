@@ -74,15 +74,18 @@ std::string PageUrl(const RunningServer& s) {
 }
 
 TEST(WebPage, TheDefaultTownsWalkAt60KmhDrawsMaskedFramesWithoutAStall) {
-  const int port = tools::FreeLoopbackPort();
-  std::unique_ptr<RunningServer> server =
-      Start({"--scene", "default", "--web-listen", "127.0.0.1:" + std::to_string(port)});
+  // Port 0: the server picks a free one and names it (a port picked here first could be taken
+  // by a test running beside this one before the server binds it).
+  std::unique_ptr<RunningServer> server = Start({"--scene", "default", "--web-listen", "127.0.0.1:0"});
   ASSERT_NE(server, nullptr);
   const std::string url = PageUrl(*server);
-  ASSERT_EQ(url, "http://127.0.0.1:" + std::to_string(port) + "/") << server->ready_line();
+  ASSERT_EQ(url.rfind("http://127.0.0.1:", 0), 0u) << server->ready_line();
+  ASSERT_GT(tools::WebPortOf(server->ready_line()), 0) << server->ready_line();
+  ASSERT_EQ(url, "http://127.0.0.1:" + std::to_string(tools::WebPortOf(server->ready_line())) + "/");
   const std::string shot = vistream::testing::ProcessTempDir() + "/web-default.png";
-  const Headless h = RunPage("--url '" + url + "?scene=default&walk=avenue-and-back-streets&speed=60' --seconds 15 " +
-                             "--id-passes 2 --screenshot " + shot);
+  // 12 s of walk, however long a loaded machine takes to start the browser (at most 120 s).
+  const Headless h = RunPage("--url '" + url + "?scene=default&walk=avenue-and-back-streets&speed=60&seconds=12' " +
+                             "--seconds 120 --until-walk-done --id-passes 2 --id-span 12 --screenshot " + shot);
   ASSERT_EQ(h.code, 0) << h.text;
   ASSERT_TRUE(h.out.is_object()) << h.text;
   const json& s = h.out["summary"];
@@ -138,25 +141,40 @@ TEST(WebPage, AnUnknownSceneAMissingOneAndARefusedTokenAreSaidOnThePageOverWss) 
 }
 
 TEST(WebPage, AServerKilledMidWalkAndStartedAgainIsResumedWithNothingSentTwice) {
-  const int grpc_port = tools::FreeLoopbackPort();
-  const int web_port = tools::FreeLoopbackPort();
-  const std::vector<std::string> args = {"--scene", "default", "--web-listen", "127.0.0.1:" + std::to_string(web_port)};
+  // The first start picks free ports (0); the restart takes the same ones again.
+  int grpc_port = 0, web_port = 0;
+  std::string first_log;
   auto start = [&] {
-    std::vector<std::string> a = args;
-    a.insert(a.begin(), {"--listen", "127.0.0.1:" + std::to_string(grpc_port), "--web-root", VISTREAM_WEB_ROOT});
+    const std::vector<std::string> a = {"--listen",     "127.0.0.1:" + std::to_string(grpc_port),
+                                        "--web-root",   VISTREAM_WEB_ROOT,
+                                        "--scene",      "default",
+                                        "--web-listen", "127.0.0.1:" + std::to_string(web_port)};
     std::string error;
-    std::unique_ptr<RunningServer> s = RunningServer::Start(VISTREAM_SERVER_BIN, a, &error, LogFile());
+    const std::string log = LogFile();
+    if (first_log.empty()) first_log = log;
+    std::unique_ptr<RunningServer> s = RunningServer::Start(VISTREAM_SERVER_BIN, a, &error, log);
     EXPECT_NE(s, nullptr) << error;
     return s;
   };
   std::unique_ptr<RunningServer> server = start();
   ASSERT_NE(server, nullptr);
+  grpc_port = server->port();
+  web_port = tools::WebPortOf(server->ready_line());
+  ASSERT_GT(web_port, 0) << server->ready_line();
+  // The page walks until it has reconnected and walked 12 s in all (at most 120 s, however slow
+  // a loaded machine is).
   Headless h;
   std::thread page([&] {
     h = RunPage("--url 'http://127.0.0.1:" + std::to_string(web_port) +
-                "/?scene=default&walk=avenue-and-back-streets&speed=30' --seconds 20");
+                "/?scene=default&walk=avenue-and-back-streets&speed=30' --seconds 120 --until-sessions 2 "
+                "--min-walk 12");
   });
-  std::this_thread::sleep_for(std::chrono::seconds(8));
+  // The server is killed once the walker has crossed into another viewcell (it is walking).
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(90);
+  while (vistream::testing::ReadText(first_log).find(" crossing ") == std::string::npos &&
+         std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
   server->Stop(SIGKILL);
   std::this_thread::sleep_for(std::chrono::seconds(2));
   server = start();

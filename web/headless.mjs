@@ -4,6 +4,7 @@
 //
 //   node web/headless.mjs --url URL [--seconds S] [--until-walk-done] [--size 1280x720]
 //        [--screenshot FILE.png] [--id-passes N [--id-span S]] [--chromium PATH] [--insecure-tls]
+//        [--until-sessions N [--min-walk S]]
 //
 // Prints one JSON object: the page's window.vistream.summary() at the end, the load timings
 // (navigation to the first drawn frame), and, with --id-passes N, N id passes spread over the
@@ -27,9 +28,14 @@ const seconds = Number(opt('seconds', '10'));
 const [width, height] = opt('size', '1280x720').split('x').map(Number);
 const screenshot = opt('screenshot', '');
 const idPasses = Number(opt('id-passes', '0'));
-// The id passes are spread over this many seconds (default: the whole run).
+// The id passes are spread over this many seconds of the walk, from when it starts (default: the
+// whole run).
 const idSpan = Number(opt('id-span', String(seconds)));
 const chromium = opt('chromium', process.env.VISTREAM_CHROMIUM || '/usr/bin/chromium');
+// Ends the run early once the page has opened this many sessions (a reconnect) and walked at
+// least --min-walk seconds.
+const untilSessions = Number(opt('until-sessions', '0'));
+const minWalk = Number(opt('min-walk', '0'));
 
 const browser = await puppeteer.launch({
   executablePath: chromium,
@@ -53,14 +59,16 @@ try {
   const passes = [];
   const until = started + seconds * 1000;
   const step = idPasses > 0 ? (idSpan * 1000) / (idPasses + 1) : 0;
-  let nextPass = started + step;
+  let nextPass = null;  // set once the walk has started
   for (;;) {
     const now = Date.now();
     const s = await page.evaluate(() => window.vistream ? window.vistream.summary() : null);
     if (s && (s.state === 'error')) break;
     if (flag('until-walk-done') && s && s.walk_done) break;
+    if (untilSessions > 0 && s && s.sessions >= untilSessions && s.state === 'walking' && s.walk_s >= minWalk) break;
     if (now >= until) break;
-    if (idPasses > 0 && passes.length < idPasses && now >= nextPass) {
+    if (nextPass === null && s && s.walk_s > 0) nextPass = now + step;
+    if (idPasses > 0 && nextPass !== null && passes.length < idPasses && now >= nextPass) {
       passes.push(await page.evaluate(() => window.vistream.idPass()));
       nextPass += step;
     }
