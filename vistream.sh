@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# vistream set-up and entry point. The README's two commands:
+# vistream set-up and entry point. The two commands of the README (README.md, "The two commands"):
 #   ./vistream.sh run    install what is missing, configure, build, run the main job
 #   ./vistream.sh test   install what is missing, configure, build, run every test
 # Both are idempotent: a second call with nothing changed only re-checks and rebuilds nothing.
@@ -22,7 +22,7 @@ PACKAGES=(
   libssl-dev openssl   # TLS: checking PEM files (server and client), certificates made by the tests and bench server --tls
   dpkg-dev systemd   # the package (cpack -G DEB: dpkg-shlibdeps) and its unit's check (systemd-analyze)
   libhiredis-dev redis-server   # the PVS store replicas share (Redis), and the real Redis its tests start
-  stunnel4   # a TLS-only Redis reached through stunnel, as README "Beyond one machine" says (tested)
+  stunnel4   # a TLS-only Redis reached through stunnel, as docs/scaling-out.md says (tested)
   libcitygml-dev   # the CityGML reader (scenes/citygml_read.cpp)
   haproxy   # the load balancer in front of replicas (deploy/haproxy.cfg); balancer_test runs it
   chromium   # the browser client's tests and `vistream bench web` (headless, WebGL 2 through SwiftShader)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's picture of the client's overlay: vistream-server on a scene (default london) on
+# The picture of the client's overlay (README.md, docs/client.md, docs/benchmarks.md): vistream-server on a scene (default london) on
 # a free loopback port, the headless client along the scene's first walk with --overlay for
 # SECONDS (default 60) of it, its last frame copied to OUT (default
 # bench/figures/client_overlay_london.png), the overlay's lines beside it (.txt), and the

@@ -1,6 +1,6 @@
 #pragma once
-// The PVS store: viewcell PVSs shared in Redis by every replica of a service (issue 33, README
-// "Beyond one machine"), behind each replica's own cache. A PVS worker that misses the cache
+// The PVS store: viewcell PVSs shared in Redis by every replica of a service (issue 33,
+// docs/scaling-out.md), behind each replica's own cache. A PVS worker that misses the cache
 // reads the store before it computes, and writes what it computed back (SET NX: two replicas
 // that computed one cell at once leave the first answer). `vistream pvs --all --store` fills
 // it ahead of traffic.
@@ -14,8 +14,8 @@
 // Redis unreachable, slow or restarted: a read or write fails within its deadline, the store is
 // marked down and its callers go on without it (the local cache and computation) until the next
 // attempt, with back-off doubling from 0.1 s. Transitions are logged once each, not per call.
-// Client: hiredis (Debian libhiredis-dev 0.14: no TLS; README "Beyond one machine" says how to
-// reach a TLS Redis).
+// Client: hiredis (Debian libhiredis-dev 0.14: no TLS; docs/scaling-out.md says how to reach a
+// TLS Redis).
 
 #include <atomic>
 #include <chrono>

@@ -2,7 +2,7 @@
 // vistream-server's command-line options for its settings, made from the one settings table
 // (server/server_config.h ServerSettings()): each setting with an option gets it (name, help
 // text, check, default shown or not, in --help's order), and each option given overrides its
-// key of the configuration file (README "Deploying"). The options that are no setting
+// key of the configuration file (docs/server.md). The options that are no setting
 // (--config, --scene, the link emulation's) stay with vistream-server's main.
 
 #include <string>

@@ -410,7 +410,7 @@ std::vector<ServerSetting> MakeSettings() {
   // [store]
   t.push_back({"store", "address", &ServerConfig::store_address, {.kind = FK::kText, .text = kStoreAddressCheck},
                "--store",
-               "Redis host:port or unix:PATH of the PVS store shared by replicas (README \"Beyond one machine\")",
+               "Redis host:port or unix:PATH of the PVS store shared by replicas (docs/scaling-out.md)",
                {.kind = OK::kText, .text = kStoreAddressCheck, .type_name = "HOST:PORT"}, 22});
   // The prefix is checked once the file is read (ParseServerConfig): a [store] without the key keeps the default.
   t.push_back({"store", "key_prefix", &ServerConfig::store_key_prefix, File(FK::kString), "--store-prefix",

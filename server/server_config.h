@@ -1,7 +1,7 @@
 #pragma once
 // vistream-server's configuration: a TOML file (`vistream-server --config FILE`, the example
 // in deploy/server.toml) whose every key a command-line option may override. The shape of the
-// file is part of the interface (issue 32, README "Deploying"):
+// file is part of the interface (issue 32; docs/deploying.md, docs/server.md):
 //
 //   listen, threads, max_sessions, catalog, grace_s, drain_s
 //   [limits]   hello_timeout_s, max_pose_rate_hz, max_sessions_per_address, max_sessions_per_token

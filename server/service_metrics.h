@@ -1,5 +1,5 @@
 #pragma once
-// What vistream-server exports on /metrics (server/metrics_http.h; README "Deploying"), named
+// What vistream-server exports on /metrics (server/metrics_http.h; docs/deploying.md), named
 // by Prometheus's rules (base units, `_total` counters, histograms), every family `vistream_`:
 //
 //   vistream_sessions_active{scene}                 sessions open (scene "" before their Hello)

@@ -40,7 +40,7 @@ std::string Import(const std::string& data, const std::string& glb, const std::s
 const std::string& DenHaag() {
   static const std::string path = Import(kDenHaag, "denhaag.glb", " --crs EPSG:28992", [](const nlohmann::json& j,
                                                                                        const std::string& out) {
-    // Most buildings occlude (1,861 of 1,990 when this was written: README "Your own city").
+    // Most buildings occlude (1,861 of 1,990 when this was written: docs/benchmarks.md, Den Haag).
     EXPECT_GT(j.at("buildings_with_occluder").get<double>(), 0.9 * j.at("buildings_drawn").get<double>()) << out;
   });
   return path;
@@ -48,7 +48,7 @@ const std::string& DenHaag() {
 
 // Delft (delft.city.json: 160 LoD1 buildings without floors, no TIN): closed with their floors
 // and standing on the terrain the import derives from them and the roads, land use and water,
-// every building occludes (README "Your own city").
+// every building occludes (docs/benchmarks.md, Delft).
 const std::string kDelft = std::string(VISTREAM_SOURCE_DIR "/../shared/data/citymodels/delft.city.json");
 
 const std::string& Delft() {

@@ -14,7 +14,7 @@
 
 namespace vistream::testing {
 
-// The tool's exit codes (README): run-time errors 1, bad options 2.
+// The tool's exit codes (docs/tool.md): run-time errors 1, bad options 2.
 inline constexpr int kRunTimeError = 1;
 inline constexpr int kBadOption = 2;
 

@@ -91,6 +91,9 @@ std::set<std::string> ExpectedTree() {
       "etc/vistream/server.toml",
       "lib/systemd/system/vistream-server.service",
       "share/doc/vistream/README.md",
+      // The deployment and scaling pages, where the README's links (docs/...) find them.
+      "share/doc/vistream/docs/deploying.md",
+      "share/doc/vistream/docs/scaling-out.md",
       "share/doc/vistream/tokens.example",
       "share/doc/vistream/haproxy.cfg",
       // The browser client's page (web/), which vistream-server serves by default from here.

@@ -282,7 +282,7 @@ TEST(PvsStore, ARedisRestartBetweenReadsCostsNoRead) {
   EXPECT_EQ(store->stats().unavailable, 0u);
 }
 
-// A Redis that speaks only TLS and wants a password, reached as the README says: through a local
+// A Redis that speaks only TLS and wants a password, reached as docs/scaling-out.md says: through a local
 // stunnel (Debian stunnel4) that verifies its certificate, with the password from the options.
 TEST(PvsStore, ATlsRedisWithAPasswordIsReachedThroughStunnel) {
   const testing::TestCerts& certs = testing::Certs();

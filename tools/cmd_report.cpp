@@ -1,8 +1,8 @@
 // vistream report: regenerates every published figure as a Markdown page with PNG plots and
 // maps. Each step runs this same binary (/proc/self/exe) as a subprocess with --json, so that
 // every number in the page is what that command printed, and the page names the command.
-// Full mode uses the README's scenes and sizes (london: an hour or more); --quick uses the
-// small scenes and counts (minutes, for CI).
+// Full mode uses the published figures' scenes and sizes (docs/benchmarks.md; london: an hour
+// or more); --quick uses the small scenes and counts (minutes, for CI).
 #include <sys/resource.h>
 #include <sys/utsname.h>
 #include <unistd.h>
@@ -50,7 +50,8 @@ struct ReportArgs {
   bool json = false;
 };
 
-// What each mode measures. Full: the README's figures; quick: the same sections, small.
+// What each mode measures. Full: the published figures (docs/benchmarks.md); quick: the same
+// sections, small.
 struct Plan {
   std::string table1_scene;
   std::vector<std::string> table1_extra;  // options after --scene
@@ -438,8 +439,9 @@ int Report(const ReportArgs& given) {
   page.Text(absl::StrCat(
       "Every number and figure below was produced by the command its section names (run by the report as a "
       "subprocess with --json, its output parsed); nothing is typed by hand. ",
-      a.quick ? "Quick mode: small scenes and counts, for CI; the README's figures come from the full run."
-              : "Full mode: the README's scenes and sizes."));
+      a.quick ? "Quick mode: small scenes and counts, for CI; the published figures (docs/benchmarks.md) come "
+                "from the full run."
+              : "Full mode: the scenes and sizes of the published figures (docs/benchmarks.md)."));
   SceneSection(page, plan);
   CitySection(page, plan);
   Table1Section(page, plan);

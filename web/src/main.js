@@ -1,4 +1,4 @@
-// vistream's browser client (README "Walk in a browser"): opens a walkthrough Session over a
+// vistream's browser client (docs/browser.md): opens a walkthrough Session over a
 // WebSocket to the server that served this page, reports its pose, and draws with three.js what
 // the server streamed, by the native client's frame rule (client/frame_loop.cpp): the ε-mask of
 // the neighbourhood the eye is in once all its objects are here (a masked frame), else the
