@@ -33,7 +33,7 @@ TEST(Cli, BadInputGivesAClearErrorAndItsExitCode) {
   ExpectBadOption("scene generate city1", "--output: is required");
   ExpectBadOption("frobnicate", "'frobnicate': not a vistream command");
   ExpectBadOption("", "'vistream' needs a command: scene, pvs, epsilon, agvs, check-conservative, bench");
-  ExpectBadOption("scene", "'vistream scene' needs a command: generate, import-osm, import-city, occluders, extrude, levels, info, map");
+  ExpectBadOption("scene", "'vistream scene' needs a command: generate, import-osm, import-city, occluders, extrude, levels, info, walks, map");
   ExpectBadOption("bench nosuch", "'nosuch': not a vistream bench command");
   ExpectBadOption("scene import-city x.city.json -o " + Tmp("never.glb") + " --ground flat", "--ground: ");
   // A CRS is AUTHORITY:CODE; a scene is written as .glb or .gltf, not into a folder or a .png,

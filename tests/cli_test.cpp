@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <glm/glm.hpp>
 #include <nlohmann/json.hpp>
 
 #include "scenes/catalog.h"
@@ -74,6 +75,54 @@ TEST(Cli, CatalogNamesWorkWithoutAFile) {
   const nlohmann::json j = nlohmann::json::parse(info.out);
   EXPECT_EQ(j.at("name"), "default");
   EXPECT_GT(j.at("objects").get<int>(), 1000);
+}
+
+// `scene walks`: the names a client's --path (or the page's ?walk=) takes, so that nobody
+// guesses them. A catalog scene lists its entry's walks in order; an imported scene those
+// derived from its data.
+TEST(Cli, SceneWalksListsTheCatalogsWalksThenTheDatas) {
+  const RunResult r = Vistream("scene walks default --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  absl::StatusOr<vistream::scenes::CatalogEntry> entry = vistream::scenes::FindCatalogEntry("default");
+  ASSERT_TRUE(entry.ok()) << entry.status();
+  ASSERT_FALSE(entry->walks.empty());
+  ASSERT_GE(j.size(), entry->walks.size());
+  for (size_t i = 0; i < entry->walks.size(); ++i) {
+    EXPECT_EQ(j[i].at("name"), entry->walks[i].name);
+    EXPECT_EQ(j[i].at("source"), "catalog");
+    EXPECT_EQ(j[i].at("points").get<size_t>(), entry->walks[i].waypoints.size());
+    double length = 0.0;
+    for (size_t k = 0; k + 1 < entry->walks[i].waypoints.size(); ++k) {
+      length += glm::distance(entry->walks[i].waypoints[k], entry->walks[i].waypoints[k + 1]);
+    }
+    EXPECT_NEAR(j[i].at("length_m").get<double>(), length, 1e-6);
+  }
+  // The plain form: one line a walk, tab-separated, the first the catalog's first.
+  const RunResult plain = Vistream("scene walks default");
+  ASSERT_EQ(plain.exit_code, 0) << plain.out;
+  const size_t tab = plain.out.find('\t');
+  ASSERT_NE(tab, std::string::npos) << plain.out;
+  const size_t line = plain.out.rfind('\n', tab) == std::string::npos ? 0 : plain.out.rfind('\n', tab) + 1;
+  EXPECT_EQ(plain.out.substr(line, tab - line), entry->walks[0].name) << plain.out;
+  EXPECT_NE(plain.out.find("points\tfrom the catalog\n"), std::string::npos) << plain.out;
+
+  // An imported OSM file: its streets' walks, derived from the data, each named and usable.
+  const std::string glb = Tmp("streets_walks.glb");
+  const RunResult imp = Vistream("scene import-osm " VISTREAM_SOURCE_DIR "/tests/osm/streets.osm -o " + glb);
+  ASSERT_EQ(imp.exit_code, 0) << imp.out;
+  const RunResult own = Vistream("scene walks " + glb + " --json");
+  ASSERT_EQ(own.exit_code, 0) << own.out;
+  const nlohmann::json w = nlohmann::json::parse(own.out);
+  ASSERT_GT(w.size(), 0u) << own.out;
+  for (const nlohmann::json& walk : w) {
+    EXPECT_EQ(walk.at("source"), "data");
+    EXPECT_FALSE(walk.at("name").get<std::string>().empty());
+    EXPECT_GE(walk.at("points").get<size_t>(), 2u);
+    EXPECT_GT(walk.at("length_m").get<double>(), 0.0);
+  }
+  // A scene that is not there: the error names it.
+  ExpectRunTimeError("scene walks " + Tmp("nope.glb"), "nope.glb");
 }
 
 TEST(Cli, PvsReportsTheSetOfAViewcell) {

@@ -10,6 +10,7 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <glm/glm.hpp>
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 #include <nlohmann/json.hpp>
@@ -625,6 +626,55 @@ int Info(const InfoArgs& a) {
   return 0;
 }
 
+// The walks of the scene `file` names: its catalog entry's (when it is a catalog name or .json),
+// then the scene's own (derived from its data), as the server serves them; `*declared` says how
+// many come from the catalog.
+std::vector<scenes::WalkPath> WalksOf(const std::string& file, const scenes::Scene& scene, size_t* declared) {
+  std::vector<scenes::WalkPath> walks;
+  const std::string ext = std::filesystem::path(file).extension().string();
+  if (ext != ".glb" && ext != ".gltf") {
+    if (auto entry = scenes::FindCatalogEntry(file); entry.ok()) walks = entry->walks;
+  }
+  *declared = walks.size();
+  return scenes::WalksWithScenePaths(walks, scene);
+}
+
+struct WalksArgs {
+  std::string file;
+  bool json = false;
+};
+
+// Lists the walks a client can name (--path, the page's ?walk=): name, length, waypoints.
+int Walks(const WalksArgs& a) {
+  if (a.json) ToolProgress().set_quiet(true);
+  absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file);
+  if (!scene.ok()) return Fail(scene.status());
+  size_t declared = 0;
+  const std::vector<scenes::WalkPath> walks = WalksOf(a.file, *scene, &declared);
+  nlohmann::ordered_json j = nlohmann::ordered_json::array();
+  for (size_t i = 0; i < walks.size(); ++i) {
+    double length = 0.0;
+    for (size_t k = 0; k + 1 < walks[i].waypoints.size(); ++k) {
+      length += glm::distance(walks[i].waypoints[k], walks[i].waypoints[k + 1]);
+    }
+    const char* source = i < declared ? "catalog" : "data";
+    if (a.json) {
+      j.push_back({{"name", walks[i].name}, {"length_m", length}, {"points", walks[i].waypoints.size()},
+                   {"source", source}});
+    } else {
+      std::printf("%s\t%.0f m\t%zu points\t%s\n", walks[i].name.c_str(), length, walks[i].waypoints.size(),
+                  i < declared ? "from the catalog" : "from the data");
+    }
+  }
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+  } else if (walks.empty()) {
+    std::fprintf(stderr, "vistream: %s has no walks (a client walks it by keys, or --path names none)\n",
+                 a.file.c_str());
+  }
+  return 0;
+}
+
 struct MapArgs {
   std::string file, output;
   int size = 2048;
@@ -635,11 +685,8 @@ struct MapArgs {
 int Map(const MapArgs& a) {
   absl::StatusOr<scenes::Scene> scene = LoadSceneArg(a.file);
   if (!scene.ok()) return Fail(scene.status());
-  std::vector<scenes::WalkPath> walks;
-  const std::string ext = std::filesystem::path(a.file).extension().string();
-  if (ext != ".glb" && ext != ".gltf") {
-    if (auto entry = scenes::FindCatalogEntry(a.file); entry.ok()) walks = entry->walks;
-  }
+  size_t declared = 0;
+  const std::vector<scenes::WalkPath> walks = WalksOf(a.file, *scene, &declared);
   TopViewMap map(scene->bounds, a.size, Rgb{245, 243, 238});
   std::vector<bool> is_terrain(scene->objects.size(), false), occludes(scene->objects.size(), false);
   for (scenes::ObjectId t : scene->terrain) is_terrain[t] = true;
@@ -691,8 +738,6 @@ int Map(const MapArgs& a) {
   }
   // The catalog's walks in red, the scene's own (derived from its data) in blue.
   const Rgb walk_colour{220, 30, 30}, path_colour{30, 80, 220};
-  const size_t declared = walks.size();
-  walks = scenes::WalksWithScenePaths(walks, *scene);
   for (size_t i = 0; i < walks.size(); ++i) {
     const scenes::WalkPath& w = walks[i];
     for (size_t k = 0; k + 1 < w.waypoints.size(); ++k) {
@@ -815,6 +860,12 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   i->add_option("FILE", info->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   i->add_flag("--json", info->json, "print one JSON object");
   i->add_option("--leaf-size", info->leaf_size, "kd-tree leaf size")->check(WholeRange(1, 1024));
+
+  auto [wk, walks] = AddSubcommand<WalksArgs>(
+      scene, "walks", "list the walks a client can follow (--path NAME): the catalog's, then those derived from the data",
+      Walks, done);
+  wk->add_option("FILE", walks->file, ".glb/.gltf file, catalog name or catalog .json")->required();
+  wk->add_flag("--json", walks->json, "print a JSON array of {name, length_m, points, source}");
 
   auto [m, map] = AddSubcommand<MapArgs>(
       scene, "map", "write a top-view PNG: footprints by height, walk paths in red", Map, done);
