@@ -34,3 +34,4 @@ set_tests_properties("WindowTest.PThenEnterFollowsAWalkAndSpacePausesIt" PROPERT
 set_tests_properties("CityImport.DenHaagFromCityGmlAndCityJsonIsTheSameScene" PROPERTIES COST 16)
 set_tests_properties("SimulatorTest.LevelsOffAreTheSameAsAScenesWithoutLevels" PROPERTIES COST 16)
 set_tests_properties("ClientMasks.WithoutMasksTheServerSendsNoneAndBothTriangleCountsAgree" PROPERTIES COST 15)
+set_tests_properties("WebPage.BenchWebThePageReceivesTheNativeClientsBytesAndShowsTheFullScenesObjects" PROPERTIES COST 25)

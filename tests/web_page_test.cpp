@@ -6,6 +6,7 @@
 // with nothing sent twice.
 
 #include <signal.h>
+#include <sys/wait.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -104,6 +105,36 @@ TEST(WebPage, TheDefaultTownsWalkAt60KmhDrawsMaskedFramesWithoutAStall) {
   for (const json& pass : h.out["id_passes"]) EXPECT_GT(pass["objects"].size(), 10u) << pass;
   EXPECT_GT(std::filesystem::file_size(shot), 10000u);
   EXPECT_EQ(server->Stop(SIGTERM), 0);
+}
+
+// `vistream bench web` (the page beside the native headless client, each through a fresh
+// server): drawing the viewcell PVS whole (--no-masks, so that no mask's timing enters) the page
+// receives the native client's bytes to the byte and its objects, and at each pose its id pass
+// shows the objects the full scene shows from the same pinhole, slivers under three pixels
+// thick apart (the two rasterizers snap differently; tools/cmd_bench_web.cpp).
+TEST(WebPage, BenchWebThePageReceivesTheNativeClientsBytesAndShowsTheFullScenesObjects) {
+  std::string out;
+  std::FILE* p = popen(VISTREAM_BIN " bench web --scene default --speed 60 --seconds 10 --poses 4 --no-masks --json 2>&1", "r");
+  ASSERT_NE(p, nullptr);
+  char buf[65536];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
+  const int status = pclose(p);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const size_t at = out.find("{\n");  // the JSON after the progress lines
+  ASSERT_NE(at, std::string::npos) << out;
+  const json j = json::parse(out.substr(at), nullptr, false);
+  ASSERT_FALSE(j.is_discarded()) << out;
+  const json& page = j.at("page");
+  const json& native = j.at("native");
+  EXPECT_GT(page.at("bytes_received").get<uint64_t>(), 100000u) << out;
+  EXPECT_EQ(page.at("bytes_received"), native.at("bytes_received")) << out;
+  EXPECT_EQ(page.at("objects_received"), native.at("objects_received")) << out;
+  EXPECT_EQ(page.at("stalls"), 0) << out;
+  EXPECT_EQ(native.at("stalls"), 0) << out;
+  const json& ids = j.at("id_passes");
+  ASSERT_EQ(ids.at("poses"), 4) << out;
+  EXPECT_EQ(ids.at("equal_poses_but_slivers"), 4) << out;
+  for (const json& pose : ids.at("each")) EXPECT_GT(pose.at("objects_page").get<int>(), 10) << pose.dump();
 }
 
 TEST(WebPage, AnUnknownSceneAMissingOneAndARefusedTokenAreSaidOnThePageOverWss) {

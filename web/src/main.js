@@ -65,6 +65,7 @@ const summary = {
   frame_ms: [],
   walk_s: 0,
   walk_done: false,
+  reversed_depth: false,  // whether the GPU offered reversed depth (EXT_clip_control)
 };
 window.vistream = {
   summary: () => ({ ...summary, frame_ms: summary.frame_ms.slice() }),
@@ -95,9 +96,11 @@ if (!gl) {
   say('This browser has no WebGL 2: vistream draws with WebGL 2 (any current Chrome, Firefox or Safari has it).', 'error');
   throw new Error('no WebGL 2');
 }
-// Reversed depth where the GPU offers it (EXT_clip_control): buildings far apart in depth stay
-// apart, as in the native client's id buffer.
-const renderer = new THREE.WebGLRenderer({ canvas, context: gl, reverseDepthBuffer: true });
+// Reversed depth where the GPU offers it (EXT_clip_control; three.js's reversedDepthBuffer):
+// with the id pass's float depth, buildings a hand apart kilometres away stay apart, as in the
+// native client's id buffer (gl/id_renderer.h).
+const renderer = new THREE.WebGLRenderer({ canvas, context: gl, reversedDepthBuffer: true });
+summary.reversed_depth = renderer.capabilities.reversedDepthBuffer === true;
 const scene3 = new THREE.Scene();
 scene3.background = new THREE.Color(0xb8d0e8);
 scene3.add(new THREE.HemisphereLight(0xffffff, 0x606060, 2.2));
@@ -110,7 +113,9 @@ ground.position.z = -0.05;
 scene3.add(ground);
 const camera = new THREE.PerspectiveCamera(60, 16 / 9, 0.5, 20000);
 camera.up.set(0, 0, 1);
-const material = new THREE.MeshLambertMaterial({ color: 0xd8d2c4 });
+// Both sides of every face, as the native client draws (client/renderer.cpp: no culling): an
+// open shell of a city model shows its inside.
+const material = new THREE.MeshLambertMaterial({ color: 0xd8d2c4, side: THREE.DoubleSide });
 
 function resize() {
   const w = options.width || window.innerWidth;
@@ -577,20 +582,38 @@ function minimap() {
 
 // ---- the object-id pass (tests: the objects the current frame shows) ----
 
-const idTarget = new THREE.WebGLRenderTarget(1, 1);
+// The id pass follows gl::IdRenderer::RenderView (gl/id_renderer.cpp) so that the two can be
+// compared pixel for pixel: a float depth buffer (reversed where the GPU offers it), a near plane
+// at 0.01 m, both sides drawn, a face turned away from the eye names no object (it hides what is
+// behind it) and a face towards the eye wins a tie in depth with one turned away.
+const idTarget = new THREE.WebGLRenderTarget(1, 1, { depthTexture: new THREE.DepthTexture(1, 1, THREE.FloatType) });
+const kIdNear = 0.01;  // metres, as gl::IdRenderer's
 const idMaterials = new Map();
 function idMaterial(id) {
   let m = idMaterials.get(id);
   if (!m) {
     const v = id + 1;
-    m = new THREE.MeshBasicMaterial({ color: new THREE.Color(((v >> 16) & 255) / 255, ((v >> 8) & 255) / 255, (v & 255) / 255) });
+    m = new THREE.ShaderMaterial({
+      side: THREE.DoubleSide,
+      uniforms: { idColor: { value: new THREE.Vector3(((v >> 16) & 255) / 255, ((v >> 8) & 255) / 255, (v & 255) / 255) } },
+      vertexShader: 'void main() { gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }',
+      fragmentShader: `uniform vec3 idColor;
+void main() {
+#ifdef USE_REVERSED_DEPTH_BUFFER
+  gl_FragDepth = gl_FrontFacing ? gl_FragCoord.z * 1.000001 : gl_FragCoord.z;
+#else
+  gl_FragDepth = gl_FrontFacing ? gl_FragCoord.z * 0.999999 : gl_FragCoord.z;
+#endif
+  gl_FragColor = gl_FrontFacing ? vec4(idColor, 1.0) : vec4(0.0, 0.0, 0.0, 1.0);
+}`,
+    });
     idMaterials.set(id, m);
   }
   return m;
 }
 
 // Renders the current frame's drawn set with each object's id as its colour; returns
-// { width, height, objects: { id: pixels } }.
+// { width, height, objects: { id: pixels }, interior: { id: interior pixels }, eye, yaw, pitch }.
 function idPass() {
   const size = renderer.getSize(new THREE.Vector2());
   idTarget.setSize(size.x, size.y);
@@ -610,8 +633,13 @@ function idPass() {
   scene3.background = new THREE.Color(0, 0, 0);
   const colorSpace = renderer.outputColorSpace;
   renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
+  const near = camera.near;
+  camera.near = kIdNear;
+  camera.updateProjectionMatrix();
   renderer.setRenderTarget(idTarget);
   renderer.render(scene3, camera);
+  camera.near = near;
+  camera.updateProjectionMatrix();
   const pixels = new Uint8Array(size.x * size.y * 4);
   renderer.readRenderTargetPixels(idTarget, 0, 0, size.x, size.y, pixels);
   renderer.setRenderTarget(null);
@@ -619,12 +647,30 @@ function idPass() {
   scene3.background = background;
   for (const [node, m] of swapped) node.material = m;
   for (const node of hidden) node.visible = true;
+  const w = size.x, h = size.y;
+  const ids = new Uint32Array(w * h);
+  for (let i = 0, k = 0; i < ids.length; ++i, k += 4) ids[i] = (pixels[k] << 16) | (pixels[k + 1] << 8) | pixels[k + 2];
+  // Per object its pixels, and its interior pixels: those whose eight neighbours show it too. An
+  // object without one is a sliver under three pixels thick, which another rasterizer's
+  // sub-pixel snapping can show or not (vistream bench web counts such differences apart).
   const counts = {};
-  for (let k = 0; k < pixels.length; k += 4) {
-    const v = (pixels[k] << 16) | (pixels[k + 1] << 8) | pixels[k + 2];
-    if (v !== 0) counts[v - 1] = (counts[v - 1] || 0) + 1;
+  const interior = {};
+  for (let y = 0; y < h; ++y) {
+    for (let x = 0; x < w; ++x) {
+      const v = ids[y * w + x];
+      if (v === 0) continue;
+      counts[v - 1] = (counts[v - 1] || 0) + 1;
+      if (x === 0 || y === 0 || x === w - 1 || y === h - 1) continue;
+      let inside = true;
+      for (let dy = -1; dy <= 1 && inside; ++dy) {
+        for (let dx = -1; dx <= 1; ++dx) {
+          if (ids[(y + dy) * w + x + dx] !== v) { inside = false; break; }
+        }
+      }
+      if (inside) interior[v - 1] = (interior[v - 1] || 0) + 1;
+    }
   }
-  return { width: size.x, height: size.y, objects: counts, eye: eye.position.slice(), yaw: eye.yaw, pitch: eye.pitch };
+  return { width: w, height: h, objects: counts, interior, eye: eye.position.slice(), yaw: eye.yaw, pitch: eye.pitch };
 }
 
 // ---- start ----
