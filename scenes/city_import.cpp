@@ -380,6 +380,12 @@ absl::StatusOr<Scene> BuildCityScene(const CityModel& model, const std::string& 
     return absl::InvalidArgumentError(absl::StrCat("the file's coordinate reference system is ", model.crs,
                                                    ", not ", options.crs, " as the import was told"));
   }
+  if (IsGeographicCrs(sum.crs)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        sum.crs, model.crs.empty() ? " (as the import was told)" : " (the file's)",
+        " is a geographic coordinate reference system, in degrees: vistream reads projected coordinates in metres "
+        "and reprojects nothing; reproject the model first (cjio's crs_reproject, or ogr2ogr)"));
+  }
   for (const auto& [reason, n] : model.skipped) sum.skipped[reason] += n;
   for (const auto& [reason, n] : model.repaired) sum.repaired[reason] += n;
   if (options.lod && (*options.lod < 0 || *options.lod > 4)) {
@@ -953,6 +959,14 @@ bool IsCrsName(std::string_view text) {
     if (!absl::ascii_isalnum(c) && c != '.' && c != '+' && c != '_' && c != '-') return false;
   }
   return true;
+}
+
+bool IsGeographicCrs(std::string_view crs) {
+  const std::string first = absl::AsciiStrToUpper(std::string(crs.substr(0, crs.find('+'))));
+  static constexpr std::string_view kGeographic[] = {
+      "EPSG:4326", "EPSG:4979", "OGC:CRS84", "OGC:CRS84H", "CRS:84", "EPSG:4258", "EPSG:4937", "EPSG:4269",
+      "EPSG:4283", "EPSG:7844", "EPSG:6668", "EPSG:4674", "EPSG:4490"};
+  return std::find(std::begin(kGeographic), std::end(kGeographic), first) != std::end(kGeographic);
 }
 
 absl::StatusOr<Scene> ImportCity(const std::string& path, const CityImportOptions& options,

@@ -73,12 +73,20 @@ enum class CityGround {
 // colon, then letters, digits, '.', '+', '_' or '-').
 bool IsCrsName(std::string_view text);
 
+// Whether `crs` (IsCrsName's form) is one of the common geographic systems, whose coordinates
+// are degrees: WGS 84 (EPSG:4326, 4979, OGC:CRS84), ETRS89 (4258, 4937), NAD83 (4269), GDA94
+// (4283), GDA2020 (7844), JGD2011 (6668), SIRGAS 2000 (4674), China 2000 (4490); a compound
+// "EPSG:4326+..." by its first part. The importers read metres and reproject nothing, so a
+// city model in such a CRS is refused (BuildCityScene).
+bool IsGeographicCrs(std::string_view crs);
+
 struct CityImportOptions {
   std::optional<int> lod;        // 0..4: the integer part of the LoD to use; none: each object's highest
   std::string name;              // the scene's name; default: the file name up to its first dot
   bool keep_going = false;       // CityReadOptions::keep_going
   // The CRS to record when the file names none ("EPSG:28992", IsCrsName); a file that names
-  // another one is an error (INVALID_ARGUMENT naming both), and so is text that names none.
+  // another one is an error (INVALID_ARGUMENT naming both), and so is text that names none
+  // and a geographic CRS (IsGeographicCrs: degrees, not metres), given or the file's.
   // Empty: the file's, or none.
   std::string crs;
   double terrain_tile_m = 100.0;  // edge of the terrain's tiles, > 0

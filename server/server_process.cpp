@@ -379,7 +379,8 @@ int RunServerProcess(const ServerProcessOptions& run) {
   if (web != nullptr) metrics_line += absl::StrFormat("; web page on %s://%s/", web->scheme(), web->address());
   std::string security_line = config.tls_cert.empty() ? "" : config.tls_client_ca.empty() ? "; TLS" : "; mutual TLS";
   if (server_options.tokens != nullptr) {
-    security_line += absl::StrFormat("; tokens (%zu tenants)", server_options.tokens->size());
+    security_line += absl::StrFormat("; tokens (%zu tenant%s)", server_options.tokens->size(),
+                                     server_options.tokens->size() == 1 ? "" : "s");
   }
   std::printf("vistream-server: ready on %s: %s%s%s%s\n", (*server)->address().c_str(), what.c_str(), link_line.c_str(),
               security_line.c_str(), metrics_line.c_str());

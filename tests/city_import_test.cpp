@@ -267,6 +267,38 @@ TEST(CityImport, ACrsGivenForAFileWithoutOneIsKeptAndOneThatContradictsItIsAnErr
   }
 }
 
+// A geographic CRS means degrees, which the importer would read as metres (it reprojects
+// nothing): refused, whether the import was told it or the file says it (found by a newcomer:
+// --crs EPSG:4326 on a model in metres was recorded without a word).
+TEST(CityImport, AGeographicCrsGivenOrTheFilesIsRefusedSayingToReprojectFirst) {
+  CityModel model;
+  CityGeometry g;
+  g.lod = "1";
+  g.surfaces.push_back({{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {}});
+  model.objects.push_back({"t", "LandUse", "", {g}});
+  CityImportOptions options;
+  options.crs = "EPSG:4326";
+  absl::StatusOr<Scene> told = BuildCityScene(model, "one", options);
+  ASSERT_FALSE(told.ok());
+  EXPECT_NE(told.status().message().find("EPSG:4326 (as the import was told) is a geographic coordinate reference system"),
+            std::string::npos)
+      << told.status();
+  EXPECT_NE(told.status().message().find("reproject the model first"), std::string::npos) << told.status();
+  options.crs.clear();
+  model.crs = "EPSG:4979";
+  absl::StatusOr<Scene> file = BuildCityScene(model, "one", options);
+  ASSERT_FALSE(file.ok());
+  EXPECT_NE(file.status().message().find("EPSG:4979 (the file's)"), std::string::npos) << file.status();
+  for (const char* geographic : {"EPSG:4326", "epsg:4258", "OGC:CRS84", "EPSG:4326+5773"}) {
+    EXPECT_TRUE(IsGeographicCrs(geographic)) << geographic;
+  }
+  for (const char* projected : {"EPSG:28992", "EPSG:7415", "EPSG:7415+5109", "EPSG:32631", "EPSG:3857", ""}) {
+    EXPECT_FALSE(IsGeographicCrs(projected)) << projected;
+  }
+  model.crs = "EPSG:7415";  // projected (RD New + NAP): imported
+  EXPECT_TRUE(BuildCityScene(model, "one", options).ok());
+}
+
 TEST(CityImport, UnknownExtensionAndEmptyModelAreErrors) {
   absl::StatusOr<Scene> s = ImportCity(kShapes + "README.md", {});
   ASSERT_FALSE(s.ok());

@@ -7,7 +7,9 @@
 
 #include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -137,7 +139,53 @@ TEST(WebPage, BenchWebThePageReceivesTheNativeClientsBytesAndShowsTheFullScenesO
   for (const json& pose : ids.at("each")) EXPECT_GT(pose.at("objects_page").get<int>(), 10) << pose.dump();
 }
 
-TEST(WebPage, AnUnknownSceneAMissingOneAndARefusedTokenAreSaidOnThePageOverWss) {
+// A ^C to `vistream bench web` during the native client's walk stops it there: "interrupted",
+// exit 130, nothing compared. Found by a newcomer's trial: the walk ran on to its end and the
+// comparison was printed, exit 0.
+TEST(WebPage, BenchWebInterruptedStopsAtOnceSayingSoAndLeavesNothingRunning) {
+  const std::string err = vistream::testing::ProcessTempDir() + "/bench-web-interrupted.err";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    std::freopen(err.c_str(), "w", stderr);
+    std::freopen("/dev/null", "w", stdout);
+    execl(VISTREAM_BIN, VISTREAM_BIN, "bench", "web", "--scene", "default", "--speed", "60", "--seconds", "20",
+          "--poses", "0", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  const auto read_err = [&] {
+    std::FILE* f = std::fopen(err.c_str(), "r");
+    std::string text;
+    if (f == nullptr) return text;
+    char buf[4096];
+    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) text.append(buf, n);
+    std::fclose(f);
+    return text;
+  };
+  // Until the native client has walked a while (its progress lines), at most two minutes.
+  for (int i = 0; i < 1200 && read_err().find("native: walk 10%") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_NE(read_err().find("native: walk 10%"), std::string::npos) << read_err();
+  kill(pid, SIGINT);
+  int status = 0;
+  pid_t done = 0;
+  for (int i = 0; i < 300 && (done = waitpid(pid, &status, WNOHANG)) == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  if (done == 0) {  // still walking after 30 s: the ^C was not heeded
+    kill(pid, SIGKILL);
+    waitpid(pid, &status, 0);
+    FAIL() << "bench web went on after ^C\n" << read_err();
+  }
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 130) << status << "\n" << read_err();
+  const std::string text = read_err();
+  EXPECT_NE(text.find("vistream: interrupted (bench web stopped during the native client's walk"), std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("native: walk 90%"), std::string::npos) << text;
+}
+
+TEST(WebPage, AnUnknownSceneAMissingOneABadNumberAndARefusedTokenAreSaidOnThePageOverWss) {
   const vistream::testing::TestCerts& certs = vistream::testing::Certs();
   const std::string tokens = vistream::testing::ProcessTempDir() + "/web-page-tokens";
   vistream::testing::WriteText(tokens, "browser web-page-token-0123456789\n");
@@ -168,6 +216,14 @@ TEST(WebPage, AnUnknownSceneAMissingOneAndARefusedTokenAreSaidOnThePageOverWss) 
   EXPECT_EQ(missing.code, 1) << missing.text;
   ASSERT_TRUE(missing.out.is_object()) << missing.text;
   EXPECT_NE(missing.out["message"].get<std::string>().find("?scene=NAME"), std::string::npos) << missing.text;
+  // A number of the address that is none (found by a newcomer: speed=abc reached the server as
+  // a NaN velocity, which ended the session): said on the page, naming it; no session opened.
+  const Headless bad = RunPage("--url '" + PageUrl(*open) + "?scene=default&walk=avenue-and-back-streets&speed=abc' --seconds 5");
+  EXPECT_EQ(bad.code, 1) << bad.text;
+  ASSERT_TRUE(bad.out.is_object()) << bad.text;
+  EXPECT_NE(bad.out["message"].get<std::string>().find("speed=abc is not a number from 0.01 to 10000"), std::string::npos)
+      << bad.text;
+  EXPECT_EQ(bad.out["summary"]["sessions"], 0) << bad.text;
   EXPECT_EQ(open->Stop(SIGTERM), 0);
 }
 

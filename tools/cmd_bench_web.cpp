@@ -56,9 +56,12 @@ struct BenchWebArgs {
   bool json = false;
 };
 
-int Fail(const std::string& message) {
-  std::fprintf(stderr, "vistream: error: bench web: %s\n", message.c_str());
-  return 1;
+// "vistream: error: bench web: MESSAGE", exit 1 (tools::Fail).
+int Fail(const std::string& message) { return tools::Fail(absl::UnknownError("bench web: " + message)); }
+
+// A ^C (CancelFlag) while `what` ran: "vistream: interrupted (...)", exit 130; nothing compared.
+int Interrupted(const std::string& what) {
+  return tools::Fail(absl::CancelledError("bench web stopped during " + what + "; nothing compared"));
 }
 
 std::string UrlEncode(const std::string& s) {
@@ -136,8 +139,9 @@ int BenchWeb(const BenchWebArgs& a) {
                                    "--until-walk-done", "--size", a.size, "--id-passes", std::to_string(a.poses),
                                    "--id-span", absl::StrFormat("%g", a.seconds)};
   if (!a.screenshot.empty()) argv.insert(argv.end(), {"--screenshot", a.screenshot});
-  absl::StatusOr<ProcessResult> page = RunProcess(argv);
+  absl::StatusOr<ProcessResult> page = RunProcess(argv, &CancelFlag());
   if (!page.ok()) return Fail(std::string(page.status().message()));
+  if (CancelFlag().load()) return Interrupted("the page's walk");
   nlohmann::json p;
   for (size_t k = 0; k < page->out.size();) {
     const size_t end = std::min(page->out.find('\n', k), page->out.size());
@@ -152,6 +156,7 @@ int BenchWeb(const BenchWebArgs& a) {
 
   server->Stop(SIGTERM);
   server = start_server(&base, &error);
+  if (CancelFlag().load()) return Interrupted("the second server's start");
   if (server == nullptr) return Fail("vistream-server did not start again: " + error);
   std::fprintf(stderr, "bench web: the native headless client along '%s' ...\n", path.c_str());
   client::WalkthroughOptions o;
@@ -168,7 +173,9 @@ int BenchWeb(const BenchWebArgs& a) {
   o.memory_budget_bytes = static_cast<uint64_t>(memory_mb * 1048576.0);
   o.local_scene = &loaded->scene;
   o.log = [](const std::string& line) { std::fprintf(stderr, "  native: %s\n", line.c_str()); };
+  o.cancel = &CancelFlag();  // a ^C ends the walk after its frame
   absl::StatusOr<client::WalkthroughSummary> native = client::RunWalkthrough(o);
+  if (CancelFlag().load()) return Interrupted("the native client's walk");
   if (!native.ok()) return Fail("the native client: " + std::string(native.status().message()));
   server->Stop(SIGTERM);
 
@@ -178,6 +185,7 @@ int BenchWeb(const BenchWebArgs& a) {
   nlohmann::ordered_json poses = nlohmann::ordered_json::array();
   uint64_t equal_poses = 0, equal_poses_but_slivers = 0, set_aside = 0, differing = 0, sliver_count = 0;
   for (const nlohmann::json& pass : p["id_passes"]) {
+    if (CancelFlag().load()) return Interrupted("the id passes");
     const glm::dvec3 eye(pass["eye"][0].get<double>(), pass["eye"][1].get<double>(), pass["eye"][2].get<double>());
     const double yaw = pass["yaw"].get<double>(), pitch = pass["pitch"].get<double>();
     const glm::dvec3 forward(std::cos(pitch) * std::cos(yaw), std::cos(pitch) * std::sin(yaw), std::sin(pitch));

@@ -868,7 +868,9 @@ void AddSceneCommands(CLI::App& app, std::function<void(int)> done) {
   wk->add_flag("--json", walks->json, "print a JSON array of {name, length_m, points, source}");
 
   auto [m, map] = AddSubcommand<MapArgs>(
-      scene, "map", "write a top-view PNG: footprints by height, walk paths in red", Map, done);
+      scene, "map",
+      "write a top-view PNG: footprints by height, the catalog's walks in red, those derived from the data in blue", Map,
+      done);
   m->add_option("FILE", map->file, ".glb/.gltf file, catalog name or catalog .json")->required();
   m->add_option("-o,--output", map->output, "output .png")->required()->check(OutputPath());
   m->add_option("--size", map->size, "pixels on the longer side")->check(WholeRange(16, 16384));

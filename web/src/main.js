@@ -34,6 +34,28 @@ const options = {
 };
 const EYE_HEIGHT_M = 1.7;  // scenes/catalog.h WalkPath::eye_height_m
 
+// The address's numbers, checked as vistream-client checks its options (its --speed range):
+// the first that is not a number in its range, named with what it takes; '' when all are.
+function badAddressNumber() {
+  const rules = [
+    ['speed', 0.01, 10000, 'km/h'],
+    ['seconds', 0, 1e7, 'seconds of the walk (0: all of it)'],
+    ['memory_mb', 0, 1e6, 'MiB (0: the catalog\'s budget)'],
+    ['max_fps', 0, 1000, 'frames per second (0: every animation frame)'],
+    ['width', 0, 16384, 'pixels'],
+    ['height', 0, 16384, 'pixels'],
+  ];
+  for (const [name, lo, hi, what] of rules) {
+    const text = params.get(name);
+    if (text === null) continue;
+    const v = Number(text);
+    if (text.trim() === '' || !Number.isFinite(v) || v < lo || v > hi) {
+      return `The address's ${name}=${text} is not a number from ${lo} to ${hi} (${what}).`;
+    }
+  }
+  return '';
+}
+
 const $ = (id) => document.getElementById(id);
 function say(text, kind = 'info') {
   const el = $('message');
@@ -675,8 +697,11 @@ function idPass() {
 
 // ---- start ----
 
-if (!options.scene) {
-  fail('Open a scene: add ?scene=NAME to the address (e.g. ?scene=default&walk=street%201&speed=30).');
+if (badAddressNumber()) {
+  fail(badAddressNumber());
+} else if (!options.scene) {
+  fail('Open a scene: add ?scene=NAME to the address (e.g. ?scene=default&walk=avenue-and-back-streets&speed=30; '
+    + '`vistream scene walks NAME` lists a scene\'s walks).');
 } else {
   MeshoptDecoder.ready.then(() => {
     connect();
