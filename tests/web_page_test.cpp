@@ -142,7 +142,7 @@ TEST(WebPage, BenchWebThePageReceivesTheNativeClientsBytesAndShowsTheFullScenesO
 // A ^C to `vistream bench web` during the native client's walk stops it there: "interrupted",
 // exit 130, nothing compared. Found by a newcomer's trial: the walk ran on to its end and the
 // comparison was printed, exit 0.
-TEST(WebPage, BenchWebInterruptedStopsAtOnceSayingSoAndLeavesNothingRunning) {
+TEST(WebPage, BenchWebInterruptedStopsAtOnceSayingSo) {
   const std::string err = vistream::testing::ProcessTempDir() + "/bench-web-interrupted.err";
   const pid_t pid = fork();
   ASSERT_GE(pid, 0);
