@@ -239,12 +239,18 @@ TEST(CityImport, SavedAndLoadedTheSceneKeepsCrsTerrainAndTypes) {
   EXPECT_EQ(SceneFingerprint(*back), SceneFingerprint(*scene));
 }
 
-TEST(CityImport, ACrsGivenForAFileWithoutOneIsKeptAndOneThatContradictsItIsAnError) {
+// A model of one land-use triangle: what the CRS checks need.
+CityModel OneTriangleModel() {
   CityModel model;
   CityGeometry g;
   g.lod = "1";
   g.surfaces.push_back({{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {}});
   model.objects.push_back({"t", "LandUse", "", {g}});
+  return model;
+}
+
+TEST(CityImport, ACrsGivenForAFileWithoutOneIsKeptAndOneThatContradictsItIsAnError) {
+  CityModel model = OneTriangleModel();
   CityImportOptions options;
   options.crs = "EPSG:28992";
   absl::StatusOr<Scene> s = BuildCityScene(model, "one", options);
@@ -271,11 +277,7 @@ TEST(CityImport, ACrsGivenForAFileWithoutOneIsKeptAndOneThatContradictsItIsAnErr
 // nothing): refused, whether the import was told it or the file says it (found by a newcomer:
 // --crs EPSG:4326 on a model in metres was recorded without a word).
 TEST(CityImport, AGeographicCrsGivenOrTheFilesIsRefusedSayingToReprojectFirst) {
-  CityModel model;
-  CityGeometry g;
-  g.lod = "1";
-  g.surfaces.push_back({{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {}});
-  model.objects.push_back({"t", "LandUse", "", {g}});
+  CityModel model = OneTriangleModel();
   CityImportOptions options;
   options.crs = "EPSG:4326";
   absl::StatusOr<Scene> told = BuildCityScene(model, "one", options);

@@ -149,7 +149,7 @@ TEST(WebPage, BenchWebInterruptedStopsAtOnceSayingSo) {
   if (pid == 0) {
     std::freopen(err.c_str(), "w", stderr);
     std::freopen("/dev/null", "w", stdout);
-    execl(VISTREAM_BIN, VISTREAM_BIN, "bench", "web", "--scene", "default", "--speed", "60", "--seconds", "20",
+    execl(VISTREAM_BIN, VISTREAM_BIN, "bench", "web", "--scene", "default", "--speed", "60", "--seconds", "8",
           "--poses", "0", static_cast<char*>(nullptr));
     _exit(127);
   }

@@ -40,7 +40,7 @@ function badAddressNumber() {
   const rules = [
     ['speed', 0.01, 10000, 'km/h'],
     ['seconds', 0, 1e7, 'seconds of the walk (0: all of it)'],
-    ['memory_mb', 0, 1e6, 'MiB (0: the catalog\'s budget)'],
+    ['memory_mb', 0, 1e6, 'MiB (0: no budget)'],
     ['max_fps', 0, 1000, 'frames per second (0: every animation frame)'],
     ['width', 0, 16384, 'pixels'],
     ['height', 0, 16384, 'pixels'],
