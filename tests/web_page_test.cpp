@@ -19,6 +19,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/cli_test_util.h"
 #include "tests/temp_dir.h"
 #include "tests/tls_test_util.h"
 #include "tools/replica_set.h"
@@ -115,13 +116,10 @@ TEST(WebPage, TheDefaultTownsWalkAt60KmhDrawsMaskedFramesWithoutAStall) {
 // shows the objects the full scene shows from the same pinhole, slivers under three pixels
 // thick apart (the two rasterizers snap differently; tools/cmd_bench_web.cpp).
 TEST(WebPage, BenchWebThePageReceivesTheNativeClientsBytesAndShowsTheFullScenesObjects) {
-  std::string out;
-  std::FILE* p = popen(VISTREAM_BIN " bench web --scene default --speed 60 --seconds 10 --poses 4 --no-masks --json 2>&1", "r");
-  ASSERT_NE(p, nullptr);
-  char buf[65536];
-  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out.append(buf, n);
-  const int status = pclose(p);
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const vistream::testing::RunResult r =
+      vistream::testing::Vistream("bench web --scene default --speed 60 --seconds 10 --poses 4 --no-masks --json");
+  const std::string& out = r.out;
+  ASSERT_EQ(r.exit_code, 0) << out;
   const size_t at = out.find("{\n");  // the JSON after the progress lines
   ASSERT_NE(at, std::string::npos) << out;
   const json j = json::parse(out.substr(at), nullptr, false);
@@ -153,15 +151,7 @@ TEST(WebPage, BenchWebInterruptedStopsAtOnceSayingSo) {
           "--poses", "0", static_cast<char*>(nullptr));
     _exit(127);
   }
-  const auto read_err = [&] {
-    std::FILE* f = std::fopen(err.c_str(), "r");
-    std::string text;
-    if (f == nullptr) return text;
-    char buf[4096];
-    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), f)) > 0;) text.append(buf, n);
-    std::fclose(f);
-    return text;
-  };
+  const auto read_err = [&] { return vistream::testing::ReadText(err); };
   // Until the native client has walked a while (its progress lines), at most two minutes.
   for (int i = 0; i < 1200 && read_err().find("native: walk 10%") == std::string::npos; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
